@@ -1,0 +1,231 @@
+"""Collision-free placement of starts and goals without rejection sampling.
+
+At load time each region becomes a set of candidate positions: a hexagonal lattice whose
+points are free of static obstacles and far enough apart that two agents placed on
+different points (with their random jitter) can never overlap. A reset then only draws
+distinct lattice points, so it costs the same at any density, and a region that cannot
+hold the requested crowd is reported when the scenario loads instead of looping forever.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+import shapely
+from shapely.geometry import Point, box
+from shapely.geometry import Polygon as ShapelyPolygon
+
+from crowdnav.scenario.schema import CircleRegion, PointsRegion, PolygonRegion, RectangleRegion, Scenario
+from crowdnav.world import GeometryError, StaticObstacles
+
+GAP = 0.05
+"""Minimum free space (m) between two freshly placed agents, and between an agent and an obstacle."""
+JITTER = 0.05
+"""Half-width (m) of the uniform jitter added to lattice points so episodes do not look gridded."""
+
+
+@dataclass
+class CandidateSet:
+    """Candidate positions for one kind of placement (robot start, human goal, ...)."""
+
+    points: np.ndarray
+    """(K,) complex lattice points, obstacle-free with margin for the jitter."""
+    jitter: float
+    """Uniform jitter half-width per axis applied when a point is drawn."""
+    ring_center: complex | None = None
+    """For circle perimeters: draws rotate the whole ring by a random angle about this centre."""
+
+    def __len__(self) -> int:
+        return len(self.points)
+
+    def draw(
+        self,
+        rng: np.random.Generator,
+        n: int,
+        *,
+        allowed: np.ndarray | None = None,
+        away_from: np.ndarray | None = None,
+        min_distance: float = 0.0,
+        replace: bool = False,
+    ) -> np.ndarray:
+        """``n`` positions from distinct candidates (unless ``replace``).
+
+        ``allowed`` masks candidates; ``away_from`` (complex array) excludes candidates closer
+        than ``min_distance`` to any of its points (e.g. agents already placed).
+        """
+        points = self.points
+        if self.ring_center is not None:
+            points = (points - self.ring_center) * np.exp(1j * rng.uniform(0, 2 * math.pi)) + self.ring_center
+        mask = allowed
+        if away_from is not None and len(away_from):
+            far = (np.abs(points[:, None] - away_from[None, :]) >= min_distance).all(1)
+            mask = far if mask is None else mask & far
+        pool = np.flatnonzero(mask) if mask is not None else np.arange(len(points))
+        if len(pool) == 0 or (not replace and n > len(pool)):
+            raise PlacementError(f"needs {n} free positions but only {len(pool)} are available")
+        out = points[rng.choice(pool, size=n, replace=replace)]
+        if self.jitter > 0:
+            noise = rng.uniform(-self.jitter, self.jitter, size=(2, n))
+            out = out + noise[0] + 1j * noise[1]
+        return out
+
+
+class PlacementError(RuntimeError):
+    """A reset could not place every agent (only possible with dynamic exclusions)."""
+
+
+@dataclass
+class Placement:
+    """All candidate sets of a scenario."""
+
+    robot_start: CandidateSet
+    robot_goal: CandidateSet
+    human_spawn: CandidateSet
+    human_goal: CandidateSet | None
+    """None when humans use the mirror rule (or there are none)."""
+    start_goal_ok: np.ndarray
+    """(K_start, K_goal) bool: pairs far enough apart for min_start_goal_distance, jitter included."""
+
+
+def build_placement(scenario: Scenario, obstacles: StaticObstacles) -> Placement:
+    robot, humans = scenario.robot, scenario.humans
+    world = scenario.world
+    world_box = box(world.min[0], world.min[1], world.max[0], world.max[1])
+    occupied = obstacles.union
+    robot_start = _candidates(robot.start, "robot.start", robot.radius, world_box, occupied)
+    robot_goal = _candidates(robot.goal, "robot.goal", robot.radius, world_box, occupied)
+    slack = 2 * math.sqrt(2) * JITTER
+    distance = np.abs(robot_start.points[:, None] - robot_goal.points[None, :])
+    start_goal_ok = distance >= robot.min_start_goal_distance + slack
+    if robot_start.ring_center is not None or robot_goal.ring_center is not None:
+        start_goal_ok = np.ones_like(start_goal_ok)  # rotated rings: checked at draw time instead
+    if not start_goal_ok.any():
+        raise GeometryError(
+            "robot.min_start_goal_distance",
+            f"no start in robot.start is {robot.min_start_goal_distance:g} m from a goal in robot.goal "
+            f"(largest distance available: {distance.max():.2f} m); expected a smaller distance or regions further apart",
+        )
+    spawn = goal = None
+    if humans.max_count > 0:
+        spawn_sets = [_candidates(r, f"humans.spawn.{i}", humans.radius, world_box, occupied) for i, r in enumerate(humans.spawn)]
+        spawn = _merge(spawn_sets, spacing=2 * humans.radius + GAP + slack)
+        if humans.goal_rule == "mirror":
+            center = complex(*(humans.mirror_center or scenario.world_center))
+            mirrored = 2 * center - spawn.points
+            free = _free(mirrored, humans.radius + GAP + slack / 2, occupied) & shapely.contains_xy(world_box, mirrored.real, mirrored.imag)
+            spawn = CandidateSet(spawn.points[free], spawn.jitter, spawn.ring_center)
+        else:
+            goal_sets = [_candidates(r, f"humans.goal.{i}", humans.radius, world_box, occupied) for i, r in enumerate(humans.goal)]
+            goal = _merge(goal_sets, spacing=0.0)
+        # The robot start takes room from the crowd: keep capacity for the densest case.
+        capacity = len(spawn.points) - _max_blocked_by_robot(spawn.points, robot_start.points, robot.radius + humans.radius + GAP + slack)
+        if capacity < humans.max_count:
+            raise GeometryError(
+                "humans.count",
+                f"the spawn regions hold at most {max(capacity, 0)} humans of radius {humans.radius:g} m next to the robot "
+                f"(asked for up to {humans.max_count}); expected a smaller count, a smaller radius or larger spawn regions",
+            )
+    empty = CandidateSet(np.zeros(0, dtype=complex), 0.0)
+    return Placement(robot_start, robot_goal, spawn or empty, goal, start_goal_ok)
+
+
+def _candidates(region, path: str, radius: float, world_box, occupied) -> CandidateSet:
+    """Lattice of obstacle-free positions for an agent of ``radius`` inside ``region``."""
+    spacing = 2 * radius + GAP + 2 * math.sqrt(2) * JITTER
+    clearance = radius + GAP + math.sqrt(2) * JITTER
+    if isinstance(region, PointsRegion):
+        points = np.array([complex(x, y) for x, y in region.points])
+        _require_inside(points, path, world_box)
+        free = _free(points, radius, occupied)
+        if not free.any():
+            raise GeometryError(path, f"every point is inside or within {radius:g} m of an obstacle; expected at least one free point")
+        return CandidateSet(points[free], 0.0)
+    if isinstance(region, CircleRegion) and region.perimeter:
+        ring = Point(region.center).buffer(region.radius, 128).exterior
+        if not ring.within(world_box):
+            raise GeometryError(path, _outside_message(world_box))
+        if ring.distance(occupied) < clearance if not occupied.is_empty else False:
+            raise GeometryError(path, f"the circle passes within {clearance:.2f} m of an obstacle; expected a free circle")
+        count = int(math.floor(math.pi / math.asin(min(1.0, spacing / (2 * region.radius))))) if spacing < 2 * region.radius else 1
+        angles = 2 * math.pi * np.arange(count) / count
+        center = complex(*region.center)
+        return CandidateSet(center + region.radius * np.exp(1j * angles), 0.0, ring_center=center)
+    shape = _region_polygon(region, path)
+    if not shape.within(world_box.buffer(1e-9)):
+        raise GeometryError(path, _outside_message(world_box))
+    free_area = shape if occupied.is_empty else shape.difference(occupied.buffer(clearance))
+    if free_area.is_empty or free_area.area < 1e-9:
+        raise GeometryError(path, "region is entirely covered by obstacles (with the agent's radius); expected some free space")
+    points = _best_lattice(free_area, spacing)
+    if len(points) == 0:
+        rep = free_area.representative_point()
+        points = np.array([complex(rep.x, rep.y)])
+        return CandidateSet(points, 0.0)
+    return CandidateSet(points, JITTER)
+
+
+def _region_polygon(region, path: str) -> ShapelyPolygon:
+    if isinstance(region, RectangleRegion):
+        return box(region.min[0], region.min[1], region.max[0], region.max[1])
+    if isinstance(region, CircleRegion):
+        return Point(region.center).buffer(region.radius, 64)
+    assert isinstance(region, PolygonRegion)
+    shape = ShapelyPolygon(region.points)
+    if not shape.is_valid or shape.area <= 0:
+        from shapely.validation import explain_validity
+
+        raise GeometryError(f"{path}.points", f"polygon is not valid ({explain_validity(shape)}); expected a simple polygon with non-zero area")
+    return shape
+
+
+def _best_lattice(area, spacing: float) -> np.ndarray:
+    """Hexagonal lattice points inside ``area``; the best of a few offsets."""
+    minx, miny, maxx, maxy = area.bounds
+    row = spacing * math.sqrt(3) / 2
+    best = np.zeros(0, dtype=complex)
+    for ox, oy in ((0.0, 0.0), (0.5, 0.0), (0.0, 0.5), (0.5, 0.5), (0.25, 0.25)):
+        ys = np.arange(miny + oy * row, maxy + 1e-9, row)
+        xs = np.arange(minx + ox * spacing, maxx + spacing, spacing)
+        grid = xs[None, :] + 1j * ys[:, None] + (np.arange(len(ys)) % 2)[:, None] * (spacing / 2)
+        grid = grid.ravel()
+        inside = shapely.contains_xy(area, grid.real, grid.imag)
+        if inside.sum() > len(best):
+            best = grid[inside]
+    return best
+
+
+def _merge(sets: list[CandidateSet], spacing: float) -> CandidateSet:
+    """Union of candidate sets; drop points closer than ``spacing`` to an earlier one (overlapping regions)."""
+    points = np.concatenate([s.points for s in sets])
+    ring = next((s.ring_center for s in sets if s.ring_center is not None), None)
+    jitter = min(s.jitter for s in sets)
+    if spacing > 0 and len(points) > 1:
+        close = np.abs(points[:, None] - points[None, :]) < spacing - 1e-9
+        keep = ~np.triu(close, 1).any(0)
+        points = points[keep]
+    return CandidateSet(points, jitter, ring if len(sets) == 1 else None)
+
+
+def _free(points: np.ndarray, clearance: float, occupied) -> np.ndarray:
+    if occupied.is_empty:
+        return np.ones(len(points), dtype=bool)
+    return shapely.distance(occupied, shapely.points(points.real, points.imag)) >= clearance
+
+
+def _require_inside(points: np.ndarray, path: str, world_box) -> None:
+    inside = shapely.contains_xy(world_box, points.real, points.imag)
+    if not inside.all():
+        raise GeometryError(path, _outside_message(world_box))
+
+
+def _outside_message(world_box) -> str:
+    minx, miny, maxx, maxy = world_box.bounds
+    return f"region extends outside the world; expected it inside x in [{minx:g}, {maxx:g}], y in [{miny:g}, {maxy:g}]"
+
+
+def _max_blocked_by_robot(spawn: np.ndarray, starts: np.ndarray, reach: float) -> int:
+    if len(spawn) == 0 or len(starts) == 0:
+        return 0
+    return int((np.abs(starts[:, None] - spawn[None, :]) < reach).sum(1).max())

@@ -1,0 +1,324 @@
+"""Typed schema of a scenario file.
+
+A scenario YAML is validated into :class:`Scenario`. Every model forbids unknown keys,
+and every field carries a one-line description (units included) that also ends up in the
+JSON Schema printed by ``crowdnav scenario schema``.
+
+Geometry that needs shapely (valid polygons, regions inside the world, crowd capacity)
+is checked when the scenario is compiled into a world, see :mod:`crowdnav.world`.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Annotated, Literal, Union
+
+from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
+
+Point = tuple[float, float]
+"""A 2-D point ``[x, y]`` in metres, world frame."""
+
+PositiveFloat = Annotated[float, Field(gt=0, allow_inf_nan=False)]
+NonNegativeFloat = Annotated[float, Field(ge=0, allow_inf_nan=False)]
+FiniteFloat = Annotated[float, Field(allow_inf_nan=False)]
+
+
+class StrictModel(BaseModel):
+    """Base model: unknown keys are errors, values are checked on assignment too."""
+
+    model_config = ConfigDict(extra="forbid", validate_assignment=True)
+
+
+# --------------------------------------------------------------------------- regions
+
+
+class RectangleRegion(StrictModel):
+    """Axis-aligned rectangle given by its two corners."""
+
+    type: Literal["rectangle"] = Field(description="Region kind.")
+    min: Point = Field(description="Lower-left corner [x, y] in metres.")
+    max: Point = Field(description="Upper-right corner [x, y] in metres.")
+
+    @model_validator(mode="after")
+    def _corners_ordered(self) -> RectangleRegion:
+        if not (self.min[0] < self.max[0] and self.min[1] < self.max[1]):
+            raise ValueError(f"expected min < max on both axes, got min={list(self.min)} max={list(self.max)}")
+        return self
+
+
+class PolygonRegion(StrictModel):
+    """Simple polygon given by its vertices."""
+
+    type: Literal["polygon"] = Field(description="Region kind.")
+    points: list[Point] = Field(min_length=3, description="Vertices [[x, y], ...] in metres, in order.")
+
+
+class PointsRegion(StrictModel):
+    """An explicit list of candidate positions; one is picked per agent."""
+
+    type: Literal["points"] = Field(description="Region kind.")
+    points: list[Point] = Field(min_length=1, description="Candidate positions [[x, y], ...] in metres.")
+
+
+class CircleRegion(StrictModel):
+    """A disc, or only its perimeter (for circle-crossing layouts)."""
+
+    type: Literal["circle"] = Field(description="Region kind.")
+    center: Point = Field(description="Centre [x, y] in metres.")
+    radius: PositiveFloat = Field(description="Radius in metres.")
+    perimeter: bool = Field(default=False, description="Sample on the circle itself instead of inside the disc.")
+
+
+Region = Annotated[
+    Union[RectangleRegion, PolygonRegion, PointsRegion, CircleRegion],
+    Field(discriminator="type"),
+]
+
+# ------------------------------------------------------------------- static geometry
+
+
+class World(StrictModel):
+    """Extent of the simulated world."""
+
+    min: Point = Field(default=(-5.0, -5.0), description="Lower-left corner [x, y] of the world in metres.")
+    max: Point = Field(default=(5.0, 5.0), description="Upper-right corner [x, y] of the world in metres.")
+    boundary_walls: bool = Field(default=True, description="Surround the world with walls (false: open space).")
+    boundary_thickness: PositiveFloat = Field(default=0.1, description="Thickness of the boundary walls in metres.")
+
+    @model_validator(mode="after")
+    def _corners_ordered(self) -> World:
+        if not (self.min[0] < self.max[0] and self.min[1] < self.max[1]):
+            raise ValueError(f"expected min < max on both axes, got min={list(self.min)} max={list(self.max)}")
+        return self
+
+
+class Wall(StrictModel):
+    """A wall: a polyline thickened into a polygon."""
+
+    points: list[Point] = Field(min_length=2, description="Polyline vertices [[x, y], ...] in metres.")
+    thickness: PositiveFloat = Field(default=0.1, description="Wall thickness in metres.")
+    name: str | None = Field(default=None, description="Optional label.")
+
+
+class PolygonFurniture(StrictModel):
+    """Furniture of arbitrary polygonal shape."""
+
+    type: Literal["polygon"] = Field(description="Shape kind.")
+    points: list[Point] = Field(min_length=3, description="Vertices [[x, y], ...] in metres, in order.")
+    name: str | None = Field(default=None, description="Optional label, e.g. 'sofa'.")
+
+
+class RectangleFurniture(StrictModel):
+    """A (possibly rotated) rectangular piece of furniture."""
+
+    type: Literal["rectangle"] = Field(description="Shape kind.")
+    center: Point = Field(description="Centre [x, y] in metres.")
+    size: tuple[PositiveFloat, PositiveFloat] = Field(description="Width and depth [w, h] in metres.")
+    angle: FiniteFloat = Field(default=0.0, description="Rotation in degrees, counter-clockwise.")
+    name: str | None = Field(default=None, description="Optional label, e.g. 'table'.")
+
+
+class CircleFurniture(StrictModel):
+    """A round piece of furniture (kept as an exact circle)."""
+
+    type: Literal["circle"] = Field(description="Shape kind.")
+    center: Point = Field(description="Centre [x, y] in metres.")
+    radius: PositiveFloat = Field(description="Radius in metres.")
+    name: str | None = Field(default=None, description="Optional label, e.g. 'round table'.")
+
+
+Furniture = Annotated[
+    Union[PolygonFurniture, RectangleFurniture, CircleFurniture],
+    Field(discriminator="type"),
+]
+
+# ----------------------------------------------------------------------------- agents
+
+
+class Robot(StrictModel):
+    """The learning robot."""
+
+    radius: PositiveFloat = Field(default=0.3, description="Body radius in metres.")
+    kinematics: Literal["holonomic", "unicycle"] = Field(
+        default="holonomic", description="holonomic: action is a velocity (vx, vy) in the robot frame; unicycle: (v, omega)."
+    )
+    max_speed: PositiveFloat = Field(default=1.0, description="Maximum linear speed in m/s.")
+    max_angular_speed: PositiveFloat | None = Field(
+        default=None, description="Maximum angular speed in rad/s (unicycle only, required there)."
+    )
+    start: Region = Field(description="Region the start position is sampled from.")
+    goal: Region = Field(description="Region the goal position is sampled from.")
+    goal_radius: PositiveFloat = Field(default=0.3, description="The goal is reached when the centre is this close (m).")
+    min_start_goal_distance: NonNegativeFloat = Field(
+        default=0.0, description="Minimum straight-line distance between start and goal in metres."
+    )
+    start_heading: Literal["random", "toward_goal"] | FiniteFloat = Field(
+        default="random", description="Initial heading: 'random', 'toward_goal', or a fixed angle in degrees."
+    )
+
+
+class SocialForce(StrictModel):
+    """Parameters of the humans' social-force model (see docs/simulator.md for the formulas)."""
+
+    goal_weight: NonNegativeFloat = Field(default=1.0, description="Weight of the goal force (dimensionless).")
+    goal_saturation_distance: PositiveFloat = Field(
+        default=1.0, description="Distance to the goal (m) beyond which the goal force has unit magnitude."
+    )
+    human_strength: NonNegativeFloat = Field(default=2.0, description="Human-human repulsion at contact (dimensionless).")
+    human_range: PositiveFloat = Field(default=0.3, description="Decay length of human-human repulsion in metres.")
+    obstacle_strength: NonNegativeFloat = Field(default=3.0, description="Obstacle repulsion at contact (dimensionless).")
+    obstacle_range: PositiveFloat = Field(default=0.2, description="Decay length of obstacle repulsion in metres.")
+    robot_strength: NonNegativeFloat = Field(
+        default=2.0, description="Repulsion from the robot at contact, used only when see_robot is on."
+    )
+    robot_range: PositiveFloat = Field(default=0.3, description="Decay length of robot repulsion in metres.")
+    relaxation_time: PositiveFloat = Field(
+        default=0.5, description="Time (s) over which a human adapts its velocity to the desired one."
+    )
+    max_speed_factor: Annotated[float, Field(ge=1.0, allow_inf_nan=False)] = Field(
+        default=1.2, description="Speed cap as a multiple of the human's preferred speed."
+    )
+    goal_tolerance: PositiveFloat = Field(default=0.3, description="A human has reached its goal within this distance (m).")
+
+
+class Humans(StrictModel):
+    """The crowd."""
+
+    count: int | tuple[int, int] = Field(
+        default=0, description="Crowd size: a number, or [min, max] sampled uniformly per episode."
+    )
+    radius: PositiveFloat = Field(default=0.3, description="Body radius of every human in metres.")
+    preferred_speed: tuple[PositiveFloat, PositiveFloat] = Field(
+        default=(0.8, 1.2), description="[min, max] preferred walking speed in m/s, sampled per human."
+    )
+    spawn: list[Region] = Field(default_factory=list, description="Regions humans start in.")
+    goal_rule: Literal["sample", "mirror"] = Field(
+        default="sample", description="sample: goals drawn from `goal`; mirror: goal is the start mirrored through mirror_center."
+    )
+    goal: list[Region] = Field(default_factory=list, description="Regions goals are sampled from (goal_rule: sample).")
+    mirror_center: Point | None = Field(
+        default=None, description="Centre of the mirror rule [x, y] in metres (default: world centre)."
+    )
+    on_goal: Literal["new_goal", "stop", "respawn"] = Field(
+        default="new_goal", description="What a human does at its goal: take a new goal, stop there, or respawn."
+    )
+    see_robot: bool = Field(default=False, description="Whether humans are repelled by the robot (off as in the paper).")
+    social_force: SocialForce = Field(default_factory=SocialForce, description="Social-force model parameters.")
+
+    @field_validator("count")
+    @classmethod
+    def _count_in_range(cls, count: int | tuple[int, int]) -> int | tuple[int, int]:
+        low, high = count if isinstance(count, tuple) else (count, count)
+        if low < 0 or low > high:
+            raise ValueError(f"expected a count >= 0 or [min, max] with 0 <= min <= max, got {count}")
+        return count
+
+    @field_validator("preferred_speed")
+    @classmethod
+    def _speed_range_ordered(cls, speed: tuple[float, float]) -> tuple[float, float]:
+        if speed[0] > speed[1]:
+            raise ValueError(f"expected [min, max] with min <= max, got {list(speed)}")
+        return speed
+
+    @property
+    def min_count(self) -> int:
+        return self.count[0] if isinstance(self.count, tuple) else self.count
+
+    @property
+    def max_count(self) -> int:
+        return self.count[1] if isinstance(self.count, tuple) else self.count
+
+
+# ---------------------------------------------------------------- sensors and reward
+
+
+class GoalSensor(StrictModel):
+    """Relative goal observation."""
+
+    frame: Literal["polar", "cartesian"] = Field(
+        default="polar", description="polar: (distance, sin, cos) of the bearing; cartesian: (x, y) in the robot frame."
+    )
+
+
+class ClosestObstacleSensor(StrictModel):
+    """Nearest point of any obstacle (human disc or static polygon)."""
+
+    frame: Literal["polar", "cartesian"] = Field(
+        default="polar", description="polar: (distance, sin, cos) of the bearing; cartesian: (x, y) in the robot frame."
+    )
+    max_range: PositiveFloat = Field(default=10.0, description="Distances are clipped to this range in metres.")
+
+
+class LidarSensor(StrictModel):
+    """2-D raycast scan."""
+
+    beams: Annotated[int, Field(ge=1, le=4096)] = Field(default=360, description="Number of beams.")
+    fov_deg: Annotated[float, Field(gt=0, le=360)] = Field(default=360.0, description="Field of view in degrees.")
+    max_range: PositiveFloat = Field(default=5.0, description="Maximum range in metres; readings are range / max_range.")
+
+
+class LeogSensor(StrictModel):
+    """Local egocentric occupancy grid."""
+
+    size: PositiveFloat = Field(default=6.0, description="Side length of the square grid in metres.")
+    resolution: PositiveFloat = Field(default=0.1, description="Cell side in metres.")
+
+    @model_validator(mode="after")
+    def _whole_cells(self) -> LeogSensor:
+        cells = self.size / self.resolution
+        if abs(cells - round(cells)) > 1e-6 or round(cells) < 2 or round(cells) > 512:
+            raise ValueError(
+                f"expected size / resolution to be a whole number of cells in [2, 512], got {cells:g}"
+            )
+        return self
+
+
+class Sensors(StrictModel):
+    """Default settings of the robot's sensing modalities (env options may override)."""
+
+    modalities: list[str] = Field(
+        default_factory=lambda: ["goal", "lidar"], description="Observation keys the robot gets by default."
+    )
+    goal: GoalSensor = Field(default_factory=GoalSensor, description="Relative goal settings.")
+    closest_obstacle: ClosestObstacleSensor = Field(
+        default_factory=ClosestObstacleSensor, description="Closest-obstacle settings."
+    )
+    lidar: LidarSensor = Field(default_factory=LidarSensor, description="LIDAR settings.")
+    leog: LeogSensor = Field(default_factory=LeogSensor, description="Occupancy-grid settings.")
+
+
+class RewardWeights(StrictModel):
+    """Weights of the named reward terms (paper defaults)."""
+
+    step: FiniteFloat = Field(default=-5.0, description="Added every step.")
+    goal_progress: FiniteFloat = Field(default=10.0, description="Times the decrease of the distance to the goal (m).")
+    social: FiniteFloat = Field(default=-100.0, description="Times the magnitude of the humans' social force on the robot.")
+    goal_reached: FiniteFloat = Field(default=500.0, description="Added once when the goal is reached.")
+    collision: FiniteFloat = Field(default=-500.0, description="Added once on a collision.")
+
+
+# ---------------------------------------------------------------------------- scenario
+
+
+class Scenario(StrictModel):
+    """One family of episodes: world, robot, crowd, timing, sensors and reward."""
+
+    name: str | None = Field(default=None, description="Scenario name (defaults to the file name).")
+    description: str = Field(min_length=1, description="One-line description shown by `crowdnav scenario list`.")
+    world: World = Field(default_factory=World, description="World extent and boundary.")
+    walls: list[Wall] = Field(default_factory=list, description="Interior walls.")
+    furniture: list[Furniture] = Field(default_factory=list, description="Static furniture.")
+    robot: Robot = Field(description="The robot.")
+    humans: Humans = Field(default_factory=Humans, description="The crowd.")
+    time_step: PositiveFloat = Field(default=0.2, description="Simulation time step in seconds.")
+    max_steps: Annotated[int, Field(ge=1)] = Field(default=150, description="Steps before an episode is truncated.")
+    sensors: Sensors = Field(default_factory=Sensors, description="Default sensor settings.")
+    reward: RewardWeights = Field(default_factory=RewardWeights, description="Reward weights.")
+
+    @property
+    def world_center(self) -> Point:
+        return ((self.world.min[0] + self.world.max[0]) / 2, (self.world.min[1] + self.world.max[1]) / 2)
+
+    @property
+    def world_diagonal(self) -> float:
+        return math.hypot(self.world.max[0] - self.world.min[0], self.world.max[1] - self.world.min[1])

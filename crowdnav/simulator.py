@@ -1,0 +1,395 @@
+"""The crowd simulator: one robot and a crowd of social-force humans among static obstacles.
+
+State lives in numpy arrays indexed by agent, robot first: ``positions[0]`` is the robot,
+``positions[1:]`` the active humans. Points and velocities are complex numbers
+(``x + 1j*y``, metres and m/s, world frame). A step costs a fixed number of array operations
+whatever the crowd size: there is no Python loop over humans, pairs or edges.
+
+Step order: humans' commands (social force, or given actions) and robot kinematics ->
+integrate -> measure the new geometry once (pairwise distances, nearest obstacle points) ->
+keep humans out of walls and of each other -> robot collision and goal checks -> humans at
+their goals follow the scenario's ``on_goal`` rule.
+
+Randomness comes only from the generator seeded by :meth:`Simulator.reset`.
+"""
+
+from __future__ import annotations
+
+import cmath
+import math
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from crowdnav import social_force as sf
+from crowdnav.placement import GAP, JITTER, PlacementError
+from crowdnav.scenario.loader import Overrides, load_scenario
+from crowdnav.scenario.schema import Scenario
+from crowdnav.world import compile_world, nearest_on_polygons
+
+_SELF_DISTANCE = 1.0e9
+"""Stand-in for an agent's distance to itself, so it neither repels nor overlaps itself."""
+
+
+@dataclass(frozen=True)
+class Collision:
+    """A robot collision: what it hit and how deep."""
+
+    kind: str
+    """``human`` or ``static``."""
+    partner: str
+    """``human_<i>`` or the obstacle's scenario path (e.g. ``furniture.2 (table)``)."""
+    surface_distance: float
+    """Distance between surfaces in metres (<= 0: touching or overlapping)."""
+
+
+@dataclass(frozen=True)
+class StepEvents:
+    """What happened to the robot during one step."""
+
+    goal_reached: bool
+    collision: Collision | None
+    truncated: bool
+
+    @property
+    def terminated(self) -> bool:
+        return self.goal_reached or self.collision is not None
+
+    @property
+    def outcome(self) -> str | None:
+        """``collision`` (wins over a simultaneous goal), ``success``, ``truncated`` or None (running)."""
+        if self.collision is not None:
+            return "collision"
+        if self.goal_reached:
+            return "success"
+        return "truncated" if self.truncated else None
+
+
+class Simulator:
+    """Vectorized crowd simulator for one scenario.
+
+    >>> sim = Simulator("room_furniture")
+    >>> sim.reset(seed=0)
+    >>> events = sim.step(np.array([1.0, 0.0]))
+    """
+
+    def __init__(self, scenario: Scenario | str | Path | dict[str, Any], overrides: Overrides | None = None):
+        if isinstance(scenario, Scenario):
+            scenario = load_scenario(scenario.model_dump(), overrides) if overrides else scenario
+        else:
+            scenario = load_scenario(scenario, overrides)
+        self.scenario = scenario
+        self.world = compile_world(scenario)
+        self.obstacles = self.world.obstacles
+        self.placement = self.world.placement
+        self.dt = scenario.time_step
+        self.max_humans = scenario.humans.max_count
+        force = scenario.humans.social_force
+        self._force = force
+        self._relax = min(1.0, self.dt / force.relaxation_time)
+        self._rng = np.random.default_rng()
+        self._ready = False
+
+    # ----------------------------------------------------------------- state views
+
+    @property
+    def n_humans(self) -> int:
+        """Active humans this episode."""
+        return len(self.positions) - 1
+
+    @property
+    def robot_position(self) -> complex:
+        return complex(self.positions[0])
+
+    @property
+    def human_positions(self) -> np.ndarray:
+        return self.positions[1:]
+
+    @property
+    def human_velocities(self) -> np.ndarray:
+        return self.velocities[1:]
+
+    @property
+    def robot_goal_distance(self) -> float:
+        return abs(self.robot_goal - self.positions[0])
+
+    @property
+    def rng(self) -> np.random.Generator:
+        """The episode's generator (seeded by reset); use it for any episode randomness."""
+        return self._rng
+
+    # ----------------------------------------------------------------------- reset
+
+    def reset(self, seed: int | None = None) -> None:
+        """Start an episode; the same seed gives the same episode bit for bit."""
+        if seed is not None:
+            self._rng = np.random.default_rng(seed)
+        rng, robot, humans, placement = self._rng, self.scenario.robot, self.scenario.humans, self.placement
+        n = int(rng.integers(humans.min_count, humans.max_count + 1))
+        start = placement.robot_start.draw(rng, 1, allowed=placement.start_goal_ok.any(1))
+        goal = placement.robot_goal.draw(
+            rng, 1, away_from=start, min_distance=robot.min_start_goal_distance + math.sqrt(2) * JITTER
+        )[0]
+        if robot.start_heading == "random":
+            heading = float(rng.uniform(-math.pi, math.pi))
+        elif robot.start_heading == "toward_goal":
+            heading = cmath.phase(goal - start[0])
+        else:
+            heading = math.radians(float(robot.start_heading))
+        spawn = np.zeros(0, dtype=complex)
+        if n:
+            reach = robot.radius + humans.radius + GAP + math.sqrt(2) * JITTER
+            spawn = placement.human_spawn.draw(rng, n, away_from=start, min_distance=reach)
+        self.positions = np.concatenate([start, spawn])
+        self.velocities = np.zeros(n + 1, dtype=complex)
+        self.robot_goal = complex(goal)
+        self.robot_heading = heading
+        self.human_goals = self._first_goals(spawn)
+        self.human_preferred_speed = rng.uniform(*humans.preferred_speed, size=n)
+        self.human_max_speed = self.human_preferred_speed * self._force.max_speed_factor
+        self.human_stopped = np.zeros(n, dtype=bool)
+        self.step_count = 0
+        self._prepare_pair_constants(n)
+        self._measure()
+        self._ready = True
+
+    def _first_goals(self, spawn: np.ndarray) -> np.ndarray:
+        humans = self.scenario.humans
+        if len(spawn) == 0:
+            return np.zeros(0, dtype=complex)
+        if humans.goal_rule == "mirror":
+            return 2 * self._mirror_center - spawn
+        goals = self.placement.human_goal
+        return goals.draw(self._rng, len(spawn), replace=len(spawn) > len(goals))
+
+    @property
+    def _mirror_center(self) -> complex:
+        humans = self.scenario.humans
+        return complex(*(humans.mirror_center or self.scenario.world_center))
+
+    def _prepare_pair_constants(self, n: int) -> None:
+        """Per-episode constants of the pairwise and obstacle repulsion (see social_force.repulsion)."""
+        robot, humans, force = self.scenario.robot, self.scenario.humans, self._force
+        radii = np.full(n + 1, humans.radius)
+        radii[0] = robot.radius
+        self.radii = radii
+        self._contact = radii[:, None] + radii[None, :]
+        strength = np.full((n + 1, n + 1), force.human_strength)
+        decay = np.full((n + 1, n + 1), force.human_range)
+        # Column 0 is the robot: it pushes humans only when they see it. Row 0 (the humans'
+        # force on the robot) keeps the human parameters: it is the reward's social term.
+        strength[1:, 0] = force.robot_strength if humans.see_robot else 0.0
+        decay[1:, 0] = force.robot_range
+        np.fill_diagonal(strength, 0.0)
+        self._pair_gain = sf.repulsion_gain(strength, self._contact, decay)
+        self._pair_decay = -1.0 / decay
+        obstacle_strength = np.full((n + 1, 1), force.obstacle_strength)
+        obstacle_strength[0] = 0.0  # the robot does not follow the social force
+        self._polygon_gain = sf.repulsion_gain(obstacle_strength, radii[:, None], force.obstacle_range)
+        self._disc_gain = sf.repulsion_gain(
+            obstacle_strength, radii[:, None] + self.obstacles.disc_radius[None, :], force.obstacle_range
+        )
+        self._obstacle_decay = -1.0 / force.obstacle_range
+
+    # ------------------------------------------------------------------------ step
+
+    def step(self, robot_action: np.ndarray, human_actions: np.ndarray | None = None) -> StepEvents:
+        """Advance one time step.
+
+        ``robot_action``: 2 values in [-1, 1] (holonomic: vx, vy in the robot frame; unicycle:
+        v, omega), scaled by the max speeds. ``human_actions``: optional (n_humans, 2) velocity
+        commands in [-1, 1] times each human's max speed (world frame); by default the humans
+        follow the social-force model.
+        """
+        if not self._ready:
+            raise RuntimeError("call reset() before step()")
+        robot_velocity = self._robot_velocity(robot_action)
+        if human_actions is None:
+            commands = self.social_force_commands()
+        else:
+            commands = self._scaled_commands(human_actions)
+        if self._any_stopped:
+            commands = np.where(self.human_stopped, 0.0, commands)
+        self.velocities[0] = robot_velocity
+        self.velocities[1:] = commands
+        self.positions += self.velocities * self.dt
+        self.step_count += 1
+        self._measure()
+        if self.n_humans and self._resolve_human_overlaps():
+            self._measure()
+        collision = self._robot_collision()
+        goal_reached = abs(self.robot_goal - self.positions[0]) <= self.scenario.robot.goal_radius
+        if self.n_humans:
+            self._apply_goal_rule()
+        truncated = self.step_count >= self.scenario.max_steps
+        return StepEvents(goal_reached=bool(goal_reached), collision=collision, truncated=truncated)
+
+    @property
+    def _any_stopped(self) -> bool:
+        return self.scenario.humans.on_goal == "stop" and bool(self.human_stopped.any())
+
+    def social_force_commands(self) -> np.ndarray:
+        """(n_humans,) complex velocity commands (m/s) of the social-force model in the current state."""
+        force = self._force
+        to_goal = self.human_goals - self.positions[1:]
+        total = sf.goal_force(to_goal, force.goal_weight, force.goal_saturation_distance)
+        total += self._neighbour_force[1:]
+        total += self.static_force()[1:]
+        return sf.velocity_command(total, self.velocities[1:], self.human_preferred_speed, self.human_max_speed, self._relax)
+
+    def static_force(self) -> np.ndarray:
+        """(n+1,) complex obstacle repulsion on every agent (row 0, the robot, is zero)."""
+        out = sf.repulsion(self.polygon_offset, self.polygon_distance, self._polygon_gain, self._obstacle_decay)
+        if self.obstacles.disc_count:
+            out += sf.repulsion(self.disc_offset, self.disc_distance, self._disc_gain, self._obstacle_decay)
+        return out
+
+    @property
+    def robot_social_force(self) -> complex:
+        """Social repulsion the humans exert on the robot (dimensionless force, world frame)."""
+        return complex(self._neighbour_force[0])
+
+    def _robot_velocity(self, action: np.ndarray) -> complex:
+        a0, a1 = float(action[0]), float(action[1])
+        if not (math.isfinite(a0) and math.isfinite(a1)):
+            raise ValueError(f"robot action must be finite, got {list(np.asarray(action).tolist())}")
+        a0, a1 = min(1.0, max(-1.0, a0)), min(1.0, max(-1.0, a1))
+        robot = self.scenario.robot
+        if robot.kinematics == "holonomic":
+            command = complex(a0, a1)
+            norm = abs(command)
+            if norm > 1.0:  # the max speed bounds the norm, not each axis
+                command /= norm
+            return command * robot.max_speed * cmath.exp(1j * self.robot_heading)
+        speed, turn = a0 * robot.max_speed, a1 * robot.max_angular_speed
+        heading = self.robot_heading
+        new_heading = heading + turn * self.dt
+        if abs(turn) > 1e-9:  # exact arc of the unicycle over the step
+            displacement = (speed / turn) * -1j * (cmath.exp(1j * new_heading) - cmath.exp(1j * heading))
+        else:
+            displacement = speed * self.dt * cmath.exp(1j * heading)
+        self.robot_heading = math.remainder(new_heading, 2 * math.pi)
+        return displacement / self.dt
+
+    def _scaled_commands(self, actions: np.ndarray) -> np.ndarray:
+        actions = np.asarray(actions, dtype=float)
+        if actions.shape != (self.n_humans, 2):
+            raise ValueError(f"human_actions must have shape ({self.n_humans}, 2), got {actions.shape}")
+        if not np.isfinite(actions).all():
+            raise ValueError("human_actions must be finite")
+        command = np.clip(actions[:, 0], -1, 1) + 1j * np.clip(actions[:, 1], -1, 1)
+        command /= np.maximum(np.abs(command), 1.0)
+        return command * self.human_max_speed
+
+    # ------------------------------------------------------------------- geometry
+
+    def _measure(self) -> None:
+        """Geometry at the current positions, computed once per step and read by sensors.
+
+        Sets ``pair_offset`` / ``pair_distance`` ((n+1, n+1): from agent i to agent j, centre
+        distance, the diagonal a huge number), ``polygon_offset`` / ``polygon_distance``
+        ((n+1, P): to the nearest point of each static polygon) and, with round obstacles,
+        ``disc_offset`` / ``disc_distance`` ((n+1, C): to each disc's centre, centre distance).
+        """
+        z = self.positions
+        offset = z[None, :] - z[:, None]  # row i, column j: from agent i to agent j
+        distance = np.abs(offset)
+        distance.flat[:: len(z) + 1] = _SELF_DISTANCE
+        self.pair_offset, self.pair_distance = offset, distance
+        self._neighbour_force = sf.repulsion(offset, distance, self._pair_gain, self._pair_decay)
+        self.polygon_offset, self.polygon_distance = nearest_on_polygons(z, self.obstacles)
+        if self.obstacles.disc_count:
+            self.disc_offset = self.obstacles.disc_center[None, :] - z[:, None]
+            self.disc_distance = np.abs(self.disc_offset)
+
+    def _resolve_human_overlaps(self) -> bool:
+        """Push humans out of obstacles and apart from each other; True if anyone moved.
+
+        Repulsion keeps this rare; it is what guarantees that humans never enter walls.
+        """
+        radius = self.scenario.humans.radius
+        pair_distance = self.pair_distance[1:, 1:]
+        polygon_distance = self.polygon_distance[1:]
+        into_wall = polygon_distance < radius
+        overlap = pair_distance < 2 * radius
+        into_disc = None
+        if self.obstacles.disc_count:
+            into_disc = self.disc_distance[1:] < radius + self.obstacles.disc_radius
+        if not (into_wall.any() or overlap.any() or (into_disc is not None and into_disc.any())):
+            return False
+        shift = np.zeros(self.n_humans, dtype=complex)
+        if overlap.any():
+            depth = np.where(overlap, 2 * radius - pair_distance, 0.0) / 2
+            shift -= (self.pair_offset[1:, 1:] / pair_distance * depth).sum(1)
+        if into_wall.any():
+            depth = np.where(into_wall, radius - polygon_distance, 0.0)
+            shift -= (self.polygon_offset[1:] / np.maximum(polygon_distance, 1e-12) * depth).sum(1)
+        if into_disc is not None and into_disc.any():
+            depth = np.where(into_disc, radius + self.obstacles.disc_radius - self.disc_distance[1:], 0.0)
+            shift -= (self.disc_offset[1:] / np.maximum(self.disc_distance[1:], 1e-12) * depth).sum(1)
+        self.positions[1:] += shift
+        return True
+
+    def _robot_collision(self) -> Collision | None:
+        robot_radius = self.scenario.robot.radius
+        candidates = []
+        if self.n_humans:
+            gaps = self.pair_distance[0, 1:] - self._contact[0, 1:]
+            j = int(gaps.argmin())
+            candidates.append((float(gaps[j]), "human", f"human_{j}"))
+        if self.obstacles.polygon_count:
+            gaps = self.polygon_distance[0] - robot_radius
+            k = int(gaps.argmin())
+            candidates.append((float(gaps[k]), "static", self.obstacles.labels[k]))
+        if self.obstacles.disc_count:
+            gaps = self.disc_distance[0] - self.obstacles.disc_radius - robot_radius
+            k = int(gaps.argmin())
+            candidates.append((float(gaps[k]), "static", self.obstacles.disc_labels[k]))
+        if not candidates:
+            return None
+        gap, kind, partner = min(candidates)
+        return Collision(kind, partner, gap) if gap <= 0.0 else None
+
+    # ------------------------------------------------------------------ goal rule
+
+    def _apply_goal_rule(self) -> None:
+        humans = self.scenario.humans
+        arrived = np.abs(self.human_goals - self.positions[1:]) <= self._force.goal_tolerance
+        if humans.on_goal == "stop":
+            self.human_stopped |= arrived
+            self.velocities[1:][self.human_stopped] = 0.0
+            return
+        if not arrived.any():
+            return
+        index = np.flatnonzero(arrived)
+        if humans.on_goal == "respawn":
+            index = self._respawn(index)
+            if len(index) == 0:
+                return
+        if humans.goal_rule == "mirror":
+            self.human_goals[index] = 2 * self._mirror_center - self.human_goals[index]
+        else:
+            self.human_goals[index] = self.placement.human_goal.draw(self._rng, len(index), replace=True)
+
+    def _respawn(self, index: np.ndarray) -> np.ndarray:
+        """Move arrived humans to free spawn points; returns those that moved (the rest wait)."""
+        humans, robot = self.scenario.humans, self.scenario.robot
+        others = np.delete(self.positions, index + 1)
+        reach = max(robot.radius, humans.radius) + humans.radius + GAP + math.sqrt(2) * JITTER
+        spawn = self.placement.human_spawn
+        for count in range(len(index), 0, -1):  # at most len(index) tries, usually one
+            try:
+                new = spawn.draw(self._rng, count, away_from=others, min_distance=reach)
+            except PlacementError:
+                continue
+            moved = index[:count]
+            self.positions[moved + 1] = new
+            self.velocities[moved + 1] = 0.0
+            if humans.goal_rule == "mirror":
+                # the mirror rule flips the goal below, so store the spawn's mirror image twice-flipped
+                self.human_goals[moved] = new
+            self._measure()
+            return moved
+        return index[:0]

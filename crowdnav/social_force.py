@@ -1,0 +1,59 @@
+"""The humans' social-force model, as vectorized functions over complex 2-D vectors.
+
+Forces are dimensionless "desired-direction" vectors; the desired velocity is the total
+force times the human's preferred speed. With ``d`` distances in metres:
+
+* goal force:      ``w_goal * (g - p) / max(|g - p|, d_sat)``: unit length far from the goal,
+  proportional to the distance within ``d_sat`` (so humans slow down as they arrive);
+* neighbour force: ``sum_j A_j * exp((r_i + r_j - d_ij) / B_j) * (p_i - p_j) / d_ij``
+  (humans, and the robot only when ``see_robot`` is on);
+* obstacle force:  ``sum_k A_o * exp((r_i - d_ik) / B_o) * (p_i - q_ik) / d_ik`` with ``q_ik``
+  the nearest point of static obstacle ``k``;
+* velocity command: ``v + (v_pref * F - v) * min(1, dt / tau)``, capped at the max speed.
+
+The same functions drive the simulator's built-in crowd and :class:`SocialForcePolicy`
+(which reads them from observations), so there is one implementation of the model.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+
+def goal_force(to_goal: np.ndarray, weight: float, saturation_distance: float) -> np.ndarray:
+    """(N,) complex: pull towards the goal, ``to_goal`` = goal minus position."""
+    return to_goal * (weight / np.maximum(np.abs(to_goal), saturation_distance))
+
+
+def repulsion(offset: np.ndarray, distance: np.ndarray, gain: np.ndarray, neg_inv_range: np.ndarray | float) -> np.ndarray:
+    """(N,) complex: sum over columns of exponential repulsion.
+
+    ``offset`` (N, M) complex points from each agent to what repels it (another agent's centre
+    or an obstacle's nearest point) and ``distance`` (N, M) is its length (centre distance for
+    agents, surface distance for obstacles). ``gain`` = ``-A * exp(contact / B)`` with the sign
+    folded in (so no extra negation per step); masked pairs have gain 0.
+    ``neg_inv_range`` = ``-1 / B``.
+    """
+    magnitude = gain * np.exp(distance * neg_inv_range)
+    return (offset * (magnitude / distance)).sum(axis=1)
+
+
+def repulsion_gain(strength: np.ndarray | float, contact: np.ndarray | float, decay_range: np.ndarray | float) -> np.ndarray:
+    """``-A * exp(contact / B)``: the precomputable part of :func:`repulsion`."""
+    return -np.asarray(strength, dtype=float) * np.exp(np.asarray(contact, dtype=float) / decay_range)
+
+
+def velocity_command(
+    force: np.ndarray,
+    velocity: np.ndarray,
+    preferred_speed: np.ndarray,
+    max_speed: np.ndarray,
+    relax: float,
+) -> np.ndarray:
+    """(N,) complex velocity (m/s): relax towards ``preferred_speed * force``, cap at ``max_speed``.
+
+    ``relax`` = ``min(1, dt / relaxation_time)``.
+    """
+    command = velocity + (force * preferred_speed - velocity) * relax
+    speed = np.abs(command)
+    return command * np.minimum(1.0, max_speed / np.maximum(speed, 1e-12))

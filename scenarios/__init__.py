@@ -1,0 +1,1 @@
+"""crowdnav's scenario library: one YAML file per scenario (data only, see crowdnav.scenario)."""
