@@ -27,7 +27,7 @@ from crowdnav import social_force as sf
 from crowdnav.placement import GAP, JITTER, PlacementError
 from crowdnav.scenario.loader import Overrides, load_scenario
 from crowdnav.scenario.schema import Scenario
-from crowdnav.world import compile_world, nearest_on_polygons
+from crowdnav.world import compile_world, nearest_on_edges
 
 _SELF_DISTANCE = 1.0e9
 """Stand-in for an agent's distance to itself, so it neither repels nor overlaps itself."""
@@ -89,7 +89,9 @@ class Simulator:
         force = scenario.humans.social_force
         self._force = force
         self._relax = min(1.0, self.dt / force.relaxation_time)
+        self._static_count = self.obstacles.polygon_count + self.obstacles.disc_count
         self._rng = np.random.default_rng()
+        self._constants: dict[int, tuple] = {}
         self._ready = False
 
     # ----------------------------------------------------------------- state views
@@ -152,7 +154,7 @@ class Simulator:
         self.human_stopped = np.zeros(n, dtype=bool)
         self.step_count = 0
         self._prepare_pair_constants(n)
-        self._measure()
+        self.refresh()
         self._ready = True
 
     def _first_goals(self, spawn: np.ndarray) -> np.ndarray:
@@ -170,7 +172,17 @@ class Simulator:
         return complex(*(humans.mirror_center or self.scenario.world_center))
 
     def _prepare_pair_constants(self, n: int) -> None:
-        """Per-episode constants of the pairwise and obstacle repulsion (see social_force.repulsion)."""
+        """Constants of the pairwise and obstacle repulsion for a crowd of ``n`` (cached per ``n``)."""
+        cached = self._constants.get(n)
+        if cached is None:
+            self._compute_pair_constants(n)
+            self._constants[n] = (self.radii, self._contact, self._gain, self._decay, self._robot_contact,
+                                  self._robot_static_contact, self._human_static_contact)
+        else:
+            (self.radii, self._contact, self._gain, self._decay, self._robot_contact,
+             self._robot_static_contact, self._human_static_contact) = cached
+
+    def _compute_pair_constants(self, n: int) -> None:
         robot, humans, force = self.scenario.robot, self.scenario.humans, self._force
         radii = np.full(n + 1, humans.radius)
         radii[0] = robot.radius
@@ -183,15 +195,18 @@ class Simulator:
         strength[1:, 0] = force.robot_strength if humans.see_robot else 0.0
         decay[1:, 0] = force.robot_range
         np.fill_diagonal(strength, 0.0)
-        self._pair_gain = sf.repulsion_gain(strength, self._contact, decay)
-        self._pair_decay = -1.0 / decay
-        obstacle_strength = np.full((n + 1, 1), force.obstacle_strength)
-        obstacle_strength[0] = 0.0  # the robot does not follow the social force
-        self._polygon_gain = sf.repulsion_gain(obstacle_strength, radii[:, None], force.obstacle_range)
-        self._disc_gain = sf.repulsion_gain(
-            obstacle_strength, radii[:, None] + self.obstacles.disc_radius[None, :], force.obstacle_range
-        )
-        self._obstacle_decay = -1.0 / force.obstacle_range
+        pair_gain = sf.repulsion_gain(strength, self._contact, decay)
+        # Obstacle columns: polygons by surface distance, discs by centre distance with their
+        # radius folded into the gain (same force, one array op less per step).
+        obstacles = self.obstacles
+        static_strength = np.full((n + 1, 1), force.obstacle_strength)
+        static_strength[0] = 0.0  # the robot does not follow the social force
+        static_gain = sf.repulsion_gain(static_strength, radii[:, None] + obstacles.surface_radius[None, :], force.obstacle_range)
+        self._gain = np.concatenate([pair_gain, static_gain], axis=1)
+        self._decay = np.concatenate([-1.0 / decay, np.full((n + 1, self._static_count), -1.0 / force.obstacle_range)], axis=1)
+        self._robot_contact = self._contact[0, 1:]
+        self._robot_static_contact = obstacles.surface_radius + robot.radius
+        self._human_static_contact = obstacles.surface_radius + humans.radius
 
     # ------------------------------------------------------------------------ step
 
@@ -216,10 +231,10 @@ class Simulator:
         self.velocities[1:] = commands
         self.positions += self.velocities * self.dt
         self.step_count += 1
-        self._measure()
+        self.refresh()
         if self.n_humans and self._resolve_human_overlaps():
-            self._measure()
-        collision = self._robot_collision()
+            self.refresh()
+        collision = self.robot_collision()
         goal_reached = abs(self.robot_goal - self.positions[0]) <= self.scenario.robot.goal_radius
         if self.n_humans:
             self._apply_goal_rule()
@@ -235,21 +250,16 @@ class Simulator:
         force = self._force
         to_goal = self.human_goals - self.positions[1:]
         total = sf.goal_force(to_goal, force.goal_weight, force.goal_saturation_distance)
-        total += self._neighbour_force[1:]
-        total += self.static_force()[1:]
+        total += self._repulsion[1:]
         return sf.velocity_command(total, self.velocities[1:], self.human_preferred_speed, self.human_max_speed, self._relax)
-
-    def static_force(self) -> np.ndarray:
-        """(n+1,) complex obstacle repulsion on every agent (row 0, the robot, is zero)."""
-        out = sf.repulsion(self.polygon_offset, self.polygon_distance, self._polygon_gain, self._obstacle_decay)
-        if self.obstacles.disc_count:
-            out += sf.repulsion(self.disc_offset, self.disc_distance, self._disc_gain, self._obstacle_decay)
-        return out
 
     @property
     def robot_social_force(self) -> complex:
-        """Social repulsion the humans exert on the robot (dimensionless force, world frame)."""
-        return complex(self._neighbour_force[0])
+        """Social repulsion the humans exert on the robot (dimensionless force, world frame).
+
+        Row 0 of the fused repulsion: the robot's own column and its obstacle columns have zero gain.
+        """
+        return complex(self._repulsion[0])
 
     def _robot_velocity(self, action: np.ndarray) -> complex:
         a0, a1 = float(action[0]), float(action[1])
@@ -285,24 +295,31 @@ class Simulator:
 
     # ------------------------------------------------------------------- geometry
 
-    def _measure(self) -> None:
+    def refresh(self) -> None:
         """Geometry at the current positions, computed once per step and read by sensors.
 
         Sets ``pair_offset`` / ``pair_distance`` ((n+1, n+1): from agent i to agent j, centre
         distance, the diagonal a huge number), ``polygon_offset`` / ``polygon_distance``
         ((n+1, P): to the nearest point of each static polygon) and, with round obstacles,
         ``disc_offset`` / ``disc_distance`` ((n+1, C): to each disc's centre, centre distance).
+        Also the repulsion on every agent from humans (and the robot if seen) and obstacles.
+        Call it after editing ``positions`` by hand (tests, scripted set-ups).
         """
         z = self.positions
         offset = z[None, :] - z[:, None]  # row i, column j: from agent i to agent j
         distance = np.abs(offset)
         distance.flat[:: len(z) + 1] = _SELF_DISTANCE
         self.pair_offset, self.pair_distance = offset, distance
-        self._neighbour_force = sf.repulsion(offset, distance, self._pair_gain, self._pair_decay)
-        self.polygon_offset, self.polygon_distance = nearest_on_polygons(z, self.obstacles)
-        if self.obstacles.disc_count:
-            self.disc_offset = self.obstacles.disc_center[None, :] - z[:, None]
-            self.disc_distance = np.abs(self.disc_offset)
+        if self._static_count:
+            obstacles = self.obstacles
+            static_offset, static_distance = nearest_on_edges(z, obstacles.surface)  # polygons, then disc centres
+            count = obstacles.polygon_count
+            self.polygon_offset, self.polygon_distance = static_offset[:, :count], static_distance[:, :count]
+            self.disc_offset, self.disc_distance = static_offset[:, count:], static_distance[:, count:]
+            self._static_offset, self._static_distance = static_offset, static_distance
+            offset = np.concatenate([offset, static_offset], axis=1)
+            distance = np.concatenate([distance, static_distance], axis=1)
+        self._repulsion = sf.repulsion(offset, distance, self._gain, self._decay)
 
     def _resolve_human_overlaps(self) -> bool:
         """Push humans out of obstacles and apart from each other; True if anyone moved.
@@ -311,46 +328,39 @@ class Simulator:
         """
         radius = self.scenario.humans.radius
         pair_distance = self.pair_distance[1:, 1:]
-        polygon_distance = self.polygon_distance[1:]
-        into_wall = polygon_distance < radius
-        overlap = pair_distance < 2 * radius
-        into_disc = None
-        if self.obstacles.disc_count:
-            into_disc = self.disc_distance[1:] < radius + self.obstacles.disc_radius
-        if not (into_wall.any() or overlap.any() or (into_disc is not None and into_disc.any())):
+        if self._static_count:
+            static_gap = self._static_distance[1:] - self._human_static_contact  # surface gaps
+            into_static = static_gap.min() < 0.0
+        else:
+            into_static = False
+        if not (into_static or pair_distance.min() < 2 * radius):
             return False
-        shift = np.zeros(self.n_humans, dtype=complex)
-        if overlap.any():
-            depth = np.where(overlap, 2 * radius - pair_distance, 0.0) / 2
-            shift -= (self.pair_offset[1:, 1:] / pair_distance * depth).sum(1)
-        if into_wall.any():
-            depth = np.where(into_wall, radius - polygon_distance, 0.0)
-            shift -= (self.polygon_offset[1:] / np.maximum(polygon_distance, 1e-12) * depth).sum(1)
-        if into_disc is not None and into_disc.any():
-            depth = np.where(into_disc, radius + self.obstacles.disc_radius - self.disc_distance[1:], 0.0)
-            shift -= (self.disc_offset[1:] / np.maximum(self.disc_distance[1:], 1e-12) * depth).sum(1)
+        overlap = np.maximum(2 * radius - pair_distance, 0.0) / 2
+        shift = -(self.pair_offset[1:, 1:] / pair_distance * overlap).sum(1)
+        if into_static:
+            direction = self._static_offset[1:] / np.maximum(self._static_distance[1:], 1e-12)
+            shift += (direction * np.minimum(static_gap, 0.0)).sum(1)
         self.positions[1:] += shift
         return True
 
-    def _robot_collision(self) -> Collision | None:
-        robot_radius = self.scenario.robot.radius
+    def robot_collision(self) -> Collision | None:
+        """The robot's deepest contact in the current state (touching counts), or None."""
+        human_gaps = self.pair_distance[0, 1:] - self._robot_contact
+        static_gaps = self._static_distance[0] - self._robot_static_contact if self._static_count else human_gaps[:0]
+        if (not len(human_gaps) or human_gaps.min() > 0.0) and (not len(static_gaps) or static_gaps.min() > 0.0):
+            return None  # the common case, decided with two reductions
         candidates = []
-        if self.n_humans:
-            gaps = self.pair_distance[0, 1:] - self._contact[0, 1:]
-            j = int(gaps.argmin())
-            candidates.append((float(gaps[j]), "human", f"human_{j}"))
-        if self.obstacles.polygon_count:
-            gaps = self.polygon_distance[0] - robot_radius
-            k = int(gaps.argmin())
-            candidates.append((float(gaps[k]), "static", self.obstacles.labels[k]))
-        if self.obstacles.disc_count:
-            gaps = self.disc_distance[0] - self.obstacles.disc_radius - robot_radius
-            k = int(gaps.argmin())
-            candidates.append((float(gaps[k]), "static", self.obstacles.disc_labels[k]))
-        if not candidates:
-            return None
+        if len(human_gaps):
+            j = int(human_gaps.argmin())
+            candidates.append((float(human_gaps[j]), "human", f"human_{j}"))
+        if len(static_gaps):
+            k = int(static_gaps.argmin())
+            labels = self.obstacles.labels + self.obstacles.disc_labels
+            candidates.append((float(static_gaps[k]), "static", labels[k]))
         gap, kind, partner = min(candidates)
         return Collision(kind, partner, gap) if gap <= 0.0 else None
+
+    _measure = refresh  # former private name, kept while callers move to refresh()
 
     # ------------------------------------------------------------------ goal rule
 
@@ -390,6 +400,6 @@ class Simulator:
             if humans.goal_rule == "mirror":
                 # the mirror rule flips the goal below, so store the spawn's mirror image twice-flipped
                 self.human_goals[moved] = new
-            self._measure()
+            self.refresh()
             return moved
         return index[:0]

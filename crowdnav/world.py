@@ -45,12 +45,18 @@ class StaticObstacles:
     """(P, E) complex: end minus start."""
     edge_inv_len2: np.ndarray
     """(P, E) float: 1 / |edge|^2 (0 for padding and degenerate edges)."""
+    edge_projector: np.ndarray
+    """(P, E) complex: conj(edge) / |edge|^2, so Re((p - a) * projector) is p's position along the edge."""
     disc_center: np.ndarray
     """(C,) complex: centres of round obstacles."""
     disc_radius: np.ndarray
     """(C,) float: radii of round obstacles."""
     disc_labels: list[str] = field(default_factory=list)
     """Per disc: its scenario path and name."""
+    surface: EdgeSet | None = None
+    """Polygons then discs (each disc one zero-length edge at its centre) for one nearest-point query."""
+    surface_radius: np.ndarray | None = None
+    """(P+C,) radius to subtract from the distance to ``surface``: 0 for polygons, the disc radius for discs."""
 
     @property
     def polygon_count(self) -> int:
@@ -63,8 +69,20 @@ class StaticObstacles:
     @property
     def union(self):
         """All static obstacles as one shapely geometry (load-time use only)."""
-        shapes = list(self.polygons) + [Point(c.real, c.imag).buffer(r, 64) for c, r in zip(self.disc_center, self.disc_radius)]
+        shapes = list(self.polygons) + [Point(c.real, c.imag).buffer(r, 64) for c, r in zip(self.disc_center, self.disc_radius, strict=False)]
         return shapely.union_all(shapes) if shapes else shapely.Polygon()
+
+
+@dataclass
+class EdgeSet:
+    """Edges of several shapes, padded to the same count per shape (rows), for vectorized queries."""
+
+    start: np.ndarray
+    """(S, E) complex edge start points (padding at FAR)."""
+    vector: np.ndarray
+    """(S, E) complex edge vectors (0 for padding)."""
+    projector: np.ndarray
+    """(S, E) complex conj(vector) / |vector|^2 (0 for padding and zero-length edges)."""
 
 
 def nearest_on_polygons(points: np.ndarray, obstacles: StaticObstacles) -> tuple[np.ndarray, np.ndarray]:
@@ -73,13 +91,20 @@ def nearest_on_polygons(points: np.ndarray, obstacles: StaticObstacles) -> tuple
     ``points``: (M,) complex. Returns ``offset`` (M, P) complex = nearest point minus the point,
     and ``distance`` (M, P) = |offset|. Exact point-to-segment math over the padded edges.
     """
-    rel = points[:, None, None] - obstacles.edge_start  # (M, P, E)
-    t = (rel * obstacles.edge_vector.conj()).real * obstacles.edge_inv_len2
-    np.clip(t, 0.0, 1.0, out=t)
-    offset = t * obstacles.edge_vector - rel  # from the point to the nearest point of each edge
+    return nearest_on_edges(points, EdgeSet(obstacles.edge_start, obstacles.edge_vector, obstacles.edge_projector))
+
+
+def nearest_on_edges(points: np.ndarray, edges: EdgeSet) -> tuple[np.ndarray, np.ndarray]:
+    """Nearest point of every row of ``edges`` to every point: (offset, distance), each (M, S)."""
+    rel = points[:, None, None] - edges.start  # (M, S, E)
+    t = (rel * edges.projector).real
+    np.maximum(t, 0.0, out=t)
+    np.minimum(t, 1.0, out=t)
+    offset = t * edges.vector - rel  # from the point to the nearest point of each edge
     dist = np.abs(offset)
     m, p, e = dist.shape
-    flat = dist.reshape(m * p, e).argmin(1) + np.arange(0, m * p * e, e)
+    flat = dist.reshape(m * p, e).argmin(1)
+    flat += np.arange(0, m * p * e, e)
     return offset.ravel()[flat].reshape(m, p), dist.ravel()[flat].reshape(m, p)
 
 
@@ -154,7 +179,7 @@ def _as_arrays(polygons: list[Polygon], labels: list[str], discs: list[tuple[com
         for ring in [poly.exterior, *poly.interiors]:
             xy = np.asarray(ring.coords)
             z = xy[:, 0] + 1j * xy[:, 1]
-            edges.extend(zip(z[:-1], z[1:]))
+            edges.extend(zip(z[:-1], z[1:], strict=False))
         rings.append(edges)
     max_edges = max((len(e) for e in rings), default=1)
     count = len(polygons)
@@ -166,15 +191,26 @@ def _as_arrays(polygons: list[Polygon], labels: list[str], discs: list[tuple[com
     vector = end - start
     len2 = np.abs(vector) ** 2
     inv_len2 = np.divide(1.0, len2, out=np.zeros_like(len2), where=len2 > 1e-18)
+    centers = np.array([c for c, _, _ in discs], dtype=complex)
+    disc_start = np.full((len(discs), max_edges), FAR + 1j * FAR, dtype=complex)
+    disc_start[:, 0] = centers
+    surface = EdgeSet(
+        start=np.concatenate([start, disc_start]),
+        vector=np.concatenate([vector, np.zeros_like(disc_start)]),
+        projector=np.concatenate([vector.conj() * inv_len2, np.zeros_like(disc_start)]),
+    )
     return StaticObstacles(
         polygons=polygons,
         labels=labels,
         edge_start=start,
         edge_vector=vector,
         edge_inv_len2=inv_len2,
-        disc_center=np.array([c for c, _, _ in discs], dtype=complex),
+        edge_projector=vector.conj() * inv_len2,
+        disc_center=centers,
         disc_radius=np.array([r for _, r, _ in discs], dtype=float),
         disc_labels=[label for _, _, label in discs],
+        surface=surface,
+        surface_radius=np.array([0.0] * count + [r for _, r, _ in discs]),
     )
 
 

@@ -7,17 +7,18 @@ the YAML node can be found, the line.
 from __future__ import annotations
 
 import copy
+import difflib
 import math
-import typing
 from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
 import yaml
-from pydantic import BaseModel, ValidationError
+from pydantic import ValidationError
 
 from crowdnav.scenario import library
-from crowdnav.scenario.errors import ScenarioError, ScenarioIssue
+from crowdnav.scenario.errors import ScenarioError, ScenarioIssue, show
+from crowdnav.scenario.messages import schema_issues
 from crowdnav.scenario.schema import Scenario
 
 Overrides = Mapping[str, Any]
@@ -35,11 +36,11 @@ def load_scenario(source: str | Path | Mapping[str, Any], overrides: Overrides |
     else:
         path = library.resolve(source)
         label = str(path)
+        if path.is_dir():
+            expected = "is a directory; expected a scenario YAML file or a library scenario name"
+            raise ScenarioError(label, [ScenarioIssue("", expected)])
         if not path.is_file():
-            hint = ""
-            if path.parent == library.library_dir():
-                hint = f" (library scenarios: {', '.join(library.library_names())})"
-            raise ScenarioError(label, [ScenarioIssue("", f"file not found{hint}")])
+            raise _not_found(source, path)
         document, root = _read_yaml(path)
     override_paths = set()
     for dotted, value in (overrides or {}).items():
@@ -61,6 +62,16 @@ def load_scenario(source: str | Path | Mapping[str, Any], overrides: Overrides |
     return scenario
 
 
+def _not_found(source: str | Path, path: Path) -> ScenarioError:
+    if path.parent != library.library_dir() or isinstance(source, Path):
+        return ScenarioError(str(path), [ScenarioIssue("", "file not found")])
+    names = library.library_names()
+    close = difflib.get_close_matches(str(source), names, n=1)
+    hint = f"did you mean '{close[0]}'? " if close else ""
+    message = f"no such file or library scenario; {hint}library scenarios: {', '.join(names)}"
+    return ScenarioError(str(source), [ScenarioIssue("", message)])
+
+
 def _read_yaml(path: Path) -> tuple[dict[str, Any], yaml.Node | None]:
     label = str(path)
     try:
@@ -78,7 +89,30 @@ def _read_yaml(path: Path) -> tuple[dict[str, Any], yaml.Node | None]:
     if not isinstance(document, dict):
         kind = "an empty file" if document is None else type(document).__name__
         raise ScenarioError(label, [ScenarioIssue("", f"expected a mapping of scenario fields at the top level, got {kind}", 1)])
+    duplicates = _duplicate_keys(root, "")
+    if duplicates:
+        raise ScenarioError(label, duplicates)
     return document, root
+
+
+def _duplicate_keys(node: yaml.Node, path: str) -> list[ScenarioIssue]:
+    """YAML silently keeps the last of two equal keys; for a config file that is always a mistake."""
+    issues = []
+    if isinstance(node, yaml.MappingNode):
+        first_line: dict[str, int] = {}
+        for key, value in node.value:
+            name = str(key.value)
+            child = f"{path}.{name}" if path else name
+            line = key.start_mark.line + 1
+            if name in first_line and name != "<<":
+                message = f"duplicate key '{name}' (first given at line {first_line[name]}); expected it once"
+                issues.append(ScenarioIssue(child, message, line))
+            first_line.setdefault(name, line)
+            issues.extend(_duplicate_keys(value, child))
+    elif isinstance(node, yaml.SequenceNode):
+        for index, item in enumerate(node.value):
+            issues.extend(_duplicate_keys(item, f"{path}.{index}" if path else str(index)))
+    return issues
 
 
 def _apply_override(label: str, document: dict[str, Any], dotted: str, value: Any) -> None:
@@ -89,7 +123,7 @@ def _apply_override(label: str, document: dict[str, Any], dotted: str, value: An
         try:
             child = node[key]
         except (KeyError, IndexError, TypeError):
-            if isinstance(node, dict):
+            if isinstance(node, dict) and not parts[depth + 1].isdigit():
                 child = node[key] = {}
             else:
                 where = ".".join(parts[: depth + 1])
@@ -98,94 +132,32 @@ def _apply_override(label: str, document: dict[str, Any], dotted: str, value: An
     last = parts[-1]
     if isinstance(node, list):
         if not last.isdigit() or int(last) >= len(node):
-            raise ScenarioError(label, [ScenarioIssue(dotted, f"override index '{last}' is not in the list (length {len(node)})")])
+            message = f"override index '{last}' is not in the list (length {len(node)})"
+            raise ScenarioError(label, [ScenarioIssue(dotted, message)])
         node[int(last)] = value
     elif isinstance(node, dict):
         node[last] = value
     else:
-        raise ScenarioError(label, [ScenarioIssue(dotted, "override path goes through a value that is not a mapping or list")])
+        where = ".".join(parts[:-1])
+        message = f"override path goes through '{where}', which holds {show(node)}, not a mapping or list"
+        raise ScenarioError(label, [ScenarioIssue(dotted, message)])
 
 
 def _validate_schema(label: str, document: dict, root: yaml.Node | None, override_paths: set[str]) -> Scenario:
     try:
         return Scenario.model_validate(document)
     except ValidationError as error:
-        grouped: dict[str, list[str]] = {}
-        for item in error.errors(include_url=False):
-            path, message = _describe(item, document)
-            grouped.setdefault(path, [])
-            if message not in grouped[path]:
-                grouped[path].append(message)
-        issues = [ScenarioIssue(path, "; or ".join(messages)) for path, messages in grouped.items()]
+        issues = schema_issues(error, document)
         raise ScenarioError(label, [_with_line(issue, root, override_paths) for issue in issues]) from None
 
 
-def _describe(item: dict[str, Any], document: dict) -> tuple[str, str]:
-    """Turn one pydantic error into (dotted path, message), dropping union-branch tags from the path."""
-    parts: list[str | int] = []
-    node: Any = document
-    for component in item["loc"]:
-        if isinstance(node, dict) and component in node:
-            parts.append(component)
-            node = node[component]
-        elif isinstance(node, list) and isinstance(component, int) and component < len(node):
-            parts.append(component)
-            node = node[component]
-        elif item["type"] == "missing" and component == item["loc"][-1]:
-            parts.append(component)
-        # otherwise it is a union tag such as 'rectangle' or 'int': not part of the document
-    path = ".".join(str(part) for part in parts)
-    kind, message = item["type"], item["msg"]
-    if kind == "extra_forbidden":
-        allowed = _allowed_keys(document, parts[:-1])
-        expected = f" (expected one of: {', '.join(allowed)})" if allowed else ""
-        return path, f"unknown key '{parts[-1]}'{expected}"
-    if kind == "missing":
-        return path, "required field is missing"
-    if kind == "union_tag_invalid":
-        tags = item.get("ctx", {}).get("expected_tags", "")
-        return path, f"unknown type {item['input'].get('type')!r} (expected one of: {tags})"
-    if kind == "union_tag_not_found":
-        return path, f"expected a 'type' key ({item.get('ctx', {}).get('discriminator', 'type')})"
-    if message.startswith("Value error, "):
-        message = message[len("Value error, ") :]
-    else:
-        message = f"{message[0].lower()}{message[1:]}, got {item.get('input')!r}"
-    return path, message
-
-
-def _allowed_keys(document: dict, parts: list[str | int]) -> list[str]:
-    """Field names accepted at ``parts`` (walking the models with the document's data)."""
-    model: type[BaseModel] | None = Scenario
-    node: Any = document
-    for part in parts:
-        if model is None:
-            return []
-        if isinstance(part, int):
-            node = node[part]
-            continue
-        field = model.model_fields.get(part)
-        node = node.get(part) if isinstance(node, dict) else None
-        model = _model_in(field.annotation, node) if field else None
-    return sorted(model.model_fields) if model else []
-
-
-def _model_in(annotation: Any, data: Any) -> type[BaseModel] | None:
-    if isinstance(annotation, type) and issubclass(annotation, BaseModel):
-        return annotation
-    candidates = [m for arg in typing.get_args(annotation) if (m := _model_in(arg, data)) is not None]
-    if len(candidates) > 1 and isinstance(data, dict):
-        for candidate in candidates:
-            tag = candidate.model_fields.get("type")
-            if tag is not None and data.get("type") in typing.get_args(tag.annotation):
-                return candidate
-    return candidates[0] if candidates else None
-
-
 def _with_line(issue: ScenarioIssue, root: yaml.Node | None, override_paths: set[str]) -> ScenarioIssue:
+    """Attach the YAML line; an issue inside an overridden value has no line in the file."""
     if any(issue.path == p or issue.path.startswith(p + ".") for p in override_paths):
         return ScenarioIssue(issue.path, f"{issue.message} (from override)", None)
-    return ScenarioIssue(issue.path, issue.message, _line_of(root, issue.path))
+    inner = sorted(p for p in override_paths if issue.path and p.startswith(issue.path + "."))
+    suffix = f" (with override {', '.join(inner)})" if inner else ""
+    return ScenarioIssue(issue.path, issue.message + suffix, _line_of(root, issue.path))
 
 
 def _line_of(root: yaml.Node | None, dotted: str) -> int | None:
@@ -213,9 +185,13 @@ def consistency_issues(scenario: Scenario) -> list[ScenarioIssue]:
     issues = []
     robot, humans = scenario.robot, scenario.humans
     if robot.kinematics == "unicycle" and robot.max_angular_speed is None:
-        issues.append(ScenarioIssue("robot.max_angular_speed", "expected a maximum angular speed (rad/s) for unicycle kinematics"))
+        issues.append(
+            ScenarioIssue("robot.max_angular_speed", "expected a maximum angular speed (rad/s) for unicycle kinematics")
+        )
     if robot.kinematics == "holonomic" and robot.max_angular_speed is not None:
-        issues.append(ScenarioIssue("robot.max_angular_speed", "only applies to unicycle kinematics; remove it or set kinematics: unicycle"))
+        issues.append(
+            ScenarioIssue("robot.max_angular_speed", "only applies to unicycle kinematics; remove it or set kinematics: unicycle")
+        )
     if humans.max_count > 0 and not humans.spawn:
         issues.append(ScenarioIssue("humans.spawn", "expected at least one spawn region when humans.count > 0"))
     if humans.max_count > 0 and humans.goal_rule == "sample" and not humans.goal:

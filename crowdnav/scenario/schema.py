@@ -11,16 +11,52 @@ is checked when the scenario is compiled into a world, see :mod:`crowdnav.world`
 from __future__ import annotations
 
 import math
-from typing import Annotated, Literal, Union
+from collections.abc import Callable
+from typing import Annotated, Any, Literal
 
-from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
+from pydantic import BaseModel, BeforeValidator, ConfigDict, Field, field_validator, model_validator
 
-Point = tuple[float, float]
-"""A 2-D point ``[x, y]`` in metres, world frame."""
+from crowdnav.scenario.errors import show
 
 PositiveFloat = Annotated[float, Field(gt=0, allow_inf_nan=False)]
 NonNegativeFloat = Annotated[float, Field(ge=0, allow_inf_nan=False)]
 FiniteFloat = Annotated[float, Field(allow_inf_nan=False)]
+
+# The shape checks below run before pydantic's own, so that a wrong shape reads
+# "expected a point [x, y] ..." instead of pydantic's generic tuple/union messages.
+
+
+def _is_number(value: Any) -> bool:
+    return isinstance(value, (int, float)) and not isinstance(value, bool)
+
+
+def _pair_of(what: str) -> Callable[[Any], Any]:
+    def check(value: Any) -> Any:
+        if isinstance(value, (list, tuple)) and len(value) == 2:
+            return value
+        raise ValueError(f"expected {what}, got {show(value)}")
+
+    return check
+
+
+Point = Annotated[tuple[FiniteFloat, FiniteFloat], BeforeValidator(_pair_of("a point [x, y] of two numbers in metres"))]
+"""A 2-D point ``[x, y]`` in metres, world frame."""
+Size = Annotated[tuple[PositiveFloat, PositiveFloat], BeforeValidator(_pair_of("a size [w, h] of two positive numbers (m)"))]
+"""Width and depth ``[w, h]`` in metres."""
+
+
+def _count_shape(value: Any) -> Any:
+    whole = _is_number(value) and float(value).is_integer()
+    pair = isinstance(value, (list, tuple)) and len(value) == 2 and all(_is_number(v) and float(v).is_integer() for v in value)
+    if whole or pair:
+        return [int(v) for v in value] if pair else int(value)
+    raise ValueError(f"expected a whole number of humans, or [min, max] sampled per episode, got {show(value)}")
+
+
+def _heading_shape(value: Any) -> Any:
+    if value in ("random", "toward_goal") or _is_number(value):
+        return value
+    raise ValueError(f"expected 'random', 'toward_goal' or an angle in degrees, got {show(value)}")
 
 
 class StrictModel(BaseModel):
@@ -70,7 +106,7 @@ class CircleRegion(StrictModel):
 
 
 Region = Annotated[
-    Union[RectangleRegion, PolygonRegion, PointsRegion, CircleRegion],
+    RectangleRegion | PolygonRegion | PointsRegion | CircleRegion,
     Field(discriminator="type"),
 ]
 
@@ -113,7 +149,7 @@ class RectangleFurniture(StrictModel):
 
     type: Literal["rectangle"] = Field(description="Shape kind.")
     center: Point = Field(description="Centre [x, y] in metres.")
-    size: tuple[PositiveFloat, PositiveFloat] = Field(description="Width and depth [w, h] in metres.")
+    size: Size = Field(description="Width and depth [w, h] in metres.")
     angle: FiniteFloat = Field(default=0.0, description="Rotation in degrees, counter-clockwise.")
     name: str | None = Field(default=None, description="Optional label, e.g. 'table'.")
 
@@ -128,7 +164,7 @@ class CircleFurniture(StrictModel):
 
 
 Furniture = Annotated[
-    Union[PolygonFurniture, RectangleFurniture, CircleFurniture],
+    PolygonFurniture | RectangleFurniture | CircleFurniture,
     Field(discriminator="type"),
 ]
 
@@ -152,7 +188,7 @@ class Robot(StrictModel):
     min_start_goal_distance: NonNegativeFloat = Field(
         default=0.0, description="Minimum straight-line distance between start and goal in metres."
     )
-    start_heading: Literal["random", "toward_goal"] | FiniteFloat = Field(
+    start_heading: Annotated[Literal["random", "toward_goal"] | FiniteFloat, BeforeValidator(_heading_shape)] = Field(
         default="random", description="Initial heading: 'random', 'toward_goal', or a fixed angle in degrees."
     )
 
@@ -184,11 +220,13 @@ class SocialForce(StrictModel):
 class Humans(StrictModel):
     """The crowd."""
 
-    count: int | tuple[int, int] = Field(
+    count: Annotated[int | tuple[int, int], BeforeValidator(_count_shape)] = Field(
         default=0, description="Crowd size: a number, or [min, max] sampled uniformly per episode."
     )
     radius: PositiveFloat = Field(default=0.3, description="Body radius of every human in metres.")
-    preferred_speed: tuple[PositiveFloat, PositiveFloat] = Field(
+    preferred_speed: Annotated[
+        tuple[PositiveFloat, PositiveFloat], BeforeValidator(_pair_of("a speed range [min, max] of two positive numbers in m/s"))
+    ] = Field(
         default=(0.8, 1.2), description="[min, max] preferred walking speed in m/s, sampled per human."
     )
     spawn: list[Region] = Field(default_factory=list, description="Regions humans start in.")
@@ -210,7 +248,7 @@ class Humans(StrictModel):
     def _count_in_range(cls, count: int | tuple[int, int]) -> int | tuple[int, int]:
         low, high = count if isinstance(count, tuple) else (count, count)
         if low < 0 or low > high:
-            raise ValueError(f"expected a count >= 0 or [min, max] with 0 <= min <= max, got {count}")
+            raise ValueError(f"expected a count >= 0, or [min, max] with 0 <= min <= max, got {show(count)}")
         return count
 
     @field_validator("preferred_speed")
@@ -286,6 +324,18 @@ class Sensors(StrictModel):
     lidar: LidarSensor = Field(default_factory=LidarSensor, description="LIDAR settings.")
     leog: LeogSensor = Field(default_factory=LeogSensor, description="Occupancy-grid settings.")
 
+    @field_validator("modalities")
+    @classmethod
+    def _known_modalities(cls, modalities: list[str]) -> list[str]:
+        # Every modality has a settings section of the same name, so the names are the other fields.
+        known = [name for name in cls.model_fields if name != "modalities"]
+        unknown = [name for name in modalities if name not in known]
+        if unknown:
+            raise ValueError(f"unknown modality {show(unknown[0])} (expected any of: {', '.join(known)})")
+        if len(set(modalities)) != len(modalities):
+            raise ValueError(f"expected each modality at most once, got {show(modalities)}")
+        return modalities
+
 
 class RewardWeights(StrictModel):
     """Weights of the named reward terms (paper defaults)."""
@@ -322,3 +372,14 @@ class Scenario(StrictModel):
     @property
     def world_diagonal(self) -> float:
         return math.hypot(self.world.max[0] - self.world.min[0], self.world.max[1] - self.world.min[1])
+
+
+JSON_SCHEMA_DIALECT = "https://json-schema.org/draft/2020-12/schema"
+"""The JSON Schema draft pydantic generates."""
+
+
+def scenario_json_schema() -> dict[str, Any]:
+    """JSON Schema of a scenario file, for editors (yaml-language-server) and other tools."""
+    schema = Scenario.model_json_schema()
+    schema.pop("title", None)
+    return {"$schema": JSON_SCHEMA_DIALECT, "title": "crowdnav scenario", **schema}

@@ -1,0 +1,51 @@
+"""The ``crowdnav`` command line (also ``python -m crowdnav``).
+
+Every command group lives in its own module of this package and exposes
+``register(subparsers)``: it adds its parser and sets ``handler`` (``(args) -> int``) on
+each leaf command. To add a group (train, render, benchmark, ...), write its module and
+append its ``register`` to :data:`COMMAND_GROUPS`. Import heavy dependencies (torch,
+pygame) inside handlers, so that ``crowdnav --help`` and the scenario tools stay fast.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from collections.abc import Sequence
+
+from crowdnav.cli import scenario
+from crowdnav.cli.common import CliError
+
+COMMAND_GROUPS = (scenario.register,)
+"""Registration functions of the command groups, in the order ``--help`` lists them."""
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The top-level parser with every command group registered."""
+    from crowdnav import __version__
+
+    parser = argparse.ArgumentParser(
+        prog="crowdnav", description="Train and benchmark robots navigating among people."
+    )
+    parser.add_argument("--version", action="version", version=f"crowdnav {__version__}")
+    groups = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
+    for register in COMMAND_GROUPS:
+        register(groups)
+    return parser
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Run the command line; returns the exit status (0 ok, 1 failure, 2 usage error)."""
+    parser = build_parser()
+    try:
+        args = parser.parse_args(argv)
+    except SystemExit as exit_:  # --help, --version and usage errors
+        return exit_.code if isinstance(exit_.code, int) else 0 if exit_.code is None else 2
+    try:
+        return args.handler(args)
+    except CliError as error:
+        print(f"crowdnav: error: {error}", file=sys.stderr)
+        return 1
+    except BrokenPipeError:  # output piped into `head` and the like
+        sys.stderr.close()
+        return 0

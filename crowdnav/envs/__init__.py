@@ -1,0 +1,50 @@
+"""Environments: Gymnasium (robot only) and PettingZoo (robot and humans), sharing one core.
+
+Importing this package registers the Gymnasium ids (see :mod:`crowdnav.envs.registration`).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from typing import Any
+
+from crowdnav.envs.core import EnvCore, ScenarioSource
+from crowdnav.envs.human_policy import SocialForcePolicy
+from crowdnav.envs.parallel import CrowdNavParallelEnv
+from crowdnav.envs.registration import SCENARIO_FILE_ID, env_id, register_envs
+from crowdnav.envs.reward import REWARD_TERMS, Reward
+from crowdnav.envs.single import CrowdNavEnv
+
+
+def parallel_env(
+    scenario: ScenarioSource,
+    *,
+    modalities: Sequence[str] | None = None,
+    sensors: Mapping[str, Any] | None = None,
+    reward_weights: Mapping[str, float] | None = None,
+    overrides: Mapping[str, Any] | None = None,
+    render_mode: str | None = None,
+) -> CrowdNavParallelEnv:
+    """The PettingZoo ParallelEnv for ``scenario`` (library name or YAML path); options as in CrowdNavEnv."""
+    return CrowdNavParallelEnv(
+        scenario, modalities=modalities, sensors=sensors, reward_weights=reward_weights,
+        overrides=overrides, render_mode=render_mode,
+    )
+
+
+ENV_IDS = register_envs()
+"""The Gymnasium ids of the library scenarios."""
+
+__all__ = [
+    "ENV_IDS",
+    "REWARD_TERMS",
+    "SCENARIO_FILE_ID",
+    "CrowdNavEnv",
+    "CrowdNavParallelEnv",
+    "EnvCore",
+    "Reward",
+    "SocialForcePolicy",
+    "env_id",
+    "parallel_env",
+    "register_envs",
+]

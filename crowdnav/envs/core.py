@@ -1,0 +1,178 @@
+"""What both environments share: env options -> validated scenario, one simulator, the robot's
+sensors and reward, action checks and the end-of-episode info.
+
+The Gymnasium env (:mod:`crowdnav.envs.single`) and the PettingZoo env
+(:mod:`crowdnav.envs.parallel`) are thin adapters around one :class:`EnvCore`; the only
+difference is who commands the humans (the simulator's social-force model, or the actions of
+the ``human_<i>`` agents).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from gymnasium import spaces
+
+from crowdnav.envs.reward import Reward
+from crowdnav.scenario import ScenarioError, ScenarioIssue, library
+from crowdnav.scenario.loader import load_scenario
+from crowdnav.scenario.schema import Scenario
+from crowdnav.sensors import build_modalities
+from crowdnav.simulator import Simulator, StepEvents
+
+ScenarioSource = str | Path | Scenario | Mapping[str, Any]
+"""A library name (``"room_furniture"``), a YAML path, a :class:`Scenario` or a parsed mapping."""
+
+RENDER_MODES: list[str] = []
+"""No render mode yet: rendering is a separate feature. ``render_mode=None`` is the only choice."""
+
+
+def option_overrides(
+    modalities: Sequence[str] | None = None,
+    sensors: Mapping[str, Any] | None = None,
+    reward_weights: Mapping[str, float] | None = None,
+    overrides: Mapping[str, Any] | None = None,
+) -> dict[str, Any]:
+    """Turn the env options into dotted scenario overrides, so they are validated like the file.
+
+    ``{"lidar": {"beams": 180}}`` becomes ``{"sensors.lidar.beams": 180}``, reward weights become
+    ``reward.<term>``, modalities ``sensors.modalities``. Options win over the same path in
+    ``overrides``.
+    """
+    merged: dict[str, Any] = dict(_mapping("overrides", overrides))
+    if modalities is not None:
+        if isinstance(modalities, str) or not isinstance(modalities, Sequence):
+            raise ValueError(f"modalities must be a list of observation keys, e.g. ['goal', 'lidar'], got {modalities!r}")
+        merged["sensors.modalities"] = list(modalities)
+    merged.update(_flatten("sensors", _mapping("sensors", sensors)))
+    for term, weight in _mapping("reward_weights", reward_weights).items():
+        merged[f"reward.{term}"] = weight
+    return merged
+
+
+def _mapping(option: str, value: Mapping[str, Any] | None) -> Mapping[str, Any]:
+    if value is None:
+        return {}
+    if not isinstance(value, Mapping):
+        raise ValueError(f"{option} must be a mapping, got {type(value).__name__}: {value!r}")
+    return value
+
+
+def _flatten(prefix: str, tree: Mapping[str, Any]) -> dict[str, Any]:
+    flat: dict[str, Any] = {}
+    for key, value in tree.items():
+        path = f"{prefix}.{key}"
+        if isinstance(value, Mapping):
+            flat.update(_flatten(path, value))
+        else:
+            flat[path] = value
+    return flat
+
+
+def load_env_scenario(scenario: ScenarioSource | None, overrides: Mapping[str, Any]) -> Scenario:
+    """Load ``scenario`` with ``overrides``; every problem is a ScenarioError naming the path."""
+    if scenario is None:
+        raise ValueError(
+            "a scenario is required: a library name "
+            f"({', '.join(library.library_names())}) or the path to a YAML file"
+        )
+    if isinstance(scenario, Scenario):
+        return load_scenario(scenario.model_dump(), overrides) if overrides else scenario
+    return load_scenario(scenario, overrides)
+
+
+def check_render_mode(render_mode: str | None) -> None:
+    if render_mode is not None:
+        raise ValueError(
+            f"render_mode={render_mode!r} is not supported: crowdnav environments have no render modes yet "
+            f"(supported: {RENDER_MODES}); use render_mode=None"
+        )
+
+
+def checked_robot_action(action: Any) -> np.ndarray:
+    """The robot action as a (2,) float64 array; a clear ValueError for a wrong shape, NaN or inf.
+
+    Values outside [-1, 1] are valid and get clipped by the simulator.
+    """
+    try:
+        values = np.asarray(action, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise ValueError(f"the robot action must be 2 numbers in [-1, 1], got {action!r}") from None
+    if values.shape != (2,):
+        raise ValueError(f"the robot action must have shape (2,), got shape {values.shape}: {action!r}")
+    if not (math.isfinite(values[0]) and math.isfinite(values[1])):
+        raise ValueError(f"the robot action must be finite (no NaN or inf), got {values.tolist()}")
+    return values
+
+
+class EnvCore:
+    """One simulator with the robot's sensors and reward, configured from env options.
+
+    ``modalities``: observation keys (default ``scenario.sensors.modalities``); ``sensors``:
+    sensor-setting overrides (``{"lidar": {"beams": 180}}``); ``reward_weights``: reward-weight
+    overrides (``{"social": -50}``); ``overrides``: dotted scenario paths to values
+    (``{"humans.count": 10}``). All of them are validated like the scenario file.
+    """
+
+    def __init__(
+        self,
+        scenario: ScenarioSource | None,
+        *,
+        modalities: Sequence[str] | None = None,
+        sensors: Mapping[str, Any] | None = None,
+        reward_weights: Mapping[str, float] | None = None,
+        overrides: Mapping[str, Any] | None = None,
+        render_mode: str | None = None,
+    ):
+        check_render_mode(render_mode)
+        self.scenario = load_env_scenario(scenario, option_overrides(modalities, sensors, reward_weights, overrides))
+        self.simulator = Simulator(self.scenario)
+        sensors_config = self.scenario.sensors
+        try:
+            self.modalities = build_modalities(sensors_config.modalities, self.simulator.world, sensors_config)
+        except ValueError as error:  # unknown or duplicate keys: report them like any other scenario field
+            raise ScenarioError(self.scenario.name or "<scenario>", [ScenarioIssue("sensors.modalities", str(error))]) from None
+        self.observation_space = spaces.Dict({key: modality.space() for key, modality in self.modalities.items()})
+        self.action_space = spaces.Box(-1.0, 1.0, shape=(2,), dtype=np.float32)
+        self.reward = Reward(self.scenario.reward)
+        # Observe in the space's key order so observations print like the space.
+        self._sensors = tuple((key, self.modalities[key]) for key in self.observation_space.spaces)
+        self._running = False
+
+    def reset(self, seed: int | None) -> dict[str, np.ndarray]:
+        self.simulator.reset(seed=seed)
+        self.reward.reset(self.simulator)
+        self._running = True
+        return self.observe()
+
+    def observe(self) -> dict[str, np.ndarray]:
+        """The robot's observation of the current state (new arrays every call)."""
+        sim = self.simulator
+        return {key: modality.observe(sim) for key, modality in self._sensors}
+
+    def step(self, action: Any, human_actions: np.ndarray | None = None) -> tuple[StepEvents, float, dict[str, float]]:
+        """Advance the simulator; returns (events, reward, reward terms)."""
+        if not self._running:
+            raise RuntimeError("the episode is over or has not started: call reset() before step()")
+        events = self.simulator.step(checked_robot_action(action), human_actions)
+        reward, terms = self.reward(self.simulator, events)
+        if events.terminated or events.truncated:
+            self._running = False
+        return events, reward, terms
+
+
+def step_info(events: StepEvents, terms: dict[str, float]) -> dict[str, Any]:
+    """The robot's info: reward terms every step; outcome, is_success, collision kind/partner at the end."""
+    info: dict[str, Any] = {"reward_terms": terms}
+    outcome = events.outcome
+    if outcome is not None:
+        info["outcome"] = outcome
+        info["is_success"] = outcome == "success"
+        if events.collision is not None:
+            info["collision_kind"] = events.collision.kind
+            info["collision_partner"] = events.collision.partner
+    return info

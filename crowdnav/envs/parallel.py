@@ -1,0 +1,138 @@
+"""The multi-agent environment (PettingZoo ParallelEnv): the robot and every human are agents."""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from typing import Any
+
+import numpy as np
+from gymnasium import spaces
+from pettingzoo import ParallelEnv
+
+from crowdnav.envs.core import RENDER_MODES, EnvCore, ScenarioSource, step_info
+from crowdnav.envs.human_observation import HumanObservations
+
+ROBOT = "robot"
+
+
+class CrowdNavParallelEnv(ParallelEnv):
+    """Robot and humans as PettingZoo agents, stepped together.
+
+    **Agents.** ``possible_agents`` is ``["robot", "human_0", ..., "human_{N-1}"]`` with N the
+    scenario's maximum crowd size. With a crowd-size range, ``agents`` after reset holds the
+    robot and ``human_<i>`` for ``i <`` this episode's crowd size.
+
+    **Robot.** Observation: the same Dict as :class:`crowdnav.envs.single.CrowdNavEnv` (one
+    key per modality); action: Box(-1, 1, (2,), float32), (vx, vy) in the robot frame times the
+    robot's max speed (holonomic) or (v, omega) (unicycle); out-of-range values are clipped;
+    NaN or inf raises ValueError. Reward: the terms of :mod:`crowdnav.envs.reward`, listed in
+    ``infos["robot"]["reward_terms"]``; at the episode end ``infos["robot"]`` also holds
+    ``outcome``, ``is_success`` and, after a collision, ``collision_kind`` / ``collision_partner``.
+
+    **Humans.** Observation: a Dict of fixed-size float32 arrays, world frame, described in
+    :mod:`crowdnav.envs.human_observation` (own state, other humans padded to N-1 with a mask,
+    nearest point of each static obstacle, and the robot when the scenario's ``see_robot`` is
+    on). Action: Box(-1, 1, (2,), float32), the velocity command in the world frame divided by
+    the human's max speed (``max_speed`` in its observation). :class:`SocialForcePolicy` gives
+    the built-in crowd's actions. Reward: 0 (humans are not scored).
+
+    **Episode end.** Success or collision terminates every agent, the time limit truncates
+    every agent; agents leave ``agents`` only then, all together.
+
+    Options are those of :class:`crowdnav.envs.core.EnvCore` (``modalities``, ``sensors``,
+    ``reward_weights``, ``overrides``, ``render_mode=None``).
+    """
+
+    metadata = {"name": "crowdnav_v0", "render_modes": RENDER_MODES, "render_fps": 5.0, "is_parallelizable": True}
+
+    def __init__(
+        self,
+        scenario: ScenarioSource | None = None,
+        *,
+        modalities: Sequence[str] | None = None,
+        sensors: Mapping[str, Any] | None = None,
+        reward_weights: Mapping[str, float] | None = None,
+        overrides: Mapping[str, Any] | None = None,
+        render_mode: str | None = None,
+    ):
+        self._core = EnvCore(
+            scenario, modalities=modalities, sensors=sensors, reward_weights=reward_weights,
+            overrides=overrides, render_mode=render_mode,
+        )
+        self.render_mode = render_mode
+        self.scenario = self._core.scenario
+        self.simulator = self._core.simulator
+        self.metadata = {**self.metadata, "render_fps": 1.0 / self.scenario.time_step}
+        self._humans = HumanObservations(self.scenario, self.simulator.obstacles)
+        self._human_names = [f"human_{i}" for i in range(self.scenario.humans.max_count)]
+        self.possible_agents = [ROBOT, *self._human_names]
+        self.agents: list[str] = []
+        self.observation_spaces = {ROBOT: self._core.observation_space}
+        self.observation_spaces.update({name: self._humans.space() for name in self._human_names})
+        self.action_spaces = {ROBOT: self._core.action_space}
+        self.action_spaces.update({name: spaces.Box(-1.0, 1.0, shape=(2,), dtype=np.float32) for name in self._human_names})
+        self._active_humans: list[str] = []
+
+    def observation_space(self, agent: str) -> spaces.Space:
+        return self.observation_spaces[agent]
+
+    def action_space(self, agent: str) -> spaces.Space:
+        return self.action_spaces[agent]
+
+    def reset(self, seed: int | None = None, options: dict[str, Any] | None = None):
+        """Start an episode; the same seed gives the same episode. ``options`` is accepted and unused."""
+        robot_observation = self._core.reset(seed)
+        self._humans.reset(self.simulator)
+        self._active_humans = self._human_names[: self.simulator.n_humans]
+        self.agents = [ROBOT, *self._active_humans]
+        observations = self._observations(robot_observation)
+        return observations, {agent: {} for agent in self.agents}
+
+    def step(self, actions: Mapping[str, Any]):
+        if not self.agents:
+            raise RuntimeError("the episode is over or has not started: call reset() before step()")
+        human_actions = self._human_actions(actions)
+        events, reward, terms = self._core.step(actions[ROBOT], human_actions)
+        agents = self.agents
+        observations = self._observations(self._core.observe())
+        rewards = dict.fromkeys(agents, 0.0)
+        rewards[ROBOT] = reward
+        terminated = events.terminated
+        truncated = events.truncated and not terminated
+        infos: dict[str, dict[str, Any]] = {agent: {} for agent in agents}
+        infos[ROBOT] = step_info(events, terms)
+        if terminated or truncated:
+            self.agents = []
+        return observations, rewards, dict.fromkeys(agents, terminated), dict.fromkeys(agents, truncated), infos
+
+    def _observations(self, robot_observation: dict[str, np.ndarray]) -> dict[str, Any]:
+        observations: dict[str, Any] = {ROBOT: robot_observation}
+        if self._active_humans:
+            batch = self._humans.batch(self.simulator)
+            for i, name in enumerate(self._active_humans):
+                observations[name] = {key: values[i] for key, values in batch.items()}
+        return observations
+
+    def _human_actions(self, actions: Mapping[str, Any]) -> np.ndarray:
+        """The humans' actions as an (n, 2) array in agent order, with clear errors."""
+        humans = self._active_humans
+        if len(actions) != len(self.agents) or ROBOT not in actions or not all(name in actions for name in humans):
+            missing = [agent for agent in self.agents if agent not in actions]
+            unknown = [agent for agent in actions if agent not in self.agents]
+            raise ValueError(
+                f"expected exactly one action per agent in env.agents; missing: {missing}, not in env.agents: {unknown}"
+            )
+        if not humans:
+            return np.zeros((0, 2))
+        try:
+            stacked = np.array([actions[name] for name in humans], dtype=np.float64)
+        except (TypeError, ValueError):
+            stacked = None
+        if stacked is None or stacked.shape != (len(humans), 2):
+            shapes = {name: np.shape(actions[name]) for name in humans if np.shape(actions[name]) != (2,)}
+            raise ValueError(f"every human action must be 2 numbers (vx, vy) / max_speed; wrong shapes: {shapes}")
+        finite = np.isfinite(stacked).all(axis=1)
+        if not finite.all():
+            bad = {humans[i]: stacked[i].tolist() for i in np.flatnonzero(~finite)}
+            raise ValueError(f"human actions must be finite (no NaN or inf), got {bad}")
+        return stacked

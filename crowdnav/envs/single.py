@@ -1,0 +1,96 @@
+"""The single-robot environment (Gymnasium): the robot is the agent, the crowd is simulated."""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+
+from crowdnav.envs.core import RENDER_MODES, EnvCore, ScenarioSource, step_info
+
+
+class CrowdNavEnv(gym.Env):
+    """A robot navigating to its goal among social-force humans and static obstacles.
+
+    **Agent.** The robot. The humans follow the simulator's built-in social-force model (the
+    same :mod:`crowdnav.social_force` functions as :class:`crowdnav.SocialForcePolicy`); use
+    :func:`crowdnav.parallel_env` to control them.
+
+    **Action.** ``Box(-1, 1, (2,), float32)``. Holonomic robot: ``(vx, vy)`` in the robot frame
+    (x forward, y left) times ``robot.max_speed``, the norm capped at 1. Unicycle robot:
+    ``(v, omega)`` times ``(max_speed, max_angular_speed)``. Values outside [-1, 1] are
+    clipped; a NaN or infinite value raises ValueError.
+
+    **Observation.** ``Dict`` with one key per modality (``modalities`` option, default
+    ``scenario.sensors.modalities``), each a float32 ``Box`` unless noted; see docs/sensors.md:
+
+    * ``goal`` (3,) polar ``(distance m, sin, cos)`` of the goal's bearing in the robot frame,
+      distance in [0, 2 x world diagonal]; or (2,) cartesian ``(x, y)`` m in the robot frame.
+    * ``closest_obstacle`` (3,) polar or (2,) cartesian like ``goal``: the nearest point of any
+      human or static obstacle, distance clipped to ``max_range`` (nothing in range: ``max_range``
+      at bearing 0).
+    * ``lidar`` (beams,) ranges / ``max_range`` in [0, 1], beams counter-clockwise from the
+      robot's heading (``-fov/2`` first) over ``fov_deg``.
+    * ``leog`` (1, H, W) uint8 in {0, 255}: local egocentric occupancy grid, robot frame,
+      ``H = W = size / resolution``, 255 = occupied.
+    * ``velocity`` (2,) the robot's velocity in the robot frame, m/s, in [-max_speed, max_speed].
+
+    **Reward.** Sum of the named terms of :mod:`crowdnav.envs.reward` (weights: scenario
+    ``reward`` section, overridable with ``reward_weights``), each in ``info["reward_terms"]``
+    every step, with ``d_t`` the robot-goal distance (m) after step t:
+    ``step = w_step`` (-5); ``goal_progress = w_goal_progress * (d_{t-1} - d_t)`` (10);
+    ``social = w_social * |F_social|`` (-100), the humans' social-force repulsion on the robot;
+    ``goal_reached = w_goal_reached`` (500) and ``collision = w_collision`` (-500) once, on the
+    last step.
+
+    **Episode end.** ``terminated`` when the robot reaches its goal (``outcome`` success) or
+    collides (``collision``, which wins over a goal reached in the same step); ``truncated`` at
+    ``scenario.max_steps`` otherwise. The last step's info holds ``outcome``
+    (``"success" | "collision" | "truncated"``), ``is_success`` (bool) and, after a collision,
+    ``collision_kind`` (``"human" | "static"``) and ``collision_partner`` (``human_<i>`` or
+    the obstacle's scenario path). Calling step() after the end raises RuntimeError.
+
+    **Options.** ``scenario``: library name, YAML path or :class:`crowdnav.Scenario`;
+    ``modalities``; ``sensors`` (``{"lidar": {"beams": 180}}``); ``reward_weights``
+    (``{"social": -50}``); ``overrides`` (``{"humans.count": 10}``); all validated like the
+    scenario file (ScenarioError naming the path). ``render_mode``: only None for now.
+    """
+
+    metadata = {"render_modes": RENDER_MODES, "render_fps": 5.0}
+
+    def __init__(
+        self,
+        scenario: ScenarioSource | None = None,
+        *,
+        modalities: Sequence[str] | None = None,
+        sensors: Mapping[str, Any] | None = None,
+        reward_weights: Mapping[str, float] | None = None,
+        overrides: Mapping[str, Any] | None = None,
+        render_mode: str | None = None,
+    ):
+        self._core = EnvCore(
+            scenario, modalities=modalities, sensors=sensors, reward_weights=reward_weights,
+            overrides=overrides, render_mode=render_mode,
+        )
+        self.render_mode = render_mode
+        self.scenario = self._core.scenario
+        self.simulator = self._core.simulator
+        self.metadata = {**self.metadata, "render_fps": 1.0 / self.scenario.time_step}
+        self.observation_space = self._core.observation_space
+        self.action_space = self._core.action_space
+
+    def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None):
+        """Start an episode; the same seed gives the same episode. ``options`` is accepted and unused."""
+        super().reset(seed=seed)
+        observation = self._core.reset(seed)
+        # The simulator's generator is the episode's only randomness: expose it as np_random.
+        self._np_random = self.simulator.rng
+        return observation, {}
+
+    def step(self, action: np.ndarray):
+        events, reward, terms = self._core.step(action)
+        terminated = events.terminated
+        truncated = events.truncated and not terminated
+        return self._core.observe(), reward, terminated, truncated, step_info(events, terms)

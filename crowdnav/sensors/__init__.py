@@ -1,0 +1,25 @@
+"""The robot's sensing modalities: one observation key each, in the robot's frame.
+
+``build_modalities(names, world, sensors)`` returns ``{key: Modality}``; each modality has a
+fixed ``space()`` (a gymnasium Box) and ``observe(sim)``. Built-in keys: ``goal``,
+``closest_obstacle``, ``lidar``, ``leog``, ``velocity``. See docs/sensors.md.
+"""
+
+from crowdnav.sensors.base import MODALITIES, Modality, build_modalities, register_modality
+from crowdnav.sensors.closest_obstacle import ClosestObstacleModality
+from crowdnav.sensors.goal import GoalModality
+from crowdnav.sensors.leog import LeogModality
+from crowdnav.sensors.lidar import LidarModality
+from crowdnav.sensors.velocity import VelocityModality
+
+__all__ = [
+    "MODALITIES",
+    "ClosestObstacleModality",
+    "GoalModality",
+    "LeogModality",
+    "LidarModality",
+    "Modality",
+    "VelocityModality",
+    "build_modalities",
+    "register_modality",
+]

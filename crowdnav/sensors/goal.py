@@ -1,0 +1,43 @@
+"""``goal``: where the robot's goal is, seen from the robot."""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
+import numpy as np
+from gymnasium import spaces
+
+from crowdnav.scenario.schema import GoalSensor
+from crowdnav.sensors.base import Modality, register_modality
+from crowdnav.sensors.frames import encode_vector, to_robot_frame, vector_space
+
+if TYPE_CHECKING:
+    from crowdnav.simulator import Simulator
+    from crowdnav.world import CompiledWorld
+
+GOAL_RANGE_FACTOR = 2.0
+"""Goal distances are clipped to this many world diagonals (reached only far outside an open world)."""
+
+
+@register_modality
+class GoalModality(Modality):
+    """Relative goal in the robot frame: polar ``(distance, sin, cos)`` or cartesian ``(x, y)``.
+
+    The distance (cartesian: the vector's length) is clipped to ``2 x`` the world's diagonal, so
+    the observation stays in its space even after the robot leaves an open world.
+    """
+
+    key = "goal"
+    settings_type = GoalSensor
+
+    def __init__(self, world: CompiledWorld, settings: GoalSensor | None = None):
+        super().__init__(world, settings)
+        self.bound = GOAL_RANGE_FACTOR * world.scenario.world_diagonal
+        self.frame = self.settings.frame
+
+    def make_space(self) -> spaces.Box:
+        return vector_space(self.frame, self.bound)
+
+    def observe(self, sim: Simulator) -> np.ndarray:
+        relative = (sim.robot_goal - complex(sim.positions[0])) * to_robot_frame(sim)
+        return encode_vector(relative, self.frame, self.bound)

@@ -1,0 +1,37 @@
+"""``velocity``: the robot's own velocity, as odometry would report it."""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
+import numpy as np
+from gymnasium import spaces
+
+from crowdnav.sensors.base import Modality, register_modality
+from crowdnav.sensors.frames import encode_vector, to_robot_frame, vector_space
+
+if TYPE_CHECKING:
+    from crowdnav.simulator import Simulator
+    from crowdnav.world import CompiledWorld
+
+
+@register_modality
+class VelocityModality(Modality):
+    """Velocity over the last step in the robot frame, ``(vx, vy)`` in m/s, float32.
+
+    Bounded by the robot's ``max_speed`` (the vector is scaled down if longer, which the
+    kinematics never produce). Zero right after reset.
+    """
+
+    key = "velocity"
+
+    def __init__(self, world: CompiledWorld, settings: None = None):
+        super().__init__(world, settings)
+        self.bound = float(world.scenario.robot.max_speed)
+
+    def make_space(self) -> spaces.Box:
+        return vector_space("cartesian", self.bound)
+
+    def observe(self, sim: Simulator) -> np.ndarray:
+        velocity = complex(sim.velocities[0]) * to_robot_frame(sim)
+        return encode_vector(velocity, "cartesian", self.bound)

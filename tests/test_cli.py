@@ -1,0 +1,132 @@
+"""The ``crowdnav`` command line: scenario list, validate and schema."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+
+import pytest
+
+from crowdnav.cli import build_parser, main
+from crowdnav.cli.common import CliError, format_table, parse_overrides
+from crowdnav.scenario.library import library_descriptions, library_dir, library_names
+from crowdnav.scenario.schema import Scenario
+
+
+def run(capsys, *argv: str) -> tuple[int, str, str]:
+    code = main(list(argv))
+    out, err = capsys.readouterr()
+    return code, out, err
+
+
+def test_scenario_list_shows_every_library_scenario_with_its_description(capsys):
+    code, out, err = run(capsys, "scenario", "list")
+    assert code == 0 and err == ""
+    lines = out.splitlines()
+    assert lines[0].split() == ["NAME", "DESCRIPTION"]
+    listed = {line.split()[0]: line.split(None, 1)[1] for line in lines[1:]}
+    assert listed == library_descriptions()
+    assert set(listed) == set(library_names())
+
+
+def test_scenario_schema_is_json_schema_of_the_scenario_model(capsys):
+    code, out, _ = run(capsys, "scenario", "schema")
+    assert code == 0
+    schema = json.loads(out)
+    assert schema["$schema"] == "https://json-schema.org/draft/2020-12/schema"
+    assert schema["title"] == "crowdnav scenario"
+    assert set(schema["properties"]) == set(Scenario.model_fields)
+    top_level = {"description", "world", "walls", "furniture", "robot", "humans", "time_step", "max_steps", "sensors", "reward"}
+    assert top_level <= set(schema["properties"])
+    assert schema["additionalProperties"] is False
+    assert schema["required"] == ["description", "robot"]
+
+
+def test_scenario_schema_output_option_writes_the_same_schema(tmp_path, capsys):
+    target = tmp_path / "scenario.schema.json"
+    code, out, err = run(capsys, "scenario", "schema", "--output", str(target))
+    assert code == 0 and out == "" and str(target) in err
+    _, printed, _ = run(capsys, "scenario", "schema")
+    assert json.loads(target.read_text(encoding="utf-8")) == json.loads(printed)
+
+
+def test_scenario_schema_unwritable_output_is_a_one_line_error(tmp_path, capsys):
+    code, out, err = run(capsys, "scenario", "schema", "--output", str(tmp_path / "missing" / "schema.json"))
+    assert code == 1 and out == ""
+    assert err.startswith("crowdnav: error: cannot write") and err.count("\n") == 1
+
+
+def test_scenario_validate_ok_for_library_names_and_files(capsys):
+    file = library_dir() / "corridor.yaml"
+    code, out, err = run(capsys, "scenario", "validate", "room_furniture", str(file))
+    assert code == 0 and err == ""
+    assert out.splitlines() == [f"OK {library_dir() / 'room_furniture.yaml'}", f"OK {file}"]
+
+
+def test_scenario_validate_whole_library(capsys):
+    code, out, _ = run(capsys, "scenario", "validate", *library_names())
+    assert code == 0
+    assert len(out.splitlines()) == len(library_names())
+
+
+def test_scenario_validate_applies_set_overrides(capsys):
+    code, out, err = run(capsys, "scenario", "validate", "open_space", "--set", "humans.count=[2, 500]")
+    assert code == 1 and out == ""
+    assert "humans.count:" in err and "asked for up to 500" in err and "(from override)" in err
+    code, _, _ = run(capsys, "scenario", "validate", "open_space", "--set", "humans.count=3", "--set", "robot.max_speed=0.5")
+    assert code == 0
+
+
+def test_parse_overrides_reads_values_as_yaml():
+    assert parse_overrides(["humans.count=20", "humans.preferred_speed=[0.5, 1]", "world.boundary_walls=false", "name=x=y"]) == {
+        "humans.count": 20,
+        "humans.preferred_speed": [0.5, 1],
+        "world.boundary_walls": False,
+        "name": "x=y",
+    }
+    with pytest.raises(CliError, match="PATH=VALUE"):
+        parse_overrides(["humans.count"])
+    with pytest.raises(CliError, match="not valid YAML"):
+        parse_overrides(["humans.count=[1,"])
+
+
+def test_bad_set_option_is_a_one_line_error(capsys):
+    code, out, err = run(capsys, "scenario", "validate", "open_space", "--set", "nonsense")
+    assert code == 1 and out == ""
+    assert err == "crowdnav: error: --set expects PATH=VALUE, e.g. humans.count=20; got 'nonsense'\n"
+
+
+@pytest.mark.parametrize("argv", [[], ["scenario"], ["scenario", "frobnicate"], ["scenario", "validate"]])
+def test_usage_errors_exit_2_with_usage(capsys, argv):
+    code, out, err = run(capsys, *argv)
+    assert code == 2
+    assert "usage: crowdnav" in err
+
+
+def test_help_exits_0(capsys):
+    code, out, _ = run(capsys, "scenario", "--help")
+    assert code == 0
+    assert all(command in out for command in ("list", "validate", "schema"))
+
+
+def test_command_groups_register_through_the_parser():
+    parser = build_parser()
+    args = parser.parse_args(["scenario", "validate", "x"])
+    assert callable(args.handler) and args.scenarios == ["x"]
+
+
+def test_format_table_aligns_columns():
+    assert format_table(("A", "B"), [("long name", "x"), ("s", "y z")]).splitlines() == [
+        "A          B",
+        "long name  x",
+        "s          y z",
+    ]
+
+
+def test_python_dash_m_crowdnav_runs_the_cli():
+    result = subprocess.run(
+        [sys.executable, "-m", "crowdnav", "scenario", "validate", "empty_room"], capture_output=True, text=True, timeout=60
+    )
+    assert result.returncode == 0, result.stderr
+    assert result.stdout.startswith("OK ") and result.stdout.strip().endswith("empty_room.yaml")
