@@ -165,7 +165,8 @@ def build_obstacles(scenario: Scenario) -> StaticObstacles:
         else:
             shape = Polygon(item.points)
             if not shape.is_valid or shape.area <= 0:
-                raise GeometryError(f"{path}.points", f"polygon is not valid ({explain_validity(shape)}); expected a simple polygon with non-zero area")
+                reason = explain_validity(shape)
+                raise GeometryError(f"{path}.points", f"polygon is not valid ({reason}); expected a simple polygon with non-zero area")
         _check_inside(shape, world_box, f"{path}.points" if not isinstance(item, RectangleFurniture) else f"{path}.center", "furniture")
         polygons.append(shape)
         labels.append(_label(path, item.name))
