@@ -10,6 +10,7 @@ pygame) inside handlers, so that ``crowdnav --help`` and the scenario tools stay
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 from collections.abc import Sequence
 
@@ -46,6 +47,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     except CliError as error:
         print(f"crowdnav: error: {error}", file=sys.stderr)
         return 1
-    except BrokenPipeError:  # output piped into `head` and the like
-        sys.stderr.close()
-        return 0
+    except BrokenPipeError:  # output piped into `head` and the like, which stopped reading
+        # Python flushes stdout again at exit; send that flush to devnull so it cannot fail too.
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        return 1

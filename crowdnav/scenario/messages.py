@@ -8,6 +8,7 @@ was expected, in the vocabulary of the scenario format.
 
 from __future__ import annotations
 
+import difflib
 import typing
 from typing import Any
 
@@ -39,8 +40,10 @@ def describe(item: dict[str, Any], document: dict) -> tuple[str, str]:
     got = f", got {show(item.get('input'))}"
     if kind == "extra_forbidden":
         allowed = sorted(model.model_fields) if (model := _walk(document, parts[:-1])[1]) else []
+        close = difflib.get_close_matches(str(parts[-1]), allowed, n=1)
+        hint = f"; did you mean '{close[0]}'?" if close else ""
         expected = f" (expected one of: {', '.join(allowed)})" if allowed else ""
-        return path, f"unknown key '{parts[-1]}'{expected}"
+        return path, f"unknown key '{parts[-1]}'{hint}{expected}"
     if kind == "missing":
         field = _walk(document, parts)[0]
         about = f" ({field.description.rstrip('.')})" if field is not None and field.description else ""

@@ -41,7 +41,9 @@ def _pair_of(what: str) -> Callable[[Any], Any]:
 
 Point = Annotated[tuple[FiniteFloat, FiniteFloat], BeforeValidator(_pair_of("a point [x, y] of two numbers in metres"))]
 """A 2-D point ``[x, y]`` in metres, world frame."""
-Size = Annotated[tuple[PositiveFloat, PositiveFloat], BeforeValidator(_pair_of("a size [w, h] of two positive numbers (m)"))]
+Size = Annotated[
+    tuple[PositiveFloat, PositiveFloat], BeforeValidator(_pair_of("a size [w, h] of two positive numbers in metres"))
+]
 """Width and depth ``[w, h]`` in metres."""
 
 
@@ -323,18 +325,6 @@ class Sensors(StrictModel):
     )
     lidar: LidarSensor = Field(default_factory=LidarSensor, description="LIDAR settings.")
     leog: LeogSensor = Field(default_factory=LeogSensor, description="Occupancy-grid settings.")
-
-    @field_validator("modalities")
-    @classmethod
-    def _known_modalities(cls, modalities: list[str]) -> list[str]:
-        # Every modality has a settings section of the same name, so the names are the other fields.
-        known = [name for name in cls.model_fields if name != "modalities"]
-        unknown = [name for name in modalities if name not in known]
-        if unknown:
-            raise ValueError(f"unknown modality {show(unknown[0])} (expected any of: {', '.join(known)})")
-        if len(set(modalities)) != len(modalities):
-            raise ValueError(f"expected each modality at most once, got {show(modalities)}")
-        return modalities
 
 
 class RewardWeights(StrictModel):
