@@ -102,11 +102,15 @@ def build_placement(scenario: Scenario, obstacles: StaticObstacles) -> Placement
     if robot_start.ring_center is not None or robot_goal.ring_center is not None:
         start_goal_ok = np.ones_like(start_goal_ok)  # rotated rings: checked at draw time instead
     if not start_goal_ok.any():
-        raise GeometryError(
-            "robot.min_start_goal_distance",
-            f"no start in robot.start is {robot.min_start_goal_distance:g} m from a goal in robot.goal "
-            f"(largest distance available: {distance.max():.2f} m); expected a smaller distance or regions further apart",
-        )
+        largest = float(distance.max())
+        if largest < 1e-9:
+            message = "robot.start and robot.goal only offer the same position; expected a goal away from the start"
+        else:
+            message = (
+                f"no start in robot.start is {robot.min_start_goal_distance:g} m from a goal in robot.goal "
+                f"(largest distance available: {largest:.2f} m); expected a smaller distance or regions further apart"
+            )
+        raise GeometryError("robot.min_start_goal_distance", message)
     spawn = goal = None
     if humans.max_count > 0:
         spawn_sets = [_candidates(r, f"humans.spawn.{i}", humans.radius, world_box, occupied) for i, r in enumerate(humans.spawn)]
@@ -115,6 +119,13 @@ def build_placement(scenario: Scenario, obstacles: StaticObstacles) -> Placement
             center = complex(*(humans.mirror_center or scenario.world_center))
             mirrored = 2 * center - spawn.points
             free = _free(mirrored, humans.radius + GAP + slack / 2, occupied) & shapely.contains_xy(world_box, mirrored.real, mirrored.imag)
+            if not free.any():
+                where = "humans.mirror_center" if humans.mirror_center is not None else "humans.goal_rule"
+                raise GeometryError(
+                    where,
+                    f"mirroring the spawn points through ({center.real:g}, {center.imag:g}) puts every goal outside the world or in an "
+                    "obstacle; expected a mirror centre between the spawn regions and free space",
+                )
             spawn = CandidateSet(spawn.points[free], spawn.jitter, spawn.ring_center)
         else:
             goal_sets = [_candidates(r, f"humans.goal.{i}", humans.radius, world_box, occupied) for i, r in enumerate(humans.goal)]
@@ -124,7 +135,8 @@ def build_placement(scenario: Scenario, obstacles: StaticObstacles) -> Placement
         if capacity < humans.max_count:
             raise GeometryError(
                 "humans.count",
-                f"the spawn regions hold at most {max(capacity, 0)} humans of radius {humans.radius:g} m next to the robot "
+                f"the spawn regions hold at most {max(capacity, 0)} human{'' if capacity == 1 else 's'} of radius {humans.radius:g} m "
+                "next to the robot "
                 f"(asked for up to {humans.max_count}); expected a smaller count, a smaller radius or larger spawn regions",
             )
     empty = CandidateSet(np.zeros(0, dtype=complex), 0.0)

@@ -214,6 +214,14 @@ def consistency_issues(scenario: Scenario) -> list[ScenarioIssue]:
             f"humans move up to {human_step:g} m per step (preferred_speed max * max_speed_factor * time_step); "
             f"expected less than their radius {humans.radius:g} m: lower preferred_speed or time_step",
         ))
+    from crowdnav.sensors import MODALITIES  # the registry also holds modalities users register
+
+    unknown = [name for name in scenario.sensors.modalities if name not in MODALITIES]
+    if unknown:
+        issues.append(ScenarioIssue(
+            "sensors.modalities",
+            f"unknown modalit{'y' if len(unknown) == 1 else 'ies'} {', '.join(map(repr, unknown))}; expected any of: {', '.join(sorted(MODALITIES))}",
+        ))
     if robot.start_heading not in ("random", "toward_goal") and not math.isfinite(float(robot.start_heading)):
         issues.append(ScenarioIssue("robot.start_heading", "expected 'random', 'toward_goal' or a finite angle in degrees"))
     return issues
