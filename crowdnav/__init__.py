@@ -2,6 +2,18 @@
 
 from crowdnav.scenario import Scenario, ScenarioError, load_scenario
 from crowdnav.simulator import Collision, Simulator, StepEvents
+from crowdnav.envs import CrowdNavEnv, CrowdNavParallelEnv, SocialForcePolicy, parallel_env  # registers the Gymnasium ids
 
-__all__ = ["Collision", "Scenario", "ScenarioError", "Simulator", "StepEvents", "load_scenario"]
+__all__ = [
+    "Collision",
+    "CrowdNavEnv",
+    "CrowdNavParallelEnv",
+    "Scenario",
+    "ScenarioError",
+    "Simulator",
+    "SocialForcePolicy",
+    "StepEvents",
+    "load_scenario",
+    "parallel_env",
+]
 __version__ = "0.1.0"

@@ -319,6 +319,10 @@ class Simulator:
             self._static_offset, self._static_distance = static_offset, static_distance
             offset = np.concatenate([offset, static_offset], axis=1)
             distance = np.concatenate([distance, static_distance], axis=1)
+        else:
+            empty = np.zeros((len(z), 0))
+            self.polygon_offset = self.disc_offset = empty.astype(complex)
+            self.polygon_distance = self.disc_distance = empty
         self._repulsion = sf.repulsion(offset, distance, self._gain, self._decay)
 
     def _resolve_human_overlaps(self) -> bool:

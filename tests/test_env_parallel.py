@@ -77,6 +77,16 @@ def test_crowd_range_activates_the_first_n_humans():
     assert len(counts) > 1
 
 
+def test_an_episode_with_an_empty_crowd_has_only_the_robot_active():
+    env = parallel_env("room_furniture", **FAST, overrides={"humans.count": [0, 2]})
+    seed = next(seed for seed in range(100) if env.reset(seed=seed) and env.simulator.n_humans == 0)
+    observations, _ = env.reset(seed=seed)
+    assert env.agents == ["robot"] and list(observations) == ["robot"]
+    assert env.possible_agents == ["robot", "human_0", "human_1"]
+    _, rewards, *_ = env.step({"robot": np.zeros(2, dtype=np.float32)})
+    assert list(rewards) == ["robot"]
+
+
 def test_spaces_are_the_same_object_every_call_and_distinct_per_agent():
     env = parallel_env("room_furniture", **FAST)
     for agent in env.possible_agents:
@@ -188,3 +198,29 @@ def test_scenario_without_humans_has_only_the_robot():
     assert env.possible_agents == env.agents == ["robot"] and list(observations) == ["robot"]
     observations, rewards, *_ = env.step({"robot": np.zeros(2, dtype=np.float32)})
     assert list(rewards) == ["robot"]
+
+
+def test_same_seed_gives_the_same_multi_agent_episode_bit_for_bit():
+    """PettingZoo's seed test stops after one step (it tests ``any(dict)``), so check whole episodes."""
+
+    def episode(seed):
+        env = parallel_env("room_furniture", **FAST, overrides={"humans.see_robot": True})
+        policy = crowdnav.envs.SocialForcePolicy(env.scenario)
+        robot = np.random.default_rng(0).uniform(-1, 1, size=(200, 2)).astype(np.float32)
+        observations, _ = env.reset(seed=seed)
+        history = [(observations, {})]
+        for action in robot:
+            observations, rewards, *_ = env.step({**policy(observations), "robot": action})
+            history.append((observations, rewards))
+            if not env.agents:
+                break
+        return history
+
+    first, again, other = episode(8), episode(8), episode(9)
+    assert len(first) == len(again) > 5
+    for (observations, rewards), (observations_again, rewards_again) in zip(first, again, strict=True):
+        assert rewards == rewards_again
+        assert list(observations) == list(observations_again)
+        for agent, observation in observations.items():
+            assert all(np.array_equal(value, observations_again[agent][key]) for key, value in observation.items())
+    assert not np.array_equal(first[0][0]["human_0"]["position"], other[0][0]["human_0"]["position"])

@@ -1,29 +1,29 @@
 """What each human agent observes in the multi-agent env: everything a social-force walker needs.
 
-All humans' observations are computed together as (n, ...) arrays from the simulator's
-cached geometry, then handed out per agent as views (one dict per human). Everything is in
-the world frame (humans have no heading), metres and m/s, float32.
+All humans' observations are computed together as new (n, ...) arrays from the simulator's
+cached geometry every step, then handed out per agent as row views (one dict per human).
+Everything is in the world frame (humans have no heading), metres and m/s, float32.
 
 Keys (N = the scenario's maximum crowd size, O = static obstacles: polygons, then discs):
 
-==================  =========  ===================================================================
-key                 shape      meaning
-==================  =========  ===================================================================
-``position``        (2,)       own centre (x, y)
-``velocity``        (2,)       own velocity, |v| <= max_speed
-``goal``            (2,)       own goal (x, y)
-``preferred_speed`` (1,)       walking speed the goal force aims for (m/s)
-``max_speed``       (1,)       speed cap; the action is the velocity command / max_speed
-``radius``          (1,)       own body radius
-``humans_offset``   (N-1, 2)   other humans' centres minus own centre, by index, padding zero
-``humans_velocity`` (N-1, 2)   other humans' velocities minus own velocity, padding zero
-``humans_radius``   (N-1,)     other humans' radii, padding zero
-``humans_mask``     (N-1,)     1.0 where the slot holds an active human, 0.0 for padding
-``obstacles_offset`` (O, 2)    nearest point of each static obstacle minus own centre
-``robot_offset``    (2,)       robot centre minus own centre (only with ``see_robot``)
-``robot_velocity``  (2,)       robot velocity minus own velocity (only with ``see_robot``)
-``robot_radius``    (1,)       robot body radius (only with ``see_robot``)
-==================  =========  ===================================================================
+====================  ========  ===========================================================
+key                   shape     meaning
+====================  ========  ===========================================================
+``position``          (2,)      own centre (x, y)
+``velocity``          (2,)      own velocity, |v| <= max_speed
+``goal``              (2,)      own goal (x, y)
+``preferred_speed``   (1,)      walking speed the goal force aims for (m/s)
+``max_speed``         (1,)      speed cap; the action is the velocity command / max_speed
+``radius``            (1,)      own body radius
+``humans_offset``     (N-1, 2)  other humans' centres minus own centre, padding zero
+``humans_velocity``   (N-1, 2)  other humans' velocities minus own velocity, padding zero
+``humans_radius``     (N-1,)    other humans' radii, padding zero
+``humans_mask``       (N-1,)    1.0 where the slot holds an active human, 0.0 for padding
+``obstacles_offset``  (O, 2)    nearest point of each static obstacle minus own centre
+``robot_offset``      (2,)      robot centre minus own centre (only with ``see_robot``)
+``robot_velocity``    (2,)      robot velocity minus own velocity (only with ``see_robot``)
+``robot_radius``      (1,)      robot body radius (only with ``see_robot``)
+====================  ========  ===========================================================
 
 Slot k of human i holds human k if k < i and human k+1 otherwise (index order, itself skipped).
 """
@@ -57,7 +57,6 @@ class HumanObservations:
         humans, robot = scenario.humans, scenario.robot
         self.max_humans = humans.max_count
         self.see_robot = humans.see_robot
-        self._obstacles = obstacles
         self._slots = max(self.max_humans - 1, 0)
         self._disc_radius = obstacles.disc_radius
         self._static_count = obstacles.polygon_count + obstacles.disc_count
@@ -95,14 +94,15 @@ class HumanObservations:
     def reset(self, sim: Simulator) -> None:
         """Per-episode index tables and constant fields (the crowd size is fixed within an episode)."""
         n, k = sim.n_humans, self._slots
-        slot = np.arange(max(n - 1, 0))
+        used = max(n - 1, 0)  # slots holding a real neighbour (an empty crowd has none)
+        slot = np.arange(used)
         # Row i lists the other humans in index order: slot s holds human s, or s+1 from i on.
         self._others = slot[None, :] + (slot[None, :] >= np.arange(n)[:, None])
         radii = sim.radii[1:]
         humans_radius = np.zeros((n, k), dtype=np.float32)
-        humans_radius[:, : n - 1] = radii[self._others]
+        humans_radius[:, :used] = radii[self._others]
         mask = np.zeros((n, k), dtype=np.float32)
-        mask[:, : n - 1] = 1.0
+        mask[:, :used] = 1.0
         self._constants = {
             "preferred_speed": sim.human_preferred_speed[:, None].astype(np.float32),
             "max_speed": sim.human_max_speed[:, None].astype(np.float32),

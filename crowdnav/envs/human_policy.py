@@ -32,8 +32,12 @@ _UNUSED_DISTANCE = 1.0
 
 def _complex(xy: np.ndarray) -> np.ndarray:
     """float array (..., 2) -> complex128 array (...)."""
-    xy = np.asarray(xy, dtype=np.float64)
-    return xy[..., 0] + 1j * xy[..., 1]
+    return np.ascontiguousarray(xy, dtype=np.float64).view(np.complex128)[..., 0]
+
+
+def _stack(arrays: list[np.ndarray]) -> np.ndarray:
+    """np.stack for equal-shape arrays; one concatenate is about twice as fast for many small ones."""
+    return np.concatenate(arrays).reshape(len(arrays), *np.shape(arrays[0]))
 
 
 class SocialForcePolicy:
@@ -59,7 +63,7 @@ class SocialForcePolicy:
         if not humans:
             return {}
         keys = observations[humans[0]].keys()
-        batch = {key: np.stack([observations[agent][key] for agent in humans]) for key in keys}
+        batch = {key: _stack([observations[agent][key] for agent in humans]) for key in keys}
         return dict(zip(humans, self.act(batch), strict=True))
 
     def act(self, batch: Mapping[str, np.ndarray]) -> np.ndarray:

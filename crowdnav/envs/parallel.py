@@ -55,21 +55,21 @@ class CrowdNavParallelEnv(ParallelEnv):
         overrides: Mapping[str, Any] | None = None,
         render_mode: str | None = None,
     ):
-        self._core = EnvCore(
+        self.core = EnvCore(  # the engine both envs share: simulator, sensors, reward
             scenario, modalities=modalities, sensors=sensors, reward_weights=reward_weights,
             overrides=overrides, render_mode=render_mode,
         )
         self.render_mode = render_mode
-        self.scenario = self._core.scenario
-        self.simulator = self._core.simulator
+        self.scenario = self.core.scenario
+        self.simulator = self.core.simulator
         self.metadata = {**self.metadata, "render_fps": 1.0 / self.scenario.time_step}
         self._humans = HumanObservations(self.scenario, self.simulator.obstacles)
         self._human_names = [f"human_{i}" for i in range(self.scenario.humans.max_count)]
         self.possible_agents = [ROBOT, *self._human_names]
         self.agents: list[str] = []
-        self.observation_spaces = {ROBOT: self._core.observation_space}
+        self.observation_spaces = {ROBOT: self.core.observation_space}
         self.observation_spaces.update({name: self._humans.space() for name in self._human_names})
-        self.action_spaces = {ROBOT: self._core.action_space}
+        self.action_spaces = {ROBOT: self.core.action_space}
         self.action_spaces.update({name: spaces.Box(-1.0, 1.0, shape=(2,), dtype=np.float32) for name in self._human_names})
         self._active_humans: list[str] = []
 
@@ -81,7 +81,7 @@ class CrowdNavParallelEnv(ParallelEnv):
 
     def reset(self, seed: int | None = None, options: dict[str, Any] | None = None):
         """Start an episode; the same seed gives the same episode. ``options`` is accepted and unused."""
-        robot_observation = self._core.reset(seed)
+        robot_observation = self.core.reset(seed)
         self._humans.reset(self.simulator)
         self._active_humans = self._human_names[: self.simulator.n_humans]
         self.agents = [ROBOT, *self._active_humans]
@@ -89,12 +89,13 @@ class CrowdNavParallelEnv(ParallelEnv):
         return observations, {agent: {} for agent in self.agents}
 
     def step(self, actions: Mapping[str, Any]):
+        """One action per agent in ``agents``; out-of-range values are clipped, NaN/inf raise ValueError."""
         if not self.agents:
             raise RuntimeError("the episode is over or has not started: call reset() before step()")
         human_actions = self._human_actions(actions)
-        events, reward, terms = self._core.step(actions[ROBOT], human_actions)
+        events, reward, terms = self.core.step(actions[ROBOT], human_actions)
         agents = self.agents
-        observations = self._observations(self._core.observe())
+        observations = self._observations(self.core.observe())
         rewards = dict.fromkeys(agents, 0.0)
         rewards[ROBOT] = reward
         terminated = events.terminated

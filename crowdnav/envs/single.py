@@ -31,10 +31,11 @@ class CrowdNavEnv(gym.Env):
     * ``closest_obstacle`` (3,) polar or (2,) cartesian like ``goal``: the nearest point of any
       human or static obstacle, distance clipped to ``max_range`` (nothing in range: ``max_range``
       at bearing 0).
-    * ``lidar`` (beams,) ranges / ``max_range`` in [0, 1], beams counter-clockwise from the
-      robot's heading (``-fov/2`` first) over ``fov_deg``.
-    * ``leog`` (1, H, W) uint8 in {0, 255}: local egocentric occupancy grid, robot frame,
-      ``H = W = size / resolution``, 255 = occupied.
+    * ``lidar`` (beams,) range / ``max_range`` in [0, 1] (1: nothing within range); beam k points
+      at ``-fov/2 + fov * (k + 0.5) / beams`` from the heading, counter-clockwise.
+    * ``leog`` (1, H, W) uint8 in {0, 255}, ``H = W = size / resolution``: local egocentric
+      occupancy grid centred on the robot and turning with it, row 0 farthest ahead, column 0
+      farthest left; 255 where a cell's centre is inside a human, round obstacle or polygon.
     * ``velocity`` (2,) the robot's velocity in the robot frame, m/s, in [-max_speed, max_speed].
 
     **Reward.** Sum of the named terms of :mod:`crowdnav.envs.reward` (weights: scenario
@@ -70,27 +71,27 @@ class CrowdNavEnv(gym.Env):
         overrides: Mapping[str, Any] | None = None,
         render_mode: str | None = None,
     ):
-        self._core = EnvCore(
+        self.core = EnvCore(  # the engine both envs share: simulator, sensors, reward
             scenario, modalities=modalities, sensors=sensors, reward_weights=reward_weights,
             overrides=overrides, render_mode=render_mode,
         )
         self.render_mode = render_mode
-        self.scenario = self._core.scenario
-        self.simulator = self._core.simulator
+        self.scenario = self.core.scenario
+        self.simulator = self.core.simulator
         self.metadata = {**self.metadata, "render_fps": 1.0 / self.scenario.time_step}
-        self.observation_space = self._core.observation_space
-        self.action_space = self._core.action_space
+        self.observation_space = self.core.observation_space
+        self.action_space = self.core.action_space
 
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None):
         """Start an episode; the same seed gives the same episode. ``options`` is accepted and unused."""
         super().reset(seed=seed)
-        observation = self._core.reset(seed)
+        observation = self.core.reset(seed)
         # The simulator's generator is the episode's only randomness: expose it as np_random.
         self._np_random = self.simulator.rng
         return observation, {}
 
     def step(self, action: np.ndarray):
-        events, reward, terms = self._core.step(action)
+        events, reward, terms = self.core.step(action)
         terminated = events.terminated
         truncated = events.truncated and not terminated
-        return self._core.observe(), reward, terminated, truncated, step_info(events, terms)
+        return self.core.observe(), reward, terminated, truncated, step_info(events, terms)

@@ -1,0 +1,169 @@
+"""The Gymnasium environment: registration, env_checker, determinism, options and action errors."""
+
+from __future__ import annotations
+
+import gymnasium as gym
+import numpy as np
+import pytest
+from gymnasium.utils.env_checker import check_env
+
+import crowdnav.envs  # noqa: F401  (registers the environments until crowdnav/__init__ imports them)
+from crowdnav.envs import ENV_IDS, SCENARIO_FILE_ID, CrowdNavEnv, env_id
+from crowdnav.scenario import ScenarioError
+from crowdnav.scenario.library import library_dir, library_names
+
+ALL_MODALITIES = ["goal", "closest_obstacle", "lidar", "leog", "velocity"]
+
+
+def test_every_library_scenario_has_a_registered_id():
+    assert ENV_IDS == [env_id(name) for name in library_names()]
+    assert env_id("room_furniture") == "crowdnav/RoomFurniture-v0"
+    assert {"crowdnav/RoomFurniture-v0", "crowdnav/OpenSpace-v0"} <= set(gym.registry)
+
+
+@pytest.mark.parametrize("gym_id", ENV_IDS)
+@pytest.mark.filterwarnings("error")
+def test_env_checker_passes_with_all_modalities_and_no_warning(gym_id):
+    env = gym.make(gym_id, modalities=ALL_MODALITIES)
+    assert set(env.observation_space.spaces) == set(ALL_MODALITIES)
+    check_env(env.unwrapped)  # unwrapped: gym.make's own checker wrapper would itself warn
+    env.close()
+
+
+@pytest.mark.filterwarnings("error")
+def test_scenario_file_id_makes_any_yaml_file(tmp_path):
+    path = tmp_path / "my_room.yaml"
+    path.write_text((library_dir() / "room_furniture.yaml").read_text())
+    env = gym.make(SCENARIO_FILE_ID, scenario=str(path), modalities=["goal", "lidar"])
+    observation, info = env.reset(seed=0)
+    assert env.unwrapped.scenario.name == "my_room"
+    assert observation["lidar"].shape == (360,) and info == {}
+    env.step(env.action_space.sample())
+
+
+def test_scenario_file_id_without_a_scenario_says_what_to_pass():
+    with pytest.raises(ValueError, match="a scenario is required: a library name"):
+        gym.make(SCENARIO_FILE_ID)
+
+
+def run_episode(env: gym.Env, seed: int, steps: int = 60) -> tuple[list[dict], list[float]]:
+    actions = np.random.default_rng(123).uniform(-1, 1, size=(steps, 2)).astype(np.float32)
+    observation, _ = env.reset(seed=seed)
+    observations, rewards = [observation], []
+    for action in actions:
+        observation, reward, terminated, truncated, _ = env.step(action)
+        observations.append(observation)
+        rewards.append(reward)
+        if terminated or truncated:
+            break
+    return observations, rewards
+
+
+def test_same_seed_gives_the_same_episode_bit_for_bit():
+    first = run_episode(gym.make("crowdnav/RoomFurniture-v0", modalities=ALL_MODALITIES), seed=11)
+    second = run_episode(gym.make("crowdnav/RoomFurniture-v0", modalities=ALL_MODALITIES), seed=11)
+    assert first[1] == second[1]
+    assert len(first[0]) == len(second[0]) > 2
+    for a, b in zip(*(first[0], second[0]), strict=True):
+        assert all(np.array_equal(a[key], b[key]) and a[key].dtype == b[key].dtype for key in ALL_MODALITIES)
+
+
+def test_different_seeds_give_different_episodes():
+    env = gym.make("crowdnav/RoomFurniture-v0", modalities=["goal", "lidar"])
+    first, rewards_first = run_episode(env, seed=1, steps=5)
+    second, rewards_second = run_episode(env, seed=2, steps=5)
+    assert not np.array_equal(first[0]["goal"], second[0]["goal"])
+    assert rewards_first != rewards_second
+
+
+def test_options_reach_the_scenario_and_the_spaces():
+    env = CrowdNavEnv(
+        "room_furniture",
+        modalities=["lidar", "goal"],
+        sensors={"lidar": {"beams": 180}, "goal": {"frame": "cartesian"}},
+        reward_weights={"social": -50.0},
+        overrides={"humans.count": 4, "max_steps": 20},
+    )
+    assert env.observation_space["lidar"].shape == (180,)
+    assert env.observation_space["goal"].shape == (2,)
+    assert env.scenario.reward.social == -50.0 and env.scenario.reward.step == -5.0
+    env.reset(seed=0)
+    assert env.simulator.n_humans == 4
+
+
+def test_default_modalities_come_from_the_scenario():
+    env = CrowdNavEnv("room_furniture")
+    assert list(env.observation_space.spaces) == sorted(env.scenario.sensors.modalities)
+
+
+@pytest.mark.parametrize(
+    ("options", "path"),
+    [
+        ({"overrides": {"humans.count": -3}}, "humans.count"),
+        ({"overrides": {"humans.bogus": 1}}, "humans.bogus"),
+        ({"sensors": {"lidar": {"beams": 0}}}, "sensors.lidar.beams"),
+        ({"sensors": {"lidar": {"range": 3.0}}}, "sensors.lidar.range"),
+        ({"reward_weights": {"speed": 1.0}}, "reward.speed"),
+        ({"reward_weights": {"step": float("nan")}}, "reward.step"),
+        ({"modalities": ["goal", "sonar"]}, "sensors.modalities"),
+        ({"modalities": []}, "sensors.modalities"),
+    ],
+)
+def test_bad_options_raise_a_scenario_error_naming_the_path(options, path):
+    with pytest.raises(ScenarioError, match=path.replace(".", r"\.")):
+        CrowdNavEnv("room_furniture", **options)
+
+
+def test_malformed_options_raise_clear_errors():
+    with pytest.raises(ValueError, match="modalities must be a list"):
+        CrowdNavEnv("room_furniture", modalities="lidar")
+    with pytest.raises(ValueError, match="sensors must be a mapping"):
+        CrowdNavEnv("room_furniture", sensors=["lidar"])
+
+
+def test_render_modes_are_not_supported_yet():
+    assert CrowdNavEnv.metadata["render_modes"] == []
+    with pytest.raises(ValueError, match="render_mode='human' is not supported"):
+        CrowdNavEnv("room_furniture", render_mode="human")
+
+
+def test_non_finite_or_misshapen_actions_raise_and_leave_the_state_alone():
+    env = CrowdNavEnv("room_furniture", modalities=["goal"])
+    env.reset(seed=0)
+    for bad in ([np.nan, 0.0], [0.0, np.inf]):
+        with pytest.raises(ValueError, match=r"robot action must be finite \(no NaN or inf\)"):
+            env.step(np.array(bad, dtype=np.float32))
+    with pytest.raises(ValueError, match=r"shape \(2,\)"):
+        env.step(np.zeros(3))
+    with pytest.raises(ValueError, match="2 numbers"):
+        env.step("forward")
+    assert env.simulator.step_count == 0
+
+
+def test_out_of_range_actions_are_clipped():
+    def after_one_step(action):
+        env = CrowdNavEnv("room_furniture", modalities=["goal"], overrides={"humans.count": 0})
+        env.reset(seed=4)
+        env.step(np.array(action, dtype=np.float32))
+        return env.simulator.robot_position
+
+    assert after_one_step([5.0, -7.0]) == after_one_step([1.0, -1.0])
+    assert after_one_step([0.5, -3.0]) == after_one_step([0.5, -1.0])
+
+
+def test_both_envs_share_one_simulator_class_and_one_crowd_model():
+    single = CrowdNavEnv("room_furniture", modalities=["goal"])
+    multi = crowdnav.envs.parallel_env("room_furniture", modalities=["goal"])
+    assert type(single.simulator) is type(multi.simulator)
+    # driving the multi-agent humans with SocialForcePolicy reproduces the single-agent episode
+    policy = crowdnav.envs.SocialForcePolicy(multi.scenario)
+    single.reset(seed=9)
+    observations, _ = multi.reset(seed=9)
+    action = np.array([0.3, 0.2], dtype=np.float32)
+    for _ in range(100):
+        _, _, terminated, truncated, _ = single.step(action)
+        observations, *_ = multi.step({**policy(observations), "robot": action})
+        np.testing.assert_allclose(single.simulator.positions, multi.simulator.positions, atol=1e-4)
+        if terminated or truncated:
+            break
+    assert single.simulator.step_count > 10 and not multi.agents
