@@ -40,7 +40,7 @@ def record_states(sim: Simulator, count: int, seed: int) -> list[Snapshot]:
     sim.reset(seed=seed)
     states = []
     while len(states) < count:
-        states.append(Snapshot({name: _copy(getattr(sim, name)) for name in GEOMETRY if hasattr(sim, name)}))
+        states.append(snapshot(sim))
         events = sim.step(rng.uniform(-1.0, 1.0, size=2))
         if events.terminated or events.truncated:
             episode += 1
@@ -50,6 +50,14 @@ def record_states(sim: Simulator, count: int, seed: int) -> list[Snapshot]:
 
 def _copy(value):
     return value.copy() if isinstance(value, np.ndarray) else value
+
+
+def snapshot(sim: Simulator) -> Snapshot:
+    # radii are replaced (never modified) at reset: sharing the object across an episode's
+    # snapshots keeps the sensors' per-episode caches valid, as in a real episode
+    fields = {name: _copy(getattr(sim, name)) for name in GEOMETRY if hasattr(sim, name) and name != "radii"}
+    fields["radii"] = sim.radii
+    return Snapshot(fields)
 
 
 def restore(sim: Simulator, snapshot: Snapshot) -> None:

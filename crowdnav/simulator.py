@@ -364,7 +364,6 @@ class Simulator:
         gap, kind, partner = min(candidates)
         return Collision(kind, partner, gap) if gap <= 0.0 else None
 
-    _measure = refresh  # former private name, kept while callers move to refresh()
 
     # ------------------------------------------------------------------ goal rule
 

@@ -14,10 +14,10 @@ import os
 import sys
 from collections.abc import Sequence
 
-from crowdnav.cli import scenario
+from crowdnav.cli import render, scenario
 from crowdnav.cli.common import CliError
 
-COMMAND_GROUPS = (scenario.register,)
+COMMAND_GROUPS = (scenario.register, render.register)
 """Registration functions of the command groups, in the order ``--help`` lists them."""
 
 

@@ -18,6 +18,7 @@ import numpy as np
 from gymnasium import spaces
 
 from crowdnav.envs.reward import Reward
+from crowdnav.rendering.episode_view import RENDER_MODES, EpisodeView, RenderOptions
 from crowdnav.scenario import ScenarioError, ScenarioIssue, library
 from crowdnav.scenario.loader import load_scenario
 from crowdnav.scenario.schema import Scenario
@@ -27,8 +28,6 @@ from crowdnav.simulator import Simulator, StepEvents
 ScenarioSource = str | Path | Scenario | Mapping[str, Any]
 """A library name (``"room_furniture"``), a YAML path, a :class:`Scenario` or a parsed mapping."""
 
-RENDER_MODES: list[str] = []
-"""No render mode yet: rendering is a separate feature. ``render_mode=None`` is the only choice."""
 
 
 def option_overrides(
@@ -85,14 +84,6 @@ def load_env_scenario(scenario: ScenarioSource | None, overrides: Mapping[str, A
     return load_scenario(scenario, overrides)
 
 
-def check_render_mode(render_mode: str | None) -> None:
-    if render_mode is not None:
-        raise ValueError(
-            f"render_mode={render_mode!r} is not supported: crowdnav environments have no render modes yet "
-            f"(supported: {RENDER_MODES}); use render_mode=None"
-        )
-
-
 def checked_robot_action(action: Any) -> np.ndarray:
     """The robot action as a (2,) float64 array; a clear ValueError for a wrong shape, NaN or inf.
 
@@ -127,8 +118,10 @@ class EnvCore:
         reward_weights: Mapping[str, float] | None = None,
         overrides: Mapping[str, Any] | None = None,
         render_mode: str | None = None,
+        render_options: RenderOptions | Mapping[str, Any] | None = None,
     ):
-        check_render_mode(render_mode)
+        if render_mode is not None and render_mode not in RENDER_MODES:
+            raise ValueError(f"render_mode={render_mode!r} is not supported; expected None or one of {RENDER_MODES}")
         self.scenario = load_env_scenario(scenario, option_overrides(modalities, sensors, reward_weights, overrides))
         self.simulator = Simulator(self.scenario)
         sensors_config = self.scenario.sensors
@@ -142,17 +135,28 @@ class EnvCore:
         # Observe in the space's key order so observations print like the space.
         self._sensors = tuple((key, self.modalities[key]) for key in self.observation_space.spaces)
         self._running = False
+        self.render_mode = render_mode
+        self.view = EpisodeView(self.simulator, render_mode, render_options) if render_mode else None
+        self._observation: dict[str, np.ndarray] = {}
 
     def reset(self, seed: int | None) -> dict[str, np.ndarray]:
         self.simulator.reset(seed=seed)
         self.reward.reset(self.simulator)
         self._running = True
+        if self.view is not None:
+            self.view.on_reset()
         return self.observe()
 
     def observe(self) -> dict[str, np.ndarray]:
-        """The robot's observation of the current state (new arrays every call)."""
+        """The robot's observation of the current state (new arrays every call).
+
+        The envs call it once per reset/step, which is when ``human`` mode draws its window.
+        """
         sim = self.simulator
-        return {key: modality.observe(sim) for key, modality in self._sensors}
+        self._observation = {key: modality.observe(sim) for key, modality in self._sensors}
+        if self.render_mode == "human":
+            self.view.render(self._observation)
+        return self._observation
 
     def step(self, action: Any, human_actions: np.ndarray | None = None) -> tuple[StepEvents, float, dict[str, float]]:
         """Advance the simulator; returns (events, reward, reward terms)."""
@@ -162,7 +166,19 @@ class EnvCore:
         reward, terms = self.reward(self.simulator, events)
         if events.terminated or events.truncated:
             self._running = False
+        if self.view is not None:
+            self.view.on_step(reward, events)
         return events, reward, terms
+
+    def render(self) -> np.ndarray | None:
+        """The current frame (``rgb_array``), a window update (``human``) or None without a render_mode."""
+        if self.view is None:
+            return None
+        return self.view.render(self._observation)
+
+    def close(self) -> None:
+        if self.view is not None:
+            self.view.close()
 
 
 def step_info(events: StepEvents, terms: dict[str, float]) -> dict[str, Any]:

@@ -9,8 +9,9 @@ import numpy as np
 from gymnasium import spaces
 from pettingzoo import ParallelEnv
 
-from crowdnav.envs.core import RENDER_MODES, EnvCore, ScenarioSource, step_info
+from crowdnav.envs.core import EnvCore, ScenarioSource, step_info
 from crowdnav.envs.human_observation import HumanObservations
+from crowdnav.rendering.episode_view import RENDER_MODES, RenderOptions
 
 ROBOT = "robot"
 
@@ -40,7 +41,8 @@ class CrowdNavParallelEnv(ParallelEnv):
     every agent; agents leave ``agents`` only then, all together.
 
     Options are those of :class:`crowdnav.envs.core.EnvCore` (``modalities``, ``sensors``,
-    ``reward_weights``, ``overrides``, ``render_mode=None``).
+    ``reward_weights``, ``overrides``, ``render_mode`` (None, ``"rgb_array"`` or ``"human"``) and
+    ``render_options``).
     """
 
     metadata = {"name": "crowdnav_v0", "render_modes": RENDER_MODES, "render_fps": 5.0, "is_parallelizable": True}
@@ -54,10 +56,11 @@ class CrowdNavParallelEnv(ParallelEnv):
         reward_weights: Mapping[str, float] | None = None,
         overrides: Mapping[str, Any] | None = None,
         render_mode: str | None = None,
+        render_options: RenderOptions | Mapping[str, Any] | None = None,
     ):
         self.core = EnvCore(  # the engine both envs share: simulator, sensors, reward
             scenario, modalities=modalities, sensors=sensors, reward_weights=reward_weights,
-            overrides=overrides, render_mode=render_mode,
+            overrides=overrides, render_mode=render_mode, render_options=render_options,
         )
         self.render_mode = render_mode
         self.scenario = self.core.scenario
@@ -105,6 +108,13 @@ class CrowdNavParallelEnv(ParallelEnv):
         if terminated or truncated:
             self.agents = []
         return observations, rewards, dict.fromkeys(agents, terminated), dict.fromkeys(agents, truncated), infos
+
+    def render(self) -> np.ndarray | None:
+        """The current frame in ``rgb_array`` mode (None in ``human`` mode, which draws at each step)."""
+        return self.core.render() if self.render_mode == "rgb_array" else None
+
+    def close(self) -> None:
+        self.core.close()
 
     def _observations(self, robot_observation: dict[str, np.ndarray]) -> dict[str, Any]:
         observations: dict[str, Any] = {ROBOT: robot_observation}

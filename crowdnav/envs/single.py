@@ -8,7 +8,8 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
-from crowdnav.envs.core import RENDER_MODES, EnvCore, ScenarioSource, step_info
+from crowdnav.envs.core import EnvCore, ScenarioSource, step_info
+from crowdnav.rendering.episode_view import RENDER_MODES, RenderOptions
 
 
 class CrowdNavEnv(gym.Env):
@@ -56,7 +57,11 @@ class CrowdNavEnv(gym.Env):
     **Options.** ``scenario``: library name, YAML path or :class:`crowdnav.Scenario`;
     ``modalities``; ``sensors`` (``{"lidar": {"beams": 180}}``); ``reward_weights``
     (``{"social": -50}``); ``overrides`` (``{"humans.count": 10}``); all validated like the
-    scenario file (ScenarioError naming the path). ``render_mode``: only None for now.
+    scenario file (ScenarioError naming the path). ``render_mode``: None, ``"rgb_array"``
+    (``render()`` returns a uint8 (H, W, 3) frame; no display needed) or ``"human"`` (a pygame
+    window updated at every reset and step, at ``metadata["render_fps"]`` = 1 / time_step);
+    ``render_options`` (:class:`crowdnav.rendering.RenderOptions` or a mapping of its fields:
+    overlays for the LIDAR, LEOG inset, closest obstacle, humans' goals, frame size).
     """
 
     metadata = {"render_modes": RENDER_MODES, "render_fps": 5.0}
@@ -70,10 +75,11 @@ class CrowdNavEnv(gym.Env):
         reward_weights: Mapping[str, float] | None = None,
         overrides: Mapping[str, Any] | None = None,
         render_mode: str | None = None,
+        render_options: RenderOptions | Mapping[str, Any] | None = None,
     ):
         self.core = EnvCore(  # the engine both envs share: simulator, sensors, reward
             scenario, modalities=modalities, sensors=sensors, reward_weights=reward_weights,
-            overrides=overrides, render_mode=render_mode,
+            overrides=overrides, render_mode=render_mode, render_options=render_options,
         )
         self.render_mode = render_mode
         self.scenario = self.core.scenario
@@ -95,3 +101,10 @@ class CrowdNavEnv(gym.Env):
         terminated = events.terminated
         truncated = events.truncated and not terminated
         return self.core.observe(), reward, terminated, truncated, step_info(events, terms)
+
+    def render(self) -> np.ndarray | None:
+        """The current frame in ``rgb_array`` mode (None in ``human`` mode, which draws at each step)."""
+        return self.core.render() if self.render_mode == "rgb_array" else None
+
+    def close(self) -> None:
+        self.core.close()

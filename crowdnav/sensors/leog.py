@@ -6,16 +6,16 @@ centre lies inside a human disc, a round obstacle or a static polygon (the robot
 drawn).
 
 Each grid row is a line of constant forward coordinate in the robot frame. Along that line a
-disc covers one interval of columns, and a polygon's inside is where the signed count of edge
-crossings to the left (a winding number; edges are oriented so it is +1 inside) is positive.
-Both become +1/-1 marks at column boundaries; one cumulative sum along the rows turns the marks
-into per-cell counts. The work is proportional to rows x (edges + discs), not to cells x
-obstacles, and the test is exact, with no precomputed raster to approximate the static world.
+disc covers one interval of columns, and a polygon's inside is where the signed count of its
+edges crossed to the left (a winding number; edges are oriented so that it is +1 inside) is
+positive. Both become +1/-1 marks at column boundaries, and one cumulative sum turns the marks
+into per-cell counts. Every edge and disc is paired only with the run of rows it spans, so the
+work grows with rows x nearby obstacles, not with cells x obstacles; the test is exact, with no
+precomputed raster approximating the static world.
 """
 
 from __future__ import annotations
 
-import math
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -24,6 +24,7 @@ from gymnasium import spaces
 from crowdnav.scenario.schema import LeogSensor
 from crowdnav.sensors.base import Modality, register_modality
 from crowdnav.sensors.frames import to_robot_frame
+from crowdnav.sensors.runs import expand_runs
 from crowdnav.sensors.static_edges import oriented_edges
 
 if TYPE_CHECKING:
@@ -55,70 +56,108 @@ class LeogModality(Modality):
         """(H,) forward coordinate (m) of each row's cell centres."""
         self.column_y = (n / 2 - np.arange(n) - 0.5) * res
         """(W,) leftward coordinate (m) of each column's cell centres."""
-        self._reach = math.hypot(n * res / 2, n * res / 2)  # centre to grid corner
         edges = oriented_edges(world.obstacles.polygons)
-        self._edge_start, self._edge_vector = edges.start, edges.vector
-        self._has_static_discs = world.obstacles.disc_count > 0
-        self._static_disc_radius = world.obstacles.disc_radius
+        self._edge_count = edges.count
+        self._edge_start, self._edge_end = edges.start, edges.start + edges.vector
+        obstacles = world.obstacles
+        self._static_disc_center = obstacles.disc_center
+        self._static_disc_radius = obstacles.disc_radius
+        self._radii_source: np.ndarray | None = None  # sim.radii the disc constants were built from
+        self._disc_cache: tuple[np.ndarray, np.ndarray] = (np.zeros((2, 0)), np.zeros(0))
+        self._ones = self._minus_ones = np.zeros(0, dtype=np.intp)
+        self._grid_origin = complex(n / 2 + 0.5, n / 2 + 0.5)
 
     def make_space(self) -> spaces.Box:
         return spaces.Box(low=0, high=OCCUPIED, shape=(1, self.cells, self.cells), dtype=np.uint8)
 
     def observe(self, sim: Simulator) -> np.ndarray:
-        occupied = self.coverage(sim) > 0
+        n = self.cells
+        occupied = self._running_counts(sim) > 0
         grid = occupied.view(np.uint8)  # True/False -> 1/0 without a copy
-        grid *= OCCUPIED
-        return grid.reshape(1, self.cells, self.cells)
+        np.negative(grid, out=grid)  # 1 -> 255 in uint8 arithmetic
+        return grid.reshape(n, n + 1)[:, :n].reshape(1, n, n)
 
     def coverage(self, sim: Simulator) -> np.ndarray:
-        """(H, W) float: how many obstacles cover each cell centre (0 = free)."""
+        """(H, W) int: how many obstacles cover each cell centre (0 = free)."""
         n = self.cells
-        rotate = to_robot_frame(sim)
-        flat_edges, edge_sign = self._polygon_marks(sim, rotate)
-        flat_low, flat_high = self._disc_marks(sim, rotate)
-        index = np.concatenate((flat_edges, flat_low, flat_high))
-        weight = np.concatenate((edge_sign, np.ones(len(flat_low)), -np.ones(len(flat_high))))
-        marks = np.bincount(index, weight, minlength=n * (n + 1)).reshape(n, n + 1)
-        return np.cumsum(marks, axis=1)[:, :n]
+        return self._running_counts(sim).reshape(n, n + 1)[:, :n]
 
-    def _column(self, y: np.ndarray) -> np.ndarray:
-        """Fractional column index whose centre lies at leftward coordinate ``y`` (column j sits at j)."""
-        return self.cells / 2 - 0.5 - y / self.resolution
+    @np.errstate(divide="ignore", invalid="ignore")  # slopes of edges parallel to the rows are never used
+    def _running_counts(self, sim: Simulator) -> np.ndarray:
+        """(H * (W + 1),) cover counts row after row; column W of each row is a spare (always 0)."""
+        n, edges = self.cells, self._edge_count
+        # Grid coordinates (v, u) = (n/2 + 0.5 - x / resolution, n/2 + 0.5 - y / resolution), as
+        # one complex number v + iu, for [edge ends, edge starts, disc centres]. Row i's centre
+        # line is v = i + 1, and the first column whose centre lies strictly right of (below) a
+        # point at u is floor(u).
+        scale = to_robot_frame(sim) * (-1.0 / self.resolution)
+        z = np.concatenate((self._edge_end, self._edge_start, sim.positions[1:], self._static_disc_center))
+        z *= scale
+        z += self._grid_origin - complex(sim.positions[0]) * scale
+        end, start, centre = z[:edges], z[edges : 2 * edges], z[2 * edges :]
+        radius_span, radius2 = self._disc_constants(sim)
 
-    def _clipped(self, column: np.ndarray) -> np.ndarray:
-        return np.clip(column, 0, self.cells).astype(np.intp)
+        # Each edge and disc is paired with the run of rows whose centre line v = i + 1 falls in
+        # its span [v0, v1): floor(v0) <= i < floor(v1). The half-open rule counts a polygon
+        # vertex lying on a row line exactly once (both its edges see the same v).
+        span = np.concatenate((np.sort(z.real[: 2 * edges].reshape(2, edges), axis=0), centre.real + radius_span), axis=1)
+        np.maximum(span, 0.0, out=span)
+        np.minimum(span, n, out=span)
+        first, stop = span.astype(np.intp)  # floor: the values are >= 0
+        count = stop - first
+        row, ends = expand_runs(first, count)
+        edge_pairs = int(ends[edges - 1]) if edges else 0
 
-    def _polygon_marks(self, sim: Simulator, rotate: complex) -> tuple[np.ndarray, np.ndarray]:
-        """Flat mark indices and signs of every (row, edge) crossing."""
-        start = (self._edge_start - complex(sim.positions[0])) * rotate
-        end = start + self._edge_vector * rotate
-        start_x, end_x = start.real, end.real
-        # Half-open rule: an edge crosses row x when exactly one end lies beyond x, so a vertex
-        # on the row line is counted once.
-        crosses = (start_x > self.row_x[:, None]) != (end_x > self.row_x[:, None])
-        row, edge = np.nonzero(crosses)
-        sx, sy, ex, ey = start_x[edge], start.imag[edge], end_x[edge], end.imag[edge]
-        y = sy + (self.row_x[row] - sx) * (ey - sy) / (ex - sx)  # ex != sx on crossing edges
-        # Going backwards (ex < sx) with the solid on the left means the cells to the right are inside.
-        sign = np.where(ex < sx, 1.0, -1.0)
-        # the crossing counts for the cells right of it: from the first column whose centre is below y
-        return row * (self.cells + 1) + self._clipped(np.floor(self._column(y)) + 1.0), sign
+        # Per-primitive data reaches the pairs with one repeat each: the start (edges) or centre
+        # (discs) shifted to v - 1, so that v - 1 - row is a pair's v offset from its row line;
+        # du per row (edges) or r^2 (discs); and each edge's crossing sign. With the solid on the
+        # left of every edge, an edge running backwards (towards -x, i.e. increasing v) has the
+        # inside on its right: +1 for the cells right of its crossing, -1 for one running
+        # forwards (an edge with constant v never crosses a row).
+        delta = end - start
+        anchor = (z[edges:] - 1.0).repeat(count)
+        shape = np.concatenate((delta.imag / delta.real, radius2)).repeat(count)
+        edge_sign = np.sign(delta.real).astype(np.intp).repeat(count[:edges])
+        offset = row - anchor.real  # from the primitive's anchor to the row line, in rows
 
-    def _disc_marks(self, sim: Simulator, rotate: complex) -> tuple[np.ndarray, np.ndarray]:
-        """Flat indices of each (row, disc) chord's first covered column and of the column after its last."""
-        offset, distance, radius = sim.pair_offset[0, 1:], sim.pair_distance[0, 1:], sim.radii[1:]
-        if self._has_static_discs:
-            offset = np.concatenate((offset, sim.disc_offset[0]))
-            distance = np.concatenate((distance, sim.disc_distance[0]))
-            radius = np.concatenate((radius, self._static_disc_radius))
-        near = np.flatnonzero(distance - radius <= self._reach)
-        centre, radius = offset[near] * rotate, radius[near]
-        half2 = radius**2 - (self.row_x[:, None] - centre.real) ** 2  # squared half chord per (row, disc)
-        row, disc = np.nonzero(half2 >= 0.0)
-        half = np.sqrt(half2[row, disc])
-        cy = centre.imag[disc]
-        base = row * (self.cells + 1)
-        # covered: the columns whose centre y satisfies cy - half <= y <= cy + half
-        low = base + self._clipped(np.ceil(self._column(cy + half)))
-        high = base + self._clipped(np.floor(self._column(cy - half)) + 1.0)
-        return low, high
+        # Edges: the crossing's u on each row; it counts for the cells right of it.
+        crossing = offset[:edge_pairs] * shape[:edge_pairs]
+        crossing += anchor.imag[:edge_pairs]
+        # Discs: a chord adds +1 from its left end (smaller u) and -1 from its right end.
+        half = offset[edge_pairs:]
+        half *= half
+        np.subtract(shape[edge_pairs:], half, out=half)
+        np.maximum(half, 0.0, out=half)  # guards rounding at the disc's top and bottom rows
+        np.sqrt(half, out=half)
+        middle = anchor.imag[edge_pairs:]
+        disc_row = row[edge_pairs:]
+
+        u = np.concatenate((crossing, middle - half, middle + half))
+        np.maximum(u, 0.0, out=u)
+        np.minimum(u, n, out=u)
+        flat = np.concatenate((row, disc_row))
+        flat *= n + 1
+        flat += u.astype(np.intp)
+        chords = len(disc_row)
+        sign = np.concatenate((edge_sign, self._ones[:chords], self._minus_ones[:chords]))
+        marks = np.zeros(n * (n + 1), dtype=np.intp)
+        np.add.at(marks, flat, sign)
+        # Every row's marks sum to zero (each primitive enters and leaves it, column W included),
+        # so one flat cumulative sum over the rows restarts at zero on each row.
+        return marks.cumsum()
+
+    def _disc_constants(self, sim: Simulator) -> tuple[np.ndarray, np.ndarray]:
+        """(2, n + C) disc radii in cells as [-r, +r], and (n + C,) their squares; humans first.
+
+        Rebuilt when the simulator's radii array changes (it is replaced at every reset).
+        """
+        if sim.radii is not self._radii_source:
+            radius = np.concatenate((sim.radii[1:], self._static_disc_radius)) / self.resolution
+            self._disc_cache = (np.stack((-radius, radius)), radius**2)
+            self._radii_source = sim.radii
+            # a disc spans at most 2 r / resolution + 1 rows
+            chords = int(np.ceil(2 * radius + 1).sum()) if len(radius) else 0
+            if len(self._ones) < chords:
+                self._ones = np.ones(chords, dtype=np.intp)
+                self._minus_ones = -self._ones
+        return self._disc_cache

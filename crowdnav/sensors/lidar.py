@@ -2,14 +2,17 @@
 
 Beam ``k`` of ``B`` points at ``-fov/2 + fov * (k + 0.5) / B`` radians from the heading
 (counter-clockwise positive), so a 360-degree scan starts just right of straight behind and
-sweeps counter-clockwise; beams are symmetric about the heading.
+sweeps counter-clockwise; the beams are symmetric about the heading.
 
 Instead of intersecting every beam with every obstacle (a beams x obstacles matrix), each
-obstacle is paired only with the beams inside the angle it subtends from the robot: a
-polygon edge or a disc covers an interval of bearings, which maps to a run of beam indices
-(one beam of slack each side; the exact hit test below decides). Polygon edges whose outer
-side faces away from the robot are skipped: the first surface a ray meets from outside a
-polygon is always one that faces it. Polygons and discs beyond ``max_range`` are skipped too.
+obstacle is paired only with the run of beams inside the bearings it subtends from the robot
+(with one beam of slack each side, and a cheap over-estimate of a disc's angular half-width:
+the exact hit test decides). Polygon edges whose outer side faces away from the robot are
+skipped: from outside a polygon, the first surface a ray meets always faces it.
+
+Hits are kept as inverse ranges ``1 / t``, so that "nearest hit" is a maximum, a miss can be
+any value <= 0 or NaN (ignored by ``fmax``), and no division by a ray-edge determinant that
+may be zero is needed.
 """
 
 from __future__ import annotations
@@ -22,7 +25,7 @@ from gymnasium import spaces
 
 from crowdnav.scenario.schema import LidarSensor
 from crowdnav.sensors.base import Modality, register_modality
-from crowdnav.sensors.frames import to_robot_frame
+from crowdnav.sensors.runs import expand_runs
 from crowdnav.sensors.static_edges import oriented_edges
 
 if TYPE_CHECKING:
@@ -54,102 +57,130 @@ class LidarModality(Modality):
         """(B,) beam bearings relative to the heading (rad)."""
         self._directions = np.exp(1j * self.angles)
         self._beams_per_turn = self.beams * 360.0 / self.settings.fov_deg  # exact B when fov is 360
+        self._full_circle = self.settings.fov_deg == 360.0
         edges = oriented_edges(world.obstacles.polygons)
-        self._edge_start, self._edge_vector, self._edge_owner = edges.start, edges.vector, edges.owner
-        self._has_polygons = world.obstacles.polygon_count > 0
-        self._has_static_discs = world.obstacles.disc_count > 0
-        self._static_disc_radius = world.obstacles.disc_radius
+        self._edge_count = edges.count
+        self._edge_start, self._edge_vector = edges.start, edges.vector
+        self._edge_end = edges.start + edges.vector
+        self._edge_vector_conj = edges.vector.conj()
+        obstacles = world.obstacles
+        self._static_disc_count = obstacles.disc_count
+        self._static_disc_center = obstacles.disc_center
+        self._static_disc_radius = obstacles.disc_radius
+        self._radii_source: np.ndarray | None = None  # sim.radii the disc constants were built from
+        self._disc_constants: tuple[np.ndarray, np.ndarray] = (np.zeros(0), np.zeros(0))
+        self._no_hit = np.full(self.beams, 1.0 / self.max_range)
 
     def make_space(self) -> spaces.Box:
         return spaces.Box(low=0.0, high=1.0, shape=(self.beams,), dtype=np.float32)
 
     def observe(self, sim: Simulator) -> np.ndarray:
-        return (self.ranges(sim) / self.max_range).astype(np.float32)
-
-    # ------------------------------------------------------------------ raycast
+        out = np.empty(self.beams, dtype=np.float32)
+        # (1 / max_range) / inverse <= 1: the inverse ranges start at 1 / max_range
+        np.divide(1.0 / self.max_range, self._inverse_ranges(sim), out=out)
+        return out
 
     def ranges(self, sim: Simulator) -> np.ndarray:
         """(B,) float64 distances in metres from the robot's centre, ``max_range`` where nothing is hit."""
-        rotate = to_robot_frame(sim)
-        # Polygon edges in the robot frame; cross(start, vector) < 0 puts the robot on an
-        # edge's outer side, the only side it can be seen from.
-        start = (self._edge_start - complex(sim.positions[0])) * rotate
-        vector = self._edge_vector * rotate
-        cross = (start.conj() * vector).imag
-        facing = cross < 0.0
-        if self._has_polygons:
-            facing &= (sim.polygon_distance[0] <= self.max_range)[self._edge_owner]
-        edge = np.flatnonzero(facing)
-        start, vector, cross = start[edge], vector[edge], cross[edge]
-        # Seen from the robot, a facing edge spans the bearings from its end counter-clockwise to its start.
-        edge_low = np.angle(start + vector)
-        edge_span = np.mod(np.angle(start) - edge_low, TWO_PI)
+        return 1.0 / self._inverse_ranges(sim)
 
-        centre, radius, gap2 = self._discs_in_range(sim, rotate)
-        half_width = np.arcsin(radius / np.abs(centre))
-        disc_low = np.angle(centre) - half_width
+    # ------------------------------------------------------------------ raycast
 
-        edge_beam, edge_index = self._beam_pairs(edge_low, edge_span)
-        disc_beam, disc_index = self._beam_pairs(disc_low, 2.0 * half_width)
-        out = np.full(self.beams, self.max_range)
-        np.minimum.at(out, edge_beam, _edge_hits(self._directions[edge_beam], start[edge_index], vector[edge_index], cross[edge_index]))
-        np.minimum.at(out, disc_beam, _disc_hits(self._directions[disc_beam], centre[disc_index], radius[disc_index], gap2[disc_index]))
+    @np.errstate(divide="ignore", invalid="ignore")  # misses may be inf/NaN by design, see the module doc
+    def _inverse_ranges(self, sim: Simulator) -> np.ndarray:
+        """(B,) per beam: max(1 / max_range, 1 / range of the nearest hit)."""
+        heading = math.remainder(sim.robot_heading, TWO_PI)
+        edges = self._edge_count
+        primitives = edges + sim.n_humans + self._static_disc_count
+        half_width_numerator, radius2 = self._primitive_constants(sim)
+        humans = sim.positions[1:]
+        # World-frame offsets from the robot, laid out so that one arctan2 gives every bearing
+        # interval: [edge ends, disc centres | edge starts, disc centres]. Per-primitive arrays
+        # below have length P = edges + discs, discs after edges.
+        z = np.concatenate((self._edge_end, humans, self._static_disc_center, self._edge_start, humans, self._static_disc_center))
+        z -= sim.positions[0]
+        bearing = np.arctan2(z.imag, z.real)
+        bearing *= 1.0 / self.step
+        # beam units: beam k sits at k; whole turns are added so the values stay positive
+        bearing += (self.fov / 2 - heading) / self.step - 0.5 + 3 * self._beams_per_turn
+        near = z[:primitives]  # edges: their end; discs: their centre
+        distance = np.abs(near)
+        half_width = half_width_numerator / distance
+        low = bearing[:primitives] - half_width
+        high = bearing[primitives:] + half_width
+
+        # Per-primitive scale, positive exactly for the primitives the robot can see: edges
+        # -1 / cross(start, vector) (the robot on the edge's outer side), discs 1 / (d^2 - r^2)
+        # (the robot outside the disc). Scaling the hit formulas by it makes them give 1 / range.
+        start_conj = z[primitives : primitives + edges].conj()
+        scale = np.empty(primitives)
+        np.divide(-1.0, (start_conj * self._edge_vector).imag, out=scale[:edges])
+        gap2 = distance[edges:]
+        gap2 *= gap2
+        gap2 -= radius2[edges:]
+        np.divide(1.0, gap2, out=scale[edges:])
+        factor = np.empty(primitives, dtype=complex)  # multiplies a beam direction in every hit formula
+        np.multiply(self._edge_vector_conj, scale[:edges], out=factor[:edges])
+        np.multiply(near[edges:].conj(), scale[edges:], out=factor[edges:])
+        start_factor = start_conj * scale[:edges]
+        radius2 = radius2 * (scale * scale)
+
+        beam, count, edge_pairs = self._beam_runs(low, high, scale > 0.0, edges)
+        direction = self._directions.take(beam) * complex(math.cos(heading), math.sin(heading))
+        local = factor.repeat(count) * direction
+        inverse = np.empty(len(beam))
+        # Edge a + s * e, ray t * d (robot at the origin): t = cross(a, e) / cross(d, e) and
+        # s = cross(a, d) / cross(d, e). With the scale k = -1 / cross(a, e), 1 / t = k * cross(e, d)
+        # = Im(k conj(e) d), and 0 <= s <= 1 reads -k cross(e, d) <= k cross(a, d) <= 0.
+        hit = local.imag[:edge_pairs]
+        along = (start_factor.repeat(count[:edges]) * direction[:edge_pairs]).imag
+        np.multiply(hit, along * (along + hit) <= 0.0, out=inverse[:edge_pairs])
+        # Disc: with b the centre's distance along the ray and h its distance off it, the near
+        # root b - sqrt(r^2 - h^2) equals (d^2 - r^2) / (b + sqrt(r^2 - h^2)); scaled by
+        # k = 1 / (d^2 - r^2), its inverse is k b + sqrt(k^2 r^2 - k^2 h^2): NaN on a miss,
+        # negative for a disc behind the robot.
+        disc_local = local[edge_pairs:]
+        root = radius2[edges:].repeat(count[edges:]) - disc_local.imag**2
+        np.sqrt(root, out=root)
+        np.add(root, disc_local.real, out=inverse[edge_pairs:])
+        out = self._no_hit.copy()
+        np.fmax.at(out, beam, inverse)
         return out
 
-    def _discs_in_range(self, sim: Simulator, rotate: complex) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """Humans and round obstacles within range and not containing the robot: robot-frame centre, radius, d^2 - r^2."""
-        offset, distance, radius = sim.pair_offset[0, 1:], sim.pair_distance[0, 1:], sim.radii[1:]
-        if self._has_static_discs:
-            offset = np.concatenate((offset, sim.disc_offset[0]))
-            distance = np.concatenate((distance, sim.disc_distance[0]))
-            radius = np.concatenate((radius, self._static_disc_radius))
-        keep = np.flatnonzero((distance > radius) & (distance - radius <= self.max_range))
-        distance, radius = distance[keep], radius[keep]
-        return offset[keep] * rotate, radius, (distance - radius) * (distance + radius)
+    def _beam_runs(self, low: np.ndarray, high: np.ndarray, visible: np.ndarray, edges: int) -> tuple[np.ndarray, np.ndarray, int]:
+        """Expand bearing intervals ``[low, high]`` (beam units, wrapping) into (beam, primitive) pairs.
 
-    def _beam_pairs(self, low: np.ndarray, span: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """(beam, obstacle) index pairs for obstacles spanning bearings ``[low, low + span]`` (span < 2 pi).
-
-        In beam units (beam k sits at u = k) an interval becomes ``[u0, u1]``; it may run past a
-        full turn, so the indices are taken on two laps, the second shifted back by one turn.
+        Primitives that are not ``visible`` get no pairs. Returns the beam of every pair, the
+        number of pairs per primitive (pairs are grouped by primitive, in order) and how many
+        pairs belong to edges (they come first).
         """
-        u0 = np.mod(low + self.fov / 2, TWO_PI) / self.step - 0.5
-        u1 = u0 + span / self.step
-        u0 = np.concatenate((u0, u0 - self._beams_per_turn))
-        u1 = np.concatenate((u1, u1 - self._beams_per_turn))
-        first = np.maximum(np.floor(u0), 0.0).astype(np.intp)
-        last = np.minimum(np.floor(u1) + 1.0, self.beams - 1).astype(np.intp)
-        count = np.maximum(last - first + 1, 0)
-        owner = np.tile(np.arange(len(low)), 2)
-        # Run-length expansion: beam = first[i] + position within run i.
-        total = int(count.sum())
-        run_start = np.cumsum(count) - count
-        beam = np.arange(total) + np.repeat(first - run_start, count)
-        return beam, np.repeat(owner, count)
+        if self._full_circle:
+            first = low.astype(np.intp)  # floor: the values are positive
+            count = (high.astype(np.intp) - first) % self.beams + 2  # one beam of slack each side
+            count *= visible
+            beam, ends = expand_runs(first, count)
+            beam %= self.beams
+            return beam, count, int(ends[edges - 1]) if edges else 0
+        # A partial field of view: the interval may run past a full turn onto the first beams
+        # again, so each primitive gets a run on each of two laps, the second shifted back by a turn.
+        turn = self._beams_per_turn
+        low = np.mod(low, turn)
+        high = low + np.mod(high - low, turn)
+        first = np.maximum(np.floor(np.stack((low, low - turn))), 0.0)  # (lap, primitive)
+        last = np.minimum(np.floor(np.stack((high, high - turn))) + 1.0, self.beams - 1.0)
+        count = np.maximum(last - first + 1.0, 0.0).astype(np.intp) * visible
+        # primitive-major order, so that a primitive's pairs stay together
+        beam, ends = expand_runs(first.T.astype(np.intp).ravel(), count.T.ravel())
+        return beam, count.sum(0), int(ends[2 * edges - 1]) if edges else 0
 
+    def _primitive_constants(self, sim: Simulator) -> tuple[np.ndarray, np.ndarray]:
+        """(P,) per primitive: numerator of the bearing half-width and squared radius (both 0 for edges).
 
-def _edge_hits(direction: np.ndarray, start: np.ndarray, vector: np.ndarray, cross: np.ndarray) -> np.ndarray:
-    """Range along each unit ``direction`` to its paired edge (robot at the origin), inf on a miss.
-
-    Solving ``t * d = a + s * e``: ``t = cross(a, e) / cross(d, e)``, ``s = cross(a, d) / cross(d, e)``;
-    a hit needs the ray to enter the edge from its outer side (``cross(d, e) < 0``) and ``s`` in [0, 1].
-    """
-    denominator = (direction.conj() * vector).imag
-    along = (start.conj() * direction).imag
-    hit = (denominator < 0.0) & (along <= 0.0) & (along >= denominator)
-    return np.divide(cross, denominator, out=np.full(len(direction), np.inf), where=hit)
-
-
-def _disc_hits(direction: np.ndarray, centre: np.ndarray, radius: np.ndarray, gap2: np.ndarray) -> np.ndarray:
-    """Range along each unit ``direction`` to its paired disc's near surface (robot outside), inf on a miss.
-
-    With ``b`` the centre's distance along the ray and ``h`` its distance off the ray, the near
-    root is ``b - sqrt(r^2 - h^2)``, written as ``(d^2 - r^2) / (b + sqrt(r^2 - h^2))`` to stay
-    exact when the beam grazes the disc.
-    """
-    local = centre.conj() * direction  # |c| * exp(i * (beam bearing - centre bearing))
-    along, off2 = local.real, local.imag**2
-    inside = radius * radius - off2
-    hit = (inside >= 0.0) & (along > 0.0)
-    root = np.sqrt(np.maximum(inside, 0.0))
-    return np.divide(gap2, along + root, out=np.full(len(direction), np.inf), where=hit)
+        Rebuilt when the simulator's radii array changes (it is replaced at every reset).
+        """
+        if sim.radii is not self._radii_source:
+            # arcsin(x) <= x * pi / 2 on [0, 1]: (r * pi / 2) / d bounds a disc's bearing half-width
+            radius = np.concatenate((np.zeros(self._edge_count), sim.radii[1:], self._static_disc_radius))
+            self._disc_constants = (radius * (math.pi / 2) / self.step, radius**2)
+            self._radii_source = sim.radii
+        return self._disc_constants

@@ -11,8 +11,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-import shapely
 from shapely.geometry import Polygon
+from shapely.geometry.polygon import orient
 
 
 @dataclass(frozen=True)
@@ -35,7 +35,7 @@ def oriented_edges(polygons: list[Polygon]) -> OrientedEdges:
     """Edges of ``polygons`` (shapely), exteriors counter-clockwise and holes clockwise."""
     starts, vectors, owners = [], [], []
     for index, polygon in enumerate(polygons):
-        polygon = shapely.orient_polygons(polygon)
+        polygon = orient(polygon, sign=1.0)  # shapely >= 2.0; orient_polygons needs 2.1
         for ring in (polygon.exterior, *polygon.interiors):
             xy = np.asarray(ring.coords)
             z = xy[:, 0] + 1j * xy[:, 1]
