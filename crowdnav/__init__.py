@@ -1,8 +1,8 @@
 """crowdnav: a multi-modal training environment for human-aware social robot navigation."""
 
+from crowdnav.envs import CrowdNavEnv, CrowdNavParallelEnv, SocialForcePolicy, parallel_env  # registers the Gymnasium ids
 from crowdnav.scenario import Scenario, ScenarioError, load_scenario
 from crowdnav.simulator import Collision, Simulator, StepEvents
-from crowdnav.envs import CrowdNavEnv, CrowdNavParallelEnv, SocialForcePolicy, parallel_env  # registers the Gymnasium ids
 
 __all__ = [
     "Collision",
