@@ -176,11 +176,9 @@ class Simulator:
         cached = self._constants.get(n)
         if cached is None:
             self._compute_pair_constants(n)
-            self._constants[n] = (self.radii, self._contact, self._gain, self._decay, self._robot_contact,
-                                  self._robot_static_contact, self._human_static_contact)
+            self._constants[n] = (self.radii, self._contact, self._gain, self._decay, self._contact_all)
         else:
-            (self.radii, self._contact, self._gain, self._decay, self._robot_contact,
-             self._robot_static_contact, self._human_static_contact) = cached
+            self.radii, self._contact, self._gain, self._decay, self._contact_all = cached
 
     def _compute_pair_constants(self, n: int) -> None:
         robot, humans, force = self.scenario.robot, self.scenario.humans, self._force
@@ -204,9 +202,9 @@ class Simulator:
         static_gain = sf.repulsion_gain(static_strength, radii[:, None] + obstacles.surface_radius[None, :], force.obstacle_range)
         self._gain = np.concatenate([pair_gain, static_gain], axis=1)
         self._decay = np.concatenate([-1.0 / decay, np.full((n + 1, self._static_count), -1.0 / force.obstacle_range)], axis=1)
-        self._robot_contact = self._contact[0, 1:]
-        self._robot_static_contact = obstacles.surface_radius + robot.radius
-        self._human_static_contact = obstacles.surface_radius + humans.radius
+        # Surface contact distance for every column of the fused distance matrix: touching
+        # agents or obstacles have distance - contact <= 0.
+        self._contact_all = np.concatenate([self._contact, radii[:, None] + obstacles.surface_radius[None, :]], axis=1)
 
     # ------------------------------------------------------------------------ step
 
@@ -232,7 +230,8 @@ class Simulator:
         self.positions += self.velocities * self.dt
         self.step_count += 1
         self.refresh()
-        if self.n_humans and self._resolve_human_overlaps():
+        if self.n_humans and self._gap[1:].min() < 0.0:  # a human touches someone or something
+            self._resolve_human_overlaps()
             self.refresh()
         collision = self.robot_collision()
         goal_reached = abs(self.robot_goal - self.positions[0]) <= self.scenario.robot.goal_radius
@@ -323,47 +322,34 @@ class Simulator:
             empty = np.zeros((len(z), 0))
             self.polygon_offset = self.disc_offset = empty.astype(complex)
             self.polygon_distance = self.disc_distance = empty
+        self._gap = distance - self._contact_all  # surface gaps: agents then obstacles, (n+1, n+1+P+C)
         self._repulsion = sf.repulsion(offset, distance, self._gain, self._decay)
 
-    def _resolve_human_overlaps(self) -> bool:
-        """Push humans out of obstacles and apart from each other; True if anyone moved.
+    def _resolve_human_overlaps(self) -> None:
+        """Push humans out of obstacles and apart from each other (half the overlap each).
 
         Repulsion keeps this rare; it is what guarantees that humans never enter walls.
         """
-        radius = self.scenario.humans.radius
-        pair_distance = self.pair_distance[1:, 1:]
+        n = self.n_humans
+        pair_gap = self._gap[1:, 1 : n + 1]
+        shift = ((self.pair_offset[1:, 1:] / self.pair_distance[1:, 1:]) * (np.minimum(pair_gap, 0.0) / 2)).sum(1)
         if self._static_count:
-            static_gap = self._static_distance[1:] - self._human_static_contact  # surface gaps
-            into_static = static_gap.min() < 0.0
-        else:
-            into_static = False
-        if not (into_static or pair_distance.min() < 2 * radius):
-            return False
-        overlap = np.maximum(2 * radius - pair_distance, 0.0) / 2
-        shift = -(self.pair_offset[1:, 1:] / pair_distance * overlap).sum(1)
-        if into_static:
+            static_gap = self._gap[1:, n + 1 :]
             direction = self._static_offset[1:] / np.maximum(self._static_distance[1:], 1e-12)
             shift += (direction * np.minimum(static_gap, 0.0)).sum(1)
         self.positions[1:] += shift
-        return True
 
     def robot_collision(self) -> Collision | None:
         """The robot's deepest contact in the current state (touching counts), or None."""
-        human_gaps = self.pair_distance[0, 1:] - self._robot_contact
-        static_gaps = self._static_distance[0] - self._robot_static_contact if self._static_count else human_gaps[:0]
-        if (not len(human_gaps) or human_gaps.min() > 0.0) and (not len(static_gaps) or static_gaps.min() > 0.0):
-            return None  # the common case, decided with two reductions
-        candidates = []
-        if len(human_gaps):
-            j = int(human_gaps.argmin())
-            candidates.append((float(human_gaps[j]), "human", f"human_{j}"))
-        if len(static_gaps):
-            k = int(static_gaps.argmin())
-            labels = self.obstacles.labels + self.obstacles.disc_labels
-            candidates.append((float(static_gaps[k]), "static", labels[k]))
-        gap, kind, partner = min(candidates)
-        return Collision(kind, partner, gap) if gap <= 0.0 else None
-
+        gaps = self._gap[0]
+        if not len(gaps) or gaps.min() > 0.0:
+            return None  # the common case, decided with one reduction
+        k = int(gaps.argmin())
+        n = self.n_humans
+        if k <= n:
+            return Collision("human", f"human_{k - 1}", float(gaps[k]))
+        labels = self.obstacles.labels + self.obstacles.disc_labels
+        return Collision("static", labels[k - n - 1], float(gaps[k]))
 
     # ------------------------------------------------------------------ goal rule
 

@@ -121,12 +121,6 @@ def test_malformed_options_raise_clear_errors():
         CrowdNavEnv("room_furniture", sensors=["lidar"])
 
 
-def test_render_modes_are_not_supported_yet():
-    assert CrowdNavEnv.metadata["render_modes"] == []
-    with pytest.raises(ValueError, match="render_mode='human' is not supported"):
-        CrowdNavEnv("room_furniture", render_mode="human")
-
-
 def test_non_finite_or_misshapen_actions_raise_and_leave_the_state_alone():
     env = CrowdNavEnv("room_furniture", modalities=["goal"])
     env.reset(seed=0)
