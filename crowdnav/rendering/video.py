@@ -38,7 +38,9 @@ class VideoWriter:
                 import imageio.v2 as imageio  # imported lazily: only video writing needs it
 
                 # macro_block_size=1: the renderer already makes sides multiples of 16, never resize.
-                self._mp4 = imageio.get_writer(self.path, fps=self.fps, codec="libx264", quality=7, macro_block_size=1)
+                self._mp4 = imageio.get_writer(
+                    self.path, fps=self.fps, codec="libx264", quality=7, macro_block_size=1, ffmpeg_params=["-preset", "veryfast"]
+                )
             self._mp4.append_data(frame)
         self.frames_written += 1
 
