@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
+from collections.abc import Mapping
 from typing import Any
 
 import numpy as np
@@ -11,7 +11,7 @@ from pettingzoo import ParallelEnv
 
 from crowdnav.envs.core import EnvCore, ScenarioSource, step_info
 from crowdnav.envs.human_observation import HumanObservations
-from crowdnav.rendering.episode_view import RENDER_MODES, RenderOptions
+from crowdnav.rendering.episode_view import RENDER_MODES
 
 ROBOT = "robot"
 
@@ -47,22 +47,10 @@ class CrowdNavParallelEnv(ParallelEnv):
 
     metadata = {"name": "crowdnav_v0", "render_modes": RENDER_MODES, "render_fps": 5.0, "is_parallelizable": True}
 
-    def __init__(
-        self,
-        scenario: ScenarioSource | None = None,
-        *,
-        modalities: Sequence[str] | None = None,
-        sensors: Mapping[str, Any] | None = None,
-        reward_weights: Mapping[str, float] | None = None,
-        overrides: Mapping[str, Any] | None = None,
-        render_mode: str | None = None,
-        render_options: RenderOptions | Mapping[str, Any] | None = None,
-    ):
-        self.core = EnvCore(  # the engine both envs share: simulator, sensors, reward
-            scenario, modalities=modalities, sensors=sensors, reward_weights=reward_weights,
-            overrides=overrides, render_mode=render_mode, render_options=render_options,
-        )
-        self.render_mode = render_mode
+    def __init__(self, scenario: ScenarioSource | None = None, **options: Any):
+        # The engine both envs share (simulator, sensors, reward); it takes and checks the options.
+        self.core = EnvCore(scenario, **options)
+        self.render_mode = self.core.render_mode
         self.scenario = self.core.scenario
         self.simulator = self.core.simulator
         self.metadata = {**self.metadata, "render_fps": 1.0 / self.scenario.time_step}

@@ -2,14 +2,13 @@
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
 from typing import Any
 
 import gymnasium as gym
 import numpy as np
 
 from crowdnav.envs.core import EnvCore, ScenarioSource, step_info
-from crowdnav.rendering.episode_view import RENDER_MODES, RenderOptions
+from crowdnav.rendering.episode_view import RENDER_MODES
 
 
 class CrowdNavEnv(gym.Env):
@@ -66,22 +65,10 @@ class CrowdNavEnv(gym.Env):
 
     metadata = {"render_modes": RENDER_MODES, "render_fps": 5.0}
 
-    def __init__(
-        self,
-        scenario: ScenarioSource | None = None,
-        *,
-        modalities: Sequence[str] | None = None,
-        sensors: Mapping[str, Any] | None = None,
-        reward_weights: Mapping[str, float] | None = None,
-        overrides: Mapping[str, Any] | None = None,
-        render_mode: str | None = None,
-        render_options: RenderOptions | Mapping[str, Any] | None = None,
-    ):
-        self.core = EnvCore(  # the engine both envs share: simulator, sensors, reward
-            scenario, modalities=modalities, sensors=sensors, reward_weights=reward_weights,
-            overrides=overrides, render_mode=render_mode, render_options=render_options,
-        )
-        self.render_mode = render_mode
+    def __init__(self, scenario: ScenarioSource | None = None, **options: Any):
+        # The engine both envs share (simulator, sensors, reward); it takes and checks the options.
+        self.core = EnvCore(scenario, **options)
+        self.render_mode = self.core.render_mode
         self.scenario = self.core.scenario
         self.simulator = self.core.simulator
         self.metadata = {**self.metadata, "render_fps": 1.0 / self.scenario.time_step}
