@@ -1,0 +1,59 @@
+"""crowdnav's evaluation: the paper's protocol as reproducible runs, per-episode metrics,
+learning curves and a leaderboard.
+
+* :class:`Protocol` (evaluation.protocol): when and on which held-out episodes a policy is tested;
+* experiments (evaluation.experiment): YAML lists of configurations x seeds, shipped in
+  ``evaluation/experiments/`` (:func:`load_experiment`);
+* :func:`run_unit` (evaluation.runner): one (configuration, seed) run, idempotent and resumable;
+  :func:`run_experiment` (evaluation.benchmark): all of them in a process pool, then the report;
+* :mod:`evaluation.metrics`: per-episode metrics from a trajectory (pure functions);
+* :func:`plot_curves`, :func:`write_leaderboard`, :func:`load_results`: any results folder.
+
+Names are imported on first use, so ``import evaluation`` stays cheap (no torch, pandas or
+matplotlib until needed).
+"""
+
+from __future__ import annotations
+
+import importlib
+from typing import Any
+
+_EXPORTS = {
+    "Protocol": "evaluation.protocol",
+    "QUICK": "evaluation.protocol",
+    "Experiment": "evaluation.experiment",
+    "Configuration": "evaluation.experiment",
+    "ExperimentError": "evaluation.experiment",
+    "load_experiment": "evaluation.experiment",
+    "shipped_experiments": "evaluation.experiment",
+    "UnitSpec": "evaluation.runner",
+    "run_unit": "evaluation.runner",
+    "run_experiment": "evaluation.benchmark",
+    "BenchmarkReport": "evaluation.benchmark",
+    "write_report": "evaluation.benchmark",
+    "Trajectory": "evaluation.metrics",
+    "episode_metrics": "evaluation.metrics",
+    "HeldOutEpisodes": "evaluation.rollout",
+    "ResultsError": "evaluation.storage",
+    "load_results": "evaluation.storage",
+    "rate_curves": "evaluation.curves",
+    "curves_figure": "evaluation.curves",
+    "plot_curves": "evaluation.curves",
+    "leaderboard_table": "evaluation.leaderboard",
+    "write_leaderboard": "evaluation.leaderboard",
+}
+
+__all__ = sorted(_EXPORTS)
+
+
+def __getattr__(name: str) -> Any:
+    module = _EXPORTS.get(name)
+    if module is None:
+        raise AttributeError(f"module 'evaluation' has no attribute {name!r}")
+    value = getattr(importlib.import_module(module), name)
+    globals()[name] = value
+    return value
+
+
+def __dir__() -> list[str]:
+    return sorted(set(globals()) | set(_EXPORTS))

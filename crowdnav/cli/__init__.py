@@ -3,7 +3,7 @@
 Every command group lives in its own module of this package and exposes
 ``register(subparsers)``: it adds its parser and sets ``handler`` (``(args) -> int``) on
 each leaf command. To add a group (train, render, benchmark, ...), write its module and
-append its ``register`` to :data:`COMMAND_GROUPS`. Import heavy dependencies (torch,
+append its ``register`` to :func:`command_groups`. Import heavy dependencies (torch,
 pygame) inside handlers, so that ``crowdnav --help`` and the scenario tools stay fast.
 """
 
@@ -14,11 +14,15 @@ import os
 import sys
 from collections.abc import Sequence
 
-from crowdnav.cli import render, scenario
+from crowdnav.cli import benchmark, render, scenario
 from crowdnav.cli.common import CliError
 
-COMMAND_GROUPS = (scenario.register, render.register)
-"""Registration functions of the command groups, in the order ``--help`` lists them."""
+
+def command_groups() -> tuple:
+    """Registration functions of the command groups, in the order ``--help`` lists them."""
+    from agents import commands as agent_commands  # imported here: it imports crowdnav.cli.common itself
+
+    return (scenario.register, agent_commands.register, render.register, benchmark.register)
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -30,7 +34,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     parser.add_argument("--version", action="version", version=f"crowdnav {__version__}")
     groups = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
-    for register in COMMAND_GROUPS:
+    for register in command_groups():
         register(groups)
     return parser
 

@@ -1,0 +1,128 @@
+"""The training callback: counts episodes (training is measured in episodes, as in the paper),
+stops after the requested number, logs every episode, shows progress, and triggers checkpoints.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+from dataclasses import asdict, dataclass
+from pathlib import Path
+from typing import TextIO
+
+from stable_baselines3.common.callbacks import BaseCallback
+
+EPISODE_LOG_HEADER = "episode,seed,outcome,return,length,timesteps,seconds"
+
+
+@dataclass
+class EpisodeRecord:
+    """One finished training episode (a row of ``episodes.csv``)."""
+
+    episode: int
+    """0-based index over the whole run (continues after a resume)."""
+    seed: int
+    outcome: str
+    """success, collision or truncated."""
+    reward: float
+    """Undiscounted return."""
+    length: int
+    timesteps: int
+    """Model timesteps after this episode."""
+    seconds: float
+    """Wall time since this (possibly resumed) session started."""
+
+    def csv(self) -> str:
+        return ",".join(str(value) for value in asdict(self).values())
+
+
+class EpisodeCallback(BaseCallback):
+    """Stop after ``episodes`` episodes in all; ``first_episode`` were done before (resume).
+
+    Checkpoints: every ``checkpoint_every`` episodes ``save(episodes_done)`` is called at the
+    end of the current rollout (for off-policy algorithms right after the step's transition
+    enters the replay buffer), so the saved buffer and episode count agree.
+    """
+
+    def __init__(self, episodes: int, first_episode: int, seed_of: Callable[[int], int], *,
+                 checkpoint_every: int, save: Callable[[int], None] | None = None,
+                 log_file: str | Path | None = None, progress: bool = False, successes_before: int = 0):
+        super().__init__()
+        self.episodes = episodes
+        self.done = first_episode
+        self.successes = successes_before
+        self.seed_of = seed_of
+        self.checkpoint_every = checkpoint_every
+        self.save = save
+        self.records: list[EpisodeRecord] = []
+        self._log_path = Path(log_file) if log_file is not None else None
+        self._log: TextIO | None = None
+        self._progress = progress
+        self._bar = None
+        self._save_due = False
+        self._start_time = 0.0
+        self._start_steps = 0
+
+    @property
+    def success_rate(self) -> float:
+        return self.successes / self.done if self.done else 0.0
+
+    def _on_training_start(self) -> None:
+        self._start_time = time.perf_counter()
+        self._start_steps = self.model.num_timesteps
+        if self._log_path is not None:
+            new = not self._log_path.exists()
+            self._log = open(self._log_path, "a", encoding="utf-8")  # noqa: SIM115 (closed in _on_training_end)
+            if new:
+                self._log.write(EPISODE_LOG_HEADER + "\n")
+        if self._progress:
+            from tqdm import tqdm
+
+            self._bar = tqdm(total=self.episodes, initial=self.done, unit="ep", desc=f"train {type(self.model).__name__}",
+                             dynamic_ncols=True)
+
+    def _on_step(self) -> bool:
+        for done, info in zip(self.locals["dones"], self.locals["infos"], strict=True):
+            if done:
+                self._record(info)
+        return self.done < self.episodes
+
+    def _record(self, info: dict) -> None:
+        episode = info.get("episode", {})
+        record = EpisodeRecord(
+            episode=self.done, seed=self.seed_of(self.done), outcome=info.get("outcome", "truncated"),
+            reward=round(float(episode.get("r", float("nan"))), 4), length=int(episode.get("l", 0)),
+            timesteps=self.model.num_timesteps, seconds=round(time.perf_counter() - self._start_time, 3),
+        )
+        self.records.append(record)
+        self.done += 1
+        self.successes += record.outcome == "success"
+        if self._log is not None:
+            self._log.write(record.csv() + "\n")
+            self._log.flush()
+        self.logger.record("episode/success_rate", self.success_rate)
+        self.logger.record("episode/return", record.reward)
+        self.logger.record("episode/length", record.length)
+        if self._bar is not None:
+            self._bar.update(1)
+            self._bar.set_postfix(success=f"{self.success_rate:.0%}", steps_per_s=f"{self.steps_per_second:.0f}", refresh=False)
+        if self.save is not None and self.done % self.checkpoint_every == 0:
+            self._save_due = True
+
+    @property
+    def steps_per_second(self) -> float:
+        elapsed = time.perf_counter() - self._start_time
+        return (self.model.num_timesteps - self._start_steps) / elapsed if elapsed > 0 else 0.0
+
+    def _on_rollout_end(self) -> None:
+        if self._save_due and self.save is not None:
+            self._save_due = False
+            self.save(self.done)
+
+    def _on_training_end(self) -> None:
+        if self._log is not None:
+            self._log.close()
+            self._log = None
+        if self._bar is not None:
+            self._bar.close()
+            self._bar = None

@@ -1,0 +1,153 @@
+"""Checkpoints: resumable training state, and deterministic policies loaded from them.
+
+A checkpoint folder holds:
+
+* ``model.zip``: the SB3 model (``<Algo>.load``);
+* ``policy.json``: ``format``, ``algo``, ``env`` (the :class:`crowdnav.envs.CrowdNavEnv`
+  keyword arguments the model needs: scenario, modalities, sensors, overrides,
+  reward_weights), ``leog_encoder`` (file of the frozen encoder that turns the ``leog`` grid
+  into the latent the model was trained on, or null), ``episodes``, ``timesteps``, ``config``;
+* ``encoder.pt``: that frozen encoder, when the model was trained on precomputed latents;
+* ``replay_buffer.pkl``: the replay buffer (off-policy runs with ``save_replay_buffer``).
+
+:func:`load_policy` accepts a checkpoint folder, its ``policy.json``, or a run folder
+(then ``checkpoint/`` inside it).
+"""
+
+from __future__ import annotations
+
+import json
+import shutil
+from collections.abc import Mapping
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from stable_baselines3.common.base_class import BaseAlgorithm
+
+POLICY_FORMAT = "crowdnav-policy/1"
+POLICY_FILE = "policy.json"
+MODEL_FILE = "model.zip"
+REPLAY_FILE = "replay_buffer.pkl"
+ENCODER_FILE = "encoder.pt"
+
+
+def save_checkpoint(
+    model: BaseAlgorithm,
+    folder: str | Path,
+    info: Mapping[str, Any],
+    *,
+    encoder_file: str | Path | None = None,
+    replay_buffer: bool = False,
+) -> Path:
+    """Write a checkpoint folder, replacing an existing one only once the new one is complete.
+
+    ``info`` becomes ``policy.json`` (``format`` and ``leog_encoder`` are filled in here);
+    ``encoder_file`` is copied in when the model sees precomputed latents.
+    """
+    folder = Path(folder)
+    staging = folder.with_name(folder.name + ".partial")
+    if staging.exists():
+        shutil.rmtree(staging)
+    staging.mkdir(parents=True)
+    model.save(staging / MODEL_FILE)
+    if replay_buffer and getattr(model, "replay_buffer", None) is not None:
+        model.save_replay_buffer(staging / REPLAY_FILE)
+    if encoder_file is not None:
+        shutil.copyfile(encoder_file, staging / ENCODER_FILE)
+    document = {"format": POLICY_FORMAT, **info, "leog_encoder": ENCODER_FILE if encoder_file is not None else None}
+    (staging / POLICY_FILE).write_text(json.dumps(document, indent=2, default=str) + "\n", encoding="utf-8")
+    if folder.exists():
+        old = folder.with_name(folder.name + ".old")
+        if old.exists():
+            shutil.rmtree(old)
+        folder.rename(old)
+        staging.rename(folder)
+        shutil.rmtree(old)
+    else:
+        staging.rename(folder)
+    return folder
+
+
+def checkpoint_folder(path: str | Path) -> Path:
+    """The checkpoint folder meant by ``path`` (a checkpoint folder, its policy.json, or a run folder)."""
+    path = Path(path)
+    if path.is_file() and path.name == POLICY_FILE:
+        return path.parent
+    if (path / POLICY_FILE).is_file():
+        return path
+    if (path / "checkpoint" / POLICY_FILE).is_file():
+        return path / "checkpoint"
+    raise FileNotFoundError(f"{path}: no crowdnav checkpoint here (expected {POLICY_FILE}, or checkpoint/{POLICY_FILE} in a run folder)")
+
+
+def read_policy_info(path: str | Path) -> dict[str, Any]:
+    """The ``policy.json`` of a checkpoint, checked."""
+    file = checkpoint_folder(path) / POLICY_FILE
+    info = json.loads(file.read_text(encoding="utf-8"))
+    if info.get("format") != POLICY_FORMAT:
+        raise ValueError(f"{file}: unsupported policy format {info.get('format')!r} (expected {POLICY_FORMAT!r})")
+    return info
+
+
+def load_model(path: str | Path, env: Any = None, device: str = "cpu") -> BaseAlgorithm:
+    """The SB3 model of a checkpoint (on ``env`` if given, e.g. to resume training)."""
+    from agents.factory import ALGORITHMS
+
+    folder = checkpoint_folder(path)
+    info = read_policy_info(folder)
+    algo = ALGORITHMS.get(info["algo"])
+    if algo is None:
+        raise ValueError(f"{folder}: unknown algorithm {info['algo']!r}; known: {', '.join(ALGORITHMS)}")
+    return algo.load(folder / MODEL_FILE, env=env, device=device)
+
+
+class AgentPolicy:
+    """A trained agent as ``policy(observation) -> action`` (deterministic), from :func:`load_policy`.
+
+    ``observation`` is what :class:`crowdnav.envs.CrowdNavEnv` returns (built with
+    :attr:`env_options`), one dict or a batch of them stacked per key; the frozen LEOG encoder,
+    if the model was trained on latents, is applied here. The action is float32 (2,) in [-1, 1]
+    (or (N, 2) for a batch).
+    """
+
+    def __init__(self, model: BaseAlgorithm, info: Mapping[str, Any], encoder: Any = None):
+        self.model = model
+        self.info = dict(info)
+        self.env_options: dict[str, Any] = dict(info["env"])
+        """Keyword arguments of CrowdNavEnv that give the observations this policy expects."""
+        self.encoder = encoder
+
+    @property
+    def algo(self) -> str:
+        return self.info["algo"]
+
+    def __call__(self, observation: Mapping[str, np.ndarray]) -> np.ndarray:
+        if self.encoder is not None:
+            from agents.wrappers import encode_grids
+
+            observation = dict(observation)
+            grid = np.asarray(observation["leog"])
+            batched = grid.ndim == 4
+            latent = encode_grids(self.encoder, grid if batched else grid[None])
+            observation["leog"] = latent if batched else latent[0]
+        action, _ = self.model.predict(observation, deterministic=True)
+        return action.astype(np.float32, copy=False)
+
+    def make_env(self, **extra: Any):
+        """A CrowdNavEnv configured as in training (``extra`` adds e.g. ``render_mode``)."""
+        from crowdnav.envs import CrowdNavEnv
+
+        return CrowdNavEnv(**{**self.env_options, **extra})
+
+
+def load_policy(path: str | Path, device: str = "cpu") -> AgentPolicy:
+    """Load a checkpoint as a deterministic policy (see :class:`AgentPolicy`)."""
+    folder = checkpoint_folder(path)
+    info = read_policy_info(folder)
+    encoder = None
+    if info.get("leog_encoder"):
+        from agents.pretrain import load_encoder
+
+        encoder, _ = load_encoder(folder / info["leog_encoder"])
+    return AgentPolicy(load_model(folder, device=device), info, encoder)

@@ -1,0 +1,198 @@
+"""Command-line wiring of the agents: ``crowdnav train``, ``crowdnav collect-dataset``, ``crowdnav pretrain-encoder``.
+
+Each ``register_*`` adds one command to the ``crowdnav`` sub-parsers and sets its ``handler``
+(``(args) -> int``); :func:`register` adds all three. Heavy imports (torch, SB3) happen inside
+the handlers, so ``crowdnav --help`` stays fast. :func:`main` runs these commands alone
+(``python -m agents.commands ...``), the way ``crowdnav.cli.main`` runs them all.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+from crowdnav.cli.common import CliError
+
+ALGOS = ("sac", "td3", "ddpg", "a2c", "ppo")
+MODES = ("frozen", "finetune", "scratch")
+
+
+def register(groups: argparse._SubParsersAction) -> None:
+    """Add ``train``, ``collect-dataset`` and ``pretrain-encoder``."""
+    register_train(groups)
+    register_collect_dataset(groups)
+    register_pretrain_encoder(groups)
+
+
+def register_train(groups: argparse._SubParsersAction) -> None:
+    parser = groups.add_parser(
+        "train", help="train an RL agent (SAC, TD3, DDPG, A2C, PPO) on a scenario",
+        description="Train an agent from a YAML config; the flags override the config's fields. "
+                    "Outputs (checkpoint, snapshots, episodes.csv) go to --out.",
+    )
+    parser.add_argument("--config", type=Path, metavar="CONFIG.yaml", help="training config (default: all defaults)")
+    parser.add_argument("--scenario", metavar="NAME_OR_PATH", help="library scenario name or scenario YAML file")
+    parser.add_argument("--algo", choices=ALGOS, help="RL algorithm")
+    parser.add_argument("--modalities", metavar="KEYS", help="comma-separated observation keys, e.g. leog,lidar,goal")
+    parser.add_argument("--encoder", choices=MODES, help="LEOG encoder mode")
+    parser.add_argument("--encoder-weights", metavar="PATH", help="pre-trained encoder (encoder.pt or its folder)")
+    parser.add_argument("--episodes", type=int, metavar="N", help="training episodes in all")
+    parser.add_argument("--seed", type=int, metavar="N", help="seed of the networks and the training episodes")
+    parser.add_argument("--out", metavar="DIR", help="output folder")
+    parser.add_argument("--threads", type=int, metavar="N", help="torch threads (default 1)")
+    parser.add_argument("--device", metavar="DEVICE", help="torch device: cpu, cuda, auto")
+    parser.add_argument("--resume", action="store_true", help="continue the run in --out from its checkpoint")
+    parser.add_argument("--no-progress", action="store_true", help="no progress bar")
+    parser.add_argument("--print-config", action="store_true", help="print the resolved config (YAML) and exit")
+    parser.add_argument("--list-options", action="store_true", help="list every config field with its default and meaning, and exit")
+    parser.set_defaults(handler=train_command)
+
+
+def register_collect_dataset(groups: argparse._SubParsersAction) -> None:
+    parser = groups.add_parser(
+        "collect-dataset", help="record occupancy grids of a randomly wandering robot into a .npz dataset",
+        description="Let the robot wander with a random policy and save its LEOG observations "
+                    "(uint8 array 'grids' of shape (N, 1, H, W) plus JSON metadata) for encoder pre-training.",
+    )
+    parser.add_argument("--scenario", default="room_furniture", metavar="NAME_OR_PATH", help="scenario (default: room_furniture)")
+    parser.add_argument("--grids", type=int, default=5_000, metavar="N", help="number of grids (default: 5000)")
+    parser.add_argument("--every", type=int, default=2, metavar="K", help="keep every K-th step's grid (default: 2)")
+    parser.add_argument("--seed", type=int, default=0, metavar="N", help="seed (default: 0)")
+    parser.add_argument("--out", required=True, type=Path, metavar="FILE.npz", help="dataset file to write")
+    parser.set_defaults(handler=collect_dataset_command)
+
+
+def register_pretrain_encoder(groups: argparse._SubParsersAction) -> None:
+    parser = groups.add_parser(
+        "pretrain-encoder", help="pre-train the LEOG encoder as a convolutional autoencoder",
+        description="Train an autoencoder on occupancy grids, from a dataset file or collected online "
+                    "from a scenario, and save encoder.pt, encoder.json and loss.png in --out.",
+    )
+    source = parser.add_mutually_exclusive_group()
+    source.add_argument("--dataset", type=Path, metavar="FILE.npz", help="dataset from collect-dataset (or another simulator)")
+    source.add_argument("--scenario", metavar="NAME_OR_PATH", help="collect grids online from this scenario (default: room_furniture)")
+    parser.add_argument("--grids", type=int, default=5_000, metavar="N", help="grids to collect online (default: 5000)")
+    parser.add_argument("--epochs", type=int, default=20, metavar="N", help="training epochs (default: 20)")
+    parser.add_argument("--batch-size", type=int, default=32, metavar="N", help="minibatch size (default: 32)")
+    parser.add_argument("--lr", type=float, default=3e-3, metavar="LR", help="Adam learning rate (default: 3e-3)")
+    parser.add_argument("--latent", type=int, default=64, metavar="N", help="latent size (default: 64, as the agents' default)")
+    parser.add_argument("--val-fraction", type=float, default=0.1, metavar="F", help="held-out fraction (default: 0.1)")
+    parser.add_argument("--seed", type=int, default=0, metavar="N", help="seed (default: 0)")
+    parser.add_argument("--threads", type=int, default=1, metavar="N", help="torch threads (default: 1)")
+    parser.add_argument("--out", required=True, type=Path, metavar="DIR", help="output folder")
+    parser.set_defaults(handler=pretrain_encoder_command)
+
+
+# ----------------------------------------------------------------------------- handlers
+
+
+def train_overrides(args: argparse.Namespace) -> dict[str, Any]:
+    """The flags given on the command line, as dotted config overrides."""
+    overrides: dict[str, Any] = {}
+    simple = {"scenario": "scenario", "algo": "algo", "episodes": "episodes", "seed": "seed", "out": "out",
+              "threads": "torch_threads", "device": "device", "encoder": "encoder.mode", "encoder_weights": "encoder.weights"}
+    for flag, field in simple.items():
+        value = getattr(args, flag)
+        if value is not None:
+            overrides[field] = value
+    if args.modalities is not None:
+        overrides["modalities"] = [key.strip() for key in args.modalities.split(",") if key.strip()]
+    if args.no_progress:
+        overrides["progress"] = False
+    return overrides
+
+
+def train_command(args: argparse.Namespace) -> int:
+    from agents.config import ConfigError, describe_fields, load_config
+
+    if args.list_options:
+        for name, default, doc in describe_fields():
+            print(f"{name} (default {default}): {doc}")
+        return 0
+    try:
+        config = load_config(args.config, train_overrides(args))
+    except ConfigError as error:
+        raise CliError(str(error)) from None
+    if args.print_config:
+        import yaml
+
+        from agents.config import config_to_dict
+
+        sys.stdout.write(yaml.safe_dump(config_to_dict(config), sort_keys=False))
+        return 0
+    from agents.training import describe_run, train
+    from crowdnav.scenario import ScenarioError
+
+    try:
+        result = train(config, resume=args.resume)
+    except (ConfigError, ScenarioError, FileNotFoundError) as error:
+        raise CliError(str(error)) from None
+    print(describe_run(result))
+    return 0
+
+
+def collect_dataset_command(args: argparse.Namespace) -> int:
+    from agents.dataset import collect_grids, save_dataset
+    from crowdnav.scenario import ScenarioError
+
+    try:
+        dataset = collect_grids(args.scenario, args.grids, seed=args.seed, every=args.every)
+    except (ScenarioError, ValueError) as error:
+        raise CliError(str(error)) from None
+    path = save_dataset(dataset, args.out)
+    print(f"wrote {len(dataset)} grids of shape {dataset.grid_shape} to {path}")
+    return 0
+
+
+def pretrain_encoder_command(args: argparse.Namespace) -> int:
+    import torch
+
+    from agents.dataset import collect_grids, load_dataset
+    from agents.pretrain import pretrain_encoder
+    from crowdnav.scenario import ScenarioError
+
+    torch.set_num_threads(args.threads)
+    try:
+        if args.dataset is not None:
+            dataset = load_dataset(args.dataset)
+        else:
+            dataset = collect_grids(args.scenario or "room_furniture", args.grids, seed=args.seed)
+        result = pretrain_encoder(
+            dataset, args.out, latent=args.latent, epochs=args.epochs, batch_size=args.batch_size,
+            learning_rate=args.lr, val_fraction=args.val_fraction, seed=args.seed, progress=True,
+        )
+    except (ScenarioError, ValueError) as error:
+        raise CliError(str(error)) from None
+    print(f"held-out loss {result.initial_val_loss:.4f} -> {result.final_val_loss:.4f} "
+          f"({result.initial_val_loss / result.final_val_loss:.1f}x lower) in {result.seconds:.1f} s; wrote {result.encoder_path}")
+    return 0
+
+
+# ------------------------------------------------------------------------------- entry
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(prog="crowdnav", description="crowdnav agent commands")
+    register(parser.add_subparsers(dest="command", metavar="COMMAND", required=True))
+    return parser
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Run one of these commands; exit status 0 ok, 1 failure, 2 usage error (as ``crowdnav.cli.main``)."""
+    parser = build_parser()
+    try:
+        args = parser.parse_args(argv)
+    except SystemExit as exit_:
+        return exit_.code if isinstance(exit_.code, int) else 0 if exit_.code is None else 2
+    try:
+        return args.handler(args)
+    except CliError as error:
+        print(f"crowdnav: error: {error}", file=sys.stderr)
+        return 1
+
+
+if __name__ == "__main__":
+    sys.exit(main())

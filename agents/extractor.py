@@ -1,0 +1,148 @@
+"""The multi-modal encoder shared by every algorithm: one branch per observation key, concatenated.
+
+Branch per key (in the observation space's key order):
+
+* a key registered with :func:`register_encoder` -> the user's module;
+* ``(C, H, W)`` grids (the LEOG) -> :class:`~agents.encoders.LeogEncoder` CNN, then the
+  ``leog_head`` fully connected layers; with ``leog_precomputed`` the key already holds the
+  frozen encoder's latent (see :class:`agents.wrappers.LeogLatentWrapper`) and only the head runs;
+* vectors longer than :data:`LOWDIM_MAX` values (the LIDAR) -> :class:`~agents.encoders.LidarEncoder`;
+* short vectors (goal, closest_obstacle, velocity) -> :class:`~agents.encoders.LowDimEncoder`
+  (Gaussian RBF, then fully connected layers).
+
+**Grid scaling.** SB3's ``preprocess_obs`` divides a uint8 observation by 255 only when
+``normalize_images`` is on *and* ``is_image_space`` recognizes the Box (uint8, bounds 0..255);
+otherwise the extractor receives 0/255 floats. The LEOG branch therefore binarizes its input
+with ``grid > 0``: it sees exactly 0/1 floats in every case (also for 0/1 grids from another
+simulator), the same values the autoencoder is pre-trained on.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Mapping
+from typing import Any
+
+import torch
+from gymnasium import spaces
+from stable_baselines3.common.torch_layers import BaseFeaturesExtractor
+from torch import nn
+
+from agents.encoders import LeogEncoder, LidarEncoder, LowDimEncoder, leog_architecture, mlp
+
+LOWDIM_MAX = 16
+"""Vectors with at most this many values go through the RBF branch, longer ones through the LIDAR branch."""
+
+EncoderBuilder = Callable[[spaces.Box, Mapping[str, Any]], tuple[nn.Module, int]]
+"""``builder(space, extractor_config) -> (module, output size)``; the module maps (B, *shape) floats to (B, size)."""
+
+ENCODERS: dict[str, EncoderBuilder] = {}
+"""Observation key -> custom branch builder, filled by :func:`register_encoder`."""
+
+
+def register_encoder(key: str, builder: EncoderBuilder) -> None:
+    """Use ``builder`` for observation ``key`` instead of the built-in branch chosen by its shape."""
+    if not isinstance(key, str) or not callable(builder):
+        raise TypeError("register_encoder(key, builder) expects an observation key and a callable")
+    ENCODERS[key] = builder
+
+
+class _LeogBranch(nn.Module):
+    """Binarize, encode (unless precomputed), head."""
+
+    def __init__(self, encoder: LeogEncoder | None, head: nn.Module):
+        super().__init__()
+        self.encoder = encoder
+        self.head = head
+
+    def forward(self, observation: torch.Tensor) -> torch.Tensor:
+        if self.encoder is None:
+            return self.head(observation)
+        grid = (observation > 0).float()
+        if not any(p.requires_grad for p in self.encoder.parameters()):
+            with torch.no_grad():  # frozen: no graph, so no backward cost
+                return self.head(self.encoder(grid))
+        return self.head(self.encoder(grid))
+
+
+class MultiModalExtractor(BaseFeaturesExtractor):
+    """SB3 features extractor: ``{key: (B, ...)}`` -> latent ``(B, features_dim)``.
+
+    ``config``: the fields of :class:`agents.config.ExtractorConfig` as a dict.
+    ``leog_mode``: ``scratch`` / ``finetune`` (the CNN is trained) or ``frozen`` (its parameters
+    never get gradients). ``leog_architecture``: the CNN's architecture dict, when it comes from
+    pre-trained weights (then ``config``'s LEOG sizes are not used). ``leog_precomputed``: the
+    ``leog`` key holds the frozen encoder's latent instead of the grid.
+    """
+
+    def __init__(
+        self,
+        observation_space: spaces.Dict,
+        config: Mapping[str, Any] | None = None,
+        leog_mode: str = "scratch",
+        leog_architecture: Mapping[str, Any] | None = None,
+        leog_precomputed: bool = False,
+    ):
+        from agents.config import ENCODER_MODES, ExtractorConfig
+
+        if not isinstance(observation_space, spaces.Dict):
+            raise TypeError(f"MultiModalExtractor needs a Dict observation space, got {observation_space}")
+        if leog_mode not in ENCODER_MODES:
+            raise ValueError(f"leog_mode must be one of {ENCODER_MODES}, got {leog_mode!r}")
+        settings = {**ExtractorConfig().__dict__, **(config or {})}
+        branches, sizes, leog_encoders = {}, {}, []
+        for key, space in observation_space.spaces.items():
+            if not isinstance(space, spaces.Box):
+                raise TypeError(f"observation {key!r}: MultiModalExtractor handles Box spaces only, got {space}")
+            if key in ENCODERS:
+                branches[key], sizes[key] = ENCODERS[key](space, settings)
+            elif len(space.shape) == 3 or (key == "leog" and leog_precomputed):
+                branch = self._leog_branch(space, settings, leog_architecture, precomputed=key == "leog" and leog_precomputed)
+                if branch.encoder is not None:
+                    leog_encoders.append(branch.encoder)
+                branches[key], sizes[key] = branch, branch.out_features
+            elif len(space.shape) == 1 and space.shape[0] > LOWDIM_MAX:
+                branch = LidarEncoder(space.low, space.high, settings["lidar_hidden"], settings["lidar_conv_channels"])
+                branches[key], sizes[key] = branch, branch.out_features
+            elif len(space.shape) == 1:
+                branch = LowDimEncoder(space.low, space.high, settings["rbf_centres"], settings["lowdim_hidden"], settings["rbf_trainable"])
+                branches[key], sizes[key] = branch, branch.out_features
+            else:
+                raise ValueError(f"observation {key!r} has shape {space.shape}: register an encoder for it with agents.register_encoder")
+        super().__init__(observation_space, features_dim=sum(sizes.values()))
+        self.branches = nn.ModuleDict(branches)
+        self.branch_sizes = sizes
+        self.leog_mode = leog_mode
+        self.leog_encoders = leog_encoders
+        if leog_mode == "frozen":
+            for encoder in leog_encoders:
+                encoder.requires_grad_(False)
+
+    @staticmethod
+    def _leog_branch(space: spaces.Box, settings: Mapping[str, Any], architecture: Mapping[str, Any] | None, precomputed: bool) -> _LeogBranch:
+        if precomputed:
+            encoder, size = None, space.shape[0]
+        else:
+            if architecture is None:
+                architecture = leog_architecture(space.shape, settings["leog_channels"], settings["leog_kernels"],
+                                                 settings["leog_strides"], settings["leog_latent"])
+            elif list(architecture["grid_shape"]) != list(space.shape):
+                raise ValueError(
+                    f"the pre-trained LEOG encoder expects grids of shape {tuple(architecture['grid_shape'])}, "
+                    f"but the environment's leog has shape {space.shape}; match the scenario's sensors.leog size/resolution"
+                )
+            encoder = LeogEncoder(dict(architecture))
+            size = encoder.latent
+        head, out = mlp(size, settings["leog_head"])
+        branch = _LeogBranch(encoder, head)
+        branch.out_features = out
+        return branch
+
+    def load_leog_encoder(self, state_dict: Mapping[str, torch.Tensor]) -> None:
+        """Copy pre-trained weights into the LEOG encoder (frozen/finetune start)."""
+        if not self.leog_encoders:
+            raise ValueError("this extractor has no LEOG encoder to load weights into")
+        for encoder in self.leog_encoders:
+            encoder.load_state_dict(state_dict)
+
+    def forward(self, observations: dict[str, torch.Tensor]) -> torch.Tensor:
+        return torch.cat([branch(observations[key]) for key, branch in self.branches.items()], dim=1)

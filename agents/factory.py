@@ -1,0 +1,152 @@
+"""The agent factory: a :class:`~agents.config.TrainConfig` -> wrapped environment + SB3 model.
+
+Every algorithm gets the same :class:`~agents.extractor.MultiModalExtractor` (the shared
+latent), then SB3's own actor/critic heads (``net_arch``) on top of it. To plug in another
+algorithm, add it to :data:`ALGORITHMS` (and its defaults to :data:`ALGORITHM_DEFAULTS`).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+from stable_baselines3 import A2C, DDPG, PPO, SAC, TD3
+from stable_baselines3.common.base_class import BaseAlgorithm
+from stable_baselines3.common.monitor import Monitor
+from stable_baselines3.common.noise import NormalActionNoise
+
+from agents.config import ConfigError, TrainConfig
+from agents.encoders import LeogEncoder
+from agents.extractor import MultiModalExtractor
+from agents.replay_buffer import PackedGridReplayBuffer, packable_keys
+from agents.wrappers import EpisodeSeeds, LeogLatentWrapper
+
+ALGORITHMS: dict[str, type[BaseAlgorithm]] = {"sac": SAC, "td3": TD3, "ddpg": DDPG, "a2c": A2C, "ppo": PPO}
+"""Config name -> Stable-Baselines3 class."""
+
+OFF_POLICY = ("sac", "td3", "ddpg")
+
+ALGORITHM_DEFAULTS: dict[str, dict[str, Any]] = {
+    "sac": {"net_arch": [64, 64], "learning_rate": 3e-4, "batch_size": 256, "buffer_size": 100_000, "learning_starts": 1_000, "gamma": 0.99},
+    "td3": {"net_arch": [64, 64], "learning_rate": 3e-4, "batch_size": 256, "buffer_size": 100_000, "learning_starts": 1_000, "gamma": 0.99},
+    "ddpg": {"net_arch": [64, 64], "learning_rate": 3e-4, "batch_size": 256, "buffer_size": 100_000, "learning_starts": 1_000, "gamma": 0.99},
+    "a2c": {"net_arch": [64, 64], "learning_rate": 7e-4, "gamma": 0.99},
+    "ppo": {"net_arch": [64, 64], "learning_rate": 3e-4, "batch_size": 64, "gamma": 0.99},
+}
+"""crowdnav's defaults for the config fields left at ``None`` (small networks: CPU training)."""
+
+
+def hyperparameters(config: TrainConfig) -> dict[str, Any]:
+    """The config's algorithm fields, ``None`` replaced by :data:`ALGORITHM_DEFAULTS` (only those the algorithm takes)."""
+    defaults = ALGORITHM_DEFAULTS[config.algo]
+    chosen = {}
+    for name, default in defaults.items():
+        value = getattr(config, name)
+        chosen[name] = default if value is None else value
+    for name in ("batch_size", "buffer_size", "learning_starts"):
+        if getattr(config, name) is not None and name not in defaults:
+            raise ConfigError(f"{name} does not apply to {config.algo}; remove it (or pass algorithm options in algo_kwargs)")
+    return chosen
+
+
+def env_options(config: TrainConfig) -> dict[str, Any]:
+    """Keyword arguments of :class:`crowdnav.envs.CrowdNavEnv` for this run (stored with checkpoints)."""
+    return {"scenario": config.scenario, "modalities": list(config.modalities), "sensors": dict(config.sensors),
+            "overrides": dict(config.overrides), "reward_weights": dict(config.reward_weights)}
+
+
+def make_env(config: TrainConfig, encoder: LeogEncoder | None = None, first_episode: int = 0) -> gym.Env:
+    """CrowdNavEnv -> (LeogLatentWrapper when ``encoder`` is given) -> EpisodeSeeds -> Monitor -> (reward scaling).
+
+    The Monitor sits below the reward scaling, so logged returns are the env's own.
+    """
+    from crowdnav.envs import CrowdNavEnv
+
+    env: gym.Env = CrowdNavEnv(**env_options(config))
+    if encoder is not None:
+        check_leog_shape(config, encoder.architecture, env.observation_space)
+        env = LeogLatentWrapper(env, encoder)
+    env = Monitor(EpisodeSeeds(env, config.seed, first_episode))
+    if config.reward_scale != 1.0:
+        env = gym.wrappers.TransformReward(env, lambda reward, scale=config.reward_scale: reward * scale)
+    return env
+
+
+def load_leog_weights(config: TrainConfig) -> tuple[LeogEncoder | None, dict[str, Any] | None]:
+    """The pre-trained encoder of frozen/finetune modes (None for scratch) and its saved dict."""
+    if config.encoder.mode == "scratch":
+        return None, None
+    from agents.pretrain import load_encoder
+
+    try:
+        return load_encoder(config.encoder.weights)
+    except (FileNotFoundError, ValueError) as error:
+        raise ConfigError(f"encoder.weights: {error}") from None
+
+
+def check_leog_shape(config: TrainConfig, architecture: dict[str, Any], observation_space: gym.spaces.Dict) -> None:
+    """ConfigError unless the pre-trained encoder was made for the environment's grid shape."""
+    expected, actual = tuple(architecture["grid_shape"]), tuple(observation_space["leog"].shape)
+    if expected != actual:
+        raise ConfigError(
+            f"encoder.weights: {config.encoder.weights} expects grids of shape {expected}, but the environment's leog has "
+            f"shape {actual}; match sensors.leog size/resolution to the grids the encoder was pre-trained on"
+        )
+
+
+def precomputes_leog(config: TrainConfig) -> bool:
+    """Whether the frozen encoder runs in the env wrapper (the model then sees latents)."""
+    return config.encoder.mode == "frozen" and config.encoder.precompute
+
+
+def policy_kwargs(config: TrainConfig, architecture: dict[str, Any] | None) -> dict[str, Any]:
+    hyper = hyperparameters(config)
+    return {
+        "features_extractor_class": MultiModalExtractor,
+        "features_extractor_kwargs": {
+            "config": dataclasses.asdict(config.extractor),
+            "leog_mode": config.encoder.mode,
+            "leog_architecture": architecture,
+            "leog_precomputed": precomputes_leog(config),
+        },
+        "net_arch": list(hyper["net_arch"]),
+    }
+
+
+def make_model(config: TrainConfig, env: gym.Env, saved_encoder: dict[str, Any] | None = None,
+               tensorboard_log: str | None = None) -> BaseAlgorithm:
+    """A new SB3 model for ``config`` on ``env``, with pre-trained LEOG weights loaded if any."""
+    hyper = hyperparameters(config)
+    kwargs: dict[str, Any] = {k: v for k, v in hyper.items() if k != "net_arch"}
+    if config.algo in ("td3", "ddpg") and config.action_noise > 0:
+        dims = env.action_space.shape[0]
+        kwargs["action_noise"] = NormalActionNoise(np.zeros(dims), np.full(dims, config.action_noise))
+    clash = sorted(set(config.algo_kwargs) & {"policy", "env", "policy_kwargs", "seed", "device", "tensorboard_log"})
+    if clash:
+        raise ConfigError(f"algo_kwargs: {', '.join(clash)} are set by crowdnav itself; use the config's own fields")
+    if config.algo in OFF_POLICY and config.pack_grids and packable_keys(env.observation_space, ["leog"]):
+        kwargs["replay_buffer_class"] = PackedGridReplayBuffer
+        kwargs["replay_buffer_kwargs"] = {"packed_keys": ["leog"]}
+    kwargs.update(config.algo_kwargs)
+    architecture = saved_encoder["architecture"] if saved_encoder is not None else None
+    if architecture is not None and not precomputes_leog(config):
+        check_leog_shape(config, architecture, env.observation_space)
+    try:
+        model = ALGORITHMS[config.algo](
+            "MultiInputPolicy", env, policy_kwargs=policy_kwargs(config, architecture), seed=config.seed,
+            device=config.device, tensorboard_log=tensorboard_log, verbose=0, **kwargs,
+        )
+    except TypeError as error:  # an algo_kwargs key the algorithm does not take
+        raise ConfigError(f"algo_kwargs for {config.algo}: {error}") from None
+    if saved_encoder is not None and not precomputes_leog(config):
+        for module in model.policy.modules():
+            if isinstance(module, MultiModalExtractor):
+                module.load_leog_encoder(saved_encoder["encoder"])
+    return model
+
+
+def extractors(model: BaseAlgorithm) -> list[MultiModalExtractor]:
+    """Every MultiModalExtractor of the model's policy (actor, critic and their targets)."""
+    return [module for module in model.policy.modules() if isinstance(module, MultiModalExtractor)]

@@ -1,0 +1,166 @@
+"""``train(config)``: one training run, counted in episodes, with checkpoints that can be resumed.
+
+Output folder (``config.out``):
+
+* ``config.yaml``: the resolved configuration;
+* ``episodes.csv``: one row per training episode (index, seed, outcome, return, length, ...);
+* ``checkpoint/``: the latest resumable checkpoint (see :mod:`agents.checkpoint`), rewritten
+  every ``checkpoint_every`` episodes and at the end;
+* ``snapshots/episode_<N>/``: the policy after N episodes (no replay buffer), for evaluation
+  along training;
+* ``tensorboard/`` with ``tensorboard: true``.
+
+``resume=True`` continues from ``checkpoint/``: the episode count, the episode seeds, the
+model and (if saved) the replay buffer carry on; the budget is still ``config.episodes`` in all.
+"""
+
+from __future__ import annotations
+
+import importlib.util
+import json
+import shutil
+import time
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import torch
+import yaml
+from stable_baselines3.common.base_class import BaseAlgorithm
+
+from agents.callbacks import EpisodeCallback, EpisodeRecord
+from agents.checkpoint import ENCODER_FILE, MODEL_FILE, REPLAY_FILE, checkpoint_folder, load_model, read_policy_info, save_checkpoint
+from agents.config import ConfigError, TrainConfig, config_from_mapping, config_to_dict, load_config
+from agents.factory import OFF_POLICY, env_options, hyperparameters, load_leog_weights, make_env, make_model, precomputes_leog
+from agents.wrappers import train_seed
+
+
+@dataclass
+class TrainResult:
+    """Summary of a finished (or resumed and finished) run."""
+
+    out: Path
+    checkpoint: Path
+    episodes: int
+    """Episodes done in all, resumed ones included."""
+    timesteps: int
+    successes: int
+    """Successful episodes in all."""
+    seconds: float
+    """Wall time of this session."""
+    steps_per_second: float
+    """Env steps per second in this session, gradient updates included."""
+    records: list[EpisodeRecord] = field(default_factory=list)
+    """The episodes of this session."""
+    model: BaseAlgorithm | None = field(default=None, repr=False)
+    """The trained SB3 model."""
+
+    @property
+    def success_rate(self) -> float:
+        return self.successes / self.episodes if self.episodes else 0.0
+
+
+def train(config: TrainConfig | Mapping[str, Any] | str | Path, *, resume: bool = False) -> TrainResult:
+    """Train an agent as ``config`` says (a TrainConfig, a mapping, or a YAML file path)."""
+    if isinstance(config, (str, Path)):
+        config = load_config(config)
+    elif isinstance(config, Mapping):
+        config = config_from_mapping(config).validate()
+    else:
+        config.validate()
+    torch.set_num_threads(config.torch_threads)
+    out = Path(config.out)
+    checkpoint = out / "checkpoint"
+    state = _resume_state(checkpoint, config) if resume else None
+    if not resume and checkpoint.exists():
+        raise ConfigError(f"{out} already holds a run (checkpoint/); resume it with --resume or choose another --out")
+    out.mkdir(parents=True, exist_ok=True)
+    (out / "config.yaml").write_text(yaml.safe_dump(config_to_dict(config), sort_keys=False), encoding="utf-8")
+
+    encoder, saved_encoder = load_leog_weights(config)
+    precompute = precomputes_leog(config)
+    first_episode = state["episodes"] if state else 0
+    env = make_env(config, encoder if precompute else None, first_episode)
+    tensorboard_log = _tensorboard_folder(config, out)
+    if state:
+        model = load_model(checkpoint, env=env, device=config.device)
+        if tensorboard_log is not None:
+            model.tensorboard_log = tensorboard_log
+        if config.algo in OFF_POLICY and (checkpoint / REPLAY_FILE).is_file():
+            model.load_replay_buffer(checkpoint / REPLAY_FILE)
+    else:
+        model = make_model(config, env, saved_encoder, tensorboard_log)
+    # copied into every checkpoint, so a checkpoint stands alone
+    encoder_copy = out / ENCODER_FILE if precompute else None
+    if encoder_copy is not None and not resume:
+        shutil.copyfile(_encoder_path(config), encoder_copy)
+
+    def info(episodes: int) -> dict[str, Any]:
+        return {"algo": config.algo, "env": env_options(config), "episodes": episodes, "timesteps": model.num_timesteps,
+                "successes": callback.successes, "hyperparameters": hyperparameters(config), "config": config_to_dict(config)}
+
+    def save(episodes: int) -> None:
+        save_checkpoint(model, checkpoint, info(episodes), encoder_file=encoder_copy,
+                        replay_buffer=config.save_replay_buffer and config.algo in OFF_POLICY)
+        snapshot = out / "snapshots" / f"episode_{episodes:05d}"
+        save_checkpoint(model, snapshot, info(episodes), encoder_file=encoder_copy)
+
+    callback = EpisodeCallback(
+        config.episodes, first_episode, lambda episode: train_seed(config.seed, episode),
+        checkpoint_every=config.checkpoint_every, save=save, log_file=out / "episodes.csv",
+        progress=config.progress, successes_before=state["successes"] if state else 0,
+    )
+    started = time.perf_counter()
+    start_steps = model.num_timesteps
+    if callback.done < config.episodes:
+        max_steps = env.unwrapped.scenario.max_steps
+        budget = (config.episodes - callback.done) * max_steps + 1  # an upper bound: the callback stops on episodes
+        model.learn(budget, callback=callback, reset_num_timesteps=state is None, tb_log_name=config.algo)
+        save(callback.done)
+    seconds = time.perf_counter() - started
+    env.close()
+    return TrainResult(
+        out=out, checkpoint=checkpoint, episodes=callback.done, timesteps=model.num_timesteps, successes=callback.successes,
+        seconds=seconds, steps_per_second=(model.num_timesteps - start_steps) / seconds if seconds > 0 else 0.0,
+        records=callback.records, model=model,
+    )
+
+
+def _resume_state(checkpoint: Path, config: TrainConfig) -> dict[str, Any]:
+    try:
+        folder = checkpoint_folder(checkpoint)
+    except FileNotFoundError:
+        raise ConfigError(f"cannot resume: {checkpoint} holds no checkpoint (start the run without --resume)") from None
+    info = read_policy_info(folder)
+    if not (folder / MODEL_FILE).is_file():
+        raise ConfigError(f"cannot resume: {folder / MODEL_FILE} is missing")
+    if info["algo"] != config.algo or info["env"]["modalities"] != list(config.modalities):
+        raise ConfigError(
+            f"cannot resume: {folder} was trained with algo {info['algo']} on {info['env']['modalities']}, "
+            f"the config asks for {config.algo} on {config.modalities}"
+        )
+    return {"episodes": int(info["episodes"]), "successes": int(info.get("successes", 0)), "config": info.get("config")}
+
+
+def _encoder_path(config: TrainConfig) -> Path:
+    path = Path(config.encoder.weights)
+    return path / ENCODER_FILE if path.is_dir() else path
+
+
+def _tensorboard_folder(config: TrainConfig, out: Path) -> str | None:
+    if not config.tensorboard:
+        return None
+    if importlib.util.find_spec("tensorboard") is None:
+        raise ConfigError("tensorboard: true needs the tensorboard package (pip install tensorboard), which is not installed")
+    return str(out / "tensorboard")
+
+
+def describe_run(result: TrainResult) -> str:
+    """One-paragraph summary for the command line."""
+    return json.dumps({
+        "out": str(result.out), "episodes": result.episodes, "timesteps": result.timesteps,
+        "success_rate": round(result.success_rate, 3), "steps_per_second": round(result.steps_per_second, 1),
+        "seconds": round(result.seconds, 1),
+    })
+

@@ -1,0 +1,132 @@
+"""Training throughput: env steps/s including gradient updates, per algorithm and modality set.
+
+    python benchmarks/bench_train.py [--algos sac td3 ddpg a2c] [--steps 1000] [--repeats 3] [--threads 1] [--json FILE]
+
+Each case builds a fresh agent with crowdnav's defaults (``agents.make_model``) on
+``open_space``, runs ``--warmup`` steps (past ``learning_starts``, so every timed step
+includes its gradient update), then times ``--steps`` more; the median over ``--repeats``
+fresh agents is reported. Cases: lidar+goal; leog+goal with the encoder frozen (the grid
+encoded once per step by the observation wrapper), frozen without that wrapper (the frozen
+CNN runs inside the extractor on every sampled batch), finetune and scratch; leog+lidar+goal
+(scratch). The frozen and finetune encoders come from a quick pre-training (their weights do
+not change the speed).
+
+Two plain SB3 references calibrate the machine's load (SAC, MultiInputPolicy, CombinedExtractor,
+lidar+goal, 64-64 and 256-256 networks). The replay-buffer table gives the bytes SB3's
+DictReplayBuffer holds per transition (observation and next observation, action, reward,
+done, timeout) and the projection to 100,000 transitions.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import platform
+import statistics
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import torch
+from stable_baselines3 import SAC
+from stable_baselines3.common.monitor import Monitor
+
+from agents.config import EncoderConfig, TrainConfig
+from agents.factory import OFF_POLICY, load_leog_weights, make_env, make_model, precomputes_leog
+
+CASES = {
+    "lidar+goal": (["lidar", "goal"], "scratch", True),
+    "leog+goal frozen": (["leog", "goal"], "frozen", True),
+    "leog+goal frozen, no wrapper": (["leog", "goal"], "frozen", False),
+    "leog+goal finetune": (["leog", "goal"], "finetune", True),
+    "leog+goal scratch": (["leog", "goal"], "scratch", True),
+    "leog+lidar+goal": (["leog", "lidar", "goal"], "scratch", True),
+}
+"""Case name -> (modalities, encoder mode, precompute)."""
+
+
+def pretrained_encoder(folder: Path) -> Path:
+    from agents import collect_grids, pretrain_encoder
+
+    return pretrain_encoder(collect_grids("room_furniture", 200, seed=0), folder, epochs=1).encoder_path
+
+
+def build(algo: str, case: str, encoder_file: Path, warmup: int):
+    modalities, mode, precompute = CASES[case]
+    encoder = EncoderConfig(mode=mode, weights=None if mode == "scratch" else str(encoder_file), precompute=precompute)
+    fields = {"learning_starts": warmup // 2} if algo in OFF_POLICY else {}
+    config = TrainConfig(scenario="open_space", modalities=modalities, algo=algo, encoder=encoder, **fields).validate()
+    frozen, saved = load_leog_weights(config)
+    env = make_env(config, frozen if precomputes_leog(config) else None)
+    return make_model(config, env, saved)
+
+
+def reference(net: list[int], warmup: int):
+    from crowdnav.envs import CrowdNavEnv
+
+    env = Monitor(CrowdNavEnv("open_space", modalities=["lidar", "goal"]))
+    return SAC("MultiInputPolicy", env, policy_kwargs={"net_arch": net}, learning_starts=warmup // 2, seed=0, device="cpu")
+
+
+def steps_per_second(make, steps: int, warmup: int) -> float:
+    model = make()
+    model.learn(warmup)
+    start = time.perf_counter()
+    model.learn(steps, reset_num_timesteps=False)
+    return steps / (time.perf_counter() - start)
+
+
+def buffer_bytes(model) -> int:
+    """Bytes per transition of an off-policy model's replay buffer (all arrays, per slot)."""
+    buffer = model.replay_buffer
+    arrays = [*buffer.observations.values(), *buffer.next_observations.values(), buffer.actions, buffer.rewards,
+              buffer.dones, buffer.timeouts]
+    return sum(array.nbytes for array in arrays) // buffer.buffer_size
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--algos", nargs="+", default=["sac", "td3", "ddpg", "a2c"], choices=["sac", "td3", "ddpg", "a2c", "ppo"])
+    parser.add_argument("--cases", nargs="+", default=list(CASES), choices=list(CASES))
+    parser.add_argument("--steps", type=int, default=1000)
+    parser.add_argument("--warmup", type=int, default=300)
+    parser.add_argument("--repeats", type=int, default=3)
+    parser.add_argument("--threads", type=int, default=1)
+    parser.add_argument("--no-reference", action="store_true")
+    parser.add_argument("--json", type=Path, help="also write the results here")
+    args = parser.parse_args(argv)
+    torch.set_num_threads(args.threads)
+    print(f"# {platform.processor() or platform.machine()}, {os.cpu_count()} CPUs, torch {torch.__version__}, "
+          f"{args.threads} thread(s); load average at start {os.getloadavg()[0]:.2f}", flush=True)
+    results: dict[str, dict[str, float]] = {}
+    with tempfile.TemporaryDirectory() as folder:
+        encoder_file = pretrained_encoder(Path(folder))
+        if not args.no_reference:
+            for net in ([64, 64], [256, 256]):
+                name = f"SB3 reference SAC {net[0]}-{net[1]}, lidar+goal"
+                rates = [steps_per_second(lambda net=net: reference(net, args.warmup), args.steps, args.warmup) for _ in range(args.repeats)]
+                results[name] = {"steps_per_second": statistics.median(rates)}
+                print(f"{name:45s} {statistics.median(rates):7.1f} steps/s  (runs: {', '.join(f'{r:.0f}' for r in rates)})", flush=True)
+        for algo in args.algos:
+            for case in args.cases:
+                rates = [steps_per_second(lambda a=algo, c=case: build(a, c, encoder_file, args.warmup), args.steps, args.warmup)
+                         for _ in range(args.repeats)]
+                name = f"{algo} {case}"
+                results[name] = {"steps_per_second": statistics.median(rates)}
+                print(f"{name:45s} {statistics.median(rates):7.1f} steps/s  (runs: {', '.join(f'{r:.0f}' for r in rates)})", flush=True)
+        print("\n# replay buffer (SB3 DictReplayBuffer, SAC)", flush=True)
+        for case in args.cases:
+            model = build("sac", case, encoder_file, args.warmup)
+            per = buffer_bytes(model)
+            results[f"buffer {case}"] = {"bytes_per_transition": per}
+            print(f"{case:45s} {per:7d} bytes/transition  -> {per * 100_000 / 1e9:.3f} GB for 100,000 transitions", flush=True)
+    print(f"# load average at end {os.getloadavg()[0]:.2f}")
+    if args.json is not None:
+        args.json.write_text(json.dumps(results, indent=2) + "\n")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,108 @@
+"""Learning check: does SAC on lidar+goal learn the open-space scenario with crowdnav's defaults?
+
+    nohup .venv/bin/python benchmarks/learning_check.py --out runs/learning_check > runs/learning_check.log 2>&1 &
+
+For each seed, trains SAC (``crowdnav/OpenSpace-v0``, modalities lidar + goal, every other
+setting at crowdnav's default) for ``--episodes`` episodes, saving a snapshot every
+``--eval-every`` episodes, and evaluates each snapshot on ``--test-episodes`` held-out
+episodes with the deterministic policy. Test episodes use seeds 0, 1, ...; training
+episodes use seeds >= 1,000,000 (``agents.train_seed``), so the two sets are disjoint.
+
+Resumable: an interrupted training resumes from its checkpoint, and evaluations already in
+``OUT/results.json`` are not redone. Pass: every seed reaches >= ``--target`` success on the
+test episodes at some evaluation within the budget (the final evaluation is reported too).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+from agents import load_policy, train
+from agents.checkpoint import checkpoint_folder
+from agents.config import TrainConfig
+
+
+def evaluate(policy_path: Path, seeds: list[int]) -> dict[str, float]:
+    """Success / collision / truncation rates of the deterministic policy on the episodes with ``seeds``."""
+    policy = load_policy(policy_path)
+    env = policy.make_env()
+    outcomes = []
+    for seed in seeds:
+        observation, _ = env.reset(seed=seed)
+        while True:
+            observation, _, terminated, truncated, info = env.step(policy(observation))
+            if terminated or truncated:
+                outcomes.append(info["outcome"])
+                break
+    return {name: outcomes.count(name) / len(outcomes) for name in ("success", "collision", "truncated")}
+
+
+def run_seed(seed: int, args: argparse.Namespace, results: dict, save) -> None:
+    out = args.out / f"seed_{seed}"
+    config = TrainConfig(scenario=args.scenario, modalities=["lidar", "goal"], algo="sac", episodes=args.episodes, seed=seed,
+                         out=str(out), checkpoint_every=args.eval_every, progress=False, save_replay_buffer=True)
+    done = False
+    try:
+        done = int(json.loads((checkpoint_folder(out) / "policy.json").read_text())["episodes"]) >= args.episodes
+    except FileNotFoundError:
+        pass
+    if not done:
+        started = time.perf_counter()
+        result = train(config, resume=(out / "checkpoint").exists())
+        print(f"seed {seed}: trained to {result.episodes} episodes ({result.timesteps} steps) in {result.seconds:.0f} s, "
+              f"{result.steps_per_second:.0f} steps/s, training success {result.success_rate:.0%} "
+              f"[{time.perf_counter() - started:.0f} s]", flush=True)
+    test_seeds = list(range(args.test_episodes))
+    seed_results = results.setdefault(str(seed), {})
+    for snapshot in sorted((out / "snapshots").glob("episode_*")):
+        episodes = int(snapshot.name.split("_")[1])
+        if str(episodes) in seed_results or episodes > args.episodes:
+            continue
+        seed_results[str(episodes)] = evaluate(snapshot, test_seeds)
+        save()
+        rates = seed_results[str(episodes)]
+        print(f"seed {seed} after {episodes:4d} episodes: success {rates['success']:.0%}  collision {rates['collision']:.0%}  "
+              f"truncated {rates['truncated']:.0%}", flush=True)
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2])
+    parser.add_argument("--episodes", type=int, default=300)
+    parser.add_argument("--eval-every", type=int, default=50)
+    parser.add_argument("--test-episodes", type=int, default=20)
+    parser.add_argument("--target", type=float, default=0.8)
+    parser.add_argument("--scenario", default="open_space")
+    parser.add_argument("--out", type=Path, default=Path("runs/learning_check"))
+    args = parser.parse_args(argv)
+    args.out.mkdir(parents=True, exist_ok=True)
+    results_file = args.out / "results.json"
+    results = json.loads(results_file.read_text()) if results_file.exists() else {}
+
+    def save() -> None:
+        results_file.write_text(json.dumps(results, indent=2) + "\n")
+
+    for seed in args.seeds:
+        run_seed(seed, args, results, save)
+    summary = {}
+    for seed in args.seeds:
+        evaluations = {int(k): v["success"] for k, v in results[str(seed)].items()}
+        reached = [episodes for episodes, rate in sorted(evaluations.items()) if rate >= args.target]
+        summary[seed] = {"best": max(evaluations.values()), "final": evaluations[max(evaluations)],
+                         "first_reaching_target": reached[0] if reached else None}
+    print(json.dumps({"summary": summary}, indent=2))
+    passed = all(entry["first_reaching_target"] is not None for entry in summary.values())
+    mean_final = float(np.mean([entry["final"] for entry in summary.values()]))
+    print(f"{'PASS' if passed else 'FAIL'}: every seed reaches {args.target:.0%} test success within {args.episodes} episodes; "
+          f"mean final success {mean_final:.0%}")
+    return 0 if passed else 1
+
+
+if __name__ == "__main__":
+    sys.exit(main())

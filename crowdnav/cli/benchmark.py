@@ -1,0 +1,121 @@
+"""``crowdnav benchmark``, ``crowdnav plot`` and ``crowdnav leaderboard``: the evaluation protocol and its report."""
+
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+from pathlib import Path
+
+from crowdnav.cli.common import CliError
+
+
+def register(subparsers: argparse._SubParsersAction) -> None:
+    """Add ``benchmark``, ``plot`` and ``leaderboard``."""
+    parser = subparsers.add_parser(
+        "benchmark", help="train and evaluate every configuration x seed of an experiment (resumable)",
+        description="Run an experiment (the paper's protocol: evaluate on held-out test episodes every N training "
+                    "episodes) and write per-episode results, learning curves, a leaderboard and a video of the "
+                    "best final policy to OUT/<experiment>. Re-running skips finished runs and resumes the others.",
+    )
+    parser.add_argument("experiment", nargs="?", metavar="EXPERIMENT.yaml",
+                        help="experiment file, or the name of a shipped one (default, encoders, modalities, fusion, "
+                             "paradigms); default: the small default experiment")
+    parser.add_argument("--out", default="results", metavar="DIR", help="results folder (default: results/)")
+    parser.add_argument("--seeds", type=int, metavar="N", help="runs per configuration (default: the experiment's)")
+    parser.add_argument("--workers", type=int, default=min(2, os.cpu_count() or 1), metavar="N",
+                        help="parallel runs, one process and one torch thread each (default: min(2, cores))")
+    parser.add_argument("--quick", action="store_true",
+                        help="smoke run: 20 training episodes, evaluations every 10 on 5 test episodes, 1 seed; "
+                             "written to OUT/<experiment>-quick")
+    parser.add_argument("--no-video", action="store_true", help="do not render the video of the final policy")
+    parser.add_argument("--no-progress", action="store_true", help="hide the progress bar")
+    parser.set_defaults(handler=benchmark)
+
+    plot = subparsers.add_parser(
+        "plot", help="draw the success / collision / truncated curves of a results folder",
+        description="One figure per experiment (PNG and PDF): the rates along training, mean and std over seeds "
+                    "of a sliding window of test episodes. Written next to experiment.yaml unless --out is given.",
+    )
+    plot.add_argument("results", metavar="RESULTS_DIR", help="a folder written by `crowdnav benchmark`")
+    plot.add_argument("--out", metavar="PATH", help="output path without extension (one experiment only)")
+    plot.set_defaults(handler=plot_command)
+
+    board = subparsers.add_parser(
+        "leaderboard", help="rank the configurations of results folders (markdown and CSV)",
+        description="One row per configuration: final rates, IQM of final success with a bootstrap CI, area under "
+                    "the success curve, social metrics, env steps and wall time. The same results give the same files.",
+    )
+    board.add_argument("results", nargs="+", metavar="RESULTS_DIR", help="folders written by `crowdnav benchmark`")
+    board.add_argument("--out", metavar="PATH", help="output path without extension (default: RESULTS_DIR/leaderboard, first folder)")
+    board.set_defaults(handler=leaderboard_command)
+
+
+def benchmark(args: argparse.Namespace) -> int:
+    from evaluation.experiment import ExperimentError, load_experiment
+    from evaluation.storage import ResultsError
+
+    if args.workers < 1:
+        raise CliError(f"--workers must be at least 1, got {args.workers}")
+    if args.seeds is not None and args.seeds < 1:
+        raise CliError(f"--seeds must be at least 1, got {args.seeds}")
+    try:
+        experiment = load_experiment(args.experiment)
+    except ExperimentError as error:
+        raise CliError(str(error)) from None
+    experiment = experiment.with_options(seeds=args.seeds, quick_protocol=args.quick)
+    if args.quick:
+        from dataclasses import replace
+
+        experiment = replace(experiment, name=f"{experiment.name}-quick")
+    from evaluation.benchmark import run_experiment
+
+    protocol = experiment.protocol
+    print(f"experiment {experiment.name}: {len(experiment.configurations)} configurations x {protocol.seeds} seeds, "
+          f"{protocol.train_episodes} training episodes, {protocol.evaluations} evaluations of {protocol.test_episodes} "
+          f"test episodes, {args.workers} worker(s)", flush=True)
+    try:
+        report = run_experiment(experiment, args.out, workers=args.workers, progress=not args.no_progress,
+                                video=not args.no_video, log=lambda line: print(line, flush=True))
+    except (ResultsError, ExperimentError) as error:
+        raise CliError(str(error)) from None
+    except KeyboardInterrupt:
+        print(f"crowdnav: interrupted; run the same command again to resume from {Path(args.out) / experiment.name}", file=sys.stderr)
+        return 130
+    skipped = sum(summary["status"] == "skipped" for summary in report.summaries)
+    print(f"{len(report.summaries)} runs finished ({skipped} already done), {len(report.failures)} failed, "
+          f"in {report.seconds:.0f} s")
+    for path in report.outputs:
+        print(f"wrote {path}")
+    print(f"results: {report.folder}")
+    if report.failures:
+        print(f"crowdnav: error: {len(report.failures)} run(s) failed; run the same command again to resume them", file=sys.stderr)
+        return 1
+    return 0
+
+
+def plot_command(args: argparse.Namespace) -> int:
+    from evaluation.curves import plot_curves
+    from evaluation.storage import ResultsError
+
+    try:
+        paths = plot_curves([Path(args.results)], args.out)
+    except ResultsError as error:
+        raise CliError(str(error)) from None
+    for path in paths:
+        print(f"wrote {path}")
+    return 0
+
+
+def leaderboard_command(args: argparse.Namespace) -> int:
+    from evaluation.leaderboard import write_leaderboard
+    from evaluation.storage import ResultsError
+
+    out = Path(args.out) if args.out else Path(args.results[0]) / "leaderboard"
+    try:
+        _, paths = write_leaderboard([Path(path) for path in args.results], out)
+    except (ResultsError, OSError) as error:
+        raise CliError(str(error)) from None
+    for path in paths:
+        print(f"wrote {path}")
+    return 0

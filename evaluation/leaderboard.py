@@ -1,0 +1,140 @@
+"""The leaderboard: one row per configuration, from any results folders, as markdown and CSV.
+
+Columns (definitions in docs/evaluation.md):
+
+* final success / collision / truncated: per run, the rate over the test episodes of the last
+  ``final_evaluations`` evaluations; mean and standard deviation (ddof 1; 0 with one seed) over seeds;
+* IQM of final success: interquartile mean over runs, with a 95% percentile confidence
+  interval from a stratified bootstrap (Agarwal et al. 2021; one stratum per configuration,
+  2000 resamples, seeded);
+* success AUC: per run, the mean of the success rate of each evaluation (area under the
+  success curve divided by its length: sample efficiency); mean and std over seeds;
+* social metrics: over the final test episodes of all seeds: mean SPL, path length, time to goal
+  (successful episodes), minimum human distance, intimate and personal zone shares, mean jerk
+  and cumulative social force; median minimum time to collision;
+* env steps and wall time: mean per run.
+
+Regenerating from the same results writes the same bytes: rows sorted by final success
+(then experiment and configuration), fixed float formats, nothing time-dependent.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+BOOTSTRAP_RESAMPLES = 2000
+BOOTSTRAP_SEED = 0
+OUTCOMES = ("success", "collision", "truncated")
+SOCIAL_MEANS = ("spl", "path_length", "time_to_goal", "min_human_distance", "intimate_share", "personal_share", "mean_jerk", "social_force")
+"""Metrics averaged over the final test episodes (time_to_goal over the successful ones)."""
+
+
+def interquartile_mean(values: np.ndarray, axis: int = -1) -> np.ndarray:
+    """Mean of the middle half: drop ``floor(n / 4)`` values at each end (``scipy.stats.trim_mean(x, 0.25)``)."""
+    ordered = np.sort(np.asarray(values, dtype=float), axis=axis)
+    n = ordered.shape[axis]
+    cut = n // 4
+    return np.take(ordered, range(cut, n - cut), axis=axis).mean(axis=axis)
+
+
+def bootstrap_iqm(values: np.ndarray, *, resamples: int = BOOTSTRAP_RESAMPLES, seed: int = BOOTSTRAP_SEED,
+                  confidence: float = 0.95) -> tuple[float, float, float]:
+    """(IQM, low, high): the IQM of ``values`` (one per run) and its percentile bootstrap interval.
+
+    Runs are resampled with replacement within the configuration (the stratum), ``resamples``
+    times, from ``numpy.random.default_rng(seed)``.
+    """
+    values = np.asarray(values, dtype=float)
+    rng = np.random.default_rng(seed)
+    samples = values[rng.integers(0, len(values), size=(resamples, len(values)))]
+    estimates = interquartile_mean(samples, axis=1)
+    tail = (1.0 - confidence) / 2.0 * 100.0
+    low, high = np.percentile(estimates, [tail, 100.0 - tail])
+    return float(interquartile_mean(values)), float(low), float(high)
+
+
+def _std(values: np.ndarray) -> float:
+    return float(np.std(values, ddof=1)) if len(values) > 1 else 0.0
+
+
+def leaderboard_table(tests: Any, metas: list[dict[str, Any]]) -> Any:
+    """The leaderboard as a DataFrame (numbers unformatted), one row per (experiment, configuration)."""
+    import pandas as pd
+
+    final_count = {meta["experiment"]: meta["protocol"]["final_evaluations"] for meta in metas}
+    run_meta = {(meta["experiment"], meta["configuration"], meta["seed"]): meta for meta in metas}
+    rows = []
+    for (experiment, configuration), frame in tests.groupby(["experiment", "configuration"], sort=True):
+        last = frame.groupby("seed")["evaluation"].transform("max")
+        final = frame[frame["evaluation"] > last - final_count[experiment]]
+        per_run = final.groupby("seed")["outcome"]
+        row: dict[str, Any] = {"experiment": experiment, "configuration": configuration, "label": frame["label"].iloc[0],
+                               "seeds": int(frame["seed"].nunique())}
+        for outcome in OUTCOMES:
+            rates = per_run.apply(lambda outcomes, o=outcome: float((outcomes == o).mean())).to_numpy()
+            row[f"final_{outcome}_mean"], row[f"final_{outcome}_std"] = float(rates.mean()), _std(rates)
+            if outcome == "success":
+                row["success_iqm"], row["success_iqm_low"], row["success_iqm_high"] = bootstrap_iqm(rates)
+        auc = (frame.assign(hit=frame["outcome"] == "success").groupby(["seed", "evaluation"])["hit"].mean()
+               .groupby("seed").mean().to_numpy())
+        row["success_auc_mean"], row["success_auc_std"] = float(auc.mean()), _std(auc)
+        for metric in SOCIAL_MEANS:
+            row[metric] = float(np.nanmean(final[metric])) if final[metric].notna().any() else float("nan")
+        row["min_time_to_collision"] = float(np.median(final["min_time_to_collision"]))
+        metas_here = [run_meta[(experiment, configuration, seed)] for seed in sorted(frame["seed"].unique())
+                      if (experiment, configuration, seed) in run_meta]
+        row["env_steps"] = float(np.mean([m["env_steps"]["total"] for m in metas_here])) if metas_here else float("nan")
+        row["wall_time_s"] = float(np.mean([m["wall_time_s"] for m in metas_here])) if metas_here else float("nan")
+        rows.append(row)
+    table = pd.DataFrame(rows)
+    return table.sort_values(["final_success_mean", "experiment", "configuration"], ascending=[False, True, True],
+                             ignore_index=True)
+
+
+def _number(value: float, digits: int = 3) -> str:
+    if value != value:  # NaN
+        return "-"
+    if np.isinf(value):
+        return "inf" if value > 0 else "-inf"
+    return f"{value:.{digits}f}"
+
+
+def to_markdown(table: Any) -> str:
+    """A GitHub markdown table with the main columns (all of them are in the CSV)."""
+    several = table["experiment"].nunique() > 1
+    header = (["experiment"] if several else []) + [
+        "configuration", "seeds", "success", "collision", "truncated", "success IQM [95% CI]", "success AUC",
+        "SPL", "min human dist. (m)", "intimate share", "social force", "env steps", "wall time (s)",
+    ]
+    lines = ["| " + " | ".join(header) + " |", "|" + "|".join(["---"] * len(header)) + "|"]
+    for row in table.to_dict("records"):
+        cells = ([row["experiment"]] if several else []) + [
+            row["label"], str(row["seeds"]),
+            *(f"{_number(row[f'final_{o}_mean'])} ± {_number(row[f'final_{o}_std'])}" for o in OUTCOMES),
+            f"{_number(row['success_iqm'])} [{_number(row['success_iqm_low'])}, {_number(row['success_iqm_high'])}]",
+            f"{_number(row['success_auc_mean'])} ± {_number(row['success_auc_std'])}",
+            _number(row["spl"]), _number(row["min_human_distance"]), _number(row["intimate_share"]), _number(row["social_force"]),
+            _number(row["env_steps"], 0), _number(row["wall_time_s"], 0),
+        ]
+        lines.append("| " + " | ".join(cells) + " |")
+    return "\n".join(lines) + "\n"
+
+
+def to_csv(table: Any) -> str:
+    return table.to_csv(index=False, lineterminator="\n", float_format="%.6f", na_rep="nan")
+
+
+def write_leaderboard(paths: Iterable[str | Path], out: str | Path) -> tuple[Any, list[Path]]:
+    """Build the leaderboard of every finished run below ``paths``; write ``out``.md and ``out``.csv."""
+    from evaluation.storage import atomic_write_text, load_results
+
+    tests, _, metas = load_results(paths)
+    table = leaderboard_table(tests, metas)
+    out = Path(out)
+    written = [atomic_write_text(out.with_name(out.name + ".md"), to_markdown(table)),
+               atomic_write_text(out.with_name(out.name + ".csv"), to_csv(table))]
+    return table, written

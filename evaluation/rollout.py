@@ -1,0 +1,76 @@
+"""Test episodes: run a deterministic policy on the held-out seeds and record what the metrics need.
+
+The test episodes of one evaluation run side by side in lock-step, one environment per seed,
+so the policy is called once per step on the batch of the still-running episodes (one
+network forward for all of them). Nothing here learns: the transitions go nowhere but into
+the trajectories.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Mapping, Sequence
+from typing import Any
+
+import numpy as np
+
+from evaluation.metrics import Trajectory, episode_metrics
+
+BatchPolicy = Callable[[Mapping[str, np.ndarray]], np.ndarray]
+"""Observations stacked per key, shape (N, ...) -> actions (N, 2); :class:`agents.AgentPolicy` is one."""
+
+
+class HeldOutEpisodes:
+    """The environments of the test episodes, built once and reused at every evaluation.
+
+    ``env_options``: keyword arguments of :class:`crowdnav.envs.CrowdNavEnv` (the policy's
+    :attr:`agents.AgentPolicy.env_options`); ``seeds``: the held-out episode seeds.
+    """
+
+    def __init__(self, env_options: Mapping[str, Any], seeds: Sequence[int]):
+        from crowdnav.envs import CrowdNavEnv
+
+        self.env_options = dict(env_options)
+        self.seeds = list(seeds)
+        self.envs = [CrowdNavEnv(**self.env_options) for _ in self.seeds]
+
+    def run(self, policy: BatchPolicy) -> list[dict[str, Any]]:
+        """Play one episode per seed with ``policy``; one dict per episode (seed order): outcome, return, metrics."""
+        observations = [env.reset(seed=seed)[0] for env, seed in zip(self.envs, self.seeds, strict=True)]
+        positions = [[env.simulator.positions.copy()] for env in self.envs]
+        forces: list[list[float]] = [[] for _ in self.envs]
+        returns = [0.0] * len(self.envs)
+        ends: list[dict[str, Any] | None] = [None] * len(self.envs)
+        running = list(range(len(self.envs)))
+        while running:
+            batch = {key: np.stack([observations[i][key] for i in running]) for key in observations[running[0]]}
+            actions = np.asarray(policy(batch)).reshape(len(running), -1)
+            still = []
+            for action, i in zip(actions, running, strict=True):
+                env = self.envs[i]
+                observations[i], reward, terminated, truncated, info = env.step(action)
+                sim = env.simulator
+                positions[i].append(sim.positions.copy())  # the simulator updates its arrays in place
+                forces[i].append(abs(complex(sim.robot_social_force)))
+                returns[i] += float(reward)
+                if terminated or truncated:
+                    ends[i] = info
+                else:
+                    still.append(i)
+            running = still
+        return [self._episode(i, positions[i], forces[i], returns[i], ends[i]) for i in range(len(self.envs))]
+
+    def _episode(self, i: int, positions: list[np.ndarray], forces: list[float], total: float, info: dict[str, Any]) -> dict[str, Any]:
+        sim = self.envs[i].simulator
+        trajectory = Trajectory(
+            positions=np.stack(positions), radii=np.asarray(sim.radii, dtype=float).copy(), goal=complex(sim.robot_goal),
+            goal_radius=float(sim.scenario.robot.goal_radius), dt=float(sim.dt), social_force=np.asarray(forces),
+        )
+        outcome = info["outcome"]
+        return {
+            "test_episode": i, "test_seed": self.seeds[i], "outcome": outcome, "collision_kind": info.get("collision_kind", ""),
+            "return": total, **episode_metrics(trajectory, outcome == "success"),
+        }
+
+    def close(self) -> None:
+        for env in self.envs:
+            env.close()

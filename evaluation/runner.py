@@ -1,0 +1,327 @@
+"""One unit of work: train one configuration with one seed and evaluate it along the protocol.
+
+:func:`run_unit` is a plain function of plain data (a :class:`UnitSpec`, or its dict, and a
+folder) returning a plain dict, so a process pool, a Ray task or a test can call it alike.
+It is idempotent: a finished run is skipped; an interrupted one resumes training from its
+last checkpoint and evaluates only the evaluation points not yet on disk; nothing already
+written is overwritten.
+
+How the protocol maps onto training: ``agents.train`` saves a policy snapshot every
+``eval_every`` episodes (``checkpoint_every``), and each snapshot is evaluated on the
+held-out test episodes with the deterministic policy. Evaluating a saved snapshot is the
+same as evaluating during training (the test episodes touch neither the model nor its replay
+buffer), and it lets a resumed run evaluate what the interrupted one had trained.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import re
+import time
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from evaluation.protocol import Protocol
+from evaluation.storage import (
+    ENCODER_DIR,
+    EVALUATIONS_DIR,
+    META_FILE,
+    SPEC_FILE,
+    TEST_FILE,
+    TRAIN_DIR,
+    TRAINING_FILE,
+    ResultsError,
+    atomic_write_csv,
+    atomic_write_json,
+    read_json,
+)
+
+PROTOCOL_FIELDS = ("seed", "out", "episodes", "checkpoint_every", "progress", "torch_threads", "save_replay_buffer")
+"""TrainConfig fields the protocol sets for every run (an experiment may not set them)."""
+
+PRETRAINED = "<pretrained>"
+"""``encoder.weights`` placeholder: the experiment's pre-trained encoder, ``<experiment folder>/encoder/encoder.pt``."""
+
+RUN_COLUMNS = ("experiment", "configuration", "label", "seed")
+"""The columns that name the run, first in every table."""
+OUTCOMES = ("success", "collision", "truncated")
+
+EventHook = Callable[[str, dict[str, Any]], None]
+"""``hook(event, data)``: ``"trained"`` ({episodes}) and ``"evaluated"`` ({evaluation, training_episodes, success, collision, truncated})."""
+
+
+@dataclass(frozen=True)
+class UnitSpec:
+    """Everything that defines one run; two runs with equal specs are the same run."""
+
+    experiment: str
+    configuration: str
+    seed: int
+    train: dict[str, Any]
+    """TrainConfig fields of the configuration (without those of :data:`PROTOCOL_FIELDS`)."""
+    protocol: dict[str, int]
+    """The :class:`Protocol` fields."""
+    label: str = ""
+    """Name of the configuration in figures and tables (default: the configuration name)."""
+    torch_threads: int = field(default=1, compare=False)
+    """torch threads of the process (not part of the run's identity)."""
+
+    def to_dict(self) -> dict[str, Any]:
+        document = dataclasses.asdict(self)
+        document.pop("torch_threads")
+        return document
+
+    @classmethod
+    def from_dict(cls, document: Mapping[str, Any]) -> UnitSpec:
+        return cls(**document)
+
+    @property
+    def display_label(self) -> str:
+        return self.label or self.configuration
+
+    def train_config(self, out_dir: Path) -> dict[str, Any]:
+        """The full TrainConfig mapping of this run, writing into ``out_dir/train``."""
+        protocol = Protocol(**self.protocol)
+        train = dict(self.train)
+        if train.get("encoder", {}).get("weights") == PRETRAINED:  # runs live in <experiment>/<configuration>/<seed>
+            train["encoder"] = {**train["encoder"], "weights": str(pretrained_encoder_path(out_dir.parent.parent))}
+        return {**train, "seed": self.seed, "out": str(out_dir / TRAIN_DIR), "episodes": protocol.train_episodes,
+                "checkpoint_every": protocol.eval_every, "progress": False, "torch_threads": self.torch_threads,
+                "save_replay_buffer": True}
+
+
+def pretrained_encoder_path(experiment_dir: str | Path) -> Path:
+    """Where an experiment's pre-trained LEOG encoder is kept."""
+    return Path(experiment_dir) / ENCODER_DIR / "encoder.pt"
+
+
+def run_unit(spec: UnitSpec | Mapping[str, Any], out_dir: str | Path, *, on_event: EventHook | None = None) -> dict[str, Any]:
+    """Train and evaluate one run into ``out_dir`` (resuming or skipping as needed); returns its summary.
+
+    Summary: experiment, configuration, seed, ``status`` (``"done"`` or ``"skipped"`` when it
+    was already complete), ``resumed``, final success/collision/truncated rates, env steps,
+    wall time and the folder.
+    """
+    spec = spec if isinstance(spec, UnitSpec) else UnitSpec.from_dict(spec)
+    out_dir = Path(out_dir)
+    hook = on_event or (lambda event, data: None)
+    _claim(out_dir, spec)
+    if (out_dir / META_FILE).is_file():
+        return _summary(spec, out_dir, read_json(out_dir / META_FILE), "skipped")
+    from agents import load_policy, train
+    from agents.config import config_from_mapping
+
+    clock = _Clock(out_dir / "timing.json")
+    protocol = Protocol(**spec.protocol)
+    config = config_from_mapping(spec.train_config(out_dir), f"{out_dir / SPEC_FILE}").validate()
+    train_dir = out_dir / TRAIN_DIR
+    trained = _checkpoint_episodes(train_dir)
+    resumed = trained > 0 or (out_dir / EVALUATIONS_DIR).is_dir()
+    evaluator = _Evaluator(spec, out_dir, protocol, load_policy, clock, hook)
+    if trained < protocol.train_episodes:
+        evaluator.evaluate_available(train_dir)  # before resuming replaces the checkpoint
+        train(config, resume=(train_dir / "checkpoint").exists())
+        clock.save()
+        hook("trained", {"episodes": protocol.train_episodes})
+    evaluator.evaluate_available(train_dir)
+    evaluator.close()
+    missing = [k for k in range(protocol.evaluations) if not evaluator.done(k)]
+    if missing:
+        raise ResultsError(f"{train_dir}: no policy snapshot for evaluation(s) {missing} "
+                           f"(after {[protocol.evaluation_points[k] for k in missing]} episodes)")
+    return _finish(spec, out_dir, protocol, config, clock, resumed)
+
+
+def _claim(out_dir: Path, spec: UnitSpec) -> None:
+    """Write spec.json, or check that the folder holds this very run."""
+    path = out_dir / SPEC_FILE
+    if path.is_file():
+        existing = read_json(path)
+        if existing != spec.to_dict():
+            changed = sorted(key for key in spec.to_dict() if existing.get(key) != spec.to_dict()[key])
+            raise ResultsError(f"{out_dir} holds a different run (its {', '.join(changed)} differ from this experiment's); "
+                               "use another output folder or remove that one")
+    else:
+        atomic_write_json(path, spec.to_dict())
+
+
+def _checkpoint_episodes(train_dir: Path) -> int:
+    """Episodes behind train/checkpoint (0 if there is none yet)."""
+    info = train_dir / "checkpoint" / "policy.json"
+    return int(read_json(info)["episodes"]) if info.is_file() else 0
+
+
+_SNAPSHOT = re.compile(r"episode_(\d+)$")
+
+
+def _policy_folders(train_dir: Path) -> dict[int, Path]:
+    """Episodes -> folder of every policy saved so far: the snapshots, and the checkpoint (a crash can leave it without its snapshot)."""
+    folders: dict[int, Path] = {}
+    checkpoint = train_dir / "checkpoint"
+    if (checkpoint / "policy.json").is_file():
+        folders[_checkpoint_episodes(train_dir)] = checkpoint
+    snapshots = train_dir / "snapshots"
+    for folder in sorted(snapshots.iterdir()) if snapshots.is_dir() else []:
+        match = _SNAPSHOT.match(folder.name)
+        if match and (folder / "policy.json").is_file():
+            folders[int(match.group(1))] = folder
+    return folders
+
+
+class _Evaluator:
+    """Evaluates the policies of the scheduled points, one CSV per evaluation."""
+
+    def __init__(self, spec: UnitSpec, out_dir: Path, protocol: Protocol, load_policy: Callable, clock: _Clock, hook: EventHook):
+        self.spec, self.protocol, self.load_policy, self.clock, self.hook = spec, protocol, load_policy, clock, hook
+        self.folder = out_dir / EVALUATIONS_DIR
+        self.episodes = None  # the test environments, built on first use
+
+    def path(self, k: int) -> Path:
+        return self.folder / f"evaluation_{k:03d}.csv"
+
+    def done(self, k: int) -> bool:
+        return self.path(k).is_file()
+
+    def evaluate_available(self, train_dir: Path) -> None:
+        """Evaluate every scheduled point that has a saved policy and no results yet."""
+        folders = _policy_folders(train_dir)
+        points = self.protocol.evaluation_points
+        for k, point in enumerate(points):
+            if self.done(k):
+                continue
+            # The policy saved at the point (a snapshot can land a few episodes late: it is taken at a rollout's end).
+            upper = points[k + 1] if k + 1 < len(points) else point + self.protocol.eval_every
+            candidates = sorted(episodes for episodes in folders if point <= episodes < upper)
+            if candidates:
+                self._evaluate(k, candidates[0], folders[candidates[0]])
+
+    def _evaluate(self, k: int, training_episodes: int, folder: Path) -> None:
+        import pandas as pd
+
+        from evaluation.rollout import HeldOutEpisodes
+
+        policy = self.load_policy(folder)
+        if self.episodes is None:
+            self.episodes = HeldOutEpisodes(policy.env_options, self.protocol.test_seeds)
+        rows = self.episodes.run(policy)
+        spec = self.spec
+        frame = pd.DataFrame(rows)
+        for position, (name, value) in enumerate(zip(
+            (*RUN_COLUMNS, "training_episodes", "evaluation"),
+            (spec.experiment, spec.configuration, spec.display_label, spec.seed, training_episodes, k), strict=True,
+        )):
+            frame.insert(position, name, value)
+        atomic_write_csv(frame, self.path(k))
+        self.clock.save()
+        rates = {outcome: float((frame["outcome"] == outcome).mean()) for outcome in OUTCOMES}
+        self.hook("evaluated", {"evaluation": k, "training_episodes": training_episodes, **rates})
+
+    def close(self) -> None:
+        if self.episodes is not None:
+            self.episodes.close()
+
+
+def _finish(spec: UnitSpec, out_dir: Path, protocol: Protocol, config: Any, clock: _Clock, resumed: bool) -> dict[str, Any]:
+    """Assemble the run's tables and write meta.json (last: it marks the run complete)."""
+    import pandas as pd
+
+    evaluations = [pd.read_csv(out_dir / EVALUATIONS_DIR / f"evaluation_{k:03d}.csv", keep_default_na=False, na_values=["nan"])
+                   for k in range(protocol.evaluations)]
+    tests = pd.concat(evaluations, ignore_index=True)
+    atomic_write_csv(tests, out_dir / TEST_FILE)
+    training = _training_episodes(spec, out_dir / TRAIN_DIR / "episodes.csv")
+    atomic_write_csv(training, out_dir / TRAINING_FILE)
+    timing = clock.save()
+    final = tests[tests["evaluation"] >= protocol.evaluations - protocol.final_evaluations]
+    train_info = read_json(out_dir / TRAIN_DIR / "checkpoint" / "policy.json")
+    train_steps, test_steps = int(train_info["timesteps"]), int(tests["steps"].sum())
+    meta = {
+        **{name: value for name, value in zip(RUN_COLUMNS, (spec.experiment, spec.configuration, spec.display_label, spec.seed),
+                                              strict=True)},
+        "status": "complete",
+        "protocol": protocol.to_dict(),
+        "config": dataclasses.asdict(config),
+        "versions": package_versions(),
+        "git_commit": git_commit(),
+        "wall_time_s": round(timing["seconds"], 3),
+        "sessions": timing["sessions"],
+        "env_steps": {"train": train_steps, "test": test_steps, "total": train_steps + test_steps},
+        "training_episodes": int(len(training)),
+        "test_episodes": int(len(tests)),
+        "resumed": resumed,
+        "final": {outcome: round(float((final["outcome"] == outcome).mean()), 6) for outcome in OUTCOMES},
+    }
+    atomic_write_json(out_dir / META_FILE, meta)
+    return _summary(spec, out_dir, meta, "done")
+
+
+def _training_episodes(spec: UnitSpec, log: Path) -> Any:
+    """agents' episodes.csv, one row per episode: a resumed session logs again the episodes after the checkpoint, keep the last."""
+    import pandas as pd
+
+    frame = pd.read_csv(log).drop_duplicates("episode", keep="last").sort_values("episode", ignore_index=True)
+    frame = frame.rename(columns={"seed": "episode_seed"})
+    for position, (name, value) in enumerate(zip(
+        RUN_COLUMNS, (spec.experiment, spec.configuration, spec.display_label, spec.seed), strict=True,
+    )):
+        frame.insert(position, name, value)
+    return frame
+
+
+class _Clock:
+    """Wall time of the sessions that worked on a run, kept in timing.json.
+
+    Each session adds the time up to its last saved result (end of training, an evaluation,
+    the end); the work a crash throws away is not counted.
+    """
+
+    def __init__(self, path: Path):
+        self.path = path
+        self.last = time.perf_counter()
+        self.first_save = True
+
+    def save(self) -> dict[str, Any]:
+        now = time.perf_counter()
+        timing = read_json(self.path) if self.path.is_file() else {"seconds": 0.0, "sessions": 0}
+        timing = {"seconds": timing["seconds"] + now - self.last, "sessions": timing["sessions"] + self.first_save}
+        atomic_write_json(self.path, timing)
+        self.last, self.first_save = now, False
+        return timing
+
+
+def _summary(spec: UnitSpec, out_dir: Path, meta: Mapping[str, Any], status: str) -> dict[str, Any]:
+    return {
+        "experiment": spec.experiment, "configuration": spec.configuration, "seed": spec.seed, "status": status,
+        "resumed": bool(meta.get("resumed", False)), **{f"final_{key}": value for key, value in meta["final"].items()},
+        "wall_time_s": meta["wall_time_s"], "env_steps": meta["env_steps"]["total"], "out": str(out_dir),
+    }
+
+
+def package_versions() -> dict[str, str]:
+    """Versions of Python and of the packages a result depends on."""
+    import platform
+    from importlib import metadata
+
+    versions = {"python": platform.python_version()}
+    for name in ("crowdnav", "numpy", "torch", "stable-baselines3", "gymnasium", "shapely", "pandas"):
+        try:
+            versions[name] = metadata.version(name)
+        except metadata.PackageNotFoundError:
+            versions[name] = "not installed"
+    return versions
+
+
+def git_commit() -> str | None:
+    """The commit of the crowdnav checkout (``+dirty`` with uncommitted changes), or None outside a git checkout."""
+    import subprocess
+
+    root = Path(__file__).resolve().parent.parent
+    try:
+        commit = subprocess.run(["git", "rev-parse", "HEAD"], cwd=root, capture_output=True, text=True, timeout=10, check=True)
+        status = subprocess.run(["git", "status", "--porcelain", "--untracked-files=no"], cwd=root, capture_output=True,
+                                text=True, timeout=10, check=True)
+    except (OSError, subprocess.SubprocessError):
+        return None
+    return commit.stdout.strip() + ("+dirty" if status.stdout.strip() else "")

@@ -1,0 +1,54 @@
+"""Tiny evaluation settings shared by the evaluation tests: a few short episodes, small networks."""
+
+from __future__ import annotations
+
+import copy
+from pathlib import Path
+from typing import Any
+
+TINY_TRAIN = {
+    "scenario": "open_space", "algo": "sac", "overrides": {"max_steps": 40, "humans.count": 3},
+    "sensors": {"lidar": {"beams": 16}}, "net_arch": [16], "batch_size": 16, "buffer_size": 2000, "learning_starts": 30,
+    "algo_kwargs": {"train_freq": 4}, "extractor": {"lidar_hidden": [16], "rbf_centres": 4, "lowdim_hidden": [8]},
+}
+"""TrainConfig fields of a run that trains in well under a second per episode."""
+
+TINY_PROTOCOL = {"train_episodes": 4, "eval_every": 2, "test_episodes": 3, "seeds": 2, "window": 3, "final_evaluations": 1}
+
+
+def tiny_experiment_document(name: str = "tiny", **protocol: Any) -> dict[str, Any]:
+    """A 2-configuration experiment (LIDAR, closest obstacle) with the tiny protocol."""
+    return copy.deepcopy({
+        "name": name,
+        "description": "tiny experiment for the tests",
+        "protocol": {**TINY_PROTOCOL, **protocol},
+        "defaults": TINY_TRAIN,
+        "configurations": [
+            {"name": "lidar", "label": "LIDAR", "train": {"modalities": ["lidar", "goal"]}},
+            {"name": "closest", "label": "closest obstacle", "train": {"modalities": ["closest_obstacle", "goal"]}},
+        ],
+    })
+
+
+def tiny_unit_spec(seed: int = 0, **protocol: Any) -> dict[str, Any]:
+    """The UnitSpec dict of one tiny run."""
+    return copy.deepcopy({"experiment": "tiny", "configuration": "lidar", "seed": seed, "label": "LIDAR",
+                          "train": {**TINY_TRAIN, "modalities": ["lidar", "goal"]},
+                          "protocol": {**TINY_PROTOCOL, "seeds": 1, **protocol}})
+
+
+_RESULTS: dict[str, Path] = {}
+
+
+def tiny_results(tmp_path_factory) -> Path:
+    """A results folder of the tiny experiment (2 configurations x 2 seeds), made once per test session."""
+    if "folder" not in _RESULTS:
+        from evaluation.benchmark import run_experiment
+        from evaluation.experiment import experiment_from_mapping
+
+        experiment = experiment_from_mapping(tiny_experiment_document())
+        report = run_experiment(experiment, tmp_path_factory.mktemp("results"), workers=1, progress=False, video=False,
+                                log=lambda line: None)
+        assert not report.failures, report.failures
+        _RESULTS["folder"] = report.folder
+    return _RESULTS["folder"]

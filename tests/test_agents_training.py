@@ -1,0 +1,67 @@
+"""Every algorithm trains end to end on every modality set through the shared extractor."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from agents_tiny import tiny_config
+
+from agents import train
+from agents.extractor import MultiModalExtractor
+
+MODALITY_SETS = {"lidar+goal": ["lidar", "goal"], "leog+goal": ["leog", "goal"], "leog+lidar+goal": ["leog", "lidar", "goal"]}
+
+
+@pytest.mark.parametrize("modalities", list(MODALITY_SETS.values()), ids=list(MODALITY_SETS))
+@pytest.mark.parametrize("algo", ["sac", "td3", "ddpg", "a2c"])
+def test_algorithm_trains_end_to_end_on_modality_set(tmp_path, algo, modalities):
+    result = train(tiny_config(tmp_path, algo=algo, modalities=modalities, episodes=3))
+    model = result.model
+    assert result.episodes == 3 and len(result.records) == 3
+    assert result.timesteps == sum(record.length for record in result.records) > 30
+    assert all(record.outcome in ("success", "collision", "truncated") for record in result.records)
+    extractor = model.policy.features_extractor if algo == "a2c" else model.actor.features_extractor
+    assert isinstance(extractor, MultiModalExtractor) and set(extractor.branches) == set(modalities)
+    assert model._n_updates > 0  # gradient steps happened, not only data collection
+    observation = {key: space.sample() for key, space in model.observation_space.spaces.items()}
+    action, _ = model.predict(observation, deterministic=True)
+    assert action.shape == (2,) and np.all(np.abs(action) <= 1.0)
+
+
+def test_ppo_trains_too(tmp_path):
+    result = train(tiny_config(tmp_path, algo="ppo", modalities=["leog", "goal"], episodes=2))
+    assert result.episodes == 2 and result.model._n_updates > 0
+
+
+def test_training_stops_after_the_requested_episodes_and_logs_each(tmp_path):
+    result = train(tiny_config(tmp_path, episodes=5, max_steps=20))
+    lines = (tmp_path / "episodes.csv").read_text().splitlines()
+    assert lines[0].startswith("episode,seed,outcome") and len(lines) == 6
+    assert [int(line.split(",")[0]) for line in lines[1:]] == [0, 1, 2, 3, 4]
+    assert result.success_rate == sum(r.outcome == "success" for r in result.records) / 5
+    assert sorted(p.name for p in (tmp_path / "snapshots").iterdir()) == ["episode_00002", "episode_00004", "episode_00005"]
+
+
+def test_packed_replay_buffer_gives_back_the_grids_at_one_bit_per_cell(tmp_path):
+    import torch
+
+    from agents.replay_buffer import PackedGridReplayBuffer
+
+    result = train(tiny_config(tmp_path, modalities=["leog", "goal"], episodes=1, max_steps=20, scenario="room_furniture"))
+    buffer = result.model.replay_buffer
+    assert isinstance(buffer, PackedGridReplayBuffer)
+    assert buffer.observations["leog"].shape[-1] == 30 * 30 // 8 + 1  # 113 bytes instead of 900
+    env = result.model.get_env()
+    observations = [env.reset()]
+    for _ in range(5):
+        observations.append(env.step(np.zeros((1, 2), dtype=np.float32))[0])
+    fresh = PackedGridReplayBuffer(10, env.observation_space, env.action_space, device="cpu")
+    for before, after in zip(observations, observations[1:], strict=False):
+        fresh.add(before, after, np.zeros((1, 2)), np.zeros(1), np.zeros(1), [{}])
+    samples = fresh._get_samples(np.arange(5))
+    expected = np.concatenate([o["leog"] for o in observations[:5]])
+    assert 0 < (expected > 0).mean() < 1  # walls and furniture in view, so the comparison means something
+    assert samples.observations["leog"].dtype == torch.uint8
+    np.testing.assert_array_equal(samples.observations["leog"].numpy(), expected)
+    np.testing.assert_array_equal(samples.next_observations["leog"].numpy(), np.concatenate([o["leog"] for o in observations[1:]]))
+    np.testing.assert_array_equal(samples.observations["goal"].numpy(), np.concatenate([o["goal"] for o in observations[:5]]))

@@ -1,0 +1,179 @@
+"""Experiment files: shipped experiments, validation errors naming file, line and field, CLI errors."""
+
+from __future__ import annotations
+
+import copy
+
+import pytest
+import yaml
+from evaluation_tiny import tiny_experiment_document
+
+from crowdnav.cli import main
+from evaluation.benchmark import claim_folder
+from evaluation.experiment import PRETRAINED, ExperimentError, experiment_from_mapping, load_experiment, shipped_experiments
+from evaluation.storage import ResultsError
+
+
+def write(tmp_path, document, name="experiment.yaml"):
+    path = tmp_path / name
+    path.write_text(yaml.safe_dump(document, sort_keys=False) if not isinstance(document, str) else document, encoding="utf-8")
+    return path
+
+
+def test_shipped_experiments_cover_figure_4_and_the_default():
+    assert set(shipped_experiments()) == {"default", "encoders", "modalities", "fusion", "paradigms"}
+    labels = {name: [c.name for c in load_experiment(name).configurations] for name in shipped_experiments()}
+    assert labels["encoders"] == ["frozen", "finetune", "scratch"]
+    assert labels["modalities"] == ["leog", "lidar", "closest_obstacle"]
+    assert labels["fusion"] == ["leog", "lidar", "leog_lidar"]
+    assert labels["paradigms"] == ["sac", "td3", "ddpg", "a2c"]
+    assert load_experiment(None).name == "default"
+
+
+def test_paper_experiments_use_the_papers_protocol_and_a_pretrained_encoder_where_frozen_or_finetuned():
+    for name in ("encoders", "modalities", "fusion", "paradigms"):
+        experiment = load_experiment(name)
+        assert experiment.protocol.evaluation_points[-1] == 700 and experiment.protocol.seeds == 5
+        for configuration in experiment.configurations:
+            encoder = configuration.train.get("encoder", {})
+            if encoder.get("mode") in ("frozen", "finetune"):
+                assert encoder["weights"] == PRETRAINED
+
+
+def test_configuration_train_fields_are_merged_over_the_defaults():
+    document = tiny_experiment_document()
+    document["configurations"][0]["train"]["overrides"] = {"humans.count": 1}
+    experiment = experiment_from_mapping(document)
+    assert experiment.configurations[0].train["overrides"] == {"max_steps": 40, "humans.count": 1}
+    assert experiment.configurations[1].train["overrides"] == {"max_steps": 40, "humans.count": 3}
+
+
+def _error(tmp_path, document) -> str:
+    path = write(tmp_path, document)
+    with pytest.raises(ExperimentError) as caught:
+        load_experiment(path)
+    message = str(caught.value)
+    assert message.startswith(str(path)) and "\n" not in message
+    return message
+
+
+def test_unknown_top_level_key_is_named_with_its_line(tmp_path):
+    document = tiny_experiment_document()
+    document["seeds"] = 3
+    message = _error(tmp_path, document)
+    line = write(tmp_path, document).read_text().splitlines().index("seeds: 3") + 1
+    assert f":{line}: seeds: unknown key 'seeds'" in message and "protocol" in message
+
+
+def test_unknown_protocol_field_is_named(tmp_path):
+    document = tiny_experiment_document()
+    document["protocol"]["evaluate_every"] = 10
+    assert "protocol.evaluate_every: unknown key 'evaluate_every'" in _error(tmp_path, document)
+
+
+def test_bad_protocol_value_is_named(tmp_path):
+    document = tiny_experiment_document()
+    document["protocol"]["test_episodes"] = 0
+    assert "protocol.test_episodes: expected an integer >= 1" in _error(tmp_path, document)
+
+
+def test_unknown_training_field_in_a_configuration_is_named_with_the_configuration(tmp_path):
+    document = tiny_experiment_document()
+    document["configurations"][1]["train"]["learning_rat"] = 0.1
+    message = _error(tmp_path, document)
+    assert "configurations.1.train (configuration 'closest')" in message and "unknown key 'learning_rat'" in message
+
+
+def test_protocol_owned_training_fields_are_refused(tmp_path):
+    document = tiny_experiment_document()
+    document["defaults"]["episodes"] = 100
+    assert "defaults.episodes: 'episodes' is set by the protocol" in _error(tmp_path, document)
+
+
+def test_unknown_scenario_or_modality_is_reported_at_load_time(tmp_path):
+    document = tiny_experiment_document()
+    document["configurations"][0]["train"]["modalities"] = ["sonar"]
+    assert "configurations.0.train (configuration 'lidar'): environment:" in _error(tmp_path, document)
+
+
+def test_duplicate_configuration_names_are_refused(tmp_path):
+    document = tiny_experiment_document()
+    document["configurations"][1]["name"] = "lidar"
+    assert "configurations.1.name: duplicate configuration name 'lidar'" in _error(tmp_path, document)
+
+
+def test_malformed_yaml_and_missing_file_are_one_line_errors(tmp_path):
+    assert "malformed YAML" in _error(tmp_path, "name: [unclosed\n")
+    with pytest.raises(ExperimentError, match="no such experiment file"):
+        load_experiment(tmp_path / "missing.yaml")
+
+
+def test_results_folder_of_a_different_experiment_config_is_refused(tmp_path):
+    document = tiny_experiment_document()
+    claim_folder(tmp_path / "tiny", experiment_from_mapping(document))
+    claim_folder(tmp_path / "tiny", experiment_from_mapping(tiny_experiment_document(seeds=3)))  # more seeds: fine
+    changed = copy.deepcopy(document)
+    changed["defaults"]["algo"] = "td3"
+    with pytest.raises(ResultsError, match="different version of experiment 'tiny' \\(configurations differ\\)"):
+        claim_folder(tmp_path / "tiny", experiment_from_mapping(changed))
+
+
+def run_cli(capsys, *argv):
+    code = main(list(argv))
+    out, err = capsys.readouterr()
+    return code, out, err
+
+
+@pytest.mark.parametrize("content, expected", [
+    (None, "no such experiment file"),
+    ("protocol: {seeds: two}\nconfigurations: []\n", "protocol.seeds: expected an integer"),
+    ("name: x\nconfigurations:\n  - name: a\n    trian: {}\n", "configurations.0.trian: unknown key"),
+])
+def test_benchmark_command_reports_bad_experiment_files_in_one_line(tmp_path, capsys, content, expected):
+    path = tmp_path / "bad.yaml"
+    if content is not None:
+        path.write_text(content, encoding="utf-8")
+    code, _, err = run_cli(capsys, "benchmark", str(path), "--out", str(tmp_path / "results"))
+    assert code == 1 and expected in err
+    assert err.startswith("crowdnav: error: ") and err.count("\n") == 1
+
+
+def test_benchmark_command_refuses_a_results_folder_from_another_config_in_one_line(tmp_path, capsys):
+    document = tiny_experiment_document()
+    changed = copy.deepcopy(document)
+    changed["protocol"]["test_episodes"] = 5
+    claim_folder(tmp_path / "results" / "tiny", experiment_from_mapping(changed))
+    code, _, err = run_cli(capsys, "benchmark", str(write(tmp_path, document)), "--out", str(tmp_path / "results"), "--no-progress")
+    assert code == 1 and "holds results of a different version of experiment 'tiny' (protocol differ)" in err
+    assert err.count("\n") == 1
+
+
+@pytest.mark.parametrize("argv", [["plot", "{missing}"], ["leaderboard", "{missing}"], ["leaderboard", "{empty}"], ["plot", "{empty}"]])
+def test_plot_and_leaderboard_of_a_missing_or_empty_folder_are_one_line_errors(tmp_path, capsys, argv):
+    (tmp_path / "empty").mkdir()
+    argv = [arg.format(missing=tmp_path / "missing", empty=tmp_path / "empty") for arg in argv]
+    code, _, err = run_cli(capsys, *argv)
+    assert code == 1 and err.startswith("crowdnav: error: ") and err.count("\n") == 1
+    assert ("no such results folder" in err) or ("no finished run here" in err)
+
+
+def test_pretrained_encoder_is_trained_once_per_experiment_and_given_to_frozen_runs(tmp_path):
+    from evaluation.benchmark import run_experiment
+
+    document = tiny_experiment_document(train_episodes=2, eval_every=2, test_episodes=2, seeds=1)
+    document["defaults"].update(
+        scenario="room_furniture", sensors={"leog": {"size": 3.0, "resolution": 0.1}},
+        extractor={"leog_channels": [4, 8], "leog_kernels": [4, 3], "leog_strides": [4, 2], "leog_latent": 8, "rbf_centres": 4,
+                   "lowdim_hidden": [8]},
+    )
+    document["pretrain_encoder"] = {"scenario": "room_furniture", "grids": 32, "epochs": 1}
+    document["configurations"] = [{"name": "frozen", "train": {"modalities": ["leog", "goal"], "encoder": {"mode": "frozen"}}}]
+    experiment = experiment_from_mapping(document)
+    report = run_experiment(experiment, tmp_path, workers=1, progress=False, video=False, log=lambda line: None)
+    assert not report.failures
+    encoder = tmp_path / "tiny" / "encoder" / "encoder.pt"
+    meta = yaml.safe_load((tmp_path / "tiny" / "frozen" / "seed_0" / "meta.json").read_text())
+    assert meta["config"]["encoder"] == {"mode": "frozen", "weights": str(encoder), "precompute": True}
+    written = encoder.stat().st_mtime_ns
+    run_experiment(experiment, tmp_path, workers=1, progress=False, video=False, log=lambda line: None)
+    assert encoder.stat().st_mtime_ns == written

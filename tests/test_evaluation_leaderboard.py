@@ -1,0 +1,103 @@
+"""Leaderboard and curves: known values on a hand-made results table, byte-identical regeneration, commands."""
+
+from __future__ import annotations
+
+import math
+import shutil
+
+import numpy as np
+import pandas as pd
+import pytest
+from evaluation_tiny import tiny_results
+
+from crowdnav.cli import main
+from evaluation.curves import rate_curves
+from evaluation.leaderboard import bootstrap_iqm, interquartile_mean, leaderboard_table, to_markdown, write_leaderboard
+from evaluation.metrics import METRIC_COLUMNS
+
+# configuration a: seed 0 always succeeds; seed 1 collides in evaluations 0-1 then succeeds; seed 2 is always truncated.
+# configuration b: always collides.
+_OUTCOMES = {("a", 0): ["success"] * 4, ("a", 1): ["collision", "collision", "success", "success"], ("a", 2): ["truncated"] * 4,
+             ("b", 0): ["collision"] * 4}
+
+
+def synthetic_results(test_episodes: int = 4, eval_every: int = 10):
+    rows, metas = [], []
+    for (configuration, seed), outcomes in _OUTCOMES.items():
+        for evaluation, outcome in enumerate(outcomes):
+            for episode in range(test_episodes):
+                row = {"experiment": "x", "configuration": configuration, "label": configuration.upper(), "seed": seed,
+                       "training_episodes": eval_every * (evaluation + 1), "evaluation": evaluation, "test_episode": episode,
+                       "test_seed": episode, "outcome": outcome, "collision_kind": "", "return": 0.0}
+                row.update({metric: 1.0 for metric in METRIC_COLUMNS})
+                row["time_to_goal"] = 5.0 if outcome == "success" else math.nan
+                row["spl"] = 0.8 if outcome == "success" else 0.0
+                rows.append(row)
+        metas.append({"experiment": "x", "configuration": configuration, "seed": seed, "wall_time_s": 10.0 * (seed + 1),
+                      "env_steps": {"total": 1000 * (seed + 1)}, "protocol": {"final_evaluations": 2, "window": 2}})
+    return pd.DataFrame(rows), metas
+
+
+def test_leaderboard_values_on_hand_made_results():
+    tests, metas = synthetic_results()
+    table = leaderboard_table(tests, metas)
+    assert list(table["configuration"]) == ["a", "b"]  # best final success first
+    a = table.iloc[0]
+    assert a["seeds"] == 3
+    assert a["final_success_mean"] == pytest.approx(2 / 3) and a["final_success_std"] == pytest.approx(math.sqrt(1 / 3))
+    assert a["final_collision_mean"] == 0.0 and a["final_truncated_mean"] == pytest.approx(1 / 3)
+    assert a["success_iqm"] == pytest.approx(2 / 3) and a["success_iqm_low"] <= 2 / 3 <= a["success_iqm_high"]
+    assert a["success_auc_mean"] == pytest.approx(0.5) and a["success_auc_std"] == pytest.approx(0.5)  # per seed 1, 0.5, 0
+    assert a["time_to_goal"] == 5.0  # successful episodes only
+    assert a["spl"] == pytest.approx(0.8 * 2 / 3)
+    assert a["env_steps"] == 2000.0 and a["wall_time_s"] == 20.0
+    b = table.iloc[1]
+    assert b["final_collision_mean"] == 1.0 and b["final_success_std"] == 0.0 and math.isnan(b["time_to_goal"])
+    markdown = to_markdown(table)
+    assert markdown.splitlines()[2].startswith("| A | 3 | 0.667 ± 0.577 | 0.000 ± 0.000 | 0.333 ± 0.577 |")
+
+
+def test_interquartile_mean_drops_a_quarter_at_each_end():
+    assert interquartile_mean(np.arange(1, 9)) == pytest.approx(4.5)
+    assert interquartile_mean(np.array([0.0, 1.0, 100.0, 2.0, 3.0])) == pytest.approx(2.0)  # n=5: one dropped each side
+    assert interquartile_mean(np.array([3.0])) == 3.0
+
+
+def test_bootstrap_interval_is_seeded_and_brackets_the_iqm():
+    values = np.array([0.2, 0.5, 0.55, 0.6, 0.9])
+    first, second = bootstrap_iqm(values), bootstrap_iqm(values)
+    assert first == second
+    iqm, low, high = first
+    assert low <= iqm <= high and low < high
+    assert bootstrap_iqm(np.array([0.4, 0.4, 0.4])) == pytest.approx((0.4, 0.4, 0.4))
+
+
+def test_rate_curves_slide_over_test_episodes_placed_along_training():
+    tests, _ = synthetic_results()
+    curves = rate_curves(tests, window=2)
+    seed1 = curves[(curves["configuration"] == "a") & (curves["seed"] == 1) & (curves["metric"] == "success")]
+    # 4 evaluations x 4 test episodes at x = 10 k + 2.5 (j + 1); outcomes switch to success at evaluation 2
+    np.testing.assert_allclose(seed1["training_episodes"], 2.5 * np.arange(1, 17))
+    np.testing.assert_allclose(seed1["rate"], [0.0] * 8 + [0.5] + [1.0] * 7)
+
+
+def test_leaderboard_regenerates_byte_for_byte(tmp_path_factory, tmp_path):
+    results = tiny_results(tmp_path_factory)
+    _, first = write_leaderboard([results], tmp_path / "one")
+    copy = tmp_path / "copy"
+    shutil.copytree(results, copy)
+    _, second = write_leaderboard([copy], tmp_path / "two")
+    for a, b in zip(first, second, strict=True):
+        assert a.read_bytes() == b.read_bytes()
+    table = pd.read_csv(first[1])
+    assert sorted(table["configuration"]) == ["closest", "lidar"] and (table["seeds"] == 2).all()
+
+
+def test_plot_and_leaderboard_commands_write_their_files(tmp_path_factory, capsys):
+    results = tiny_results(tmp_path_factory)
+    assert main(["plot", str(results)]) == 0
+    assert main(["leaderboard", str(results)]) == 0
+    out = capsys.readouterr().out
+    for name in ("curves.png", "curves.pdf", "leaderboard.md", "leaderboard.csv"):
+        assert f"wrote {results / name}" in out and (results / name).stat().st_size > 0
+    assert (results / "curves.png").read_bytes().startswith(b"\x89PNG")

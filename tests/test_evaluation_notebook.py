@@ -1,0 +1,23 @@
+"""notebooks/plot_results.ipynb executes on a results folder made by the tests."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import nbformat
+from evaluation_tiny import tiny_results
+from nbclient import NotebookClient
+
+NOTEBOOK = Path(__file__).resolve().parent.parent / "notebooks" / "plot_results.ipynb"
+
+
+def test_plot_results_notebook_draws_the_curves_and_the_leaderboard(tmp_path_factory, monkeypatch):
+    results = tiny_results(tmp_path_factory)
+    monkeypatch.setenv("CROWDNAV_RESULTS", str(results))  # the kernel inherits the environment
+    notebook = nbformat.read(NOTEBOOK, as_version=4)
+    NotebookClient(notebook, timeout=120, kernel_name="python3", resources={"metadata": {"path": str(NOTEBOOK.parent.parent)}}).execute()
+    outputs = [output for cell in notebook.cells if cell.cell_type == "code" for output in cell.outputs]
+    assert not [output for output in outputs if output.output_type == "error"]
+    assert any("image/png" in output.get("data", {}) for output in outputs)
+    tables = [output["data"]["text/markdown"] for output in outputs if "text/markdown" in output.get("data", {})]
+    assert tables and "| LIDAR | 2 |" in tables[0] and "| closest obstacle | 2 |" in tables[0]

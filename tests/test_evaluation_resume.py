@@ -1,0 +1,140 @@
+"""run_unit: idempotent, resumable after a crash in evaluation or a killed process, nothing lost or duplicated."""
+
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pandas as pd
+import pytest
+from evaluation_tiny import tiny_experiment_document, tiny_unit_spec
+
+from evaluation.benchmark import run_experiment
+from evaluation.experiment import experiment_from_mapping
+from evaluation.runner import run_unit
+from evaluation.storage import ResultsError
+
+
+def check_complete(out: Path, spec: dict) -> tuple[pd.DataFrame, pd.DataFrame]:
+    """Every test episode of every evaluation once, every training episode once, meta.json consistent."""
+    protocol = spec["protocol"]
+    evaluations = protocol["train_episodes"] // protocol["eval_every"]
+    tests = pd.read_csv(out / "test_episodes.csv", keep_default_na=False, na_values=["nan"])
+    assert len(tests) == evaluations * protocol["test_episodes"]
+    assert not tests.duplicated(["evaluation", "test_episode"]).any()
+    assert sorted(tests["evaluation"].unique()) == list(range(evaluations))
+    assert list(tests["training_episodes"].unique()) == list(range(protocol["eval_every"], protocol["train_episodes"] + 1,
+                                                                   protocol["eval_every"]))
+    assert set(tests["test_seed"]) == set(range(protocol["test_episodes"]))
+    training = pd.read_csv(out / "training_episodes.csv")
+    assert list(training["episode"]) == list(range(protocol["train_episodes"]))
+    meta = json.loads((out / "meta.json").read_text())
+    assert meta["status"] == "complete" and meta["test_episodes"] == len(tests)
+    assert meta["env_steps"]["test"] == tests["steps"].sum()
+    assert meta["env_steps"]["train"] == training["timesteps"].iloc[-1]
+    return tests, training
+
+
+class Crash(Exception):
+    pass
+
+
+def test_crash_during_evaluation_resumes_without_redoing_or_losing_evaluations(tmp_path):
+    spec = tiny_unit_spec()
+
+    def crash_after_first(event, data):
+        if event == "evaluated" and data["evaluation"] == 0:
+            raise Crash
+
+    with pytest.raises(Crash):
+        run_unit(spec, tmp_path, on_event=crash_after_first)
+    first = tmp_path / "evaluations" / "evaluation_000.csv"
+    written = first.stat().st_mtime_ns
+    assert not (tmp_path / "meta.json").exists() and not (tmp_path / "evaluations" / "evaluation_001.csv").exists()
+
+    events = []
+    summary = run_unit(spec, tmp_path, on_event=lambda event, data: events.append((event, data["evaluation"], data["training_episodes"])))
+    assert events == [("evaluated", 1, 4)]  # no training, evaluation 0 not redone
+    assert first.stat().st_mtime_ns == written
+    assert summary["status"] == "done" and summary["resumed"]
+    check_complete(tmp_path, spec)
+    assert json.loads((tmp_path / "meta.json").read_text())["sessions"] == 2
+
+
+def test_finished_run_is_skipped_and_left_untouched(tmp_path):
+    spec = tiny_unit_spec()
+    run_unit(spec, tmp_path)
+    stamps = {path: path.stat().st_mtime_ns for path in tmp_path.rglob("*") if path.is_file()}
+    summary = run_unit(spec, tmp_path)
+    assert summary["status"] == "skipped"
+    assert {path: path.stat().st_mtime_ns for path in tmp_path.rglob("*") if path.is_file()} == stamps
+
+
+def test_folder_of_another_run_is_refused(tmp_path):
+    (tmp_path / "spec.json").write_text(json.dumps(tiny_unit_spec(seed=1)))
+    with pytest.raises(ResultsError, match="holds a different run \\(its seed differ"):
+        run_unit(tiny_unit_spec(seed=0), tmp_path)
+
+
+_CHILD = """
+import json, sys
+from evaluation.benchmark import run_experiment
+from evaluation.experiment import experiment_from_mapping
+from evaluation.runner import run_unit
+run_unit(json.loads(sys.argv[1]), sys.argv[2])
+"""
+
+
+def test_killed_process_resumes_training_from_its_checkpoint_without_duplicate_or_lost_rows(tmp_path):
+    spec = tiny_unit_spec(train_episodes=12, eval_every=2)
+    child = subprocess.Popen([sys.executable, "-c", _CHILD, json.dumps(spec), str(tmp_path)], cwd=Path(__file__).parent.parent,
+                             stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    log = tmp_path / "train" / "episodes.csv"
+    deadline = time.monotonic() + 60
+    # Kill once episode 2 is logged: the checkpoint holds 2 episodes, the next one is due after episode 4.
+    while child.poll() is None and time.monotonic() < deadline and (not log.exists() or len(log.read_text().splitlines()) < 4):
+        time.sleep(0.01)
+    os.kill(child.pid, signal.SIGKILL)
+    child.wait()
+    checkpoint = json.loads((tmp_path / "train" / "checkpoint" / "policy.json").read_text())["episodes"]
+    logged = len(log.read_text().splitlines()) - 1
+    assert not (tmp_path / "meta.json").exists() and checkpoint < logged < 12  # episodes past the checkpoint are lost
+
+    summary = run_unit(spec, tmp_path)
+    assert summary["status"] == "done" and summary["resumed"]
+    tests, training = check_complete(tmp_path, spec)
+    assert list(training["episode_seed"]) == [1_000_000 + episode for episode in range(12)]
+
+
+def test_checkpoint_whose_snapshot_was_never_written_is_evaluated_in_its_place(tmp_path):
+    spec = tiny_unit_spec()
+
+    def crash_after_training(event, data):
+        if event == "trained":
+            raise Crash
+
+    with pytest.raises(Crash):
+        run_unit(spec, tmp_path, on_event=crash_after_training)
+    shutil.rmtree(tmp_path / "train" / "snapshots" / "episode_00004")  # as if killed between checkpoint and snapshot
+    events = []
+    run_unit(spec, tmp_path, on_event=lambda event, data: events.append((data["evaluation"], data["training_episodes"])))
+    assert events == [(0, 2), (1, 4)]
+    check_complete(tmp_path, spec)
+
+
+def test_a_failing_run_is_reported_and_the_others_finish_in_the_process_pool(tmp_path):
+    experiment = experiment_from_mapping(tiny_experiment_document(seeds=1))
+    (spec, broken), _ = experiment.units(tmp_path / "tiny")
+    broken.mkdir(parents=True)
+    (broken / "spec.json").write_text(json.dumps({**spec.to_dict(), "seed": 7}))  # someone else's run in that folder
+    report = run_experiment(experiment, tmp_path, workers=2, progress=False, video=False, log=lambda line: None)
+    assert [(f["configuration"], f["seed"]) for f in report.failures] == [("lidar", 0)]
+    assert "holds a different run" in report.failures[0]["error"] and (broken / "error.log").is_file()
+    assert [(s["configuration"], s["status"]) for s in report.summaries] == [("closest", "done")]
+    assert (tmp_path / "tiny" / "leaderboard.md").is_file()  # the report covers the runs that finished
