@@ -117,8 +117,9 @@ def test_human_observations_describe_the_simulator_state():
     env = parallel_env("room_furniture", **FAST)
     observations, _ = env.reset(seed=7)
     rng = np.random.default_rng(0)
-    for _ in range(5):
-        actions = {agent: env.action_space(agent).sample() for agent in env.agents}
+    for _ in range(5):  # seeded human actions and a robot standing still: the episode cannot end by chance
+        actions = {agent: rng.uniform(-1, 1, 2).astype(np.float32) for agent in env.agents}
+        actions["robot"] = np.zeros(2, dtype=np.float32)
         observations, *_ = env.step(actions)
     sim, obstacles = env.simulator, env.simulator.obstacles
     discs = zip(obstacles.disc_center, obstacles.disc_radius, strict=True)
