@@ -32,6 +32,7 @@ from typing import Any
 
 import yaml
 
+from crowdnav.scenario.loader import yaml_line
 from evaluation.protocol import Protocol, protocol_fields, quick
 from evaluation.runner import PRETRAINED, PROTOCOL_FIELDS, UnitSpec
 
@@ -183,19 +184,7 @@ class _Checker:
         self.label, self.root = label, root
 
     def line(self, dotted: str) -> int | None:
-        node, line = self.root, None
-        for part in filter(None, dotted.split(".")):
-            if isinstance(node, yaml.MappingNode):
-                match = [(key, value) for key, value in node.value if str(key.value) == part]
-                if not match:
-                    break
-                node, line = match[0][1], match[0][0].start_mark.line + 1
-            elif isinstance(node, yaml.SequenceNode) and part.isdigit() and int(part) < len(node.value):
-                node = node.value[int(part)]
-                line = node.start_mark.line + 1
-            else:
-                break
-        return line
+        return yaml_line(self.root, dotted)
 
     def fail(self, dotted: str, message: str) -> None:
         line = self.line(dotted)

@@ -157,11 +157,11 @@ def _with_line(issue: ScenarioIssue, root: yaml.Node | None, override_paths: set
         return ScenarioIssue(issue.path, f"{issue.message} (from override)", None)
     inner = sorted(p for p in override_paths if issue.path and p.startswith(issue.path + "."))
     suffix = f" (with override {', '.join(inner)})" if inner else ""
-    return ScenarioIssue(issue.path, issue.message + suffix, _line_of(root, issue.path))
+    return ScenarioIssue(issue.path, issue.message + suffix, yaml_line(root, issue.path))
 
 
-def _line_of(root: yaml.Node | None, dotted: str) -> int | None:
-    """1-based line of the deepest YAML node on the path ``dotted``."""
+def yaml_line(root: yaml.Node | None, dotted: str) -> int | None:
+    """1-based line of the deepest YAML node on the path ``dotted`` (``yaml.compose`` tree), or None without a tree."""
     if root is None:
         return None
     node, line = root, root.start_mark.line + 1
