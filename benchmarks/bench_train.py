@@ -12,9 +12,9 @@ CNN runs inside the extractor on every sampled batch), finetune and scratch; leo
 not change the speed).
 
 Two plain SB3 references calibrate the machine's load (SAC, MultiInputPolicy, CombinedExtractor,
-lidar+goal, 64-64 and 256-256 networks). The replay-buffer table gives the bytes SB3's
-DictReplayBuffer holds per transition (observation and next observation, action, reward,
-done, timeout) and the projection to 100,000 transitions.
+lidar+goal, 64-64 and 256-256 networks). The replay-buffer table gives the bytes the replay buffer holds per transition (observation
+and next observation, action, reward, done, timeout) and the projection to 100,000
+transitions, with the grids bit-packed (crowdnav's default) and as SB3 stores them (uint8).
 """
 
 from __future__ import annotations
@@ -53,11 +53,12 @@ def pretrained_encoder(folder: Path) -> Path:
     return pretrain_encoder(collect_grids("room_furniture", 200, seed=0), folder, epochs=1).encoder_path
 
 
-def build(algo: str, case: str, encoder_file: Path, warmup: int):
+def build(algo: str, case: str, encoder_file: Path, warmup: int, pack_grids: bool = True):
     modalities, mode, precompute = CASES[case]
     encoder = EncoderConfig(mode=mode, weights=None if mode == "scratch" else str(encoder_file), precompute=precompute)
     fields = {"learning_starts": warmup // 2} if algo in OFF_POLICY else {}
-    config = TrainConfig(scenario="open_space", modalities=modalities, algo=algo, encoder=encoder, **fields).validate()
+    config = TrainConfig(scenario="open_space", modalities=modalities, algo=algo, encoder=encoder, pack_grids=pack_grids,
+                         **fields).validate()
     frozen, saved = load_leog_weights(config)
     env = make_env(config, frozen if precomputes_leog(config) else None)
     return make_model(config, env, saved)
@@ -116,12 +117,12 @@ def main(argv: list[str] | None = None) -> int:
                 name = f"{algo} {case}"
                 results[name] = {"steps_per_second": statistics.median(rates)}
                 print(f"{name:45s} {statistics.median(rates):7.1f} steps/s  (runs: {', '.join(f'{r:.0f}' for r in rates)})", flush=True)
-        print("\n# replay buffer (SB3 DictReplayBuffer, SAC)", flush=True)
+        print("\n# replay buffer (SAC): bytes per transition, and GB for 100,000 transitions", flush=True)
+        print(f"{'case':45s} {'packed grids':>22s} {'uint8 grids':>22s}")
         for case in args.cases:
-            model = build("sac", case, encoder_file, args.warmup)
-            per = buffer_bytes(model)
-            results[f"buffer {case}"] = {"bytes_per_transition": per}
-            print(f"{case:45s} {per:7d} bytes/transition  -> {per * 100_000 / 1e9:.3f} GB for 100,000 transitions", flush=True)
+            packed, plain = (buffer_bytes(build("sac", case, encoder_file, args.warmup, pack)) for pack in (True, False))
+            results[f"buffer {case}"] = {"bytes_per_transition": packed, "bytes_per_transition_uint8": plain}
+            print(f"{case:45s} {packed:8d} B {packed * 1e5 / 1e9:7.3f} GB {plain:8d} B {plain * 1e5 / 1e9:7.3f} GB", flush=True)
     print(f"# load average at end {os.getloadavg()[0]:.2f}")
     if args.json is not None:
         args.json.write_text(json.dumps(results, indent=2) + "\n")
