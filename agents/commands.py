@@ -1,16 +1,14 @@
 """Command-line wiring of the agents: ``crowdnav train``, ``crowdnav collect-dataset``, ``crowdnav pretrain-encoder``.
 
 Each ``register_*`` adds one command to the ``crowdnav`` sub-parsers and sets its ``handler``
-(``(args) -> int``); :func:`register` adds all three. Heavy imports (torch, SB3) happen inside
-the handlers, so ``crowdnav --help`` stays fast. :func:`main` runs these commands alone
-(``python -m agents.commands ...``), the way ``crowdnav.cli.main`` runs them all.
+(``(args) -> int``); :func:`register` adds all three (``crowdnav.cli`` calls it). Heavy imports
+(torch, SB3) happen inside the handlers, so ``crowdnav --help`` stays fast.
 """
 
 from __future__ import annotations
 
 import argparse
 import sys
-from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
@@ -172,27 +170,3 @@ def pretrain_encoder_command(args: argparse.Namespace) -> int:
 
 
 # ------------------------------------------------------------------------------- entry
-
-
-def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(prog="crowdnav", description="crowdnav agent commands")
-    register(parser.add_subparsers(dest="command", metavar="COMMAND", required=True))
-    return parser
-
-
-def main(argv: Sequence[str] | None = None) -> int:
-    """Run one of these commands; exit status 0 ok, 1 failure, 2 usage error (as ``crowdnav.cli.main``)."""
-    parser = build_parser()
-    try:
-        args = parser.parse_args(argv)
-    except SystemExit as exit_:
-        return exit_.code if isinstance(exit_.code, int) else 0 if exit_.code is None else 2
-    try:
-        return args.handler(args)
-    except CliError as error:
-        print(f"crowdnav: error: {error}", file=sys.stderr)
-        return 1
-
-
-if __name__ == "__main__":
-    sys.exit(main())

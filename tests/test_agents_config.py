@@ -10,8 +10,8 @@ import yaml
 from agents_tiny import tiny_config
 
 from agents import ConfigError, TrainConfig, load_config, load_dataset
-from agents.commands import main
 from agents.config import describe_fields
+from crowdnav.cli import main
 
 
 def write(tmp_path, text: str):
