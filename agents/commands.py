@@ -73,7 +73,7 @@ def register_pretrain_encoder(groups: argparse._SubParsersAction) -> None:
     source.add_argument("--dataset", type=Path, metavar="FILE.npz", help="dataset from collect-dataset (or another simulator)")
     source.add_argument("--scenario", metavar="NAME_OR_PATH", help="collect grids online from this scenario (default: room_furniture)")
     parser.add_argument("--grids", type=int, default=5_000, metavar="N", help="grids to collect online (default: 5000)")
-    parser.add_argument("--epochs", type=int, default=20, metavar="N", help="training epochs (default: 20)")
+    parser.add_argument("--epochs", type=int, default=30, metavar="N", help="training epochs (default: 30)")
     parser.add_argument("--batch-size", type=int, default=32, metavar="N", help="minibatch size (default: 32)")
     parser.add_argument("--lr", type=float, default=3e-3, metavar="LR", help="Adam learning rate (default: 3e-3)")
     parser.add_argument("--latent", type=int, default=64, metavar="N", help="latent size (default: 64, as the agents' default)")

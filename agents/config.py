@@ -84,6 +84,7 @@ class TrainConfig:
     reward_scale: float = option(1.0, "Multiplies the reward the algorithm learns from (SAC's reward scale); logged returns stay in env units.")
     action_noise: float = option(0.1, "Std of the Gaussian exploration noise of TD3 and DDPG, in action units.")
     algo_kwargs: dict[str, Any] = option({}, "Further keyword arguments of the SB3 algorithm, e.g. {tau: 0.01}.")
+    policy_kwargs: dict[str, Any] = option({}, "Further SB3 policy_kwargs, e.g. {share_features_extractor: true} (the extractor is crowdnav's).")
     extractor: ExtractorConfig = field(default_factory=ExtractorConfig, metadata={"doc": "Sizes of the multi-modal encoder."})
     encoder: EncoderConfig = field(default_factory=EncoderConfig, metadata={"doc": "LEOG encoder mode and pre-trained weights."})
     checkpoint_every: int = option(50, "Save a resumable checkpoint (and a policy snapshot) every this many episodes.")

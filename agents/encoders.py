@@ -18,14 +18,26 @@ from torch import nn
 from agents.rbf import GaussianRBF
 
 
+class MLP(nn.Module):
+    """Linear layers, each followed by a ReLU (applied functionally: fewer modules for SB3 to walk
+    through on every ``set_training_mode``, which it calls twice per step)."""
+
+    def __init__(self, in_features: int, hidden: Sequence[int]):
+        super().__init__()
+        sizes = [in_features, *hidden]
+        self.layers = nn.ModuleList(nn.Linear(a, b) for a, b in zip(sizes, sizes[1:], strict=False))
+        self.out_features = sizes[-1]
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        for layer in self.layers:
+            x = torch.relu(layer(x))
+        return x
+
+
 def mlp(in_features: int, hidden: Sequence[int]) -> tuple[nn.Module, int]:
-    """Linear + ReLU layers; returns the module and its output size (``in_features`` when empty)."""
-    layers: list[nn.Module] = []
-    size = in_features
-    for width in hidden:
-        layers += [nn.Linear(size, width), nn.ReLU()]
-        size = width
-    return (nn.Sequential(*layers) if layers else nn.Identity()), size
+    """:class:`MLP` (identity when ``hidden`` is empty) and its output size."""
+    module = MLP(in_features, hidden)
+    return module, module.out_features
 
 
 def leog_architecture(grid_shape: Sequence[int], channels: Sequence[int], kernels: Sequence[int],
@@ -76,12 +88,17 @@ class LeogEncoder(nn.Module):
 
 
 class LeogDecoder(nn.Module):
-    """Latent -> occupancy logits (B, 1, H, W): the mirror image of a :class:`LeogEncoder`."""
+    """Latent -> occupancy logits (B, 1, H, W): the mirror image of a :class:`LeogEncoder`.
 
-    def __init__(self, architecture: dict[str, Any]):
+    ``width`` multiplies its channels: the decoder is dropped after pre-training, so it can be
+    wider than the encoder at no cost to the agent (a 4x4-stride-4 last layer with only 8
+    channels can draw few shapes per 4x4 block, too few for thin walls at any angle).
+    """
+
+    def __init__(self, architecture: dict[str, Any], width: int = 1):
         super().__init__()
         sizes = conv_sizes(architecture)
-        channels = [architecture["grid_shape"][0], *architecture["channels"]]
+        channels = [architecture["grid_shape"][0], *(c * width for c in architecture["channels"])]
         self.start_shape = (channels[-1], *sizes[-1])
         self.fc = nn.Linear(architecture["latent"], int(np.prod(self.start_shape)))
         layers: list[nn.Module] = []
@@ -95,6 +112,10 @@ class LeogDecoder(nn.Module):
             layers.append(nn.ConvTranspose2d(channels[index + 1], channels[index], kernel, stride, output_padding=padding))
             if index > 0:
                 layers.append(nn.ReLU())
+        # Zero last layer: the untrained decoder predicts p = 0.5 everywhere (loss ln 2 whatever
+        # the seed), and learning starts from that neutral guess.
+        nn.init.zeros_(layers[-1].weight)
+        nn.init.zeros_(layers[-1].bias)
         self.deconv = nn.Sequential(*layers)
 
     def forward(self, latent: torch.Tensor) -> torch.Tensor:
@@ -105,10 +126,10 @@ class LeogDecoder(nn.Module):
 class LeogAutoencoder(nn.Module):
     """Encoder + decoder; ``forward`` returns reconstruction logits (train with BCE-with-logits)."""
 
-    def __init__(self, architecture: dict[str, Any]):
+    def __init__(self, architecture: dict[str, Any], decoder_width: int = 1):
         super().__init__()
         self.encoder = LeogEncoder(architecture)
-        self.decoder = LeogDecoder(architecture)
+        self.decoder = LeogDecoder(architecture, decoder_width)
 
     def forward(self, grid: torch.Tensor) -> torch.Tensor:
         return self.decoder(self.encoder(grid))

@@ -5,7 +5,7 @@ from its latent, trained with binary cross-entropy on the cell logits. A held-ou
 the grids measures the reconstruction loss before training and after every epoch.
 
 Output folder: ``encoder.pt`` (``torch.load``-able dict: ``format``, ``architecture``,
-``encoder`` and ``decoder`` state dicts, ``metadata``), ``encoder.json`` (the same
+``encoder`` and ``decoder`` state dicts, ``metadata`` with the ``decoder_width``), ``encoder.json`` (the same
 architecture and metadata, with the per-epoch losses, readable without torch) and
 ``loss.png`` (train and held-out loss per epoch).
 """
@@ -61,7 +61,8 @@ def pretrain_encoder(
     kernels: Sequence[int] = (4, 3, 3),
     strides: Sequence[int] = (4, 2, 1),
     latent: int = 64,
-    epochs: int = 20,
+    decoder_width: int = 2,
+    epochs: int = 30,
     batch_size: int = 32,
     learning_rate: float = 3e-3,
     val_fraction: float = 0.1,
@@ -70,7 +71,8 @@ def pretrain_encoder(
 ) -> PretrainResult:
     """Train an autoencoder on ``dataset`` and save its encoder to ``out`` (if given).
 
-    The default architecture is :class:`agents.config.ExtractorConfig`'s, so the result plugs
+    ``decoder_width`` multiplies the decoder's channels (it is dropped after pre-training, so
+    its size costs the agent nothing). The default architecture is :class:`agents.config.ExtractorConfig`'s, so the result plugs
     into an agent with default settings (``encoder.mode: frozen`` or ``finetune``).
     """
     if isinstance(dataset, np.ndarray):
@@ -86,7 +88,7 @@ def pretrain_encoder(
     n_val = max(1, round(val_fraction * len(grids)))
     val, train = grids[order[:n_val]], grids[order[n_val:]]
     architecture = leog_architecture(dataset.grid_shape, channels, kernels, strides, latent)
-    model = LeogAutoencoder(architecture)
+    model = LeogAutoencoder(architecture, decoder_width)
     optimizer = torch.optim.Adam(model.parameters(), lr=learning_rate)
     loss_fn = nn.BCEWithLogitsLoss()
     val_loss = [_evaluate(model, val, loss_fn)]
@@ -113,7 +115,7 @@ def pretrain_encoder(
             epochs_iter.set_postfix(train=f"{train_loss[-1]:.4f}", held_out=f"{val_loss[-1]:.4f}")
     metadata = {
         "dataset": dataset.metadata, "grids": len(dataset), "held_out": n_val, "epochs": epochs, "batch_size": batch_size,
-        "learning_rate": learning_rate, "seed": seed, "occupied_fraction": float(grids.mean()),
+        "learning_rate": learning_rate, "seed": seed, "decoder_width": decoder_width, "occupied_fraction": float(grids.mean()),
         "held_out_cell_accuracy": _accuracy(model, val),
     }
     result = PretrainResult(None, architecture, train_loss, val_loss, time.perf_counter() - started, metadata)

@@ -39,9 +39,12 @@ class GaussianRBF(nn.Module):
         self.centres = centres
         self.keep_input = keep_input
         self.out_features = self.in_features * (centres + int(keep_input))
-        self.register_buffer("_low", torch.as_tensor(np.where(finite, low, -1.0), dtype=torch.float32))
-        self.register_buffer("_scale", torch.as_tensor(2.0 / span, dtype=torch.float32))
+        scale = 2.0 / span
+        # z = x * scale + offset, i.e. 2 (x - low) / (high - low) - 1
+        self.register_buffer("_scale", torch.as_tensor(scale, dtype=torch.float32))
+        self.register_buffer("_offset", torch.as_tensor(np.where(finite, -low * scale - 1.0, 0.0), dtype=torch.float32))
         self.register_buffer("_finite", torch.as_tensor(finite))
+        self._all_finite = bool(finite.all())
         grid = torch.linspace(-1.0, 1.0, centres) if centres > 1 else torch.zeros(centres)
         spacing = 2.0 / (centres - 1) if centres > 1 else 1.0
         centre = grid.repeat(self.in_features, 1)  # (d, K)
@@ -54,15 +57,15 @@ class GaussianRBF(nn.Module):
 
     def scaled(self, x: torch.Tensor) -> torch.Tensor:
         """Inputs mapped to [-1, 1] (affinely from finite bounds, tanh otherwise)."""
-        z = (x - self._low) * self._scale - 1.0
-        return torch.where(self._finite, z, torch.tanh(x))
+        z = torch.addcmul(self._offset, x, self._scale)
+        return z if self._all_finite else torch.where(self._finite, z, torch.tanh(x))
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:
         z = self.scaled(x)
         if self.centres == 0:
             return z
         distance = (z.unsqueeze(-1) - self.centre) * torch.exp(-self.log_width)  # (B, d, K) in widths
-        features = torch.exp(-0.5 * distance.square()).flatten(1)
+        features = torch.exp(distance.square().mul_(-0.5)).flatten(1)
         return torch.cat((z, features), dim=1) if self.keep_input else features
 
     def extra_repr(self) -> str:

@@ -5,7 +5,8 @@
 Each case builds a fresh agent with crowdnav's defaults (``agents.make_model``) on
 ``open_space``, runs ``--warmup`` steps (past ``learning_starts``, so every timed step
 includes its gradient update), then times ``--steps`` more; the median over ``--repeats``
-fresh agents is reported. Cases: lidar+goal; leog+goal with the encoder frozen (the grid
+fresh agents is reported, per wall-clock second and per CPU second of the process (the latter
+is less sensitive to other processes sharing the machine). Cases: lidar+goal; leog+goal with the encoder frozen (the grid
 encoded once per step by the observation wrapper), frozen without that wrapper (the frozen
 CNN runs inside the extractor on every sampled batch), finetune and scratch; leog+lidar+goal
 (scratch). The frozen and finetune encoders come from a quick pre-training (their weights do
@@ -71,12 +72,19 @@ def reference(net: list[int], warmup: int):
     return SAC("MultiInputPolicy", env, policy_kwargs={"net_arch": net}, learning_starts=warmup // 2, seed=0, device="cpu")
 
 
-def steps_per_second(make, steps: int, warmup: int) -> float:
+def steps_per_second(make, steps: int, warmup: int) -> tuple[float, float]:
+    """(env steps per wall-clock second, per CPU second of this process)."""
     model = make()
     model.learn(warmup)
-    start = time.perf_counter()
+    wall, cpu = time.perf_counter(), time.process_time()
     model.learn(steps, reset_num_timesteps=False)
-    return steps / (time.perf_counter() - start)
+    return steps / (time.perf_counter() - wall), steps / (time.process_time() - cpu)
+
+
+def report(name: str, runs: list[tuple[float, float]], results: dict) -> None:
+    wall, cpu = statistics.median(r[0] for r in runs), statistics.median(r[1] for r in runs)
+    results[name] = {"steps_per_second": wall, "steps_per_cpu_second": cpu}
+    print(f"{name:45s} {wall:7.1f} steps/s {cpu:7.1f} per CPU-s  (wall runs: {', '.join(f'{r[0]:.0f}' for r in runs)})", flush=True)
 
 
 def buffer_bytes(model) -> int:
@@ -106,17 +114,13 @@ def main(argv: list[str] | None = None) -> int:
         encoder_file = pretrained_encoder(Path(folder))
         if not args.no_reference:
             for net in ([64, 64], [256, 256]):
-                name = f"SB3 reference SAC {net[0]}-{net[1]}, lidar+goal"
-                rates = [steps_per_second(lambda net=net: reference(net, args.warmup), args.steps, args.warmup) for _ in range(args.repeats)]
-                results[name] = {"steps_per_second": statistics.median(rates)}
-                print(f"{name:45s} {statistics.median(rates):7.1f} steps/s  (runs: {', '.join(f'{r:.0f}' for r in rates)})", flush=True)
+                runs = [steps_per_second(lambda net=net: reference(net, args.warmup), args.steps, args.warmup) for _ in range(args.repeats)]
+                report(f"SB3 reference SAC {net[0]}-{net[1]}, lidar+goal", runs, results)
         for algo in args.algos:
             for case in args.cases:
-                rates = [steps_per_second(lambda a=algo, c=case: build(a, c, encoder_file, args.warmup), args.steps, args.warmup)
-                         for _ in range(args.repeats)]
-                name = f"{algo} {case}"
-                results[name] = {"steps_per_second": statistics.median(rates)}
-                print(f"{name:45s} {statistics.median(rates):7.1f} steps/s  (runs: {', '.join(f'{r:.0f}' for r in rates)})", flush=True)
+                runs = [steps_per_second(lambda a=algo, c=case: build(a, c, encoder_file, args.warmup), args.steps, args.warmup)
+                        for _ in range(args.repeats)]
+                report(f"{algo} {case}", runs, results)
         print("\n# replay buffer (SAC): bytes per transition, and GB for 100,000 transitions", flush=True)
         print(f"{'case':45s} {'packed grids':>22s} {'uint8 grids':>22s}")
         for case in args.cases:

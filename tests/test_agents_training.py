@@ -65,3 +65,31 @@ def test_packed_replay_buffer_gives_back_the_grids_at_one_bit_per_cell(tmp_path)
     np.testing.assert_array_equal(samples.observations["leog"].numpy(), expected)
     np.testing.assert_array_equal(samples.next_observations["leog"].numpy(), np.concatenate([o["leog"] for o in observations[1:]]))
     np.testing.assert_array_equal(samples.observations["goal"].numpy(), np.concatenate([o["goal"] for o in observations[:5]]))
+
+
+def test_policy_and_algorithm_options_reach_sb3_and_clashes_are_errors(tmp_path):
+    from agents import ConfigError
+
+    config = tiny_config(tmp_path, modalities=["leog", "goal"], episodes=1, max_steps=20,
+                         policy_kwargs={"share_features_extractor": True}, algo_kwargs={"train_freq": 4, "tau": 0.02})
+    model = train(config).model
+    assert model.critic.features_extractor is model.actor.features_extractor and model.tau == 0.02
+    with pytest.raises(ConfigError, match="net_arch are set by crowdnav"):
+        train(tiny_config(tmp_path / "a", policy_kwargs={"net_arch": [8]}))
+    with pytest.raises(ConfigError, match="algo_kwargs / policy_kwargs for sac: .*unexpected keyword argument 'taus'"):
+        train(tiny_config(tmp_path / "b", algo_kwargs={"taus": 1}))
+
+
+def test_progress_bar_and_tensorboard_option(tmp_path, capsys):
+    import importlib.util
+
+    from agents import ConfigError
+
+    train(tiny_config(tmp_path, episodes=2, max_steps=10, progress=True))
+    assert "2/2" in capsys.readouterr().err  # tqdm's bar on stderr: episodes done / total
+    if importlib.util.find_spec("tensorboard") is None:
+        with pytest.raises(ConfigError, match="pip install tensorboard"):
+            train(tiny_config(tmp_path / "tb", episodes=1, tensorboard=True))
+    else:
+        train(tiny_config(tmp_path / "tb", episodes=1, max_steps=10, tensorboard=True))
+        assert any((tmp_path / "tb" / "tensorboard").iterdir())
