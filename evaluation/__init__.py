@@ -5,7 +5,9 @@ learning curves and a leaderboard.
 * experiments (evaluation.experiment): YAML lists of configurations x seeds, shipped in
   ``evaluation/experiments/`` (:func:`load_experiment`);
 * :func:`run_unit` (evaluation.runner): one (configuration, seed) run, idempotent and resumable;
-  :func:`run_experiment` (evaluation.benchmark): all of them in a process pool, then the report;
+  :func:`run_experiment` (evaluation.benchmark): all of them through an executor, then the report;
+* :func:`make_executor` (evaluation.executors): ``serial``, ``local`` (process pool) or ``ray``
+  (evaluation.ray_executor, needs ``crowdnav[ray]``);
 * :mod:`evaluation.metrics`: per-episode metrics from a trajectory (pure functions);
 * :func:`plot_curves`, :func:`write_leaderboard`, :func:`load_results`: any results folder.
 
@@ -28,6 +30,7 @@ _EXPORTS = {
     "shipped_experiments": "evaluation.experiment",
     "UnitSpec": "evaluation.runner",
     "run_unit": "evaluation.runner",
+    "make_executor": "evaluation.executors",
     "run_experiment": "evaluation.benchmark",
     "BenchmarkReport": "evaluation.benchmark",
     "write_report": "evaluation.benchmark",

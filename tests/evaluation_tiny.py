@@ -52,3 +52,11 @@ def tiny_results(tmp_path_factory) -> Path:
         assert not report.failures, report.failures
         _RESULTS["folder"] = report.folder
     return _RESULTS["folder"]
+
+
+def write_tiny_experiment(path: Path, name: str = "tiny", **protocol: Any) -> Path:
+    """The tiny experiment as a YAML file at ``path`` (for the command line)."""
+    import yaml
+
+    path.write_text(yaml.safe_dump(tiny_experiment_document(name, **protocol), sort_keys=False), encoding="utf-8")
+    return path

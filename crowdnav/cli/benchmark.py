@@ -23,8 +23,22 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                              "paradigms); default: the small default experiment")
     parser.add_argument("--out", default="results", metavar="DIR", help="results folder (default: results/)")
     parser.add_argument("--seeds", type=int, metavar="N", help="runs per configuration (default: the experiment's)")
-    parser.add_argument("--workers", type=int, default=min(2, os.cpu_count() or 1), metavar="N",
-                        help="parallel runs, one process and one torch thread each (default: min(2, cores))")
+    parser.add_argument("--workers", type=int, metavar="N",
+                        help="parallel runs, one process (or Ray task) and one torch thread each (default: min(2, cores); "
+                             "with --executor ray --address: as many as the cluster's CPUs allow)")
+    parser.add_argument("--executor", choices=("local", "serial", "ray"), default="local",
+                        help="where the runs happen: local (default): a pool of --workers processes; serial: one after the "
+                             "other in this process (debugging); ray: one Ray task per run (pip install 'crowdnav[ray]'; "
+                             "see docs/cluster.md)")
+    parser.add_argument("--address", metavar="HOST:PORT",
+                        help="ray: join the Ray cluster whose head is at HOST:PORT (default: start a local Ray)")
+    parser.add_argument("--storage", metavar="DIR",
+                        help="ray: where the tasks run and keep their checkpoints for resuming, a folder every node sees "
+                             "(default: the --out folder; a node that does not see it uses its temp folder)")
+    parser.add_argument("--gpus-per-run", type=float, metavar="G",
+                        help="ray: GPUs each run reserves, fractions allowed (default: 0)")
+    parser.add_argument("--retries", type=int, metavar="N",
+                        help="ray: times a run whose worker died is started again (default: 3)")
     parser.add_argument("--quick", action="store_true",
                         help="smoke run: 20 training episodes, evaluations every 10 on 5 test episodes, 1 seed; "
                              "written to OUT/<experiment>-quick")
@@ -52,11 +66,26 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 
 def benchmark(args: argparse.Namespace) -> int:
+    from evaluation.executors import ExecutorError, make_executor
     from evaluation.experiment import ExperimentError, load_experiment
     from evaluation.storage import ResultsError
 
-    if args.workers < 1:
-        raise CliError(f"--workers must be at least 1, got {args.workers}")
+    for option in ("workers", "retries", "gpus_per_run"):
+        value, least = getattr(args, option), 0 if option != "workers" else 1
+        if value is not None and value < least:
+            raise CliError(f"--{option.replace('_', '-')} must be at least {least}, got {value:g}")
+    ray_options = [f"--{name.replace('_', '-')}" for name in ("address", "storage", "gpus_per_run", "retries")
+                   if getattr(args, name) is not None]
+    if ray_options and args.executor != "ray":
+        raise CliError(f"{', '.join(ray_options)}: option(s) of --executor ray, not of --executor {args.executor}")
+    workers = args.workers
+    if workers is None and not (args.executor == "ray" and args.address):
+        workers = min(2, os.cpu_count() or 1)
+    try:
+        executor = make_executor(args.executor, workers=workers, address=args.address, storage=args.storage,
+                                 gpus_per_run=args.gpus_per_run, retries=args.retries)
+    except ExecutorError as error:
+        raise CliError(str(error)) from None
     if args.seeds is not None and args.seeds < 1:
         raise CliError(f"--seeds must be at least 1, got {args.seeds}")
     try:
@@ -73,18 +102,17 @@ def benchmark(args: argparse.Namespace) -> int:
     protocol = experiment.protocol
     print(f"experiment {experiment.name}: {len(experiment.configurations)} configurations x {protocol.seeds} seeds, "
           f"{protocol.train_episodes} training episodes, {protocol.evaluations} evaluations of {protocol.test_episodes} "
-          f"test episodes, {args.workers} worker(s)", flush=True)
+          f"test episodes; executor {executor.describe()}", flush=True)
     try:
-        report = run_experiment(experiment, args.out, workers=args.workers, progress=not args.no_progress,
+        report = run_experiment(experiment, args.out, executor=executor, progress=not args.no_progress,
                                 video=not args.no_video, log=lambda line: print(line, flush=True))
-    except (ResultsError, ExperimentError) as error:
+    except (ResultsError, ExperimentError, ExecutorError) as error:
         raise CliError(str(error)) from None
     except KeyboardInterrupt:
         print(f"crowdnav: interrupted; run the same command again to resume from {Path(args.out) / experiment.name}", file=sys.stderr)
         return 130
-    skipped = sum(summary["status"] == "skipped" for summary in report.summaries)
-    print(f"{len(report.summaries)} runs finished ({skipped} already done), {len(report.failures)} failed, "
-          f"in {report.seconds:.0f} s")
+    for line in report.summary_lines():
+        print(line)
     for path in report.outputs:
         print(f"wrote {path}")
     print(f"results: {report.folder}")
