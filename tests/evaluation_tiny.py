@@ -60,3 +60,16 @@ def write_tiny_experiment(path: Path, name: str = "tiny", **protocol: Any) -> Pa
 
     path.write_text(yaml.safe_dump(tiny_experiment_document(name, **protocol), sort_keys=False), encoding="utf-8")
     return path
+
+
+def tiny_frozen_encoder_document() -> dict[str, Any]:
+    """A one-run experiment whose agent uses a tiny pre-trained frozen LEOG encoder (trained by the experiment)."""
+    document = tiny_experiment_document(train_episodes=2, eval_every=2, test_episodes=2, seeds=1)
+    document["defaults"].update(
+        scenario="room_furniture", sensors={"leog": {"size": 3.0, "resolution": 0.1}},
+        extractor={"leog_channels": [4, 8], "leog_kernels": [4, 3], "leog_strides": [4, 2], "leog_latent": 8, "rbf_centres": 4,
+                   "lowdim_hidden": [8]},
+    )
+    document["pretrain_encoder"] = {"scenario": "room_furniture", "grids": 32, "epochs": 1}
+    document["configurations"] = [{"name": "frozen", "train": {"modalities": ["leog", "goal"], "encoder": {"mode": "frozen"}}}]
+    return document

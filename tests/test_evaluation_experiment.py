@@ -6,7 +6,7 @@ import copy
 
 import pytest
 import yaml
-from evaluation_tiny import tiny_experiment_document
+from evaluation_tiny import tiny_experiment_document, tiny_frozen_encoder_document
 
 from crowdnav.cli import main
 from evaluation.benchmark import claim_folder
@@ -160,14 +160,7 @@ def test_plot_and_leaderboard_of_a_missing_or_empty_folder_are_one_line_errors(t
 def test_pretrained_encoder_is_trained_once_per_experiment_and_given_to_frozen_runs(tmp_path):
     from evaluation.benchmark import run_experiment
 
-    document = tiny_experiment_document(train_episodes=2, eval_every=2, test_episodes=2, seeds=1)
-    document["defaults"].update(
-        scenario="room_furniture", sensors={"leog": {"size": 3.0, "resolution": 0.1}},
-        extractor={"leog_channels": [4, 8], "leog_kernels": [4, 3], "leog_strides": [4, 2], "leog_latent": 8, "rbf_centres": 4,
-                   "lowdim_hidden": [8]},
-    )
-    document["pretrain_encoder"] = {"scenario": "room_furniture", "grids": 32, "epochs": 1}
-    document["configurations"] = [{"name": "frozen", "train": {"modalities": ["leog", "goal"], "encoder": {"mode": "frozen"}}}]
+    document = tiny_frozen_encoder_document()
     experiment = experiment_from_mapping(document)
     report = run_experiment(experiment, tmp_path, workers=1, progress=False, video=False, log=lambda line: None)
     assert not report.failures

@@ -19,7 +19,7 @@ from pathlib import Path
 
 import pandas as pd
 import pytest
-from evaluation_tiny import tiny_experiment_document, write_tiny_experiment
+from evaluation_tiny import tiny_experiment_document, tiny_frozen_encoder_document, write_tiny_experiment
 from test_evaluation_resume import check_complete
 
 from crowdnav.cli import main
@@ -149,14 +149,7 @@ def test_ray_on_a_running_cluster_gives_row_for_row_the_local_executors_results(
 
 
 def test_pretrained_encoder_reaches_runs_that_work_outside_the_results_folder(cluster, tmp_path):
-    document = tiny_experiment_document(train_episodes=2, eval_every=2, test_episodes=2, seeds=1)
-    document["defaults"].update(
-        scenario="room_furniture", sensors={"leog": {"size": 3.0, "resolution": 0.1}},
-        extractor={"leog_channels": [4, 8], "leog_kernels": [4, 3], "leog_strides": [4, 2], "leog_latent": 8, "rbf_centres": 4,
-                   "lowdim_hidden": [8]},
-    )
-    document["pretrain_encoder"] = {"scenario": "room_furniture", "grids": 32, "epochs": 1}
-    document["configurations"] = [{"name": "frozen", "train": {"modalities": ["leog", "goal"], "encoder": {"mode": "frozen"}}}]
+    document = tiny_frozen_encoder_document()
     experiment = experiment_from_mapping(document)
     storage = tmp_path / "storage"
     report = run_experiment(experiment, tmp_path / "results", progress=False, video=False, log=lambda line: None,
