@@ -22,11 +22,11 @@ import time
 from pathlib import Path
 
 import numpy as np
-import yaml
 
 from agents import load_policy, train
 from agents.checkpoint import checkpoint_folder
 from agents.config import load_config
+from crowdnav.cli.common import CliError, parse_overrides
 
 
 def evaluate(policy_path: Path, seeds: list[int]) -> dict[str, float]:
@@ -44,22 +44,11 @@ def evaluate(policy_path: Path, seeds: list[int]) -> dict[str, float]:
     return {name: outcomes.count(name) / len(outcomes) for name in ("success", "collision", "truncated")}
 
 
-def parse_settings(pairs: list[str]) -> dict:
-    """``KEY=VALUE`` strings (VALUE read as YAML) as dotted config overrides."""
-    settings = {}
-    for pair in pairs:
-        key, sep, value = pair.partition("=")
-        if not sep:
-            raise SystemExit(f"--set expects KEY=VALUE, got {pair!r}")
-        settings[key] = yaml.safe_load(value)
-    return settings
-
-
 def run_seed(seed: int, args: argparse.Namespace, results: dict, save) -> None:
     out = args.out / f"seed_{seed}"
     config = load_config(None, {"scenario": args.scenario, "modalities": ["lidar", "goal"], "algo": "sac", "episodes": args.episodes,
                                 "seed": seed, "out": str(out), "checkpoint_every": args.eval_every, "progress": False,
-                                "save_replay_buffer": True, **parse_settings(args.set)})
+                                "save_replay_buffer": True, **args.settings})
     done = False
     try:
         done = int(json.loads((checkpoint_folder(out) / "policy.json").read_text())["episodes"]) >= args.episodes
@@ -96,6 +85,10 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
                         help="training-config override (dotted key, YAML value), e.g. --set overrides={humans.count: 5}; repeatable")
     args = parser.parse_args(argv)
+    try:
+        args.settings = parse_overrides(args.set)
+    except CliError as error:
+        parser.error(str(error))
     args.out.mkdir(parents=True, exist_ok=True)
     results_file = args.out / "results.json"
     results = json.loads(results_file.read_text()) if results_file.exists() else {}

@@ -18,8 +18,8 @@ import argparse
 import sys
 
 import numpy as np
-import yaml
 
+from crowdnav.cli.common import CliError, add_override_option, parse_overrides
 from crowdnav.envs import CrowdNavEnv
 from crowdnav.envs.reward import REWARD_TERMS
 from crowdnav.policies import SocialForceRobot, StraightToGoal
@@ -59,15 +59,12 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--scenarios", nargs="+", default=library_names())
     parser.add_argument("--episodes", type=int, default=200)
-    parser.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
-                        help="dotted scenario override (YAML value), e.g. humans.count=5; repeatable")
+    add_override_option(parser)
     args = parser.parse_args(argv)
-    overrides = {}
-    for pair in args.set:
-        key, sep, value = pair.partition("=")
-        if not sep:
-            parser.error(f"--set expects KEY=VALUE, got {pair!r}")
-        overrides[key] = yaml.safe_load(value)
+    try:
+        overrides = parse_overrides(args.overrides)
+    except CliError as error:
+        parser.error(str(error))
     print(f"{args.episodes} episodes (seeds 0..{args.episodes - 1}) per scenario and policy" + (f"; overrides {overrides}" if overrides else ""))
     print(f"{'scenario':24s} {'policy':13s} {'success':>8s} {'collision':>10s} {'truncated':>10s} {'return':>8s} {'length':>7s}  "
           + " ".join(f"{name:>12s}" for name in REWARD_TERMS))

@@ -24,7 +24,7 @@ from typing import Any
 
 import yaml
 
-from evaluation.executors import Executor, Job, make_executor
+from evaluation.executors import Executor, Job, make_executor, run_name
 from evaluation.experiment import Experiment
 from evaluation.progress import ProgressBar
 from evaluation.storage import (
@@ -69,10 +69,6 @@ class BenchmarkReport:
             if outcomes:
                 lines.append(f"{title}: " + ", ".join(f"{run_name(o)}{detail(o)}" for o in sorted(outcomes, key=run_name)))
         return lines
-
-
-def run_name(outcome: dict[str, Any]) -> str:
-    return f"{outcome['configuration']}/seed_{outcome['seed']}"
 
 
 def run_experiment(experiment: Experiment, results: str | Path = "results", *, workers: int = 1, executor: Executor | None = None,

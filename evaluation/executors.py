@@ -48,12 +48,16 @@ class Job:
 
     @property
     def name(self) -> str:
-        """``configuration/seed_N``, as runs are named in messages."""
-        return f"{self.spec['configuration']}/seed_{self.spec['seed']}"
+        return run_name(self.spec)
 
     @property
     def protocol(self) -> Protocol:
         return Protocol(**self.spec["protocol"])
+
+
+def run_name(record: dict[str, Any]) -> str:
+    """``configuration/seed_N``, as runs are named in messages (``record``: a run's spec or outcome)."""
+    return f"{record['configuration']}/seed_{record['seed']}"
 
 
 class Executor:
@@ -180,7 +184,7 @@ def run_guarded(spec: dict[str, Any], out_dir: str, verbose: bool = False) -> di
 
 def describe_evaluation(spec: dict[str, Any], data: dict[str, Any]) -> str:
     """The line a verbose benchmark prints after an evaluation (run_unit's ``evaluated`` event)."""
-    return (f"run {spec['configuration']}/seed_{spec['seed']}: evaluation {data['evaluation']} after "
+    return (f"run {run_name(spec)}: evaluation {data['evaluation']} after "
             f"{data['training_episodes']} episodes: success {data['success']:.0%}, collision {data['collision']:.0%}, "
             f"truncated {data['truncated']:.0%}")
 

@@ -44,6 +44,7 @@ from evaluation.executors import (
     write_error_log,
 )
 from evaluation.progress import episodes_on_disk, run_episodes
+from evaluation.protocol import Protocol
 from evaluation.runner import PRETRAINED, pretrained_encoder_path, run_unit
 from evaluation.storage import META_FILE, SPEC_FILE, TRAIN_DIR, ResultsError, read_json
 from evaluation.transfer import claim_storage, pack_folder, remove_work_folder, unpack_folder, work_folder
@@ -260,7 +261,8 @@ def _run_task(spec: dict[str, Any], out_dir: str, storage: str, storage_id: str,
     import torch
 
     torch.set_num_threads(1)
-    name = f"{spec['configuration']}/seed_{spec['seed']}"
+    job = Job(spec, out_dir)
+    name = job.name
     try:
         attempt = ray.get(board.started.remote(name))
     except ray.exceptions.RayError:  # the board is lost: the run matters more than its attempt count
@@ -269,7 +271,7 @@ def _run_task(spec: dict[str, Any], out_dir: str, storage: str, storage_id: str,
     work_dir, shared = work_folder(storage, storage_id, relative)
     if encoder is not None:
         unpack_folder(encoder, pretrained_encoder_path(work_dir.parent.parent).parent, "encoder.pt")
-    reporter = _ProgressReporter(board, name, work_dir, spec)
+    reporter = _ProgressReporter(board, name, work_dir, job.protocol)
 
     def on_event(event: str, data: dict[str, Any]) -> None:
         if event == "evaluated":
@@ -297,10 +299,8 @@ def _run_task(spec: dict[str, Any], out_dir: str, storage: str, storage_id: str,
 class _ProgressReporter:
     """A thread of the task that sends the run's episode count to the board whenever it changes."""
 
-    def __init__(self, board: Any, name: str, folder: Path, spec: dict[str, Any]):
-        from evaluation.protocol import Protocol
-
-        self.board, self.name, self.folder, self.protocol = board, name, folder, Protocol(**spec["protocol"])
+    def __init__(self, board: Any, name: str, folder: Path, protocol: Protocol):
+        self.board, self.name, self.folder, self.protocol = board, name, folder, protocol
         self.last = -1
         self._stop = threading.Event()
         self._thread = threading.Thread(target=self._loop, daemon=True)
