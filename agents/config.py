@@ -81,6 +81,7 @@ class TrainConfig:
     buffer_size: int | None = option(None, "Replay buffer capacity in transitions (off-policy only; None: default).")
     learning_starts: int | None = option(None, "Steps of random actions before gradient updates start (off-policy only; None: default).")
     gamma: float | None = option(None, "Discount factor (None: per-algorithm default).")
+    n_step_returns: int | None = option(None, "Off-policy: rewards summed per replay sample before bootstrapping (None: per-algorithm default).")
     reward_scale: float = option(1.0, "Multiplies the reward the algorithm learns from (SAC's reward scale); logged returns stay in env units.")
     action_noise: float = option(0.1, "Std of the Gaussian exploration noise of TD3 and DDPG, in action units.")
     algo_kwargs: dict[str, Any] = option({}, "Further keyword arguments of the SB3 algorithm, e.g. {tau: 0.01}.")
@@ -101,7 +102,7 @@ class TrainConfig:
         for name in ("episodes", "checkpoint_every", "torch_threads"):
             if getattr(self, name) < 1:
                 problems.append(f"{name}: expected an integer >= 1, got {getattr(self, name)}")
-        for name in ("batch_size", "buffer_size"):
+        for name in ("batch_size", "buffer_size", "n_step_returns"):
             value = getattr(self, name)
             if value is not None and value < 1:
                 problems.append(f"{name}: expected an integer >= 1, got {value}")

@@ -20,7 +20,7 @@ from stable_baselines3.common.noise import NormalActionNoise
 from agents.config import ConfigError, TrainConfig
 from agents.encoders import LeogEncoder
 from agents.extractor import MultiModalExtractor
-from agents.replay_buffer import PackedGridReplayBuffer, packable_keys
+from agents.replay_buffer import PackedGridReplayBuffer
 from agents.wrappers import EpisodeSeeds, LeogLatentWrapper
 
 ALGORITHMS: dict[str, type[BaseAlgorithm]] = {"sac": SAC, "td3": TD3, "ddpg": DDPG, "a2c": A2C, "ppo": PPO}
@@ -29,9 +29,12 @@ ALGORITHMS: dict[str, type[BaseAlgorithm]] = {"sac": SAC, "td3": TD3, "ddpg": DD
 OFF_POLICY = ("sac", "td3", "ddpg")
 
 ALGORITHM_DEFAULTS: dict[str, dict[str, Any]] = {
-    "sac": {"net_arch": [64, 64], "learning_rate": 3e-4, "batch_size": 256, "buffer_size": 100_000, "learning_starts": 1_000, "gamma": 0.99},
-    "td3": {"net_arch": [64, 64], "learning_rate": 3e-4, "batch_size": 256, "buffer_size": 100_000, "learning_starts": 1_000, "gamma": 0.99},
-    "ddpg": {"net_arch": [64, 64], "learning_rate": 3e-4, "batch_size": 256, "buffer_size": 100_000, "learning_starts": 1_000, "gamma": 0.99},
+    "sac": {"net_arch": [64, 64], "learning_rate": 3e-4, "batch_size": 256, "buffer_size": 100_000, "learning_starts": 1_000, "gamma": 0.99,
+             "n_step_returns": 1},
+    "td3": {"net_arch": [64, 64], "learning_rate": 3e-4, "batch_size": 256, "buffer_size": 100_000, "learning_starts": 1_000, "gamma": 0.99,
+             "n_step_returns": 1},
+    "ddpg": {"net_arch": [64, 64], "learning_rate": 3e-4, "batch_size": 256, "buffer_size": 100_000, "learning_starts": 1_000, "gamma": 0.99,
+             "n_step_returns": 1},
     "a2c": {"net_arch": [64, 64], "learning_rate": 7e-4, "gamma": 0.99},
     "ppo": {"net_arch": [64, 64], "learning_rate": 3e-4, "batch_size": 64, "gamma": 0.99},
 }
@@ -45,7 +48,7 @@ def hyperparameters(config: TrainConfig) -> dict[str, Any]:
     for name, default in defaults.items():
         value = getattr(config, name)
         chosen[name] = default if value is None else value
-    for name in ("batch_size", "buffer_size", "learning_starts"):
+    for name in ("batch_size", "buffer_size", "learning_starts", "n_step_returns"):
         if getattr(config, name) is not None and name not in defaults:
             raise ConfigError(f"{name} does not apply to {config.algo}; remove it (or pass algorithm options in algo_kwargs)")
     return chosen
@@ -128,16 +131,18 @@ def make_model(config: TrainConfig, env: gym.Env, saved_encoder: dict[str, Any] 
                tensorboard_log: str | None = None) -> BaseAlgorithm:
     """A new SB3 model for ``config`` on ``env``, with pre-trained LEOG weights loaded if any."""
     hyper = hyperparameters(config)
-    kwargs: dict[str, Any] = {k: v for k, v in hyper.items() if k != "net_arch"}
+    kwargs: dict[str, Any] = {k: v for k, v in hyper.items() if k not in ("net_arch", "n_step_returns")}
     if config.algo in ("td3", "ddpg") and config.action_noise > 0:
         dims = env.action_space.shape[0]
         kwargs["action_noise"] = NormalActionNoise(np.zeros(dims), np.full(dims, config.action_noise))
     clash = sorted(set(config.algo_kwargs) & {"policy", "env", "policy_kwargs", "seed", "device", "tensorboard_log"})
     if clash:
         raise ConfigError(f"algo_kwargs: {', '.join(clash)} are set by crowdnav itself; use the config's own fields")
-    if config.algo in OFF_POLICY and config.pack_grids and packable_keys(env.observation_space, ["leog"]):
+    if config.algo in OFF_POLICY:
+        # crowdnav's buffer: bit-packed grids, and n-step returns for Dict observations (SB3's own refuses those)
         kwargs["replay_buffer_class"] = PackedGridReplayBuffer
-        kwargs["replay_buffer_kwargs"] = {"packed_keys": ["leog"]}
+        kwargs["replay_buffer_kwargs"] = {"packed_keys": ["leog"] if config.pack_grids else [], "n_steps": hyper["n_step_returns"],
+                                          "gamma": hyper["gamma"]}
     kwargs.update(config.algo_kwargs)
     architecture = saved_encoder["architecture"] if saved_encoder is not None else None
     if architecture is not None and not precomputes_leog(config):

@@ -93,3 +93,13 @@ def test_progress_bar_and_tensorboard_option(tmp_path, capsys):
     else:
         train(tiny_config(tmp_path / "tb", episodes=1, max_steps=10, tensorboard=True))
         assert any((tmp_path / "tb" / "tensorboard").iterdir())
+
+
+def test_n_step_returns_reach_the_replay_buffer_and_are_refused_for_on_policy_algorithms(tmp_path):
+    from agents import ConfigError
+
+    model = train(tiny_config(tmp_path, episodes=1, max_steps=20, n_step_returns=5, gamma=0.95)).model
+    assert (model.replay_buffer.n_steps, model.replay_buffer.gamma) == (5, 0.95)
+    assert model.replay_buffer.sample(4).discounts is not None  # SAC bootstraps with gamma ** k, not gamma
+    with pytest.raises(ConfigError, match="n_step_returns does not apply to a2c"):
+        train(tiny_config(tmp_path / "a2c", algo="a2c", n_step_returns=5))
