@@ -13,6 +13,35 @@ from typing import TextIO
 from stable_baselines3.common.callbacks import BaseCallback
 
 EPISODE_LOG_HEADER = "episode,seed,outcome,return,length,timesteps,seconds"
+DISCARDED_LOG_SUFFIX = ".discarded"
+"""``episodes.csv.discarded`` keeps the rows of episodes that a resume trained again."""
+
+
+def set_aside_episodes_from(log_path: Path, first_episode: int) -> int:
+    """Move the rows of episodes >= ``first_episode`` out of ``log_path``; returns how many moved.
+
+    A resumed run restarts from its last checkpoint, so the episodes logged after it belong to
+    a training history that was thrown away and are trained again. Their rows go to
+    ``<log>.discarded`` (appended, nothing is deleted) and the log keeps one row per episode.
+    """
+    lines = log_path.read_text(encoding="utf-8").splitlines()
+    if not lines:
+        return 0
+    header, rows = lines[0], lines[1:]
+    kept = [row for row in rows if int(row.split(",", 1)[0]) < first_episode]
+    moved = [row for row in rows if int(row.split(",", 1)[0]) >= first_episode]
+    if not moved:
+        return 0
+    discarded = log_path.with_name(log_path.name + DISCARDED_LOG_SUFFIX)
+    with open(discarded, "a", encoding="utf-8") as file:
+        if file.tell() == 0:
+            file.write(header + "\n")
+        file.write("\n".join(moved) + "\n")
+    # written beside the log and renamed over it, so a crash leaves the old or the new log whole
+    temporary = log_path.with_name(log_path.name + ".tmp")
+    temporary.write_text("\n".join([header, *kept]) + "\n", encoding="utf-8")
+    temporary.replace(log_path)
+    return len(moved)
 
 
 @dataclass
@@ -72,6 +101,8 @@ class EpisodeCallback(BaseCallback):
         self._start_steps = self.model.num_timesteps
         if self._log_path is not None:
             new = not self._log_path.exists()
+            if not new:
+                set_aside_episodes_from(self._log_path, self.done)
             self._log = open(self._log_path, "a", encoding="utf-8")  # noqa: SIM115 (closed in _on_training_end)
             if new:
                 self._log.write(EPISODE_LOG_HEADER + "\n")

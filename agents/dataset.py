@@ -95,8 +95,10 @@ def collect_grids(
     The random policy draws a uniform action in [-1, 1]^2 and holds it for a geometric number
     of steps (mean ``hold``), so the robot travels across the room instead of jittering in
     place; episodes that end (collision, goal, time limit) are restarted. Everything is seeded
-    from ``seed`` (episode ``i`` uses seed ``seed * 1_000_003 + i``).
+    from ``seed``: episode ``i`` uses seed ``agents.wrappers.dataset_seed(seed, i)``, never a
+    test or training episode's seed.
     """
+    from agents.wrappers import dataset_seed
     from crowdnav import __version__
     from crowdnav.envs import CrowdNavEnv
 
@@ -107,7 +109,7 @@ def collect_grids(
     grids = np.empty((count, *shape), dtype=np.uint8)
     rng = np.random.default_rng(seed)
     episode, kept, step = 0, 0, 0
-    observation, _ = env.reset(seed=seed * 1_000_003)
+    observation, _ = env.reset(seed=dataset_seed(seed, 0))
     action = rng.uniform(-1.0, 1.0, 2).astype(np.float32)
     while kept < count:
         if step % every == 0:
@@ -119,7 +121,7 @@ def collect_grids(
         step += 1
         if terminated or truncated:
             episode += 1
-            observation, _ = env.reset(seed=seed * 1_000_003 + episode)
+            observation, _ = env.reset(seed=dataset_seed(seed, episode))
     leog = env.scenario.sensors.leog
     metadata = {
         "scenario": str(scenario), "seed": seed, "every": every, "hold": hold, "episodes": episode + 1, "steps": step,

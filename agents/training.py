@@ -100,17 +100,24 @@ def train(config: TrainConfig | Mapping[str, Any] | str | Path, *, resume: bool 
         return {"algo": config.algo, "env": env_options(config), "episodes": episodes, "timesteps": model.num_timesteps,
                 "successes": callback.successes, "hyperparameters": hyperparameters(config), "config": config_to_dict(config)}
 
+    def save_snapshot(episodes: int) -> None:
+        save_checkpoint(model, snapshot_folder(out, episodes), info(episodes), encoder_file=encoder_copy)
+
     def save(episodes: int) -> None:
+        # The snapshot first: once the checkpoint says N episodes, snapshot N exists, so a kill
+        # between the two writes cannot lose an evaluation point.
+        save_snapshot(episodes)
         save_checkpoint(model, checkpoint, info(episodes), encoder_file=encoder_copy,
                         replay_buffer=config.save_replay_buffer and config.algo in OFF_POLICY)
-        snapshot = out / "snapshots" / f"episode_{episodes:05d}"
-        save_checkpoint(model, snapshot, info(episodes), encoder_file=encoder_copy)
 
     callback = EpisodeCallback(
         config.episodes, first_episode, lambda episode: train_seed(config.seed, episode),
         checkpoint_every=config.checkpoint_every, save=save, log_file=out / "episodes.csv",
         progress=config.progress, successes_before=state["successes"] if state else 0,
     )
+    _set_aside_snapshots_after(out, state["episodes"] if state else 0)
+    if state and not snapshot_folder(out, state["episodes"]).is_dir():
+        save_snapshot(state["episodes"])  # a run checkpointed by an older crowdnav, killed before its snapshot
     started = time.perf_counter()
     start_steps = model.num_timesteps
     if callback.done < config.episodes:
@@ -125,6 +132,28 @@ def train(config: TrainConfig | Mapping[str, Any] | str | Path, *, resume: bool 
         seconds=seconds, steps_per_second=(model.num_timesteps - start_steps) / seconds if seconds > 0 else 0.0,
         records=callback.records, model=model,
     )
+
+
+def snapshot_folder(out: Path, episodes: int) -> Path:
+    """Where a run saves its policy after ``episodes`` training episodes."""
+    return out / "snapshots" / f"episode_{episodes:05d}"
+
+
+def _set_aside_snapshots_after(out: Path, episodes: int) -> None:
+    """Move snapshots newer than the checkpoint (a kill between snapshot and checkpoint) to ``snapshots_discarded/``.
+
+    They come from a training history that the resume throws away; the resumed run saves its
+    own snapshot at the same episode, and the old one is kept for inspection, not evaluated.
+    """
+    snapshots = out / "snapshots"
+    for folder in sorted(snapshots.glob("episode_*")) if snapshots.is_dir() else []:
+        if folder.name[len("episode_"):].isdigit() and int(folder.name[len("episode_"):]) > episodes:
+            target = out / "snapshots_discarded" / folder.name
+            suffix = 1
+            while target.exists():
+                target, suffix = out / "snapshots_discarded" / f"{folder.name}.{suffix}", suffix + 1
+            target.parent.mkdir(exist_ok=True)
+            folder.rename(target)
 
 
 def _resume_state(checkpoint: Path, config: TrainConfig) -> dict[str, Any]:

@@ -2,7 +2,8 @@
 
 * :class:`EpisodeSeeds` gives training episode ``i`` the seed :func:`train_seed` ``(seed, i)``,
   so a run is reproducible, a resumed run continues the same episode sequence, and
-  evaluation seeds (below :data:`TRAIN_SEED_BASE`) never occur in training.
+  evaluation seeds (below :data:`TRAIN_SEED_BASE`) never occur in training;
+  :func:`dataset_seed` does the same for the random-policy grid collections.
 * :class:`LeogLatentWrapper` encodes the occupancy grid once per step with a frozen encoder,
   so the agent (and its replay buffer) sees a small float vector instead of the grid.
 """
@@ -25,6 +26,19 @@ TRAIN_SEED_BASE = 1_000_000
 def train_seed(seed: int, episode: int) -> int:
     """Seed of training episode ``episode`` (0-based) of a run with seed ``seed``: disjoint ranges per run seed."""
     return TRAIN_SEED_BASE * (seed + 1) + episode
+
+
+DATASET_SEED_OFFSET = TRAIN_SEED_BASE // 2
+"""Grid-collection episodes use the upper half of each seed's band: no run trains 500,000 episodes."""
+
+
+def dataset_seed(seed: int, episode: int) -> int:
+    """Seed of episode ``episode`` of a random-policy grid collection with seed ``seed``.
+
+    Disjoint from the held-out test seeds (below :data:`TRAIN_SEED_BASE`) and from every
+    training episode, so an encoder pre-trained on the collection never saw a test episode.
+    """
+    return TRAIN_SEED_BASE * (seed + 1) + DATASET_SEED_OFFSET + episode
 
 
 class EpisodeSeeds(gym.Wrapper):

@@ -39,7 +39,7 @@ from evaluation.runner import PRETRAINED, PROTOCOL_FIELDS, UnitSpec
 EXPERIMENTS_DIR = Path(__file__).resolve().parent / "experiments"
 DEFAULT_EXPERIMENT = "default"
 PRETRAIN_DEFAULTS = {"scenario": "room_furniture", "grids": 5000, "epochs": 20, "seed": 99, "every": 2}
-"""``pretrain_encoder`` fields and defaults (seed 99: its collection episodes are far from test and training seeds)."""
+"""``pretrain_encoder`` fields and defaults (collection seeds never meet test or training seeds: agents.wrappers.dataset_seed)."""
 _NAME = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.-]*$")
 _TOP_KEYS = ("name", "description", "protocol", "defaults", "pretrain_encoder", "configurations")
 _CONFIGURATION_KEYS = ("name", "label", "train")

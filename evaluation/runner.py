@@ -157,15 +157,23 @@ _SNAPSHOT = re.compile(r"episode_(\d+)$")
 
 
 def _policy_folders(train_dir: Path) -> dict[int, Path]:
-    """Episodes -> folder of every policy saved so far: the snapshots, and the checkpoint (a crash can leave it without its snapshot)."""
+    """Episodes -> folder of every policy saved so far on the checkpoint's training history.
+
+    The snapshots up to the checkpoint, and the checkpoint itself (a run from an older crowdnav
+    can have been killed after its checkpoint and before its snapshot). A snapshot newer than
+    the checkpoint (or any snapshot without one) was saved just before a kill; the resume
+    trains that stretch again.
+    """
     folders: dict[int, Path] = {}
     checkpoint = train_dir / "checkpoint"
+    latest = 0
     if (checkpoint / "policy.json").is_file():
-        folders[_checkpoint_episodes(train_dir)] = checkpoint
+        latest = _checkpoint_episodes(train_dir)
+        folders[latest] = checkpoint
     snapshots = train_dir / "snapshots"
     for folder in sorted(snapshots.iterdir()) if snapshots.is_dir() else []:
         match = _SNAPSHOT.match(folder.name)
-        if match and (folder / "policy.json").is_file():
+        if match and (folder / "policy.json").is_file() and int(match.group(1)) <= latest:
             folders[int(match.group(1))] = folder
     return folders
 
@@ -258,7 +266,7 @@ def _finish(spec: UnitSpec, out_dir: Path, protocol: Protocol, config: Any, cloc
 
 
 def _training_episodes(spec: UnitSpec, log: Path) -> Any:
-    """agents' episodes.csv, one row per episode: a resumed session logs again the episodes after the checkpoint, keep the last."""
+    """agents' episodes.csv, one row per episode (runs resumed by earlier versions logged some twice: keep the last)."""
     import pandas as pd
 
     frame = pd.read_csv(log).drop_duplicates("episode", keep="last").sort_values("episode", ignore_index=True)

@@ -3,12 +3,14 @@
 from __future__ import annotations
 
 import json
+import shutil
 
 import numpy as np
 import pytest
 from agents_tiny import tiny_config
 
 from agents import ConfigError, load_policy, train, train_seed
+from agents.callbacks import set_aside_episodes_from
 
 
 def test_saved_checkpoint_loads_as_a_deterministic_policy_that_acts(tmp_path):
@@ -55,3 +57,46 @@ def test_a_finished_run_is_not_overwritten_and_resume_needs_a_checkpoint(tmp_pat
 def test_load_policy_names_what_is_missing(tmp_path):
     with pytest.raises(FileNotFoundError, match="no crowdnav checkpoint"):
         load_policy(tmp_path)
+
+
+def test_resume_sets_aside_episodes_and_snapshots_saved_after_the_checkpoint(tmp_path):
+    train(tiny_config(tmp_path, episodes=2, max_steps=20, checkpoint_every=2))
+    # As if the process had logged episodes 2-3 and saved snapshot 4 before it was killed.
+    log = tmp_path / "episodes.csv"
+    stale = ["2,12,collision,-1.0,3,99,1.0", "3,13,success,1.0,3,102,1.5"]
+    log.write_text(log.read_text() + "\n".join(stale) + "\n")
+    shutil.copytree(tmp_path / "snapshots" / "episode_00002", tmp_path / "snapshots" / "episode_00004")
+    train(tiny_config(tmp_path, episodes=4, max_steps=20, checkpoint_every=2), resume=True)
+    rows = [line.split(",") for line in log.read_text().splitlines()[1:]]
+    assert [int(row[0]) for row in rows] == [0, 1, 2, 3]
+    assert [int(row[1]) for row in rows] == [train_seed(0, episode) for episode in range(4)]
+    assert (tmp_path / "episodes.csv.discarded").read_text().splitlines()[1:] == stale
+    assert json.loads((tmp_path / "snapshots_discarded" / "episode_00004" / "policy.json").read_text())["episodes"] == 2
+    assert json.loads((tmp_path / "snapshots" / "episode_00004" / "policy.json").read_text())["episodes"] == 4
+
+
+def test_the_snapshot_is_saved_before_the_checkpoint_and_a_missing_one_is_restored_on_resume(tmp_path, monkeypatch):
+    import agents.training
+
+    saved = []
+    original = agents.training.save_checkpoint
+    monkeypatch.setattr(agents.training, "save_checkpoint", lambda model, folder, *args, **kwargs: (
+        saved.append(folder.relative_to(tmp_path).as_posix()), original(model, folder, *args, **kwargs))[1])
+    train(tiny_config(tmp_path, episodes=2, max_steps=20, checkpoint_every=2))
+    assert saved[:2] == ["snapshots/episode_00002", "checkpoint"]
+    # A run from an older crowdnav killed between its checkpoint and its snapshot.
+    shutil.rmtree(tmp_path / "snapshots" / "episode_00002")
+    saved.clear()
+    train(tiny_config(tmp_path, episodes=3, max_steps=20, checkpoint_every=2), resume=True)
+    assert saved[0] == "snapshots/episode_00002"
+    assert json.loads((tmp_path / "snapshots" / "episode_00002" / "policy.json").read_text())["episodes"] == 2
+
+
+def test_set_aside_keeps_the_log_untouched_when_nothing_comes_after_the_checkpoint(tmp_path):
+    log = tmp_path / "episodes.csv"
+    log.write_text("episode,seed\n0,10\n1,11\n")
+    assert set_aside_episodes_from(log, 2) == 0
+    assert log.read_text() == "episode,seed\n0,10\n1,11\n" and not (tmp_path / "episodes.csv.discarded").exists()
+    assert set_aside_episodes_from(log, 1) == 1 and set_aside_episodes_from(log, 0) == 1
+    assert log.read_text() == "episode,seed\n"
+    assert (tmp_path / "episodes.csv.discarded").read_text() == "episode,seed\n1,11\n0,10\n"

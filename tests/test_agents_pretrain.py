@@ -8,7 +8,8 @@ import numpy as np
 import pytest
 import torch
 
-from agents import GridDataset, collect_grids, load_dataset, load_encoder, pretrain_encoder, save_dataset
+from agents import GridDataset, collect_grids, load_dataset, load_encoder, pretrain_encoder, save_dataset, train_seed
+from agents.wrappers import TRAIN_SEED_BASE, dataset_seed
 
 
 def test_pretraining_cuts_the_held_out_reconstruction_loss_at_least_5x_on_the_furniture_room(tmp_path):
@@ -71,3 +72,18 @@ def test_pretraining_accepts_a_plain_array_and_skips_saving_without_an_output_fo
     grids = (np.random.default_rng(1).random((40, 1, 30, 30)) < 0.1).astype(np.uint8)
     result = pretrain_encoder(GridDataset(grids).grids, None, channels=[4], kernels=[5], strides=[5], latent=4, epochs=1)
     assert result.encoder_path is None and result.architecture["grid_shape"] == [1, 30, 30]
+
+
+def test_grid_collection_never_uses_a_test_or_training_episode_seed(monkeypatch):
+    from crowdnav.envs import CrowdNavEnv
+
+    seeds = []
+    original = CrowdNavEnv.reset
+    monkeypatch.setattr(CrowdNavEnv, "reset", lambda self, *, seed=None, options=None: (
+        seeds.append(seed), original(self, seed=seed, options=options))[1])
+    collect_grids("room_furniture", 300, seed=0, every=1, overrides={"max_steps": 20})
+    assert len(seeds) >= 10 and seeds == [dataset_seed(0, episode) for episode in range(len(seeds))]
+    held_out = set(range(TRAIN_SEED_BASE))  # what the evaluation protocol may use
+    training = {train_seed(run, episode) for run in range(5) for episode in range(10_000)}
+    assert not (set(seeds) & held_out) and not (set(seeds) & training)
+    assert not ({dataset_seed(run, 0) for run in range(5)} & training)
