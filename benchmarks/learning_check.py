@@ -4,13 +4,15 @@
 
 For each seed, trains SAC (``crowdnav/OpenSpace-v0``, modalities lidar + goal) for
 ``--episodes`` episodes with crowdnav's defaults except :data:`CHECK_SETTINGS` (the social
-reward term off, 5-step returns; why: docs/agents.md#learning-check), saving a snapshot every
+reward term off, goal progress weighted 50, 5-step returns, two gradient steps per env step;
+why: docs/agents.md#learning-check), saving a snapshot every
 ``--eval-every`` episodes, and evaluates each snapshot on ``--test-episodes`` held-out
 episodes with the deterministic policy. Test episodes use seeds 0, 1, ...; training
 episodes use seeds >= 1,000,000 (``agents.train_seed``), so the two sets are disjoint.
 
 Resumable: an interrupted training resumes from its checkpoint, and evaluations already in
-``OUT/results.json`` are not redone. Pass: every seed reaches >= ``--target`` success on the
+``OUT/seed_N/evaluations.json`` are not redone (``OUT/results.json`` gathers all seeds, so
+several processes can check different seeds into the same ``--out``). Pass: every seed reaches >= ``--target`` success on the
 test episodes at some evaluation within the budget (the final evaluation is reported too).
 """
 
@@ -29,7 +31,7 @@ from agents.checkpoint import checkpoint_folder
 from agents.config import load_config
 from crowdnav.cli.common import CliError, parse_overrides
 
-CHECK_SETTINGS = {"reward_weights": {"social": 0.0}, "n_step_returns": 5}
+CHECK_SETTINGS = {"reward_weights": {"social": 0.0, "goal_progress": 50.0}, "n_step_returns": 5, "algo_kwargs": {"gradient_steps": 2}}
 """Where the check departs from crowdnav's defaults; ``--set`` overrides these too."""
 
 
@@ -96,13 +98,21 @@ def main(argv: list[str] | None = None) -> int:
     print(f"settings beyond crowdnav's defaults: {args.settings}", flush=True)
     args.out.mkdir(parents=True, exist_ok=True)
     results_file = args.out / "results.json"
-    results = json.loads(results_file.read_text()) if results_file.exists() else {}
-
-    def save() -> None:
-        results_file.write_text(json.dumps(results, indent=2) + "\n")
-
+    results = {}
     for seed in args.seeds:
+        # one file per seed, so processes checking different seeds into the same --out never clash
+        seed_file = args.out / f"seed_{seed}" / "evaluations.json"
+        results[str(seed)] = json.loads(seed_file.read_text()) if seed_file.exists() else {}
+
+        def save(seed_file: Path = seed_file, seed: int = seed) -> None:
+            seed_file.parent.mkdir(parents=True, exist_ok=True)
+            seed_file.write_text(json.dumps(results[str(seed)], indent=2) + "\n")
+
         run_seed(seed, args, results, save)
+    # results.json: every seed evaluated in --out so far, this process's and others'
+    merged = {path.parent.name.removeprefix("seed_"): json.loads(path.read_text())
+              for path in sorted(args.out.glob("seed_*/evaluations.json"))}
+    results_file.write_text(json.dumps(merged, indent=2) + "\n")
     summary = {}
     for seed in args.seeds:
         evaluations = {int(k): v["success"] for k, v in results[str(seed)].items()}

@@ -76,13 +76,17 @@ class Experiment:
         return replace(self, protocol=protocol)
 
     def units(self, folder: str | Path) -> list[tuple[UnitSpec, Path]]:
-        """Every (configuration, seed) run and its folder under ``folder`` (the experiment's results folder)."""
+        """Every (configuration, seed) run and its folder under ``folder`` (the experiment's results folder).
+
+        Seed by seed (all configurations of the first seed, then the next), so an experiment
+        stopped part-way has comparable runs of every configuration.
+        """
         folder = Path(folder)
         return [
             (UnitSpec(self.name, configuration.name, seed, copy.deepcopy(configuration.train), self.protocol.to_dict(),
                       configuration.label),
              folder / configuration.name / f"seed_{seed}")
-            for configuration in self.configurations for seed in self.protocol.run_seeds
+            for seed in self.protocol.run_seeds for configuration in self.configurations
         ]
 
     def needs_encoder(self) -> bool:

@@ -48,6 +48,13 @@ def test_configuration_train_fields_are_merged_over_the_defaults():
     assert experiment.configurations[1].train["overrides"] == {"max_steps": 40, "humans.count": 3}
 
 
+def test_runs_are_ordered_seed_by_seed_so_a_partial_experiment_covers_every_configuration(tmp_path):
+    experiment = experiment_from_mapping(tiny_experiment_document(seeds=2))
+    order = [(spec.seed, spec.configuration) for spec, _ in experiment.units(tmp_path)]
+    assert order == [(0, "lidar"), (0, "closest"), (1, "lidar"), (1, "closest")]
+    assert [folder.relative_to(tmp_path).as_posix() for _, folder in experiment.units(tmp_path)][:2] == ["lidar/seed_0", "closest/seed_0"]
+
+
 def _error(tmp_path, document) -> str:
     path = write(tmp_path, document)
     with pytest.raises(ExperimentError) as caught:
