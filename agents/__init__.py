@@ -7,8 +7,7 @@ The names below are imported on first use (PEP 562), so that ``import agents`` (
 
 from __future__ import annotations
 
-import importlib
-from typing import Any
+from crowdnav.lazy_exports import lazy_exports
 
 _EXPORTS = {
     "train": "agents.training",
@@ -33,6 +32,7 @@ _EXPORTS = {
     "load_encoder": "agents.pretrain",
     "LeogLatentWrapper": "agents.wrappers",
     "train_seed": "agents.wrappers",
+    "dataset_seed": "agents.wrappers",
     "ALGORITHMS": "agents.factory",
     "make_env": "agents.factory",
     "make_model": "agents.factory",
@@ -40,15 +40,4 @@ _EXPORTS = {
 
 __all__ = sorted(_EXPORTS)
 
-
-def __getattr__(name: str) -> Any:
-    module = _EXPORTS.get(name)
-    if module is None:
-        raise AttributeError(f"module 'agents' has no attribute {name!r}")
-    value = getattr(importlib.import_module(module), name)
-    globals()[name] = value
-    return value
-
-
-def __dir__() -> list[str]:
-    return sorted(set(globals()) | set(_EXPORTS))
+__getattr__, __dir__ = lazy_exports(__name__, _EXPORTS, globals())

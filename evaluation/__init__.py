@@ -17,8 +17,7 @@ matplotlib until needed).
 
 from __future__ import annotations
 
-import importlib
-from typing import Any
+from crowdnav.lazy_exports import lazy_exports
 
 _EXPORTS = {
     "Protocol": "evaluation.protocol",
@@ -48,15 +47,4 @@ _EXPORTS = {
 
 __all__ = sorted(_EXPORTS)
 
-
-def __getattr__(name: str) -> Any:
-    module = _EXPORTS.get(name)
-    if module is None:
-        raise AttributeError(f"module 'evaluation' has no attribute {name!r}")
-    value = getattr(importlib.import_module(module), name)
-    globals()[name] = value
-    return value
-
-
-def __dir__() -> list[str]:
-    return sorted(set(globals()) | set(_EXPORTS))
+__getattr__, __dir__ = lazy_exports(__name__, _EXPORTS, globals())
