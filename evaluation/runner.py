@@ -252,7 +252,9 @@ def _finish(spec: UnitSpec, out_dir: Path, protocol: Protocol, config: Any, cloc
         "protocol": protocol.to_dict(),
         "config": dataclasses.asdict(config),
         "versions": package_versions(),
-        "git_commit": git_commit(),
+        # the code the run started with, and every commit a later session resumed it with
+        "git_commit": timing["commits"][0],
+        "git_commits": timing["commits"],
         "wall_time_s": round(timing["seconds"], 3),
         "sessions": timing["sessions"],
         "env_steps": {"train": train_steps, "test": test_steps, "total": train_steps + test_steps},
@@ -279,21 +281,26 @@ def _training_episodes(spec: UnitSpec, log: Path) -> Any:
 
 
 class _Clock:
-    """Wall time of the sessions that worked on a run, kept in timing.json.
+    """Wall time and code of the sessions that worked on a run, kept in timing.json.
 
     Each session adds the time up to its last saved result (end of training, an evaluation,
-    the end); the work a crash throws away is not counted.
+    the end); the work a crash throws away is not counted. ``commits`` lists the crowdnav
+    commit each session ran (read when the session starts, the code it imported).
     """
 
     def __init__(self, path: Path):
         self.path = path
         self.last = time.perf_counter()
         self.first_save = True
+        self.commit = git_commit()
 
     def save(self) -> dict[str, Any]:
         now = time.perf_counter()
         timing = read_json(self.path) if self.path.is_file() else {"seconds": 0.0, "sessions": 0}
-        timing = {"seconds": timing["seconds"] + now - self.last, "sessions": timing["sessions"] + self.first_save}
+        commits = list(timing.get("commits", []))
+        if self.first_save and (not commits or commits[-1] != self.commit):
+            commits.append(self.commit)
+        timing = {"seconds": timing["seconds"] + now - self.last, "sessions": timing["sessions"] + self.first_save, "commits": commits}
         atomic_write_json(self.path, timing)
         self.last, self.first_save = now, False
         return timing

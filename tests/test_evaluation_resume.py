@@ -15,6 +15,7 @@ import pandas as pd
 import pytest
 from evaluation_tiny import tiny_experiment_document, tiny_unit_spec
 
+import evaluation.runner
 from evaluation.benchmark import run_experiment
 from evaluation.experiment import experiment_from_mapping
 from evaluation.runner import _policy_folders, run_unit
@@ -65,6 +66,22 @@ def test_crash_during_evaluation_resumes_without_redoing_or_losing_evaluations(t
     assert summary["status"] == "done" and summary["resumed"]
     check_complete(tmp_path, spec)
     assert json.loads((tmp_path / "meta.json").read_text())["sessions"] == 2
+
+
+def test_meta_names_the_commit_the_run_started_with_and_those_of_its_resumes(tmp_path, monkeypatch):
+    spec = tiny_unit_spec()
+
+    def crash_after_training(event, data):
+        if event == "trained":
+            raise Crash
+
+    monkeypatch.setattr(evaluation.runner, "git_commit", lambda: "started")
+    with pytest.raises(Crash):
+        run_unit(spec, tmp_path, on_event=crash_after_training)
+    monkeypatch.setattr(evaluation.runner, "git_commit", lambda: "resumed")
+    run_unit(spec, tmp_path)
+    meta = json.loads((tmp_path / "meta.json").read_text())
+    assert meta["git_commit"] == "started" and meta["git_commits"] == ["started", "resumed"] and meta["sessions"] == 2
 
 
 def test_finished_run_is_skipped_and_left_untouched(tmp_path):
