@@ -27,9 +27,9 @@ def set_aside_episodes_from(log_path: Path, first_episode: int) -> int:
     lines = log_path.read_text(encoding="utf-8").splitlines()
     if not lines:
         return 0
-    header, rows = lines[0], lines[1:]
-    kept = [row for row in rows if int(row.split(",", 1)[0]) < first_episode]
-    moved = [row for row in rows if int(row.split(",", 1)[0]) >= first_episode]
+    header, kept, moved = lines[0], [], []
+    for row in lines[1:]:
+        (kept if int(row.split(",", 1)[0]) < first_episode else moved).append(row)
     if not moved:
         return 0
     discarded = log_path.with_name(log_path.name + DISCARDED_LOG_SUFFIX)

@@ -147,7 +147,8 @@ def _set_aside_snapshots_after(out: Path, episodes: int) -> None:
     """
     snapshots = out / "snapshots"
     for folder in sorted(snapshots.glob("episode_*")) if snapshots.is_dir() else []:
-        if folder.name[len("episode_"):].isdigit() and int(folder.name[len("episode_"):]) > episodes:
+        number = folder.name.removeprefix("episode_")
+        if number.isdigit() and int(number) > episodes:
             target = out / "snapshots_discarded" / folder.name
             suffix = 1
             while target.exists():
