@@ -31,6 +31,7 @@ _EXPORTS = {
     "pretrain_encoder": "agents.pretrain",
     "load_encoder": "agents.pretrain",
     "LeogLatentWrapper": "agents.wrappers",
+    "NormalizeObservation": "agents.wrappers",
     "train_seed": "agents.wrappers",
     "dataset_seed": "agents.wrappers",
     "ALGORITHMS": "agents.factory",

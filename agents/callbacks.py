@@ -52,7 +52,7 @@ class EpisodeRecord:
     """0-based index over the whole run (continues after a resume)."""
     seed: int
     outcome: str
-    """success, collision or truncated."""
+    """One of :data:`crowdnav.simulator.OUTCOMES`: success, collision, out_of_bounds or truncated."""
     reward: float
     """Undiscounted return."""
     length: int

@@ -5,8 +5,11 @@ A checkpoint folder holds:
 * ``model.zip``: the SB3 model (``<Algo>.load``);
 * ``policy.json``: ``format``, ``algo``, ``env`` (the :class:`crowdnav.envs.CrowdNavEnv`
   keyword arguments the model needs: scenario, modalities, sensors, overrides,
-  reward_weights), ``leog_encoder`` (file of the frozen encoder that turns the ``leog`` grid
-  into the latent the model was trained on, or null), ``episodes``, ``timesteps``, ``config``;
+  reward_weights), ``observation_normalization`` (``{key: {"offset": [...], "scale": [...]}}``,
+  the fixed scaling of the model's inputs, or null for raw observations; checkpoints written
+  before it existed lack the key and load as raw), ``leog_encoder`` (file of the frozen encoder
+  that turns the ``leog`` grid into the latent the model was trained on, or null),
+  ``episodes``, ``timesteps``, ``config``;
 * ``encoder.pt``: that frozen encoder, when the model was trained on precomputed latents;
 * ``replay_buffer.pkl``: the replay buffer (off-policy runs with ``save_replay_buffer``).
 
@@ -24,6 +27,8 @@ from typing import Any
 
 import numpy as np
 from stable_baselines3.common.base_class import BaseAlgorithm
+
+from agents.wrappers import ObservationScales, encode_grids, normalize_observation, scales_from_json
 
 POLICY_FORMAT = "crowdnav-policy/1"
 POLICY_FILE = "policy.json"
@@ -106,9 +111,12 @@ class AgentPolicy:
     """A trained agent as ``policy(observation) -> action`` (deterministic), from :func:`load_policy`.
 
     ``observation`` is what :class:`crowdnav.envs.CrowdNavEnv` returns (built with
-    :attr:`env_options`), one dict or a batch of them stacked per key; the frozen LEOG encoder,
-    if the model was trained on latents, is applied here. The action is float32 (2,) in [-1, 1]
-    (or (N, 2) for a batch).
+    :attr:`env_options`, or by :meth:`make_env`), one dict or a batch of them stacked per key, in
+    raw units: what the model was trained on is applied here (:meth:`preprocess`), i.e. the
+    observation normalisation stored with the checkpoint and the frozen LEOG encoder if the model
+    was trained on latents. So anything that builds the env from :attr:`env_options` (evaluation,
+    rendering) feeds the policy correctly. The action is float32 (2,) in [-1, 1] (or (N, 2) for a
+    batch).
     """
 
     def __init__(self, model: BaseAlgorithm, info: Mapping[str, Any], encoder: Any = None):
@@ -117,25 +125,36 @@ class AgentPolicy:
         self.env_options: dict[str, Any] = dict(info["env"])
         """Keyword arguments of CrowdNavEnv that give the observations this policy expects."""
         self.encoder = encoder
+        normalization = self.info.get("observation_normalization")  # absent: a checkpoint from before normalisation
+        self.scales: ObservationScales | None = scales_from_json(normalization) if normalization is not None else None
+        """Key -> (offset, scale) applied to raw observations (None: the model saw raw observations)."""
 
     @property
     def algo(self) -> str:
         return self.info["algo"]
 
-    def __call__(self, observation: Mapping[str, np.ndarray]) -> np.ndarray:
+    def preprocess(self, observation: Mapping[str, np.ndarray]) -> dict[str, np.ndarray]:
+        """A raw CrowdNavEnv observation (or batch) -> the model's input: normalised, LEOG encoded if trained so."""
+        observation = dict(observation)
+        if self.scales is not None:
+            observation = normalize_observation(observation, self.scales)
         if self.encoder is not None:
-            from agents.wrappers import encode_grids
-
-            observation = dict(observation)
             grid = np.asarray(observation["leog"])
             batched = grid.ndim == 4
             latent = encode_grids(self.encoder, grid if batched else grid[None])
             observation["leog"] = latent if batched else latent[0]
-        action, _ = self.model.predict(observation, deterministic=True)
+        return observation
+
+    def __call__(self, observation: Mapping[str, np.ndarray]) -> np.ndarray:
+        action, _ = self.model.predict(self.preprocess(observation), deterministic=True)
         return action.astype(np.float32, copy=False)
 
     def make_env(self, **extra: Any):
-        """A CrowdNavEnv configured as in training (``extra`` adds e.g. ``render_mode``)."""
+        """A CrowdNavEnv configured as in training (``extra`` adds e.g. ``render_mode``).
+
+        Its observations are raw; calling the policy on them applies the normalisation and the
+        frozen encoder the model was trained with (:meth:`preprocess`).
+        """
         from crowdnav.envs import CrowdNavEnv
 
         return CrowdNavEnv(**{**self.env_options, **extra})

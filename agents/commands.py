@@ -12,7 +12,7 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from crowdnav.cli.common import CliError
+from crowdnav.cli.common import CliError, add_reward_options, reward_options
 
 ALGOS = ("sac", "td3", "ddpg", "a2c", "ppo")
 MODES = ("frozen", "finetune", "scratch")
@@ -42,6 +42,7 @@ def register_train(groups: argparse._SubParsersAction) -> None:
     parser.add_argument("--out", metavar="DIR", help="output folder")
     parser.add_argument("--threads", type=int, metavar="N", help="torch threads (default 1)")
     parser.add_argument("--device", metavar="DEVICE", help="torch device: cpu, cuda, auto")
+    add_reward_options(parser)  # --reward PRESET, --reward-weight TERM=VALUE: into reward_weights
     parser.add_argument("--resume", action="store_true", help="continue the run in --out from its checkpoint")
     parser.add_argument("--no-progress", action="store_true", help="no progress bar")
     parser.add_argument("--print-config", action="store_true", help="print the resolved config (YAML) and exit")
@@ -100,6 +101,8 @@ def train_overrides(args: argparse.Namespace) -> dict[str, Any]:
         overrides["modalities"] = [key.strip() for key in args.modalities.split(",") if key.strip()]
     if args.no_progress:
         overrides["progress"] = False
+    for term, weight in reward_options(args).items():  # merged into the config file's reward_weights
+        overrides[f"reward_weights.{term}"] = weight
     return overrides
 
 

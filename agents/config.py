@@ -68,9 +68,10 @@ class TrainConfig:
 
     scenario: str = option("open_space", "Library scenario name or path to a scenario YAML file.")
     modalities: list[str] = option(["lidar", "goal"], "Observation keys the agent receives (goal, closest_obstacle, lidar, leog, velocity).")
+    normalize_observations: bool = option(True, "Scale each float modality by its declared scale ((x - offset) / scale, O(1)); false: raw units.")
     sensors: dict[str, Any] = option({}, "Sensor-setting overrides, e.g. {lidar: {beams: 180}}.")
     overrides: dict[str, Any] = option({}, "Dotted scenario overrides, e.g. {humans.count: 5}.")
-    reward_weights: dict[str, float] = option({}, "Reward-weight overrides, e.g. {social: -50}.")
+    reward_weights: dict[str, Any] = option({}, "Reward preset and weight overrides, e.g. {preset: paper, social: -50} (docs/agents.md#reward).")
     algo: Literal["sac", "td3", "ddpg", "a2c", "ppo"] = option("sac", "Stable-Baselines3 algorithm.")
     episodes: int = option(700, "Training length in episodes (the paper trains for 700).")
     seed: int = option(0, "Seed of the networks and of the training episodes (episode i uses seed train_seed(seed, i)).")

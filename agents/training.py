@@ -16,10 +16,12 @@ model and (if saved) the replay buffer carry on; the budget is still ``config.ep
 
 from __future__ import annotations
 
+import dataclasses
 import importlib.util
 import json
 import shutil
 import time
+import warnings
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -32,8 +34,17 @@ from stable_baselines3.common.base_class import BaseAlgorithm
 from agents.callbacks import EpisodeCallback, EpisodeRecord
 from agents.checkpoint import ENCODER_FILE, MODEL_FILE, REPLAY_FILE, checkpoint_folder, load_model, read_policy_info, save_checkpoint
 from agents.config import ConfigError, TrainConfig, config_from_mapping, config_to_dict, load_config
-from agents.factory import OFF_POLICY, env_options, hyperparameters, load_leog_weights, make_env, make_model, precomputes_leog
-from agents.wrappers import train_seed
+from agents.factory import (
+    OFF_POLICY,
+    env_options,
+    hyperparameters,
+    load_leog_weights,
+    make_env,
+    make_model,
+    observation_normalization,
+    precomputes_leog,
+)
+from agents.wrappers import scales_from_json, scales_to_json, train_seed
 
 
 @dataclass
@@ -73,6 +84,11 @@ def train(config: TrainConfig | Mapping[str, Any] | str | Path, *, resume: bool 
     out = Path(config.out)
     checkpoint = out / "checkpoint"
     state = _resume_state(checkpoint, config) if resume else None
+    if state and state["normalization"] is None and config.normalize_observations:
+        # a checkpoint from before observation normalisation: its model was trained on raw observations
+        warnings.warn(f"{checkpoint} predates observation normalisation; resuming on raw observations "
+                      "(normalize_observations: false)", stacklevel=2)
+        config = dataclasses.replace(config, normalize_observations=False)
     if not resume and checkpoint.exists():
         raise ConfigError(f"{out} already holds a run (checkpoint/); resume it with --resume or choose another --out")
     out.mkdir(parents=True, exist_ok=True)
@@ -81,7 +97,9 @@ def train(config: TrainConfig | Mapping[str, Any] | str | Path, *, resume: bool 
     encoder, saved_encoder = load_leog_weights(config)
     precompute = precomputes_leog(config)
     first_episode = state["episodes"] if state else 0
-    env = make_env(config, encoder if precompute else None, first_episode)
+    stored = state["normalization"] if state else None
+    env = make_env(config, encoder if precompute else None, first_episode, scales_from_json(stored) if stored is not None else None)
+    scales = observation_normalization(env)
     tensorboard_log = _tensorboard_folder(config, out)
     if state:
         model = load_model(checkpoint, env=env, device=config.device)
@@ -97,7 +115,9 @@ def train(config: TrainConfig | Mapping[str, Any] | str | Path, *, resume: bool 
         shutil.copyfile(_encoder_path(config), encoder_copy)
 
     def info(episodes: int) -> dict[str, Any]:
-        return {"algo": config.algo, "env": env_options(config), "episodes": episodes, "timesteps": model.num_timesteps,
+        return {"algo": config.algo, "env": env_options(config),
+                "observation_normalization": None if scales is None else scales_to_json(scales),
+                "episodes": episodes, "timesteps": model.num_timesteps,
                 "successes": callback.successes, "hyperparameters": hyperparameters(config), "config": config_to_dict(config)}
 
     def save_snapshot(episodes: int) -> None:
@@ -170,7 +190,15 @@ def _resume_state(checkpoint: Path, config: TrainConfig) -> dict[str, Any]:
             f"cannot resume: {folder} was trained with algo {info['algo']} on {info['env']['modalities']}, "
             f"the config asks for {config.algo} on {config.modalities}"
         )
-    return {"episodes": int(info["episodes"]), "successes": int(info.get("successes", 0)), "config": info.get("config")}
+    legacy = "observation_normalization" not in info  # written before normalisation existed: raw observations
+    normalization = info.get("observation_normalization")
+    if not legacy and (normalization is not None) != config.normalize_observations:
+        raise ConfigError(
+            f"cannot resume: {folder} was trained with normalize_observations: {str(normalization is not None).lower()}, "
+            f"the config asks for {str(config.normalize_observations).lower()}"
+        )
+    return {"episodes": int(info["episodes"]), "successes": int(info.get("successes", 0)), "config": info.get("config"),
+            "normalization": normalization}
 
 
 def _encoder_path(config: TrainConfig) -> Path:

@@ -4,12 +4,17 @@
   so a run is reproducible, a resumed run continues the same episode sequence, and
   evaluation seeds (below :data:`TRAIN_SEED_BASE`) never occur in training;
   :func:`dataset_seed` does the same for the random-policy grid collections.
+* :class:`NormalizeObservation` maps every float modality to ``(x - offset) / scale`` with the
+  scales its modality declares (:meth:`crowdnav.sensors.Modality.scale`): fixed numbers, not
+  running statistics, so a checkpoint stores them (:func:`scales_to_json`) and a loaded policy
+  applies exactly what it was trained on.
 * :class:`LeogLatentWrapper` encodes the occupancy grid once per step with a frozen encoder,
   so the agent (and its replay buffer) sees a small float vector instead of the grid.
 """
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from typing import Any
 
 import gymnasium as gym
@@ -18,6 +23,7 @@ import torch
 from gymnasium import spaces
 
 from agents.encoders import LeogEncoder
+from crowdnav.sensors.base import checked_scale, normalize_values, normalized_box
 
 TRAIN_SEED_BASE = 1_000_000
 """Training seeds start here; seeds below it are free for held-out test episodes."""
@@ -55,6 +61,86 @@ class EpisodeSeeds(gym.Wrapper):
         observation, info = self.env.reset(seed=train_seed(self.run_seed, self.episode), options=options)
         info["episode_index"] = self.episode
         return observation, info
+
+
+ObservationScales = dict[str, tuple[np.ndarray, np.ndarray]]
+"""Observation key -> ``(offset, scale)`` float32 arrays of that key's shape."""
+
+
+def observation_scales(env: gym.Env) -> ObservationScales:
+    """The declared ``(offset, scale)`` of every float observation key of a crowdnav env (wrapped or not).
+
+    Read from the modalities of ``env.unwrapped.core``. Left out, so passed on unscaled: integer
+    keys (the uint8 LEOG grid: SB3 treats it as an image and the extractor reads ``grid > 0``),
+    keys an inner :class:`NormalizeObservation` already scales (wrapping twice scales once) and
+    keys an inner wrapper replaced (the frozen encoder's latent).
+    """
+    modalities = getattr(getattr(env.unwrapped, "core", None), "modalities", None)
+    space = env.observation_space
+    if modalities is None or not isinstance(space, spaces.Dict):
+        raise TypeError(f"observation_scales needs a crowdnav environment (CrowdNavEnv or a wrapper of it), got {env}")
+    scaled: set[str] = set()
+    inner = env
+    while isinstance(inner, gym.Wrapper):
+        if isinstance(inner, NormalizeObservation):
+            scaled |= set(inner.scales)
+        inner = inner.env
+    return {
+        key: modalities[key].normalization()
+        for key, box in space.spaces.items()
+        if key in modalities and key not in scaled and box == modalities[key].space() and np.issubdtype(box.dtype, np.floating)
+    }
+
+
+def normalize_observation(observation: Mapping[str, np.ndarray], scales: ObservationScales) -> dict[str, np.ndarray]:
+    """``observation`` with each key of ``scales`` mapped to ``(x - offset) / scale`` (float32); batches work too."""
+    observation = dict(observation)
+    for key, (offset, scale) in scales.items():
+        observation[key] = normalize_values(observation[key], offset, scale)
+    return observation
+
+
+def scales_to_json(scales: ObservationScales) -> dict[str, dict[str, list]]:
+    """JSON-ready ``{key: {"offset": [...], "scale": [...]}}`` (nested lists of the observation's shape)."""
+    return {key: {"offset": offset.tolist(), "scale": scale.tolist()} for key, (offset, scale) in scales.items()}
+
+
+def scales_from_json(document: Mapping[str, Mapping[str, Any]]) -> ObservationScales:
+    """Inverse of :func:`scales_to_json`."""
+    return {key: (np.asarray(item["offset"], dtype=np.float32), np.asarray(item["scale"], dtype=np.float32))
+            for key, item in document.items()}
+
+
+class NormalizeObservation(gym.ObservationWrapper):
+    """Feed the agent O(1) numbers: each float modality becomes ``(x - offset) / scale``.
+
+    The scales are those the modalities declare (:func:`observation_scales`), or ``scales`` when
+    given (the ones stored with a checkpoint, so a resumed run keeps its own). Unlike
+    ``gymnasium.wrappers.NormalizeObservation`` there are no running statistics: the mapping is
+    fixed, the same in training, evaluation and after loading. The space of a scaled key is its
+    Box mapped the same way (float32), so it contains every scaled observation; other keys
+    (the uint8 LEOG grid) pass through unchanged, so a :class:`LeogLatentWrapper` stacked on
+    top still receives the raw grid.
+    """
+
+    def __init__(self, env: gym.Env, scales: Mapping[str, tuple[Any, Any]] | None = None):
+        super().__init__(env)
+        space = env.observation_space
+        if not isinstance(space, spaces.Dict):
+            raise TypeError(f"NormalizeObservation needs a Dict observation space, got {space}")
+        if scales is None:
+            scales = observation_scales(env)
+        unknown = sorted(set(scales) - set(space.spaces))
+        if unknown:
+            raise ValueError(f"NormalizeObservation: scales for keys the environment does not observe: {unknown}")
+        self.scales: ObservationScales = {key: checked_scale(key, space[key], *scales[key]) for key in space.spaces if key in scales}
+        """Key -> (offset, scale) float32 arrays; the keys left out pass through."""
+        self.observation_space = spaces.Dict({
+            key: normalized_box(box, *self.scales[key]) if key in self.scales else box for key, box in space.spaces.items()
+        })
+
+    def observation(self, observation: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
+        return normalize_observation(observation, self.scales)
 
 
 class LeogLatentWrapper(gym.ObservationWrapper):

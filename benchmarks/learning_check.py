@@ -3,8 +3,8 @@
     nohup .venv/bin/python benchmarks/learning_check.py --out runs/learning_check > runs/learning_check.log 2>&1 &
 
 For each seed, trains SAC (``crowdnav/OpenSpace-v0``, modalities lidar + goal) for
-``--episodes`` episodes with crowdnav's defaults except :data:`CHECK_SETTINGS` (the social
-reward term off, goal progress weighted 50, 5-step returns, two gradient steps per env step;
+``--episodes`` episodes with crowdnav's defaults except :data:`CHECK_SETTINGS` (the paper's
+reward weights with the social term off and goal progress weighted 50, 5-step returns, two gradient steps per env step;
 why: docs/agents.md#learning-check), saving a snapshot every
 ``--eval-every`` episodes, and evaluates each snapshot on ``--test-episodes`` held-out
 episodes with the deterministic policy. Test episodes use seeds 0, 1, ...; training
@@ -30,13 +30,15 @@ from agents import load_policy, train
 from agents.checkpoint import checkpoint_folder
 from agents.config import load_config
 from crowdnav.cli.common import CliError, parse_overrides
+from crowdnav.simulator import OUTCOMES
 
-CHECK_SETTINGS = {"reward_weights": {"social": 0.0, "goal_progress": 50.0}, "n_step_returns": 5, "algo_kwargs": {"gradient_steps": 2}}
+CHECK_SETTINGS = {"reward_weights": {"preset": "paper", "social": 0.0, "goal_progress": 50.0}, "n_step_returns": 5,
+                  "algo_kwargs": {"gradient_steps": 2}}
 """Where the check departs from crowdnav's defaults; ``--set`` overrides these too."""
 
 
 def evaluate(policy_path: Path, seeds: list[int]) -> dict[str, float]:
-    """Success / collision / truncation rates of the deterministic policy on the episodes with ``seeds``."""
+    """The rate of each outcome (:data:`crowdnav.simulator.OUTCOMES`) of the deterministic policy on the episodes with ``seeds``."""
     policy = load_policy(policy_path)
     env = policy.make_env()
     outcomes = []
@@ -47,7 +49,7 @@ def evaluate(policy_path: Path, seeds: list[int]) -> dict[str, float]:
             if terminated or truncated:
                 outcomes.append(info["outcome"])
                 break
-    return {name: outcomes.count(name) / len(outcomes) for name in ("success", "collision", "truncated")}
+    return {name: outcomes.count(name) / len(outcomes) for name in OUTCOMES}
 
 
 def run_seed(seed: int, args: argparse.Namespace, results: dict, save) -> None:
@@ -75,8 +77,7 @@ def run_seed(seed: int, args: argparse.Namespace, results: dict, save) -> None:
         seed_results[str(episodes)] = evaluate(snapshot, test_seeds)
         save()
         rates = seed_results[str(episodes)]
-        print(f"seed {seed} after {episodes:4d} episodes: success {rates['success']:.0%}  collision {rates['collision']:.0%}  "
-              f"truncated {rates['truncated']:.0%}", flush=True)
+        print(f"seed {seed} after {episodes:4d} episodes: " + "  ".join(f"{name} {rates[name]:.0%}" for name in OUTCOMES), flush=True)
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -7,7 +7,7 @@ Runs ``straight`` (head for the goal at full speed, blind to everyone) and ``soc
 (the humans' own model applied to the robot: goal attraction plus repulsion from the humans'
 *positions*, no velocities; privileged, it reads the simulator) on episodes with seeds 0, 1,
 ... of each scenario, with the scenario's own reward weights. Prints success / collision /
-truncated rates, the mean return, the mean episode length and each reward term's mean sum
+out_of_bounds / truncated rates, the mean return, the mean episode length and each reward term's mean sum
 per episode. A learned policy that sees the same scene should at least match ``straight``;
 ``social-force`` shows what a purely reactive, position-only policy can reach.
 """
@@ -24,6 +24,7 @@ from crowdnav.envs import CrowdNavEnv
 from crowdnav.envs.reward import REWARD_TERMS
 from crowdnav.policies import SocialForceRobot, StraightToGoal
 from crowdnav.scenario.library import library_names
+from crowdnav.simulator import OUTCOMES
 
 POLICIES = {"straight": StraightToGoal, "social-force": SocialForceRobot}
 
@@ -49,7 +50,7 @@ def run(scenario: str, policy_name: str, episodes: int, overrides: dict) -> dict
         lengths.append(length)
     env.close()
     return {
-        **{name: outcomes.count(name) / episodes for name in ("success", "collision", "truncated")},
+        **{name: outcomes.count(name) / episodes for name in OUTCOMES},
         "return": float(np.mean(returns)), "length": float(np.mean(lengths)),
         "terms": {name: value / episodes for name, value in terms.items()},
     }
@@ -66,13 +67,13 @@ def main(argv: list[str] | None = None) -> int:
     except CliError as error:
         parser.error(str(error))
     print(f"{args.episodes} episodes (seeds 0..{args.episodes - 1}) per scenario and policy" + (f"; overrides {overrides}" if overrides else ""))
-    print(f"{'scenario':24s} {'policy':13s} {'success':>8s} {'collision':>10s} {'truncated':>10s} {'return':>8s} {'length':>7s}  "
+    print(f"{'scenario':24s} {'policy':13s} " + " ".join(f"{name:>13s}" for name in OUTCOMES) + f" {'return':>8s} {'length':>7s}  "
           + " ".join(f"{name:>12s}" for name in REWARD_TERMS))
     for scenario in args.scenarios:
         for policy_name in POLICIES:
             row = run(scenario, policy_name, args.episodes, overrides)
-            print(f"{scenario:24s} {policy_name:13s} {row['success']:8.1%} {row['collision']:10.1%} {row['truncated']:10.1%} "
-                  f"{row['return']:8.0f} {row['length']:7.1f}  " + " ".join(f"{row['terms'][name]:12.0f}" for name in REWARD_TERMS),
+            print(f"{scenario:24s} {policy_name:13s} " + " ".join(f"{row[name]:13.1%}" for name in OUTCOMES)
+                  + f" {row['return']:8.0f} {row['length']:7.1f}  " + " ".join(f"{row['terms'][name]:12.0f}" for name in REWARD_TERMS),
                   flush=True)
     return 0
 

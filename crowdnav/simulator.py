@@ -7,8 +7,13 @@ whatever the crowd size: there is no Python loop over humans, pairs or edges.
 
 Step order: humans' commands (social force, or given actions) and robot kinematics ->
 integrate -> measure the new geometry once (pairwise distances, nearest obstacle points) ->
-keep humans out of walls and of each other -> robot collision and goal checks -> humans at
-their goals follow the scenario's ``on_goal`` rule.
+keep humans out of walls and of each other -> robot collision, world-exit and goal checks ->
+humans at their goals follow the scenario's ``on_goal`` rule.
+
+The robot cannot escape the task: leaving the world (its centre outside the scenario's
+``world.min`` / ``world.max`` rectangle) is either impossible (``world.boundary_walls``: the
+walls are obstacles, touching them is a collision) or ends the episode with the outcome
+``out_of_bounds`` (open space).
 
 Randomness comes only from the generator seeded by :meth:`Simulator.reset`.
 """
@@ -45,6 +50,12 @@ class Collision:
     """Distance between surfaces in metres (<= 0: touching or overlapping)."""
 
 
+OUTCOMES = ("success", "collision", "out_of_bounds", "truncated")
+"""Every way an episode ends (:attr:`StepEvents.outcome` of its last step, ``info["outcome"]``
+of the envs): the one success, the two failures, the time limit. Evaluation, training logs and
+benchmarks count the outcomes in this order."""
+
+
 @dataclass(frozen=True)
 class StepEvents:
     """What happened to the robot during one step."""
@@ -52,16 +63,26 @@ class StepEvents:
     goal_reached: bool
     collision: Collision | None
     truncated: bool
+    left_world: bool = False
+    """The robot's centre is outside the world rectangle (only without boundary walls: with them it collides first)."""
 
     @property
     def terminated(self) -> bool:
-        return self.goal_reached or self.collision is not None
+        """The step ends the episode by an event (goal, collision or leaving the world), not by the time limit."""
+        return self.goal_reached or self.collision is not None or self.left_world
 
     @property
     def outcome(self) -> str | None:
-        """``collision`` (wins over a simultaneous goal), ``success``, ``truncated`` or None (running)."""
+        """How the step ends the episode, one of :data:`OUTCOMES`, or None (running).
+
+        Precedence when several events happen in the same step: ``collision`` > ``out_of_bounds``
+        > ``success`` > ``truncated`` (a failure wins over a goal reached in the same step, and
+        any event over the time limit).
+        """
         if self.collision is not None:
             return "collision"
+        if self.left_world:
+            return "out_of_bounds"
         if self.goal_reached:
             return "success"
         return "truncated" if self.truncated else None
@@ -90,6 +111,9 @@ class Simulator:
         self._force = force
         self._relax = min(1.0, self.dt / force.relaxation_time)
         self._static_count = self.obstacles.polygon_count + self.obstacles.disc_count
+        world = scenario.world
+        # Open space: the rectangle the robot's centre must stay in (None: boundary walls keep it in).
+        self._bounds = None if world.boundary_walls else (*map(float, world.min), *map(float, world.max))
         self._rng = np.random.default_rng()
         self._constants: dict[int, tuple] = {}
         self._ready = False
@@ -234,11 +258,12 @@ class Simulator:
             self._resolve_human_overlaps()
             self.refresh()
         collision = self.robot_collision()
+        left_world = self.robot_left_world()
         goal_reached = abs(self.robot_goal - self.positions[0]) <= self.scenario.robot.goal_radius
         if self.n_humans:
             self._apply_goal_rule()
         truncated = self.step_count >= self.scenario.max_steps
-        return StepEvents(goal_reached=bool(goal_reached), collision=collision, truncated=truncated)
+        return StepEvents(goal_reached=bool(goal_reached), collision=collision, truncated=truncated, left_world=left_world)
 
     @property
     def _any_stopped(self) -> bool:
@@ -350,6 +375,17 @@ class Simulator:
             return Collision("human", f"human_{k - 1}", float(gaps[k]))
         labels = self.obstacles.labels + self.obstacles.disc_labels
         return Collision("static", labels[k - n - 1], float(gaps[k]))
+
+    def robot_left_world(self) -> bool:
+        """Whether the robot's centre is outside the world rectangle (always False with boundary walls).
+
+        Four scalar comparisons: the robot is one point, whatever the crowd size.
+        """
+        if self._bounds is None:
+            return False
+        x0, y0, x1, y1 = self._bounds
+        robot = complex(self.positions[0])
+        return not (x0 <= robot.real <= x1 and y0 <= robot.imag <= y1)
 
     # ------------------------------------------------------------------ goal rule
 

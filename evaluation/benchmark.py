@@ -24,6 +24,8 @@ from typing import Any
 
 import yaml
 
+from crowdnav.simulator import OUTCOMES
+from evaluation.baselines import evaluate_experiment_baselines
 from evaluation.executors import Executor, Job, make_executor, run_name
 from evaluation.experiment import Experiment
 from evaluation.progress import ProgressBar
@@ -85,6 +87,8 @@ def run_experiment(experiment: Experiment, results: str | Path = "results", *, w
     claim_folder(folder, experiment)
     if experiment.needs_encoder():
         pretrain(experiment, folder, log)
+    for baseline in evaluate_experiment_baselines(experiment, folder):  # seconds: the bar the learned runs must clear
+        log(describe_baseline(baseline))
     jobs = [Job(spec.to_dict(), str(out_dir)) for spec, out_dir in experiment.units(folder)]
     report = BenchmarkReport(folder, executor=executor.name)
     monitor = ProgressBar(jobs, experiment.protocol, executor.episodes_done, title=f"benchmark {experiment.name}", enabled=progress)
@@ -108,8 +112,18 @@ def describe_outcome(outcome: dict[str, Any]) -> str:
         run += f" (attempt {outcome['attempts']})"
     if outcome["status"] == "failed":
         return f"{run} failed: {outcome['error']} (traceback: {outcome['log']})"
-    return (f"{run} {outcome['status']}: final success {outcome['final_success']:.0%}, collision {outcome['final_collision']:.0%}, "
-            f"truncated {outcome['final_truncated']:.0%}; {outcome['env_steps']} env steps, {outcome['wall_time_s']:.0f} s")
+    # a run finished before out_of_bounds existed has no final_out_of_bounds: it had none
+    rates = ", ".join(f"{name} {outcome.get(f'final_{name}', 0.0):.0%}" for name in OUTCOMES)
+    return f"{run} {outcome['status']}: final {rates}; {outcome['env_steps']} env steps, {outcome['wall_time_s']:.0f} s"
+
+
+def describe_baseline(folder: Path) -> str:
+    """One line about a scripted baseline's rates on the test episodes."""
+    from evaluation.storage import read_json
+
+    meta = read_json(folder / META_FILE)
+    rates = ", ".join(f"{outcome} {rate:.0%}" for outcome, rate in sorted(meta["final"].items(), key=lambda item: item[0] != "success"))
+    return f"baseline {meta['label']}: {rates} on the {meta['test_episodes']} test episodes"
 
 
 def claim_folder(folder: Path, experiment: Experiment) -> None:
@@ -169,7 +183,7 @@ def write_report(folder: Path, *, video: bool = True, log: Callable[[str], None]
     table, written = write_leaderboard([folder], folder / "leaderboard")
     outputs += written
     if video:
-        best = table.iloc[0]  # rows are sorted by final success
+        best = table[table["kind"] == "learned"].iloc[0]  # rows are sorted by final success
         try:
             outputs += render_final_policy(folder / best["configuration"], folder / "videos")
         except Exception as error:  # the results stand without the video; say why it is missing

@@ -1,11 +1,14 @@
-"""Learning curves as in the paper's Figure 4: success, collision and truncated rates along training.
+"""Learning curves as in the paper's Figure 4: success, collision, out-of-bounds and truncated rates along training.
 
 For each run (configuration, seed), the test episodes are put in order (evaluation, then test
 episode) and each outcome's rate is a sliding mean over the last ``window`` test episodes
 (fewer at the start). Test episode ``j`` (of ``m``) of the evaluation after ``N_k`` training
 episodes is placed at ``x = N_{k-1} + (j + 1) / m * (N_k - N_{k-1})`` (``N_{-1} = 0``), so the
 curve advances one test episode at a time and reaches ``N_k`` with that evaluation's last
-episode. The figure shows the mean over seeds and a band of one standard deviation.
+episode. The figure shows the mean over seeds and a band of one standard deviation. Scripted
+baselines (:mod:`evaluation.baselines`) are grey horizontal lines at their rate on the same
+test episodes. One panel per outcome of :data:`crowdnav.simulator.OUTCOMES`; results written
+before ``out_of_bounds`` existed draw a zero rate there.
 """
 
 from __future__ import annotations
@@ -16,7 +19,8 @@ from typing import Any
 
 import numpy as np
 
-OUTCOMES = ("success", "collision", "truncated")
+from crowdnav.simulator import OUTCOMES
+
 RUN_KEYS = ["experiment", "configuration", "label", "seed"]
 
 
@@ -48,20 +52,28 @@ def curves_figure(tests: Any, window: int, title: str | None = None) -> Any:
     import seaborn as sns
     from matplotlib.figure import Figure
 
-    curves = rate_curves(tests, window)
+    from evaluation.baselines import is_baseline
+
+    scripted = tests["configuration"].map(is_baseline)
+    baselines, tests = tests[scripted], tests[~scripted]
+    curves = rate_curves(tests, window) if len(tests) else None
     labels = list(dict.fromkeys(tests.sort_values(["configuration"])["label"]))
     figure = Figure(figsize=(4.2 * len(OUTCOMES), 3.6), layout="constrained")
     axes = figure.subplots(1, len(OUTCOMES), sharex=True, sharey=True)
     palette = dict(zip(labels, sns.color_palette("colorblind", len(labels)), strict=True))
     for axis, outcome in zip(axes, OUTCOMES, strict=True):
-        sns.lineplot(data=curves[curves["metric"] == outcome], x="training_episodes", y="rate", hue="label", hue_order=labels,
-                     palette=palette, estimator="mean", errorbar="sd", ax=axis, legend=axis is axes[-1])
-        axis.set_title(f"{outcome} rate")
+        if curves is not None:
+            sns.lineplot(data=curves[curves["metric"] == outcome], x="training_episodes", y="rate", hue="label", hue_order=labels,
+                         palette=palette, estimator="mean", errorbar="sd", ax=axis, legend=axis is axes[-1])
+        # a scripted baseline plays the same test episodes at every evaluation: one rate, a horizontal line
+        for (label, frame), style in zip(baselines.groupby("label", sort=True), ("--", ":", "-.", (0, (5, 1))), strict=False):
+            axis.axhline(float((frame["outcome"] == outcome).mean()), color="0.35", linestyle=style, linewidth=1.2, label=label)
+        axis.set_title(f"{outcome.replace('_', ' ')} rate")
         axis.set_xlabel("training episodes")
         axis.set_ylabel(f"rate (sliding window of {window} test episodes)" if axis is axes[0] else "")
         axis.set_ylim(-0.02, 1.02)
         axis.grid(alpha=0.3)
-    if len(labels):
+    if len(labels) or len(baselines):
         axes[-1].legend(title=None, loc="best", fontsize="small")
     if title:
         figure.suptitle(title)

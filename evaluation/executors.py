@@ -29,7 +29,7 @@ from typing import Any
 
 from evaluation.progress import episodes_on_disk
 from evaluation.protocol import Protocol
-from evaluation.runner import run_unit
+from evaluation.runner import OUTCOMES, run_unit
 
 EXECUTORS = ("local", "serial", "ray")
 """Names accepted by :func:`make_executor` (and ``crowdnav benchmark --executor``)."""
@@ -184,9 +184,8 @@ def run_guarded(spec: dict[str, Any], out_dir: str, verbose: bool = False) -> di
 
 def describe_evaluation(spec: dict[str, Any], data: dict[str, Any]) -> str:
     """The line a verbose benchmark prints after an evaluation (run_unit's ``evaluated`` event)."""
-    return (f"run {run_name(spec)}: evaluation {data['evaluation']} after "
-            f"{data['training_episodes']} episodes: success {data['success']:.0%}, collision {data['collision']:.0%}, "
-            f"truncated {data['truncated']:.0%}")
+    rates = ", ".join(f"{outcome} {data.get(outcome, 0.0):.0%}" for outcome in OUTCOMES)
+    return f"run {run_name(spec)}: evaluation {data['evaluation']} after {data['training_episodes']} episodes: {rates}"
 
 
 def one_line(error: BaseException) -> str:

@@ -33,6 +33,7 @@ from typing import Any
 import yaml
 
 from crowdnav.scenario.loader import yaml_line
+from evaluation.baselines import BASELINE_PREFIX
 from evaluation.protocol import Protocol, protocol_fields, quick
 from evaluation.runner import PRETRAINED, PROTOCOL_FIELDS, UnitSpec
 
@@ -161,6 +162,8 @@ def experiment_from_mapping(document: Any, label: str = "<experiment>", root: ya
         config_name = item.get("name")
         if not isinstance(config_name, str) or not _NAME.match(config_name):
             check.fail(f"{where}.name", f"expected a folder-safe name (letters, digits, '_', '-', '.'), got {config_name!r}")
+        if config_name.startswith(BASELINE_PREFIX):
+            check.fail(f"{where}.name", f"names starting with {BASELINE_PREFIX!r} are kept for the scripted baselines, got {config_name!r}")
         if config_name in seen:
             check.fail(f"{where}.name", f"duplicate configuration name {config_name!r} (also configurations.{seen[config_name]})")
         seen[config_name] = index

@@ -2,8 +2,10 @@
 
 Columns (definitions in docs/evaluation.md):
 
-* final success / collision / truncated: per run, the rate over the test episodes of the last
-  ``final_evaluations`` evaluations; mean and standard deviation (ddof 1; 0 with one seed) over seeds;
+* final success / collision / out_of_bounds / truncated (:data:`crowdnav.simulator.OUTCOMES`):
+  per run, the rate over the test episodes of the last ``final_evaluations`` evaluations; mean
+  and standard deviation (ddof 1; 0 with one seed) over seeds. Rates are counted from the
+  episodes' ``outcome`` column, so results written before ``out_of_bounds`` existed rank with 0;
 * IQM of final success: interquartile mean over runs, with a 95% percentile confidence
   interval from a stratified bootstrap (Agarwal et al. 2021; one stratum per configuration,
   2000 resamples, seeded);
@@ -13,6 +15,9 @@ Columns (definitions in docs/evaluation.md):
   (successful episodes), minimum human distance, intimate and personal zone shares, mean jerk
   and cumulative social force; median minimum time to collision;
 * env steps and wall time: mean per run.
+
+Scripted baselines (:mod:`evaluation.baselines`, ``kind`` baseline) are ranked with the learned
+configurations, on the same test episodes; their one deterministic run counts as one seed.
 
 Regenerating from the same results writes the same bytes: rows sorted by final success
 (then experiment and configuration), fixed float formats, nothing time-dependent.
@@ -26,9 +31,11 @@ from typing import Any
 
 import numpy as np
 
+from crowdnav.simulator import OUTCOMES
+from evaluation.baselines import is_baseline
+
 BOOTSTRAP_RESAMPLES = 2000
 BOOTSTRAP_SEED = 0
-OUTCOMES = ("success", "collision", "truncated")
 SOCIAL_MEANS = ("spl", "path_length", "time_to_goal", "min_human_distance", "intimate_share", "personal_share", "mean_jerk", "social_force")
 """Metrics averaged over the final test episodes (time_to_goal over the successful ones)."""
 
@@ -73,7 +80,7 @@ def leaderboard_table(tests: Any, metas: list[dict[str, Any]]) -> Any:
         final = frame[frame["evaluation"] > last - final_count[experiment]]
         per_run = final.groupby("seed")["outcome"]
         row: dict[str, Any] = {"experiment": experiment, "configuration": configuration, "label": frame["label"].iloc[0],
-                               "seeds": int(frame["seed"].nunique())}
+                               "kind": "baseline" if is_baseline(configuration) else "learned", "seeds": int(frame["seed"].nunique())}
         for outcome in OUTCOMES:
             rates = per_run.apply(lambda outcomes, o=outcome: float((outcomes == o).mean())).to_numpy()
             row[f"final_{outcome}_mean"], row[f"final_{outcome}_std"] = float(rates.mean()), _std(rates)
@@ -107,7 +114,7 @@ def to_markdown(table: Any) -> str:
     """A GitHub markdown table with the main columns (all of them are in the CSV)."""
     several = table["experiment"].nunique() > 1
     header = (["experiment"] if several else []) + [
-        "configuration", "seeds", "success", "collision", "truncated", "success IQM [95% CI]", "success AUC",
+        "configuration", "seeds", *OUTCOMES, "success IQM [95% CI]", "success AUC",
         "SPL", "min human dist. (m)", "intimate share", "social force", "env steps", "wall time (s)",
     ]
     lines = ["| " + " | ".join(header) + " |", "|" + "|".join(["---"] * len(header)) + "|"]

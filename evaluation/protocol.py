@@ -27,7 +27,7 @@ class Protocol:
     test_episodes: int = _option(20, "Test episodes per evaluation (the same seeds at every evaluation).")
     seeds: int = _option(5, "Runs per configuration, with training seeds 0, 1, ..., seeds - 1.")
     test_seed_base: int = _option(0, "The test episodes use seeds test_seed_base, test_seed_base + 1, ...")
-    window: int = _option(10, "Curves: sliding window, in test episodes, of the success/collision/truncated rates.")
+    window: int = _option(10, "Curves: sliding window, in test episodes, of the outcome rates (success, collision, out_of_bounds, truncated).")
     final_evaluations: int = _option(3, "Leaderboard: the 'final' rates pool the test episodes of this many last evaluations.")
 
     def __post_init__(self) -> None:

@@ -17,6 +17,8 @@ from evaluation.metrics import Trajectory, episode_metrics
 
 BatchPolicy = Callable[[Mapping[str, np.ndarray]], np.ndarray]
 """Observations stacked per key, shape (N, ...) -> actions (N, 2); :class:`agents.AgentPolicy` is one."""
+ScriptedPolicy = Callable[[Any], np.ndarray]
+"""A privileged robot policy: simulator -> action (2,), e.g. :class:`crowdnav.policies.StraightToGoal`."""
 
 
 class HeldOutEpisodes:
@@ -33,8 +35,12 @@ class HeldOutEpisodes:
         self.seeds = list(seeds)
         self.envs = [CrowdNavEnv(**self.env_options) for _ in self.seeds]
 
-    def run(self, policy: BatchPolicy) -> list[dict[str, Any]]:
-        """Play one episode per seed with ``policy``; one dict per episode (seed order): outcome, return, metrics."""
+    def run(self, policy: BatchPolicy | ScriptedPolicy, *, privileged: bool = False) -> list[dict[str, Any]]:
+        """Play one episode per seed with ``policy``; one dict per episode (seed order): outcome, return, metrics.
+
+        ``privileged``: ``policy`` is a scripted robot policy (:mod:`crowdnav.policies`) called
+        with each running episode's simulator instead of the stacked observations.
+        """
         observations = [env.reset(seed=seed)[0] for env, seed in zip(self.envs, self.seeds, strict=True)]
         positions = [[env.simulator.positions.copy()] for env in self.envs]
         forces: list[list[float]] = [[] for _ in self.envs]
@@ -42,8 +48,11 @@ class HeldOutEpisodes:
         ends: list[dict[str, Any] | None] = [None] * len(self.envs)
         running = list(range(len(self.envs)))
         while running:
-            batch = {key: np.stack([observations[i][key] for i in running]) for key in observations[running[0]]}
-            actions = np.asarray(policy(batch)).reshape(len(running), -1)
+            if privileged:
+                actions = np.stack([policy(self.envs[i].simulator) for i in running])
+            else:
+                batch = {key: np.stack([observations[i][key] for i in running]) for key in observations[running[0]]}
+                actions = np.asarray(policy(batch)).reshape(len(running), -1)
             still = []
             for action, i in zip(actions, running, strict=True):
                 env = self.envs[i]

@@ -23,6 +23,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from crowdnav.simulator import OUTCOMES
 from evaluation.protocol import Protocol
 from evaluation.storage import (
     ENCODER_DIR,
@@ -46,10 +47,10 @@ PRETRAINED = "<pretrained>"
 
 RUN_COLUMNS = ("experiment", "configuration", "label", "seed")
 """The columns that name the run, first in every table."""
-OUTCOMES = ("success", "collision", "truncated")
 
 EventHook = Callable[[str, dict[str, Any]], None]
-"""``hook(event, data)``: ``"trained"`` ({episodes}) and ``"evaluated"`` ({evaluation, training_episodes, success, collision, truncated})."""
+"""``hook(event, data)``: ``"trained"`` ({episodes}) and ``"evaluated"`` ({evaluation, training_episodes} and the
+rate of each of :data:`OUTCOMES`: success, collision, out_of_bounds, truncated)."""
 
 
 @dataclass(frozen=True)
@@ -101,8 +102,9 @@ def run_unit(spec: UnitSpec | Mapping[str, Any], out_dir: str | Path, *, on_even
     """Train and evaluate one run into ``out_dir`` (resuming or skipping as needed); returns its summary.
 
     Summary: experiment, configuration, seed, ``status`` (``"done"`` or ``"skipped"`` when it
-    was already complete), ``resumed``, final success/collision/truncated rates, env steps,
-    wall time and the folder.
+    was already complete), ``resumed``, final rate of each outcome (``final_<outcome>``, one per
+    :data:`OUTCOMES`; a run finished before ``out_of_bounds`` existed has no ``final_out_of_bounds``),
+    env steps, wall time and the folder.
     """
     spec = spec if isinstance(spec, UnitSpec) else UnitSpec.from_dict(spec)
     out_dir = Path(out_dir)

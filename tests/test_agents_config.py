@@ -62,6 +62,40 @@ def test_train_command_overrides_the_config_with_flags(tmp_path, capsys):
     assert (printed["algo"], printed["modalities"], printed["episodes"], printed["seed"]) == ("ddpg", ["leog", "lidar", "goal"], 7, 4)
 
 
+def test_train_reward_flags_fill_reward_weights_on_top_of_the_config_file(tmp_path, capsys):
+    path = write(tmp_path, "reward_weights: {social: 0, goal_progress: 50}\n")
+    code = main(["train", "--config", str(path), "--reward", "paper", "--reward-weight", "goal_progress=20",
+                 "--reward-weight", "collision=-100", "--print-config"])
+    assert code == 0
+    printed = yaml.safe_load(capsys.readouterr().out)
+    assert printed["reward_weights"] == {"social": 0, "goal_progress": 20.0, "preset": "paper", "collision": -100.0}
+
+
+@pytest.mark.parametrize(("argv", "message"), [
+    (["--reward", "papr"], "invalid choice: 'papr'"),
+    (["--reward-weight", "socal=1"], "unknown reward term 'socal'; did you mean 'social'? expected one of: step, goal_progress, social"),
+    (["--reward-weight", "social"], "expected TERM=VALUE"),
+    (["--reward-weight", "social=lots"], "social: expected a finite number, got 'lots'"),
+])
+def test_train_reward_flag_errors_are_usage_errors_naming_the_valid_values(capsys, argv, message):
+    assert main(["train", *argv, "--print-config"]) == 2
+    err = capsys.readouterr().err
+    assert message in err and "Traceback" not in err
+    if "papr" in argv:
+        assert "default" in err.split("choose from")[1] and "paper" in err.split("choose from")[1]
+
+
+def test_train_config_reward_weights_select_a_preset_for_the_env():
+    from agents.factory import env_options
+    from crowdnav.envs import CrowdNavEnv
+
+    config = load_config(None, {"reward_weights": {"preset": "paper", "social": -50}})
+    reward = CrowdNavEnv(**env_options(config)).scenario.reward
+    assert reward.preset == "paper" and reward.terms == {"step": -5.0, "goal_progress": 10.0, "social": -50.0,
+                                                         "goal_reached": 500.0, "collision": -500.0}
+    assert CrowdNavEnv(**env_options(TrainConfig())).scenario.reward.preset == "default"
+
+
 def test_train_command_reports_config_errors_on_one_line(tmp_path, capsys):
     path = write(tmp_path, "episods: 3\n")
     assert main(["train", "--config", str(path)]) == 1

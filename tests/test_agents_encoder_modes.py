@@ -9,7 +9,7 @@ from agents_tiny import SMALL_LEOG, TINY_EXTRACTOR, tiny_config
 
 from agents import collect_grids, load_policy, pretrain_encoder, train
 from agents.factory import extractors
-from agents.wrappers import LeogLatentWrapper
+from agents.wrappers import LeogLatentWrapper, NormalizeObservation
 
 
 @pytest.fixture(scope="module")
@@ -72,7 +72,10 @@ def test_precomputed_frozen_latent_replaces_the_grid_and_the_policy_applies_the_
     assert policy.encoder is not None
     env = policy.make_env()
     observation, _ = env.reset(seed=3)
-    wrapped = LeogLatentWrapper(env, policy.encoder).observation(observation)
+    # the training env's stack: normalisation (goal in diagonals, the grid untouched), then the latent of the raw grid
+    normalized = NormalizeObservation(env)
+    wrapped = LeogLatentWrapper(normalized, policy.encoder).observation(normalized.observation(observation))
+    assert set(policy.scales) == {"goal"} and model.observation_space["goal"] == normalized.observation_space["goal"]
     expected, _ = model.predict(wrapped, deterministic=True)
     np.testing.assert_allclose(policy(observation), expected, atol=1e-6)
 

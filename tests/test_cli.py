@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import argparse
 import json
 import subprocess
 import sys
@@ -9,8 +10,9 @@ import sys
 import pytest
 
 from crowdnav.cli import build_parser, main
-from crowdnav.cli.common import CliError, format_table, parse_overrides
+from crowdnav.cli.common import CliError, format_table, parse_overrides, reward_options, reward_weight
 from crowdnav.scenario.library import library_descriptions, library_dir, library_names
+from crowdnav.scenario.reward_presets import REWARD_PRESETS, REWARD_TERMS
 from crowdnav.scenario.schema import Scenario
 
 
@@ -102,6 +104,33 @@ def test_usage_errors_exit_2_with_usage(capsys, argv):
     code, out, err = run(capsys, *argv)
     assert code == 2
     assert "usage: crowdnav" in err
+
+
+def test_render_reward_flags_become_reward_weights():
+    args = build_parser().parse_args(["render", "open_space", "--reward", "paper", "--reward-weight", "social=-50",
+                                      "--reward-weight", "step=-1"])
+    assert reward_options(args) == {"preset": "paper", "social": -50.0, "step": -1.0}
+    assert reward_options(build_parser().parse_args(["render", "open_space"])) == {}
+
+
+def test_reward_weight_values_are_checked_and_terms_listed():
+    assert reward_weight(" goal_reached = 25 ") == ("goal_reached", 25.0)
+    with pytest.raises(argparse.ArgumentTypeError, match="expected one of: step, goal_progress, social, goal_reached, collision"):
+        reward_weight("colision=-1")
+    with pytest.raises(argparse.ArgumentTypeError, match="finite number"):
+        reward_weight("step=nan")
+
+
+@pytest.mark.parametrize(("argv", "message", "listing", "names"), [
+    (["--reward", "gentle"], "argument --reward: invalid choice: 'gentle'", "(choose from ", REWARD_PRESETS),
+    (["--reward-weight", "speed=1"], "argument --reward-weight: unknown reward term 'speed'", "expected one of: ", REWARD_TERMS),
+])
+def test_render_unknown_reward_names_exit_2_listing_the_valid_ones(capsys, argv, message, listing, names):
+    code, out, err = run(capsys, "render", "open_space", *argv)
+    assert code == 2 and out == ""
+    assert message in err and "Traceback" not in err
+    valid = err.split(listing)[1].splitlines()[0]
+    assert all(name in valid for name in names)
 
 
 def test_help_exits_0(capsys):

@@ -173,6 +173,27 @@ def test_episode_end_removes_every_agent_at_once():
         env.step({})
 
 
+def test_robot_leaving_an_open_world_terminates_every_agent_out_of_bounds():
+    env = parallel_env("open_space", **FAST, overrides={"humans.count": 3})
+    env.reset(seed=0)
+    sim = env.simulator
+    # park the robot 0.1 m inside the right edge, where it is farthest from the (standing) humans, and drive right
+    edge = sim.scenario.world.max[0] - 0.1
+    spots = [complex(edge, y) for y in np.linspace(-4.0, 4.0, 17)]
+    sim.positions[0] = max(spots, key=lambda spot: np.abs(sim.human_positions - spot).min())
+    sim.robot_heading = 0.0
+    sim.refresh()
+    actions = {agent: np.zeros(2, dtype=np.float32) for agent in env.agents}
+    actions["robot"] = np.array([1.0, 0.0], dtype=np.float32)
+    agents = list(env.agents)
+    _, rewards, terminations, truncations, infos = env.step(actions)
+    assert terminations == dict.fromkeys(agents, True) and truncations == dict.fromkeys(agents, False)
+    assert env.agents == []
+    assert infos["robot"]["outcome"] == "out_of_bounds" and infos["robot"]["is_success"] is False
+    assert infos["robot"]["reward_terms"]["collision"] == env.scenario.reward.collision
+    assert all(rewards[agent] == 0.0 for agent in agents if agent != "robot")
+
+
 def test_missing_unknown_and_non_finite_actions_raise_clear_errors():
     env = parallel_env("room_furniture", **FAST, overrides={"humans.count": 2})
     env.reset(seed=0)

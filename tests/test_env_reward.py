@@ -1,14 +1,23 @@
-"""Reward terms: formulas on constructed states, their sum, the event terms and the end-of-episode info."""
+"""Reward terms: formulas on constructed states, their sum, the event terms, the presets and the end-of-episode info."""
 
 from __future__ import annotations
 
+import contextlib
+import io
 import math
+import runpy
+from pathlib import Path
 
 import numpy as np
 import pytest
 
 import crowdnav.envs  # noqa: F401  (registers the environments until crowdnav/__init__ imports them)
 from crowdnav.envs import REWARD_TERMS, CrowdNavEnv
+from crowdnav.scenario import ScenarioError, load_scenario, reward_presets
+from crowdnav.scenario.reward_presets import DEFAULT_PRESET, REWARD_PRESETS
+
+PAPER = {"step": -5.0, "goal_progress": 10.0, "social": -100.0, "goal_reached": 500.0, "collision": -500.0}
+"""The OpenSocInt paper's weights (its Section "Reward functions"), step read as a penalty."""
 
 
 def constructed(humans: list[tuple[float, float]] = (), goal=(3.0, 0.0), walls=(), max_steps=100, see_robot=False) -> dict:
@@ -69,8 +78,8 @@ def test_reward_terms_follow_their_formulas_and_sum_to_the_reward():
     assert all(s < 0 for s in socials)  # the humans are close enough for the term to matter
 
 
-def test_default_weights_are_the_papers():
-    env = CrowdNavEnv(constructed(), modalities=["goal"])
+def test_paper_preset_pays_the_papers_step_penalty_and_progress_weight():
+    env = CrowdNavEnv(constructed(), modalities=["goal"], reward_weights={"preset": "paper"})
     env.reset(seed=0)
     _, reward, _, _, info = env.step(np.array([1.0, 0.0]))
     terms = info["reward_terms"]
@@ -82,7 +91,7 @@ def test_default_weights_are_the_papers():
 
 
 def test_goal_reached_pays_once_and_reports_success():
-    env = CrowdNavEnv(constructed(goal=(1.0, 0.0)), modalities=["goal"])
+    env = CrowdNavEnv(constructed(goal=(1.0, 0.0)), modalities=["goal"], reward_weights={"preset": "paper"})
     env.reset(seed=1)
     for _ in range(20):
         _, reward, terminated, truncated, info = env.step(np.array([1.0, 0.0]))
@@ -98,7 +107,7 @@ def test_goal_reached_pays_once_and_reports_success():
 
 
 def test_collision_with_a_human_pays_once_and_names_the_human():
-    env = CrowdNavEnv(constructed(humans=[(1.4, 0.0)]), modalities=["goal"])
+    env = CrowdNavEnv(constructed(humans=[(1.4, 0.0)]), modalities=["goal"], reward_weights={"preset": "paper"})
     env.reset(seed=2)
     for _ in range(20):
         _, reward, terminated, truncated, info = env.step(np.array([1.0, 0.0]))
@@ -130,3 +139,95 @@ def test_time_limit_truncates_without_terminating():
     assert [(terminated, truncated) for terminated, truncated, _ in ends] == [(False, False), (False, False), (False, True)]
     info = ends[-1][2]
     assert info["outcome"] == "truncated" and info["is_success"] is False and "collision_kind" not in info
+
+
+# ----------------------------------------------------------------------------- presets
+
+
+def test_paper_preset_has_exactly_the_papers_five_weights():
+    assert dict(REWARD_PRESETS["paper"].weights) == PAPER
+    assert load_scenario(constructed(), {"reward.preset": "paper"}).reward.terms == PAPER
+
+
+def test_every_preset_gives_every_term_in_order_with_a_one_line_doc():
+    assert DEFAULT_PRESET == "default" and list(REWARD_PRESETS)[0] == DEFAULT_PRESET
+    for name, preset in REWARD_PRESETS.items():
+        assert preset.name == name and tuple(preset.weights) == REWARD_TERMS
+        assert all(math.isfinite(weight) for weight in preset.weights.values())
+        assert preset.doc and "\n" not in preset.doc
+
+
+def test_default_preset_numbers_live_in_one_place_each():
+    default = REWARD_PRESETS["default"].weights
+    assert default == {"step": reward_presets.DEFAULT_STEP, "goal_progress": reward_presets.DEFAULT_GOAL_PROGRESS,
+                       "social": reward_presets.DEFAULT_SOCIAL, "goal_reached": reward_presets.DEFAULT_GOAL_REACHED,
+                       "collision": reward_presets.DEFAULT_COLLISION}
+    assert default["step"] < 0 < default["goal_progress"] and default["social"] < 0 and default["collision"] < 0 < default["goal_reached"]
+
+
+def test_a_scenario_without_reward_section_gets_the_default_preset():
+    env = CrowdNavEnv(constructed(), modalities=["goal"])
+    assert "reward" not in constructed()
+    reward = env.scenario.reward
+    assert reward.preset == "default" and reward.terms == dict(REWARD_PRESETS["default"].weights)
+    env.reset(seed=0)
+    _, reward_value, _, _, info = env.step(np.array([1.0, 0.0]))
+    assert info["reward_terms"]["step"] == reward_presets.DEFAULT_STEP
+    assert info["reward_terms"]["goal_progress"] == pytest.approx(reward_presets.DEFAULT_GOAL_PROGRESS * 0.2, abs=1e-9)
+
+
+@pytest.mark.parametrize("name", ["open_space", "room_furniture", "corridor"])
+def test_library_scenarios_use_the_default_preset(name):
+    assert load_scenario(name).reward.terms == dict(REWARD_PRESETS["default"].weights)
+
+
+def test_a_single_term_override_on_top_of_a_preset_keeps_the_other_preset_weights():
+    expected = {**PAPER, "social": -50.0}
+    in_the_file = load_scenario({**constructed(), "reward": {"preset": "paper", "social": -50}}).reward
+    as_overrides = load_scenario(constructed(), {"reward.preset": "paper", "reward.social": -50}).reward
+    as_env_option = CrowdNavEnv(constructed(), modalities=["goal"], reward_weights={"preset": "paper", "social": -50}).scenario.reward
+    for reward in (in_the_file, as_overrides, as_env_option):
+        assert reward.preset == "paper" and reward.terms == expected
+    on_the_default = load_scenario(constructed(), {"reward.social": -1.5}).reward
+    assert on_the_default.terms == {**REWARD_PRESETS["default"].weights, "social": -1.5}
+
+
+def test_explicit_terms_win_over_a_preset_given_later_also_from_a_loaded_scenario():
+    scenario = load_scenario({**constructed(), "reward": {"social": -1.0}})
+    assert scenario.reward.model_dump() == {"preset": "default", "social": -1.0}  # what was written, not the resolved numbers
+    env = CrowdNavEnv(scenario, modalities=["goal"], reward_weights={"preset": "paper"})
+    assert env.scenario.reward.terms == {**PAPER, "social": -1.0}
+    scenario.reward.preset = "paper"  # assignment re-resolves the terms that were not given
+    assert scenario.reward.terms == {**PAPER, "social": -1.0}
+
+
+def test_unknown_preset_or_term_in_an_env_option_names_the_valid_ones():
+    with pytest.raises(ScenarioError) as caught:
+        CrowdNavEnv(constructed(), reward_weights={"preset": "papr"})
+    assert "reward.preset: unknown reward preset 'papr'; did you mean 'paper'? expected one of: default, paper" in str(caught.value)
+    with pytest.raises(ScenarioError) as caught:
+        CrowdNavEnv(constructed(), reward_weights={"socal": -50})
+    message = str(caught.value)
+    assert "reward.socal: unknown key 'socal'; did you mean 'social'?" in message
+    assert all(name in message for name in ("preset", *REWARD_TERMS))
+
+
+# ---------------------------------------------------------------------- calibration
+
+
+def test_reward_calibration_script_prints_both_tables_for_every_preset():
+    script = runpy.run_path(str(Path(__file__).parents[1] / "benchmarks" / "reward_calibration.py"))
+    out = io.StringIO()
+    with contextlib.redirect_stdout(out):
+        assert script["main"](["--gammas", "0.99", "--reward", "paper", "--reward-weight", "social=0"]) == 0
+    text = out.getvalue()
+    assert "(a) Social term" in text and "(b) Discounted return" in text
+    for name in (*REWARD_PRESETS, "custom"):
+        assert f"{name}: sum per pass" in text
+        assert f"{name}: gamma 0.99" in text
+    rows = {line.split(" | ")[0].lstrip("| "): line.split(" | ") for line in text.splitlines() if line.startswith("| ")}
+    # peak |F_social| at a 0.5 m surface gap is A exp(-gap / B) = 2 exp(-0.5 / 0.3)
+    walking = next(cells for line in text.splitlines() if line.startswith("| walking") and (cells := line.split(" | "))[1] == "0.5")
+    assert float(walking[3].split(" / ")[0]) == pytest.approx(2 * math.exp(-0.5 / 0.3), rel=1e-2)
+    assert rows["reach: straight to the goal 6 m away"][1] == "success"
+    assert rows["collide: a wall, after 3 m of progress"][1:3] == ["collision", "15"]

@@ -11,6 +11,7 @@ import crowdnav.envs  # noqa: F401  (registers the environments until crowdnav/_
 from crowdnav.envs import ENV_IDS, SCENARIO_FILE_ID, CrowdNavEnv, env_id
 from crowdnav.scenario import ScenarioError
 from crowdnav.scenario.library import library_dir, library_names
+from crowdnav.scenario.reward_presets import REWARD_PRESETS
 
 ALL_MODALITIES = ["goal", "closest_obstacle", "lidar", "leog", "velocity"]
 
@@ -86,7 +87,7 @@ def test_options_reach_the_scenario_and_the_spaces():
     )
     assert env.observation_space["lidar"].shape == (180,)
     assert env.observation_space["goal"].shape == (2,)
-    assert env.scenario.reward.social == -50.0 and env.scenario.reward.step == -5.0
+    assert env.scenario.reward.social == -50.0 and env.scenario.reward.step == REWARD_PRESETS["default"].weights["step"]
     env.reset(seed=0)
     assert env.simulator.n_humans == 4
 
@@ -161,3 +162,59 @@ def test_both_envs_share_one_simulator_class_and_one_crowd_model():
         if terminated or truncated:
             break
     assert single.simulator.step_count > 10 and not multi.agents
+
+
+def flee_the_goal(env: CrowdNavEnv, limit: int = 200) -> tuple[int, float, bool, bool, dict]:
+    """Drive the holonomic robot straight away from its goal until the episode ends: (steps, last reward, terminated, truncated, info)."""
+    sim = env.simulator
+    sim.robot_heading = 0.0  # holonomic: the action is then a world-frame direction
+    away = sim.robot_position - sim.robot_goal
+    action = np.array([away.real, away.imag]) / abs(away)
+    for step in range(1, limit + 1):
+        _, reward, terminated, truncated, info = env.step(action)
+        if terminated or truncated:
+            return step, reward, terminated, truncated, info
+    raise AssertionError("the episode did not end")
+
+
+@pytest.mark.parametrize("scenario", ["open_space", "crowded_open_space", "circle_crossing", "perpendicular_crossing"])
+def test_robot_driven_out_of_an_open_world_ends_out_of_bounds_and_pays_the_collision_term(scenario):
+    env = CrowdNavEnv(scenario, modalities=["goal"], overrides={"humans.count": 0})
+    assert not env.scenario.world.boundary_walls
+    env.reset(seed=0)
+    steps, reward, terminated, truncated, info = flee_the_goal(env)
+    assert info["outcome"] == "out_of_bounds" and info["is_success"] is False
+    assert terminated is True and truncated is False
+    assert "collision_kind" not in info and "collision_partner" not in info
+    assert steps < env.scenario.max_steps  # the robot did not wander until the time limit
+    assert info["reward_terms"]["collision"] == env.scenario.reward.collision != 0.0
+    assert info["reward_terms"]["goal_reached"] == 0.0
+    assert reward == pytest.approx(sum(info["reward_terms"].values()))
+    (x0, y0), (x1, y1) = env.scenario.world.min, env.scenario.world.max
+    position = env.simulator.robot_position
+    assert not (x0 <= position.real <= x1 and y0 <= position.imag <= y1)
+    with pytest.raises(RuntimeError, match="reset"):
+        env.step(np.zeros(2))
+
+
+def test_with_boundary_walls_the_same_drive_ends_in_a_static_collision():
+    env = CrowdNavEnv("open_space", modalities=["goal"], overrides={"humans.count": 0, "world.boundary_walls": True})
+    env.reset(seed=0)
+    _, _, terminated, truncated, info = flee_the_goal(env)
+    assert info["outcome"] == "collision" and info["collision_kind"] == "static" and "boundary" in info["collision_partner"]
+    assert terminated is True and truncated is False
+    assert info["reward_terms"]["collision"] == env.scenario.reward.collision
+    assert not env.simulator.robot_left_world()  # leaving the world is impossible with walls
+
+
+def test_every_library_scenario_either_walls_the_robot_in_or_ends_the_episode_when_it_leaves():
+    for name in library_names():
+        env = CrowdNavEnv(name, modalities=["goal"], overrides={"humans.count": 0})
+        env.reset(seed=0)
+        _, _, terminated, truncated, info = flee_the_goal(env, limit=env.scenario.max_steps)
+        if env.scenario.world.boundary_walls:
+            assert info["outcome"] == "collision" and info["collision_kind"] == "static", name  # walls or furniture first
+        else:
+            assert info["outcome"] == "out_of_bounds", name
+        assert terminated and not truncated, name
+        env.close()

@@ -21,7 +21,7 @@ def write(tmp_path, document, name="experiment.yaml"):
 
 
 def test_shipped_experiments_cover_figure_4_and_the_default():
-    assert set(shipped_experiments()) == {"default", "encoders", "modalities", "fusion", "paradigms"}
+    assert set(shipped_experiments()) == {"default", "encoders", "modalities", "fusion", "paradigms", "learning_check"}
     labels = {name: [c.name for c in load_experiment(name).configurations] for name in shipped_experiments()}
     assert labels["encoders"] == ["frozen", "finetune", "scratch"]
     assert labels["modalities"] == ["leog", "lidar", "closest_obstacle"]

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import math
 import shutil
 
@@ -11,8 +12,10 @@ import pytest
 from evaluation_tiny import tiny_results
 
 from crowdnav.cli import main
-from evaluation.curves import rate_curves
-from evaluation.leaderboard import bootstrap_iqm, interquartile_mean, leaderboard_table, to_markdown, write_leaderboard
+from crowdnav.simulator import OUTCOMES
+from evaluation.benchmark import describe_outcome
+from evaluation.curves import curves_figure, rate_curves
+from evaluation.leaderboard import bootstrap_iqm, interquartile_mean, leaderboard_table, to_csv, to_markdown, write_leaderboard
 from evaluation.metrics import METRIC_COLUMNS
 
 # configuration a: seed 0 always succeeds; seed 1 collides in evaluations 0-1 then succeeds; seed 2 is always truncated.
@@ -46,6 +49,7 @@ def test_leaderboard_values_on_hand_made_results():
     assert a["seeds"] == 3
     assert a["final_success_mean"] == pytest.approx(2 / 3) and a["final_success_std"] == pytest.approx(math.sqrt(1 / 3))
     assert a["final_collision_mean"] == 0.0 and a["final_truncated_mean"] == pytest.approx(1 / 3)
+    assert a["final_out_of_bounds_mean"] == 0.0  # no out_of_bounds episode (e.g. results written before it existed): rate 0
     assert a["success_iqm"] == pytest.approx(2 / 3) and a["success_iqm_low"] <= 2 / 3 <= a["success_iqm_high"]
     assert a["success_auc_mean"] == pytest.approx(0.5) and a["success_auc_std"] == pytest.approx(0.5)  # per seed 1, 0.5, 0
     assert a["time_to_goal"] == 5.0  # successful episodes only
@@ -54,7 +58,44 @@ def test_leaderboard_values_on_hand_made_results():
     b = table.iloc[1]
     assert b["final_collision_mean"] == 1.0 and b["final_success_std"] == 0.0 and math.isnan(b["time_to_goal"])
     markdown = to_markdown(table)
-    assert markdown.splitlines()[2].startswith("| A | 3 | 0.667 ± 0.577 | 0.000 ± 0.000 | 0.333 ± 0.577 |")
+    assert markdown.splitlines()[0].startswith("| configuration | seeds | success | collision | out_of_bounds | truncated |")
+    assert markdown.splitlines()[2].startswith("| A | 3 | 0.667 ± 0.577 | 0.000 ± 0.000 | 0.000 ± 0.000 | 0.333 ± 0.577 |")
+
+
+def test_leaderboard_and_curves_count_out_of_bounds_episodes():
+    tests, metas = synthetic_results()
+    # configuration b leaves the world in its last two evaluations instead of colliding
+    tests.loc[(tests["configuration"] == "b") & (tests["evaluation"] >= 2), "outcome"] = "out_of_bounds"
+    table = leaderboard_table(tests, metas).set_index("configuration")
+    assert table.loc["b", "final_out_of_bounds_mean"] == 1.0 and table.loc["b", "final_collision_mean"] == 0.0
+    assert table.loc["a", "final_out_of_bounds_mean"] == 0.0
+    for name in OUTCOMES:  # every outcome's mean and std, in the CSV and the markdown
+        assert f"final_{name}_mean" in to_csv(table.reset_index()).splitlines()[0]
+    assert "| B | 1 | 0.000 ± 0.000 | 0.000 ± 0.000 | 1.000 ± 0.000 | 0.000 ± 0.000 |" in to_markdown(table.reset_index())
+    curves = rate_curves(tests, window=2)
+    assert set(curves["metric"]) == set(OUTCOMES)
+    b = curves[(curves["configuration"] == "b") & (curves["metric"] == "out_of_bounds")]
+    np.testing.assert_allclose(b["rate"], [0.0] * 8 + [0.5] + [1.0] * 7)
+    figure = curves_figure(tests, window=2)
+    assert [axis.get_title() for axis in figure.axes] == ["success rate", "collision rate", "out of bounds rate", "truncated rate"]
+
+
+def test_results_written_before_out_of_bounds_existed_still_load_and_rank(tmp_path_factory, tmp_path):
+    old = tmp_path / "old"
+    shutil.copytree(tiny_results(tmp_path_factory), old)
+    for meta_path in old.rglob("meta.json"):  # what such a run wrote: no out_of_bounds rate, no out_of_bounds episode
+        meta = json.loads(meta_path.read_text())
+        meta["final"].pop("out_of_bounds")
+        meta_path.write_text(json.dumps(meta))
+        episodes = meta_path.parent / "test_episodes.csv"
+        episodes.write_text(episodes.read_text().replace(",out_of_bounds,", ",truncated,"))
+    table, written = write_leaderboard([old], tmp_path / "board")
+    assert (table["final_out_of_bounds_mean"] == 0.0).all() and (table["final_out_of_bounds_std"] == 0.0).all()
+    assert "out_of_bounds" in written[0].read_text().splitlines()[0]
+    assert main(["plot", str(old), "--out", str(tmp_path / "curves")]) == 0
+    summary = {"experiment": "tiny", "configuration": "lidar", "seed": 0, "status": "skipped", "final_success": 0.5,
+               "final_collision": 0.25, "final_truncated": 0.25, "env_steps": 100, "wall_time_s": 3.0}
+    assert "success 50%, collision 25%, out_of_bounds 0%, truncated 25%" in describe_outcome(summary)
 
 
 def test_interquartile_mean_drops_a_quarter_at_each_end():
@@ -90,7 +131,9 @@ def test_leaderboard_regenerates_byte_for_byte(tmp_path_factory, tmp_path):
     for a, b in zip(first, second, strict=True):
         assert a.read_bytes() == b.read_bytes()
     table = pd.read_csv(first[1])
-    assert sorted(table["configuration"]) == ["closest", "lidar"] and (table["seeds"] == 2).all()
+    learned = table[table["kind"] == "learned"]
+    assert sorted(learned["configuration"]) == ["closest", "lidar"] and (learned["seeds"] == 2).all()
+    assert sorted(table.loc[table["kind"] == "baseline", "configuration"]) == ["baseline_social_force", "baseline_straight"]
 
 
 def test_plot_and_leaderboard_commands_write_their_files(tmp_path_factory, capsys):

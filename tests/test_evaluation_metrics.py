@@ -139,3 +139,12 @@ def test_held_out_episodes_of_a_goal_seeking_policy_in_an_empty_world_succeed_wi
     assert all(row["min_human_distance"] == math.inf and row["social_force"] == 0.0 for row in rows)
     assert all(row["max_speed"] <= 1.0 + 1e-9 for row in rows)
     assert rows == again  # same seeds, deterministic policy: the same episodes
+
+
+def test_held_out_episodes_of_a_policy_fleeing_the_goal_end_out_of_bounds_with_zero_spl():
+    episodes = HeldOutEpisodes({"scenario": "open_space", "modalities": ["goal"], "overrides": {"humans.count": 0}}, [3, 4])
+    rows = episodes.run(lambda batch: -batch["goal"][:, [2, 1]])  # full speed away from the goal bearing (cos, sin)
+    episodes.close()
+    assert all(row["outcome"] == "out_of_bounds" and row["collision_kind"] == "" for row in rows)
+    assert all(row["spl"] == 0.0 and math.isnan(row["time_to_goal"]) for row in rows)
+    assert all(row["steps"] < 150 for row in rows)  # ended when it left the world, not at the time limit

@@ -115,6 +115,17 @@ CASES = [
         "robot.goal", 3, ["required field is missing", "goal position"],
     ),
     (
+        "unknown reward preset lists the presets",
+        VALID + "reward: {preset: papr, social: -50}\n",
+        "reward.preset", 12, ["unknown reward preset 'papr'; did you mean 'paper'?", "expected one of: default, paper"],
+    ),
+    (
+        "unknown reward term lists the terms and the preset key",
+        VALID + "reward:\n  preset: paper\n  socal: -50\n",
+        "reward.socal", 14,
+        ["unknown key 'socal'; did you mean 'social'?", "collision, goal_progress, goal_reached, preset, social, step"],
+    ),
+    (
         "duplicate key",
         edit("  radius: 0.3\n", "  radius: 0.3\n  radius: 0.4\n"),
         "humans.radius", 10, ["duplicate key 'radius'", "first given at line 9"],
@@ -214,6 +225,8 @@ def test_all_schema_problems_are_reported_together(tmp_path):
         ({"humans.count": "lots"}, "humans.count", "expected a whole number of humans"),
         ({"robot.max_speed": -1}, "robot.max_speed", "greater than 0"),
         ({"robot.start.min": [0, 0, 0]}, "robot.start.min", "expected a point [x, y]"),
+        ({"reward.preset": "fast"}, "reward.preset", "unknown reward preset 'fast'; expected one of: default, paper"),
+        ({"reward.speed": 1}, "reward.speed", "unknown key 'speed'"),
     ],
 )
 def test_bad_override_names_the_override(tmp_path, overrides, path, expected):

@@ -258,3 +258,87 @@ def test_the_worked_example_in_the_docs_registers_and_observes(room, monkeypatch
     assert built.space().contains(observation)
     nearest = np.sort(np.abs(room.pair_offset[0, 1:]))[:3]
     np.testing.assert_allclose(np.hypot(observation[:, 0], observation[:, 1]), nearest, rtol=1e-6)
+    np.testing.assert_array_equal(built.scale()[1], np.full((3, 2), 10.0))  # the default scale, from its Box
+
+
+# ------------------------------------------------------------------------- scales
+
+
+@pytest.mark.parametrize("frame", ["polar", "cartesian"])
+def test_every_registered_modality_declares_a_positive_scale_of_its_observation_shape(room, frame):
+    sensors = room.scenario.sensors.model_copy(update={
+        "goal": room.scenario.sensors.goal.model_copy(update={"frame": frame}),
+        "closest_obstacle": room.scenario.sensors.closest_obstacle.model_copy(update={"frame": frame}),
+    })
+    built = build_modalities(sorted(MODALITIES), room.world, sensors)
+    assert set(built) >= set(ALL)
+    for key, modality in built.items():
+        offset, scale = modality.scale()
+        shape = modality.space().shape
+        assert offset.shape == scale.shape == shape and offset.dtype == scale.dtype == np.float32, key
+        assert np.all(np.isfinite(offset)) and np.all(np.isfinite(scale) & (scale > 0)), key
+        normalized = modality.normalized_space()
+        assert normalized.shape == shape and normalized.dtype == np.float32, key
+        assert normalized.contains(modality.normalize(modality.observe(room))), key
+
+
+def test_declared_scales_are_the_diagonal_the_ranges_and_the_max_speed(room):
+    built = build_modalities(ALL, room.world, room.scenario.sensors)
+    scales = {key: modality.scale()[1] for key, modality in built.items()}
+    sensors, diagonal = room.scenario.sensors, room.scenario.world_diagonal
+    np.testing.assert_allclose(scales["goal"], [diagonal, 1, 1], rtol=1e-6)  # one diagonal, not the 2x clip bound
+    np.testing.assert_allclose(scales["closest_obstacle"], [sensors.closest_obstacle.max_range, 1, 1], rtol=1e-6)
+    np.testing.assert_allclose(scales["velocity"], [room.scenario.robot.max_speed] * 2, rtol=1e-6)
+    assert np.all(scales["lidar"] == 1.0) and np.all(scales["leog"] == 255.0)  # lidar kept in [0, 1]; grids -> 0/1
+    assert all(np.all(modality.scale()[0] == 0.0) for modality in built.values())
+    np.testing.assert_allclose(built["goal"].normalized_space().high, [2, 1, 1], rtol=1e-6)
+    # "nothing within range" reads (1, 0, 1) once normalised, like a LIDAR beam that sees nothing
+    far = built["closest_obstacle"].normalize(np.array([sensors.closest_obstacle.max_range, 0, 1], dtype=np.float32))
+    np.testing.assert_allclose(far, [1, 0, 1])
+
+
+@pytest.mark.parametrize("scenario", ["open_space", "room_furniture"])
+def test_normalized_observations_of_random_episodes_are_finite_and_mostly_within_unit_range(scenario):
+    sim = Simulator(scenario)
+    keys = ["goal", "closest_obstacle", "lidar", "velocity"]
+    built = build_modalities(keys, sim.world, sim.scenario.sensors)
+    values: dict[str, list[np.ndarray]] = {key: [] for key in keys}
+    rng = np.random.default_rng(0)
+    for episode in range(3):
+        sim.reset(seed=episode)
+        for _ in range(60):
+            for key, modality in built.items():
+                normalized = modality.normalize(modality.observe(sim))
+                assert modality.normalized_space().contains(normalized), key
+                values[key].append(normalized)
+            if sim.step(rng.uniform(-1, 1, size=2)).terminated:
+                break
+    for key, rows in values.items():
+        stacked = np.stack(rows)
+        assert np.all(np.isfinite(stacked)), key
+        assert np.mean(np.abs(stacked) <= 1.0) >= 0.99, key
+        assert np.abs(stacked).max() > 0.05, key  # and not squashed to nothing
+    distances = np.stack(values["goal"])[:, 0]
+    assert 0.1 < distances.max() <= 1.0  # goal distances inside the world: up to one diagonal
+
+
+def test_a_modality_without_its_own_scale_gets_one_from_its_box(room):
+    class Bounded(Modality):
+        key = "bounded"
+
+        def make_space(self):
+            return spaces.Box(np.float32([-4.0, 0.0, 0.0]), np.float32([2.0, np.inf, 0.0]), dtype=np.float32)
+
+        def observe(self, sim):
+            return np.zeros(3, dtype=np.float32)
+
+    offset, scale = Bounded(room.world).scale()
+    np.testing.assert_array_equal(offset, [0, 0, 0])
+    np.testing.assert_array_equal(scale, [4, 1, 1])  # max(|low|, |high|); 1 where infinite or zero
+
+    class BadScale(Bounded):
+        def scale(self):
+            return np.zeros(2), np.ones(2)
+
+    with pytest.raises(ValueError, match="'bounded': offset and scale must have the observation's shape"):
+        BadScale(room.world).normalize(np.zeros(3, dtype=np.float32))

@@ -151,6 +151,63 @@ def test_robot_touching_a_round_table_collides_and_step_reports_it():
     assert events.outcome == "collision" and events.terminated
 
 
+def drive_up_until_the_end(sim: Simulator, limit: int = 20) -> list:
+    """Drive the robot (parked at y = 5.5, 0.5 m below the top of the world) straight up; the events of every step."""
+    sim.robot_heading = 0.0
+    events = []
+    while not events or not (events[-1].terminated or events[-1].truncated):
+        assert len(events) < limit, "the robot drove on past the world's edge"
+        events.append(sim.step(np.array([0.0, 1.0])))  # holonomic, heading 0: +y in the world
+    return events
+
+
+def test_robot_leaving_an_open_world_ends_the_episode_out_of_bounds_on_the_step_it_crosses():
+    sim = Simulator(scenario())  # boundary_walls false, world y <= 6
+    sim.reset(seed=0)
+    events = drive_up_until_the_end(sim)
+    assert all(e.outcome is None and not e.left_world for e in events[:-1])
+    last = events[-1]
+    assert last.left_world and last.outcome == "out_of_bounds" and last.terminated and not last.truncated
+    assert last.collision is None and not last.goal_reached
+    assert sim.robot_position.imag > 6.0 and sim.robot_position.imag - sim.scenario.robot.max_speed * sim.dt <= 6.0
+    assert len(events) == 3  # 5.5 -> 5.7 -> 5.9 -> 6.1
+
+
+def test_robot_exactly_on_the_world_edge_is_still_inside():
+    sim = Simulator(scenario())
+    sim.reset(seed=0)
+    sim.positions[0] = 6.0 + 6.0j
+    assert not sim.robot_left_world()
+    sim.positions[0] = 6.0 + 6.0000001j
+    assert sim.robot_left_world()
+    sim.positions[0] = -6.0000001 + 0j
+    assert sim.robot_left_world()
+
+
+def test_with_boundary_walls_the_same_drive_ends_in_a_static_collision_inside_the_world():
+    sim = Simulator(scenario(world={"min": [-6, -6], "max": [6, 6], "boundary_walls": True}))
+    sim.reset(seed=0)
+    events = drive_up_until_the_end(sim)
+    last = events[-1]
+    assert last.outcome == "collision" and last.collision.kind == "static" and "boundary" in last.collision.partner
+    assert not last.left_world and not sim.robot_left_world()  # leaving is impossible: the wall is hit first
+    assert sim.robot_position.imag <= 6.0
+
+
+def test_outcome_precedence_is_collision_then_out_of_bounds_then_success_then_truncated():
+    from crowdnav.simulator import OUTCOMES, Collision, StepEvents
+
+    hit = Collision("human", "human_0", 0.0)
+    assert StepEvents(goal_reached=True, collision=hit, truncated=True, left_world=True).outcome == "collision"
+    assert StepEvents(goal_reached=True, collision=None, truncated=True, left_world=True).outcome == "out_of_bounds"
+    assert StepEvents(goal_reached=True, collision=None, truncated=True, left_world=False).outcome == "success"
+    assert StepEvents(goal_reached=False, collision=None, truncated=True).outcome == "truncated"
+    assert StepEvents(goal_reached=False, collision=None, truncated=False).outcome is None
+    left = StepEvents(goal_reached=False, collision=None, truncated=False, left_world=True)
+    assert left.terminated and not left.truncated
+    assert OUTCOMES == ("success", "collision", "out_of_bounds", "truncated")
+
+
 def test_holonomic_action_is_a_velocity_in_the_robot_frame_with_capped_norm():
     sim = Simulator(scenario())
     sim.reset(seed=0)

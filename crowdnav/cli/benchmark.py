@@ -47,7 +47,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.set_defaults(handler=benchmark)
 
     plot = subparsers.add_parser(
-        "plot", help="draw the success / collision / truncated curves of a results folder",
+        "plot", help="draw the success / collision / out_of_bounds / truncated curves of a results folder",
         description="One figure per experiment (PNG and PDF): the rates along training, mean and std over seeds "
                     "of a sliding window of test episodes. Written next to experiment.yaml unless --out is given.",
     )

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import math
 from collections.abc import Sequence
 from typing import Any
 
@@ -38,6 +39,46 @@ def parse_overrides(items: Sequence[str]) -> dict[str, Any]:
             problem = getattr(error, "problem", None) or error
             raise CliError(f"--set {path.strip()}: value {text!r} is not valid YAML ({problem})") from None
     return overrides
+
+
+def add_reward_options(parser: argparse.ArgumentParser) -> None:
+    """``--reward PRESET`` and ``--reward-weight TERM=VALUE`` (repeatable); read them with :func:`reward_options`."""
+    from crowdnav.scenario.reward_presets import REWARD_PRESETS, REWARD_TERMS
+
+    parser.add_argument(
+        "--reward", metavar="PRESET", choices=tuple(REWARD_PRESETS),
+        help=f"reward preset: {', '.join(REWARD_PRESETS)} (default: the scenario's, else 'default'; docs/agents.md#reward)",
+    )
+    parser.add_argument(
+        "--reward-weight", dest="reward_weights", metavar="TERM=VALUE", action="append", default=[], type=reward_weight,
+        help=f"override one reward weight on top of the preset, repeatable, e.g. --reward-weight social=-50 "
+             f"(terms: {', '.join(REWARD_TERMS)})",
+    )
+
+
+def reward_weight(text: str) -> tuple[str, float]:
+    """``"social=-50"`` -> ``("social", -50.0)``; a usage error (exit status 2) naming the valid terms otherwise."""
+    from crowdnav.scenario.reward_presets import REWARD_TERMS, unknown_term_message
+
+    term, sep, value = (part.strip() for part in text.partition("="))
+    if not sep or not term:
+        raise argparse.ArgumentTypeError(f"expected TERM=VALUE, e.g. social=-50; got {text!r}")
+    if term not in REWARD_TERMS:
+        raise argparse.ArgumentTypeError(unknown_term_message(term))
+    try:
+        weight = float(value)
+    except ValueError:
+        weight = math.nan
+    if not math.isfinite(weight):
+        raise argparse.ArgumentTypeError(f"{term}: expected a finite number, got {value!r}")
+    return term, weight
+
+
+def reward_options(args: argparse.Namespace) -> dict[str, Any]:
+    """``--reward`` and ``--reward-weight`` as a reward-weights mapping, e.g. ``{"preset": "paper", "social": -50.0}``."""
+    weights: dict[str, Any] = {} if args.reward is None else {"preset": args.reward}
+    weights.update(args.reward_weights)
+    return weights
 
 
 def format_table(header: Sequence[str], rows: Sequence[Sequence[str]]) -> str:

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import argparse
 
-from crowdnav.cli.common import CliError, add_override_option, parse_overrides
+from crowdnav.cli.common import CliError, add_override_option, add_reward_options, parse_overrides, reward_options
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -26,6 +26,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("--human-goals", action="store_true", help="mark every human's goal")
     parser.add_argument("--no-progress", action="store_true", help="hide the progress bar")
     add_override_option(parser)
+    add_reward_options(parser)
     parser.set_defaults(handler=run)
 
 
@@ -44,6 +45,7 @@ def run(args: argparse.Namespace) -> int:
             out=args.out,
             video_format=args.video_format,
             overrides=parse_overrides(args.overrides),
+            reward_weights=reward_options(args),
             render_options={"human_goals": args.human_goals},
             progress=not args.no_progress,
         )

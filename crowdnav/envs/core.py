@@ -182,7 +182,13 @@ class EnvCore:
 
 
 def step_info(events: StepEvents, terms: dict[str, float]) -> dict[str, Any]:
-    """The robot's info: reward terms every step; outcome, is_success, collision kind/partner at the end."""
+    """The robot's info: reward terms every step; outcome, is_success, collision kind/partner at the end.
+
+    ``info["outcome"]`` is one of :data:`crowdnav.simulator.OUTCOMES`: ``success``, ``collision``,
+    ``out_of_bounds`` (the robot's centre left the world of a scenario without boundary walls) or
+    ``truncated``; ``is_success`` is True only for ``success``. ``collision_kind`` and
+    ``collision_partner`` are there after a collision only.
+    """
     info: dict[str, Any] = {"reward_terms": terms}
     outcome = events.outcome
     if outcome is not None:

@@ -37,8 +37,12 @@ class CrowdNavParallelEnv(ParallelEnv):
     the human's max speed (``max_speed`` in its observation). :class:`SocialForcePolicy` gives
     the built-in crowd's actions. Reward: 0 (humans are not scored).
 
-    **Episode end.** Success or collision terminates every agent, the time limit truncates
-    every agent; agents leave ``agents`` only then, all together.
+    **Episode end.** Success, collision or the robot leaving the world terminates every agent,
+    the time limit truncates every agent; agents leave ``agents`` only then, all together. As in
+    :class:`crowdnav.envs.single.CrowdNavEnv`, the robot cannot escape the task: leaving the
+    world (its centre outside the ``world.min`` / ``world.max`` rectangle) is either impossible
+    (``world.boundary_walls``: touching the walls is a collision) or ends the episode with
+    ``infos["robot"]["outcome"] == "out_of_bounds"`` (open space), paying the ``collision`` term.
 
     Options are those of :class:`crowdnav.envs.core.EnvCore` (``modalities``, ``sensors``,
     ``reward_weights``, ``overrides``, ``render_mode`` (None, ``"rgb_array"`` or ``"human"``) and

@@ -1,14 +1,18 @@
 """The robot's reward: named, weighted terms computed from the simulator after each step.
 
-With weights ``w`` (scenario ``reward`` section, or the env option ``reward_weights``) and
-``d_t`` the robot-goal centre distance in metres after step ``t``:
+With weights ``w`` (a named preset, ``default`` or ``paper``, with single terms overridden: the
+scenario's ``reward`` section, the env option ``reward_weights``, see
+:mod:`crowdnav.scenario.reward_presets`) and ``d_t`` the robot-goal centre distance in metres
+after step ``t`` (in parentheses: the ``paper`` preset's weight):
 
-* ``step``          = ``w_step`` every step (paper: -5);
+* ``step``          = ``w_step`` every step (paper: -5, a penalty);
 * ``goal_progress`` = ``w_goal_progress * (d_{t-1} - d_t)``, potential-based shaping (paper: 10);
 * ``social``        = ``w_social * |F_social|`` (paper: -100);
 * ``goal_reached``  = ``w_goal_reached`` on the step whose outcome is ``success``, else 0 (paper: 500);
 * ``collision``     = ``w_collision`` on the step whose outcome is ``collision``, else 0 (paper: -500).
+* leaving the world (outcome ``out_of_bounds``, open space only) is a failure that costs as much as a collision: it pays ``collision`` too.
 
+Every weight multiplies its quantity and the product is added: penalties have negative weights.
 ``F_social`` is :attr:`crowdnav.Simulator.robot_social_force`: the summed social-force
 repulsion of all humans on the robot at the new state (dimensionless, see
 :mod:`crowdnav.social_force`). A collision wins over a goal reached in the same step (the
@@ -18,11 +22,11 @@ The reward is the sum of the terms, in the order above.
 
 from __future__ import annotations
 
+from crowdnav.scenario.reward_presets import REWARD_TERMS
 from crowdnav.scenario.schema import RewardWeights
 from crowdnav.simulator import Simulator, StepEvents
 
-REWARD_TERMS = ("step", "goal_progress", "social", "goal_reached", "collision")
-"""Names of the reward terms, in summation order (also the keys of ``info["reward_terms"]``)."""
+__all__ = ["REWARD_TERMS", "Reward"]  # REWARD_TERMS: names in summation order, keys of info["reward_terms"]
 
 
 class Reward:
@@ -52,7 +56,7 @@ class Reward:
             "goal_progress": self._progress * progress,
             "social": self._social * abs(complex(sim.robot_social_force)),
             "goal_reached": self._goal if outcome == "success" else 0.0,
-            "collision": self._collision if outcome == "collision" else 0.0,
+            "collision": self._collision if outcome == "collision" or outcome == "out_of_bounds" else 0.0,
         }
         reward = terms["step"] + terms["goal_progress"] + terms["social"] + terms["goal_reached"] + terms["collision"]
         return reward, terms

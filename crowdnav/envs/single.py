@@ -44,14 +44,20 @@ class CrowdNavEnv(gym.Env):
     ``step = w_step`` (-5); ``goal_progress = w_goal_progress * (d_{t-1} - d_t)`` (10);
     ``social = w_social * |F_social|`` (-100), the humans' social-force repulsion on the robot;
     ``goal_reached = w_goal_reached`` (500) and ``collision = w_collision`` (-500) once, on the
-    last step.
+    last step (``collision`` also when the robot leaves the world: outcome ``out_of_bounds``).
 
-    **Episode end.** ``terminated`` when the robot reaches its goal (``outcome`` success) or
-    collides (``collision``, which wins over a goal reached in the same step); ``truncated`` at
-    ``scenario.max_steps`` otherwise. The last step's info holds ``outcome``
-    (``"success" | "collision" | "truncated"``), ``is_success`` (bool) and, after a collision,
-    ``collision_kind`` (``"human" | "static"``) and ``collision_partner`` (``human_<i>`` or
-    the obstacle's scenario path). Calling step() after the end raises RuntimeError.
+    **Episode end.** ``terminated`` when the robot reaches its goal (``outcome`` success),
+    collides (``collision``) or leaves the world (``out_of_bounds``); ``truncated`` at
+    ``scenario.max_steps`` otherwise (never both). The robot cannot escape the task: leaving the
+    world (the robot's centre outside the scenario's ``world.min`` / ``world.max`` rectangle) is
+    either impossible (``world.boundary_walls``: the walls are obstacles, touching them is a
+    collision) or ends the episode with outcome ``out_of_bounds`` (open space), a failure that
+    pays the ``collision`` reward term. Precedence within one step: collision > out_of_bounds >
+    success > truncated. The last step's info holds ``outcome``
+    (``"success" | "collision" | "out_of_bounds" | "truncated"``, :data:`crowdnav.simulator.OUTCOMES`),
+    ``is_success`` (bool) and, after a collision, ``collision_kind`` (``"human" | "static"``) and
+    ``collision_partner`` (``human_<i>`` or the obstacle's scenario path). Calling step() after
+    the end raises RuntimeError.
 
     **Options.** ``scenario``: library name, YAML path or :class:`crowdnav.Scenario`;
     ``modalities``; ``sensors`` (``{"lidar": {"beams": 180}}``); ``reward_weights``

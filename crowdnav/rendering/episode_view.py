@@ -107,6 +107,6 @@ class EpisodeView:
         if self._last_reward is not None and math.isfinite(self._last_reward):
             parts.append(f"reward {self._last_reward:+.1f}")
             parts.append(f"return {self._return:+.1f}")
-        if self._outcome:
-            parts.append(self._outcome.upper())
+        if self._outcome:  # one of crowdnav.simulator.OUTCOMES: SUCCESS, COLLISION, OUT OF BOUNDS, TRUNCATED
+            parts.append(self._outcome.replace("_", " ").upper())
         return "   ".join(parts)

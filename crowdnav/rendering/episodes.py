@@ -48,6 +48,7 @@ def render_episodes(
     out: str | Path = "videos",
     video_format: str = "mp4",
     overrides: Mapping[str, Any] | None = None,
+    reward_weights: Mapping[str, Any] | None = None,
     render_options: Mapping[str, Any] | None = None,
     progress: bool = True,
 ) -> list[Path]:
@@ -60,6 +61,8 @@ def render_episodes(
     act, env_options = resolve_policy(policy, seed)
     if overrides:
         env_options["overrides"] = {**env_options.get("overrides", {}), **overrides}
+    if reward_weights:  # a preset and weights on top of a checkpoint's own (which win over overrides)
+        env_options["reward_weights"] = {**env_options.get("reward_weights", {}), **reward_weights}
     env = CrowdNavEnv(scenario, render_mode="rgb_array", render_options=render_options, **env_options)
     label = Path(policy).stem if policy not in SCRIPTED_POLICIES else policy
     out = Path(out)

@@ -14,9 +14,10 @@ import math
 from collections.abc import Callable
 from typing import Annotated, Any, Literal
 
-from pydantic import BaseModel, BeforeValidator, ConfigDict, Field, field_validator, model_validator
+from pydantic import BaseModel, BeforeValidator, ConfigDict, Field, field_validator, model_serializer, model_validator
 
 from crowdnav.scenario.errors import show
+from crowdnav.scenario.reward_presets import DEFAULT_PRESET, REWARD_PRESETS, REWARD_TERMS, unknown_preset_message
 
 PositiveFloat = Annotated[float, Field(gt=0, allow_inf_nan=False)]
 NonNegativeFloat = Annotated[float, Field(ge=0, allow_inf_nan=False)]
@@ -327,14 +328,58 @@ class Sensors(StrictModel):
     leog: LeogSensor = Field(default_factory=LeogSensor, description="Occupancy-grid settings.")
 
 
-class RewardWeights(StrictModel):
-    """Weights of the named reward terms (paper defaults)."""
+def _preset_term(description: str) -> Any:
+    """A term weight that, when not given, takes the preset's value (filled in by RewardWeights)."""
+    return Field(default=None, description=f"{description} Default: the preset's value.", json_schema_extra=_no_default)
 
-    step: FiniteFloat = Field(default=-5.0, description="Added every step.")
-    goal_progress: FiniteFloat = Field(default=10.0, description="Times the decrease of the distance to the goal (m).")
-    social: FiniteFloat = Field(default=-100.0, description="Times the magnitude of the humans' social force on the robot.")
-    goal_reached: FiniteFloat = Field(default=500.0, description="Added once when the goal is reached.")
-    collision: FiniteFloat = Field(default=-500.0, description="Added once on a collision.")
+
+def _no_default(schema: dict[str, Any]) -> None:
+    """The JSON Schema of a preset term shows no default (its ``None`` only marks "not given")."""
+    schema.pop("default", None)
+
+
+class RewardWeights(StrictModel):
+    """Weights of the named reward terms: a preset's, with the terms given here overriding it."""
+
+    # Every term holds its resolved number (scenario.reward.social; `terms` gives all five). A
+    # dump (model_dump) holds what was written: the preset and the terms given explicitly, so
+    # that loading it again, also with another preset as override, resolves the same way.
+
+    preset: str = Field(
+        default=DEFAULT_PRESET,
+        description=f"Named set of weights the terms not given here take: {', '.join(REWARD_PRESETS)} (docs/agents.md#reward).",
+        json_schema_extra={"enum": list(REWARD_PRESETS)},
+    )
+    step: FiniteFloat = _preset_term("Added every step (negative: a penalty).")
+    goal_progress: FiniteFloat = _preset_term("Times the decrease of the distance to the goal in the step (m).")
+    social: FiniteFloat = _preset_term("Times the magnitude of the humans' social force on the robot (negative: a penalty).")
+    goal_reached: FiniteFloat = _preset_term("Added once when the goal is reached.")
+    collision: FiniteFloat = _preset_term("Added once on a collision (negative: a penalty).")
+
+    @field_validator("preset")
+    @classmethod
+    def _known_preset(cls, preset: str) -> str:
+        if preset not in REWARD_PRESETS:
+            raise ValueError(unknown_preset_message(preset))
+        return preset
+
+    @model_validator(mode="after")
+    def _fill_from_preset(self) -> RewardWeights:
+        # Runs after construction and after every assignment: terms never given follow the preset.
+        for term, weight in REWARD_PRESETS[self.preset].weights.items():
+            if term not in self.model_fields_set:
+                self.__dict__[term] = weight  # not setattr: that would validate (and call this) again
+        return self
+
+    @model_serializer(mode="wrap")
+    def _dump_as_written(self, handler: Any) -> dict[str, Any]:
+        dumped = handler(self)
+        return {key: value for key, value in dumped.items() if key == "preset" or key in self.model_fields_set}
+
+    @property
+    def terms(self) -> dict[str, float]:
+        """Every term's resolved weight, in summation order."""
+        return {term: getattr(self, term) for term in REWARD_TERMS}
 
 
 # ---------------------------------------------------------------------------- scenario
@@ -353,7 +398,9 @@ class Scenario(StrictModel):
     time_step: PositiveFloat = Field(default=0.2, description="Simulation time step in seconds.")
     max_steps: Annotated[int, Field(ge=1)] = Field(default=150, description="Steps before an episode is truncated.")
     sensors: Sensors = Field(default_factory=Sensors, description="Default sensor settings.")
-    reward: RewardWeights = Field(default_factory=RewardWeights, description="Reward weights.")
+    reward: RewardWeights = Field(
+        default_factory=RewardWeights, description="Reward weights: a preset (default: 'default') and terms overriding it."
+    )
 
     @property
     def world_center(self) -> Point:

@@ -6,7 +6,9 @@ that never moves is precomputed in ``__init__``; ``observe`` then reads the simu
 and the geometry the simulator caches after every reset/step.
 
 Adding a modality is one class with a ``key``, ``make_space`` and ``observe``, decorated with
-:func:`register_modality` (see docs/sensors.md).
+:func:`register_modality` (see docs/sensors.md). Each modality also declares the typical range
+of its entries (:meth:`Modality.scale`, by default derived from the Box), which the agents use
+to feed their networks O(1) numbers (:meth:`Modality.normalize`).
 """
 
 from __future__ import annotations
@@ -45,6 +47,7 @@ class Modality(abc.ABC):
         self.world = world
         self.settings = settings
         self._space: spaces.Box | None = None
+        self._normalization: tuple[np.ndarray, np.ndarray] | None = None
 
     def space(self) -> spaces.Box:
         """The observation space (built once: the same object on every call)."""
@@ -60,8 +63,65 @@ class Modality(abc.ABC):
     def observe(self, sim: Simulator) -> np.ndarray:
         """A new array in :meth:`space` describing the simulator's current state."""
 
+    def scale(self) -> tuple[np.ndarray, np.ndarray]:
+        """``(offset, scale)``: float32 arrays of the observation's shape, in the observation's own units.
+
+        They declare the typical range of each entry: ``(observation - offset) / scale`` is O(1),
+        mostly within [-1, 1], over the values that actually occur (:meth:`normalize`). The
+        default, for a modality that does not override it, comes from the Box: offset 0 and
+        scale ``max(|low|, |high|)`` per entry (1 where that is infinite or 0), so zero stays
+        zero, signs are kept and the normalised Box lies within [-1, 1]. Override it when the Box
+        is a clip bound well above the values that occur (``goal``: distances are clipped at two
+        world diagonals but scaled by one). The scale must be positive and finite.
+        """
+        space = self.space()
+        magnitude = np.maximum(np.abs(space.low.astype(np.float64)), np.abs(space.high.astype(np.float64)))
+        scale = np.where(np.isfinite(magnitude) & (magnitude > 0.0), magnitude, 1.0)
+        return np.zeros(space.shape, dtype=np.float32), scale.astype(np.float32)
+
+    def normalization(self) -> tuple[np.ndarray, np.ndarray]:
+        """:meth:`scale`, checked (shape of the observation, finite offset, positive finite scale) and cached."""
+        if self._normalization is None:
+            offset, scale = self.scale()
+            self._normalization = checked_scale(self.key, self.space(), offset, scale)
+        return self._normalization
+
+    def normalized_space(self) -> spaces.Box:
+        """The Box of :meth:`normalize`'s values: the space's bounds mapped through ``(x - offset) / scale``."""
+        return normalized_box(self.space(), *self.normalization())
+
+    def normalize(self, observation: np.ndarray) -> np.ndarray:
+        """``(observation - offset) / scale`` as float32 (a batch with leading axes works too)."""
+        return normalize_values(observation, *self.normalization())
+
     def __repr__(self) -> str:
         return f"{type(self).__name__}(key={self.key!r}, settings={self.settings!r})"
+
+
+def checked_scale(key: str, space: spaces.Box, offset: Any, scale: Any) -> tuple[np.ndarray, np.ndarray]:
+    """``(offset, scale)`` as float32 arrays of ``space``'s shape (scalars broadcast); ValueError naming ``key`` otherwise."""
+    try:
+        offset = np.broadcast_to(np.asarray(offset, dtype=np.float32), space.shape).copy()
+        scale = np.broadcast_to(np.asarray(scale, dtype=np.float32), space.shape).copy()
+    except ValueError:
+        raise ValueError(
+            f"modality {key!r}: offset and scale must have the observation's shape {space.shape}, "
+            f"got {np.shape(offset)} and {np.shape(scale)}"
+        ) from None
+    if not np.all(np.isfinite(offset)) or not np.all(np.isfinite(scale) & (scale > 0.0)):
+        raise ValueError(f"modality {key!r}: offsets must be finite and scales positive and finite")
+    return offset, scale
+
+
+def normalize_values(values: np.ndarray, offset: np.ndarray, scale: np.ndarray) -> np.ndarray:
+    """``(values - offset) / scale`` in float32; ``values`` may carry leading batch axes."""
+    return (np.asarray(values, dtype=np.float32) - offset) / scale
+
+
+def normalized_box(space: spaces.Box, offset: np.ndarray, scale: np.ndarray) -> spaces.Box:
+    """Float32 Box of ``space``'s bounds mapped like :func:`normalize_values` (so it contains every mapped observation)."""
+    low, high = normalize_values(space.low, offset, scale), normalize_values(space.high, offset, scale)
+    return spaces.Box(low=low, high=high, dtype=np.float32)
 
 
 MODALITIES: dict[str, type[Modality]] = {}

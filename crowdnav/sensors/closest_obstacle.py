@@ -33,6 +33,9 @@ class ClosestObstacleModality(Modality):
     While the robot's centre is outside every obstacle (always the case before a collision
     ends the episode) the point is shapely's nearest point of the obstacles; should the centre
     be inside one, the reading is the nearest point of that obstacle's outline.
+
+    Scale (:meth:`~crowdnav.sensors.Modality.scale`): the Box default, ``max_range`` for distances and
+    coordinates, 1 for sin/cos; "nothing in range" then reads ``(1, 0, 1)`` (cartesian ``(1, 0)``).
     """
 
     key = "closest_obstacle"

@@ -24,7 +24,8 @@ class GoalModality(Modality):
     """Relative goal in the robot frame: polar ``(distance, sin, cos)`` or cartesian ``(x, y)``.
 
     The distance (cartesian: the vector's length) is clipped to ``2 x`` the world's diagonal, so
-    the observation stays in its space even after the robot leaves an open world.
+    the observation stays in its space even after the robot leaves an open world. Its scale
+    (:meth:`scale`) is one diagonal, the largest distance inside the world.
     """
 
     key = "goal"
@@ -32,11 +33,18 @@ class GoalModality(Modality):
 
     def __init__(self, world: CompiledWorld, settings: GoalSensor | None = None):
         super().__init__(world, settings)
-        self.bound = GOAL_RANGE_FACTOR * world.scenario.world_diagonal
+        self.diagonal = float(world.scenario.world_diagonal)
+        self.bound = GOAL_RANGE_FACTOR * self.diagonal
         self.frame = self.settings.frame
 
     def make_space(self) -> spaces.Box:
         return vector_space(self.frame, self.bound)
+
+    def scale(self) -> tuple[np.ndarray, np.ndarray]:
+        """Metres scaled by the world's diagonal (not the 2x clip bound): polar ``(d, 1, 1)``, cartesian ``(d, d)``."""
+        shape = self.space().shape
+        scale = np.array((self.diagonal, 1.0, 1.0) if self.frame == "polar" else (self.diagonal, self.diagonal), dtype=np.float32)
+        return np.zeros(shape, dtype=np.float32), scale
 
     def observe(self, sim: Simulator) -> np.ndarray:
         relative = (sim.robot_goal - complex(sim.positions[0])) * to_robot_frame(sim)

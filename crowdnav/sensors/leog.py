@@ -40,7 +40,8 @@ class LeogModality(Modality):
     """Occupancy grid, uint8 of shape (1, H, W): 255 where occupied, 0 where free (``grid > 0`` is the binary map).
 
     Cell (i, j) has its centre at ``x = (H/2 - i - 0.5) * resolution`` metres ahead of the robot
-    and ``y = (W/2 - j - 0.5) * resolution`` metres to its left.
+    and ``y = (W/2 - j - 0.5) * resolution`` metres to its left. Scale: the Box default, 255
+    (normalised: 0/1); the agents pass the uint8 grid on unscaled (their CNN reads ``grid > 0``).
     """
 
     key = "leog"

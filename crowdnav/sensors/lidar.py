@@ -40,7 +40,8 @@ class LidarModality(Modality):
     """Normalized ranges ``range / max_range`` per beam, float32 in [0, 1]; 1 means nothing within range.
 
     Surfaces are seen from outside: an obstacle that contains the robot's centre (possible only
-    after a collision) is transparent, and what lies behind an obstacle is occluded.
+    after a collision) is transparent, and what lies behind an obstacle is occluded. Scale: the Box
+    default, 1 (the readings are already fractions of ``max_range``).
     """
 
     key = "lidar"

@@ -20,7 +20,7 @@ class VelocityModality(Modality):
     """Velocity over the last step in the robot frame, ``(vx, vy)`` in m/s, float32.
 
     Bounded by the robot's ``max_speed`` (the vector is scaled down if longer, which the
-    kinematics never produce). Zero right after reset.
+    kinematics never produce). Zero right after reset. Scale: the Box default, ``max_speed``.
     """
 
     key = "velocity"

@@ -1,0 +1,128 @@
+"""Scripted baselines on an experiment's own test episodes: the bar a learned policy must clear.
+
+Every experiment evaluates two privileged scripted robots (:mod:`crowdnav.policies`) on the
+same held-out test episodes as its learned runs, with the same scenario, overrides and reward:
+
+* ``straight``: drive at the goal at full speed, blind to everyone. A learned policy that does
+  worse has not learned to navigate, only (at best) to head for the goal;
+* ``social_force``: the humans' own reactive model applied to the robot (goal attraction plus
+  repulsion from the true positions of the humans and obstacles): what a purely reactive,
+  position-only policy with perfect perception reaches.
+
+Each baseline is stored like a run, ``<experiment>/baseline_<name>/<env>/`` with ``meta.json``
+and ``test_episodes.csv`` (the same per-episode columns as a learned run), so the leaderboard
+ranks it and the notebook reads it without special cases. A scripted policy is deterministic
+and the test episodes are the same at every evaluation, so it is played once and its rows are
+repeated at each evaluation point; the curves draw it as a horizontal reference line.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Mapping
+from pathlib import Path
+from typing import Any
+
+from evaluation.protocol import Protocol
+from evaluation.storage import META_FILE, TEST_FILE, atomic_write_csv, atomic_write_json, read_json
+
+BASELINE_PREFIX = "baseline_"
+"""Configuration names of baselines start with this; experiment configurations may not."""
+
+BASELINES: dict[str, str] = {
+    "straight": "straight to goal (scripted)",
+    "social_force": "social force, privileged (scripted)",
+}
+"""Baseline name -> label in tables and figures."""
+
+
+def is_baseline(configuration: str) -> bool:
+    """Whether a configuration name (a results table's ``configuration`` column) is a scripted baseline."""
+    return str(configuration).startswith(BASELINE_PREFIX)
+
+
+def _policy(name: str) -> Any:
+    from crowdnav.policies import SocialForceRobot, StraightToGoal
+
+    return {"straight": StraightToGoal, "social_force": SocialForceRobot}[name]()
+
+
+def baseline_env_options(train: Mapping[str, Any]) -> dict[str, Any]:
+    """The env options a baseline shares with a configuration: scenario, overrides, reward (its own observation: the goal)."""
+    return {"scenario": train.get("scenario", "open_space"), "modalities": ["goal"], "overrides": dict(train.get("overrides", {})),
+            "reward_weights": dict(train.get("reward_weights", {}))}
+
+
+def experiment_baselines(experiment: Any) -> list[tuple[str, str, dict[str, Any]]]:
+    """(configuration name, label, env options) of every baseline an experiment needs.
+
+    One pair of baselines per distinct environment of its configurations; with several
+    environments the name and label carry the first configuration trained in each.
+    """
+    environments: dict[str, tuple[str, dict[str, Any]]] = {}
+    for configuration in experiment.configurations:
+        options = baseline_env_options(configuration.train)
+        environments.setdefault(repr(sorted(options.items())), (configuration.name, options))
+    several = len(environments) > 1
+    return [(f"{BASELINE_PREFIX}{name}" + (f"_{first}" if several else ""), label + (f" [{first}]" if several else ""), options)
+            for first, options in environments.values() for name, label in BASELINES.items()]
+
+
+def evaluate_baseline(experiment: str, configuration: str, label: str, env_options: Mapping[str, Any], protocol: Protocol,
+                      out_dir: str | Path) -> Path:
+    """Play the baseline on the protocol's test episodes into ``out_dir`` (skipped when already there); returns the folder."""
+    import pandas as pd
+
+    from evaluation.rollout import HeldOutEpisodes
+    from evaluation.runner import OUTCOMES, RUN_COLUMNS, git_commit, package_versions
+
+    out_dir = Path(out_dir)
+    if (out_dir / META_FILE).is_file():
+        meta = read_json(out_dir / META_FILE)
+        if meta.get("env") == dict(env_options) and _episodes_of(meta["protocol"]) == _episodes_of(protocol.to_dict()):
+            return out_dir  # deterministic: the same episodes give the same rows
+    started = time.perf_counter()
+    name = _baseline_name(configuration)
+    episodes = HeldOutEpisodes(env_options, protocol.test_seeds)
+    try:
+        rows = episodes.run(_policy(name), privileged=True)
+    finally:
+        episodes.close()
+    once = pd.DataFrame(rows)
+    frames = []
+    for k, point in enumerate(protocol.evaluation_points):
+        frame = once.copy()
+        for position, (column, value) in enumerate(zip((*RUN_COLUMNS, "training_episodes", "evaluation"),
+                                                       (experiment, configuration, label, 0, point, k), strict=True)):
+            frame.insert(position, column, value)
+        frames.append(frame)
+    tests = pd.concat(frames, ignore_index=True)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    atomic_write_csv(tests, out_dir / TEST_FILE)
+    steps = int(once["steps"].sum())
+    meta = {
+        "experiment": experiment, "configuration": configuration, "label": label, "seed": 0, "status": "complete",
+        "kind": "baseline", "policy": name, "env": dict(env_options), "protocol": protocol.to_dict(),
+        "versions": package_versions(), "git_commit": git_commit(), "wall_time_s": round(time.perf_counter() - started, 3),
+        "env_steps": {"train": 0, "test": steps, "total": steps}, "training_episodes": 0, "test_episodes": len(once),
+        "resumed": False, "final": {outcome: round(float((once["outcome"] == outcome).mean()), 6) for outcome in OUTCOMES},
+    }
+    atomic_write_json(out_dir / META_FILE, meta)  # last: it marks the baseline complete
+    return out_dir
+
+
+def _episodes_of(protocol: Mapping[str, Any]) -> tuple:
+    """What decides a baseline's rows: the test episodes and the evaluation points (not the number of seeds)."""
+    return tuple(protocol[key] for key in ("train_episodes", "eval_every", "test_episodes", "test_seed_base"))
+
+
+def _baseline_name(configuration: str) -> str:
+    rest = configuration.removeprefix(BASELINE_PREFIX)
+    return next(name for name in sorted(BASELINES, key=len, reverse=True) if rest == name or rest.startswith(name + "_"))
+
+
+def evaluate_experiment_baselines(experiment: Any, folder: str | Path) -> list[Path]:
+    """Every baseline of ``experiment`` into its results ``folder`` (``baseline_<name>/baseline``)."""
+    return [evaluate_baseline(experiment.name, configuration, label, options, experiment.protocol,
+                              Path(folder) / configuration / "baseline")
+            for configuration, label, options in experiment_baselines(experiment)]
