@@ -1,14 +1,16 @@
-"""Learning check: does SAC on lidar+goal learn the open-space scenario within 300 episodes?
+"""Single-seed learning runs for diagnosis: SAC with crowdnav's defaults plus any ``--set`` override.
 
-    nohup .venv/bin/python benchmarks/learning_check.py --out runs/learning_check > runs/learning_check.log 2>&1 &
+    python benchmarks/learning_check.py --seeds 0 [--episodes 400] [--set KEY=VALUE ...] --out runs/lc
 
-For each seed, trains SAC (``crowdnav/OpenSpace-v0``, modalities lidar + goal) for
-``--episodes`` episodes with crowdnav's defaults except :data:`CHECK_SETTINGS` (the paper's
-reward weights with the social term off and goal progress weighted 50, 5-step returns, two gradient steps per env step;
-why: docs/agents.md#learning-check), saving a snapshot every
-``--eval-every`` episodes, and evaluates each snapshot on ``--test-episodes`` held-out
-episodes with the deterministic policy. Test episodes use seeds 0, 1, ...; training
-episodes use seeds >= 1,000,000 (``agents.train_seed``), so the two sets are disjoint.
+The learning check itself is the experiment ``crowdnav benchmark learning_check`` (5 seeds, two
+scenarios, baselines, curves; docs/agents.md#learning-check). This script is its quick,
+hand-driven relative: for each seed, trains SAC (``open_space``, closest obstacle + goal unless
+``--set modalities=...``) for ``--episodes`` episodes with crowdnav's defaults and the ``--set``
+training-config overrides (YAML value, dotted key), saving a snapshot every ``--eval-every``
+episodes, and evaluates each snapshot on ``--test-episodes`` held-out episodes with the
+deterministic policy. Test episodes use seeds 0, 1, ...; training episodes use seeds >=
+1,000,000 (``agents.train_seed``), so the two sets are disjoint. docs/agents.md#how-the-recipe-was-found
+lists the runs made with it.
 
 Resumable: an interrupted training resumes from its checkpoint, and evaluations already in
 ``OUT/seed_N/evaluations.json`` are not redone (``OUT/results.json`` gathers all seeds, so
@@ -32,9 +34,8 @@ from agents.config import load_config
 from crowdnav.cli.common import CliError, parse_overrides
 from crowdnav.simulator import OUTCOMES
 
-CHECK_SETTINGS = {"reward_weights": {"preset": "paper", "social": 0.0, "goal_progress": 50.0}, "n_step_returns": 5,
-                  "algo_kwargs": {"gradient_steps": 2}}
-"""Where the check departs from crowdnav's defaults; ``--set`` overrides these too."""
+MODALITIES = ["closest_obstacle", "goal"]
+"""The main job's input (``--set modalities=[lidar, goal]`` for another)."""
 
 
 def evaluate(policy_path: Path, seeds: list[int]) -> dict[str, float]:
@@ -54,7 +55,7 @@ def evaluate(policy_path: Path, seeds: list[int]) -> dict[str, float]:
 
 def run_seed(seed: int, args: argparse.Namespace, results: dict, save) -> None:
     out = args.out / f"seed_{seed}"
-    config = load_config(None, {"scenario": args.scenario, "modalities": ["lidar", "goal"], "algo": "sac", "episodes": args.episodes,
+    config = load_config(None, {"scenario": args.scenario, "modalities": MODALITIES, "algo": "sac", "episodes": args.episodes,
                                 "seed": seed, "out": str(out), "checkpoint_every": args.eval_every, "progress": False,
                                 "save_replay_buffer": True, **args.settings})
     done = False
@@ -93,10 +94,10 @@ def main(argv: list[str] | None = None) -> int:
                         help="training-config override (dotted key, YAML value), e.g. --set overrides={humans.count: 5}; repeatable")
     args = parser.parse_args(argv)
     try:
-        args.settings = {**CHECK_SETTINGS, **parse_overrides(args.set)}
+        args.settings = parse_overrides(args.set)
     except CliError as error:
         parser.error(str(error))
-    print(f"settings beyond crowdnav's defaults: {args.settings}", flush=True)
+    print(f"settings beyond crowdnav's defaults: {args.settings or 'none'}", flush=True)
     args.out.mkdir(parents=True, exist_ok=True)
     results_file = args.out / "results.json"
     results = {}

@@ -1,6 +1,6 @@
 """Reward calibration: what the reward presets make of passing people and of each way an episode can end.
 
-    python benchmarks/reward_calibration.py [--gammas 0.9 0.99] [--reward PRESET --reward-weight TERM=VALUE ...]
+    python benchmarks/reward_calibration.py [--gammas 0.95 0.99] [--reward PRESET --reward-weight TERM=VALUE ...]
 
 No training: scripted robot motions in the real :class:`crowdnav.Simulator`, scored by the real
 :class:`crowdnav.envs.reward.Reward` under every preset of
@@ -52,12 +52,13 @@ ENCOUNTER_SPAN = 8.0
 FORWARD, BACKWARD, STILL = np.array([1.0, 0.0]), np.array([-1.0, 0.0]), np.zeros(2)
 
 
-def scenario(humans: int = 0, walls: Sequence[tuple[tuple[float, float], tuple[float, float]]] = ()) -> dict:
-    """An open 80 m x 80 m world, the robot at the origin heading +x, its goal 6 m ahead; humans placed by hand later."""
+def scenario(humans: int = 0, walls: Sequence[tuple[tuple[float, float], tuple[float, float]]] = (), behind: float = 40.0) -> dict:
+    """An open 80 m x 80 m world (its edge ``behind`` m behind the robot), the robot at the origin heading +x, its goal
+    6 m ahead; humans placed by hand later."""
     document = {
         "name": "reward_calibration",
         "description": "Scripted encounters for reward calibration.",
-        "world": {"min": [-40, -40], "max": [40, 40], "boundary_walls": False},
+        "world": {"min": [-behind, -40], "max": [40, 40], "boundary_walls": False},
         "walls": [{"points": [list(a), list(b)], "thickness": 0.1} for a, b in walls],
         "robot": {
             "radius": RADIUS, "max_speed": SPEED, "start_heading": 0.0,
@@ -202,6 +203,11 @@ def outcome_runs(weights: dict[str, RewardWeights]) -> list[tuple[str, Run]]:
     sim = Simulator(scenario())
     start(sim, 0j, goal)
     runs.append(("wander: drive away from the goal for 150 steps (30 m)", play(sim, weights, lambda t: BACKWARD, 150)))
+
+    # an open world's edge 5 m behind the robot: leaving it ends the episode (out_of_bounds)
+    sim = Simulator(scenario(behind=5.0))
+    start(sim, 0j, goal)
+    runs.append(("leave: drive away from the goal out of an open world 5 m behind", play(sim, weights, lambda t: BACKWARD, 150)))
     return runs
 
 
@@ -247,7 +253,7 @@ def weight_sets(args: argparse.Namespace) -> dict[str, RewardWeights]:
 
 def main(argv: Sequence[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0], formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--gammas", type=float, nargs="+", default=[0.9, 0.99], metavar="GAMMA", help="discount factors of table (b)")
+    parser.add_argument("--gammas", type=float, nargs="+", default=[0.95, 0.99], metavar="GAMMA", help="discount factors of table (b)")
     add_reward_options(parser)
     args = parser.parse_args(argv)
     weights = weight_sets(args)

@@ -66,8 +66,8 @@ def curves_figure(tests: Any, window: int, title: str | None = None) -> Any:
             sns.lineplot(data=curves[curves["metric"] == outcome], x="training_episodes", y="rate", hue="label", hue_order=labels,
                          palette=palette, estimator="mean", errorbar="sd", ax=axis, legend=axis is axes[-1])
         # a scripted baseline plays the same test episodes at every evaluation: one rate, a horizontal line
-        for (label, frame), style in zip(baselines.groupby("label", sort=True), ("--", ":", "-.", (0, (5, 1))), strict=False):
-            axis.axhline(float((frame["outcome"] == outcome).mean()), color="0.35", linestyle=style, linewidth=1.2, label=label)
+        for label, frame in baselines.groupby("label", sort=True):
+            axis.axhline(float((frame["outcome"] == outcome).mean()), label=label, linewidth=1.2, **_baseline_style(frame, tests, palette))
         axis.set_title(f"{outcome.replace('_', ' ')} rate")
         axis.set_xlabel("training episodes")
         axis.set_ylabel(f"rate (sliding window of {window} test episodes)" if axis is axes[0] else "")
@@ -78,6 +78,17 @@ def curves_figure(tests: Any, window: int, title: str | None = None) -> Any:
     if title:
         figure.suptitle(title)
     return figure
+
+
+def _baseline_style(baseline: Any, tests: Any, palette: dict) -> dict[str, Any]:
+    """Dashed for straight-to-goal, dotted for social force; grey, or the colour of the configuration whose
+    environment it shares when an experiment has several (``baseline_<name>_<configuration>``)."""
+    configuration = str(baseline["configuration"].iloc[0])
+    linestyle = ":" if "social_force" in configuration else "--"
+    for name, label in tests[["configuration", "label"]].drop_duplicates().itertuples(index=False):
+        if configuration.endswith(f"_{name}") and label in palette:
+            return {"linestyle": linestyle, "color": palette[label]}
+    return {"linestyle": linestyle, "color": "0.35"}
 
 
 def plot_curves(paths: Iterable[str | Path], out: str | Path | None = None) -> list[Path]:

@@ -135,13 +135,22 @@ def to_csv(table: Any) -> str:
     return table.to_csv(index=False, lineterminator="\n", float_format="%.6f", na_rep="nan")
 
 
+def evaluation_rates(tests: Any) -> Any:
+    """Per run and evaluation: the outcome rates over its test episodes (the numbers behind the curves)."""
+    keys = ["experiment", "configuration", "seed", "evaluation", "training_episodes"]
+    rates = tests.groupby(keys, sort=True)["outcome"].value_counts(normalize=True).unstack(fill_value=0.0)
+    return rates.reindex(columns=list(OUTCOMES), fill_value=0.0).reset_index()
+
+
 def write_leaderboard(paths: Iterable[str | Path], out: str | Path) -> tuple[Any, list[Path]]:
-    """Build the leaderboard of every finished run below ``paths``; write ``out``.md and ``out``.csv."""
+    """Build the leaderboard of every finished run below ``paths``; write ``out``.md and ``out``.csv, and the
+    per-evaluation rates of every run next to them (``evaluation_rates.csv``)."""
     from evaluation.storage import atomic_write_text, load_results
 
     tests, _, metas = load_results(paths)
     table = leaderboard_table(tests, metas)
     out = Path(out)
     written = [atomic_write_text(out.with_name(out.name + ".md"), to_markdown(table)),
-               atomic_write_text(out.with_name(out.name + ".csv"), to_csv(table))]
+               atomic_write_text(out.with_name(out.name + ".csv"), to_csv(table)),
+               atomic_write_text(out.with_name("evaluation_rates.csv"), to_csv(evaluation_rates(tests)))]
     return table, written

@@ -210,3 +210,29 @@ def test_resuming_with_the_other_setting_is_a_clear_error(tmp_path):
     train(tiny_config(tmp_path, episodes=1, max_steps=10))
     with pytest.raises(ConfigError, match="trained with normalize_observations: true, the config asks for false"):
         train(tiny_config(tmp_path, episodes=2, max_steps=10, normalize_observations=False), resume=True)
+
+
+def test_crowdnavs_extractor_gives_the_same_latent_on_raw_and_scaled_observations():
+    import torch
+
+    from agents.extractor import MultiModalExtractor
+    from crowdnav.envs import CrowdNavEnv
+
+    raw_env = CrowdNavEnv("room_furniture", modalities=["goal", "closest_obstacle", "lidar", "velocity"])
+    scaled_env = NormalizeObservation(CrowdNavEnv("room_furniture", modalities=["goal", "closest_obstacle", "lidar", "velocity"]))
+    torch.manual_seed(0)
+    raw_extractor = MultiModalExtractor(raw_env.observation_space)
+    scaled_extractor = MultiModalExtractor(scaled_env.observation_space)
+    # the same weights; each keeps its own buffers (the RBF's input bounds, taken from its space)
+    weights = dict(raw_extractor.named_parameters())
+    scaled_extractor.load_state_dict({k: v for k, v in raw_extractor.state_dict().items() if k in weights}, strict=False)
+    raw, _ = raw_env.reset(seed=3)
+    scaled, _ = scaled_env.reset(seed=3)
+    for _ in range(5):
+        action = np.array([0.6, 0.2])
+        with torch.no_grad():
+            a = raw_extractor({k: torch.as_tensor(v[None]).float() for k, v in raw.items()})
+            b = scaled_extractor({k: torch.as_tensor(v[None]).float() for k, v in scaled.items()})
+        torch.testing.assert_close(a, b, rtol=1e-5, atol=1e-5)
+        raw, *_ = raw_env.step(action)
+        scaled, *_ = scaled_env.step(action)

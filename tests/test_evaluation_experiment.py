@@ -40,6 +40,26 @@ def test_paper_experiments_use_the_papers_protocol_and_a_pretrained_encoder_wher
                 assert encoder["weights"] == PRETRAINED
 
 
+def test_the_main_job_learns_from_the_defaults_in_a_bounded_crowd_of_five_with_two_seeds():
+    from crowdnav.envs import CrowdNavEnv
+
+    experiment = load_experiment(None)
+    assert experiment.protocol.seeds >= 2 and experiment.protocol.evaluation_points[0] <= 25
+    for configuration in experiment.configurations:
+        # nothing beyond the scenario, the algorithm and the input: the curve is the defaults' own
+        assert set(configuration.train) <= {"scenario", "algo", "modalities"}
+        env = CrowdNavEnv(configuration.train["scenario"], modalities=configuration.train["modalities"])
+        assert env.scenario.humans.min_count >= 5 and env.scenario.reward.preset == "default"
+        env.close()
+
+
+def test_the_learning_check_runs_crowdnavs_defaults_in_two_library_scenarios():
+    experiment = load_experiment("learning_check")
+    assert experiment.protocol.seeds == 5 and experiment.protocol.evaluation_points == [50, 100, 150, 200, 250, 300]
+    assert [c.train["scenario"] for c in experiment.configurations] == ["open_space", "room_furniture"]
+    assert all(set(c.train) <= {"scenario", "algo", "modalities"} for c in experiment.configurations)
+
+
 def test_configuration_train_fields_are_merged_over_the_defaults():
     document = tiny_experiment_document()
     document["configurations"][0]["train"]["overrides"] = {"humans.count": 1}
