@@ -121,8 +121,18 @@ def _baseline_name(configuration: str) -> str:
     return next(name for name in sorted(BASELINES, key=len, reverse=True) if rest == name or rest.startswith(name + "_"))
 
 
-def evaluate_experiment_baselines(experiment: Any, folder: str | Path) -> list[Path]:
-    """Every baseline of ``experiment`` into its results ``folder`` (``baseline_<name>/baseline``)."""
-    return [evaluate_baseline(experiment.name, configuration, label, options, experiment.protocol,
-                              Path(folder) / configuration / "baseline")
-            for configuration, label, options in experiment_baselines(experiment)]
+def evaluate_experiment_baselines(experiment: Any, folder: str | Path) -> list[Path | str]:
+    """Every baseline of ``experiment`` into its results ``folder`` (``baseline_<name>/baseline``).
+
+    Returns each baseline's folder, or a one-line message where it could not be played (its
+    environment failed to build, e.g. a scenario file gone): the learned runs then fail or
+    succeed on their own, as they would without baselines.
+    """
+    done: list[Path | str] = []
+    for configuration, label, options in experiment_baselines(experiment):
+        try:
+            done.append(evaluate_baseline(experiment.name, configuration, label, options, experiment.protocol,
+                                          Path(folder) / configuration / "baseline"))
+        except Exception as error:  # noqa: BLE001 - reported, and the experiment's own runs go on
+            done.append(f"baseline {label} skipped: {type(error).__name__}: {str(error).splitlines()[0]}")
+    return done

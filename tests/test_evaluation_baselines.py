@@ -77,3 +77,19 @@ def test_benchmark_results_rank_the_baselines_and_draw_them_as_horizontal_lines(
     for axis in figure.axes:
         horizontal = [line for line in axis.get_lines() if len(set(line.get_ydata())) == 1 and line.get_linestyle() in ("--", ":")]
         assert len(horizontal) == 2
+
+
+def test_a_baseline_that_cannot_be_played_is_reported_and_the_others_are_played(tmp_path):
+    from evaluation.baselines import evaluate_experiment_baselines
+
+    scenario = tmp_path / "gone.yaml"
+    document = tiny_experiment_document(seeds=1)
+    from crowdnav.scenario.library import library_dir
+
+    scenario.write_text((library_dir() / "open_space.yaml").read_text())
+    document["configurations"][1]["train"]["scenario"] = str(scenario)
+    experiment = experiment_from_mapping(document)
+    scenario.unlink()
+    done = evaluate_experiment_baselines(experiment, tmp_path / "results")
+    assert [isinstance(item, str) for item in done] == [False, False, True, True]
+    assert "gone.yaml" in done[2] and done[2].startswith("baseline straight to goal (scripted) [closest] skipped: ")

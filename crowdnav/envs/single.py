@@ -39,12 +39,14 @@ class CrowdNavEnv(gym.Env):
     * ``velocity`` (2,) the robot's velocity in the robot frame, m/s, in [-max_speed, max_speed].
 
     **Reward.** Sum of the named terms of :mod:`crowdnav.envs.reward` (weights: scenario
-    ``reward`` section, overridable with ``reward_weights``), each in ``info["reward_terms"]``
-    every step, with ``d_t`` the robot-goal distance (m) after step t:
-    ``step = w_step`` (-5); ``goal_progress = w_goal_progress * (d_{t-1} - d_t)`` (10);
-    ``social = w_social * |F_social|`` (-100), the humans' social-force repulsion on the robot;
-    ``goal_reached = w_goal_reached`` (500) and ``collision = w_collision`` (-500) once, on the
-    last step (``collision`` also when the robot leaves the world: outcome ``out_of_bounds``).
+    ``reward`` section, a preset plus single-term overrides, overridable with ``reward_weights``;
+    docs/agents.md#reward), each in ``info["reward_terms"]`` every step, with ``d_t`` the
+    robot-goal distance (m) after step t; in brackets the ``default`` preset, then the ``paper``
+    preset: ``step = w_step`` (-0.1, -5); ``goal_progress = w_goal_progress * (d_{t-1} - d_t)``
+    (5, 10); ``social = w_social * |F_social|`` (-1, -100), the humans' social-force repulsion on
+    the robot; ``goal_reached = w_goal_reached`` (25, 500) and ``collision = w_collision`` (-25,
+    -500) once, on the last step (``collision`` also when the robot leaves the world: outcome
+    ``out_of_bounds``).
 
     **Episode end.** ``terminated`` when the robot reaches its goal (``outcome`` success),
     collides (``collision``) or leaves the world (``out_of_bounds``); ``truncated`` at
