@@ -15,6 +15,15 @@ Branch per key (in the observation space's key order):
 otherwise the extractor receives 0/255 floats. The LEOG branch therefore binarizes its input
 with ``grid > 0``: it sees exactly 0/1 floats in every case (also for 0/1 grids from another
 simulator), the same values the autoencoder is pre-trained on.
+
+**Speed** (docs/agents.md#performance). crowdnav's SAC/TD3/DDPG policies (:mod:`agents.algorithms`)
+hand the extractor the observation tensors as sampled (:meth:`MultiModalExtractor.prepare`), without
+SB3's ``float() / 255`` copy of the grid, which the binarization makes irrelevant. The grid is
+binarized once per sampled batch, not once per network (the actor, critic and target networks all
+read the same batch: :mod:`agents.batch_cache`, which also serves the LIDAR proximities and the
+RBF expansions), straight into float32 (:func:`binarize`; ``(grid > 0).float()`` converts through
+a bool tensor, ~10x slower on CPU). ``reference=True`` keeps the plain formulas (the
+benchmark's baseline; the tests check both give the same values).
 """
 
 from __future__ import annotations
@@ -24,10 +33,13 @@ from typing import Any
 
 import torch
 from gymnasium import spaces
+from stable_baselines3.common.preprocessing import preprocess_obs
 from stable_baselines3.common.torch_layers import BaseFeaturesExtractor
 from torch import nn
 
+from agents import batch_cache
 from agents.encoders import LeogEncoder, LidarEncoder, LowDimEncoder, leog_architecture, mlp
+from agents.rbf import GaussianRBF
 
 LOWDIM_MAX = 16
 """Vectors with at most this many values go through the RBF branch, longer ones through the LIDAR branch."""
@@ -46,8 +58,23 @@ def register_encoder(key: str, builder: EncoderBuilder) -> None:
     ENCODERS[key] = builder
 
 
+def _binarize(grid: torch.Tensor) -> torch.Tensor:
+    return torch.gt(grid, 0, out=torch.empty(grid.shape, dtype=torch.float32, device=grid.device))
+
+
+def binarize(grid: torch.Tensor) -> torch.Tensor:
+    """``(grid > 0).float()``, once per sampled batch (:func:`agents.batch_cache.cached`).
+
+    The result is written straight as float32 (``torch.gt(..., out=)``): ``(grid > 0).float()``
+    goes through a bool tensor whose conversion costs ~10x more on CPU.
+    """
+    return batch_cache.cached("binarize", grid, _binarize)
+
+
 class _LeogBranch(nn.Module):
     """Binarize, encode (unless precomputed), head."""
+
+    reference = False  # True: the plain (slower) binarization, for the benchmark's baseline
 
     def __init__(self, encoder: LeogEncoder | None, head: nn.Module):
         super().__init__()
@@ -57,7 +84,7 @@ class _LeogBranch(nn.Module):
     def forward(self, observation: torch.Tensor) -> torch.Tensor:
         if self.encoder is None:
             return self.head(observation)
-        grid = (observation > 0).float()
+        grid = (observation > 0).float() if self.reference else binarize(observation)
         if not any(p.requires_grad for p in self.encoder.parameters()):
             with torch.no_grad():  # frozen: no graph, so no backward cost
                 return self.head(self.encoder(grid))
@@ -81,6 +108,7 @@ class MultiModalExtractor(BaseFeaturesExtractor):
         leog_mode: str = "scratch",
         leog_architecture: Mapping[str, Any] | None = None,
         leog_precomputed: bool = False,
+        reference: bool = False,
     ):
         from agents.config import ENCODER_MODES, ExtractorConfig
 
@@ -116,6 +144,12 @@ class MultiModalExtractor(BaseFeaturesExtractor):
         if leog_mode == "frozen":
             for encoder in leog_encoders:
                 encoder.requires_grad_(False)
+        self.reference = bool(reference)
+        for module in self.modules():
+            if isinstance(module, (_LeogBranch, GaussianRBF, LidarEncoder)):
+                module.reference = self.reference
+        # keys whose built-in branch reads the sampled tensor as it is (see prepare); the others get SB3's preprocessing
+        self.raw_keys = frozenset(key for key in branches if key not in ENCODERS)
 
     @staticmethod
     def _leog_branch(space: spaces.Box, settings: Mapping[str, Any], architecture: Mapping[str, Any] | None, precomputed: bool) -> _LeogBranch:
@@ -143,6 +177,25 @@ class MultiModalExtractor(BaseFeaturesExtractor):
             raise ValueError("this extractor has no LEOG encoder to load weights into")
         for encoder in self.leog_encoders:
             encoder.load_state_dict(state_dict)
+
+    def prepare(self, observations: dict[str, torch.Tensor], normalize_images: bool) -> dict[str, torch.Tensor]:
+        """The extractor's input from the sampled tensors, in place of SB3's ``preprocess_obs``.
+
+        The built-in branches get float32 vectors as SB3 would give them (``float()``, which is the
+        same tensor for float32), but grids as sampled: the LEOG branch only asks which cells are
+        non-zero, the same answer before and after SB3's ``float() / 255`` (and binarizing the
+        sampled tensor lets the actor, critic and target networks share the work, see binarize).
+        Registered encoders get SB3's preprocessing.
+        """
+        prepared = {}
+        for key, space in self._observation_space.spaces.items():
+            value = observations[key]
+            if key not in self.raw_keys:
+                value = preprocess_obs(value, space, normalize_images=normalize_images)
+            elif len(space.shape) != 3 and value.dtype != torch.float32:
+                value = value.float()
+            prepared[key] = value
+        return prepared
 
     def forward(self, observations: dict[str, torch.Tensor]) -> torch.Tensor:
         return torch.cat([branch(observations[key]) for key, branch in self.branches.items()], dim=1)

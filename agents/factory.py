@@ -17,14 +17,18 @@ from stable_baselines3.common.base_class import BaseAlgorithm
 from stable_baselines3.common.monitor import Monitor
 from stable_baselines3.common.noise import NormalActionNoise
 
+from agents.algorithms import CrowdNavDDPG, CrowdNavSAC, CrowdNavTD3
 from agents.config import ConfigError, TrainConfig
 from agents.encoders import LeogEncoder
 from agents.extractor import MultiModalExtractor
 from agents.replay_buffer import PackedGridReplayBuffer
 from agents.wrappers import EpisodeSeeds, LeogLatentWrapper, NormalizeObservation, ObservationScales
 
-ALGORITHMS: dict[str, type[BaseAlgorithm]] = {"sac": SAC, "td3": TD3, "ddpg": DDPG, "a2c": A2C, "ppo": PPO}
-"""Config name -> Stable-Baselines3 class."""
+ALGORITHMS: dict[str, type[BaseAlgorithm]] = {"sac": CrowdNavSAC, "td3": CrowdNavTD3, "ddpg": CrowdNavDDPG, "a2c": A2C, "ppo": PPO}
+"""Config name -> algorithm class: SB3's, with the same updates at less cost per step for SAC/TD3/DDPG (agents.algorithms)."""
+
+SB3_ALGORITHMS: dict[str, type[BaseAlgorithm]] = {"sac": SAC, "td3": TD3, "ddpg": DDPG, "a2c": A2C, "ppo": PPO}
+"""Config name -> Stable-Baselines3's own class (``make_model(..., reference=True)``: the benchmark's baseline)."""
 
 OFF_POLICY = ("sac", "td3", "ddpg")
 
@@ -122,8 +126,8 @@ def precomputes_leog(config: TrainConfig) -> bool:
     return config.encoder.mode == "frozen" and config.encoder.precompute
 
 
-def policy_kwargs(config: TrainConfig, architecture: dict[str, Any] | None) -> dict[str, Any]:
-    """SB3 policy_kwargs: crowdnav's extractor and heads, plus the config's own ``policy_kwargs``."""
+def policy_kwargs(config: TrainConfig, architecture: dict[str, Any] | None, reference: bool = False) -> dict[str, Any]:
+    """SB3 policy_kwargs: crowdnav's extractor and heads, plus the config's own ``policy_kwargs`` (``reference``: see make_model)."""
     hyper = hyperparameters(config)
     ours = {"features_extractor_class", "features_extractor_kwargs", "net_arch"}
     clash = sorted(ours & set(config.policy_kwargs))
@@ -136,6 +140,7 @@ def policy_kwargs(config: TrainConfig, architecture: dict[str, Any] | None) -> d
             "leog_mode": config.encoder.mode,
             "leog_architecture": architecture,
             "leog_precomputed": precomputes_leog(config),
+            **({"reference": True} if reference else {}),
         },
         "net_arch": list(hyper["net_arch"]),
         # fused Adam: one kernel per parameter group instead of a Python loop over tensors (~7% faster SAC steps on CPU)
@@ -146,8 +151,13 @@ def policy_kwargs(config: TrainConfig, architecture: dict[str, Any] | None) -> d
 
 
 def make_model(config: TrainConfig, env: gym.Env, saved_encoder: dict[str, Any] | None = None,
-               tensorboard_log: str | None = None) -> BaseAlgorithm:
-    """A new SB3 model for ``config`` on ``env``, with pre-trained LEOG weights loaded if any."""
+               tensorboard_log: str | None = None, reference: bool = False) -> BaseAlgorithm:
+    """A new SB3 model for ``config`` on ``env``, with pre-trained LEOG weights loaded if any.
+
+    ``reference=True``: the same model trained the way crowdnav did before its speed-ups: SB3's own
+    algorithm and policy classes, the extractor's and replay buffer's plain code paths. Same
+    results, more time per step: the baseline of ``benchmarks/bench_train.py`` and of the tests.
+    """
     hyper = hyperparameters(config)
     kwargs: dict[str, Any] = {k: v for k, v in hyper.items() if k not in ("net_arch", "n_step_returns")}
     if config.algo in ("td3", "ddpg") and config.action_noise > 0:
@@ -160,14 +170,14 @@ def make_model(config: TrainConfig, env: gym.Env, saved_encoder: dict[str, Any] 
         # crowdnav's buffer: bit-packed grids, and n-step returns for Dict observations (SB3's own refuses those)
         kwargs["replay_buffer_class"] = PackedGridReplayBuffer
         kwargs["replay_buffer_kwargs"] = {"packed_keys": ["leog"] if config.pack_grids else [], "n_steps": hyper["n_step_returns"],
-                                          "gamma": hyper["gamma"]}
+                                          "gamma": hyper["gamma"], **({"fast_sampling": False} if reference else {})}
     kwargs.update(config.algo_kwargs)
     architecture = saved_encoder["architecture"] if saved_encoder is not None else None
     if architecture is not None and not precomputes_leog(config):
         check_leog_shape(config, architecture, env.observation_space)
     try:
-        model = ALGORITHMS[config.algo](
-            "MultiInputPolicy", env, policy_kwargs=policy_kwargs(config, architecture), seed=config.seed,
+        model = (SB3_ALGORITHMS if reference else ALGORITHMS)[config.algo](
+            "MultiInputPolicy", env, policy_kwargs=policy_kwargs(config, architecture, reference), seed=config.seed,
             device=config.device, tensorboard_log=tensorboard_log, verbose=0, **kwargs,
         )
     except TypeError as error:  # an algo_kwargs / policy_kwargs key the algorithm or its policy does not take

@@ -11,6 +11,8 @@ import numpy as np
 import torch
 from torch import nn
 
+from agents import batch_cache
+
 
 class GaussianRBF(nn.Module):
     """Per-value Gaussian RBF expansion: (B, d) -> (B, d * (centres + keep_input)).
@@ -23,6 +25,8 @@ class GaussianRBF(nn.Module):
     the exact value is not lost between bumps (``centres=0``: the scaled values only). With ``trainable`` the centres and widths
     (per value) are learned, starting from that layout.
     """
+
+    reference = False  # True: always the plain formula (reference_forward), for the benchmark's baseline
 
     def __init__(self, low: np.ndarray, high: np.ndarray, centres: int = 16, trainable: bool = False, keep_input: bool = True):
         super().__init__()
@@ -54,6 +58,9 @@ class GaussianRBF(nn.Module):
         else:
             self.register_buffer("centre", centre)
             self.register_buffer("log_width", log_width)
+        # fixed centres and widths: every constant of the expansion precomputed, flattened in output order
+        self.register_buffer("_repeat", torch.arange(self.in_features).repeat_interleave(centres), persistent=False)
+        self._constants: tuple[tuple, tuple, torch.Tensor, torch.Tensor] | None = None
 
     def scaled(self, x: torch.Tensor) -> torch.Tensor:
         """Inputs mapped to [-1, 1] (affinely from finite bounds, tanh otherwise)."""
@@ -61,6 +68,35 @@ class GaussianRBF(nn.Module):
         return z if self._all_finite else torch.where(self._finite, z, torch.tanh(x))
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:
+        if (self.reference or self.centres == 0 or not self._all_finite or isinstance(self.centre, nn.Parameter)
+                or torch.is_grad_enabled() and x.requires_grad):
+            return self.reference_forward(x)
+        key, _, _ = self._fixed_constants()
+        return batch_cache.cached(key, x, self._expand)  # once per sampled batch for all the networks reading it
+
+    def _expand(self, x: torch.Tensor) -> torch.Tensor:
+        # The same elementwise ops as reference_forward, on the same values in the same order (so the
+        # same result to the last bit), in 8 tensor ops instead of 11 and without the (B, d, K) broadcasts.
+        _, centre, inverse_width = self._fixed_constants()
+        z = torch.addcmul(self._offset, x, self._scale)
+        features = torch.index_select(z, 1, self._repeat).sub_(centre).mul_(inverse_width).square_().mul_(-0.5).exp_()
+        return torch.cat((z, features), dim=1) if self.keep_input else features
+
+    def _fixed_constants(self) -> tuple[tuple, torch.Tensor, torch.Tensor]:
+        """(cache key naming the constants by value, flattened centres, 1 / widths as reference_forward computes them).
+
+        Remade when a constant changes (load_state_dict, .to()).
+        """
+        buffers = (self.centre, self.log_width, self._scale, self._offset)
+        versions = tuple((id(t), t._version) for t in buffers)
+        if self._constants is None or self._constants[0] != versions:
+            with torch.no_grad():
+                key = ("rbf", self.keep_input, batch_cache.fingerprint(*buffers))
+                self._constants = (versions, key, self.centre.flatten().clone(), torch.exp(-self.log_width).flatten())
+        return self._constants[1], self._constants[2], self._constants[3]
+
+    def reference_forward(self, x: torch.Tensor) -> torch.Tensor:
+        """The plain formula (trainable centres and widths, infinite bounds; the reference the fast path is tested against)."""
         z = self.scaled(x)
         if self.centres == 0:
             return z

@@ -22,6 +22,7 @@ from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
+import torch
 from gymnasium import spaces
 from stable_baselines3.common.buffers import DictReplayBuffer
 from stable_baselines3.common.type_aliases import DictReplayBufferSamples
@@ -38,18 +39,20 @@ def packable_keys(observation_space: spaces.Dict, keys: Sequence[str]) -> list[s
 class PackedGridReplayBuffer(DictReplayBuffer):
     """``DictReplayBuffer`` with the grids in ``packed_keys`` stored bit-packed (non-zero = occupied)."""
 
-    n_steps = 1  # class-level defaults: buffers pickled before n-step returns existed still load
+    n_steps = 1  # class-level defaults: buffers pickled before n-step returns (or fast sampling) existed still load
     gamma = 0.99
+    fast_sampling = True
 
     def __init__(self, buffer_size: int, observation_space: spaces.Dict, action_space: spaces.Space, device: Any = "auto",
                  n_envs: int = 1, optimize_memory_usage: bool = False, handle_timeout_termination: bool = True,
-                 packed_keys: Sequence[str] = ("leog",), n_steps: int = 1, gamma: float = 0.99):
+                 packed_keys: Sequence[str] = ("leog",), n_steps: int = 1, gamma: float = 0.99, fast_sampling: bool = True):
         if n_steps < 1:
             raise ValueError(f"n_steps must be >= 1, got {n_steps}")
         if optimize_memory_usage:
             raise ValueError("PackedGridReplayBuffer does not support optimize_memory_usage")
         self.n_steps = int(n_steps)
         self.gamma = float(gamma)
+        self.fast_sampling = bool(fast_sampling)
         self.packed_keys = packable_keys(observation_space, packed_keys)
         self.grid_shapes = {key: tuple(observation_space[key].shape) for key in self.packed_keys}
         stored = dict(observation_space.spaces)
@@ -83,21 +86,40 @@ class PackedGridReplayBuffer(DictReplayBuffer):
             discounts = None
         else:
             last_inds, rewards, discounts = self._n_step(batch_inds, env_indices)
-        samples = []
-        for stored, rows in ((self.observations, batch_inds), (self.next_observations, last_inds)):
-            batch = {key: (self._unpack(stored, key, rows, env_indices) if key in self.grid_shapes
-                           else values[rows, env_indices, :]) for key, values in stored.items()}
-            batch = self._normalize_obs(batch, env)
-            samples.append({key: self.to_torch(values) for key, values in batch.items()})
+        if self.fast_sampling and env is None:
+            # Each array gathered straight into the tensor the networks get (torch.index_select on a view of
+            # the buffer), instead of numpy fancy indexing then a copy into torch: the same values, one copy.
+            rows = torch.from_numpy(batch_inds * self.n_envs + env_indices)
+            observations = self._gather(self.observations, rows, batch_inds, env_indices)
+            next_rows = rows if last_inds is batch_inds else torch.from_numpy(last_inds * self.n_envs + env_indices)
+            next_observations = self._gather(self.next_observations, next_rows, last_inds, env_indices)
+            actions = self._select(self.actions, rows)
+        else:  # SB3's way (also with a VecNormalize env, which normalises the numpy batch)
+            observations, next_observations = (
+                {key: self.to_torch(values) for key, values in self._normalize_obs(
+                    {key: (self._unpack(stored, key, rows, env_indices) if key in self.grid_shapes else values[rows, env_indices, :])
+                     for key, values in stored.items()}, env).items()}
+                for stored, rows in ((self.observations, batch_inds), (self.next_observations, last_inds)))
+            actions = self.to_torch(self.actions[batch_inds, env_indices])
         dones = self.dones[last_inds, env_indices] * (1 - self.timeouts[last_inds, env_indices])
         return DictReplayBufferSamples(
-            observations=samples[0],
-            actions=self.to_torch(self.actions[batch_inds, env_indices]),
-            next_observations=samples[1],
+            observations=observations,
+            actions=actions,
+            next_observations=next_observations,
             dones=self.to_torch(dones).reshape(-1, 1),
             rewards=self.to_torch(self._normalize_reward(rewards, env)),
             discounts=None if discounts is None else self.to_torch(discounts),
         )
+
+    def _select(self, values: np.ndarray, flat_rows: torch.Tensor) -> torch.Tensor:
+        """``values[rows, env_indices]`` as a tensor (``flat_rows = rows * n_envs + env_indices``)."""
+        flat = torch.from_numpy(values).view(values.shape[0] * values.shape[1], *values.shape[2:])
+        return torch.index_select(flat, 0, flat_rows).to(self.device)
+
+    def _gather(self, stored: dict[str, np.ndarray], flat_rows: torch.Tensor, rows: np.ndarray,
+                env_indices: np.ndarray) -> dict[str, torch.Tensor]:
+        return {key: (torch.from_numpy(self._unpack(stored, key, rows, env_indices)).to(self.device) if key in self.grid_shapes
+                      else self._select(values, flat_rows)) for key, values in stored.items()}
 
     def _n_step(self, batch_inds: np.ndarray, env_indices: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Last row, discounted reward sum and bootstrap discount of each sampled n-step transition.
@@ -107,12 +129,13 @@ class PackedGridReplayBuffer(DictReplayBuffer):
         """
         offsets = np.arange(self.n_steps)
         rows = (batch_inds[:, None] + offsets) % self.buffer_size  # [batch, n]
-        ends = np.logical_or(self.dones[rows, env_indices[:, None]], self.timeouts[rows, env_indices[:, None]])
+        flat = rows * self.n_envs + env_indices[:, None]  # the same elements as [rows, env_indices[:, None]], gathered faster
+        ends = np.logical_or(self.dones.reshape(-1).take(flat), self.timeouts.reshape(-1).take(flat))
         ends |= rows == (self.pos - 1) % self.buffer_size
         ends[:, -1] = True
         count = ends.argmax(axis=1) + 1  # rewards summed per sample, 1..n
         used = offsets[None, :] < count[:, None]
-        rewards = self.rewards[rows, env_indices[:, None]] * (self.gamma ** offsets)[None, :] * used
+        rewards = self.rewards.reshape(-1).take(flat) * (self.gamma ** offsets)[None, :] * used
         last_inds = rows[np.arange(len(batch_inds)), count - 1]
         discounts = (self.gamma ** count).astype(np.float32).reshape(-1, 1)
         return last_inds, rewards.sum(axis=1, dtype=np.float32).reshape(-1, 1), discounts

@@ -1,6 +1,7 @@
-"""Training throughput: env steps/s including gradient updates, per algorithm and modality set.
+"""Training throughput: env steps/s including gradient updates, per algorithm and modality set, before/after.
 
-    python benchmarks/bench_train.py [--algos sac td3 ddpg a2c] [--steps 1000] [--repeats 3] [--threads 1] [--json FILE]
+    python benchmarks/bench_train.py [--algos sac td3 ddpg a2c] [--cases ...] [--steps 1000] [--repeats 3]
+                                     [--threads 1] [--no-baseline] [--no-reference] [--json FILE]
 
 Each case builds a fresh agent with crowdnav's defaults (``agents.make_model``) on
 ``open_space``, runs ``--warmup`` steps (past ``learning_starts``, so every timed step
@@ -12,8 +13,16 @@ CNN runs inside the extractor on every sampled batch), finetune and scratch; leo
 (scratch). The frozen and finetune encoders come from a quick pre-training (their weights do
 not change the speed).
 
+**Before/after in one run.** Unless ``--no-baseline``, every case also runs as crowdnav trained
+before its speed-ups (``make_model(..., reference=True)``: SB3's own SAC/TD3/DDPG classes and
+the extractor's and replay buffer's plain code paths; the same updates, the tests check the
+networks come out identical). The two alternate within each repeat (baseline first on even
+repeats, last on odd ones), so both see the same machine load; the ``speed-up`` column is the
+ratio of the medians per CPU second.
+
 Two plain SB3 references calibrate the machine's load (SAC, MultiInputPolicy, CombinedExtractor,
-lidar+goal, 64-64 and 256-256 networks). The replay-buffer table gives the bytes the replay buffer holds per transition (observation
+lidar+goal, 64-64 and 256-256 networks; ``--no-reference`` skips them). The replay-buffer table
+(``--no-buffer`` skips it) gives the bytes the replay buffer holds per transition (observation
 and next observation, action, reward, done, timeout) and the projection to 100,000
 transitions, with the grids bit-packed (crowdnav's default) and as SB3 stores them (uint8).
 """
@@ -54,7 +63,7 @@ def pretrained_encoder(folder: Path) -> Path:
     return pretrain_encoder(collect_grids("room_furniture", 200, seed=0), folder, epochs=1).encoder_path
 
 
-def build(algo: str, case: str, encoder_file: Path, warmup: int, pack_grids: bool = True):
+def build(algo: str, case: str, encoder_file: Path, warmup: int, pack_grids: bool = True, baseline: bool = False):
     modalities, mode, precompute = CASES[case]
     encoder = EncoderConfig(mode=mode, weights=None if mode == "scratch" else str(encoder_file), precompute=precompute)
     fields = {"learning_starts": warmup // 2} if algo in OFF_POLICY else {}
@@ -62,7 +71,7 @@ def build(algo: str, case: str, encoder_file: Path, warmup: int, pack_grids: boo
                          **fields).validate()
     frozen, saved = load_leog_weights(config)
     env = make_env(config, frozen if precomputes_leog(config) else None)
-    return make_model(config, env, saved)
+    return make_model(config, env, saved, reference=baseline)
 
 
 def reference(net: list[int], warmup: int):
@@ -81,10 +90,15 @@ def steps_per_second(make, steps: int, warmup: int) -> tuple[float, float]:
     return steps / (time.perf_counter() - wall), steps / (time.process_time() - cpu)
 
 
-def report(name: str, runs: list[tuple[float, float]], results: dict) -> None:
+def report(name: str, runs: list[tuple[float, float]], results: dict, before: list[tuple[float, float]] | None = None) -> None:
     wall, cpu = statistics.median(r[0] for r in runs), statistics.median(r[1] for r in runs)
     results[name] = {"steps_per_second": wall, "steps_per_cpu_second": cpu}
-    print(f"{name:45s} {wall:7.1f} steps/s {cpu:7.1f} per CPU-s  (wall runs: {', '.join(f'{r[0]:.0f}' for r in runs)})", flush=True)
+    line = f"{name:40s} {wall:7.1f} steps/s {cpu:7.1f} per CPU-s"
+    if before is not None:
+        base_wall, base_cpu = statistics.median(r[0] for r in before), statistics.median(r[1] for r in before)
+        results[name].update(baseline_steps_per_second=base_wall, baseline_steps_per_cpu_second=base_cpu, speedup=cpu / base_cpu)
+        line += f" | before {base_wall:7.1f} steps/s {base_cpu:7.1f} per CPU-s | speed-up {cpu / base_cpu:4.2f}x"
+    print(f"{line}  (wall runs: {', '.join(f'{r[0]:.0f}' for r in runs)})", flush=True)
 
 
 def buffer_bytes(model) -> int:
@@ -103,7 +117,9 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--warmup", type=int, default=300)
     parser.add_argument("--repeats", type=int, default=3)
     parser.add_argument("--threads", type=int, default=1)
-    parser.add_argument("--no-reference", action="store_true")
+    parser.add_argument("--no-baseline", action="store_true", help="skip the before-the-speed-ups runs of each case")
+    parser.add_argument("--no-reference", action="store_true", help="skip the plain SB3 SAC references")
+    parser.add_argument("--no-buffer", action="store_true", help="skip the replay-buffer size table")
     parser.add_argument("--json", type=Path, help="also write the results here")
     args = parser.parse_args(argv)
     torch.set_num_threads(args.threads)
@@ -118,15 +134,21 @@ def main(argv: list[str] | None = None) -> int:
                 report(f"SB3 reference SAC {net[0]}-{net[1]}, lidar+goal", runs, results)
         for algo in args.algos:
             for case in args.cases:
-                runs = [steps_per_second(lambda a=algo, c=case: build(a, c, encoder_file, args.warmup), args.steps, args.warmup)
-                        for _ in range(args.repeats)]
-                report(f"{algo} {case}", runs, results)
-        print("\n# replay buffer (SAC): bytes per transition, and GB for 100,000 transitions", flush=True)
-        print(f"{'case':45s} {'packed grids':>22s} {'uint8 grids':>22s}")
-        for case in args.cases:
-            packed, plain = (buffer_bytes(build("sac", case, encoder_file, args.warmup, pack)) for pack in (True, False))
-            results[f"buffer {case}"] = {"bytes_per_transition": packed, "bytes_per_transition_uint8": plain}
-            print(f"{case:45s} {packed:8d} B {packed * 1e5 / 1e9:7.3f} GB {plain:8d} B {plain * 1e5 / 1e9:7.3f} GB", flush=True)
+                runs, before = [], []
+                for repeat in range(args.repeats):
+                    order = (False, True) if repeat % 2 else (True, False)  # baseline first, then last, alternately
+                    for baseline in order if not args.no_baseline else (False,):
+                        timing = steps_per_second(lambda a=algo, c=case, b=baseline: build(a, c, encoder_file, args.warmup, baseline=b),
+                                                  args.steps, args.warmup)
+                        (before if baseline else runs).append(timing)
+                report(f"{algo} {case}", runs, results, before if not args.no_baseline else None)
+        if not args.no_buffer:
+            print("\n# replay buffer (SAC): bytes per transition, and GB for 100,000 transitions", flush=True)
+            print(f"{'case':45s} {'packed grids':>22s} {'uint8 grids':>22s}")
+            for case in args.cases:
+                packed, plain = (buffer_bytes(build("sac", case, encoder_file, args.warmup, pack)) for pack in (True, False))
+                results[f"buffer {case}"] = {"bytes_per_transition": packed, "bytes_per_transition_uint8": plain}
+                print(f"{case:45s} {packed:8d} B {packed * 1e5 / 1e9:7.3f} GB {plain:8d} B {plain * 1e5 / 1e9:7.3f} GB", flush=True)
     print(f"# load average at end {os.getloadavg()[0]:.2f}")
     if args.json is not None:
         args.json.write_text(json.dumps(results, indent=2) + "\n")

@@ -100,3 +100,31 @@ def test_set_aside_keeps_the_log_untouched_when_nothing_comes_after_the_checkpoi
     assert set_aside_episodes_from(log, 1) == 1 and set_aside_episodes_from(log, 0) == 1
     assert log.read_text() == "episode,seed\n"
     assert (tmp_path / "episodes.csv.discarded").read_text() == "episode,seed\n1,11\n0,10\n"
+
+
+def test_models_saved_by_sb3s_own_classes_load_into_crowdnavs_and_the_other_way_round(tmp_path):
+    import torch
+    from stable_baselines3 import SAC
+
+    from agents.algorithms import CrowdNavSAC
+    from agents.checkpoint import load_model, save_checkpoint
+    from agents.config import config_from_mapping
+    from agents.factory import make_env, make_model
+
+    config = config_from_mapping(tiny_config(tmp_path, modalities=["leog", "goal"])).validate()
+    sb3_model = make_model(config, make_env(config), reference=True)  # as crowdnav built models before its speed-ups
+    sb3_model.learn(60)
+    save_checkpoint(sb3_model, tmp_path / "old", {"algo": "sac", "env": {}}, replay_buffer=True)
+    loaded = load_model(tmp_path / "old", env=make_env(config))
+    assert isinstance(loaded, CrowdNavSAC)
+    observation = {key: space.sample() for key, space in sb3_model.observation_space.spaces.items()}
+    np.testing.assert_array_equal(loaded.predict(observation, deterministic=True)[0], sb3_model.predict(observation, deterministic=True)[0])
+    loaded.load_replay_buffer(tmp_path / "old" / "replay_buffer.pkl")
+    loaded.learn(20, reset_num_timesteps=False)  # resumes training
+    new_model = make_model(config, make_env(config))
+    new_model.learn(60)
+    new_model.save(tmp_path / "new.zip")
+    back = SAC.load(tmp_path / "new.zip")  # plain SB3 reads crowdnav's models too
+    states = new_model.policy.state_dict(), back.policy.state_dict()
+    assert all(torch.equal(states[0][key], states[1][key]) for key in states[0])
+    np.testing.assert_array_equal(back.predict(observation, deterministic=True)[0], new_model.predict(observation, deterministic=True)[0])

@@ -104,3 +104,77 @@ def test_frozen_mode_turns_off_gradients_of_the_cnn_only():
     extractor = MultiModalExtractor(env.observation_space, leog_mode="frozen")
     assert not any(p.requires_grad for p in extractor.leog_encoders[0].parameters())
     assert all(p.requires_grad for p in extractor.branches["goal"].parameters())
+
+
+# ------------------------------------------------------------- fast paths = the plain formulas
+
+
+@pytest.mark.parametrize("centres", [16, 5, 1])
+@pytest.mark.parametrize("rows", [1, 7, 256])
+@pytest.mark.parametrize("keep_input", [True, False])
+def test_rbf_fast_path_gives_the_plain_formula_to_the_last_bit(centres, rows, keep_input):
+    rbf = GaussianRBF(np.array([0.0, -1.0, -3.0]), np.array([2.0, 1.0, 5.0]), centres, keep_input=keep_input)
+    x = torch.rand(rows, 3, generator=torch.Generator().manual_seed(rows)) * 10 - 4  # also outside the bounds
+    assert torch.equal(rbf(x), rbf.reference_forward(x))
+    # new centres and widths (e.g. load_state_dict) reach the fast path's precomputed constants
+    rbf.load_state_dict({"centre": rbf.centre * 0.5, "log_width": rbf.log_width + 0.3, "_scale": rbf._scale, "_offset": rbf._offset,
+                         "_finite": rbf._finite})
+    assert torch.equal(rbf(x), rbf.reference_forward(x))
+    rbf.reference = True
+    assert torch.equal(rbf(x), rbf.reference_forward(x))
+
+
+def test_rbf_gradients_with_respect_to_the_input_and_trainable_centres_still_flow():
+    rbf = GaussianRBF(np.zeros(2), np.ones(2), centres=4)
+    x = torch.rand(3, 2, requires_grad=True)
+    rbf(x).sum().backward()  # the fast path's in-place ops would fail here: the plain formula is used
+    assert x.grad is not None and x.grad.abs().sum() > 0
+    trainable = GaussianRBF(np.zeros(2), np.ones(2), centres=4, trainable=True)
+    trainable(torch.rand(3, 2)).sum().backward()
+    assert trainable.centre.grad is not None
+
+
+@pytest.mark.parametrize("dtype", [torch.uint8, torch.float32])
+def test_binarize_equals_the_plain_comparison_and_reuses_its_result_for_the_same_unchanged_tensor(dtype):
+    from agents.extractor import binarize
+
+    grid = (torch.rand(4, 1, 6, 6) > 0.7).to(dtype) * (255 if dtype == torch.uint8 else 1)
+    binary = binarize(grid)
+    assert binary.dtype == torch.float32 and torch.equal(binary, (grid > 0).float())
+    assert binarize(grid) is binary  # the critic and target networks read the actor's result
+    assert binarize(grid.clone()) is not binary  # another tensor: computed again
+    grid[0] = 0  # changed in place: its version moved on
+    assert torch.equal(binarize(grid), (grid > 0).float())
+
+
+def test_extractor_on_sampled_tensors_equals_sb3_preprocessing_and_the_reference_path():
+    from stable_baselines3.common.preprocessing import preprocess_obs
+
+    env = CrowdNavEnv("room_furniture", modalities=ALL)
+    config = {"lidar_hidden": [32], "lowdim_hidden": [8], "rbf_centres": 4, "leog_latent": 24, "leog_head": [16]}
+    fast = MultiModalExtractor(env.observation_space, config)
+    plain = MultiModalExtractor(env.observation_space, config, reference=True)
+    plain.load_state_dict(fast.state_dict())
+    observations = [env.reset(seed=seed)[0] for seed in range(3)]
+    raw = {key: torch.as_tensor(np.stack([o[key] for o in observations])) for key in observations[0]}
+    assert raw["leog"].dtype == torch.uint8 and raw["leog"].max() == 255
+    expected = plain(preprocess_obs(raw, env.observation_space, normalize_images=True))  # what SB3 alone would compute
+    assert torch.equal(fast(fast.prepare(raw, normalize_images=True)), expected)
+    assert torch.equal(fast(preprocess_obs(raw, env.observation_space, normalize_images=True)), expected)
+    assert torch.equal(fast(fast.prepare(raw, normalize_images=False)), expected)
+
+
+def test_parameter_free_transforms_run_once_per_batch_and_are_shared_only_between_equal_constants():
+    from agents.encoders import LowDimEncoder
+
+    scan = torch.rand(5, 8)
+    first, same, other = (LidarEncoder(np.zeros(8), np.full(8, high), hidden=[4]) for high in (1.0, 1.0, 2.0))
+    assert first.proximity(scan) is same.proximity(scan)  # the actor's, critic's and target's LIDAR branches
+    torch.testing.assert_close(other.proximity(scan), (2.0 - scan) / 2.0)
+    assert first.proximity(scan.clone()) is not first.proximity(scan)
+    goal = torch.rand(5, 3)
+    first, same, other = (LowDimEncoder(np.zeros(3), np.full(3, high), 4, [4]) for high in (1.0, 1.0, 3.0))
+    assert first.rbf(goal) is same.rbf(goal)
+    assert torch.equal(other.rbf(goal), other.rbf.reference_forward(goal)) and not torch.equal(other.rbf(goal), first.rbf(goal))
+    with torch.inference_mode():  # no inference tensors kept for a later backward pass
+        assert first.rbf(goal) is not first.rbf(goal)

@@ -90,3 +90,40 @@ def test_n_step_window_does_not_cross_into_older_rows_after_the_buffer_wraps():
 def test_n_steps_below_one_is_refused():
     with pytest.raises(ValueError, match="n_steps must be >= 1"):
         PackedGridReplayBuffer(8, SPACE, ACTIONS, device="cpu", n_steps=0)
+
+
+@pytest.mark.parametrize("n_steps", [1, 3])
+@pytest.mark.parametrize("packed", [True, False])
+def test_fast_sampling_gives_the_batch_sb3s_indexing_gives(n_steps, packed):
+    import torch
+
+    space = spaces.Dict({"goal": spaces.Box(-1.0, 1.0, shape=(3,), dtype=np.float32),
+                         "lidar": spaces.Box(0.0, 1.0, shape=(40,), dtype=np.float32),
+                         "leog": spaces.Box(0, 255, shape=(1, 6, 6), dtype=np.uint8)})
+    rng = np.random.default_rng(0)
+
+    def observation():
+        return {"goal": rng.uniform(-1, 1, (2, 3)).astype(np.float32), "lidar": rng.uniform(0, 1, (2, 40)).astype(np.float32),
+                "leog": ((rng.uniform(size=(2, 1, 6, 6)) > 0.6) * 255).astype(np.uint8)}
+
+    buffer = PackedGridReplayBuffer(50, space, ACTIONS, device="cpu", n_envs=2, n_steps=n_steps, gamma=GAMMA,
+                                    packed_keys=["leog"] if packed else [])
+    for _ in range(70):  # wraps around
+        done = rng.uniform(size=2) < 0.1
+        buffer.add(observation(), observation(), rng.uniform(-1, 1, (2, 2)), rng.normal(size=2), done,
+                   [{"TimeLimit.truncated": bool(d and rng.uniform() < 0.5)} for d in done])
+    batches = []
+    for fast in (True, False):
+        buffer.fast_sampling = fast
+        np.random.seed(3)
+        batches.append(buffer.sample(64))
+    for name in batches[0]._fields:
+        a, b = getattr(batches[0], name), getattr(batches[1], name)
+        pairs = [(a[key], b[key]) for key in b] if isinstance(b, dict) else [(a, b)]
+        if isinstance(b, dict):
+            assert list(a) == list(b)
+        for x, y in pairs:
+            if y is None:
+                assert x is None
+            else:
+                assert x.dtype == y.dtype and x.shape == y.shape and torch.equal(x, y), name

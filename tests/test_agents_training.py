@@ -104,3 +104,92 @@ def test_n_step_returns_reach_the_replay_buffer_and_are_refused_for_on_policy_al
     assert model.replay_buffer.sample(4).discounts is not None  # SAC bootstraps with gamma ** k, not gamma
     with pytest.raises(ConfigError, match="n_step_returns does not apply to a2c"):
         train(tiny_config(tmp_path / "a2c", algo="a2c", n_step_returns=5))
+
+
+# ------------------------------------------------ crowdnav's faster SAC/TD3/DDPG = SB3's own
+
+
+@pytest.mark.parametrize("modalities", [["lidar", "goal"], ["leog", "goal", "velocity"]], ids=["lidar+goal", "leog+goal+velocity"])
+@pytest.mark.parametrize("algo", ["sac", "td3", "ddpg"])
+def test_fast_training_gives_the_networks_sb3s_own_classes_give_to_the_last_bit(tmp_path, algo, modalities):
+    """Same seed: crowdnav's algorithms, extractor and replay-buffer fast paths = SB3's classes and the plain paths."""
+    import torch
+    from stable_baselines3 import DDPG, SAC, TD3
+
+    from agents.algorithms import CrowdNavDDPG, CrowdNavSAC, CrowdNavTD3
+    from agents.config import config_from_mapping
+    from agents.factory import make_env, make_model
+
+    states, classes = [], []
+    for reference in (True, False):
+        config = config_from_mapping(tiny_config(tmp_path, algo=algo, modalities=modalities, max_steps=40)).validate()
+        model = make_model(config, make_env(config), reference=reference)
+        model.learn(160)
+        assert model._n_updates > 20
+        states.append(model.policy.state_dict())
+        classes.append(type(model))
+    assert classes == [{"sac": SAC, "td3": TD3, "ddpg": DDPG}[algo], {"sac": CrowdNavSAC, "td3": CrowdNavTD3, "ddpg": CrowdNavDDPG}[algo]]
+    assert states[0].keys() == states[1].keys()
+    assert all(torch.equal(states[0][key], states[1][key]) for key in states[0])
+
+
+def test_soft_update_equals_sb3s_polyak_update_to_the_last_bit():
+    import torch
+    from stable_baselines3.common.utils import polyak_update
+
+    from agents.algorithms import soft_update
+
+    generator = torch.Generator().manual_seed(0)
+    params = [torch.randn(shape, generator=generator) for shape in [(64, 360), (64,), (3, 3, 2), ()]]
+    targets = [torch.randn(p.shape, generator=generator) for p in params]
+    expected = [t.clone() for t in targets]
+    for tau in (0.005, 0.3, 1.0):
+        polyak_update(params, expected, tau)
+        soft_update(params, targets, tau)
+        assert all(torch.equal(a, b) for a, b in zip(targets, expected, strict=True))
+    with pytest.raises(ValueError, match="2 parameters but 1 target"):
+        soft_update(params[:2], targets[:1], 0.1)
+
+
+def test_fast_training_mode_sets_the_flags_sb3s_set_training_mode_sets(tmp_path):
+    from stable_baselines3.sac.policies import SACPolicy
+
+    from agents.config import config_from_mapping
+    from agents.factory import make_env, make_model
+
+    config = config_from_mapping(tiny_config(tmp_path)).validate()
+    model = make_model(config, make_env(config))
+    policy = model.policy
+    for mode in (True, False, True):
+        policy.set_training_mode(mode)
+        flags = {name: module.training for name, module in policy.named_modules()}
+        SACPolicy.set_training_mode(policy, not mode)  # SB3's recursive version, to the other mode and back
+        SACPolicy.set_training_mode(policy, mode)
+        assert flags == {name: module.training for name, module in policy.named_modules()}
+        assert policy.actor.training is mode and policy.critic.features_extractor.training is mode
+        assert policy.critic_target.training is False  # SB3 keeps the target network in eval mode
+    with pytest.raises(ValueError, match="boolean"):
+        policy.set_training_mode(1)
+
+
+def test_sac_actor_written_out_gaussian_matches_sb3s_distribution(tmp_path):
+    import torch
+    from stable_baselines3.sac.policies import Actor
+
+    from agents.config import config_from_mapping
+    from agents.factory import make_env, make_model
+
+    config = config_from_mapping(tiny_config(tmp_path, modalities=["leog", "goal"])).validate()
+    model = make_model(config, make_env(config))
+    model.learn(60)
+    observations = model.replay_buffer.sample(32).observations
+    actor = model.actor
+    results = []
+    for method in (type(actor).action_log_prob, Actor.action_log_prob,
+                   lambda a, o: type(a).forward(a, o), lambda a, o: Actor.forward(a, o),
+                   lambda a, o: type(a).forward(a, o, True), lambda a, o: Actor.forward(a, o, True)):
+        torch.manual_seed(7)
+        results.append(method(actor, observations))
+    for fast, sb3 in zip(results[::2], results[1::2], strict=True):
+        fast, sb3 = (fast, sb3) if isinstance(fast, tuple) else ((fast,), (sb3,))
+        assert all(torch.equal(a, b) for a, b in zip(fast, sb3, strict=True))
