@@ -21,23 +21,40 @@ def write(tmp_path, document, name="experiment.yaml"):
 
 
 def test_shipped_experiments_cover_figure_4_and_the_default():
-    assert set(shipped_experiments()) == {"default", "encoders", "modalities", "fusion", "paradigms", "learning_check"}
+    assert set(shipped_experiments()) == {"default", "encoders", "modalities", "modalities_paper", "fusion", "paradigms", "learning_check"}
     labels = {name: [c.name for c in load_experiment(name).configurations] for name in shipped_experiments()}
     assert labels["encoders"] == ["frozen", "finetune", "scratch"]
-    assert labels["modalities"] == ["leog", "lidar", "closest_obstacle"]
+    assert labels["modalities"] == labels["modalities_paper"] == ["leog", "lidar", "closest_obstacle"]
     assert labels["fusion"] == ["leog", "lidar", "leog_lidar"]
     assert labels["paradigms"] == ["sac", "td3", "ddpg", "a2c"]
     assert load_experiment(None).name == "default"
 
 
 def test_paper_experiments_use_the_papers_protocol_and_a_pretrained_encoder_where_frozen_or_finetuned():
-    for name in ("encoders", "modalities", "fusion", "paradigms"):
+    for name in ("encoders", "modalities", "modalities_paper", "fusion", "paradigms"):
         experiment = load_experiment(name)
         assert experiment.protocol.evaluation_points[-1] == 700 and experiment.protocol.seeds == 5
+        assert experiment.protocol.eval_every == 50 and experiment.protocol.window == 10
         for configuration in experiment.configurations:
             encoder = configuration.train.get("encoder", {})
             if encoder.get("mode") in ("frozen", "finetune"):
                 assert encoder["weights"] == PRETRAINED
+
+
+def test_figure_4_experiments_share_one_setting_walking_crowd_of_five_default_preset_but_the_paper_rerun():
+    from crowdnav.envs import CrowdNavEnv
+
+    for name in ("encoders", "modalities", "modalities_paper", "fusion", "paradigms"):
+        for configuration in load_experiment(name).configurations:
+            train = configuration.train
+            assert train["scenario"] == "room_furniture" and not {"gamma", "n_step_returns", "algo_kwargs"} & set(train)
+            env = CrowdNavEnv("room_furniture", modalities=["goal"], overrides=train["overrides"],
+                              reward_weights=train.get("reward_weights", {}))
+            humans = env.scenario.humans
+            assert humans.min_count >= 5 and humans.preferred_speed[0] >= 0.5 and humans.preferred_speed[1] >= 1.2
+            assert not humans.see_robot  # humans do not react to the robot, as in the paper
+            assert env.scenario.reward.preset == ("paper" if name == "modalities_paper" else "default")
+            env.close()
 
 
 def test_the_main_job_learns_from_the_defaults_in_a_bounded_crowd_of_five_with_two_seeds():
