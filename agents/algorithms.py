@@ -44,7 +44,7 @@ from stable_baselines3.td3.policies import Actor as TD3Actor
 from stable_baselines3.td3.policies import MultiInputPolicy as TD3MultiInputPolicy
 from torch import nn
 
-from agents.extractor import MultiModalExtractor
+from crowdnav.agents.extractor import MultiModalExtractor
 
 
 def soft_update(params: Sequence[torch.Tensor], target_params: Sequence[torch.Tensor], tau: float) -> None:

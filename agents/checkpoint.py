@@ -28,7 +28,7 @@ from typing import Any
 import numpy as np
 from stable_baselines3.common.base_class import BaseAlgorithm
 
-from agents.wrappers import ObservationScales, encode_grids, normalize_observation, scales_from_json
+from crowdnav.agents.wrappers import ObservationScales, encode_grids, normalize_observation, scales_from_json
 
 POLICY_FORMAT = "crowdnav-policy/1"
 POLICY_FILE = "policy.json"
@@ -97,7 +97,7 @@ def read_policy_info(path: str | Path) -> dict[str, Any]:
 
 def load_model(path: str | Path, env: Any = None, device: str = "cpu") -> BaseAlgorithm:
     """The SB3 model of a checkpoint (on ``env`` if given, e.g. to resume training)."""
-    from agents.factory import ALGORITHMS
+    from crowdnav.agents.factory import ALGORITHMS
 
     folder = checkpoint_folder(path)
     info = read_policy_info(folder)
@@ -166,7 +166,7 @@ def load_policy(path: str | Path, device: str = "cpu") -> AgentPolicy:
     info = read_policy_info(folder)
     encoder = None
     if info.get("leog_encoder"):
-        from agents.pretrain import load_encoder
+        from crowdnav.agents.pretrain import load_encoder
 
         encoder, _ = load_encoder(folder / info["leog_encoder"])
     return AgentPolicy(load_model(folder, device=device), info, encoder)

@@ -107,7 +107,7 @@ def train_overrides(args: argparse.Namespace) -> dict[str, Any]:
 
 
 def train_command(args: argparse.Namespace) -> int:
-    from agents.config import ConfigError, describe_fields, load_config
+    from crowdnav.agents.config import ConfigError, describe_fields, load_config
 
     if args.list_options:
         for name, default, doc in describe_fields():
@@ -120,11 +120,11 @@ def train_command(args: argparse.Namespace) -> int:
     if args.print_config:
         import yaml
 
-        from agents.config import config_to_dict
+        from crowdnav.agents.config import config_to_dict
 
         sys.stdout.write(yaml.safe_dump(config_to_dict(config), sort_keys=False))
         return 0
-    from agents.training import describe_run, train
+    from crowdnav.agents.training import describe_run, train
     from crowdnav.scenario import ScenarioError
 
     try:
@@ -136,7 +136,7 @@ def train_command(args: argparse.Namespace) -> int:
 
 
 def collect_dataset_command(args: argparse.Namespace) -> int:
-    from agents.dataset import collect_grids, save_dataset
+    from crowdnav.agents.dataset import collect_grids, save_dataset
     from crowdnav.scenario import ScenarioError
 
     try:
@@ -151,8 +151,8 @@ def collect_dataset_command(args: argparse.Namespace) -> int:
 def pretrain_encoder_command(args: argparse.Namespace) -> int:
     import torch
 
-    from agents.dataset import collect_grids, load_dataset
-    from agents.pretrain import pretrain_encoder
+    from crowdnav.agents.dataset import collect_grids, load_dataset
+    from crowdnav.agents.pretrain import pretrain_encoder
     from crowdnav.scenario import ScenarioError
 
     torch.set_num_threads(args.threads)

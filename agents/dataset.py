@@ -98,7 +98,7 @@ def collect_grids(
     from ``seed``: episode ``i`` uses seed ``agents.wrappers.dataset_seed(seed, i)``, never a
     test or training episode's seed.
     """
-    from agents.wrappers import dataset_seed
+    from crowdnav.agents.wrappers import dataset_seed
     from crowdnav import __version__
     from crowdnav.envs import CrowdNavEnv
 

@@ -16,8 +16,8 @@ import torch
 import torch.nn.functional as F
 from torch import nn
 
-from agents import batch_cache
-from agents.rbf import GaussianRBF
+from crowdnav.agents import batch_cache
+from crowdnav.agents.rbf import GaussianRBF
 
 
 class MLP(nn.Module):

@@ -37,9 +37,9 @@ from stable_baselines3.common.preprocessing import preprocess_obs
 from stable_baselines3.common.torch_layers import BaseFeaturesExtractor
 from torch import nn
 
-from agents import batch_cache
-from agents.encoders import LeogEncoder, LidarEncoder, LowDimEncoder, leog_architecture, mlp
-from agents.rbf import GaussianRBF
+from crowdnav.agents import batch_cache
+from crowdnav.agents.encoders import LeogEncoder, LidarEncoder, LowDimEncoder, leog_architecture, mlp
+from crowdnav.agents.rbf import GaussianRBF
 
 LOWDIM_MAX = 16
 """Vectors with at most this many values go through the RBF branch, longer ones through the LIDAR branch."""
@@ -110,7 +110,7 @@ class MultiModalExtractor(BaseFeaturesExtractor):
         leog_precomputed: bool = False,
         reference: bool = False,
     ):
-        from agents.config import ENCODER_MODES, ExtractorConfig
+        from crowdnav.agents.config import ENCODER_MODES, ExtractorConfig
 
         if not isinstance(observation_space, spaces.Dict):
             raise TypeError(f"MultiModalExtractor needs a Dict observation space, got {observation_space}")

@@ -17,12 +17,12 @@ from stable_baselines3.common.base_class import BaseAlgorithm
 from stable_baselines3.common.monitor import Monitor
 from stable_baselines3.common.noise import NormalActionNoise
 
-from agents.algorithms import CrowdNavDDPG, CrowdNavSAC, CrowdNavTD3
-from agents.config import ConfigError, TrainConfig
-from agents.encoders import LeogEncoder
-from agents.extractor import MultiModalExtractor
-from agents.replay_buffer import PackedGridReplayBuffer
-from agents.wrappers import EpisodeSeeds, LeogLatentWrapper, NormalizeObservation, ObservationScales
+from crowdnav.agents.algorithms import CrowdNavDDPG, CrowdNavSAC, CrowdNavTD3
+from crowdnav.agents.config import ConfigError, TrainConfig
+from crowdnav.agents.encoders import LeogEncoder
+from crowdnav.agents.extractor import MultiModalExtractor
+from crowdnav.agents.replay_buffer import PackedGridReplayBuffer
+from crowdnav.agents.wrappers import EpisodeSeeds, LeogLatentWrapper, NormalizeObservation, ObservationScales
 
 ALGORITHMS: dict[str, type[BaseAlgorithm]] = {"sac": CrowdNavSAC, "td3": CrowdNavTD3, "ddpg": CrowdNavDDPG, "a2c": A2C, "ppo": PPO}
 """Config name -> algorithm class: SB3's, with the same updates at less cost per step for SAC/TD3/DDPG (agents.algorithms)."""
@@ -103,7 +103,7 @@ def load_leog_weights(config: TrainConfig) -> tuple[LeogEncoder | None, dict[str
     """The pre-trained encoder of frozen/finetune modes (None for scratch) and its saved dict."""
     if config.encoder.mode == "scratch":
         return None, None
-    from agents.pretrain import load_encoder
+    from crowdnav.agents.pretrain import load_encoder
 
     try:
         return load_encoder(config.encoder.weights)

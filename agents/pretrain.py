@@ -23,8 +23,8 @@ import numpy as np
 import torch
 from torch import nn
 
-from agents.dataset import GridDataset
-from agents.encoders import LeogAutoencoder, LeogEncoder, leog_architecture
+from crowdnav.agents.dataset import GridDataset
+from crowdnav.agents.encoders import LeogAutoencoder, LeogEncoder, leog_architecture
 
 ENCODER_FORMAT = "crowdnav-leog-encoder/1"
 ENCODER_FILE = "encoder.pt"

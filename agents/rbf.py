@@ -11,7 +11,7 @@ import numpy as np
 import torch
 from torch import nn
 
-from agents import batch_cache
+from crowdnav.agents import batch_cache
 
 
 class GaussianRBF(nn.Module):

@@ -31,10 +31,10 @@ import torch
 import yaml
 from stable_baselines3.common.base_class import BaseAlgorithm
 
-from agents.callbacks import EpisodeCallback, EpisodeRecord
-from agents.checkpoint import ENCODER_FILE, MODEL_FILE, REPLAY_FILE, checkpoint_folder, load_model, read_policy_info, save_checkpoint
-from agents.config import ConfigError, TrainConfig, config_from_mapping, config_to_dict, load_config
-from agents.factory import (
+from crowdnav.agents.callbacks import EpisodeCallback, EpisodeRecord
+from crowdnav.agents.checkpoint import ENCODER_FILE, MODEL_FILE, REPLAY_FILE, checkpoint_folder, load_model, read_policy_info, save_checkpoint
+from crowdnav.agents.config import ConfigError, TrainConfig, config_from_mapping, config_to_dict, load_config
+from crowdnav.agents.factory import (
     OFF_POLICY,
     env_options,
     hyperparameters,
@@ -44,7 +44,7 @@ from agents.factory import (
     observation_normalization,
     precomputes_leog,
 )
-from agents.wrappers import scales_from_json, scales_to_json, train_seed
+from crowdnav.agents.wrappers import scales_from_json, scales_to_json, train_seed
 
 
 @dataclass

@@ -22,7 +22,7 @@ import numpy as np
 import torch
 from gymnasium import spaces
 
-from agents.encoders import LeogEncoder
+from crowdnav.agents.encoders import LeogEncoder
 from crowdnav.sensors.base import checked_scale, normalize_values, normalized_box
 
 TRAIN_SEED_BASE = 1_000_000

@@ -43,8 +43,8 @@ import torch
 from stable_baselines3 import SAC
 from stable_baselines3.common.monitor import Monitor
 
-from agents.config import EncoderConfig, TrainConfig
-from agents.factory import OFF_POLICY, load_leog_weights, make_env, make_model, precomputes_leog
+from crowdnav.agents.config import EncoderConfig, TrainConfig
+from crowdnav.agents.factory import OFF_POLICY, load_leog_weights, make_env, make_model, precomputes_leog
 
 CASES = {
     "lidar+goal": (["lidar", "goal"], "scratch", True),
@@ -58,7 +58,7 @@ CASES = {
 
 
 def pretrained_encoder(folder: Path) -> Path:
-    from agents import collect_grids, pretrain_encoder
+    from crowdnav.agents import collect_grids, pretrain_encoder
 
     return pretrain_encoder(collect_grids("room_furniture", 200, seed=0), folder, epochs=1).encoder_path
 

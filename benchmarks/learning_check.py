@@ -28,9 +28,9 @@ from pathlib import Path
 
 import numpy as np
 
-from agents import load_policy, train
-from agents.checkpoint import checkpoint_folder
-from agents.config import load_config
+from crowdnav.agents import load_policy, train
+from crowdnav.agents.checkpoint import checkpoint_folder
+from crowdnav.agents.config import load_config
 from crowdnav.cli.common import CliError, parse_overrides
 from crowdnav.simulator import OUTCOMES
 

@@ -23,8 +23,8 @@ from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
-from evaluation.protocol import Protocol
-from evaluation.storage import META_FILE, TEST_FILE, atomic_write_csv, atomic_write_json, read_json
+from crowdnav.evaluation.protocol import Protocol
+from crowdnav.evaluation.storage import META_FILE, TEST_FILE, atomic_write_csv, atomic_write_json, read_json
 
 BASELINE_PREFIX = "baseline_"
 """Configuration names of baselines start with this; experiment configurations may not."""
@@ -73,8 +73,8 @@ def evaluate_baseline(experiment: str, configuration: str, label: str, env_optio
     """Play the baseline on the protocol's test episodes into ``out_dir`` (skipped when already there); returns the folder."""
     import pandas as pd
 
-    from evaluation.rollout import HeldOutEpisodes
-    from evaluation.runner import OUTCOMES, RUN_COLUMNS, git_commit, package_versions
+    from crowdnav.evaluation.rollout import HeldOutEpisodes
+    from crowdnav.evaluation.runner import OUTCOMES, RUN_COLUMNS, git_commit, package_versions
 
     out_dir = Path(out_dir)
     if (out_dir / META_FILE).is_file():

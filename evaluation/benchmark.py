@@ -25,11 +25,11 @@ from typing import Any
 import yaml
 
 from crowdnav.simulator import OUTCOMES
-from evaluation.baselines import evaluate_experiment_baselines
-from evaluation.executors import Executor, Job, make_executor, run_name
-from evaluation.experiment import Experiment
-from evaluation.progress import ProgressBar
-from evaluation.storage import (
+from crowdnav.evaluation.baselines import evaluate_experiment_baselines
+from crowdnav.evaluation.executors import Executor, Job, make_executor, run_name
+from crowdnav.evaluation.experiment import Experiment
+from crowdnav.evaluation.progress import ProgressBar
+from crowdnav.evaluation.storage import (
     EXPERIMENT_FILE,
     META_FILE,
     TRAIN_DIR,
@@ -119,7 +119,7 @@ def describe_outcome(outcome: dict[str, Any]) -> str:
 
 def describe_baseline(folder: Path) -> str:
     """One line about a scripted baseline's rates on the test episodes."""
-    from evaluation.storage import read_json
+    from crowdnav.evaluation.storage import read_json
 
     meta = read_json(folder / META_FILE)
     rates = ", ".join(f"{outcome} {rate:.0%}" for outcome, rate in sorted(meta["final"].items(), key=lambda item: item[0] != "success"))
@@ -148,14 +148,14 @@ def claim_folder(folder: Path, experiment: Experiment) -> None:
 
 def pretrain(experiment: Experiment, folder: Path, log: Callable[[str], None]) -> Path:
     """The experiment's pre-trained LEOG encoder (trained once, then reused)."""
-    from evaluation.runner import pretrained_encoder_path
+    from crowdnav.evaluation.runner import pretrained_encoder_path
 
     target = pretrained_encoder_path(folder)
     if target.is_file():
         return target
     import torch
 
-    from agents import collect_grids, pretrain_encoder
+    from crowdnav.agents import collect_grids, pretrain_encoder
 
     settings = experiment.pretrain_encoder
     extractor = experiment.configurations[0].train.get("extractor", {})
@@ -176,8 +176,8 @@ def pretrain(experiment: Experiment, folder: Path, log: Callable[[str], None]) -
 
 def write_report(folder: Path, *, video: bool = True, log: Callable[[str], None] = print) -> list[Path]:
     """Curves, leaderboard and (optionally) a video of the best configuration's final policy, in ``folder``."""
-    from evaluation.curves import plot_curves
-    from evaluation.leaderboard import write_leaderboard
+    from crowdnav.evaluation.curves import plot_curves
+    from crowdnav.evaluation.leaderboard import write_leaderboard
 
     outputs = plot_curves([folder], folder / "curves")
     table, written = write_leaderboard([folder], folder / "leaderboard")
@@ -194,7 +194,7 @@ def write_report(folder: Path, *, video: bool = True, log: Callable[[str], None]
 def render_final_policy(configuration_dir: Path, out: Path) -> list[Path]:
     """A video of the first seed's final policy on the first test episode."""
     from crowdnav.rendering.episodes import render_episodes
-    from evaluation.storage import read_json
+    from crowdnav.evaluation.storage import read_json
 
     runs = sorted(path for path in configuration_dir.iterdir() if (path / META_FILE).is_file())
     meta = read_json(runs[0] / META_FILE)

@@ -52,7 +52,7 @@ def curves_figure(tests: Any, window: int, title: str | None = None) -> Any:
     import seaborn as sns
     from matplotlib.figure import Figure
 
-    from evaluation.baselines import is_baseline
+    from crowdnav.evaluation.baselines import is_baseline
 
     scripted = tests["configuration"].map(is_baseline)
     baselines, tests = tests[scripted], tests[~scripted]
@@ -97,7 +97,7 @@ def plot_curves(paths: Iterable[str | Path], out: str | Path | None = None) -> l
     Written to ``out`` + ``.png``/``.pdf`` if given (one experiment only), else to
     ``<experiment folder>/curves.png`` and ``.pdf``.
     """
-    from evaluation.storage import ResultsError, finished_runs, load_results
+    from crowdnav.evaluation.storage import ResultsError, finished_runs, load_results
 
     paths = list(paths)
     tests, _, metas = load_results(paths)

@@ -27,9 +27,9 @@ from multiprocessing import get_context
 from pathlib import Path
 from typing import Any
 
-from evaluation.progress import episodes_on_disk
-from evaluation.protocol import Protocol
-from evaluation.runner import OUTCOMES, run_unit
+from crowdnav.evaluation.progress import episodes_on_disk
+from crowdnav.evaluation.protocol import Protocol
+from crowdnav.evaluation.runner import OUTCOMES, run_unit
 
 EXECUTORS = ("local", "serial", "ray")
 """Names accepted by :func:`make_executor` (and ``crowdnav benchmark --executor``)."""
@@ -136,7 +136,7 @@ def make_executor(kind: str = "local", *, workers: int | None = None, address: s
     if kind == "local":
         return LocalExecutor(min(2, os.cpu_count() or 1) if workers is None else workers)
     try:
-        from evaluation.ray_executor import RayExecutor
+        from crowdnav.evaluation.ray_executor import RayExecutor
     except ImportError as error:
         if error.name is None or error.name.split(".")[0] != "ray":
             raise

@@ -33,9 +33,9 @@ from typing import Any
 import yaml
 
 from crowdnav.scenario.loader import yaml_line
-from evaluation.baselines import BASELINE_PREFIX
-from evaluation.protocol import Protocol, protocol_fields, quick
-from evaluation.runner import PRETRAINED, PROTOCOL_FIELDS, UnitSpec
+from crowdnav.evaluation.baselines import BASELINE_PREFIX
+from crowdnav.evaluation.protocol import Protocol, protocol_fields, quick
+from crowdnav.evaluation.runner import PRETRAINED, PROTOCOL_FIELDS, UnitSpec
 
 EXPERIMENTS_DIR = Path(__file__).resolve().parent / "experiments"
 DEFAULT_EXPERIMENT = "default"
@@ -260,8 +260,8 @@ def _with_encoder(train: dict[str, Any], pretrain: dict[str, Any] | None) -> Non
 
 
 def _check_train(check: _Checker, train: dict[str, Any], where: str, name: str) -> None:
-    from agents import ConfigError
-    from agents.config import config_from_mapping
+    from crowdnav.agents import ConfigError
+    from crowdnav.agents.config import config_from_mapping
     from crowdnav.envs import CrowdNavEnv
     from crowdnav.scenario import ScenarioError
 

@@ -32,7 +32,7 @@ from typing import Any
 import numpy as np
 
 from crowdnav.simulator import OUTCOMES
-from evaluation.baselines import is_baseline
+from crowdnav.evaluation.baselines import is_baseline
 
 BOOTSTRAP_RESAMPLES = 2000
 BOOTSTRAP_SEED = 0
@@ -145,7 +145,7 @@ def evaluation_rates(tests: Any) -> Any:
 def write_leaderboard(paths: Iterable[str | Path], out: str | Path) -> tuple[Any, list[Path]]:
     """Build the leaderboard of every finished run below ``paths``; write ``out``.md and ``out``.csv, and the
     per-evaluation rates of every run next to them (``evaluation_rates.csv``)."""
-    from evaluation.storage import atomic_write_text, load_results
+    from crowdnav.evaluation.storage import atomic_write_text, load_results
 
     tests, _, metas = load_results(paths)
     table = leaderboard_table(tests, metas)

@@ -12,8 +12,8 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
-from evaluation.protocol import Protocol
-from evaluation.storage import EVALUATIONS_DIR, META_FILE, TRAIN_DIR
+from crowdnav.evaluation.protocol import Protocol
+from crowdnav.evaluation.storage import EVALUATIONS_DIR, META_FILE, TRAIN_DIR
 
 
 def run_episodes(protocol: Protocol) -> int:

@@ -61,7 +61,7 @@ class Protocol:
 
     def training_seeds(self, run_seed: int) -> range | list[int]:
         """Seeds of the training episodes of run ``run_seed`` (as :func:`agents.train_seed` assigns them)."""
-        from agents import train_seed
+        from crowdnav.agents import train_seed
 
         first, last = train_seed(run_seed, 0), train_seed(run_seed, self.train_episodes - 1)
         if last - first == self.train_episodes - 1:  # consecutive: a range, so membership tests are O(1)

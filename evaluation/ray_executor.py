@@ -33,7 +33,7 @@ from typing import Any
 
 import ray
 
-from evaluation.executors import (
+from crowdnav.evaluation.executors import (
     Executor,
     ExecutorError,
     Job,
@@ -43,11 +43,11 @@ from evaluation.executors import (
     run_guarded,
     write_error_log,
 )
-from evaluation.progress import episodes_on_disk, run_episodes
-from evaluation.protocol import Protocol
-from evaluation.runner import PRETRAINED, pretrained_encoder_path, run_unit
-from evaluation.storage import META_FILE, SPEC_FILE, TRAIN_DIR, ResultsError, read_json
-from evaluation.transfer import claim_storage, pack_folder, remove_work_folder, unpack_folder, work_folder
+from crowdnav.evaluation.progress import episodes_on_disk, run_episodes
+from crowdnav.evaluation.protocol import Protocol
+from crowdnav.evaluation.runner import PRETRAINED, pretrained_encoder_path, run_unit
+from crowdnav.evaluation.storage import META_FILE, SPEC_FILE, TRAIN_DIR, ResultsError, read_json
+from crowdnav.evaluation.transfer import claim_storage, pack_folder, remove_work_folder, unpack_folder, work_folder
 
 THREADS_ENV = {"OMP_NUM_THREADS": "1", "MKL_NUM_THREADS": "1"}
 """Environment of the tasks: one thread each (Ray already runs one task per CPU)."""
@@ -287,7 +287,7 @@ def _run_task(spec: dict[str, Any], out_dir: str, storage: str, storage_id: str,
     finally:
         reporter.stop()
     if work_dir != Path(out_dir):
-        from agents.checkpoint import REPLAY_FILE
+        from crowdnav.agents.checkpoint import REPLAY_FILE
 
         # The replay buffer only serves to resume training, which a finished run never does, and can weigh hundreds of MB.
         base["files"] = pack_folder(work_dir, skip=(f"{TRAIN_DIR}/checkpoint/{REPLAY_FILE}",))

@@ -13,7 +13,7 @@ from typing import Any
 
 import numpy as np
 
-from evaluation.metrics import Trajectory, episode_metrics
+from crowdnav.evaluation.metrics import Trajectory, episode_metrics
 
 BatchPolicy = Callable[[Mapping[str, np.ndarray]], np.ndarray]
 """Observations stacked per key, shape (N, ...) -> actions (N, 2); :class:`agents.AgentPolicy` is one."""

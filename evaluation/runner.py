@@ -24,8 +24,8 @@ from pathlib import Path
 from typing import Any
 
 from crowdnav.simulator import OUTCOMES
-from evaluation.protocol import Protocol
-from evaluation.storage import (
+from crowdnav.evaluation.protocol import Protocol
+from crowdnav.evaluation.storage import (
     ENCODER_DIR,
     EVALUATIONS_DIR,
     META_FILE,
@@ -112,8 +112,8 @@ def run_unit(spec: UnitSpec | Mapping[str, Any], out_dir: str | Path, *, on_even
     _claim(out_dir, spec)
     if (out_dir / META_FILE).is_file():
         return _summary(spec, out_dir, read_json(out_dir / META_FILE), "skipped")
-    from agents import load_policy, train
-    from agents.config import config_from_mapping
+    from crowdnav.agents import load_policy, train
+    from crowdnav.agents.config import config_from_mapping
 
     clock = _Clock(out_dir / "timing.json")
     protocol = Protocol(**spec.protocol)
@@ -210,7 +210,7 @@ class _Evaluator:
     def _evaluate(self, k: int, training_episodes: int, folder: Path) -> None:
         import pandas as pd
 
-        from evaluation.rollout import HeldOutEpisodes
+        from crowdnav.evaluation.rollout import HeldOutEpisodes
 
         policy = self.load_policy(folder)
         if self.episodes is None:

@@ -25,7 +25,7 @@ import tempfile
 import uuid
 from pathlib import Path
 
-from evaluation.storage import ResultsError, atomic_write_text
+from crowdnav.evaluation.storage import ResultsError, atomic_write_text
 
 STORAGE_ID_FILE = ".crowdnav-storage"
 """The storage root's id file (one random id, written once, kept)."""

@@ -43,8 +43,8 @@ _RESULTS: dict[str, Path] = {}
 def tiny_results(tmp_path_factory) -> Path:
     """A results folder of the tiny experiment (2 configurations x 2 seeds), made once per test session."""
     if "folder" not in _RESULTS:
-        from evaluation.benchmark import run_experiment
-        from evaluation.experiment import experiment_from_mapping
+        from crowdnav.evaluation.benchmark import run_experiment
+        from crowdnav.evaluation.experiment import experiment_from_mapping
 
         experiment = experiment_from_mapping(tiny_experiment_document())
         report = run_experiment(experiment, tmp_path_factory.mktemp("results"), workers=1, progress=False, video=False,

@@ -9,8 +9,8 @@ import numpy as np
 import pytest
 from agents_tiny import tiny_config
 
-from agents import ConfigError, load_policy, train, train_seed
-from agents.callbacks import set_aside_episodes_from
+from crowdnav.agents import ConfigError, load_policy, train, train_seed
+from crowdnav.agents.callbacks import set_aside_episodes_from
 
 
 def test_saved_checkpoint_loads_as_a_deterministic_policy_that_acts(tmp_path):
@@ -76,11 +76,11 @@ def test_resume_sets_aside_episodes_and_snapshots_saved_after_the_checkpoint(tmp
 
 
 def test_the_snapshot_is_saved_before_the_checkpoint_and_a_missing_one_is_restored_on_resume(tmp_path, monkeypatch):
-    import agents.training
+    import crowdnav.agents.training as training_module
 
     saved = []
-    original = agents.training.save_checkpoint
-    monkeypatch.setattr(agents.training, "save_checkpoint", lambda model, folder, *args, **kwargs: (
+    original = training_module.save_checkpoint
+    monkeypatch.setattr(training_module, "save_checkpoint", lambda model, folder, *args, **kwargs: (
         saved.append(folder.relative_to(tmp_path).as_posix()), original(model, folder, *args, **kwargs))[1])
     train(tiny_config(tmp_path, episodes=2, max_steps=20, checkpoint_every=2))
     assert saved[:2] == ["snapshots/episode_00002", "checkpoint"]
@@ -106,10 +106,10 @@ def test_models_saved_by_sb3s_own_classes_load_into_crowdnavs_and_the_other_way_
     import torch
     from stable_baselines3 import SAC
 
-    from agents.algorithms import CrowdNavSAC
-    from agents.checkpoint import load_model, save_checkpoint
-    from agents.config import config_from_mapping
-    from agents.factory import make_env, make_model
+    from crowdnav.agents.algorithms import CrowdNavSAC
+    from crowdnav.agents.checkpoint import load_model, save_checkpoint
+    from crowdnav.agents.config import config_from_mapping
+    from crowdnav.agents.factory import make_env, make_model
 
     config = config_from_mapping(tiny_config(tmp_path, modalities=["leog", "goal"])).validate()
     sb3_model = make_model(config, make_env(config), reference=True)  # as crowdnav built models before its speed-ups

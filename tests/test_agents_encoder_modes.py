@@ -7,9 +7,9 @@ import pytest
 import torch
 from agents_tiny import SMALL_LEOG, TINY_EXTRACTOR, tiny_config
 
-from agents import collect_grids, load_policy, pretrain_encoder, train
-from agents.factory import extractors
-from agents.wrappers import LeogLatentWrapper, NormalizeObservation
+from crowdnav.agents import collect_grids, load_policy, pretrain_encoder, train
+from crowdnav.agents.factory import extractors
+from crowdnav.agents.wrappers import LeogLatentWrapper, NormalizeObservation
 
 
 @pytest.fixture(scope="module")
@@ -81,7 +81,7 @@ def test_precomputed_frozen_latent_replaces_the_grid_and_the_policy_applies_the_
 
 
 def test_frozen_mode_needs_weights_of_the_right_grid_shape(tmp_path, encoder_file):
-    from agents import ConfigError
+    from crowdnav.agents import ConfigError
 
     with pytest.raises(ConfigError, match="encoder.weights"):
         train(tiny_config(tmp_path, modalities=["leog", "goal"], encoder={"mode": "frozen"}))

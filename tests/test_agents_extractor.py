@@ -8,9 +8,9 @@ import torch
 from gymnasium import spaces
 from torch import nn
 
-from agents.encoders import LeogAutoencoder, LeogEncoder, LidarEncoder, leog_architecture
-from agents.extractor import ENCODERS, MultiModalExtractor, register_encoder
-from agents.rbf import GaussianRBF
+from crowdnav.agents.encoders import LeogAutoencoder, LeogEncoder, LidarEncoder, leog_architecture
+from crowdnav.agents.extractor import ENCODERS, MultiModalExtractor, register_encoder
+from crowdnav.agents.rbf import GaussianRBF
 from crowdnav.envs import CrowdNavEnv
 
 ALL = ["goal", "closest_obstacle", "lidar", "leog", "velocity"]
@@ -136,7 +136,7 @@ def test_rbf_gradients_with_respect_to_the_input_and_trainable_centres_still_flo
 
 @pytest.mark.parametrize("dtype", [torch.uint8, torch.float32])
 def test_binarize_equals_the_plain_comparison_and_reuses_its_result_for_the_same_unchanged_tensor(dtype):
-    from agents.extractor import binarize
+    from crowdnav.agents.extractor import binarize
 
     grid = (torch.rand(4, 1, 6, 6) > 0.7).to(dtype) * (255 if dtype == torch.uint8 else 1)
     binary = binarize(grid)
@@ -165,7 +165,7 @@ def test_extractor_on_sampled_tensors_equals_sb3_preprocessing_and_the_reference
 
 
 def test_parameter_free_transforms_run_once_per_batch_and_are_shared_only_between_equal_constants():
-    from agents.encoders import LowDimEncoder
+    from crowdnav.agents.encoders import LowDimEncoder
 
     scan = torch.rand(5, 8)
     first, same, other = (LidarEncoder(np.zeros(8), np.full(8, high), hidden=[4]) for high in (1.0, 1.0, 2.0))

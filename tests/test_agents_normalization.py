@@ -9,10 +9,10 @@ import numpy as np
 import pytest
 from agents_tiny import tiny_config
 
-from agents import ConfigError, load_policy, train
-from agents.config import config_from_mapping
-from agents.factory import make_env, observation_normalization
-from agents.wrappers import NormalizeObservation, normalize_observation, observation_scales
+from crowdnav.agents import ConfigError, load_policy, train
+from crowdnav.agents.config import config_from_mapping
+from crowdnav.agents.factory import make_env, observation_normalization
+from crowdnav.agents.wrappers import NormalizeObservation, normalize_observation, observation_scales
 from crowdnav.envs import CrowdNavEnv
 from crowdnav.simulator import OUTCOMES
 
@@ -123,8 +123,8 @@ def test_make_env_normalizes_by_default_and_switching_it_off_gives_the_raw_obser
 def test_frozen_latent_wrapper_on_top_of_the_normalisation_still_encodes_the_raw_grid():
     import torch
 
-    from agents.encoders import LeogEncoder, leog_architecture
-    from agents.wrappers import LeogLatentWrapper, encode_grids
+    from crowdnav.agents.encoders import LeogEncoder, leog_architecture
+    from crowdnav.agents.wrappers import LeogLatentWrapper, encode_grids
 
     env = NormalizeObservation(CrowdNavEnv("room_furniture", modalities=["leog", "goal"], sensors={"leog": {"size": 3.0}}))
     torch.manual_seed(0)
@@ -159,7 +159,7 @@ def test_model_trained_with_normalisation_saves_and_load_policy_reproduces_its_a
 
 
 def test_evaluation_feeds_the_policy_normalised_observations(normalized_run):
-    from evaluation.rollout import HeldOutEpisodes
+    from crowdnav.evaluation.rollout import HeldOutEpisodes
 
     out, _ = normalized_run
     policy = load_policy(out)
@@ -215,7 +215,7 @@ def test_resuming_with_the_other_setting_is_a_clear_error(tmp_path):
 def test_crowdnavs_extractor_gives_the_same_latent_on_raw_and_scaled_observations():
     import torch
 
-    from agents.extractor import MultiModalExtractor
+    from crowdnav.agents.extractor import MultiModalExtractor
     from crowdnav.envs import CrowdNavEnv
 
     raw_env = CrowdNavEnv("room_furniture", modalities=["goal", "closest_obstacle", "lidar", "velocity"])

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 from gymnasium import spaces
 
-from agents.replay_buffer import PackedGridReplayBuffer
+from crowdnav.agents.replay_buffer import PackedGridReplayBuffer
 
 GAMMA = 0.9
 SPACE = spaces.Dict({"goal": spaces.Box(-100.0, 100.0, shape=(1,), dtype=np.float32)})

@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 from agents_tiny import tiny_config
 
-from agents import train
-from agents.extractor import MultiModalExtractor
+from crowdnav.agents import train
+from crowdnav.agents.extractor import MultiModalExtractor
 from crowdnav.simulator import OUTCOMES
 
 MODALITY_SETS = {"lidar+goal": ["lidar", "goal"], "leog+goal": ["leog", "goal"], "leog+lidar+goal": ["leog", "lidar", "goal"]}
@@ -46,7 +46,7 @@ def test_training_stops_after_the_requested_episodes_and_logs_each(tmp_path):
 def test_packed_replay_buffer_gives_back_the_grids_at_one_bit_per_cell(tmp_path):
     import torch
 
-    from agents.replay_buffer import PackedGridReplayBuffer
+    from crowdnav.agents.replay_buffer import PackedGridReplayBuffer
 
     result = train(tiny_config(tmp_path, modalities=["leog", "goal"], episodes=1, max_steps=20, scenario="room_furniture"))
     buffer = result.model.replay_buffer
@@ -69,7 +69,7 @@ def test_packed_replay_buffer_gives_back_the_grids_at_one_bit_per_cell(tmp_path)
 
 
 def test_policy_and_algorithm_options_reach_sb3_and_clashes_are_errors(tmp_path):
-    from agents import ConfigError
+    from crowdnav.agents import ConfigError
 
     config = tiny_config(tmp_path, modalities=["leog", "goal"], episodes=1, max_steps=20,
                          policy_kwargs={"share_features_extractor": True}, algo_kwargs={"train_freq": 4, "tau": 0.02})
@@ -84,7 +84,7 @@ def test_policy_and_algorithm_options_reach_sb3_and_clashes_are_errors(tmp_path)
 def test_progress_bar_and_tensorboard_option(tmp_path, capsys):
     import importlib.util
 
-    from agents import ConfigError
+    from crowdnav.agents import ConfigError
 
     train(tiny_config(tmp_path, episodes=2, max_steps=10, progress=True))
     assert "2/2" in capsys.readouterr().err  # tqdm's bar on stderr: episodes done / total
@@ -97,7 +97,7 @@ def test_progress_bar_and_tensorboard_option(tmp_path, capsys):
 
 
 def test_n_step_returns_reach_the_replay_buffer_and_are_refused_for_on_policy_algorithms(tmp_path):
-    from agents import ConfigError
+    from crowdnav.agents import ConfigError
 
     model = train(tiny_config(tmp_path, episodes=1, max_steps=20, n_step_returns=5, gamma=0.95)).model
     assert (model.replay_buffer.n_steps, model.replay_buffer.gamma) == (5, 0.95)
@@ -116,9 +116,9 @@ def test_fast_training_gives_the_networks_sb3s_own_classes_give_to_the_last_bit(
     import torch
     from stable_baselines3 import DDPG, SAC, TD3
 
-    from agents.algorithms import CrowdNavDDPG, CrowdNavSAC, CrowdNavTD3
-    from agents.config import config_from_mapping
-    from agents.factory import make_env, make_model
+    from crowdnav.agents.algorithms import CrowdNavDDPG, CrowdNavSAC, CrowdNavTD3
+    from crowdnav.agents.config import config_from_mapping
+    from crowdnav.agents.factory import make_env, make_model
 
     states, classes = [], []
     for reference in (True, False):
@@ -137,7 +137,7 @@ def test_soft_update_equals_sb3s_polyak_update_to_the_last_bit():
     import torch
     from stable_baselines3.common.utils import polyak_update
 
-    from agents.algorithms import soft_update
+    from crowdnav.agents.algorithms import soft_update
 
     generator = torch.Generator().manual_seed(0)
     params = [torch.randn(shape, generator=generator) for shape in [(64, 360), (64,), (3, 3, 2), ()]]
@@ -154,8 +154,8 @@ def test_soft_update_equals_sb3s_polyak_update_to_the_last_bit():
 def test_fast_training_mode_sets_the_flags_sb3s_set_training_mode_sets(tmp_path):
     from stable_baselines3.sac.policies import SACPolicy
 
-    from agents.config import config_from_mapping
-    from agents.factory import make_env, make_model
+    from crowdnav.agents.config import config_from_mapping
+    from crowdnav.agents.factory import make_env, make_model
 
     config = config_from_mapping(tiny_config(tmp_path)).validate()
     model = make_model(config, make_env(config))
@@ -176,8 +176,8 @@ def test_sac_actor_written_out_gaussian_matches_sb3s_distribution(tmp_path):
     import torch
     from stable_baselines3.sac.policies import Actor
 
-    from agents.config import config_from_mapping
-    from agents.factory import make_env, make_model
+    from crowdnav.agents.config import config_from_mapping
+    from crowdnav.agents.factory import make_env, make_model
 
     config = config_from_mapping(tiny_config(tmp_path, modalities=["leog", "goal"])).validate()
     model = make_model(config, make_env(config))

@@ -8,12 +8,12 @@ from evaluation_tiny import tiny_experiment_document, tiny_results
 
 from crowdnav.envs import CrowdNavEnv
 from crowdnav.policies import SocialForceRobot, StraightToGoal
-from evaluation.baselines import BASELINES, evaluate_baseline, experiment_baselines, is_baseline
-from evaluation.curves import curves_figure
-from evaluation.experiment import ExperimentError, experiment_from_mapping
-from evaluation.leaderboard import leaderboard_table
-from evaluation.protocol import Protocol
-from evaluation.storage import META_FILE, TEST_FILE, load_results, read_json
+from crowdnav.evaluation.baselines import BASELINES, evaluate_baseline, experiment_baselines, is_baseline
+from crowdnav.evaluation.curves import curves_figure
+from crowdnav.evaluation.experiment import ExperimentError, experiment_from_mapping
+from crowdnav.evaluation.leaderboard import leaderboard_table
+from crowdnav.evaluation.protocol import Protocol
+from crowdnav.evaluation.storage import META_FILE, TEST_FILE, load_results, read_json
 
 
 def _outcome(policy, env_options, seed):
@@ -80,7 +80,7 @@ def test_benchmark_results_rank_the_baselines_and_draw_them_as_horizontal_lines(
 
 
 def test_a_baseline_that_cannot_be_played_is_reported_and_the_others_are_played(tmp_path):
-    from evaluation.baselines import evaluate_experiment_baselines
+    from crowdnav.evaluation.baselines import evaluate_experiment_baselines
 
     scenario = tmp_path / "gone.yaml"
     document = tiny_experiment_document(seeds=1)

@@ -9,9 +9,9 @@ import yaml
 from evaluation_tiny import tiny_experiment_document, tiny_frozen_encoder_document
 
 from crowdnav.cli import main
-from evaluation.benchmark import claim_folder
-from evaluation.experiment import PRETRAINED, ExperimentError, experiment_from_mapping, load_experiment, shipped_experiments
-from evaluation.storage import ResultsError
+from crowdnav.evaluation.benchmark import claim_folder
+from crowdnav.evaluation.experiment import PRETRAINED, ExperimentError, experiment_from_mapping, load_experiment, shipped_experiments
+from crowdnav.evaluation.storage import ResultsError
 
 
 def write(tmp_path, document, name="experiment.yaml"):
@@ -202,7 +202,7 @@ def test_plot_and_leaderboard_of_a_missing_or_empty_folder_are_one_line_errors(t
 
 
 def test_pretrained_encoder_is_trained_once_per_experiment_and_given_to_frozen_runs(tmp_path):
-    from evaluation.benchmark import run_experiment
+    from crowdnav.evaluation.benchmark import run_experiment
 
     document = tiny_frozen_encoder_document()
     experiment = experiment_from_mapping(document)

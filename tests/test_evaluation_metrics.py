@@ -7,7 +7,7 @@ import math
 import numpy as np
 import pytest
 
-from evaluation.metrics import (
+from crowdnav.evaluation.metrics import (
     METRIC_COLUMNS,
     Trajectory,
     closest_distance,
@@ -22,7 +22,7 @@ from evaluation.metrics import (
     time_to_collision,
     zone_shares,
 )
-from evaluation.rollout import HeldOutEpisodes
+from crowdnav.evaluation.rollout import HeldOutEpisodes
 
 
 def test_path_length_sums_the_segment_lengths():

@@ -4,9 +4,9 @@ from __future__ import annotations
 
 import pytest
 
-from agents import train_seed
-from evaluation.experiment import load_experiment, shipped_experiments
-from evaluation.protocol import QUICK, Protocol, quick
+from crowdnav.agents import train_seed
+from crowdnav.evaluation.experiment import load_experiment, shipped_experiments
+from crowdnav.evaluation.protocol import QUICK, Protocol, quick
 
 
 def test_default_protocol_is_the_papers_14_evaluations_of_20_test_episodes_up_to_700_episodes():

@@ -24,11 +24,11 @@ from test_evaluation_resume import check_complete
 
 from crowdnav.cli import main
 from crowdnav.scenario.library import library_dir
-from evaluation.benchmark import run_experiment
-from evaluation.executors import ExecutorError, make_executor
-from evaluation.experiment import experiment_from_mapping
-from evaluation.storage import ResultsError
-from evaluation.transfer import claim_storage, node_local_root, pack_folder, unpack_folder, work_folder
+from crowdnav.evaluation.benchmark import run_experiment
+from crowdnav.evaluation.executors import ExecutorError, make_executor
+from crowdnav.evaluation.experiment import experiment_from_mapping
+from crowdnav.evaluation.storage import ResultsError
+from crowdnav.evaluation.transfer import claim_storage, node_local_root, pack_folder, unpack_folder, work_folder
 
 WALL_TIME_COLUMNS = ("seconds", "wall_time_s")
 
@@ -258,7 +258,7 @@ def test_unreachable_cluster_address_is_a_one_line_error(tmp_path, capsys):
 
 def test_without_ray_installed_the_ray_executor_is_a_one_line_error(monkeypatch, tmp_path, capsys):
     monkeypatch.setitem(sys.modules, "ray", None)  # import ray now fails as if it were not installed
-    monkeypatch.delitem(sys.modules, "evaluation.ray_executor", raising=False)
+    monkeypatch.delitem(sys.modules, "crowdnav.evaluation.ray_executor", raising=False)
     with pytest.raises(ExecutorError, match=r"pip install 'crowdnav\[ray\]'"):
         make_executor("ray")
     code = main(["benchmark", str(write_tiny_experiment(tmp_path / "tiny.yaml")), "--executor", "ray", "--out", str(tmp_path)])

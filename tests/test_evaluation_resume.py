@@ -15,11 +15,11 @@ import pandas as pd
 import pytest
 from evaluation_tiny import tiny_experiment_document, tiny_unit_spec
 
-import evaluation.runner
-from evaluation.benchmark import run_experiment
-from evaluation.experiment import experiment_from_mapping
-from evaluation.runner import _policy_folders, run_unit
-from evaluation.storage import ResultsError
+import crowdnav.evaluation.runner as runner_module
+from crowdnav.evaluation.benchmark import run_experiment
+from crowdnav.evaluation.experiment import experiment_from_mapping
+from crowdnav.evaluation.runner import _policy_folders, run_unit
+from crowdnav.evaluation.storage import ResultsError
 
 
 def check_complete(out: Path, spec: dict) -> tuple[pd.DataFrame, pd.DataFrame]:
@@ -75,10 +75,10 @@ def test_meta_names_the_commit_the_run_started_with_and_those_of_its_resumes(tmp
         if event == "trained":
             raise Crash
 
-    monkeypatch.setattr(evaluation.runner, "git_commit", lambda: "started")
+    monkeypatch.setattr(runner_module, "git_commit", lambda: "started")
     with pytest.raises(Crash):
         run_unit(spec, tmp_path, on_event=crash_after_training)
-    monkeypatch.setattr(evaluation.runner, "git_commit", lambda: "resumed")
+    monkeypatch.setattr(runner_module, "git_commit", lambda: "resumed")
     run_unit(spec, tmp_path)
     meta = json.loads((tmp_path / "meta.json").read_text())
     assert meta["git_commit"] == "started" and meta["git_commits"] == ["started", "resumed"] and meta["sessions"] == 2
@@ -101,9 +101,9 @@ def test_folder_of_another_run_is_refused(tmp_path):
 
 _CHILD = """
 import json, sys
-from evaluation.benchmark import run_experiment
-from evaluation.experiment import experiment_from_mapping
-from evaluation.runner import run_unit
+from crowdnav.evaluation.benchmark import run_experiment
+from crowdnav.evaluation.experiment import experiment_from_mapping
+from crowdnav.evaluation.runner import run_unit
 run_unit(json.loads(sys.argv[1]), sys.argv[2])
 """
 

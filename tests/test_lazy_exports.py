@@ -8,12 +8,12 @@ from pathlib import Path
 
 import pytest
 
-import agents
-import evaluation
+import crowdnav.agents as agents
+import crowdnav.evaluation as evaluation
 
 
 def test_importing_the_packages_and_the_command_line_loads_no_torch_pandas_or_matplotlib():
-    code = ("import sys, agents, evaluation, crowdnav.cli\n"
+    code = ("import sys, crowdnav.cli\nfrom crowdnav import agents, evaluation\n"
             "heavy = [name for name in ('torch', 'pandas', 'matplotlib', 'stable_baselines3') if name in sys.modules]\n"
             "assert not heavy, heavy\n"
             "agents.train_seed, evaluation.Protocol\n")

@@ -20,7 +20,7 @@ from crowdnav.cli.common import CliError
 
 def command_groups() -> tuple:
     """Registration functions of the command groups, in the order ``--help`` lists them."""
-    from agents import commands as agent_commands  # imported here: it imports crowdnav.cli.common itself
+    from crowdnav.agents import commands as agent_commands  # imported here: it imports crowdnav.cli.common itself
 
     return (scenario.register, agent_commands.register, render.register, benchmark.register)
 

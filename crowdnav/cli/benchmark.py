@@ -66,9 +66,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 
 def benchmark(args: argparse.Namespace) -> int:
-    from evaluation.executors import ExecutorError, make_executor
-    from evaluation.experiment import ExperimentError, load_experiment
-    from evaluation.storage import ResultsError
+    from crowdnav.evaluation.executors import ExecutorError, make_executor
+    from crowdnav.evaluation.experiment import ExperimentError, load_experiment
+    from crowdnav.evaluation.storage import ResultsError
 
     for option in ("workers", "retries", "gpus_per_run"):
         value, least = getattr(args, option), 0 if option != "workers" else 1
@@ -97,7 +97,7 @@ def benchmark(args: argparse.Namespace) -> int:
         from dataclasses import replace
 
         experiment = replace(experiment, name=f"{experiment.name}-quick")
-    from evaluation.benchmark import run_experiment
+    from crowdnav.evaluation.benchmark import run_experiment
 
     protocol = experiment.protocol
     print(f"experiment {experiment.name}: {len(experiment.configurations)} configurations x {protocol.seeds} seeds, "
@@ -123,8 +123,8 @@ def benchmark(args: argparse.Namespace) -> int:
 
 
 def plot_command(args: argparse.Namespace) -> int:
-    from evaluation.curves import plot_curves
-    from evaluation.storage import ResultsError
+    from crowdnav.evaluation.curves import plot_curves
+    from crowdnav.evaluation.storage import ResultsError
 
     try:
         paths = plot_curves([Path(args.results)], args.out)
@@ -136,8 +136,8 @@ def plot_command(args: argparse.Namespace) -> int:
 
 
 def leaderboard_command(args: argparse.Namespace) -> int:
-    from evaluation.leaderboard import write_leaderboard
-    from evaluation.storage import ResultsError
+    from crowdnav.evaluation.leaderboard import write_leaderboard
+    from crowdnav.evaluation.storage import ResultsError
 
     out = Path(args.out) if args.out else Path(args.results[0]) / "leaderboard"
     try:

@@ -30,7 +30,7 @@ def resolve_policy(policy: str, seed: int) -> tuple[Act, dict[str, Any]]:
             f"--policy {policy!r} is neither a scripted policy ({', '.join(SCRIPTED_POLICIES)}) nor an existing checkpoint path"
         )
     try:
-        from agents import load_policy
+        from crowdnav.agents import load_policy
 
         trained = load_policy(path)
     except Exception as error:  # a checkpoint can fail in many ways; report one clear line

@@ -10,7 +10,7 @@ import yaml
 
 def library_dir() -> Path:
     """Folder holding the library's YAML files (works for source trees and installed wheels)."""
-    return Path(str(resources.files("scenarios")))
+    return Path(str(resources.files("crowdnav.scenarios")))
 
 
 def library_names() -> list[str]:
