@@ -34,6 +34,7 @@ from typing import Any, ClassVar
 
 import torch
 import torch.nn.functional as F
+from crowdnav.agents.extractor import MultiModalExtractor
 from stable_baselines3 import DDPG, SAC, TD3
 from stable_baselines3.common.distributions import SquashedDiagGaussianDistribution
 from stable_baselines3.common.policies import BasePolicy, ContinuousCritic
@@ -43,8 +44,6 @@ from stable_baselines3.sac.policies import MultiInputPolicy as SACMultiInputPoli
 from stable_baselines3.td3.policies import Actor as TD3Actor
 from stable_baselines3.td3.policies import MultiInputPolicy as TD3MultiInputPolicy
 from torch import nn
-
-from crowdnav.agents.extractor import MultiModalExtractor
 
 
 def soft_update(params: Sequence[torch.Tensor], target_params: Sequence[torch.Tensor], tau: float) -> None:

@@ -26,9 +26,8 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from stable_baselines3.common.base_class import BaseAlgorithm
-
 from crowdnav.agents.wrappers import ObservationScales, encode_grids, normalize_observation, scales_from_json
+from stable_baselines3.common.base_class import BaseAlgorithm
 
 POLICY_FORMAT = "crowdnav-policy/1"
 POLICY_FILE = "policy.json"

@@ -119,12 +119,12 @@ def train_command(args: argparse.Namespace) -> int:
         raise CliError(str(error)) from None
     if args.print_config:
         import yaml
-
         from crowdnav.agents.config import config_to_dict
 
         sys.stdout.write(yaml.safe_dump(config_to_dict(config), sort_keys=False))
         return 0
     from crowdnav.agents.training import describe_run, train
+
     from crowdnav.scenario import ScenarioError
 
     try:
@@ -137,6 +137,7 @@ def train_command(args: argparse.Namespace) -> int:
 
 def collect_dataset_command(args: argparse.Namespace) -> int:
     from crowdnav.agents.dataset import collect_grids, save_dataset
+
     from crowdnav.scenario import ScenarioError
 
     try:
@@ -150,9 +151,9 @@ def collect_dataset_command(args: argparse.Namespace) -> int:
 
 def pretrain_encoder_command(args: argparse.Namespace) -> int:
     import torch
-
     from crowdnav.agents.dataset import collect_grids, load_dataset
     from crowdnav.agents.pretrain import pretrain_encoder
+
     from crowdnav.scenario import ScenarioError
 
     torch.set_num_threads(args.threads)

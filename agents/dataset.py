@@ -99,6 +99,7 @@ def collect_grids(
     test or training episode's seed.
     """
     from crowdnav.agents.wrappers import dataset_seed
+
     from crowdnav import __version__
     from crowdnav.envs import CrowdNavEnv
 

@@ -14,10 +14,9 @@ from typing import Any
 import numpy as np
 import torch
 import torch.nn.functional as F
-from torch import nn
-
 from crowdnav.agents import batch_cache
 from crowdnav.agents.rbf import GaussianRBF
+from torch import nn
 
 
 class MLP(nn.Module):

@@ -32,14 +32,13 @@ from collections.abc import Callable, Mapping
 from typing import Any
 
 import torch
+from crowdnav.agents import batch_cache
+from crowdnav.agents.encoders import LeogEncoder, LidarEncoder, LowDimEncoder, leog_architecture, mlp
+from crowdnav.agents.rbf import GaussianRBF
 from gymnasium import spaces
 from stable_baselines3.common.preprocessing import preprocess_obs
 from stable_baselines3.common.torch_layers import BaseFeaturesExtractor
 from torch import nn
-
-from crowdnav.agents import batch_cache
-from crowdnav.agents.encoders import LeogEncoder, LidarEncoder, LowDimEncoder, leog_architecture, mlp
-from crowdnav.agents.rbf import GaussianRBF
 
 LOWDIM_MAX = 16
 """Vectors with at most this many values go through the RBF branch, longer ones through the LIDAR branch."""

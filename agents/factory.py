@@ -12,17 +12,16 @@ from typing import Any
 
 import gymnasium as gym
 import numpy as np
-from stable_baselines3 import A2C, DDPG, PPO, SAC, TD3
-from stable_baselines3.common.base_class import BaseAlgorithm
-from stable_baselines3.common.monitor import Monitor
-from stable_baselines3.common.noise import NormalActionNoise
-
 from crowdnav.agents.algorithms import CrowdNavDDPG, CrowdNavSAC, CrowdNavTD3
 from crowdnav.agents.config import ConfigError, TrainConfig
 from crowdnav.agents.encoders import LeogEncoder
 from crowdnav.agents.extractor import MultiModalExtractor
 from crowdnav.agents.replay_buffer import PackedGridReplayBuffer
 from crowdnav.agents.wrappers import EpisodeSeeds, LeogLatentWrapper, NormalizeObservation, ObservationScales
+from stable_baselines3 import A2C, DDPG, PPO, SAC, TD3
+from stable_baselines3.common.base_class import BaseAlgorithm
+from stable_baselines3.common.monitor import Monitor
+from stable_baselines3.common.noise import NormalActionNoise
 
 ALGORITHMS: dict[str, type[BaseAlgorithm]] = {"sac": CrowdNavSAC, "td3": CrowdNavTD3, "ddpg": CrowdNavDDPG, "a2c": A2C, "ppo": PPO}
 """Config name -> algorithm class: SB3's, with the same updates at less cost per step for SAC/TD3/DDPG (agents.algorithms)."""

@@ -21,10 +21,9 @@ from typing import Any
 
 import numpy as np
 import torch
-from torch import nn
-
 from crowdnav.agents.dataset import GridDataset
 from crowdnav.agents.encoders import LeogAutoencoder, LeogEncoder, leog_architecture
+from torch import nn
 
 ENCODER_FORMAT = "crowdnav-leog-encoder/1"
 ENCODER_FILE = "encoder.pt"

@@ -9,9 +9,8 @@ from __future__ import annotations
 
 import numpy as np
 import torch
-from torch import nn
-
 from crowdnav.agents import batch_cache
+from torch import nn
 
 
 class GaussianRBF(nn.Module):

@@ -29,8 +29,6 @@ from typing import Any
 
 import torch
 import yaml
-from stable_baselines3.common.base_class import BaseAlgorithm
-
 from crowdnav.agents.callbacks import EpisodeCallback, EpisodeRecord
 from crowdnav.agents.checkpoint import ENCODER_FILE, MODEL_FILE, REPLAY_FILE, checkpoint_folder, load_model, read_policy_info, save_checkpoint
 from crowdnav.agents.config import ConfigError, TrainConfig, config_from_mapping, config_to_dict, load_config
@@ -45,6 +43,7 @@ from crowdnav.agents.factory import (
     precomputes_leog,
 )
 from crowdnav.agents.wrappers import scales_from_json, scales_to_json, train_seed
+from stable_baselines3.common.base_class import BaseAlgorithm
 
 
 @dataclass

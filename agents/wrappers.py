@@ -20,9 +20,9 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 import torch
+from crowdnav.agents.encoders import LeogEncoder
 from gymnasium import spaces
 
-from crowdnav.agents.encoders import LeogEncoder
 from crowdnav.sensors.base import checked_scale, normalize_values, normalized_box
 
 TRAIN_SEED_BASE = 1_000_000

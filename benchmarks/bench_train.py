@@ -40,11 +40,10 @@ import time
 from pathlib import Path
 
 import torch
-from stable_baselines3 import SAC
-from stable_baselines3.common.monitor import Monitor
-
 from crowdnav.agents.config import EncoderConfig, TrainConfig
 from crowdnav.agents.factory import OFF_POLICY, load_leog_weights, make_env, make_model, precomputes_leog
+from stable_baselines3 import SAC
+from stable_baselines3.common.monitor import Monitor
 
 CASES = {
     "lidar+goal": (["lidar", "goal"], "scratch", True),

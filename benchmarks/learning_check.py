@@ -27,10 +27,10 @@ import time
 from pathlib import Path
 
 import numpy as np
-
 from crowdnav.agents import load_policy, train
 from crowdnav.agents.checkpoint import checkpoint_folder
 from crowdnav.agents.config import load_config
+
 from crowdnav.cli.common import CliError, parse_overrides
 from crowdnav.simulator import OUTCOMES
 

@@ -23,8 +23,6 @@ from pathlib import Path
 from typing import Any
 
 import yaml
-
-from crowdnav.simulator import OUTCOMES
 from crowdnav.evaluation.baselines import evaluate_experiment_baselines
 from crowdnav.evaluation.executors import Executor, Job, make_executor, run_name
 from crowdnav.evaluation.experiment import Experiment
@@ -36,6 +34,8 @@ from crowdnav.evaluation.storage import (
     ResultsError,
     atomic_write_text,
 )
+
+from crowdnav.simulator import OUTCOMES
 
 
 @dataclass
@@ -154,7 +154,6 @@ def pretrain(experiment: Experiment, folder: Path, log: Callable[[str], None]) -
     if target.is_file():
         return target
     import torch
-
     from crowdnav.agents import collect_grids, pretrain_encoder
 
     settings = experiment.pretrain_encoder
@@ -193,8 +192,9 @@ def write_report(folder: Path, *, video: bool = True, log: Callable[[str], None]
 
 def render_final_policy(configuration_dir: Path, out: Path) -> list[Path]:
     """A video of the first seed's final policy on the first test episode."""
-    from crowdnav.rendering.episodes import render_episodes
     from crowdnav.evaluation.storage import read_json
+
+    from crowdnav.rendering.episodes import render_episodes
 
     runs = sorted(path for path in configuration_dir.iterdir() if (path / META_FILE).is_file())
     meta = read_json(runs[0] / META_FILE)

@@ -50,9 +50,8 @@ def rate_curves(tests: Any, window: int) -> Any:
 def curves_figure(tests: Any, window: int, title: str | None = None) -> Any:
     """A matplotlib Figure: one panel per outcome, one line per configuration (mean over seeds, +-1 std band)."""
     import seaborn as sns
-    from matplotlib.figure import Figure
-
     from crowdnav.evaluation.baselines import is_baseline
+    from matplotlib.figure import Figure
 
     scripted = tests["configuration"].map(is_baseline)
     baselines, tests = tests[scripted], tests[~scripted]

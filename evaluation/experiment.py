@@ -31,11 +31,11 @@ from pathlib import Path
 from typing import Any
 
 import yaml
-
-from crowdnav.scenario.loader import yaml_line
 from crowdnav.evaluation.baselines import BASELINE_PREFIX
 from crowdnav.evaluation.protocol import Protocol, protocol_fields, quick
 from crowdnav.evaluation.runner import PRETRAINED, PROTOCOL_FIELDS, UnitSpec
+
+from crowdnav.scenario.loader import yaml_line
 
 EXPERIMENTS_DIR = Path(__file__).resolve().parent / "experiments"
 DEFAULT_EXPERIMENT = "default"
@@ -262,6 +262,7 @@ def _with_encoder(train: dict[str, Any], pretrain: dict[str, Any] | None) -> Non
 def _check_train(check: _Checker, train: dict[str, Any], where: str, name: str) -> None:
     from crowdnav.agents import ConfigError
     from crowdnav.agents.config import config_from_mapping
+
     from crowdnav.envs import CrowdNavEnv
     from crowdnav.scenario import ScenarioError
 

@@ -30,9 +30,9 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from crowdnav.evaluation.baselines import is_baseline
 
 from crowdnav.simulator import OUTCOMES
-from crowdnav.evaluation.baselines import is_baseline
 
 BOOTSTRAP_RESAMPLES = 2000
 BOOTSTRAP_SEED = 0

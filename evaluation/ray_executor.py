@@ -32,7 +32,6 @@ from pathlib import Path
 from typing import Any
 
 import ray
-
 from crowdnav.evaluation.executors import (
     Executor,
     ExecutorError,

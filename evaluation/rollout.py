@@ -12,7 +12,6 @@ from collections.abc import Callable, Mapping, Sequence
 from typing import Any
 
 import numpy as np
-
 from crowdnav.evaluation.metrics import Trajectory, episode_metrics
 
 BatchPolicy = Callable[[Mapping[str, np.ndarray]], np.ndarray]

@@ -23,7 +23,6 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from crowdnav.simulator import OUTCOMES
 from crowdnav.evaluation.protocol import Protocol
 from crowdnav.evaluation.storage import (
     ENCODER_DIR,
@@ -38,6 +37,8 @@ from crowdnav.evaluation.storage import (
     atomic_write_json,
     read_json,
 )
+
+from crowdnav.simulator import OUTCOMES
 
 PROTOCOL_FIELDS = ("seed", "out", "episodes", "checkpoint_every", "progress", "torch_threads", "save_replay_buffer")
 """TrainConfig fields the protocol sets for every run (an experiment may not set them)."""
@@ -209,7 +210,6 @@ class _Evaluator:
 
     def _evaluate(self, k: int, training_episodes: int, folder: Path) -> None:
         import pandas as pd
-
         from crowdnav.evaluation.rollout import HeldOutEpisodes
 
         policy = self.load_policy(folder)

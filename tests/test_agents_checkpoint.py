@@ -8,7 +8,6 @@ import shutil
 import numpy as np
 import pytest
 from agents_tiny import tiny_config
-
 from crowdnav.agents import ConfigError, load_policy, train, train_seed
 from crowdnav.agents.callbacks import set_aside_episodes_from
 
@@ -104,12 +103,11 @@ def test_set_aside_keeps_the_log_untouched_when_nothing_comes_after_the_checkpoi
 
 def test_models_saved_by_sb3s_own_classes_load_into_crowdnavs_and_the_other_way_round(tmp_path):
     import torch
-    from stable_baselines3 import SAC
-
     from crowdnav.agents.algorithms import CrowdNavSAC
     from crowdnav.agents.checkpoint import load_model, save_checkpoint
     from crowdnav.agents.config import config_from_mapping
     from crowdnav.agents.factory import make_env, make_model
+    from stable_baselines3 import SAC
 
     config = config_from_mapping(tiny_config(tmp_path, modalities=["leog", "goal"])).validate()
     sb3_model = make_model(config, make_env(config), reference=True)  # as crowdnav built models before its speed-ups

@@ -6,7 +6,6 @@ import numpy as np
 import pytest
 import torch
 from agents_tiny import SMALL_LEOG, TINY_EXTRACTOR, tiny_config
-
 from crowdnav.agents import collect_grids, load_policy, pretrain_encoder, train
 from crowdnav.agents.factory import extractors
 from crowdnav.agents.wrappers import LeogLatentWrapper, NormalizeObservation

@@ -5,12 +5,12 @@ from __future__ import annotations
 import numpy as np
 import pytest
 import torch
-from gymnasium import spaces
-from torch import nn
-
 from crowdnav.agents.encoders import LeogAutoencoder, LeogEncoder, LidarEncoder, leog_architecture
 from crowdnav.agents.extractor import ENCODERS, MultiModalExtractor, register_encoder
 from crowdnav.agents.rbf import GaussianRBF
+from gymnasium import spaces
+from torch import nn
+
 from crowdnav.envs import CrowdNavEnv
 
 ALL = ["goal", "closest_obstacle", "lidar", "leog", "velocity"]

@@ -7,7 +7,6 @@ import json
 import numpy as np
 import pytest
 import torch
-
 from crowdnav.agents import GridDataset, collect_grids, load_dataset, load_encoder, pretrain_encoder, save_dataset, train_seed
 from crowdnav.agents.wrappers import TRAIN_SEED_BASE, dataset_seed
 

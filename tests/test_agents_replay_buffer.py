@@ -4,9 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from gymnasium import spaces
-
 from crowdnav.agents.replay_buffer import PackedGridReplayBuffer
+from gymnasium import spaces
 
 GAMMA = 0.9
 SPACE = spaces.Dict({"goal": spaces.Box(-100.0, 100.0, shape=(1,), dtype=np.float32)})

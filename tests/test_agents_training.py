@@ -5,9 +5,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 from agents_tiny import tiny_config
-
 from crowdnav.agents import train
 from crowdnav.agents.extractor import MultiModalExtractor
+
 from crowdnav.simulator import OUTCOMES
 
 MODALITY_SETS = {"lidar+goal": ["lidar", "goal"], "leog+goal": ["leog", "goal"], "leog+lidar+goal": ["leog", "lidar", "goal"]}
@@ -45,7 +45,6 @@ def test_training_stops_after_the_requested_episodes_and_logs_each(tmp_path):
 
 def test_packed_replay_buffer_gives_back_the_grids_at_one_bit_per_cell(tmp_path):
     import torch
-
     from crowdnav.agents.replay_buffer import PackedGridReplayBuffer
 
     result = train(tiny_config(tmp_path, modalities=["leog", "goal"], episodes=1, max_steps=20, scenario="room_furniture"))
@@ -114,11 +113,10 @@ def test_n_step_returns_reach_the_replay_buffer_and_are_refused_for_on_policy_al
 def test_fast_training_gives_the_networks_sb3s_own_classes_give_to_the_last_bit(tmp_path, algo, modalities):
     """Same seed: crowdnav's algorithms, extractor and replay-buffer fast paths = SB3's classes and the plain paths."""
     import torch
-    from stable_baselines3 import DDPG, SAC, TD3
-
     from crowdnav.agents.algorithms import CrowdNavDDPG, CrowdNavSAC, CrowdNavTD3
     from crowdnav.agents.config import config_from_mapping
     from crowdnav.agents.factory import make_env, make_model
+    from stable_baselines3 import DDPG, SAC, TD3
 
     states, classes = [], []
     for reference in (True, False):
@@ -135,9 +133,8 @@ def test_fast_training_gives_the_networks_sb3s_own_classes_give_to_the_last_bit(
 
 def test_soft_update_equals_sb3s_polyak_update_to_the_last_bit():
     import torch
-    from stable_baselines3.common.utils import polyak_update
-
     from crowdnav.agents.algorithms import soft_update
+    from stable_baselines3.common.utils import polyak_update
 
     generator = torch.Generator().manual_seed(0)
     params = [torch.randn(shape, generator=generator) for shape in [(64, 360), (64,), (3, 3, 2), ()]]
@@ -152,10 +149,9 @@ def test_soft_update_equals_sb3s_polyak_update_to_the_last_bit():
 
 
 def test_fast_training_mode_sets_the_flags_sb3s_set_training_mode_sets(tmp_path):
-    from stable_baselines3.sac.policies import SACPolicy
-
     from crowdnav.agents.config import config_from_mapping
     from crowdnav.agents.factory import make_env, make_model
+    from stable_baselines3.sac.policies import SACPolicy
 
     config = config_from_mapping(tiny_config(tmp_path)).validate()
     model = make_model(config, make_env(config))
@@ -174,10 +170,9 @@ def test_fast_training_mode_sets_the_flags_sb3s_set_training_mode_sets(tmp_path)
 
 def test_sac_actor_written_out_gaussian_matches_sb3s_distribution(tmp_path):
     import torch
-    from stable_baselines3.sac.policies import Actor
-
     from crowdnav.agents.config import config_from_mapping
     from crowdnav.agents.factory import make_env, make_model
+    from stable_baselines3.sac.policies import Actor
 
     config = config_from_mapping(tiny_config(tmp_path, modalities=["leog", "goal"])).validate()
     model = make_model(config, make_env(config))

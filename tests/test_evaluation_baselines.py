@@ -4,16 +4,16 @@ from __future__ import annotations
 
 import pandas as pd
 import pytest
-from evaluation_tiny import tiny_experiment_document, tiny_results
-
-from crowdnav.envs import CrowdNavEnv
-from crowdnav.policies import SocialForceRobot, StraightToGoal
 from crowdnav.evaluation.baselines import BASELINES, evaluate_baseline, experiment_baselines, is_baseline
 from crowdnav.evaluation.curves import curves_figure
 from crowdnav.evaluation.experiment import ExperimentError, experiment_from_mapping
 from crowdnav.evaluation.leaderboard import leaderboard_table
 from crowdnav.evaluation.protocol import Protocol
 from crowdnav.evaluation.storage import META_FILE, TEST_FILE, load_results, read_json
+from evaluation_tiny import tiny_experiment_document, tiny_results
+
+from crowdnav.envs import CrowdNavEnv
+from crowdnav.policies import SocialForceRobot, StraightToGoal
 
 
 def _outcome(policy, env_options, seed):

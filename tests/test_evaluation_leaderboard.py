@@ -9,14 +9,14 @@ import shutil
 import numpy as np
 import pandas as pd
 import pytest
-from evaluation_tiny import tiny_results
-
-from crowdnav.cli import main
-from crowdnav.simulator import OUTCOMES
 from crowdnav.evaluation.benchmark import describe_outcome
 from crowdnav.evaluation.curves import curves_figure, rate_curves
 from crowdnav.evaluation.leaderboard import bootstrap_iqm, interquartile_mean, leaderboard_table, to_csv, to_markdown, write_leaderboard
 from crowdnav.evaluation.metrics import METRIC_COLUMNS
+from evaluation_tiny import tiny_results
+
+from crowdnav.cli import main
+from crowdnav.simulator import OUTCOMES
 
 # configuration a: seed 0 always succeeds; seed 1 collides in evaluations 0-1 then succeeds; seed 2 is always truncated.
 # configuration b: always collides.

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import pytest
-
 from crowdnav.agents import train_seed
 from crowdnav.evaluation.experiment import load_experiment, shipped_experiments
 from crowdnav.evaluation.protocol import QUICK, Protocol, quick

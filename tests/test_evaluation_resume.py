@@ -11,15 +11,14 @@ import sys
 import time
 from pathlib import Path
 
+import crowdnav.evaluation.runner as runner_module
 import pandas as pd
 import pytest
-from evaluation_tiny import tiny_experiment_document, tiny_unit_spec
-
-import crowdnav.evaluation.runner as runner_module
 from crowdnav.evaluation.benchmark import run_experiment
 from crowdnav.evaluation.experiment import experiment_from_mapping
 from crowdnav.evaluation.runner import _policy_folders, run_unit
 from crowdnav.evaluation.storage import ResultsError
+from evaluation_tiny import tiny_experiment_document, tiny_unit_spec
 
 
 def check_complete(out: Path, spec: dict) -> tuple[pd.DataFrame, pd.DataFrame]:

@@ -6,10 +6,9 @@ import subprocess
 import sys
 from pathlib import Path
 
-import pytest
-
 import crowdnav.agents as agents
 import crowdnav.evaluation as evaluation
+import pytest
 
 
 def test_importing_the_packages_and_the_command_line_loads_no_torch_pandas_or_matplotlib():
