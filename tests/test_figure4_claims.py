@@ -1,0 +1,43 @@
+"""The statistics and verdict rules of benchmarks/figure4_claims.py (the claims page of docs/results)."""
+
+from __future__ import annotations
+
+import importlib.util
+import sys
+from pathlib import Path
+
+import numpy as np
+
+SPEC = importlib.util.spec_from_file_location("figure4_claims", Path(__file__).parent.parent / "benchmarks" / "figure4_claims.py")
+claims = importlib.util.module_from_spec(SPEC)
+sys.modules["figure4_claims"] = claims  # dataclasses look their module up there
+SPEC.loader.exec_module(claims)
+
+
+def runs(success: list[list[float]], truncated: list[list[float]] | None = None) -> object:
+    success = np.array(success, dtype=float)
+    truncated = np.zeros_like(success) if truncated is None else np.array(truncated, dtype=float)
+    rates = {"success": success, "truncated": truncated, "collision": 1 - success - truncated, "out_of_bounds": 0 * success}
+    return claims.Runs(np.arange(1, success.shape[1] + 1) * 50, rates)
+
+
+def test_probability_of_improvement_is_one_half_for_equal_runs_and_one_for_disjoint_runs():
+    same = np.array([0.2, 0.4, 0.6])
+    assert claims.improvement(same, same)[0] == 0.5
+    value, low, high = claims.improvement(np.array([0.9, 0.8, 0.95]), np.array([0.1, 0.2, 0.3]))
+    assert value == low == high == 1.0
+    assert claims.beats(np.array([0.9, 0.8]), np.array([0.1, 0.2])) and not claims.beats(same, same)
+
+
+def test_modalities_claims_are_judged_by_their_stated_rules():
+    early_fast = [[0.5] * 6 + [0.9] * 8, [0.6] * 6 + [0.9] * 8]
+    slow = [[0.0] * 6 + [0.88] * 8, [0.1] * 6 + [0.89] * 8]
+    verdicts = dict(claims.modalities({"leog": runs(slow), "lidar": runs(early_fast), "closest_obstacle": runs(early_fast)}))
+    assert verdicts["(b) all inputs converge to similar performance"][0] == "reproduced"
+    assert verdicts["(b) LIDAR and closest obstacle are better early (than LEOG)"][0] == "reproduced"
+    assert verdicts["(b) LEOG ends with the smallest std"][0] == "not reproduced"  # 0.007 vs 0.0
+
+
+def test_a_truncation_spike_counts_runs_and_evaluations_at_or_above_a_quarter_after_the_first():
+    spiky = runs([[0.5, 0.5, 0.5]], truncated=[[0.9, 0.25, 0.1]])
+    assert spiky.spikes() == 1
