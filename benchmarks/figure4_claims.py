@@ -41,6 +41,33 @@ SIMILAR = 0.15  # final success within this many points counts as "similar perfo
 SPIKE = 0.25  # a run's truncated rate at one evaluation at or above this is a truncation spike
 
 
+CLAIM_TEXTS = {
+    "encoders": [
+        '(a) all three strategies reach excellent performance',
+        '(a) from scratch has the largest std during training',
+        '(a) pre-trained frozen is best early',
+    ],
+    "modalities": [
+        '(b) all inputs converge to similar performance',
+        '(b) LIDAR and closest obstacle are better early (than LEOG)',
+        '(b) LEOG ends with the smallest std',
+    ],
+    "fusion": [
+        '(c) fusion is better than either input in the first half of training',
+        '(c) fusion has the smallest std',
+        '(c) fusion has no sporadic truncation spikes',
+    ],
+    "paradigms": [
+        '(d) SAC is the best paradigm',
+        '(d) SAC has few truncations from early on',
+        '(d) TD3 is noisy',
+        "(d) DDPG and A2C drift towards truncation; A2C's truncation rate goes to 1",
+    ],
+}
+CLAIM_TEXTS["modalities_paper"] = CLAIM_TEXTS["modalities"]
+"""The paper's claims per experiment (Figure 4 and its discussion), in the order they are judged."""
+
+
 @dataclass
 class Runs:
     """One configuration's rates: arrays of shape (runs, evaluations)."""
@@ -134,13 +161,13 @@ def encoders(r: dict[str, Runs]) -> list[tuple[str, Verdict]]:
     early_best = max(early, key=lambda k: early[k].mean()) == "frozen"
     p_t, p_s = improvement(early["frozen"], early["finetune"])[0], improvement(early["frozen"], early["scratch"])[0]
     return [
-        ("(a) all three strategies reach excellent performance",
+        (CLAIM_TEXTS["encoders"][0],
          (_grade(excellent, 3), "final success " + ", ".join(f"{k} {score(v, finals[k])}" for k, v in r.items())
           + f"; 'excellent' = mean >= {pct(EXCELLENT)}")),
-        ("(a) from scratch has the largest std during training",
+        (CLAIM_TEXTS["encoders"][1],
          ("reproduced" if max(stds, key=stds.get) == "scratch" else "not reproduced",
           "std of success over evaluations " + ", ".join(f"{k} {v:.3f}" for k, v in stds.items()))),
-        ("(a) pre-trained frozen is best early",
+        (CLAIM_TEXTS["encoders"][2],
          ("reproduced" if early_best and min(p_t, p_s) > 0.5 else "partly" if early_best or max(p_t, p_s) > 0.5 else "not reproduced",
           "success over evaluations 50-300: " + ", ".join(f"{k} {score(v, early[k])}" for k, v in r.items())
           + "; " + pi("frozen", "finetune", early["frozen"], early["finetune"])
@@ -156,15 +183,15 @@ def modalities(r: dict[str, Runs]) -> list[tuple[str, Verdict]]:
     better = sum(beats(early[k], early["leog"]) for k in ("lidar", "closest_obstacle"))
     final_std = {k: float(v.std(ddof=1)) for k, v in finals.items()}
     return [
-        ("(b) all inputs converge to similar performance",
+        (CLAIM_TEXTS["modalities"][0],
          ("reproduced" if gap <= SIMILAR else "partly" if gap <= 2 * SIMILAR else "not reproduced",
           "final success " + ", ".join(f"{k} {score(v, finals[k])}" for k, v in r.items())
           + f"; spread {pct(gap)} ('similar' = within {pct(SIMILAR)})")),
-        ("(b) LIDAR and closest obstacle are better early (than LEOG)",
+        (CLAIM_TEXTS["modalities"][1],
          (_grade(better, 2), "success over evaluations 50-300: " + ", ".join(f"{k} {score(v, early[k])}" for k, v in r.items())
           + "; " + pi("lidar", "leog", early["lidar"], early["leog"])
           + "; " + pi("closest_obstacle", "leog", early["closest_obstacle"], early["leog"]))),
-        ("(b) LEOG ends with the smallest std",
+        (CLAIM_TEXTS["modalities"][2],
          ("reproduced" if min(final_std, key=final_std.get) == "leog" else "not reproduced",
           "across-seed std of final success " + ", ".join(f"{k} {v:.3f}" for k, v in final_std.items()))),
     ]
@@ -178,14 +205,14 @@ def fusion(r: dict[str, Runs]) -> list[tuple[str, Verdict]]:
     spikes = {k: v.spikes() for k, v in r.items()}
     calm = spikes["leog_lidar"] == 0 or spikes["leog_lidar"] < min(spikes["leog"], spikes["lidar"])
     return [
-        ("(c) fusion is better than either input in the first half of training",
+        (CLAIM_TEXTS["fusion"][0],
          (_grade(better, 2), "success over evaluations 50-350: " + ", ".join(f"{k} {score(v, first[k])}" for k, v in r.items())
           + "; " + pi("leog_lidar", "leog", first["leog_lidar"], first["leog"])
           + "; " + pi("leog_lidar", "lidar", first["leog_lidar"], first["lidar"]))),
-        ("(c) fusion has the smallest std",
+        (CLAIM_TEXTS["fusion"][1],
          ("reproduced" if min(stds, key=stds.get) == "leog_lidar" else "not reproduced",
           "std of success over evaluations " + ", ".join(f"{k} {v:.3f}" for k, v in stds.items()))),
-        ("(c) fusion has no sporadic truncation spikes",
+        (CLAIM_TEXTS["fusion"][2],
          ("reproduced" if spikes["leog_lidar"] == 0 else "partly" if calm else "not reproduced",
           f"(run, evaluation) pairs with truncated >= {pct(SPIKE)} after the first evaluation: "
           + ", ".join(f"{k} {v}" for k, v in spikes.items()))),
@@ -201,16 +228,16 @@ def paradigms(r: dict[str, Runs]) -> list[tuple[str, Verdict]]:
     drift = {k: (r[k].span(*EARLY, "truncated").mean(), r[k].final("truncated").mean()) for k in ("ddpg", "a2c")}
     drift_hits = sum(late > early for early, late in drift.values()) + (drift["a2c"][1] >= 0.9)
     return [
-        ("(d) SAC is the best paradigm",
+        (CLAIM_TEXTS["paradigms"][0],
          ("reproduced" if sac_best and p_min > 0.5 else "partly" if sac_best else "not reproduced",
           "final success " + ", ".join(f"{k} {score(v, finals[k])}" for k, v in r.items())
           + "; " + "; ".join(pi("sac", k, finals["sac"], finals[k]) for k in finals if k != "sac"))),
-        ("(d) SAC has few truncations from early on",
+        (CLAIM_TEXTS["paradigms"][1],
          ("reproduced" if sac_trunc <= 0.1 else "not reproduced", f"SAC's truncated rate from evaluation 100 on: {pct(sac_trunc)} ('few' = <= 10%)")),
-        ("(d) TD3 is noisy",
+        (CLAIM_TEXTS["paradigms"][2],
          ("reproduced" if max(noise, key=noise.get) == "td3" else "not reproduced",
           "mean |change of success| between consecutive evaluations " + ", ".join(f"{k} {v:.3f}" for k, v in noise.items()))),
-        ("(d) DDPG and A2C drift towards truncation; A2C's truncation rate goes to 1",
+        (CLAIM_TEXTS["paradigms"][3],
          (_grade(drift_hits, 3), "truncated rate early (50-300) -> final: "
           + ", ".join(f"{k} {pct(a)} -> {pct(b)}" for k, (a, b) in drift.items()))),
     ]
@@ -226,7 +253,7 @@ def report(results: Path) -> str:
     for name in EXPERIMENTS:
         path = results / name / "evaluation_rates.csv"
         if not path.exists():
-            lines.append(f"| [{name}]({name}/) | every claim of this experiment | not run yet | |")
+            lines += [f"| [{name}]({name}/) | {claim} | not run yet | |" for claim in CLAIM_TEXTS[name]]
             continue
         runs = load(path)
         for claim, (verdict, numbers) in CLAIMS[name](runs):
