@@ -159,3 +159,30 @@ def test_python_dash_m_crowdnav_runs_the_cli():
     )
     assert result.returncode == 0, result.stderr
     assert result.stdout.startswith("OK ") and result.stdout.strip().endswith("empty_room.yaml")
+
+
+@pytest.mark.parametrize(("command", "missing", "extra"), [("train", "torch", "train"), ("benchmark", "torch", "bench"), ("benchmark", "ray", "ray")])
+def test_command_of_a_missing_extra_names_the_extra_to_install(monkeypatch, capsys, command, missing, extra):
+    """On the core install a command whose layer needs an extra exits 1 with the pip line, no traceback."""
+
+    def handler(args):
+        raise ModuleNotFoundError(f"No module named {missing!r}", name=missing)
+
+    parser = build_parser()
+    monkeypatch.setattr("crowdnav.cli.build_parser", lambda: parser)
+    for action in parser._subparsers._group_actions[0].choices.values():
+        action.set_defaults(handler=handler)
+    assert main([command]) == 1
+    err = capsys.readouterr().err.strip()
+    assert err.startswith(f"crowdnav: error: `crowdnav {command}` needs {missing}") and err.endswith(f"pip install 'crowdnav[{extra}]'")
+
+
+def test_unrelated_missing_module_is_not_hidden(monkeypatch):
+    def handler(args):
+        raise ModuleNotFoundError("No module named 'nonexistent'", name="nonexistent")
+
+    parser = build_parser()
+    monkeypatch.setattr("crowdnav.cli.build_parser", lambda: parser)
+    parser._subparsers._group_actions[0].choices["train"].set_defaults(handler=handler)
+    with pytest.raises(ModuleNotFoundError):
+        main(["train"])

@@ -17,6 +17,11 @@ from collections.abc import Sequence
 from crowdnav.cli import benchmark, render, scenario
 from crowdnav.cli.common import CliError
 
+# Packages that only an extra installs (pyproject.toml), so a command run on the core install
+# names the extra to add instead of failing with a traceback.
+EXTRA_OF_MODULE = {"torch": "train", "stable_baselines3": "train", "matplotlib": "train", "pandas": "bench", "seaborn": "bench", "ray": "ray"}
+EXTRA_OF_COMMAND = {"train": "train", "benchmark": "bench"}
+
 
 def command_groups() -> tuple:
     """Registration functions of the command groups, in the order ``--help`` lists them."""
@@ -50,6 +55,15 @@ def main(argv: Sequence[str] | None = None) -> int:
         return args.handler(args)
     except CliError as error:
         print(f"crowdnav: error: {error}", file=sys.stderr)
+        return 1
+    except ModuleNotFoundError as error:
+        extra = EXTRA_OF_MODULE.get((error.name or "").split(".")[0])
+        if extra is None:
+            raise
+        if extra != "ray":  # benchmark needs bench even where torch is the first thing missing
+            extra = EXTRA_OF_COMMAND.get(args.command, extra)
+        print(f"crowdnav: error: `crowdnav {args.command}` needs {error.name}, which the core install leaves out: "
+              f"pip install 'crowdnav[{extra}]'", file=sys.stderr)
         return 1
     except BrokenPipeError:  # output piped into `head` and the like, which stopped reading
         # Python flushes stdout again at exit; send that flush to devnull so it cannot fail too.

@@ -1,0 +1,44 @@
+"""CI: the core install alone (``pip install crowdnav``, no extras) runs the environments.
+
+Run in a fresh virtual environment holding only crowdnav's core dependencies. It steps a
+Gymnasium env and a PettingZoo env, renders an ``rgb_array`` frame, runs ``crowdnav --help`` and
+checks that none of the extras' packages were installed or imported on the way.
+"""
+
+from __future__ import annotations
+
+import importlib.util
+import subprocess
+import sys
+
+EXTRAS = ("torch", "stable_baselines3", "pandas", "matplotlib", "seaborn", "ray")
+
+missing_on_purpose = [name for name in EXTRAS if importlib.util.find_spec(name) is None]
+assert missing_on_purpose == list(EXTRAS), f"the core install pulled extras: {sorted(set(EXTRAS) - set(missing_on_purpose))}"
+
+import gymnasium as gym  # noqa: E402
+
+import crowdnav  # noqa: E402,F401  (registers crowdnav/<Scenario>-v0)
+from crowdnav.envs import CrowdNavParallelEnv  # noqa: E402
+
+env = gym.make("crowdnav/RoomFurniture-v0", render_mode="rgb_array")
+obs, _ = env.reset(seed=0)
+for _ in range(5):
+    obs, reward, terminated, truncated, _ = env.step(env.action_space.sample())
+frame = env.render()
+assert frame.ndim == 3 and frame.shape[2] == 3 and frame.std() > 0, "rgb_array frame is empty"
+env.close()
+
+parallel = CrowdNavParallelEnv("open_space")
+observations, _ = parallel.reset(seed=0)
+for _ in range(5):
+    observations, rewards, terminations, truncations, _ = parallel.step({agent: parallel.action_space(agent).sample() for agent in parallel.agents})
+parallel.close()
+
+loaded = sorted(name for name in EXTRAS if name in sys.modules)
+assert not loaded, f"imported extras: {loaded}"
+subprocess.run(["crowdnav", "--help"], check=True, capture_output=True)
+# a command of an extra names the extra to install, in one line, instead of a traceback
+hint = subprocess.run(["crowdnav", "benchmark"], capture_output=True, text=True)
+assert hint.returncode == 1 and hint.stderr.strip().endswith("pip install 'crowdnav[bench]'"), hint.stderr
+print(f"core install: Gymnasium env, PettingZoo env ({len(observations)} agents) and an rgb_array frame {frame.shape} without {', '.join(EXTRAS)}")
