@@ -2,7 +2,7 @@
 
 from crowdnav.envs import CrowdNavEnv, CrowdNavParallelEnv, SocialForcePolicy, parallel_env  # registers the Gymnasium ids
 from crowdnav.scenario import Scenario, ScenarioError, load_scenario
-from crowdnav.simulator import Collision, Simulator, StepEvents
+from crowdnav.simulator import Collision, SimulationError, Simulator, StepEvents
 
 __all__ = [
     "Collision",
@@ -10,6 +10,7 @@ __all__ = [
     "CrowdNavParallelEnv",
     "Scenario",
     "ScenarioError",
+    "SimulationError",
     "Simulator",
     "SocialForcePolicy",
     "StepEvents",

@@ -88,6 +88,10 @@ class StepEvents:
         return "truncated" if self.truncated else None
 
 
+class SimulationError(RuntimeError):
+    """The simulated state became non-finite; the message names the agent and the step."""
+
+
 class Simulator:
     """Vectorized crowd simulator for one scenario.
 
@@ -253,6 +257,13 @@ class Simulator:
         self.velocities[1:] = commands
         self.positions += self.velocities * self.dt
         self.step_count += 1
+        # one cheap check per step, so a non-finite state stops the episode with its name
+        # instead of leaking NaN into rewards while the observations stay finite
+        if not np.isfinite(self.positions).all():
+            bad = np.flatnonzero(~np.isfinite(self.positions))
+            who = "the robot" if bad[0] == 0 else f"human {bad[0] - 1}"
+            raise SimulationError(f"step {self.step_count}: the position of {who} became non-finite (its velocity: {self.velocities[bad[0]]}); "
+                                  "check the scenario's social_force parameters")
         self.refresh()
         if self.n_humans and self._gap[1:].min() < 0.0:  # a human touches someone or something
             self._resolve_human_overlaps()

@@ -19,6 +19,8 @@ from __future__ import annotations
 
 import numpy as np
 
+MAX_EXPONENT = 700.0
+
 
 def goal_force(to_goal: np.ndarray, weight: float, saturation_distance: float) -> np.ndarray:
     """(N,) complex: pull towards the goal, ``to_goal`` = goal minus position."""
@@ -42,8 +44,13 @@ def repulsion(offset: np.ndarray, distance: np.ndarray, gain: np.ndarray, neg_in
 
 
 def repulsion_gain(strength: np.ndarray | float, contact: np.ndarray | float, decay_range: np.ndarray | float) -> np.ndarray:
-    """``-A * exp(contact / B)``: the precomputable part of :func:`repulsion`."""
-    return -np.asarray(strength, dtype=float) * np.exp(np.asarray(contact, dtype=float) / decay_range)
+    """``-A * exp(contact / B)``: the precomputable part of :func:`repulsion`.
+
+    The exponent is capped at 700 (exp(700) ~ 1e304, below float64's overflow) so a gain is
+    never inf: inf times the vanishing ``exp(-d / B)`` of a far pair would be NaN.
+    """
+    exponent = np.minimum(np.asarray(contact, dtype=float) / decay_range, MAX_EXPONENT)
+    return -np.asarray(strength, dtype=float) * np.exp(exponent)
 
 
 def velocity_command(

@@ -371,3 +371,44 @@ def test_no_obstacles_and_no_humans_still_steps():
     events = sim.step(np.array([1.0, 0.0]))
     assert events.collision is None
     assert Point(sim.robot_position.real, sim.robot_position.imag).distance(Point(-5.5, 5.5)) > 0
+
+
+@pytest.mark.parametrize("field", ["human_range", "obstacle_range", "robot_range"])
+def test_force_ranges_below_one_centimetre_are_refused_with_the_field_named(field):
+    from crowdnav import ScenarioError
+
+    with pytest.raises(ScenarioError, match=rf"humans\.social_force\.{field}: expected a value greater than or equal to 0\.01"):
+        Simulator("open_space", overrides={f"humans.social_force.{field}": 5e-4})
+
+
+def test_shortest_force_ranges_with_a_dense_crowd_keep_every_state_and_reward_finite():
+    import gymnasium as gym
+
+    ranges = {f"humans.social_force.{name}": 0.01 for name in ("human_range", "obstacle_range", "robot_range")}
+    env = gym.make("crowdnav/RoomFurniture-v0", overrides={**ranges, "humans.count": 20, "humans.see_robot": True})
+    env.reset(seed=0)
+    rng = np.random.default_rng(0)
+    for _ in range(200):
+        _, reward, terminated, truncated, _ = env.step(rng.uniform(-1, 1, 2))
+        sim = env.unwrapped.simulator
+        assert np.isfinite(reward) and np.isfinite(sim.human_positions).all() and np.isfinite(sim.human_velocities).all()
+        if terminated or truncated:
+            env.reset()
+
+
+def test_repulsion_gain_never_overflows_to_inf():
+    from crowdnav import social_force as sf
+
+    gain = sf.repulsion_gain(np.array([2.0]), np.array([1e6]), 1e-3)
+    assert np.isfinite(gain).all()
+
+
+@pytest.mark.filterwarnings("ignore:invalid value:RuntimeWarning")
+def test_a_non_finite_state_stops_the_step_with_the_agent_named():
+    from crowdnav import SimulationError
+
+    sim = Simulator("open_space")
+    sim.reset(seed=0)
+    sim.human_goals[1] = complex(np.inf, 0.0)  # the goal force of human 1 becomes non-finite
+    with pytest.raises(SimulationError, match=r"step 1: the position of human 1 became non-finite"):
+        sim.step(np.zeros(2))

@@ -196,6 +196,11 @@ class Robot(StrictModel):
     )
 
 
+# Decay lengths below 1 cm make exp(contact / range) overflow to inf (then inf * 0 = NaN) for
+# human-sized radii, and no crowd model needs a force field thinner than that.
+MIN_FORCE_RANGE = 0.01
+
+
 class SocialForce(StrictModel):
     """Parameters of the humans' social-force model (see docs/simulator.md for the formulas)."""
 
@@ -204,13 +209,19 @@ class SocialForce(StrictModel):
         default=1.0, description="Distance to the goal (m) beyond which the goal force has unit magnitude."
     )
     human_strength: NonNegativeFloat = Field(default=2.0, description="Human-human repulsion at contact (dimensionless).")
-    human_range: PositiveFloat = Field(default=0.3, description="Decay length of human-human repulsion in metres.")
+    human_range: float = Field(
+        default=0.3, ge=MIN_FORCE_RANGE, description="Decay length of human-human repulsion in metres (at least 1 cm)."
+    )
     obstacle_strength: NonNegativeFloat = Field(default=3.0, description="Obstacle repulsion at contact (dimensionless).")
-    obstacle_range: PositiveFloat = Field(default=0.2, description="Decay length of obstacle repulsion in metres.")
+    obstacle_range: float = Field(
+        default=0.2, ge=MIN_FORCE_RANGE, description="Decay length of obstacle repulsion in metres (at least 1 cm)."
+    )
     robot_strength: NonNegativeFloat = Field(
         default=2.0, description="Repulsion from the robot at contact, used only when see_robot is on."
     )
-    robot_range: PositiveFloat = Field(default=0.3, description="Decay length of robot repulsion in metres.")
+    robot_range: float = Field(
+        default=0.3, ge=MIN_FORCE_RANGE, description="Decay length of robot repulsion in metres (at least 1 cm)."
+    )
     relaxation_time: PositiveFloat = Field(
         default=0.5, description="Time (s) over which a human adapts its velocity to the desired one."
     )
