@@ -31,6 +31,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from crowdnav.paths import OutputPathError
     from crowdnav.rendering.episodes import PolicyLoadError, render_episodes
     from crowdnav.scenario import ScenarioError
 
@@ -49,7 +50,7 @@ def run(args: argparse.Namespace) -> int:
             render_options={"human_goals": args.human_goals},
             progress=not args.no_progress,
         )
-    except (ScenarioError, PolicyLoadError) as error:
+    except (ScenarioError, PolicyLoadError, OutputPathError) as error:
         raise CliError(str(error)) from None
     for path in paths:
         print(f"wrote {path}")

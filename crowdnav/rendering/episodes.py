@@ -9,6 +9,7 @@ from typing import Any
 import numpy as np
 
 from crowdnav.envs import CrowdNavEnv
+from crowdnav.paths import inside
 from crowdnav.policies import SCRIPTED_POLICIES
 from crowdnav.rendering.video import VIDEO_FORMATS, VideoWriter
 
@@ -70,7 +71,7 @@ def render_episodes(
     bar = _progress(episodes * env.scenario.max_steps, progress)
     try:
         for episode in range(episodes):
-            path = out / f"{env.scenario.name}_{label}_seed{seed + episode}{suffix}"
+            path = inside(out, f"{env.scenario.name}_{label}_seed{seed + episode}{suffix}")
             observation, _ = env.reset(seed=seed + episode)
             with VideoWriter(path, fps=env.metadata["render_fps"]) as writer:
                 writer.append(env.render())

@@ -16,6 +16,7 @@ from typing import Any
 import yaml
 from pydantic import ValidationError
 
+from crowdnav.paths import safe_stem
 from crowdnav.scenario import library
 from crowdnav.scenario.errors import ScenarioError, ScenarioIssue, show
 from crowdnav.scenario.messages import schema_issues
@@ -47,7 +48,7 @@ def load_scenario(source: str | Path | Mapping[str, Any], overrides: Overrides |
         _apply_override(label, document, dotted, value)
         override_paths.add(dotted)
     if isinstance(source, (str, Path)) and document.get("name") is None:
-        document["name"] = library.resolve(source).stem
+        document["name"] = safe_stem(library.resolve(source).stem)
     scenario = _validate_schema(label, document, root, override_paths)
     issues = consistency_issues(scenario)
     if not issues:

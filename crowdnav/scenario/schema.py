@@ -16,6 +16,7 @@ from typing import Annotated, Any, Literal
 
 from pydantic import BaseModel, BeforeValidator, ConfigDict, Field, field_validator, model_serializer, model_validator
 
+from crowdnav.paths import SAFE_NAME_EXPECTATION, is_safe_name
 from crowdnav.scenario.errors import show
 from crowdnav.scenario.reward_presets import DEFAULT_PRESET, REWARD_PRESETS, REWARD_TERMS, unknown_preset_message
 
@@ -399,7 +400,7 @@ class RewardWeights(StrictModel):
 class Scenario(StrictModel):
     """One family of episodes: world, robot, crowd, timing, sensors and reward."""
 
-    name: str | None = Field(default=None, description="Scenario name (defaults to the file name).")
+    name: str | None = Field(default=None, description="Scenario name, folder-safe (defaults to the file name); it names videos.")
     description: str = Field(min_length=1, description="One-line description shown by `crowdnav scenario list`.")
     world: World = Field(default_factory=World, description="World extent and boundary.")
     walls: list[Wall] = Field(default_factory=list, description="Interior walls.")
@@ -412,6 +413,14 @@ class Scenario(StrictModel):
     reward: RewardWeights = Field(
         default_factory=RewardWeights, description="Reward weights: a preset (default: 'default') and terms overriding it."
     )
+
+    @field_validator("name")
+    @classmethod
+    def _folder_safe_name(cls, name: str | None) -> str | None:
+        # the name becomes part of video file names: no separators, no "..", no absolute paths
+        if name is not None and not is_safe_name(name):
+            raise ValueError(f"expected {SAFE_NAME_EXPECTATION}, got {name!r}")
+        return name
 
     @property
     def world_center(self) -> Point:
