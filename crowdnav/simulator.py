@@ -154,8 +154,10 @@ class Simulator:
     # ----------------------------------------------------------------------- reset
 
     def reset(self, seed: int | None = None) -> None:
-        """Start an episode; the same seed gives the same episode bit for bit."""
+        """Start an episode; the same seed gives the same episode bit for bit (seed: a non-negative integer or None)."""
         if seed is not None:
+            if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
+                raise ValueError(f"seed must be a non-negative integer or None, got {seed!r}")
             self._rng = np.random.default_rng(seed)
         rng, robot, humans, placement = self._rng, self.scenario.robot, self.scenario.humans, self.placement
         n = int(rng.integers(humans.min_count, humans.max_count + 1))

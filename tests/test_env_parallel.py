@@ -246,3 +246,33 @@ def test_same_seed_gives_the_same_multi_agent_episode_bit_for_bit():
         for agent, observation in observations.items():
             assert all(np.array_equal(value, observations_again[agent][key]) for key, value in observation.items())
     assert not np.array_equal(first[0][0]["human_0"]["position"], other[0][0]["human_0"]["position"])
+
+
+@pytest.mark.parametrize("actions", [None, [[0.0, 0.0]], "robot", 3])
+def test_step_with_something_other_than_a_dict_is_a_one_line_type_error(actions):
+    env = parallel_env("open_space")
+    env.reset(seed=0)
+    with pytest.raises(TypeError, match=r"^step\(\) takes a dict \{agent: action\}"):
+        env.step(actions)
+
+
+@pytest.mark.parametrize(
+    ("value", "kind"), [([1 + 2j, 0.0], "complex numbers"), (["1", "0"], "strings"), ([True, False], "booleans"), ([object(), 1], "Python objects")]
+)
+@pytest.mark.parametrize("agent", ["robot", "human_0"])
+def test_actions_that_only_look_numeric_are_refused_naming_the_agent(agent, value, kind):
+    env = parallel_env("open_space")
+    env.reset(seed=0)
+    actions = {name: np.zeros(2) for name in env.agents}
+    actions[agent] = value
+    who = "the robot action" if agent == "robot" else f"the action of {agent}"
+    with pytest.raises(ValueError, match=rf"^{who} must be 2 numbers \(real, not {kind}\)"):
+        env.step(actions)
+
+
+@pytest.mark.parametrize("seed", [-1, 1.5, True, "3"])
+def test_reset_seed_must_be_a_non_negative_integer(seed):
+    env = parallel_env("open_space")
+    with pytest.raises(ValueError, match="seed must be a non-negative integer or None"):
+        env.reset(seed=seed)
+    env.reset(seed=np.int64(3))  # numpy integers are integers

@@ -84,15 +84,28 @@ def load_env_scenario(scenario: ScenarioSource | None, overrides: Mapping[str, A
     return load_scenario(scenario, overrides)
 
 
+def real_array(value: Any, what: str) -> np.ndarray:
+    """``value`` as a float64 array, refusing what only looks numeric.
+
+    Strings ("1"), booleans and complex numbers would convert silently (a complex action would
+    lose its imaginary part), so they are a clear ValueError naming ``what``.
+    """
+    try:
+        raw = np.asarray(value)
+    except (TypeError, ValueError):  # ragged nesting
+        raise ValueError(f"{what} must be 2 numbers in [-1, 1], got {value!r}") from None
+    if raw.dtype.kind not in "iuf":
+        kind = {"b": "booleans", "c": "complex numbers", "U": "strings", "S": "bytes", "O": "Python objects"}.get(raw.dtype.kind, str(raw.dtype))
+        raise ValueError(f"{what} must be 2 numbers (real, not {kind}), got {value!r}")
+    return raw.astype(np.float64, copy=False)
+
+
 def checked_robot_action(action: Any) -> np.ndarray:
-    """The robot action as a (2,) float64 array; a clear ValueError for a wrong shape, NaN or inf.
+    """The robot action as a (2,) float64 array; a clear ValueError for a wrong type or shape, NaN or inf.
 
     Values outside [-1, 1] are valid and get clipped by the simulator.
     """
-    try:
-        values = np.asarray(action, dtype=np.float64)
-    except (TypeError, ValueError):
-        raise ValueError(f"the robot action must be 2 numbers in [-1, 1], got {action!r}") from None
+    values = real_array(action, "the robot action")
     if values.shape != (2,):
         raise ValueError(f"the robot action must have shape (2,), got shape {values.shape}: {action!r}")
     if not (math.isfinite(values[0]) and math.isfinite(values[1])):

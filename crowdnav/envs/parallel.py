@@ -9,7 +9,7 @@ import numpy as np
 from gymnasium import spaces
 from pettingzoo import ParallelEnv
 
-from crowdnav.envs.core import EnvCore, ScenarioSource, step_info
+from crowdnav.envs.core import EnvCore, ScenarioSource, real_array, step_info
 from crowdnav.envs.human_observation import HumanObservations
 from crowdnav.rendering.episode_view import RENDER_MODES
 
@@ -85,6 +85,8 @@ class CrowdNavParallelEnv(ParallelEnv):
 
     def step(self, actions: Mapping[str, Any]):
         """One action per agent in ``agents``; out-of-range values are clipped, NaN/inf raise ValueError."""
+        if not isinstance(actions, Mapping):
+            raise TypeError(f"step() takes a dict {{agent: action}} with one action per agent in env.agents, got {type(actions).__name__}")
         if not self.agents:
             raise RuntimeError("the episode is over or has not started: call reset() before step()")
         human_actions = self._human_actions(actions)
@@ -127,13 +129,11 @@ class CrowdNavParallelEnv(ParallelEnv):
             )
         if not humans:
             return np.zeros((0, 2))
-        try:
-            stacked = np.array([actions[name] for name in humans], dtype=np.float64)
-        except (TypeError, ValueError):
-            stacked = None
-        if stacked is None or stacked.shape != (len(humans), 2):
-            shapes = {name: np.shape(actions[name]) for name in humans if np.shape(actions[name]) != (2,)}
+        arrays = [real_array(actions[name], f"the action of {name}") for name in humans]
+        shapes = {name: array.shape for name, array in zip(humans, arrays, strict=True) if array.shape != (2,)}
+        if shapes:
             raise ValueError(f"every human action must be 2 numbers (vx, vy) / max_speed; wrong shapes: {shapes}")
+        stacked = np.stack(arrays)
         finite = np.isfinite(stacked).all(axis=1)
         if not finite.all():
             bad = {humans[i]: stacked[i].tolist() for i in np.flatnonzero(~finite)}
