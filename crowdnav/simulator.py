@@ -183,6 +183,8 @@ class Simulator:
         self.human_preferred_speed = rng.uniform(*humans.preferred_speed, size=n)
         self.human_max_speed = self.human_preferred_speed * self._force.max_speed_factor
         self.human_stopped = np.zeros(n, dtype=bool)
+        self.human_arrived = np.zeros(n, dtype=bool)
+        """Humans that reached their goal in the last step (under ``on_goal: stop``, on arrival only)."""
         self.step_count = 0
         self._prepare_pair_constants(n)
         self.refresh()
@@ -281,7 +283,8 @@ class Simulator:
 
     @property
     def _any_stopped(self) -> bool:
-        return self.scenario.humans.on_goal == "stop" and bool(self.human_stopped.any())
+        # humans stop at their goal (on_goal: stop) or when a multi-agent env lets them leave
+        return bool(self.human_stopped.any())
 
     def social_force_commands(self) -> np.ndarray:
         """(n_humans,) complex velocity commands (m/s) of the social-force model in the current state."""
@@ -414,6 +417,7 @@ class Simulator:
     def _apply_goal_rule(self) -> None:
         humans = self.scenario.humans
         arrived = np.abs(self.human_goals - self.positions[1:]) <= self._force.goal_tolerance
+        self.human_arrived = arrived & ~self.human_stopped
         if humans.on_goal == "stop":
             self.human_stopped |= arrived
             self.velocities[1:][self.human_stopped] = 0.0

@@ -10,6 +10,7 @@ from typing import Any
 
 from crowdnav.envs.core import EnvCore, ScenarioSource
 from crowdnav.envs.human_policy import SocialForcePolicy
+from crowdnav.envs.multi_agent import HumanExit, HumanReward
 from crowdnav.envs.parallel import CrowdNavParallelEnv
 from crowdnav.envs.registration import SCENARIO_FILE_ID, env_id, register_envs
 from crowdnav.envs.reward import REWARD_TERMS, Reward
@@ -24,11 +25,16 @@ def parallel_env(
     reward_weights: Mapping[str, float] | None = None,
     overrides: Mapping[str, Any] | None = None,
     render_mode: str | None = None,
+    flat_observations: bool = False,
+    human_reward: HumanReward | None = None,
+    human_exit: HumanExit | None = None,
 ) -> CrowdNavParallelEnv:
-    """The PettingZoo ParallelEnv for ``scenario`` (library name or YAML path); options as in CrowdNavEnv."""
+    """The PettingZoo ParallelEnv for ``scenario`` (library name or YAML path); options as in
+    CrowdNavEnv, plus the multi-agent ones of :class:`CrowdNavParallelEnv`."""
     return CrowdNavParallelEnv(
         scenario, modalities=modalities, sensors=sensors, reward_weights=reward_weights,
-        overrides=overrides, render_mode=render_mode,
+        overrides=overrides, render_mode=render_mode, flat_observations=flat_observations,
+        human_reward=human_reward, human_exit=human_exit,
     )
 
 

@@ -11,6 +11,7 @@ from pettingzoo import ParallelEnv
 
 from crowdnav.envs.core import EnvCore, ScenarioSource, real_array, step_info
 from crowdnav.envs.human_observation import HumanObservations
+from crowdnav.envs.multi_agent import HumanExit, HumanReward, flat_spaces, flatten_batch, global_state, state_space
 from crowdnav.rendering.episode_view import RENDER_MODES
 
 ROBOT = "robot"
@@ -35,25 +36,42 @@ class CrowdNavParallelEnv(ParallelEnv):
     nearest point of each static obstacle, and the robot when the scenario's ``see_robot`` is
     on). Action: Box(-1, 1, (2,), float32), the velocity command in the world frame divided by
     the human's max speed (``max_speed`` in its observation). :class:`SocialForcePolicy` gives
-    the built-in crowd's actions. Reward: 0 (humans are not scored).
+    the built-in crowd's actions. Reward: 0, or ``human_reward(simulator)``. Info:
+    ``goal_reached`` (it reached its goal this step).
 
     **Episode end.** Success, collision or the robot leaving the world terminates every agent,
-    the time limit truncates every agent; agents leave ``agents`` only then, all together. As in
+    the time limit truncates every agent. A human also terminates alone when ``human_exit``
+    says so; it then stands still, an obstacle for the others, until the episode ends. As in
     :class:`crowdnav.envs.single.CrowdNavEnv`, the robot cannot escape the task: leaving the
     world (its centre outside the ``world.min`` / ``world.max`` rectangle) is either impossible
     (``world.boundary_walls``: touching the walls is a collision) or ends the episode with
     ``infos["robot"]["outcome"] == "out_of_bounds"`` (open space), paying the ``collision`` term.
 
-    Options are those of :class:`crowdnav.envs.core.EnvCore` (``modalities``, ``sensors``,
+    **Multi-agent plumbing** (:mod:`crowdnav.envs.multi_agent`): ``state()`` / ``state_space``,
+    the global state for centralised critics; ``flat_observations=True`` gives every agent a flat
+    float32 Box observation (for SuperSuit and MARL libraries); ``human_reward`` and
+    ``human_exit`` plug in the humans' reward and individual termination.
+
+    Other options are those of :class:`crowdnav.envs.core.EnvCore` (``modalities``, ``sensors``,
     ``reward_weights``, ``overrides``, ``render_mode`` (None, ``"rgb_array"`` or ``"human"``) and
     ``render_options``).
     """
 
     metadata = {"name": "crowdnav_v0", "render_modes": RENDER_MODES, "render_fps": 5.0, "is_parallelizable": True}
 
-    def __init__(self, scenario: ScenarioSource | None = None, **options: Any):
+    def __init__(
+        self,
+        scenario: ScenarioSource | None = None,
+        *,
+        flat_observations: bool = False,
+        human_reward: HumanReward | None = None,
+        human_exit: HumanExit | None = None,
+        **options: Any,
+    ):
         # The engine both envs share (simulator, sensors, reward); it takes and checks the options.
         self.core = EnvCore(scenario, **options)
+        self.flat_observations = bool(flat_observations)
+        self.human_reward, self.human_exit = human_reward, human_exit
         self.render_mode = self.core.render_mode
         self.scenario = self.core.scenario
         self.simulator = self.core.simulator
@@ -64,9 +82,17 @@ class CrowdNavParallelEnv(ParallelEnv):
         self.agents: list[str] = []
         self.observation_spaces = {ROBOT: self.core.observation_space}
         self.observation_spaces.update({name: self._humans.space() for name in self._human_names})
+        self._dict_spaces = dict(self.observation_spaces)
+        if self.flat_observations:
+            self.observation_spaces = flat_spaces(self._dict_spaces)
+        self.state_space = state_space(self.scenario.humans.max_count)
         self.action_spaces = {ROBOT: self.core.action_space}
         self.action_spaces.update({name: spaces.Box(-1.0, 1.0, shape=(2,), dtype=np.float32) for name in self._human_names})
         self._active_humans: list[str] = []
+
+    def state(self) -> np.ndarray:
+        """The global state (:mod:`crowdnav.envs.multi_agent`): (1 + N) rows of x, y, vx, vy, gx, gy, radius, active."""
+        return global_state(self.simulator, self.scenario.humans.max_count)
 
     def observation_space(self, agent: str) -> spaces.Space:
         return self.observation_spaces[agent]
@@ -91,17 +117,32 @@ class CrowdNavParallelEnv(ParallelEnv):
             raise RuntimeError("the episode is over or has not started: call reset() before step()")
         human_actions = self._human_actions(actions)
         events, reward, terms = self.core.step(actions[ROBOT], human_actions)
-        agents = self.agents
+        agents, sim = self.agents, self.simulator
         observations = self._observations(self.core.observe())
         rewards = dict.fromkeys(agents, 0.0)
         rewards[ROBOT] = reward
         terminated = events.terminated
         truncated = events.truncated and not terminated
+        terminations, truncations = dict.fromkeys(agents, terminated), dict.fromkeys(agents, truncated)
         infos: dict[str, dict[str, Any]] = {agent: {} for agent in agents}
         infos[ROBOT] = step_info(events, terms)
+        if self._active_humans:
+            index = self._active_index
+            arrived = sim.human_arrived[index]
+            human_rewards = self.human_reward(sim)[index] if self.human_reward is not None else np.zeros(len(index))
+            leaving = np.asarray(self.human_exit(sim), dtype=bool)[index] if self.human_exit is not None else np.zeros(len(index), bool)
+            for k, name in enumerate(self._active_humans):
+                rewards[name] = float(human_rewards[k])
+                infos[name] = {"goal_reached": bool(arrived[k])}
+                terminations[name] = terminated or bool(leaving[k])
+            if leaving.any() and not (terminated or truncated):
+                sim.human_stopped[index[leaving]] = True  # it stays in the world, standing
+                sim.velocities[1:][index[leaving]] = 0.0
+                self._active_humans = [name for name, gone in zip(self._active_humans, leaving, strict=True) if not gone]
+                self.agents = [ROBOT, *self._active_humans]
         if terminated or truncated:
             self.agents = []
-        return observations, rewards, dict.fromkeys(agents, terminated), dict.fromkeys(agents, truncated), infos
+        return observations, rewards, terminations, truncations, infos
 
     def render(self) -> np.ndarray | None:
         """The current frame in ``rgb_array`` mode (None in ``human`` mode, which draws at each step)."""
@@ -110,12 +151,24 @@ class CrowdNavParallelEnv(ParallelEnv):
     def close(self) -> None:
         self.core.close()
 
+    @property
+    def _active_index(self) -> np.ndarray:
+        """Simulator indices (0-based among humans) of the humans still in ``agents``."""
+        return np.array([int(name[len("human_") :]) for name in self._active_humans], dtype=int)
+
     def _observations(self, robot_observation: dict[str, np.ndarray]) -> dict[str, Any]:
+        if self.flat_observations:
+            robot_observation = spaces.flatten(self._dict_spaces[ROBOT], robot_observation).astype(np.float32, copy=False)
         observations: dict[str, Any] = {ROBOT: robot_observation}
         if self._active_humans:
             batch = self._humans.batch(self.simulator)
-            for i, name in enumerate(self._active_humans):
-                observations[name] = {key: values[i] for key, values in batch.items()}
+            index = self._active_index
+            if self.flat_observations:
+                rows = flatten_batch(self._dict_spaces[self._active_humans[0]], batch, self.simulator.n_humans)[index]
+                observations.update(zip(self._active_humans, rows, strict=True))
+            else:
+                for name, i in zip(self._active_humans, index, strict=True):
+                    observations[name] = {key: values[i] for key, values in batch.items()}
         return observations
 
     def _human_actions(self, actions: Mapping[str, Any]) -> np.ndarray:
@@ -128,7 +181,7 @@ class CrowdNavParallelEnv(ParallelEnv):
                 f"expected exactly one action per agent in env.agents; missing: {missing}, not in env.agents: {unknown}"
             )
         if not humans:
-            return np.zeros((0, 2))
+            return np.zeros((self.simulator.n_humans, 2))
         arrays = [real_array(actions[name], f"the action of {name}") for name in humans]
         shapes = {name: array.shape for name, array in zip(humans, arrays, strict=True) if array.shape != (2,)}
         if shapes:
@@ -138,4 +191,8 @@ class CrowdNavParallelEnv(ParallelEnv):
         if not finite.all():
             bad = {humans[i]: stacked[i].tolist() for i in np.flatnonzero(~finite)}
             raise ValueError(f"human actions must be finite (no NaN or inf), got {bad}")
-        return stacked
+        if len(humans) == self.simulator.n_humans:
+            return stacked
+        commands = np.zeros((self.simulator.n_humans, 2))  # humans that left stand still
+        commands[self._active_index] = stacked
+        return commands

@@ -1,0 +1,90 @@
+"""Multi-agent plumbing of the ParallelEnv: global state, flat observations, human rewards and exits.
+
+**Global state** (``env.state()``, for centralised critics): a float32 vector of ``(1 + N) * 8``
+values, N the scenario's maximum crowd size, read as a table of ``1 + N`` rows (row 0 the robot,
+row ``1 + i`` human ``i``; rows of humans absent this episode are zero) by the columns of
+:data:`STATE_COLUMNS`, world frame, metres and m/s:
+
+==========  ===============================================================
+column      meaning
+==========  ===============================================================
+``x, y``    centre
+``vx, vy``  velocity
+``gx, gy``  goal (the robot's goal, or the human's current goal)
+``radius``  body radius
+``active``  1 for the robot and this episode's humans (also after they left
+            ``agents``), 0 for padding
+==========  ===============================================================
+
+**Flat observations** (``flat_observations=True``): every agent's Dict observation becomes one
+float32 Box, in the order of :func:`gymnasium.spaces.flatten_space` (the Dict's keys in order,
+each array row-major), so SuperSuit's wrappers and MARL libraries that take Box spaces work.
+
+**Human rewards and exits** are pluggable: ``human_reward(simulator) -> (n,) floats`` and
+``human_exit(simulator) -> (n,) bools``, called after each step on the episode's ``n`` humans.
+A human whose exit is True is terminated (it leaves ``agents``) and stands still from then on,
+an obstacle for the others. :func:`goal_reward` (+1 on reaching a goal) and :func:`exit_at_goal`
+are the documented examples; by default humans get 0 and stay until the episode ends.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Mapping
+
+import numpy as np
+from gymnasium import spaces
+
+from crowdnav.simulator import Simulator
+
+STATE_COLUMNS = ("x", "y", "vx", "vy", "gx", "gy", "radius", "active")
+
+HumanReward = Callable[[Simulator], np.ndarray]
+"""``(simulator) -> (n_humans,)`` rewards of the episode's humans after a step."""
+HumanExit = Callable[[Simulator], np.ndarray]
+"""``(simulator) -> (n_humans,)`` booleans: True terminates that human (it stands still from then on)."""
+
+
+def state_space(max_humans: int) -> spaces.Box:
+    """The Box of :func:`global_state` (unbounded: an open world's robot may step past its edge)."""
+    low = np.full((1 + max_humans, len(STATE_COLUMNS)), -np.inf, dtype=np.float32)
+    high = np.full_like(low, np.inf)
+    low[:, 6:] = 0.0
+    high[:, 7] = 1.0
+    return spaces.Box(low.reshape(-1), high.reshape(-1), dtype=np.float32)
+
+
+def global_state(sim: Simulator, max_humans: int) -> np.ndarray:
+    """The state table of the module docstring, flattened row by row."""
+    n = sim.n_humans
+    table = np.zeros((1 + max_humans, len(STATE_COLUMNS)), dtype=np.float32)
+    rows = table[: 1 + n]
+    rows[:, 0], rows[:, 1] = sim.positions.real, sim.positions.imag
+    rows[:, 2], rows[:, 3] = sim.velocities.real, sim.velocities.imag
+    goals = np.concatenate([[sim.robot_goal], sim.human_goals])
+    rows[:, 4], rows[:, 5] = goals.real, goals.imag
+    rows[:, 6] = sim.radii[: 1 + n]
+    rows[:, 7] = 1.0
+    return table.reshape(-1)
+
+
+def goal_reward(sim: Simulator) -> np.ndarray:
+    """Example human reward: +1 on the step a human reaches its goal, 0 otherwise."""
+    return sim.human_arrived.astype(np.float64)
+
+
+def exit_at_goal(sim: Simulator) -> np.ndarray:
+    """Example human exit: a human leaves the episode when it reaches its goal."""
+    return sim.human_arrived.copy()
+
+
+def flat_spaces(observation_spaces: Mapping[str, spaces.Space]) -> dict[str, spaces.Box]:
+    """Each agent's Dict space as the flat Box of :func:`gymnasium.spaces.flatten_space`."""
+    return {agent: spaces.flatten_space(space) for agent, space in observation_spaces.items()}
+
+
+def flatten_batch(space: spaces.Dict, batch: Mapping[str, np.ndarray], n: int) -> np.ndarray:
+    """(n, flat size) rows of ``n`` agents' Dict observations stacked per key, in flatten_space order.
+
+    One concatenation for all humans instead of one ``spaces.flatten`` call per human.
+    """
+    return np.concatenate([np.asarray(batch[key], dtype=np.float32).reshape(n, -1) for key in space.spaces], axis=1)
