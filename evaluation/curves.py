@@ -5,7 +5,8 @@ episode) and each outcome's rate is a sliding mean over the last ``window`` test
 (fewer at the start). Test episode ``j`` (of ``m``) of the evaluation after ``N_k`` training
 episodes is placed at ``x = N_{k-1} + (j + 1) / m * (N_k - N_{k-1})`` (``N_{-1} = 0``), so the
 curve advances one test episode at a time and reaches ``N_k`` with that evaluation's last
-episode. The figure shows the mean over seeds and a band of one standard deviation. Scripted
+episode. The figure shows the mean over seeds and a band, clipped to [0, 1]: one standard
+deviation (the paper's style, the default) or a 95% bootstrap interval of the mean. Scripted
 baselines (:mod:`evaluation.baselines`) are grey horizontal lines at their rate on the same
 test episodes. One panel per outcome of :data:`crowdnav.simulator.OUTCOMES`; results written
 before ``out_of_bounds`` existed draw a zero rate there.
@@ -47,23 +48,64 @@ def rate_curves(tests: Any, window: int) -> Any:
     return pd.concat(frames, ignore_index=True)
 
 
-def curves_figure(tests: Any, window: int, title: str | None = None) -> Any:
-    """A matplotlib Figure: one panel per outcome, one line per configuration (mean over seeds, +-1 std band)."""
+BANDS = ("std", "ci")
+"""Band around the mean over seeds: ``std`` (one standard deviation, the paper's style) or ``ci``
+(95% percentile bootstrap interval of the mean over seeds)."""
+CI_RESAMPLES = 1000
+# Line style and marker per configuration, so overlapping lines stay apart without colour; the
+# baselines' dashed and dotted styles are kept for the baselines.
+STYLES = [("-", "o"), ("-.", "s"), ("-", "^"), ("-.", "D"), ("-", "v"), ("-.", "P"), ("-", "X"), ("-.", "*")]
+
+
+def seed_band(rates: Any, band: str = "std", seed: int = 0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(mean, low, high) over the columns (seeds) of ``rates`` (x by seed), the band clipped to [0, 1]."""
+    values = np.asarray(rates, dtype=float)
+    mean = values.mean(axis=1)
+    if values.shape[1] < 2:
+        low = high = mean
+    elif band == "std":
+        spread = values.std(axis=1, ddof=1)
+        low, high = mean - spread, mean + spread
+    elif band == "ci":
+        pick = np.random.default_rng(seed).integers(0, values.shape[1], size=(CI_RESAMPLES, values.shape[1]))
+        means = values[:, pick].mean(axis=2)  # (x, resamples)
+        low, high = np.percentile(means, [2.5, 97.5], axis=1)
+    else:
+        raise ValueError(f"unknown band {band!r}; expected one of {', '.join(BANDS)}")
+    # rates live in [0, 1]: a band beyond them would show impossible rates
+    return mean, np.clip(low, 0.0, 1.0), np.clip(high, 0.0, 1.0)
+
+
+def curves_figure(tests: Any, window: int, title: str | None = None, band: str = "std") -> Any:
+    """A matplotlib Figure: one panel per outcome, one line per configuration (mean over seeds and a band).
+
+    ``band``: see :data:`BANDS`. Lines differ by colour, style and a marker at each evaluation;
+    the legend sits below the panels, where it hides no curve.
+    """
     import seaborn as sns
     from crowdnav.evaluation.baselines import is_baseline
     from matplotlib.figure import Figure
 
+    if band not in BANDS:
+        raise ValueError(f"unknown band {band!r}; expected one of {', '.join(BANDS)}")
     scripted = tests["configuration"].map(is_baseline)
     baselines, tests = tests[scripted], tests[~scripted]
     curves = rate_curves(tests, window) if len(tests) else None
     labels = list(dict.fromkeys(tests.sort_values(["configuration"])["label"]))
-    figure = Figure(figsize=(4.2 * len(OUTCOMES), 3.6), layout="constrained")
+    evaluation_points = set(tests["training_episodes"].unique())
+    figure = Figure(figsize=(4.2 * len(OUTCOMES), 4.2), layout="constrained")
     axes = figure.subplots(1, len(OUTCOMES), sharex=True, sharey=True)
     palette = dict(zip(labels, sns.color_palette("colorblind", len(labels)), strict=True))
     for axis, outcome in zip(axes, OUTCOMES, strict=True):
-        if curves is not None:
-            sns.lineplot(data=curves[curves["metric"] == outcome], x="training_episodes", y="rate", hue="label", hue_order=labels,
-                         palette=palette, estimator="mean", errorbar="sd", ax=axis, legend=axis is axes[-1])
+        for k, label in enumerate(labels if curves is not None else []):
+            rows = curves[(curves["metric"] == outcome) & (curves["label"] == label)]
+            rates = rows.pivot_table(index="training_episodes", columns="seed", values="rate", aggfunc="mean")
+            mean, low, high = seed_band(rates.to_numpy(), band)
+            x = rates.index.to_numpy()
+            linestyle, marker = STYLES[k % len(STYLES)]
+            marks = [i for i, value in enumerate(x) if value in evaluation_points]
+            axis.plot(x, mean, color=palette[label], linestyle=linestyle, marker=marker, markevery=marks, markersize=4, linewidth=1.4, label=label)
+            axis.fill_between(x, low, high, color=palette[label], alpha=0.18, linewidth=0)
         # a scripted baseline plays the same test episodes at every evaluation: one rate, a horizontal line
         for label, frame in baselines.groupby("label", sort=True):
             axis.axhline(float((frame["outcome"] == outcome).mean()), label=label, linewidth=1.2, **_baseline_style(frame, tests, palette))
@@ -72,8 +114,11 @@ def curves_figure(tests: Any, window: int, title: str | None = None) -> Any:
         axis.set_ylabel(f"rate (sliding window of {window} test episodes)" if axis is axes[0] else "")
         axis.set_ylim(-0.02, 1.02)
         axis.grid(alpha=0.3)
-    if len(labels) or len(baselines):
-        axes[-1].legend(title=None, loc="best", fontsize="small")
+    handles, names = axes[0].get_legend_handles_labels()
+    if handles:
+        shown = "mean over seeds, band: " + ("one standard deviation" if band == "std" else "95% bootstrap CI of the mean")
+        figure.legend(handles, names, loc="outside lower center", ncols=min(len(handles), 5), fontsize="small", frameon=False, title=shown,
+                      title_fontsize="small")
     if title:
         figure.suptitle(title)
     return figure
@@ -90,7 +135,7 @@ def _baseline_style(baseline: Any, tests: Any, palette: dict) -> dict[str, Any]:
     return {"linestyle": linestyle, "color": "0.35"}
 
 
-def plot_curves(paths: Iterable[str | Path], out: str | Path | None = None) -> list[Path]:
+def plot_curves(paths: Iterable[str | Path], out: str | Path | None = None, band: str = "std") -> list[Path]:
     """One figure (PNG and PDF) per experiment found below ``paths``; returns the files written.
 
     Written to ``out`` + ``.png``/``.pdf`` if given (one experiment only), else to
@@ -109,7 +154,7 @@ def plot_curves(paths: Iterable[str | Path], out: str | Path | None = None) -> l
         raise ResultsError(f"--out names one figure, but the results hold {len(experiments)} experiments: {', '.join(experiments)}")
     written = []
     for experiment in experiments:
-        figure = curves_figure(tests[tests["experiment"] == experiment], windows[experiment], title=experiment)
+        figure = curves_figure(tests[tests["experiment"] == experiment], windows[experiment], title=experiment, band=band)
         stem = Path(out) if out is not None else folders.get(experiment, Path(paths[0])) / "curves"
         stem.parent.mkdir(parents=True, exist_ok=True)
         for suffix in (".png", ".pdf"):

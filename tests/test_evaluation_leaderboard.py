@@ -144,3 +144,34 @@ def test_plot_and_leaderboard_commands_write_their_files(tmp_path_factory, capsy
     for name in ("curves.png", "curves.pdf", "leaderboard.md", "leaderboard.csv"):
         assert f"wrote {results / name}" in out and (results / name).stat().st_size > 0
     assert (results / "curves.png").read_bytes().startswith(b"\x89PNG")
+
+
+def test_seed_bands_stay_inside_zero_one_for_std_and_bootstrap_ci():
+    from crowdnav.evaluation.curves import seed_band
+
+    rates = np.array([[0.0, 0.0, 1.0], [1.0, 1.0, 0.0], [0.5, 0.5, 0.5]])  # x by seed
+    for band in ("std", "ci"):
+        mean, low, high = seed_band(rates, band)
+        np.testing.assert_allclose(mean, [1 / 3, 2 / 3, 0.5])
+        assert (low >= 0).all() and (high <= 1).all() and (low <= mean).all() and (mean <= high).all()
+    _, low, high = seed_band(rates, "std")
+    assert low[0] == 0.0 and high[1] == 1.0  # mean -+ std would leave [0, 1] here: clipped
+    _, low, high = seed_band(rates, "ci")
+    assert low[2] == high[2] == 0.5  # identical seeds: no uncertainty
+    with pytest.raises(ValueError, match="unknown band"):
+        seed_band(rates, "sem")
+
+
+def test_curves_differ_by_style_and_marker_and_the_legend_sits_outside_the_panels(tmp_path_factory):
+    from crowdnav.evaluation.storage import load_results
+
+    tests, _, _ = load_results([tiny_results(tmp_path_factory)])
+    configurations = tests.loc[~tests["configuration"].str.startswith("baseline_"), "label"].nunique()
+    for band in ("std", "ci"):
+        figure = curves_figure(tests, window=2, band=band)
+        for axis in figure.axes:
+            marked = [line for line in axis.get_lines() if line.get_marker() not in (None, "None", "")]
+            assert len({(line.get_linestyle(), line.get_marker()) for line in marked}) == len(marked) == configurations >= 2
+            assert axis.get_legend() is None
+        expected = {"std": "one standard deviation", "ci": "95% bootstrap CI of the mean"}[band]
+        assert len(figure.legends) == 1 and figure.legends[0].get_title().get_text().endswith(expected)

@@ -48,11 +48,14 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
     plot = subparsers.add_parser(
         "plot", help="draw the success / collision / out_of_bounds / truncated curves of a results folder",
-        description="One figure per experiment (PNG and PDF): the rates along training, mean and std over seeds "
-                    "of a sliding window of test episodes. Written next to experiment.yaml unless --out is given.",
+        description="One figure per experiment (PNG and PDF): the rates along training, mean over seeds and a band "
+                    "(clipped to [0, 1]) of a sliding window of test episodes. Written next to experiment.yaml unless --out is given.",
     )
     plot.add_argument("results", metavar="RESULTS_DIR", help="a folder written by `crowdnav benchmark`")
     plot.add_argument("--out", metavar="PATH", help="output path without extension (one experiment only)")
+    plot.add_argument("--band", choices=["std", "ci"], default="std",
+                      help="band around the mean over seeds: one standard deviation (the paper's style) or the 95%% bootstrap CI "
+                           "of the mean (default: %(default)s)")
     plot.set_defaults(handler=plot_command)
 
     board = subparsers.add_parser(
@@ -127,7 +130,7 @@ def plot_command(args: argparse.Namespace) -> int:
     from crowdnav.evaluation.storage import ResultsError
 
     try:
-        paths = plot_curves([Path(args.results)], args.out)
+        paths = plot_curves([Path(args.results)], args.out, band=args.band)
     except ResultsError as error:
         raise CliError(str(error)) from None
     for path in paths:
