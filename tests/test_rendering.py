@@ -73,3 +73,22 @@ def test_a_five_step_episode_written_to_video_reads_back_with_its_frames_and_siz
 def test_unknown_video_format_is_a_clear_error(tmp_path):
     with pytest.raises(ValueError, match="unsupported video format"):
         write_video(_five_frames(), tmp_path / "episode.avi")
+
+
+@pytest.mark.parametrize("name", ["room_furniture", "corridor", "cafe"])
+def test_panel_beside_or_below_the_map_never_covers_it_and_the_goal_is_drawn_on_top(name):
+    sim = Simulator(name)
+    sim.reset(seed=0)
+    renderer = Renderer(sim)
+    renderer.record()
+    grid = np.zeros((60, 60))
+    lidar = (np.linspace(-np.pi, np.pi, 90, endpoint=False), np.full(90, 30.0), 30.0)  # rays across the whole map
+    frame = renderer.frame(Overlays(leog=grid, lidar=lidar, closest_point=0.5 + 0j), hud="x" * 500)
+    assert not renderer._map_rect.colliderect(renderer._panel_rect)
+    assert renderer._map_rect.union(renderer._panel_rect).height + renderer._bar == frame.shape[0]
+    x, y = renderer.to_pixels(sim.robot_goal).astype(int)
+    assert tuple(frame[y, x]) in {renderer.palette.goal, renderer.palette.goal_fill}
+    if name == "corridor":
+        assert renderer._panel_rect.top >= renderer._map_rect.bottom  # a wide world: the panel goes below
+    else:
+        assert renderer._panel_rect.left >= renderer._map_rect.right

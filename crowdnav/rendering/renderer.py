@@ -1,9 +1,11 @@
 """Draw a simulator state with pygame: to an ``rgb_array`` frame, or into a window.
 
-What is drawn: world bounds, walls and furniture; humans as discs with a heading tick and a short
-trail; the robot with its heading, its goal and its path so far; optional overlays (LIDAR rays,
-the LEOG as an inset, the closest-obstacle point, the humans' goals); a one-line heads-up text.
-The scale is chosen from the world bounds so every scenario fits the frame.
+Layout: a status bar on top (one line of heads-up text, cut to fit), the map below it, and a
+panel beside it (below it for wide worlds such as corridors) holding the LEOG inset, a legend of
+what is drawn and a scale bar in metres, so nothing covers the map. On the map: world bounds, walls and furniture; humans as discs with
+a heading tick and a short trail; the robot with its heading and its path so far; its goal as a
+filled disc of the goal radius with a cross; optional overlays (LIDAR rays, the closest-obstacle
+point, the humans' goals). The map's scale is chosen from the world bounds so every scenario fits.
 
 Frames are drawn off-screen on a plain pygame Surface, so ``rgb_array`` needs no display; a
 window is opened only by :meth:`Renderer.show`.
@@ -38,6 +40,8 @@ class Palette:
     robot: tuple[int, int, int] = (210, 60, 50)
     robot_path: tuple[int, int, int] = (235, 140, 130)
     goal: tuple[int, int, int] = (30, 150, 80)
+    goal_fill: tuple[int, int, int] = (190, 232, 200)
+    panel: tuple[int, int, int] = (236, 236, 232)
     lidar: tuple[int, int, int] = (235, 140, 20)
     lidar_ray: tuple[int, int, int] = (250, 225, 175)
     closest: tuple[int, int, int] = (190, 40, 190)
@@ -64,7 +68,7 @@ class RenderOptions:
     """Which overlays the environments add when rendering."""
 
     max_side: int = 640
-    """Longest side of the frame in pixels (rounded to a multiple of 16 for video codecs)."""
+    """Longest side of the frame in pixels: status bar, map and side panel (sizes are multiples of 16 for video codecs)."""
     lidar: bool = True
     """Draw the LIDAR rays."""
     leog: bool = True
@@ -94,11 +98,33 @@ class Renderer:
         margin = 0.4 + (world.boundary_thickness if world.boundary_walls else 0.0)
         self._x0, self._y1 = world.min[0] - margin, world.max[1] + margin
         span_x, span_y = world.max[0] - world.min[0] + 2 * margin, world.max[1] - world.min[1] + 2 * margin
-        scale = self.options.max_side / max(span_x, span_y)
-        self.size = (_multiple_of_16(span_x * scale), _multiple_of_16(span_y * scale))
-        self.scale = min(self.size[0] / span_x, self.size[1] / span_y)
+        side = self.options.max_side
         pygame.font.init()
-        self._font = pygame.font.Font(None, max(14, self.size[1] // 36))
+        self._font = pygame.font.Font(None, max(14, side // 36))
+        self._row = self._font.get_linesize() + 4  # legend row height
+        self._bar = self._font.get_linesize() + 8  # status bar height
+        # Wide worlds (corridors) get the panel below the map, the others beside it.
+        self._below = span_x > 1.6 * span_y
+        if self._below:
+            inset, panel_h = _floor_16(0.22 * side), 0
+            panel_h = inset + self._row + 24
+            scale = min(side / span_x, (side - self._bar - panel_h) / span_y)
+        else:
+            panel_w = _multiple_of_16(max(176, 0.28 * side))
+            inset = panel_w - 24
+            # the map takes what the bar and the panel leave of a max_side x max_side frame
+            scale = min((side - panel_w) / span_x, (side - self._bar) / span_y)
+        map_w, map_h = _floor_16(span_x * scale), _floor_16(span_y * scale)
+        self.scale = min(map_w / span_x, map_h / span_y)
+        self._map_rect = pygame.Rect(0, self._bar, map_w, map_h)
+        self._inset_side = inset
+        if self._below:
+            self.size = (map_w, _ceil_16(self._bar + map_h + panel_h))
+            self._panel_rect = pygame.Rect(0, self._bar + map_h, map_w, self.size[1] - self._bar - map_h)
+        else:
+            tallest = 8 + inset + self._row + 10 + 10 * self._row + 3 * self._row  # inset, every legend entry, scale bar
+            self.size = (map_w + panel_w, _ceil_16(self._bar + max(map_h, tallest)))
+            self._panel_rect = pygame.Rect(map_w, self._bar, panel_w, self.size[1] - self._bar)
         self._static = self._draw_static()
         self._history = _History(humans=deque(maxlen=self.options.trail_length))
         self._window: pygame.Surface | None = None
@@ -141,13 +167,15 @@ class Renderer:
     def to_pixels(self, points: np.ndarray | complex) -> np.ndarray:
         """World points (complex) -> (..., 2) pixel coordinates (x right, y down)."""
         z = np.asarray(points, dtype=complex)
-        return np.stack([(z.real - self._x0) * self.scale, (self._y1 - z.imag) * self.scale], axis=-1)
+        return np.stack([(z.real - self._x0) * self.scale, self._bar + (self._y1 - z.imag) * self.scale], axis=-1)
 
     # ---------------------------------------------------------------- drawing
 
     def _draw_static(self) -> pygame.Surface:
         surface = pygame.Surface(self.size)
-        surface.fill(self.palette.outside)
+        surface.fill(self.palette.panel)
+        surface.fill(self.palette.outside, self._map_rect)
+        surface.set_clip(self._map_rect)
         world = self.sim.scenario.world
         corners = self.to_pixels(np.array([complex(*world.min), complex(world.max[0], world.min[1]),
                                            complex(*world.max), complex(world.min[0], world.max[1])]))
@@ -160,16 +188,18 @@ class Renderer:
                 pygame.draw.polygon(surface, colour, self.to_pixels(xy[:, 0] + 1j * xy[:, 1]))
         for centre, radius in zip(obstacles.disc_center, obstacles.disc_radius, strict=True):
             pygame.draw.circle(surface, self.palette.furniture, self.to_pixels(centre), radius * self.scale)
+        surface.set_clip(None)
+        edge = (self._panel_rect.topright if self._below else self._panel_rect.bottomleft)
+        pygame.draw.line(surface, self.palette.outline, self._panel_rect.topleft, edge, 1)
+        self._draw_scale_bar(surface)
         return surface
 
     def _draw(self, overlays: Overlays, hud: str) -> pygame.Surface:
         sim, palette, scale = self.sim, self.palette, self.scale
         surface = self._static.copy()
+        surface.set_clip(self._map_rect)  # nothing drawn on the map spills into the bar or the panel
         robot = sim.robot_position
         heading = sim.robot_heading
-        goal_radius = sim.scenario.robot.goal_radius
-        pygame.draw.circle(surface, palette.goal, self.to_pixels(sim.robot_goal), max(3, goal_radius * scale), 2)
-        _cross(surface, palette.goal, self.to_pixels(sim.robot_goal), 5)
         if overlays.human_goals:
             for goal in self.to_pixels(sim.human_goals):
                 _cross(surface, palette.human_goal, goal, 4)
@@ -188,6 +218,11 @@ class Renderer:
                 pygame.draw.line(surface, palette.lidar_ray, start, end, 1)
             for end in ends[ranges < max_range]:  # beams that hit something
                 pygame.draw.circle(surface, palette.lidar, end, 2)
+        # the goal above the LIDAR rays and trails, below the agents
+        goal, goal_px = self.to_pixels(sim.robot_goal), max(6.0, sim.scenario.robot.goal_radius * scale)
+        pygame.draw.circle(surface, palette.goal_fill, goal, goal_px)
+        pygame.draw.circle(surface, palette.goal, goal, goal_px, 3)
+        _cross(surface, palette.goal, goal, max(5.0, goal_px * 0.6))
         radius = sim.scenario.humans.radius * scale
         for position, velocity in zip(self.to_pixels(sim.human_positions), sim.human_velocities, strict=True):
             pygame.draw.circle(surface, palette.human, position, radius)
@@ -204,29 +239,98 @@ class Renderer:
             point = self.to_pixels(robot + overlays.closest_point * complex(math.cos(heading), math.sin(heading)))
             pygame.draw.line(surface, palette.closest, centre, point, 2)
             pygame.draw.circle(surface, palette.closest, point, 4)
+        surface.set_clip(None)
+        left, top = self._panel_rect.left + 12, self._panel_rect.top + 8
         if overlays.leog is not None:
-            self._draw_inset(surface, np.asarray(overlays.leog))
+            right, bottom = self._draw_inset(surface, np.asarray(overlays.leog), left, top)
+            left, top = (right + 24, top) if self._below else (left, bottom)
+        self._draw_legend(surface, overlays, left, top)
         if hud:
-            surface.blit(self._font.render(hud, True, palette.text), (6, 4))
+            surface.blit(self._font.render(_fit(self._font, hud, self.size[0] - 12), True, palette.text), (6, 4))
         return surface
 
-    def _draw_inset(self, surface: pygame.Surface, grid: np.ndarray) -> None:
+    def _draw_inset(self, surface: pygame.Surface, grid: np.ndarray, left: int, top: int) -> tuple[int, int]:
+        """The LEOG in the panel with its caption; returns its right edge and the y below the caption."""
         grid = grid.reshape(grid.shape[-2], grid.shape[-1])
-        side = max(48, self.size[1] // 4)
+        side = self._inset_side
         pixels = np.where(grid > 0, 30, 235).astype(np.uint8)
         image = pygame.surfarray.make_surface(np.repeat(pixels.T[:, :, None], 3, axis=2))
-        image = pygame.transform.scale(image, (side, side))
-        position = (self.size[0] - side - 6, 6)
-        surface.blit(image, position)
-        pygame.draw.rect(surface, self.palette.outline, (*position, side, side), 1)
-        cx, cy = position[0] + side / 2, position[1] + side / 2  # the robot sits at the centre, facing up
+        surface.blit(pygame.transform.scale(image, (side, side)), (left, top))
+        pygame.draw.rect(surface, self.palette.outline, (left, top, side, side), 1)
+        cx, cy = left + side / 2, top + side / 2  # the robot sits at the centre, facing up
         pygame.draw.polygon(surface, self.palette.robot, [(cx, cy - 5), (cx - 4, cy + 4), (cx + 4, cy + 4)])
+        caption = self._font.render(_fit(self._font, "LEOG, heading up", side), True, self.palette.text)
+        surface.blit(caption, (left, top + side + 3))
+        return left + side, top + side + caption.get_height() + 10
+
+    def _legend_entries(self, overlays: Overlays) -> list[tuple[str, str, tuple[int, int, int]]]:
+        palette = self.palette
+        entries = [("disc", "robot", palette.robot), ("goal", "robot goal", palette.goal), ("disc", "human", palette.human)]
+        if overlays.human_goals:
+            entries.append(("cross", "human goal", palette.human_goal))
+        entries += [("line", "robot path", palette.robot_path), ("line", "human trail", palette.human_trail),
+                    ("box", "wall", palette.wall), ("box", "furniture", palette.furniture)]
+        if overlays.lidar is not None:
+            entries.append(("line", "LIDAR beam, hit", palette.lidar))
+        if overlays.closest_point is not None:
+            entries.append(("line", "closest obstacle", palette.closest))
+        return entries
+
+    def _draw_legend(self, surface: pygame.Surface, overlays: Overlays, left: int, top: int) -> None:
+        """One entry per row from (left, top); below the map, in columns that fit the panel's height."""
+        row, column_width = self._row, 150
+        rows = max(1, (self._panel_rect.bottom - top - 8) // row) if self._below else 99
+        for k, (kind, label, colour) in enumerate(self._legend_entries(overlays)):
+            x, cy = left + (k // rows) * column_width, top + (k % rows) * row + row // 2
+            if kind == "disc":
+                pygame.draw.circle(surface, colour, (x + 8, cy), 7)
+                pygame.draw.circle(surface, self.palette.outline, (x + 8, cy), 7, 1)
+            elif kind == "goal":
+                pygame.draw.circle(surface, self.palette.goal_fill, (x + 8, cy), 7)
+                pygame.draw.circle(surface, colour, (x + 8, cy), 7, 2)
+            elif kind == "cross":
+                _cross(surface, colour, np.array([x + 8, cy]), 5)
+            elif kind == "box":
+                pygame.draw.rect(surface, colour, (x + 1, cy - 6, 14, 12))
+            else:
+                pygame.draw.line(surface, colour, (x, cy), (x + 16, cy), 3)
+            surface.blit(self._font.render(label, True, self.palette.text), (x + 24, cy - self._font.get_height() // 2))
+
+    def _draw_scale_bar(self, surface: pygame.Surface) -> None:
+        """A bar of a round number of metres at the panel's bottom (right end below the map)."""
+        room = 160 if self._below else self._panel_rect.width - 24
+        metres = max((m for m in (0.5, 1, 2, 5, 10, 20, 50, 100) if m * self.scale <= room), default=0.5)
+        length = metres * self.scale
+        x = self.size[0] - 12 - length if self._below else self._panel_rect.left + 12
+        y = self.size[1] - 14
+        pygame.draw.line(surface, self.palette.outline, (x, y), (x + length, y), 3)
+        for end in (x, x + length):
+            pygame.draw.line(surface, self.palette.outline, (end, y - 5), (end, y + 5), 2)
+        label = self._font.render(f"{metres:g} m", True, self.palette.text)
+        surface.blit(label, (x, y - 8 - label.get_height()))
+
+
+def _fit(font: pygame.font.Font, text: str, width: int) -> str:
+    """``text`` cut (with an ellipsis) to fit ``width`` pixels."""
+    if font.size(text)[0] <= width:
+        return text
+    while text and font.size(text + "...")[0] > width:
+        text = text[:-1]
+    return text + "..."
 
 
 def _cross(surface: pygame.Surface, colour, centre: np.ndarray, half: float) -> None:
     x, y = centre
     pygame.draw.line(surface, colour, (x - half, y - half), (x + half, y + half), 2)
     pygame.draw.line(surface, colour, (x - half, y + half), (x + half, y - half), 2)
+
+
+def _ceil_16(pixels: float) -> int:
+    return int(math.ceil(pixels / 16)) * 16
+
+
+def _floor_16(pixels: float) -> int:
+    return max(16, int(pixels // 16) * 16)
 
 
 def _multiple_of_16(pixels: float) -> int:

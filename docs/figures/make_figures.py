@@ -2,8 +2,9 @@
 
     python docs/figures/make_figures.py
 
-Writes docs/figures/room_furniture_lidar.png: the furniture room after a few steps of the
-social-force robot, with the LIDAR rays, the closest-obstacle point and the LEOG inset.
+Writes docs/figures/room_furniture_lidar.png (the README's picture), cafe.png and corridor.png
+(docs/rendering.md): a few steps of the social-force robot, with the LIDAR rays, the
+closest-obstacle point, the LEOG inset, the legend and the scale bar.
 """
 
 from __future__ import annotations
@@ -18,9 +19,9 @@ from crowdnav.policies import SocialForceRobot
 HERE = Path(__file__).parent
 
 
-def room_furniture_lidar(path: Path, seed: int = 3, steps: int = 20) -> Path:
+def frame(scenario: str, path: Path, seed: int = 3, steps: int = 20) -> Path:
     env = CrowdNavEnv(
-        "room_furniture",
+        scenario,
         modalities=["goal", "lidar", "leog", "closest_obstacle"],
         render_mode="rgb_array",
         render_options={"human_goals": True},
@@ -37,4 +38,6 @@ def room_furniture_lidar(path: Path, seed: int = 3, steps: int = 20) -> Path:
 
 
 if __name__ == "__main__":
-    print(f"wrote {room_furniture_lidar(HERE / 'room_furniture_lidar.png')}")
+    print(f"wrote {frame('room_furniture', HERE / 'room_furniture_lidar.png')}")
+    print(f"wrote {frame('cafe', HERE / 'cafe.png', seed=1, steps=15)}")
+    print(f"wrote {frame('corridor', HERE / 'corridor.png', seed=1, steps=10)}")
