@@ -34,14 +34,17 @@ class HeldOutEpisodes:
         self.seeds = list(seeds)
         self.envs = [CrowdNavEnv(**self.env_options) for _ in self.seeds]
 
-    def run(self, policy: BatchPolicy | ScriptedPolicy, *, privileged: bool = False) -> list[dict[str, Any]]:
+    def run(self, policy: BatchPolicy | ScriptedPolicy, *, privileged: bool = False, record: bool = False) -> list[dict[str, Any]]:
         """Play one episode per seed with ``policy``; one dict per episode (seed order): outcome, return, metrics.
 
         ``privileged``: ``policy`` is a scripted robot policy (:mod:`crowdnav.policies`) called
-        with each running episode's simulator instead of the stacked observations.
+        with each running episode's simulator instead of the stacked observations. ``record``:
+        each dict also holds ``frames``, the episode's states step by step (see
+        :mod:`crowdnav.evaluation.trajectories`).
         """
         observations = [env.reset(seed=seed)[0] for env, seed in zip(self.envs, self.seeds, strict=True)]
         positions = [[env.simulator.positions.copy()] for env in self.envs]
+        frames = [[_state(env.simulator)] for env in self.envs] if record else None
         forces: list[list[float]] = [[] for _ in self.envs]
         returns = [0.0] * len(self.envs)
         ends: list[dict[str, Any] | None] = [None] * len(self.envs)
@@ -58,6 +61,8 @@ class HeldOutEpisodes:
                 observations[i], reward, terminated, truncated, info = env.step(action)
                 sim = env.simulator
                 positions[i].append(sim.positions.copy())  # the simulator updates its arrays in place
+                if frames is not None:
+                    frames[i].append(_state(sim))
                 forces[i].append(abs(complex(sim.robot_social_force)))
                 returns[i] += float(reward)
                 if terminated or truncated:
@@ -65,7 +70,11 @@ class HeldOutEpisodes:
                 else:
                     still.append(i)
             running = still
-        return [self._episode(i, positions[i], forces[i], returns[i], ends[i]) for i in range(len(self.envs))]
+        episodes = [self._episode(i, positions[i], forces[i], returns[i], ends[i]) for i in range(len(self.envs))]
+        if frames is not None:
+            for episode, states, env in zip(episodes, frames, self.envs, strict=True):
+                episode["frames"] = {"dt": float(env.simulator.dt), **{key: np.stack([s[key] for s in states]) for key in states[0]}}
+        return episodes
 
     def _episode(self, i: int, positions: list[np.ndarray], forces: list[float], total: float, info: dict[str, Any]) -> dict[str, Any]:
         sim = self.envs[i].simulator
@@ -82,3 +91,9 @@ class HeldOutEpisodes:
     def close(self) -> None:
         for env in self.envs:
             env.close()
+
+
+def _state(sim: Any) -> dict[str, np.ndarray]:
+    """Positions, velocities and goals of the robot (index 0) and the humans, copied (complex, (n + 1,))."""
+    return {"positions": sim.positions.copy(), "velocities": sim.velocities.copy(),
+            "goals": np.concatenate([[sim.robot_goal], sim.human_goals])}
