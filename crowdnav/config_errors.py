@@ -265,6 +265,8 @@ def _base(annotation: Any) -> Any:
 
 def _number_words(field: FieldInfo | None) -> str:
     base = _base(field.annotation) if field is not None else None
+    if typing.get_origin(base) is list and typing.get_args(base):  # an item of a list field
+        base = _base(typing.get_args(base)[0])
     return {int: "an integer", float: "a number"}.get(base, "a value")
 
 
