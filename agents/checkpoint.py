@@ -102,7 +102,9 @@ def load_model(path: str | Path, env: Any = None, device: str = "cpu") -> BaseAl
     info = read_policy_info(folder)
     algo = ALGORITHMS.get(info["algo"])
     if algo is None:
-        raise ValueError(f"{folder}: unknown algorithm {info['algo']!r}; known: {', '.join(ALGORITHMS)}")
+        from crowdnav.registry import unknown_name_message
+
+        raise ValueError(f"{folder}: {unknown_name_message('algorithm', info['algo'], ALGORITHMS)}")
     return algo.load(folder / MODEL_FILE, env=env, device=device)
 
 

@@ -13,9 +13,10 @@ from pathlib import Path
 from typing import Any
 
 from crowdnav.cli.common import CliError, add_reward_options, reward_options
+from crowdnav.registry import ALGORITHM_NAMES, ENCODER_MODES
 
-ALGOS = ("sac", "td3", "ddpg", "a2c", "ppo")
-MODES = ("frozen", "finetune", "scratch")
+ALGOS = ALGORITHM_NAMES  # the registry's names (also the config's and the factory's)
+MODES = tuple(ENCODER_MODES)
 
 
 def register(groups: argparse._SubParsersAction) -> None:
@@ -27,7 +28,7 @@ def register(groups: argparse._SubParsersAction) -> None:
 
 def register_train(groups: argparse._SubParsersAction) -> None:
     parser = groups.add_parser(
-        "train", help="train an RL agent (SAC, TD3, DDPG, A2C, PPO) on a scenario",
+        "train", help=f"train an RL agent ({', '.join(name.upper() for name in ALGOS)}) on a scenario",
         description="Train an agent from a YAML config; the flags override the config's fields. "
                     "Outputs (checkpoint, snapshots, episodes.csv) go to --out.",
     )

@@ -115,7 +115,7 @@ class MultiModalExtractor(BaseFeaturesExtractor):
             raise TypeError(f"MultiModalExtractor needs a Dict observation space, got {observation_space}")
         if leog_mode not in ENCODER_MODES:
             raise ValueError(f"leog_mode must be one of {ENCODER_MODES}, got {leog_mode!r}")
-        settings = {**ExtractorConfig().__dict__, **(config or {})}
+        settings = {**ExtractorConfig().model_dump(), **(config or {})}
         branches, sizes, leog_encoders = {}, {}, []
         for key, space in observation_space.spaces.items():
             if not isinstance(space, spaces.Box):

@@ -7,7 +7,6 @@ algorithm, add it to :data:`ALGORITHMS` (and its defaults to :data:`ALGORITHM_DE
 
 from __future__ import annotations
 
-import dataclasses
 from typing import Any
 
 import gymnasium as gym
@@ -23,13 +22,16 @@ from stable_baselines3.common.base_class import BaseAlgorithm
 from stable_baselines3.common.monitor import Monitor
 from stable_baselines3.common.noise import NormalActionNoise
 
+from crowdnav.registry import OFF_POLICY_ALGORITHMS
+
 ALGORITHMS: dict[str, type[BaseAlgorithm]] = {"sac": CrowdNavSAC, "td3": CrowdNavTD3, "ddpg": CrowdNavDDPG, "a2c": A2C, "ppo": PPO}
-"""Config name -> algorithm class: SB3's, with the same updates at less cost per step for SAC/TD3/DDPG (agents.algorithms)."""
+"""Config name (those of :data:`crowdnav.registry.ALGORITHMS`) -> algorithm class: SB3's,
+with the same updates at less cost per step for SAC/TD3/DDPG (agents.algorithms)."""
 
 SB3_ALGORITHMS: dict[str, type[BaseAlgorithm]] = {"sac": SAC, "td3": TD3, "ddpg": DDPG, "a2c": A2C, "ppo": PPO}
 """Config name -> Stable-Baselines3's own class (``make_model(..., reference=True)``: the benchmark's baseline)."""
 
-OFF_POLICY = ("sac", "td3", "ddpg")
+OFF_POLICY = OFF_POLICY_ALGORITHMS
 
 ALGORITHM_DEFAULTS: dict[str, dict[str, Any]] = {
     # gamma 0.95 (a 4 s horizon at the 0.2 s step) and 5-step returns: with the default reward's
@@ -135,7 +137,7 @@ def policy_kwargs(config: TrainConfig, architecture: dict[str, Any] | None, refe
     kwargs = {
         "features_extractor_class": MultiModalExtractor,
         "features_extractor_kwargs": {
-            "config": dataclasses.asdict(config.extractor),
+            "config": config.extractor.model_dump(),
             "leog_mode": config.encoder.mode,
             "leog_architecture": architecture,
             "leog_precomputed": precomputes_leog(config),

@@ -16,7 +16,6 @@ model and (if saved) the replay buffer carry on; the budget is still ``config.ep
 
 from __future__ import annotations
 
-import dataclasses
 import importlib.util
 import json
 import shutil
@@ -76,9 +75,8 @@ def train(config: TrainConfig | Mapping[str, Any] | str | Path, *, resume: bool 
     if isinstance(config, (str, Path)):
         config = load_config(config)
     elif isinstance(config, Mapping):
-        config = config_from_mapping(config).validate()
-    else:
-        config.validate()
+        config = config_from_mapping(config)
+    # a TrainConfig was checked when it was built: not again here (one validation per run)
     torch.set_num_threads(config.torch_threads)
     out = Path(config.out)
     checkpoint = out / "checkpoint"
@@ -87,7 +85,7 @@ def train(config: TrainConfig | Mapping[str, Any] | str | Path, *, resume: bool 
         # a checkpoint from before observation normalisation: its model was trained on raw observations
         warnings.warn(f"{checkpoint} predates observation normalisation; resuming on raw observations "
                       "(normalize_observations: false)", stacklevel=2)
-        config = dataclasses.replace(config, normalize_observations=False)
+        config = config.model_copy(update={"normalize_observations": False})
     if not resume and checkpoint.exists():
         raise ConfigError(f"{out} already holds a run (checkpoint/); resume it with --resume or choose another --out")
     out.mkdir(parents=True, exist_ok=True)

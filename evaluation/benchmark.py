@@ -89,7 +89,7 @@ def run_experiment(experiment: Experiment, results: str | Path = "results", *, w
         pretrain(experiment, folder, log)
     for baseline in evaluate_experiment_baselines(experiment, folder):  # seconds: the bar the learned runs must clear
         log(baseline if isinstance(baseline, str) else describe_baseline(baseline))
-    jobs = [Job(spec.to_dict(), str(out_dir)) for spec, out_dir in experiment.units(folder)]
+    jobs = [Job(spec.to_dict(), str(out_dir), spec) for spec, out_dir in experiment.units(folder)]
     report = BenchmarkReport(folder, executor=executor.name)
     monitor = ProgressBar(jobs, experiment.protocol, executor.episodes_done, title=f"benchmark {experiment.name}", enabled=progress)
     try:

@@ -22,7 +22,7 @@ import signal
 import traceback
 from collections.abc import Iterator, Sequence
 from concurrent.futures import ProcessPoolExecutor, as_completed
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from multiprocessing import get_context
 from pathlib import Path
 from typing import Any
@@ -45,6 +45,8 @@ class Job:
 
     spec: dict[str, Any]
     out_dir: str
+    unit: Any = field(default=None, compare=False, repr=False)
+    """The :class:`~evaluation.runner.UnitSpec` itself, carrying its validated TrainConfig (None: run_unit validates ``spec``)."""
 
     @property
     def name(self) -> str:
@@ -85,7 +87,7 @@ class SerialExecutor(Executor):
 
     def run(self, jobs: Sequence[Job], *, verbose: bool = False) -> Iterator[dict[str, Any]]:
         for job in jobs:
-            yield run_guarded(job.spec, job.out_dir, verbose)
+            yield run_guarded(job.spec, job.out_dir, verbose, job.unit)
 
 
 class LocalExecutor(Executor):
@@ -104,7 +106,7 @@ class LocalExecutor(Executor):
     def run(self, jobs: Sequence[Job], *, verbose: bool = False) -> Iterator[dict[str, Any]]:
         pool = ProcessPoolExecutor(max_workers=self.workers, mp_context=get_context("spawn"), initializer=_init_worker)
         try:
-            futures = {pool.submit(run_guarded, job.spec, job.out_dir, verbose): job for job in jobs}
+            futures = {pool.submit(run_guarded, job.spec, job.out_dir, verbose, job.unit): job for job in jobs}
             for future in as_completed(futures):
                 try:
                     yield future.result()
@@ -164,7 +166,7 @@ def _on_interrupt(signum: int, frame: Any) -> None:
     raise KeyboardInterrupt
 
 
-def run_guarded(spec: dict[str, Any], out_dir: str, verbose: bool = False) -> dict[str, Any]:
+def run_guarded(spec: dict[str, Any], out_dir: str, verbose: bool = False, unit: Any = None) -> dict[str, Any]:
     """:func:`run_unit` that returns a failure record (traceback in OUT/error.log) instead of raising.
 
     ``verbose``: print a line after each evaluation (for logs; not with a progress bar).
@@ -176,7 +178,7 @@ def run_guarded(spec: dict[str, Any], out_dir: str, verbose: bool = False) -> di
     if _interrupted:
         return failure_record(spec, out_dir, "not started: interrupted", None)
     try:
-        summary = run_unit(spec, out_dir, on_event=report)
+        summary = run_unit(unit if unit is not None else spec, out_dir, on_event=report)
     except Exception as error:  # one failed run must not stop the others
         return failure_record(spec, out_dir, one_line(error), write_error_log(out_dir, traceback.format_exc()), attempts=1)
     return {**summary, "attempts": 0 if summary["status"] == "skipped" else 1}

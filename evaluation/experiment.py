@@ -28,26 +28,109 @@ import re
 from collections.abc import Mapping
 from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import Any
+from typing import Annotated, Any
 
-import yaml
 from crowdnav.evaluation.baselines import BASELINE_PREFIX
-from crowdnav.evaluation.protocol import Protocol, protocol_fields, quick
+from crowdnav.evaluation.protocol import Protocol, quick
 from crowdnav.evaluation.runner import PRETRAINED, PROTOCOL_FIELDS, UnitSpec
+from pydantic import AfterValidator, BaseModel, ConfigDict, Field, Strict, ValidationError, field_validator, model_validator
 
-from crowdnav.scenario.loader import yaml_line
+from crowdnav.config_errors import ConfigIssue, FieldProblems, YamlProblem, format_issues, read_yaml, validation_issues, yaml_line
 
 EXPERIMENTS_DIR = Path(__file__).resolve().parent / "experiments"
 DEFAULT_EXPERIMENT = "default"
-PRETRAIN_DEFAULTS = {"scenario": "room_furniture", "grids": 5000, "epochs": 20, "seed": 99, "every": 2}
-"""``pretrain_encoder`` fields and defaults (collection seeds never meet test or training seeds: agents.wrappers.dataset_seed)."""
 _NAME = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.-]*$")
-_TOP_KEYS = ("name", "description", "protocol", "defaults", "pretrain_encoder", "configurations")
-_CONFIGURATION_KEYS = ("name", "label", "train")
 
 
 class ExperimentError(ValueError):
-    """An invalid experiment file; ``str()`` is ``FILE:LINE: field: problem``."""
+    """An invalid experiment file; ``str()`` is ``FILE:LINE: field: problem`` (several joined with `` / `` on one line)."""
+
+    def __init__(self, message: str, issues: list[ConfigIssue] | None = None):
+        super().__init__(message)
+        self.issues = list(issues or [])
+
+
+# ------------------------------------------------------------------ the file's schema
+
+
+def _folder_name(name: str) -> str:
+    if not _NAME.match(name):
+        raise ValueError(f"expected a folder-safe name (letters, digits, '_', '-', '.'), got {name!r}")
+    return name
+
+
+FolderName = Annotated[str, Strict(), AfterValidator(_folder_name)]
+Text = Annotated[str, Strict()]
+Int = Annotated[int, Strict()]
+
+
+def _protocol_owned(train: dict[str, Any]) -> dict[str, Any]:
+    owned = [(key, f"'{key}' is set by the protocol for every run; remove it (see the protocol section)") for key in train
+             if key in PROTOCOL_FIELDS]
+    if owned:
+        raise FieldProblems(owned)
+    return train
+
+
+TrainFields = Annotated[dict[str, Any], AfterValidator(_protocol_owned)]
+"""TrainConfig fields (checked as a TrainConfig once merged; see :func:`experiment_from_mapping`)."""
+
+
+class _Strict(BaseModel):
+    model_config = ConfigDict(extra="forbid")
+
+
+class PretrainEncoder(_Strict):
+    """The ``pretrain_encoder`` section: a LEOG encoder pre-trained once for the experiment."""
+
+    scenario: Text = Field("room_furniture", description="Scenario the grids are collected in (library name or path).")
+    grids: Int = Field(5000, ge=1, description="Occupancy grids to collect.")
+    epochs: Int = Field(20, ge=1, description="Autoencoder training epochs.")
+    seed: Int = Field(99, ge=0, description="Collection seed (never meets test or training seeds: agents.wrappers.dataset_seed).")
+    every: Int = Field(2, ge=1, description="Keep every this many steps' grid.")
+
+
+PRETRAIN_DEFAULTS = PretrainEncoder().model_dump()
+"""``pretrain_encoder`` fields and defaults."""
+
+
+class ConfigurationEntry(_Strict):
+    """One entry of ``configurations``: trained with every seed of the protocol."""
+
+    name: FolderName = Field(description="Folder name of its runs (unique in the experiment).")
+    label: Text | None = Field(None, description="Name in figures and tables (default: name).")
+    train: TrainFields = Field(default_factory=dict, description="TrainConfig fields of this configuration, merged over defaults.")
+
+    @field_validator("name")
+    @classmethod
+    def _not_a_baseline(cls, name: str) -> str:
+        if name.startswith(BASELINE_PREFIX):
+            raise ValueError(f"names starting with {BASELINE_PREFIX!r} are kept for the scripted baselines, got {name!r}")
+        return name
+
+
+class ExperimentFile(_Strict):
+    """An experiment file: configurations, each trained with every seed under one protocol."""
+
+    name: FolderName | None = Field(None, description="Folder under the results folder (default: the file name).")
+    description: Text = Field("", description="What the experiment measures.")
+    protocol: Protocol = Field(default_factory=Protocol, description="Training length, evaluation schedule, test episodes, seeds.")
+    defaults: TrainFields = Field(default_factory=dict, description="TrainConfig fields shared by every configuration.")
+    pretrain_encoder: PretrainEncoder | None = Field(None, description="Pre-train a LEOG encoder once, for frozen/finetune runs.")
+    configurations: list[ConfigurationEntry] = Field(min_length=1, description="The configurations compared.")
+
+    @model_validator(mode="after")
+    def _unique_names(self) -> ExperimentFile:
+        seen: dict[str, int] = {}
+        for index, entry in enumerate(self.configurations):
+            if entry.name in seen:
+                raise FieldProblems([(f"configurations.{index}.name",
+                                      f"duplicate configuration name {entry.name!r} (also configurations.{seen[entry.name]})")])
+            seen[entry.name] = index
+        return self
+
+
+# ------------------------------------------------------------------ the experiment in memory
 
 
 @dataclass(frozen=True)
@@ -58,6 +141,8 @@ class Configuration:
     """Name in figures and tables."""
     train: dict[str, Any]
     """TrainConfig fields, defaults merged in."""
+    config: Any = field(default=None, compare=False, repr=False)
+    """The validated :class:`~crowdnav.agents.config.TrainConfig` (protocol fields at their defaults until a run sets them)."""
 
 
 @dataclass(frozen=True)
@@ -73,7 +158,7 @@ class Experiment:
         """This experiment with the ``--quick`` protocol and/or another number of seeds."""
         protocol = quick(self.protocol) if quick_protocol else self.protocol
         if seeds is not None:
-            protocol = replace(protocol, seeds=seeds)
+            protocol = Protocol(**{**protocol.to_dict(), "seeds": seeds})
         return replace(self, protocol=protocol)
 
     def units(self, folder: str | Path) -> list[tuple[UnitSpec, Path]]:
@@ -85,7 +170,7 @@ class Experiment:
         folder = Path(folder)
         return [
             (UnitSpec(self.name, configuration.name, seed, copy.deepcopy(configuration.train), self.protocol.to_dict(),
-                      configuration.label),
+                      configuration.label, config=configuration.config),
              folder / configuration.name / f"seed_{seed}")
             for seed in self.protocol.run_seeds for configuration in self.configurations
         ]
@@ -124,121 +209,50 @@ def load_experiment(source: str | Path | None = None) -> Experiment:
         shipped = ", ".join(shipped_experiments())
         raise ExperimentError(f"{label}: no such experiment file (shipped experiments: {shipped})")
     try:
-        text = path.read_text(encoding="utf-8")
-        root = yaml.compose(text, Loader=yaml.SafeLoader)
-        document = yaml.safe_load(text)
+        document, root = read_yaml(path.read_text(encoding="utf-8"))
     except (OSError, UnicodeDecodeError) as error:
         raise ExperimentError(f"{label}: cannot read the file: {error}") from None
-    except yaml.YAMLError as error:
-        mark = getattr(error, "problem_mark", None)
-        where = f"{label}:{mark.line + 1}" if mark is not None else label
-        raise ExperimentError(f"{where}: malformed YAML: {getattr(error, 'problem', None) or error}") from None
+    except YamlProblem as problem:
+        raise _error(label, [problem.issue]) from None
     return experiment_from_mapping(document, label, root, default_name=path.stem)
 
 
-def experiment_from_mapping(document: Any, label: str = "<experiment>", root: yaml.Node | None = None,
+def experiment_from_mapping(document: Any, label: str = "<experiment>", root: Any = None,
                             default_name: str = "experiment") -> Experiment:
-    """Check a parsed experiment document; ``root`` (the YAML node) gives line numbers."""
-    check = _Checker(label, root)
-    check.mapping(document, "", _TOP_KEYS)
-    name = document.get("name", default_name)
-    if not isinstance(name, str) or not _NAME.match(name):
-        check.fail("name", f"expected a folder-safe name (letters, digits, '_', '-', '.'), got {name!r}")
-    description = document.get("description", "")
-    if not isinstance(description, str):
-        check.fail("description", f"expected a string, got {description!r}")
-    protocol = _protocol(check, document.get("protocol") or {})
-    defaults = document.get("defaults") or {}
-    check.mapping(defaults, "defaults", None)
-    _no_protocol_fields(check, defaults, "defaults")
-    pretrain = _pretrain(check, document.get("pretrain_encoder"))
-    configurations = document.get("configurations")
-    if not isinstance(configurations, list) or not configurations:
-        check.fail("configurations", f"expected a non-empty list of configurations, got {configurations!r}")
-    items, seen = [], {}
-    for index, item in enumerate(configurations):
-        where = f"configurations.{index}"
-        check.mapping(item, where, _CONFIGURATION_KEYS)
-        config_name = item.get("name")
-        if not isinstance(config_name, str) or not _NAME.match(config_name):
-            check.fail(f"{where}.name", f"expected a folder-safe name (letters, digits, '_', '-', '.'), got {config_name!r}")
-        if config_name.startswith(BASELINE_PREFIX):
-            check.fail(f"{where}.name", f"names starting with {BASELINE_PREFIX!r} are kept for the scripted baselines, got {config_name!r}")
-        if config_name in seen:
-            check.fail(f"{where}.name", f"duplicate configuration name {config_name!r} (also configurations.{seen[config_name]})")
-        seen[config_name] = index
-        config_label = item.get("label", config_name)
-        if not isinstance(config_label, str):
-            check.fail(f"{where}.label", f"expected a string, got {config_label!r}")
-        train = item.get("train") or {}
-        check.mapping(train, f"{where}.train", None)
-        _no_protocol_fields(check, train, f"{where}.train")
-        merged = _merge(defaults, train)
-        _with_encoder(merged, pretrain)
-        _check_train(check, merged, f"{where}.train", config_name)
-        items.append(Configuration(config_name, config_label, merged))
-    try:
-        protocol.check_disjoint()
-    except ValueError as error:
-        check.fail("protocol.test_seed_base", str(error).split(": ", 1)[1])
-    return Experiment(name, description, protocol, tuple(items), pretrain, label)
+    """Check a parsed experiment document once: the file's schema, then each configuration as a TrainConfig.
 
-
-class _Checker:
-    """Raises ExperimentError with the file, the line of a dotted path, and the field."""
-
-    def __init__(self, label: str, root: yaml.Node | None):
-        self.label, self.root = label, root
-
-    def line(self, dotted: str) -> int | None:
-        return yaml_line(self.root, dotted)
-
-    def fail(self, dotted: str, message: str) -> None:
-        line = self.line(dotted)
-        where = self.label if line is None else f"{self.label}:{line}"
-        raise ExperimentError(f"{where}: {dotted}: {message}" if dotted else f"{where}: {message}")
-
-    def mapping(self, value: Any, dotted: str, known: tuple[str, ...] | None) -> None:
-        if not isinstance(value, Mapping):
-            what = "an empty document" if value is None and not dotted else repr(value)
-            self.fail(dotted, f"expected a mapping (key: value), got {what}")
-        for key in value if known is not None else ():
-            if key not in known:
-                self.fail(f"{dotted}.{key}" if dotted else str(key), f"unknown key '{key}' (expected one of: {', '.join(known)})")
-
-
-def _protocol(check: _Checker, document: Any) -> Protocol:
-    known = protocol_fields()
-    check.mapping(document, "protocol", tuple(known))
-    for key, value in document.items():
-        if not isinstance(value, int) or isinstance(value, bool):
-            check.fail(f"protocol.{key}", f"expected an integer ({known[key]}), got {value!r}")
-    try:
-        return Protocol(**document)
-    except ValueError as error:
-        first = str(error).split("; ")[0]
-        key, _, message = first.partition(": ")
-        check.fail(f"protocol.{key}", message)
-    raise AssertionError("unreachable")
-
-
-def _pretrain(check: _Checker, document: Any) -> dict[str, Any] | None:
+    ``root`` (the ``yaml.compose`` tree) gives line numbers. Each configuration's TrainConfig is
+    validated here and travels with the experiment's units, so a run does not validate it again.
+    """
     if document is None:
-        return None
-    check.mapping(document, "pretrain_encoder", tuple(PRETRAIN_DEFAULTS))
-    merged = {**PRETRAIN_DEFAULTS, **document}
-    for key, value in merged.items():
-        expected = str if key == "scenario" else int
-        if not isinstance(value, expected) or isinstance(value, bool) or (expected is int and value < (0 if key == "seed" else 1)):
-            check.fail(f"pretrain_encoder.{key}", f"expected {'a scenario name or path' if expected is str else 'a positive integer'}, "
-                                                  f"got {value!r}")
-    return merged
+        raise _error(label, [ConfigIssue("", "expected a mapping (key: value), got an empty document", 1 if root else None)])
+    try:
+        parsed = ExperimentFile.model_validate(document)
+    except ValidationError as error:
+        issues = validation_issues(error, document, ExperimentFile)
+        raise _error(label, [ConfigIssue(i.path, i.message, yaml_line(root, i.path)) for i in issues]) from None
+    pretrain = None if parsed.pretrain_encoder is None else parsed.pretrain_encoder.model_dump()
+    items, issues = [], []
+    for index, entry in enumerate(parsed.configurations):
+        merged = _merge(parsed.defaults, entry.train)
+        _with_encoder(merged, pretrain)
+        config, problems = _train_config(merged, parsed.defaults, entry.train, f"configurations.{index}.train", entry.name, root)
+        issues.extend(problems)
+        items.append(Configuration(entry.name, entry.label if entry.label is not None else entry.name, merged, config))
+    if issues:
+        raise _error(label, issues)
+    for index, item in enumerate(items):
+        _check_environment(label, item, f"configurations.{index}.train", root)
+    try:
+        parsed.protocol.check_disjoint()
+    except ValueError as error:
+        message = str(error).split(": ", 1)[1]
+        raise _error(label, [ConfigIssue("protocol.test_seed_base", message, yaml_line(root, "protocol.test_seed_base"))]) from None
+    return Experiment(parsed.name or default_name, parsed.description, parsed.protocol, tuple(items), pretrain, label)
 
 
-def _no_protocol_fields(check: _Checker, train: Mapping[str, Any], where: str) -> None:
-    for key in train:
-        if key in PROTOCOL_FIELDS:
-            check.fail(f"{where}.{key}", f"'{key}' is set by the protocol for every run; remove it (see the protocol section)")
+def _error(label: str, issues: list[ConfigIssue]) -> ExperimentError:
+    return ExperimentError(format_issues(label, issues, separator=" / "), issues)
 
 
 def _merge(base: Mapping[str, Any], top: Mapping[str, Any]) -> dict[str, Any]:
@@ -259,24 +273,43 @@ def _with_encoder(train: dict[str, Any], pretrain: dict[str, Any] | None) -> Non
         encoder["weights"] = PRETRAINED
 
 
-def _check_train(check: _Checker, train: dict[str, Any], where: str, name: str) -> None:
-    from crowdnav.agents import ConfigError
-    from crowdnav.agents.config import config_from_mapping
+def _train_config(merged: dict[str, Any], defaults: Mapping[str, Any], train: Mapping[str, Any], where: str, name: str,
+                  root: Any) -> tuple[Any, list[ConfigIssue]]:
+    """The configuration's TrainConfig, or the issues, each at the key that set it (the configuration's train, else defaults)."""
+    from crowdnav.agents.config import TrainConfig
 
+    try:
+        return TrainConfig.model_validate(merged), []
+    except ValidationError as error:
+        issues = []
+        for issue in validation_issues(error, merged, TrainConfig):
+            path = f"{where}.{issue.path}" if _holds(train, issue.path) or not _holds(defaults, issue.path) else f"defaults.{issue.path}"
+            issues.append(ConfigIssue(path, f"{issue.message} (configuration '{name}')", yaml_line(root, path)))
+        return None, issues
+
+
+def _holds(document: Any, dotted: str) -> bool:
+    """Whether ``document`` has a value at the first key of ``dotted`` (and the keys below it that are mappings)."""
+    node = document
+    for part in dotted.split(".") if dotted else ():
+        if isinstance(node, Mapping) and part in node:
+            node = node[part]
+        elif isinstance(node, list) and part.isdigit() and int(part) < len(node):
+            node = node[int(part)]
+        else:
+            return node is not document
+    return bool(dotted)
+
+
+def _check_environment(label: str, item: Configuration, where: str, root: Any) -> None:
+    """Build the environment the runs will train in: scenario, modalities, sensors, overrides, reward weights."""
     from crowdnav.envs import CrowdNavEnv
     from crowdnav.scenario import ScenarioError
 
-    source = f"{check.label} ({where}, configuration '{name}')"
-    line = check.line(where)
-    where_line = f"{check.label}:{line}" if line is not None else check.label
+    config = item.config
     try:
-        config = config_from_mapping({**train, "out": "unused"}, source).validate(source)
-    except ConfigError as error:
-        detail = str(error).replace(f"{source}: ", "")
-        raise ExperimentError(f"{where_line}: {where} (configuration '{name}'): {detail}") from None
-    try:  # the environment the runs will train in: scenario, modalities, sensors, overrides, reward weights
         CrowdNavEnv(config.scenario, modalities=config.modalities, sensors=config.sensors, overrides=config.overrides,
                     reward_weights=config.reward_weights).close()
     except (ScenarioError, ValueError) as error:
         detail = " / ".join(str(error).splitlines())
-        raise ExperimentError(f"{where_line}: {where} (configuration '{name}'): environment: {detail}") from None
+        raise _error(label, [ConfigIssue(where, f"environment: {detail} (configuration '{item.name}')", yaml_line(root, where))]) from None

@@ -10,36 +10,62 @@ their own environment with the deterministic policy, so no transition enters a r
 
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass, field, fields, replace
-from typing import Any
+from typing import Annotated, Any
+
+from pydantic import BaseModel, BeforeValidator, ConfigDict, Field, ValidationError, model_validator
+
+from crowdnav.config_errors import FieldProblems, validation_issues
+
+
+def _at_least(minimum: int) -> BeforeValidator:
+    """A whole number >= ``minimum`` (not a bool, not 2.0), with the one message every protocol field gives."""
+    def check(value: Any) -> Any:
+        if not _is_int(value) or value < minimum:
+            raise ValueError(f"expected an integer >= {minimum}, got {value!r}")
+        return value
+
+    return BeforeValidator(check)
+
+
+Count = Annotated[int, _at_least(1), Field(ge=1)]
+SeedBase = Annotated[int, _at_least(0), Field(ge=0)]
 
 
 def _option(default: Any, doc: str) -> Any:
-    return field(default=default, metadata={"doc": doc})
+    return Field(default, description=doc)
 
 
-@dataclass(frozen=True)
-class Protocol:
-    """How every (configuration, seed) run is trained and tested. Defaults: the paper's protocol."""
+class Protocol(BaseModel):
+    """How every (configuration, seed) run is trained and tested. Defaults: the paper's protocol.
 
-    train_episodes: int = _option(700, "Training length in episodes.")
-    eval_every: int = _option(50, "Evaluate the current policy after every this many training episodes.")
-    test_episodes: int = _option(20, "Test episodes per evaluation (the same seeds at every evaluation).")
-    seeds: int = _option(5, "Runs per configuration, with training seeds 0, 1, ..., seeds - 1.")
-    test_seed_base: int = _option(0, "The test episodes use seeds test_seed_base, test_seed_base + 1, ...")
-    window: int = _option(10, "Curves: sliding window, in test episodes, of the outcome rates (success, collision, out_of_bounds, truncated).")
-    final_evaluations: int = _option(3, "Leaderboard: the 'final' rates pool the test episodes of this many last evaluations.")
+    The ``protocol`` section of an experiment file; built directly, a bad value raises ValueError
+    ``field: expectation``.
+    """
 
-    def __post_init__(self) -> None:
-        problems = [f"{name}: expected an integer >= 1, got {getattr(self, name)!r}"
-                    for name in ("train_episodes", "eval_every", "test_episodes", "seeds", "window", "final_evaluations")
-                    if not _is_int(getattr(self, name)) or getattr(self, name) < 1]
-        if not _is_int(self.test_seed_base) or self.test_seed_base < 0:
-            problems.append(f"test_seed_base: expected an integer >= 0, got {self.test_seed_base!r}")
-        if not problems and self.eval_every > self.train_episodes:
-            problems.append(f"eval_every: {self.eval_every} is more than train_episodes ({self.train_episodes}): no evaluation would run")
-        if problems:
-            raise ValueError("; ".join(problems))
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+    train_episodes: Count = _option(700, "Training length in episodes.")
+    eval_every: Count = _option(50, "Evaluate the current policy after every this many training episodes.")
+    test_episodes: Count = _option(20, "Test episodes per evaluation (the same seeds at every evaluation).")
+    seeds: Count = _option(5, "Runs per configuration, with training seeds 0, 1, ..., seeds - 1.")
+    test_seed_base: SeedBase = _option(0, "The test episodes use seeds test_seed_base, test_seed_base + 1, ...")
+    window: Count = _option(10, "Curves: sliding window, in test episodes, of the outcome rates (success, collision, out_of_bounds, truncated).")
+    final_evaluations: Count = _option(3, "Leaderboard: the 'final' rates pool the test episodes of this many last evaluations.")
+
+    def __init__(self, **fields: Any) -> None:
+        # One ValueError naming the fields. Pydantic calls a custom __init__ for the protocol section of an
+        # experiment file too; there the shared formatter unpacks FieldProblems onto protocol.<field>.
+        try:
+            super().__init__(**fields)
+        except ValidationError as error:
+            raise FieldProblems([(issue.path, issue.message) for issue in validation_issues(error, fields, Protocol)]) from None
+
+    @model_validator(mode="after")
+    def _evaluates_at_least_once(self) -> Protocol:
+        if self.eval_every > self.train_episodes:
+            raise FieldProblems([("eval_every", f"{self.eval_every} is more than train_episodes ({self.train_episodes}): "
+                                                "no evaluation would run")])
+        return self
 
     @property
     def evaluation_points(self) -> list[int]:
@@ -78,7 +104,7 @@ class Protocol:
                                  "choose a test_seed_base below the training seeds (agents.train_seed)")
 
     def to_dict(self) -> dict[str, int]:
-        return asdict(self)
+        return self.model_dump()
 
 
 QUICK = {"train_episodes": 20, "eval_every": 10, "test_episodes": 5, "seeds": 1, "window": 5, "final_evaluations": 1}
@@ -87,12 +113,12 @@ QUICK = {"train_episodes": 20, "eval_every": 10, "test_episodes": 5, "seeds": 1,
 
 def quick(protocol: Protocol) -> Protocol:
     """``protocol`` shrunk to the :data:`QUICK` preset (the test-seed base is kept)."""
-    return replace(protocol, **QUICK)
+    return Protocol(**{**protocol.to_dict(), **QUICK})
 
 
 def protocol_fields() -> dict[str, str]:
     """Field name -> one-line doc, for error messages and documentation."""
-    return {item.name: item.metadata["doc"] for item in fields(Protocol)}
+    return {name: info.description or "" for name, info in Protocol.model_fields.items()}
 
 
 def _is_int(value: Any) -> bool:

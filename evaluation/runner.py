@@ -69,11 +69,11 @@ class UnitSpec:
     """Name of the configuration in figures and tables (default: the configuration name)."""
     torch_threads: int = field(default=1, compare=False)
     """torch threads of the process (not part of the run's identity)."""
+    config: Any = field(default=None, compare=False, repr=False)
+    """``train`` already validated as a TrainConfig (by the experiment file's loader), or None: :func:`run_unit` validates it."""
 
     def to_dict(self) -> dict[str, Any]:
-        document = dataclasses.asdict(self)
-        document.pop("torch_threads")
-        return document
+        return {item.name: getattr(self, item.name) for item in dataclasses.fields(self) if item.name not in ("torch_threads", "config")}
 
     @classmethod
     def from_dict(cls, document: Mapping[str, Any]) -> UnitSpec:
@@ -85,13 +85,33 @@ class UnitSpec:
 
     def train_config(self, out_dir: Path) -> dict[str, Any]:
         """The full TrainConfig mapping of this run, writing into ``out_dir/train``."""
-        protocol = Protocol(**self.protocol)
         train = dict(self.train)
-        if train.get("encoder", {}).get("weights") == PRETRAINED:  # runs live in <experiment>/<configuration>/<seed>
-            train["encoder"] = {**train["encoder"], "weights": str(pretrained_encoder_path(out_dir.parent.parent))}
-        return {**train, "seed": self.seed, "out": str(out_dir / TRAIN_DIR), "episodes": protocol.train_episodes,
+        if train.get("encoder", {}).get("weights") == PRETRAINED:
+            train["encoder"] = {**train["encoder"], "weights": self._encoder_weights(out_dir)}
+        return {**train, **self._protocol_fields(out_dir)}
+
+    def config_for(self, out_dir: Path) -> Any:
+        """This run's :class:`~crowdnav.agents.config.TrainConfig`: :attr:`config` completed (no second validation),
+        or ``train`` validated here when the spec came without it (a dict from a worker process, a test)."""
+        if self.config is None:
+            from crowdnav.agents.config import config_from_mapping
+
+            return config_from_mapping(self.train_config(out_dir), f"{out_dir / SPEC_FILE}")
+        update = self._protocol_fields(out_dir)
+        if self.config.encoder.weights == PRETRAINED:
+            update["encoder"] = self.config.encoder.model_copy(update={"weights": self._encoder_weights(out_dir)})
+        # the protocol's values were checked by Protocol, the rest when the config was built
+        return self.config.model_copy(update=update)
+
+    def _protocol_fields(self, out_dir: Path) -> dict[str, Any]:
+        protocol = Protocol(**self.protocol)
+        return {"seed": self.seed, "out": str(out_dir / TRAIN_DIR), "episodes": protocol.train_episodes,
                 "checkpoint_every": protocol.eval_every, "progress": False, "torch_threads": self.torch_threads,
                 "save_replay_buffer": True}
+
+    @staticmethod
+    def _encoder_weights(out_dir: Path) -> str:
+        return str(pretrained_encoder_path(out_dir.parent.parent))  # runs live in <experiment>/<configuration>/<seed>
 
 
 def pretrained_encoder_path(experiment_dir: str | Path) -> Path:
@@ -114,11 +134,10 @@ def run_unit(spec: UnitSpec | Mapping[str, Any], out_dir: str | Path, *, on_even
     if (out_dir / META_FILE).is_file():
         return _summary(spec, out_dir, read_json(out_dir / META_FILE), "skipped")
     from crowdnav.agents import load_policy, train
-    from crowdnav.agents.config import config_from_mapping
 
     clock = _Clock(out_dir / "timing.json")
     protocol = Protocol(**spec.protocol)
-    config = config_from_mapping(spec.train_config(out_dir), f"{out_dir / SPEC_FILE}").validate()
+    config = spec.config_for(out_dir)
     train_dir = out_dir / TRAIN_DIR
     trained = _checkpoint_episodes(train_dir)
     resumed = trained > 0 or (out_dir / EVALUATIONS_DIR).is_dir()
@@ -252,7 +271,7 @@ def _finish(spec: UnitSpec, out_dir: Path, protocol: Protocol, config: Any, cloc
                                               strict=True)},
         "status": "complete",
         "protocol": protocol.to_dict(),
-        "config": dataclasses.asdict(config),
+        "config": config.model_dump(),
         "versions": package_versions(),
         # the code the run started with, and every commit a later session resumed it with
         "git_commit": timing["commits"][0],

@@ -22,16 +22,21 @@ def write(tmp_path, text: str):
 
 def test_a_bad_config_key_names_the_key_the_file_and_the_line(tmp_path):
     path = write(tmp_path, "algo: sac\nepisodes: 10\nlearnig_rate: 0.001\n")
-    with pytest.raises(ConfigError, match=rf"{path}:3: unknown key 'learnig_rate'.*known keys: scenario, modalities"):
+    # the style every crowdnav config file shares: FILE:LINE: dotted.key: expectation, with a did-you-mean
+    with pytest.raises(ConfigError, match=rf"{path}:3: learnig_rate: unknown key 'learnig_rate'; did you mean 'learning_rate'\? "
+                                          r"\(expected one of: action_noise, algo, .*scenario"):
         load_config(path)
     nested = write(tmp_path, "extractor:\n  rbf_centers: 8\n")
-    with pytest.raises(ConfigError, match=rf"{nested}:2: unknown key 'extractor.rbf_centers' in the ExtractorConfig section"):
+    with pytest.raises(ConfigError, match=rf"{nested}:2: extractor.rbf_centers: unknown key 'rbf_centers'; did you mean 'rbf_centres'\?"):
         load_config(nested)
 
 
 @pytest.mark.parametrize(("text", "message"), [
     ("episodes: many", "episodes: expected an integer, got 'many'"),
     ("algo: dqn", "algo: expected one of 'sac', 'td3', 'ddpg', 'a2c', 'ppo'"),
+    ("algo: sca", "algo: expected one of 'sac', 'td3', 'ddpg', 'a2c', 'ppo', got 'sca'; did you mean 'sac'?"),
+    ("modalities: [lidar, gaol]", "modalities.1: unknown modality 'gaol'; did you mean 'goal'?"),
+    ("reward_weights: {preset: papr}", "reward_weights: unknown reward preset 'papr'; did you mean 'paper'?"),
     ("modalities: lidar", "modalities: expected a list of strings"),
     ("learning_rate: fast", "learning_rate: expected a number or null"),
     ("episodes: 0", "episodes: expected an integer >= 1"),
@@ -101,7 +106,7 @@ def test_train_command_reports_config_errors_on_one_line(tmp_path, capsys):
     path = write(tmp_path, "episods: 3\n")
     assert main(["train", "--config", str(path)]) == 1
     err = capsys.readouterr().err
-    assert err.startswith(f"crowdnav: error: {path}:1: unknown key 'episods'") and "Traceback" not in err
+    assert err.startswith(f"crowdnav: error: {path}:1: episods: unknown key 'episods'; did you mean 'episodes'?") and "Traceback" not in err
     assert main(["train", "--encoder", "frozen", "--modalities", "leog,goal"]) == 1
     assert "needs pre-trained weights" in capsys.readouterr().err
     assert main(["train", "--algo", "dqn"]) == 2  # argparse usage error

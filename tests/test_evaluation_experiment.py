@@ -125,7 +125,9 @@ def test_unknown_training_field_in_a_configuration_is_named_with_the_configurati
     document = tiny_experiment_document()
     document["configurations"][1]["train"]["learning_rat"] = 0.1
     message = _error(tmp_path, document)
-    assert "configurations.1.train (configuration 'closest')" in message and "unknown key 'learning_rat'" in message
+    line = next(n for n, text in enumerate(write(tmp_path, document).read_text().splitlines(), 1) if "learning_rat: 0.1" in text)
+    assert f":{line}: configurations.1.train.learning_rat: unknown key 'learning_rat'; did you mean 'learning_rate'?" in message
+    assert "(configuration 'closest')" in message
 
 
 def test_protocol_owned_training_fields_are_refused(tmp_path):
@@ -137,7 +139,11 @@ def test_protocol_owned_training_fields_are_refused(tmp_path):
 def test_unknown_scenario_or_modality_is_reported_at_load_time(tmp_path):
     document = tiny_experiment_document()
     document["configurations"][0]["train"]["modalities"] = ["sonar"]
-    assert "configurations.0.train (configuration 'lidar'): environment:" in _error(tmp_path, document)
+    assert "configurations.0.train.modalities.0: unknown modality 'sonar'" in _error(tmp_path, document)
+    document = tiny_experiment_document()
+    document["configurations"][0]["train"]["scenario"] = "no_such_scenario"
+    message = _error(tmp_path, document)
+    assert "configurations.0.train: environment:" in message and "(configuration 'lidar')" in message
 
 
 def test_duplicate_configuration_names_are_refused(tmp_path):

@@ -377,7 +377,7 @@ def test_no_obstacles_and_no_humans_still_steps():
 def test_force_ranges_below_one_centimetre_are_refused_with_the_field_named(field):
     from crowdnav import ScenarioError
 
-    with pytest.raises(ScenarioError, match=rf"humans\.social_force\.{field}: expected a value greater than or equal to 0\.01"):
+    with pytest.raises(ScenarioError, match=rf"humans\.social_force\.{field}: expected a number >= 0\.01"):
         Simulator("open_space", overrides={f"humans.social_force.{field}": 5e-4})
 
 

@@ -14,7 +14,7 @@ import os
 import sys
 from collections.abc import Sequence
 
-from crowdnav.cli import benchmark, render, scenario
+from crowdnav.cli import benchmark, render, scenario, schema
 from crowdnav.cli.common import CliError
 
 # Packages that only an extra installs (pyproject.toml), so a command run on the core install
@@ -27,7 +27,7 @@ def command_groups() -> tuple:
     """Registration functions of the command groups, in the order ``--help`` lists them."""
     from crowdnav.agents import commands as agent_commands  # imported here: it imports crowdnav.cli.common itself
 
-    return (scenario.register, agent_commands.register, render.register, benchmark.register)
+    return (scenario.register, agent_commands.register, render.register, benchmark.register, schema.register)
 
 
 def build_parser() -> argparse.ArgumentParser:

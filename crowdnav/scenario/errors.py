@@ -1,27 +1,17 @@
-"""The one exception a scenario author sees: every problem with file, field path, line and expectation."""
+"""The one exception a scenario author sees: every problem with file, field path, line and expectation.
+
+Issues and their formatting are shared with the training and experiment configs
+(:mod:`crowdnav.config_errors`).
+"""
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-from typing import Any
+from crowdnav.config_errors import ConfigIssue, format_issues, show
 
+__all__ = ["ScenarioError", "ScenarioIssue", "show"]
 
-def show(value: Any) -> str:
-    """A value as the YAML author wrote it (lists, not tuples), shortened for messages."""
-    text = repr(list(value) if isinstance(value, tuple) else value)
-    return text if len(text) <= 80 else text[:77] + "..."
-
-
-@dataclass(frozen=True)
-class ScenarioIssue:
-    """One problem found in a scenario document."""
-
-    path: str
-    """Dotted location inside the document, e.g. ``humans.count`` ('' for the whole document)."""
-    message: str
-    """What is wrong and what was expected."""
-    line: int | None = None
-    """1-based line in the YAML file, when it can be found."""
+ScenarioIssue = ConfigIssue
+"""One problem found in a scenario document (the shared :class:`~crowdnav.config_errors.ConfigIssue`)."""
 
 
 class ScenarioError(ValueError):
@@ -33,9 +23,4 @@ class ScenarioError(ValueError):
         super().__init__(self.report())
 
     def report(self) -> str:
-        lines = []
-        for issue in self.issues:
-            where = self.source if issue.line is None else f"{self.source}:{issue.line}"
-            field = f" {issue.path}:" if issue.path else ""
-            lines.append(f"{where}:{field} {issue.message}")
-        return "\n".join(lines)
+        return format_issues(self.source, self.issues)

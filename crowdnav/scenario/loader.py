@@ -16,6 +16,7 @@ from typing import Any
 import yaml
 from pydantic import ValidationError
 
+from crowdnav.config_errors import yaml_line
 from crowdnav.paths import safe_stem
 from crowdnav.scenario import library
 from crowdnav.scenario.errors import ScenarioError, ScenarioIssue, show
@@ -159,26 +160,6 @@ def _with_line(issue: ScenarioIssue, root: yaml.Node | None, override_paths: set
     inner = sorted(p for p in override_paths if issue.path and p.startswith(issue.path + "."))
     suffix = f" (with override {', '.join(inner)})" if inner else ""
     return ScenarioIssue(issue.path, issue.message + suffix, yaml_line(root, issue.path))
-
-
-def yaml_line(root: yaml.Node | None, dotted: str) -> int | None:
-    """1-based line of the deepest YAML node on the path ``dotted`` (``yaml.compose`` tree), or None without a tree."""
-    if root is None:
-        return None
-    node, line = root, root.start_mark.line + 1
-    for part in filter(None, dotted.split(".")):
-        if isinstance(node, yaml.MappingNode):
-            match = [(k, v) for k, v in node.value if k.value == part]
-            if not match:
-                break
-            key, node = match[0]
-            line = key.start_mark.line + 1
-        elif isinstance(node, yaml.SequenceNode) and part.isdigit() and int(part) < len(node.value):
-            node = node.value[int(part)]
-            line = node.start_mark.line + 1
-        else:
-            break
-    return line
 
 
 def consistency_issues(scenario: Scenario) -> list[ScenarioIssue]:

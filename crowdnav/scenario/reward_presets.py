@@ -31,7 +31,6 @@ its own "penalises taking unnecessary steps"; crowdnav reads it as a penalty of 
 
 from __future__ import annotations
 
-import difflib
 from collections.abc import Mapping
 from dataclasses import dataclass
 from types import MappingProxyType
@@ -100,6 +99,6 @@ def unknown_term_message(name: object) -> str:
 
 
 def _unknown(what: str, name: object, valid: tuple[str, ...]) -> str:
-    close = difflib.get_close_matches(str(name), valid, n=1)
-    hint = f"; did you mean '{close[0]}'?" if close else ";"
-    return f"unknown {what} {name!r}{hint} expected one of: {', '.join(valid)}"
+    from crowdnav.registry import unknown_name_message  # the one wording of unknown names
+
+    return unknown_name_message(what, name, valid)
