@@ -6,7 +6,8 @@ the LEOG as an inset, the closest-obstacle point, the humans' goals); a one-line
 The scale is chosen from the world bounds so every scenario fits the frame.
 
 Frames are drawn off-screen on a plain pygame Surface, so ``rgb_array`` needs no display; a
-window is opened only by :meth:`Renderer.show`.
+window is opened only by :meth:`Renderer.show`. pygame is imported when the first renderer is
+built, so importing crowdnav (and building an env without a render mode) never loads it.
 """
 
 from __future__ import annotations
@@ -15,13 +16,22 @@ import math
 import os
 from collections import deque
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
 import numpy as np
 
-os.environ.setdefault("PYGAME_HIDE_SUPPORT_PROMPT", "1")
-import pygame  # noqa: E402  (the variable above must be set before the import)
+from crowdnav.simulator import Simulator
 
-from crowdnav.simulator import Simulator  # noqa: E402
+if TYPE_CHECKING:
+    import pygame
+
+
+def _pygame():
+    """pygame, imported on first use (without its greeting on stdout)."""
+    os.environ.setdefault("PYGAME_HIDE_SUPPORT_PROMPT", "1")
+    import pygame
+
+    return pygame
 
 
 @dataclass(frozen=True)
@@ -87,6 +97,7 @@ class Renderer:
     """Draws one scenario's states; call :meth:`reset` at each episode start, :meth:`frame` per step."""
 
     def __init__(self, sim: Simulator, options: RenderOptions | None = None):
+        pygame = _pygame()
         self.sim = sim
         self.options = options or RenderOptions()
         self.palette = Palette()
@@ -117,11 +128,13 @@ class Renderer:
 
     def frame(self, overlays: Overlays | None = None, hud: str = "") -> np.ndarray:
         """The current state as a ``uint8`` array of shape (H, W, 3)."""
+        pygame = _pygame()
         surface = self._draw(overlays or Overlays(), hud)
         return np.ascontiguousarray(pygame.surfarray.pixels3d(surface).transpose(1, 0, 2))
 
     def show(self, overlays: Overlays | None = None, hud: str = "", fps: float = 10.0) -> None:
         """Draw into a window (opened on first use) and wait to keep ``fps``."""
+        pygame = _pygame()
         surface = self._draw(overlays or Overlays(), hud)
         if self._window is None:
             pygame.display.init()
@@ -134,6 +147,7 @@ class Renderer:
         self._clock.tick(fps)
 
     def close(self) -> None:
+        pygame = _pygame()
         if self._window is not None:
             pygame.display.quit()
             self._window = None
@@ -146,6 +160,7 @@ class Renderer:
     # ---------------------------------------------------------------- drawing
 
     def _draw_static(self) -> pygame.Surface:
+        pygame = _pygame()
         surface = pygame.Surface(self.size)
         surface.fill(self.palette.outside)
         world = self.sim.scenario.world
@@ -163,6 +178,7 @@ class Renderer:
         return surface
 
     def _draw(self, overlays: Overlays, hud: str) -> pygame.Surface:
+        pygame = _pygame()
         sim, palette, scale = self.sim, self.palette, self.scale
         surface = self._static.copy()
         robot = sim.robot_position
@@ -211,6 +227,7 @@ class Renderer:
         return surface
 
     def _draw_inset(self, surface: pygame.Surface, grid: np.ndarray) -> None:
+        pygame = _pygame()
         grid = grid.reshape(grid.shape[-2], grid.shape[-1])
         side = max(48, self.size[1] // 4)
         pixels = np.where(grid > 0, 30, 235).astype(np.uint8)
@@ -224,6 +241,7 @@ class Renderer:
 
 
 def _cross(surface: pygame.Surface, colour, centre: np.ndarray, half: float) -> None:
+    pygame = _pygame()
     x, y = centre
     pygame.draw.line(surface, colour, (x - half, y - half), (x + half, y + half), 2)
     pygame.draw.line(surface, colour, (x - half, y + half), (x + half, y - half), 2)
