@@ -31,13 +31,13 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from crowdnav.rendering.episodes import PolicyLoadError, render_episodes
+    from crowdnav.agents.render import PolicyLoadError, render_policy
     from crowdnav.scenario import ScenarioError
 
     if args.episodes < 1:
         raise CliError(f"--episodes must be at least 1, got {args.episodes}")
     try:
-        paths = render_episodes(
+        paths = render_policy(
             args.scenario,
             args.policy,
             episodes=args.episodes,
