@@ -24,8 +24,9 @@ from typing import Any
 
 import yaml
 from crowdnav.evaluation.baselines import evaluate_experiment_baselines
-from crowdnav.evaluation.executors import Executor, Job, make_executor, run_name
+from crowdnav.evaluation.executors import make_executor
 from crowdnav.evaluation.experiment import Experiment
+from crowdnav.evaluation.jobs import Executor, Job, run_name
 from crowdnav.evaluation.progress import ProgressBar
 from crowdnav.evaluation.storage import (
     EXPERIMENT_FILE,

@@ -32,7 +32,7 @@ from pathlib import Path
 from typing import Any
 
 import ray
-from crowdnav.evaluation.executors import (
+from crowdnav.evaluation.jobs import (
     Executor,
     ExecutorError,
     Job,
