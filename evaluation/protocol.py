@@ -13,6 +13,8 @@ from __future__ import annotations
 from dataclasses import asdict, dataclass, field, fields, replace
 from typing import Any
 
+from crowdnav.agents.seeding import train_seed  # torch-free: the protocol stays cheap to import
+
 
 def _option(default: Any, doc: str) -> Any:
     return field(default=default, metadata={"doc": doc})
@@ -61,8 +63,6 @@ class Protocol:
 
     def training_seeds(self, run_seed: int) -> range | list[int]:
         """Seeds of the training episodes of run ``run_seed`` (as :func:`agents.train_seed` assigns them)."""
-        from crowdnav.agents import train_seed
-
         first, last = train_seed(run_seed, 0), train_seed(run_seed, self.train_episodes - 1)
         if last - first == self.train_episodes - 1:  # consecutive: a range, so membership tests are O(1)
             return range(first, last + 1)

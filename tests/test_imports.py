@@ -43,3 +43,9 @@ def test_crowdnav_help_loads_no_torch_pygame_pandas_or_matplotlib(argv):
 def test_building_and_stepping_an_env_without_a_render_mode_loads_no_pygame_or_torch():
     loaded = loaded_modules("from crowdnav import CrowdNavEnv\nenv = CrowdNavEnv('room_furniture')\nenv.reset(seed=0)\nenv.step([1, 0])")
     assert not loaded & set(HEAVY)
+
+
+def test_the_evaluation_protocol_and_the_seed_rules_load_no_torch():
+    loaded = loaded_modules("import crowdnav.evaluation.protocol as p, crowdnav.agents.seeding, crowdnav.agents.run_folder\n"
+                            "p.Protocol().check_disjoint()")
+    assert not loaded & set(HEAVY)
