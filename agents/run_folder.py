@@ -8,7 +8,7 @@
 
 Training writes this layout and everything that reads a run (evaluation, the benchmark's
 video, the progress bar) goes through these functions, so the layout is known in one place.
-Torch-free: only :func:`load_policy` imports the agents' training stack, when called.
+Torch-free; a policy folder loads with :func:`crowdnav.agents.load_policy` (torch and SB3).
 """
 
 from __future__ import annotations
@@ -92,10 +92,3 @@ def logged_episodes(train_dir: str | Path) -> int:
         return 0
     first = lines[-1].split(",", 1)[0]
     return int(first) + 1 if first.isdigit() else 0
-
-
-def load_policy(folder: str | Path, device: str = "cpu") -> Any:
-    """The policy in ``folder`` (a checkpoint, a snapshot, or a run folder): :func:`crowdnav.agents.checkpoint.load_policy`."""
-    from crowdnav.agents.checkpoint import load_policy as load  # torch and SB3: only when a policy is loaded
-
-    return load(folder, device=device)

@@ -22,7 +22,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from crowdnav.agents.run_folder import checkpoint_dir, checkpoint_episodes, checkpoint_info, episode_log, load_policy, policy_snapshots
+from crowdnav.agents.run_folder import checkpoint_dir, checkpoint_episodes, checkpoint_info, episode_log, policy_snapshots
 from crowdnav.evaluation.protocol import Protocol
 from crowdnav.evaluation.storage import (
     ENCODER_DIR,
@@ -113,7 +113,7 @@ def run_unit(spec: UnitSpec | Mapping[str, Any], out_dir: str | Path, *, on_even
     _claim(out_dir, spec)
     if (out_dir / META_FILE).is_file():
         return _summary(spec, out_dir, read_json(out_dir / META_FILE), "skipped")
-    from crowdnav.agents import train
+    from crowdnav.agents import load_policy, train
     from crowdnav.agents.config import config_from_mapping
 
     clock = _Clock(out_dir / "timing.json")

@@ -6,13 +6,12 @@ import json
 import shutil
 
 from agents_tiny import tiny_config
-from crowdnav.agents import train
+from crowdnav.agents import load_policy, train
 from crowdnav.agents.run_folder import (
     checkpoint_dir,
     checkpoint_episodes,
     checkpoint_info,
     episode_log,
-    load_policy,
     logged_episodes,
     policy_snapshots,
     replay_buffer_file,
