@@ -26,13 +26,12 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from crowdnav.agents.run_folder import CHECKPOINT_DIR, POLICY_FILE, REPLAY_FILE
 from crowdnav.agents.wrappers import ObservationScales, encode_grids, normalize_observation, scales_from_json
 from stable_baselines3.common.base_class import BaseAlgorithm
 
 POLICY_FORMAT = "crowdnav-policy/1"
-POLICY_FILE = "policy.json"
 MODEL_FILE = "model.zip"
-REPLAY_FILE = "replay_buffer.pkl"
 ENCODER_FILE = "encoder.pt"
 
 
@@ -80,8 +79,8 @@ def checkpoint_folder(path: str | Path) -> Path:
         return path.parent
     if (path / POLICY_FILE).is_file():
         return path
-    if (path / "checkpoint" / POLICY_FILE).is_file():
-        return path / "checkpoint"
+    if (path / CHECKPOINT_DIR / POLICY_FILE).is_file():
+        return path / CHECKPOINT_DIR
     raise FileNotFoundError(f"{path}: no crowdnav checkpoint here (expected {POLICY_FILE}, or checkpoint/{POLICY_FILE} in a run folder)")
 
 

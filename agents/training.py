@@ -41,7 +41,9 @@ from crowdnav.agents.factory import (
     observation_normalization,
     precomputes_leog,
 )
-from crowdnav.agents.wrappers import scales_from_json, scales_to_json, train_seed
+from crowdnav.agents.run_folder import SNAPSHOTS_DIR, checkpoint_dir, episode_log, snapshot_dir
+from crowdnav.agents.seeding import train_seed
+from crowdnav.agents.wrappers import scales_from_json, scales_to_json
 from stable_baselines3.common.base_class import BaseAlgorithm
 
 
@@ -79,7 +81,7 @@ def train(config: TrainConfig | Mapping[str, Any] | str | Path, *, resume: bool 
     # a TrainConfig was checked when it was built: not again here (one validation per run)
     torch.set_num_threads(config.torch_threads)
     out = Path(config.out)
-    checkpoint = out / "checkpoint"
+    checkpoint = checkpoint_dir(out)
     state = _resume_state(checkpoint, config) if resume else None
     if state and state["normalization"] is None and config.normalize_observations:
         # a checkpoint from before observation normalisation: its model was trained on raw observations
@@ -129,7 +131,7 @@ def train(config: TrainConfig | Mapping[str, Any] | str | Path, *, resume: bool 
 
     callback = EpisodeCallback(
         config.episodes, first_episode, lambda episode: train_seed(config.seed, episode),
-        checkpoint_every=config.checkpoint_every, save=save, log_file=out / "episodes.csv",
+        checkpoint_every=config.checkpoint_every, save=save, log_file=episode_log(out),
         progress=config.progress, successes_before=state["successes"] if state else 0,
     )
     _set_aside_snapshots_after(out, state["episodes"] if state else 0)
@@ -153,7 +155,7 @@ def train(config: TrainConfig | Mapping[str, Any] | str | Path, *, resume: bool 
 
 def snapshot_folder(out: Path, episodes: int) -> Path:
     """Where a run saves its policy after ``episodes`` training episodes."""
-    return out / "snapshots" / f"episode_{episodes:05d}"
+    return snapshot_dir(out, episodes)
 
 
 def _set_aside_snapshots_after(out: Path, episodes: int) -> None:
@@ -162,7 +164,7 @@ def _set_aside_snapshots_after(out: Path, episodes: int) -> None:
     They come from a training history that the resume throws away; the resumed run saves its
     own snapshot at the same episode, and the old one is kept for inspection, not evaluated.
     """
-    snapshots = out / "snapshots"
+    snapshots = out / SNAPSHOTS_DIR
     for folder in sorted(snapshots.glob("episode_*")) if snapshots.is_dir() else []:
         number = folder.name.removeprefix("episode_")
         if number.isdigit() and int(number) > episodes:

@@ -1,9 +1,9 @@
 """Environment wrappers used in training: seeded episodes and the frozen-encoder latent.
 
-* :class:`EpisodeSeeds` gives training episode ``i`` the seed :func:`train_seed` ``(seed, i)``,
-  so a run is reproducible, a resumed run continues the same episode sequence, and
-  evaluation seeds (below :data:`TRAIN_SEED_BASE`) never occur in training;
-  :func:`dataset_seed` does the same for the random-policy grid collections.
+* :class:`EpisodeSeeds` gives training episode ``i`` the seed :func:`train_seed` ``(seed, i)``
+  (the seed rules live in :mod:`crowdnav.agents.seeding`, free of torch), so a run is
+  reproducible, a resumed run continues the same episode sequence, and evaluation seeds (below
+  :data:`TRAIN_SEED_BASE`) never occur in training.
 * :class:`NormalizeObservation` maps every float modality to ``(x - offset) / scale`` with the
   scales its modality declares (:meth:`crowdnav.sensors.Modality.scale`): fixed numbers, not
   running statistics, so a checkpoint stores them (:func:`scales_to_json`) and a loaded policy
@@ -21,30 +21,10 @@ import gymnasium as gym
 import numpy as np
 import torch
 from crowdnav.agents.encoders import LeogEncoder
+from crowdnav.agents.seeding import DATASET_SEED_OFFSET, TRAIN_SEED_BASE, dataset_seed, train_seed  # noqa: F401  (re-exported)
 from gymnasium import spaces
 
 from crowdnav.sensors.base import checked_scale, normalize_values, normalized_box
-
-TRAIN_SEED_BASE = 1_000_000
-"""Training seeds start here; seeds below it are free for held-out test episodes."""
-
-
-def train_seed(seed: int, episode: int) -> int:
-    """Seed of training episode ``episode`` (0-based) of a run with seed ``seed``: disjoint ranges per run seed."""
-    return TRAIN_SEED_BASE * (seed + 1) + episode
-
-
-DATASET_SEED_OFFSET = TRAIN_SEED_BASE // 2
-"""Grid-collection episodes use the upper half of each seed's band: no run trains 500,000 episodes."""
-
-
-def dataset_seed(seed: int, episode: int) -> int:
-    """Seed of episode ``episode`` of a random-policy grid collection with seed ``seed``.
-
-    Disjoint from the held-out test seeds (below :data:`TRAIN_SEED_BASE`) and from every
-    training episode, so an encoder pre-trained on the collection never saw a test episode.
-    """
-    return TRAIN_SEED_BASE * (seed + 1) + DATASET_SEED_OFFSET + episode
 
 
 class EpisodeSeeds(gym.Wrapper):

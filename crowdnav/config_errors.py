@@ -25,7 +25,7 @@ import yaml
 from pydantic import BaseModel, ValidationError
 from pydantic.fields import FieldInfo
 
-from crowdnav.registry import did_you_mean
+from crowdnav.suggest import did_you_mean
 
 
 def show(value: Any) -> str:

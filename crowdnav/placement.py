@@ -17,8 +17,8 @@ import shapely
 from shapely.geometry import Point, box
 from shapely.geometry import Polygon as ShapelyPolygon
 
+from crowdnav.obstacles import GeometryError, StaticObstacles
 from crowdnav.scenario.schema import CircleRegion, PointsRegion, PolygonRegion, RectangleRegion, Scenario
-from crowdnav.world import GeometryError, StaticObstacles
 
 GAP = 0.05
 """Minimum free space (m) between two freshly placed agents, and between an agent and an obstacle."""

@@ -7,14 +7,19 @@ in :data:`crowdnav.agents.factory.ALGORITHMS` (a test asserts both name sets are
 
 Modalities and reward presets have registries of their own, kept where they are defined
 (:data:`crowdnav.sensors.MODALITIES`, which users extend with ``register_modality``, and
-:data:`crowdnav.scenario.reward_presets.REWARD_PRESETS`); the functions below read them.
+:data:`crowdnav.scenario.reward_presets.REWARD_PRESETS`); the functions below read them. The
+registry sits at the top of the environment core (it reads the sensors): modules below it take the
+"unknown name" wording from :mod:`crowdnav.suggest`.
 """
 
 from __future__ import annotations
 
-import difflib
-from collections.abc import Iterable, Mapping
+from collections.abc import Mapping
 from types import MappingProxyType
+
+from crowdnav.scenario.reward_presets import REWARD_PRESETS
+from crowdnav.sensors import MODALITIES  # numpy and gymnasium only; registers the built-in modalities
+from crowdnav.suggest import did_you_mean, unknown_name_message  # noqa: F401  (re-exported: the one wording)
 
 ALGORITHMS: Mapping[str, str] = MappingProxyType({
     "sac": "Soft Actor-Critic: off-policy, entropy-regularised (crowdnav's default).",
@@ -40,26 +45,9 @@ ENCODER_MODES: Mapping[str, str] = MappingProxyType({
 
 def modality_names() -> tuple[str, ...]:
     """Observation keys registered in :data:`crowdnav.sensors.MODALITIES` (built-in and user-registered), sorted."""
-    from crowdnav.sensors import MODALITIES  # numpy and gymnasium only; registers the built-in modalities
-
     return tuple(sorted(MODALITIES))
 
 
 def reward_preset_names() -> tuple[str, ...]:
     """Names of :data:`crowdnav.scenario.reward_presets.REWARD_PRESETS`, the default first."""
-    from crowdnav.scenario.reward_presets import REWARD_PRESETS
-
     return tuple(REWARD_PRESETS)
-
-
-def did_you_mean(name: object, valid: Iterable[str]) -> str:
-    """``"; did you mean 'sac'?"`` when a valid name is close to ``name``, else ``""``."""
-    close = difflib.get_close_matches(str(name), list(valid), n=1)
-    return f"; did you mean '{close[0]}'?" if close else ""
-
-
-def unknown_name_message(what: str, name: object, valid: Iterable[str]) -> str:
-    """E.g. ``unknown algorithm 'sca'; did you mean 'sac'? expected one of: sac, td3, ddpg, a2c, ppo``."""
-    valid = list(valid)
-    hint = did_you_mean(name, valid) or ";"
-    return f"unknown {what} {name!r}{hint} expected one of: {', '.join(valid)}"

@@ -23,16 +23,14 @@ from __future__ import annotations
 import cmath
 import math
 from dataclasses import dataclass
-from pathlib import Path
-from typing import Any
 
 import numpy as np
 
 from crowdnav import social_force as sf
+from crowdnav.obstacles import nearest_on_edges
 from crowdnav.placement import GAP, JITTER, PlacementError
-from crowdnav.scenario.loader import Overrides, load_scenario
-from crowdnav.scenario.schema import Scenario
-from crowdnav.world import compile_world, nearest_on_edges
+from crowdnav.scenario.loader import Overrides
+from crowdnav.world import CompiledWorld, WorldSource, load_world
 
 _OBSTACLE_PASSES = 3  # obstacle pushes per overlapping step (corners between two obstacles need more than one)
 _SELF_DISTANCE = 1.0e9
@@ -99,15 +97,19 @@ class Simulator:
     >>> sim = Simulator("room_furniture")
     >>> sim.reset(seed=0)
     >>> events = sim.step(np.array([1.0, 0.0]))
+
+    ``scenario``: a library name, YAML path, mapping or Scenario (loaded and compiled by
+    :func:`crowdnav.world.load_world`), or an already compiled world (then no ``overrides``).
     """
 
-    def __init__(self, scenario: Scenario | str | Path | dict[str, Any], overrides: Overrides | None = None):
-        if isinstance(scenario, Scenario):
-            scenario = load_scenario(scenario.model_dump(), overrides) if overrides else scenario
+    def __init__(self, scenario: WorldSource | CompiledWorld, overrides: Overrides | None = None):
+        if isinstance(scenario, CompiledWorld):
+            if overrides:
+                raise ValueError("overrides apply when a scenario is loaded, not to an already compiled world")
+            self.world = scenario
         else:
-            scenario = load_scenario(scenario, overrides)
-        self.scenario = scenario
-        self.world = compile_world(scenario)
+            self.world = load_world(scenario, overrides)
+        self.scenario = scenario = self.world.scenario
         self.obstacles = self.world.obstacles
         self.placement = self.world.placement
         self.dt = scenario.time_step

@@ -24,8 +24,9 @@ from typing import Any
 
 import yaml
 from crowdnav.evaluation.baselines import evaluate_experiment_baselines
-from crowdnav.evaluation.executors import Executor, Job, make_executor, run_name
+from crowdnav.evaluation.executors import make_executor
 from crowdnav.evaluation.experiment import Experiment
+from crowdnav.evaluation.jobs import Executor, Job, run_name
 from crowdnav.evaluation.progress import ProgressBar
 from crowdnav.evaluation.storage import (
     EXPERIMENT_FILE,
@@ -192,15 +193,15 @@ def write_report(folder: Path, *, video: bool = True, log: Callable[[str], None]
 
 def render_final_policy(configuration_dir: Path, out: Path) -> list[Path]:
     """A video of the first seed's final policy on the first test episode."""
+    from crowdnav.agents.render import render_policy
+    from crowdnav.agents.run_folder import checkpoint_dir
     from crowdnav.evaluation.storage import read_json
-
-    from crowdnav.rendering.episodes import render_episodes
 
     runs = sorted(path for path in configuration_dir.iterdir() if (path / META_FILE).is_file())
     meta = read_json(runs[0] / META_FILE)
-    checkpoint = runs[0] / TRAIN_DIR / "checkpoint"
+    checkpoint = checkpoint_dir(runs[0] / TRAIN_DIR)
     test_seed = meta["protocol"]["test_seed_base"]
-    paths = render_episodes(meta["config"]["scenario"], str(checkpoint), episodes=1, seed=test_seed, out=out, progress=False)
+    paths = render_policy(meta["config"]["scenario"], str(checkpoint), episodes=1, seed=test_seed, out=out, progress=False)
     named = out / f"{meta['configuration']}_{runs[0].name}_final_test{test_seed}{paths[0].suffix}"
     paths[0].replace(named)
     return [named]

@@ -12,6 +12,7 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
+from crowdnav.agents.run_folder import logged_episodes
 from crowdnav.evaluation.protocol import Protocol
 from crowdnav.evaluation.storage import EVALUATIONS_DIR, META_FILE, TRAIN_DIR
 
@@ -26,13 +27,7 @@ def episodes_on_disk(folder: str | Path, protocol: Protocol) -> int:
     folder = Path(folder)
     if (folder / META_FILE).is_file():
         return run_episodes(protocol)
-    trained = 0
-    log = folder / TRAIN_DIR / "episodes.csv"
-    if log.is_file():
-        lines = log.read_text(encoding="utf-8").splitlines()
-        if len(lines) > 1:
-            first = lines[-1].split(",", 1)[0]
-            trained = int(first) + 1 if first.isdigit() else 0
+    trained = logged_episodes(folder / TRAIN_DIR)
     evaluations = len(list((folder / EVALUATIONS_DIR).glob("evaluation_*.csv"))) if (folder / EVALUATIONS_DIR).is_dir() else 0
     return min(trained, protocol.train_episodes) + evaluations * protocol.test_episodes
 

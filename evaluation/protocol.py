@@ -12,6 +12,7 @@ from __future__ import annotations
 
 from typing import Annotated, Any
 
+from crowdnav.agents.seeding import train_seed  # torch-free: the protocol stays cheap to import
 from pydantic import BaseModel, BeforeValidator, ConfigDict, Field, ValidationError, model_validator
 
 from crowdnav.config_errors import FieldProblems, validation_issues
@@ -87,8 +88,6 @@ class Protocol(BaseModel):
 
     def training_seeds(self, run_seed: int) -> range | list[int]:
         """Seeds of the training episodes of run ``run_seed`` (as :func:`agents.train_seed` assigns them)."""
-        from crowdnav.agents import train_seed
-
         first, last = train_seed(run_seed, 0), train_seed(run_seed, self.train_episodes - 1)
         if last - first == self.train_episodes - 1:  # consecutive: a range, so membership tests are O(1)
             return range(first, last + 1)

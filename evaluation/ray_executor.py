@@ -32,7 +32,7 @@ from pathlib import Path
 from typing import Any
 
 import ray
-from crowdnav.evaluation.executors import (
+from crowdnav.evaluation.jobs import (
     Executor,
     ExecutorError,
     Job,
@@ -286,10 +286,10 @@ def _run_task(spec: dict[str, Any], out_dir: str, storage: str, storage_id: str,
     finally:
         reporter.stop()
     if work_dir != Path(out_dir):
-        from crowdnav.agents.checkpoint import REPLAY_FILE
+        from crowdnav.agents.run_folder import replay_buffer_file
 
         # The replay buffer only serves to resume training, which a finished run never does, and can weigh hundreds of MB.
-        base["files"] = pack_folder(work_dir, skip=(f"{TRAIN_DIR}/checkpoint/{REPLAY_FILE}",))
+        base["files"] = pack_folder(work_dir, skip=(replay_buffer_file(TRAIN_DIR).as_posix(),))
         if not shared:  # a node-local copy: nobody else can reach it, and the driver now gets the run
             remove_work_folder(work_dir)
     return {**summary, **base}

@@ -16,13 +16,13 @@ buffer), and it lets a resumed run evaluate what the interrupted one had trained
 from __future__ import annotations
 
 import dataclasses
-import re
 import time
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from crowdnav.agents.run_folder import checkpoint_dir, checkpoint_episodes, checkpoint_info, episode_log, policy_snapshots
 from crowdnav.evaluation.protocol import Protocol
 from crowdnav.evaluation.storage import (
     ENCODER_DIR,
@@ -139,12 +139,12 @@ def run_unit(spec: UnitSpec | Mapping[str, Any], out_dir: str | Path, *, on_even
     protocol = Protocol(**spec.protocol)
     config = spec.config_for(out_dir)
     train_dir = out_dir / TRAIN_DIR
-    trained = _checkpoint_episodes(train_dir)
+    trained = checkpoint_episodes(train_dir)
     resumed = trained > 0 or (out_dir / EVALUATIONS_DIR).is_dir()
     evaluator = _Evaluator(spec, out_dir, protocol, load_policy, clock, hook)
     if trained < protocol.train_episodes:
         evaluator.evaluate_available(train_dir)  # before resuming replaces the checkpoint
-        train(config, resume=(train_dir / "checkpoint").exists())
+        train(config, resume=checkpoint_dir(train_dir).exists())
         clock.save()
         hook("trained", {"episodes": protocol.train_episodes})
     evaluator.evaluate_available(train_dir)
@@ -169,37 +169,6 @@ def _claim(out_dir: Path, spec: UnitSpec) -> None:
         atomic_write_json(path, spec.to_dict())
 
 
-def _checkpoint_episodes(train_dir: Path) -> int:
-    """Episodes behind train/checkpoint (0 if there is none yet)."""
-    info = train_dir / "checkpoint" / "policy.json"
-    return int(read_json(info)["episodes"]) if info.is_file() else 0
-
-
-_SNAPSHOT = re.compile(r"episode_(\d+)$")
-
-
-def _policy_folders(train_dir: Path) -> dict[int, Path]:
-    """Episodes -> folder of every policy saved so far on the checkpoint's training history.
-
-    The snapshots up to the checkpoint, and the checkpoint itself (a run from an older crowdnav
-    can have been killed after its checkpoint and before its snapshot). A snapshot newer than
-    the checkpoint (or any snapshot without one) was saved just before a kill; the resume
-    trains that stretch again.
-    """
-    folders: dict[int, Path] = {}
-    checkpoint = train_dir / "checkpoint"
-    latest = 0
-    if (checkpoint / "policy.json").is_file():
-        latest = _checkpoint_episodes(train_dir)
-        folders[latest] = checkpoint
-    snapshots = train_dir / "snapshots"
-    for folder in sorted(snapshots.iterdir()) if snapshots.is_dir() else []:
-        match = _SNAPSHOT.match(folder.name)
-        if match and (folder / "policy.json").is_file() and int(match.group(1)) <= latest:
-            folders[int(match.group(1))] = folder
-    return folders
-
-
 class _Evaluator:
     """Evaluates the policies of the scheduled points, one CSV per evaluation."""
 
@@ -216,7 +185,7 @@ class _Evaluator:
 
     def evaluate_available(self, train_dir: Path) -> None:
         """Evaluate every scheduled point that has a saved policy and no results yet."""
-        folders = _policy_folders(train_dir)
+        folders = policy_snapshots(train_dir)
         points = self.protocol.evaluation_points
         for k, point in enumerate(points):
             if self.done(k):
@@ -260,11 +229,11 @@ def _finish(spec: UnitSpec, out_dir: Path, protocol: Protocol, config: Any, cloc
                    for k in range(protocol.evaluations)]
     tests = pd.concat(evaluations, ignore_index=True)
     atomic_write_csv(tests, out_dir / TEST_FILE)
-    training = _training_episodes(spec, out_dir / TRAIN_DIR / "episodes.csv")
+    training = _training_episodes(spec, episode_log(out_dir / TRAIN_DIR))
     atomic_write_csv(training, out_dir / TRAINING_FILE)
     timing = clock.save()
     final = tests[tests["evaluation"] >= protocol.evaluations - protocol.final_evaluations]
-    train_info = read_json(out_dir / TRAIN_DIR / "checkpoint" / "policy.json")
+    train_info = checkpoint_info(out_dir / TRAIN_DIR)
     train_steps, test_steps = int(train_info["timesteps"]), int(tests["steps"].sum())
     meta = {
         **{name: value for name, value in zip(RUN_COLUMNS, (spec.experiment, spec.configuration, spec.display_label, spec.seed),

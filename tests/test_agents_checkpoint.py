@@ -126,3 +126,12 @@ def test_models_saved_by_sb3s_own_classes_load_into_crowdnavs_and_the_other_way_
     states = new_model.policy.state_dict(), back.policy.state_dict()
     assert all(torch.equal(states[0][key], states[1][key]) for key in states[0])
     np.testing.assert_array_equal(back.predict(observation, deterministic=True)[0], new_model.predict(observation, deterministic=True)[0])
+
+
+def test_a_checkpoint_renders_as_a_video_with_the_env_options_it_was_trained_with(tmp_path):
+    from crowdnav.agents.render import render_policy
+
+    train(tiny_config(tmp_path / "run", episodes=1, max_steps=10))
+    paths = render_policy("open_space", str(tmp_path / "run" / "checkpoint"), episodes=1, seed=3, out=tmp_path / "videos",
+                          video_format="gif", progress=False)
+    assert [path.name for path in paths] == ["open_space_checkpoint_seed3.gif"] and paths[0].stat().st_size > 0

@@ -115,6 +115,29 @@ def test_bad_options_raise_a_scenario_error_naming_the_path(options, path):
         CrowdNavEnv("room_furniture", **options)
 
 
+def test_an_unknown_modality_in_the_file_is_reported_with_its_line_when_the_env_is_built(tmp_path):
+    text = (library_dir() / "room_furniture.yaml").read_text(encoding="utf-8")
+    file = tmp_path / "room.yaml"
+    file.write_text(text + "sensors: {modalities: [goal, sonar]}\n", encoding="utf-8")
+    with pytest.raises(ScenarioError) as caught:
+        CrowdNavEnv(str(file))
+    (issue,) = caught.value.issues
+    assert issue.path == "sensors.modalities" and "'sonar'" in issue.message
+    assert issue.line == text.count("\n") + 1
+
+
+@pytest.mark.parametrize("make", [CrowdNavEnv, crowdnav.envs.parallel_env], ids=["gymnasium", "pettingzoo"])
+def test_building_an_env_compiles_its_world_once(monkeypatch, make):
+    import crowdnav.world
+
+    calls = []
+    compile_world = crowdnav.world.compile_world
+    monkeypatch.setattr(crowdnav.world, "compile_world", lambda scenario: calls.append(scenario.name) or compile_world(scenario))
+    env = make("room_furniture", modalities=["goal", "lidar"])
+    env.reset(seed=0)
+    assert calls == ["room_furniture"]
+
+
 def test_malformed_options_raise_clear_errors():
     with pytest.raises(ValueError, match="modalities must be a list"):
         CrowdNavEnv("room_furniture", modalities="lidar")

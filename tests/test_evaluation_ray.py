@@ -268,8 +268,8 @@ def test_without_ray_installed_the_ray_executor_is_a_one_line_error(monkeypatch,
 
 
 def test_core_benchmark_modules_never_import_ray():
-    code = ("import sys, evaluation.benchmark, evaluation.executors, crowdnav.cli\n"
-            "from evaluation.executors import make_executor\n"
+    code = ("import sys, crowdnav.evaluation.benchmark, crowdnav.evaluation.executors, crowdnav.cli\n"
+            "from crowdnav.evaluation.executors import make_executor\n"
             "make_executor('local', workers=2)\n"
             "assert 'ray' not in sys.modules, 'ray was imported'\n")
     result = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)

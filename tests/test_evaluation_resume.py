@@ -16,7 +16,7 @@ import pandas as pd
 import pytest
 from crowdnav.evaluation.benchmark import run_experiment
 from crowdnav.evaluation.experiment import experiment_from_mapping
-from crowdnav.evaluation.runner import _policy_folders, run_unit
+from crowdnav.evaluation.runner import run_unit
 from crowdnav.evaluation.storage import ResultsError
 from evaluation_tiny import tiny_experiment_document, tiny_unit_spec
 
@@ -143,17 +143,6 @@ def test_checkpoint_whose_snapshot_was_never_written_is_evaluated_in_its_place(t
     run_unit(spec, tmp_path, on_event=lambda event, data: events.append((data["evaluation"], data["training_episodes"])))
     assert events == [(0, 2), (1, 4)]
     check_complete(tmp_path, spec)
-
-
-def test_a_snapshot_newer_than_the_checkpoint_is_not_evaluated(tmp_path):
-    train_dir = tmp_path / "train"
-    for folder, episodes in (("checkpoint", 4), ("snapshots/episode_00002", 2), ("snapshots/episode_00004", 4),
-                             ("snapshots/episode_00006", 6)):  # 6: saved, then killed before its checkpoint
-        (train_dir / folder).mkdir(parents=True)
-        (train_dir / folder / "policy.json").write_text(json.dumps({"episodes": episodes}))
-    assert _policy_folders(train_dir) == {2: train_dir / "snapshots/episode_00002", 4: train_dir / "snapshots/episode_00004"}
-    shutil.rmtree(train_dir / "checkpoint")
-    assert _policy_folders(train_dir) == {}
 
 
 def test_a_failing_run_is_reported_and_the_others_finish_in_the_process_pool(tmp_path):

@@ -10,6 +10,7 @@ import pytest
 
 from crowdnav.cli import main
 from crowdnav.scenario import ScenarioError, load_scenario
+from crowdnav.world import load_world
 
 VALID = """\
 description: A small test room.
@@ -153,13 +154,22 @@ def test_the_base_document_is_valid(tmp_path):
 def test_invalid_file_reports_file_path_line_and_expectation(tmp_path, case, text, path, line, expected):
     file = write(tmp_path, text)
     with pytest.raises(ScenarioError) as caught:
-        load_scenario(file)
+        load_world(file)  # the loader's checks, then the geometry's
     issue = issue_at(caught.value, path)
     assert issue.line == line
     report_line = next(row for row in str(caught.value).splitlines() if f" {path}: " in row)
     assert report_line.startswith(f"{file}:{line}: {path}: ")
     for fragment in expected:
         assert fragment in issue.message
+
+
+def test_the_loader_leaves_geometry_to_the_world_which_reports_it_with_the_line(tmp_path):
+    file = write(tmp_path, edit("  goal: {type: rectangle, min: [2.5, 2.5], max: [3.5, 3.5]}\n",
+                                "  goal: {type: rectangle, min: [2.5, 2.5], max: [4.5, 3.5]}\n"))
+    assert list(load_scenario(file).robot.goal.max) == [4.5, 3.5]  # pure: YAML, schema and consistency only
+    with pytest.raises(ScenarioError) as caught:
+        load_world(file)
+    assert issue_at(caught.value, "robot.goal").line == 6
 
 
 def test_there_are_at_least_twelve_distinct_invalid_file_cases():
@@ -241,7 +251,7 @@ def test_bad_override_names_the_override(tmp_path, overrides, path, expected):
 
 def test_override_inside_a_region_keeps_the_region_line(tmp_path):
     with pytest.raises(ScenarioError) as caught:
-        load_scenario(write(tmp_path, VALID), overrides={"robot.goal.max": [4.5, 3.5]})
+        load_world(write(tmp_path, VALID), overrides={"robot.goal.max": [4.5, 3.5]})
     issue = issue_at(caught.value, "robot.goal")
     assert issue.line == 6 and "(with override robot.goal.max)" in issue.message
 

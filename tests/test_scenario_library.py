@@ -10,11 +10,11 @@ import numpy as np
 import pytest
 import yaml
 from pydantic import BaseModel
+from shapely.geometry import Point
 
 from crowdnav import Simulator, load_scenario
 from crowdnav.scenario import schema
 from crowdnav.scenario.library import camel_name, library_descriptions, library_dir, library_names
-from crowdnav.world import nearest_on_polygons
 
 REPO = Path(__file__).resolve().parents[1]
 NAMES = library_names()
@@ -119,10 +119,9 @@ def test_corridor_humans_start_at_an_end_and_walk_to_the_other():
 def test_doorway_door_is_1_2_m_wide_and_every_human_path_runs_through_it():
     sim = Simulator("doorway")
     sim.reset(seed=0)
-    _, to_walls = nearest_on_polygons(np.array([0j]), sim.obstacles)
-    interior = [i for i, label in enumerate(sim.obstacles.labels) if label.startswith("walls.")]
+    interior = [polygon for polygon, label in zip(sim.obstacles.polygons, sim.obstacles.labels, strict=True) if label.startswith("walls.")]
     assert len(interior) == 2
-    assert to_walls[0, interior] == pytest.approx([0.6, 0.6])
+    assert [Point(0, 0).distance(polygon) for polygon in interior] == pytest.approx([0.6, 0.6])
     start, goal = sim.human_positions, sim.human_goals
     assert (np.sign(start.real) == -np.sign(goal.real)).all()
     # The straight start -> goal line crosses the dividing wall's line (x = 0) at the door's centre.

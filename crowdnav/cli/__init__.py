@@ -3,8 +3,9 @@
 Every command group lives in its own module of this package and exposes
 ``register(subparsers)``: it adds its parser and sets ``handler`` (``(args) -> int``) on
 each leaf command. To add a group (train, render, benchmark, ...), write its module and
-append its ``register`` to :func:`command_groups`. Import heavy dependencies (torch,
-pygame) inside handlers, so that ``crowdnav --help`` and the scenario tools stay fast.
+append its ``register`` to :func:`command_groups`. The CLI is the top floor: a handler imports
+the layer it runs (the environment core, crowdnav.agents, crowdnav.evaluation) when it runs,
+so that ``crowdnav --help`` and the scenario tools load neither torch nor pygame.
 """
 
 from __future__ import annotations
@@ -14,7 +15,7 @@ import os
 import sys
 from collections.abc import Sequence
 
-from crowdnav.cli import benchmark, render, scenario, schema
+from crowdnav.cli import benchmark, render, scenario, schema, train
 from crowdnav.cli.common import CliError
 
 # Packages that only an extra installs (pyproject.toml), so a command run on the core install
@@ -25,9 +26,7 @@ EXTRA_OF_COMMAND = {"train": "train", "benchmark": "bench"}
 
 def command_groups() -> tuple:
     """Registration functions of the command groups, in the order ``--help`` lists them."""
-    from crowdnav.agents import commands as agent_commands  # imported here: it imports crowdnav.cli.common itself
-
-    return (scenario.register, agent_commands.register, render.register, benchmark.register, schema.register)
+    return (scenario.register, train.register, render.register, benchmark.register, schema.register)
 
 
 def build_parser() -> argparse.ArgumentParser:

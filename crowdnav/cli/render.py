@@ -31,14 +31,14 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from crowdnav.agents.render import PolicyLoadError, render_policy
     from crowdnav.paths import OutputPathError
-    from crowdnav.rendering.episodes import PolicyLoadError, render_episodes
     from crowdnav.scenario import ScenarioError
 
     if args.episodes < 1:
         raise CliError(f"--episodes must be at least 1, got {args.episodes}")
     try:
-        paths = render_episodes(
+        paths = render_policy(
             args.scenario,
             args.policy,
             episodes=args.episodes,

@@ -20,7 +20,8 @@ def register(groups: argparse._SubParsersAction) -> None:
     validate = commands.add_parser(
         "validate",
         help="check scenario files or library names; exit status 1 if any is invalid",
-        description="Load each scenario as the simulator would and report every problem with file, line and field.",
+        description="Load each scenario as an environment would (schema, geometry, modality names) and report every "
+                    "problem with file, line and field.",
     )
     validate.add_argument("scenarios", nargs="+", metavar="FILE_OR_NAME", help="a YAML file or a library scenario name")
     add_override_option(validate)
@@ -40,14 +41,15 @@ def list_command(args: argparse.Namespace) -> int:
 
 
 def validate_command(args: argparse.Namespace) -> int:
-    from crowdnav.scenario import ScenarioError, load_scenario
+    from crowdnav.envs.core import load_env_world
+    from crowdnav.scenario import ScenarioError
     from crowdnav.scenario.library import resolve
 
     overrides = parse_overrides(args.overrides)
     invalid = 0
     for source in args.scenarios:
         try:
-            load_scenario(source, overrides=overrides)
+            load_env_world(source, overrides)
         except ScenarioError as error:
             invalid += 1
             print(error.report(), file=sys.stderr)

@@ -11,7 +11,6 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping, Sequence
-from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -19,15 +18,13 @@ from gymnasium import spaces
 
 from crowdnav.envs.reward import Reward
 from crowdnav.rendering.episode_view import RENDER_MODES, EpisodeView, RenderOptions
-from crowdnav.scenario import ScenarioError, ScenarioIssue, library
-from crowdnav.scenario.loader import load_scenario
-from crowdnav.scenario.schema import Scenario
-from crowdnav.sensors import build_modalities
+from crowdnav.scenario import ScenarioIssue, library
+from crowdnav.sensors import Modality, build_modalities
 from crowdnav.simulator import Simulator, StepEvents
+from crowdnav.world import CompiledWorld, WorldSource, load_world
 
-ScenarioSource = str | Path | Scenario | Mapping[str, Any]
+ScenarioSource = WorldSource
 """A library name (``"room_furniture"``), a YAML path, a :class:`Scenario` or a parsed mapping."""
-
 
 
 def option_overrides(
@@ -72,16 +69,25 @@ def _flatten(prefix: str, tree: Mapping[str, Any]) -> dict[str, Any]:
     return flat
 
 
-def load_env_scenario(scenario: ScenarioSource | None, overrides: Mapping[str, Any]) -> Scenario:
-    """Load ``scenario`` with ``overrides``; every problem is a ScenarioError naming the path."""
+def load_env_world(scenario: ScenarioSource | None, overrides: Mapping[str, Any]) -> tuple[CompiledWorld, dict[str, Modality]]:
+    """Load ``scenario`` with ``overrides``, compile its world and build its modalities, each once.
+
+    Every problem is a ScenarioError naming the path (and the file's line where there is one):
+    the scenario's (:func:`crowdnav.world.load_world`) and the modality names (checked by
+    :func:`crowdnav.sensors.build_modalities`, the one place that knows the registered ones).
+    """
     if scenario is None:
         raise ValueError(
             "a scenario is required: a library name "
             f"({', '.join(library.library_names())}) or the path to a YAML file"
         )
-    if isinstance(scenario, Scenario):
-        return load_scenario(scenario.model_dump(), overrides) if overrides else scenario
-    return load_scenario(scenario, overrides)
+    world = load_world(scenario, overrides)
+    sensors = world.scenario.sensors
+    try:
+        modalities = build_modalities(sensors.modalities, world, sensors)
+    except ValueError as error:  # unknown or duplicate keys: report them like any other scenario field
+        raise world.source.error([ScenarioIssue("sensors.modalities", str(error))]) from None
+    return world, modalities
 
 
 def real_array(value: Any, what: str) -> np.ndarray:
@@ -135,13 +141,9 @@ class EnvCore:
     ):
         if render_mode is not None and render_mode not in RENDER_MODES:
             raise ValueError(f"render_mode={render_mode!r} is not supported; expected None or one of {RENDER_MODES}")
-        self.scenario = load_env_scenario(scenario, option_overrides(modalities, sensors, reward_weights, overrides))
-        self.simulator = Simulator(self.scenario)
-        sensors_config = self.scenario.sensors
-        try:
-            self.modalities = build_modalities(sensors_config.modalities, self.simulator.world, sensors_config)
-        except ValueError as error:  # unknown or duplicate keys: report them like any other scenario field
-            raise ScenarioError(self.scenario.name or "<scenario>", [ScenarioIssue("sensors.modalities", str(error))]) from None
+        world, self.modalities = load_env_world(scenario, option_overrides(modalities, sensors, reward_weights, overrides))
+        self.scenario = world.scenario
+        self.simulator = Simulator(world)
         self.observation_space = spaces.Dict({key: modality.space() for key, modality in self.modalities.items()})
         self.action_space = spaces.Box(-1.0, 1.0, shape=(2,), dtype=np.float32)
         self.reward = Reward(self.scenario.reward)

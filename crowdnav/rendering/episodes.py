@@ -1,4 +1,9 @@
-"""Render whole episodes of a policy to video files (what ``crowdnav render`` runs)."""
+"""Render whole episodes of a policy to video files.
+
+The policy is a plain callable ``act(env, observation) -> action``, or the name of a scripted
+policy; a trained agent is rendered through :func:`crowdnav.agents.render.render_policy`
+(what ``crowdnav render`` runs), which loads the checkpoint and calls :func:`render_episodes`.
+"""
 
 from __future__ import annotations
 
@@ -16,34 +21,20 @@ from crowdnav.rendering.video import VIDEO_FORMATS, VideoWriter
 Act = Callable[[CrowdNavEnv, Mapping[str, np.ndarray]], np.ndarray]
 
 
-class PolicyLoadError(ValueError):
-    """A ``--policy`` value that is neither a scripted policy nor a loadable checkpoint."""
-
-
-def resolve_policy(policy: str, seed: int) -> tuple[Act, dict[str, Any]]:
-    """A scripted policy name or a checkpoint path -> (act(env, observation), env options it needs)."""
-    if policy in SCRIPTED_POLICIES:
-        scripted = SCRIPTED_POLICIES[policy](seed) if policy == "random" else SCRIPTED_POLICIES[policy]()
-        return (lambda env, observation: scripted(env.simulator)), {}
-    path = Path(policy)
-    if not path.exists():
-        raise PolicyLoadError(
-            f"--policy {policy!r} is neither a scripted policy ({', '.join(SCRIPTED_POLICIES)}) nor an existing checkpoint path"
-        )
-    try:
-        from crowdnav.agents import load_policy
-
-        trained = load_policy(path)
-    except Exception as error:  # a checkpoint can fail in many ways; report one clear line
-        raise PolicyLoadError(f"cannot load checkpoint {path}: {type(error).__name__}: {error}") from None
-    options = {k: v for k, v in trained.env_options.items() if k not in ("scenario", "render_mode", "render_options")}
-    return (lambda env, observation: trained(observation)), options
+def scripted_act(name: str, seed: int = 0) -> Act:
+    """The scripted policy ``name`` (:data:`crowdnav.policies.SCRIPTED_POLICIES`) as ``act(env, observation)``."""
+    if name not in SCRIPTED_POLICIES:
+        raise ValueError(f"unknown scripted policy {name!r}; expected one of: {', '.join(SCRIPTED_POLICIES)}")
+    scripted = SCRIPTED_POLICIES[name](seed) if name == "random" else SCRIPTED_POLICIES[name]()
+    return lambda env, observation: scripted(env.simulator)
 
 
 def render_episodes(
     scenario: str,
-    policy: str = "social-force",
+    policy: str | Act = "social-force",
     *,
+    label: str | None = None,
+    env_options: Mapping[str, Any] | None = None,
     episodes: int = 3,
     seed: int = 0,
     out: str | Path = "videos",
@@ -53,19 +44,25 @@ def render_episodes(
     render_options: Mapping[str, Any] | None = None,
     progress: bool = True,
 ) -> list[Path]:
-    """Run ``episodes`` episodes (seeds ``seed``, ``seed + 1``, ...) and write one video each; returns the paths."""
+    """Run ``episodes`` episodes (seeds ``seed``, ``seed + 1``, ...) and write one video each; returns the paths.
+
+    ``policy``: a scripted policy's name or ``act(env, observation) -> action``; ``label``
+    names it in the file names (default: the scripted name, else ``policy``); ``env_options``:
+    CrowdNavEnv keyword arguments the policy needs (e.g. a trained agent's modalities).
+    """
     suffix = f".{video_format.lower().lstrip('.')}"
     if suffix not in VIDEO_FORMATS:
         raise ValueError(f"unsupported video format {video_format!r}; expected one of {', '.join(f[1:] for f in VIDEO_FORMATS)}")
     if episodes < 1:
         raise ValueError(f"episodes must be at least 1, got {episodes}")
-    act, env_options = resolve_policy(policy, seed)
+    act = scripted_act(policy, seed) if isinstance(policy, str) else policy
+    env_options = dict(env_options or {})
     if overrides:
         env_options["overrides"] = {**env_options.get("overrides", {}), **overrides}
     if reward_weights:  # a preset and weights on top of a checkpoint's own (which win over overrides)
         env_options["reward_weights"] = {**env_options.get("reward_weights", {}), **reward_weights}
     env = CrowdNavEnv(scenario, render_mode="rgb_array", render_options=render_options, **env_options)
-    label = Path(policy).stem if policy not in SCRIPTED_POLICIES else policy
+    label = label or (policy if isinstance(policy, str) else "policy")
     out = Path(out)
     paths = []
     bar = _progress(episodes * env.scenario.max_steps, progress)

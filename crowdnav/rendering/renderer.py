@@ -2,13 +2,14 @@
 
 Layout: a status bar on top (one line of heads-up text, cut to fit), the map below it, and a
 panel beside it (below it for wide worlds such as corridors) holding the LEOG inset, a legend of
-what is drawn and a scale bar in metres, so nothing covers the map. On the map: world bounds, walls and furniture; humans as discs with
-a heading tick and a short trail; the robot with its heading and its path so far; its goal as a
+what is drawn and a scale bar in metres, so nothing covers the map. On the map: world bounds,
+walls and furniture; humans as discs with a heading tick and a short trail; the robot with its heading and its path so far; its goal as a
 filled disc of the goal radius with a cross; optional overlays (LIDAR rays, the closest-obstacle
 point, the humans' goals). The map's scale is chosen from the world bounds so every scenario fits.
 
 Frames are drawn off-screen on a plain pygame Surface, so ``rgb_array`` needs no display; a
-window is opened only by :meth:`Renderer.show`.
+window is opened only by :meth:`Renderer.show`. pygame is imported when the first renderer is
+built, so importing crowdnav (and building an env without a render mode) never loads it.
 """
 
 from __future__ import annotations
@@ -17,13 +18,22 @@ import math
 import os
 from collections import deque
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
 import numpy as np
 
-os.environ.setdefault("PYGAME_HIDE_SUPPORT_PROMPT", "1")
-import pygame  # noqa: E402  (the variable above must be set before the import)
+from crowdnav.simulator import Simulator
 
-from crowdnav.simulator import Simulator  # noqa: E402
+if TYPE_CHECKING:
+    import pygame
+
+
+def _pygame():
+    """pygame, imported on first use (without its greeting on stdout)."""
+    os.environ.setdefault("PYGAME_HIDE_SUPPORT_PROMPT", "1")
+    import pygame
+
+    return pygame
 
 
 @dataclass(frozen=True)
@@ -91,6 +101,7 @@ class Renderer:
     """Draws one scenario's states; call :meth:`reset` at each episode start, :meth:`frame` per step."""
 
     def __init__(self, sim: Simulator, options: RenderOptions | None = None):
+        pygame = _pygame()
         self.sim = sim
         self.options = options or RenderOptions()
         self.palette = Palette()
@@ -106,7 +117,7 @@ class Renderer:
         # Wide worlds (corridors) get the panel below the map, the others beside it.
         self._below = span_x > 1.6 * span_y
         if self._below:
-            inset, panel_h = _floor_16(0.22 * side), 0
+            inset = _floor_16(0.22 * side)
             panel_h = inset + self._row + 24
             scale = min(side / span_x, (side - self._bar - panel_h) / span_y)
         else:
@@ -143,11 +154,13 @@ class Renderer:
 
     def frame(self, overlays: Overlays | None = None, hud: str = "") -> np.ndarray:
         """The current state as a ``uint8`` array of shape (H, W, 3)."""
+        pygame = _pygame()
         surface = self._draw(overlays or Overlays(), hud)
         return np.ascontiguousarray(pygame.surfarray.pixels3d(surface).transpose(1, 0, 2))
 
     def show(self, overlays: Overlays | None = None, hud: str = "", fps: float = 10.0) -> None:
         """Draw into a window (opened on first use) and wait to keep ``fps``."""
+        pygame = _pygame()
         surface = self._draw(overlays or Overlays(), hud)
         if self._window is None:
             pygame.display.init()
@@ -160,6 +173,7 @@ class Renderer:
         self._clock.tick(fps)
 
     def close(self) -> None:
+        pygame = _pygame()
         if self._window is not None:
             pygame.display.quit()
             self._window = None
@@ -172,6 +186,7 @@ class Renderer:
     # ---------------------------------------------------------------- drawing
 
     def _draw_static(self) -> pygame.Surface:
+        pygame = _pygame()
         surface = pygame.Surface(self.size)
         surface.fill(self.palette.panel)
         surface.fill(self.palette.outside, self._map_rect)
@@ -195,6 +210,7 @@ class Renderer:
         return surface
 
     def _draw(self, overlays: Overlays, hud: str) -> pygame.Surface:
+        pygame = _pygame()
         sim, palette, scale = self.sim, self.palette, self.scale
         surface = self._static.copy()
         surface.set_clip(self._map_rect)  # nothing drawn on the map spills into the bar or the panel
@@ -251,6 +267,7 @@ class Renderer:
 
     def _draw_inset(self, surface: pygame.Surface, grid: np.ndarray, left: int, top: int) -> tuple[int, int]:
         """The LEOG in the panel with its caption; returns its right edge and the y below the caption."""
+        pygame = _pygame()
         grid = grid.reshape(grid.shape[-2], grid.shape[-1])
         side = self._inset_side
         pixels = np.where(grid > 0, 30, 235).astype(np.uint8)
@@ -278,6 +295,7 @@ class Renderer:
 
     def _draw_legend(self, surface: pygame.Surface, overlays: Overlays, left: int, top: int) -> None:
         """One entry per row from (left, top); below the map, in columns that fit the panel's height."""
+        pygame = _pygame()
         row, column_width = self._row, 150
         rows = max(1, (self._panel_rect.bottom - top - 8) // row) if self._below else 99
         for k, (kind, label, colour) in enumerate(self._legend_entries(overlays)):
@@ -298,6 +316,7 @@ class Renderer:
 
     def _draw_scale_bar(self, surface: pygame.Surface) -> None:
         """A bar of a round number of metres at the panel's bottom (right end below the map)."""
+        pygame = _pygame()
         room = 160 if self._below else self._panel_rect.width - 24
         metres = max((m for m in (0.5, 1, 2, 5, 10, 20, 50, 100) if m * self.scale <= room), default=0.5)
         length = metres * self.scale
@@ -320,6 +339,7 @@ def _fit(font: pygame.font.Font, text: str, width: int) -> str:
 
 
 def _cross(surface: pygame.Surface, colour, centre: np.ndarray, half: float) -> None:
+    pygame = _pygame()
     x, y = centre
     pygame.draw.line(surface, colour, (x - half, y - half), (x + half, y + half), 2)
     pygame.draw.line(surface, colour, (x - half, y + half), (x + half, y - half), 2)

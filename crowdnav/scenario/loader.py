@@ -1,7 +1,10 @@
-"""Load a scenario: YAML with line numbers -> overrides -> schema -> consistency and geometry checks.
+"""Load a scenario: YAML with line numbers -> overrides -> schema -> consistency checks.
 
 Every failure becomes a :class:`ScenarioError` naming the file, the dotted path and, where
-the YAML node can be found, the line.
+the YAML node can be found, the line. The loader is pure (text in, :class:`Scenario` out):
+the geometry is checked when the world is compiled (:func:`crowdnav.world.load_world`) and
+modality names when the sensors are built; :meth:`LoadedScenario.error` lets those later
+checks report their problems with the same file and lines.
 """
 
 from __future__ import annotations
@@ -9,7 +12,8 @@ from __future__ import annotations
 import copy
 import difflib
 import math
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -26,13 +30,42 @@ from crowdnav.scenario.schema import Scenario
 Overrides = Mapping[str, Any]
 
 
+@dataclass(frozen=True)
+class LoadedScenario:
+    """A validated scenario and where it came from, to report problems found after loading."""
+
+    scenario: Scenario
+    label: str
+    """The file (or library file), ``<mapping>``, or the scenario's name."""
+    root: yaml.Node | None = None
+    """The YAML node tree of the file, for line numbers (None without a file)."""
+    override_paths: frozenset[str] = frozenset()
+
+    def error(self, issues: Sequence[ScenarioIssue]) -> ScenarioError:
+        """A ScenarioError for ``issues`` found later (geometry, modality names), with file and lines like the loader's."""
+        return ScenarioError(self.label, [_with_line(issue, self.root, set(self.override_paths)) for issue in issues])
+
+
 def load_scenario(source: str | Path | Mapping[str, Any], overrides: Overrides | None = None) -> Scenario:
-    """Load and fully validate a scenario.
+    """Load and validate a scenario (YAML, schema, consistency between fields).
 
     ``source`` is a library name (``"room_furniture"``), a path to a YAML file, or an
     already-parsed mapping. ``overrides`` maps dotted paths to values, e.g.
     ``{"humans.count": 10, "walls.0.thickness": 0.2}``; they are validated like the file.
+    The geometry is checked when the world is compiled (:func:`crowdnav.world.load_world`).
     """
+    return read_scenario(source, overrides).scenario
+
+
+def read_scenario(source: str | Path | Mapping[str, Any] | Scenario, overrides: Overrides | None = None) -> LoadedScenario:
+    """:func:`load_scenario`, keeping the file's label and YAML tree (:class:`LoadedScenario`).
+
+    A :class:`Scenario` is taken as it is, or validated again with ``overrides`` applied.
+    """
+    if isinstance(source, Scenario):
+        if not overrides:
+            return LoadedScenario(source, source.name or "<scenario>")
+        source = source.model_dump()
     if isinstance(source, Mapping):
         label, document, root = "<mapping>", copy.deepcopy(dict(source)), None
     else:
@@ -51,17 +84,11 @@ def load_scenario(source: str | Path | Mapping[str, Any], overrides: Overrides |
     if isinstance(source, (str, Path)) and document.get("name") is None:
         document["name"] = safe_stem(library.resolve(source).stem)
     scenario = _validate_schema(label, document, root, override_paths)
+    loaded = LoadedScenario(scenario, label, root, frozenset(override_paths))
     issues = consistency_issues(scenario)
-    if not issues:
-        from crowdnav.world import GeometryError, compile_world  # shapely is only needed here
-
-        try:
-            compile_world(scenario)
-        except GeometryError as error:
-            issues = [ScenarioIssue(error.path, error.message)]
     if issues:
-        raise ScenarioError(label, [_with_line(issue, root, override_paths) for issue in issues])
-    return scenario
+        raise loaded.error(issues)
+    return loaded
 
 
 def _not_found(source: str | Path, path: Path) -> ScenarioError:
@@ -163,7 +190,7 @@ def _with_line(issue: ScenarioIssue, root: yaml.Node | None, override_paths: set
 
 
 def consistency_issues(scenario: Scenario) -> list[ScenarioIssue]:
-    """Cross-field rules that the per-field schema cannot express."""
+    """Cross-field rules that the per-field schema cannot express (modality names: when the sensors are built)."""
     issues = []
     robot, humans = scenario.robot, scenario.humans
     if robot.kinematics == "unicycle" and robot.max_angular_speed is None:
@@ -195,14 +222,6 @@ def consistency_issues(scenario: Scenario) -> list[ScenarioIssue]:
             "humans.preferred_speed",
             f"humans move up to {human_step:g} m per step (preferred_speed max * max_speed_factor * time_step); "
             f"expected less than their radius {humans.radius:g} m: lower preferred_speed or time_step",
-        ))
-    from crowdnav.sensors import MODALITIES  # the registry also holds modalities users register
-
-    unknown = [name for name in scenario.sensors.modalities if name not in MODALITIES]
-    if unknown:
-        issues.append(ScenarioIssue(
-            "sensors.modalities",
-            f"unknown modalit{'y' if len(unknown) == 1 else 'ies'} {', '.join(map(repr, unknown))}; expected any of: {', '.join(sorted(MODALITIES))}",
         ))
     if robot.start_heading not in ("random", "toward_goal") and not math.isfinite(float(robot.start_heading)):
         issues.append(ScenarioIssue("robot.start_heading", "expected 'random', 'toward_goal' or a finite angle in degrees"))

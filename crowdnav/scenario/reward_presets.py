@@ -35,6 +35,8 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 from types import MappingProxyType
 
+from crowdnav.suggest import unknown_name_message
+
 REWARD_TERMS = ("step", "goal_progress", "social", "goal_reached", "collision")
 """Names of the reward terms, in summation order (also the keys of ``info["reward_terms"]``)."""
 
@@ -99,6 +101,4 @@ def unknown_term_message(name: object) -> str:
 
 
 def _unknown(what: str, name: object, valid: tuple[str, ...]) -> str:
-    from crowdnav.registry import unknown_name_message  # the one wording of unknown names
-
-    return unknown_name_message(what, name, valid)
+    return unknown_name_message(what, name, valid)  # the one wording of unknown names

@@ -1,8 +1,8 @@
-"""Command-line wiring of the agents: ``crowdnav train``, ``crowdnav collect-dataset``, ``crowdnav pretrain-encoder``.
+"""``crowdnav train``, ``crowdnav collect-dataset``, ``crowdnav pretrain-encoder``: the agents' commands.
 
 Each ``register_*`` adds one command to the ``crowdnav`` sub-parsers and sets its ``handler``
-(``(args) -> int``); :func:`register` adds all three (``crowdnav.cli`` calls it). Heavy imports
-(torch, SB3) happen inside the handlers, so ``crowdnav --help`` stays fast.
+(``(args) -> int``); :func:`register` adds all three (``crowdnav.cli`` calls it). The agents
+(torch, SB3) are imported inside the handlers, so ``crowdnav --help`` stays fast.
 """
 
 from __future__ import annotations
@@ -120,12 +120,12 @@ def train_command(args: argparse.Namespace) -> int:
         raise CliError(str(error)) from None
     if args.print_config:
         import yaml
+
         from crowdnav.agents.config import config_to_dict
 
         sys.stdout.write(yaml.safe_dump(config_to_dict(config), sort_keys=False))
         return 0
     from crowdnav.agents.training import describe_run, train
-
     from crowdnav.scenario import ScenarioError
 
     try:
@@ -138,7 +138,6 @@ def train_command(args: argparse.Namespace) -> int:
 
 def collect_dataset_command(args: argparse.Namespace) -> int:
     from crowdnav.agents.dataset import collect_grids, save_dataset
-
     from crowdnav.scenario import ScenarioError
 
     try:
@@ -152,9 +151,9 @@ def collect_dataset_command(args: argparse.Namespace) -> int:
 
 def pretrain_encoder_command(args: argparse.Namespace) -> int:
     import torch
+
     from crowdnav.agents.dataset import collect_grids, load_dataset
     from crowdnav.agents.pretrain import pretrain_encoder
-
     from crowdnav.scenario import ScenarioError
 
     torch.set_num_threads(args.threads)
@@ -172,6 +171,3 @@ def pretrain_encoder_command(args: argparse.Namespace) -> int:
     print(f"held-out loss {result.initial_val_loss:.4f} -> {result.final_val_loss:.4f} "
           f"({result.initial_val_loss / result.final_val_loss:.1f}x lower) in {result.seconds:.1f} s; wrote {result.encoder_path}")
     return 0
-
-
-# ------------------------------------------------------------------------------- entry

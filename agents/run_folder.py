@@ -1,0 +1,94 @@
+"""The layout of a training run's folder (``agents.train``'s ``out``), as a small public API.
+
+::
+
+    <train_dir>/checkpoint/              the latest checkpoint (crowdnav.agents.checkpoint): policy.json, model.zip, ...
+    <train_dir>/snapshots/episode_<N>/   the policy after N episodes (saved every checkpoint_every episodes)
+    <train_dir>/episodes.csv             one row per training episode
+
+Training writes this layout and everything that reads a run (evaluation, the benchmark's
+video, the progress bar) goes through these functions, so the layout is known in one place.
+Torch-free; a policy folder loads with :func:`crowdnav.agents.load_policy` (torch and SB3).
+"""
+
+from __future__ import annotations
+
+import json
+import re
+from pathlib import Path
+from typing import Any
+
+CHECKPOINT_DIR = "checkpoint"
+SNAPSHOTS_DIR = "snapshots"
+EPISODE_LOG = "episodes.csv"
+POLICY_FILE = "policy.json"
+"""A policy folder (checkpoint or snapshot) is complete once it holds this file (written last)."""
+REPLAY_FILE = "replay_buffer.pkl"
+"""The checkpoint's replay buffer (off-policy runs with ``save_replay_buffer``)."""
+
+_SNAPSHOT = re.compile(r"episode_(\d+)$")
+
+
+def checkpoint_dir(train_dir: str | Path) -> Path:
+    """The folder of the run's latest checkpoint (it may not exist yet)."""
+    return Path(train_dir) / CHECKPOINT_DIR
+
+
+def snapshot_dir(train_dir: str | Path, episodes: int) -> Path:
+    """The folder of the policy snapshot after ``episodes`` training episodes."""
+    return Path(train_dir) / SNAPSHOTS_DIR / f"episode_{episodes:05d}"
+
+
+def episode_log(train_dir: str | Path) -> Path:
+    """The run's per-episode log (CSV, one row per training episode; it may not exist yet)."""
+    return Path(train_dir) / EPISODE_LOG
+
+
+def replay_buffer_file(train_dir: str | Path) -> Path:
+    """The checkpoint's replay buffer file (large; a run resumes without it, training its buffer anew)."""
+    return checkpoint_dir(train_dir) / REPLAY_FILE
+
+
+def checkpoint_info(train_dir: str | Path) -> dict[str, Any] | None:
+    """The checkpoint's ``policy.json`` (``episodes``, ``timesteps``, ``algo``, ``env``, ...), or None without a checkpoint."""
+    file = checkpoint_dir(train_dir) / POLICY_FILE
+    return json.loads(file.read_text(encoding="utf-8")) if file.is_file() else None
+
+
+def checkpoint_episodes(train_dir: str | Path) -> int:
+    """Training episodes behind the run's checkpoint (0 if there is none yet)."""
+    info = checkpoint_info(train_dir)
+    return int(info["episodes"]) if info is not None else 0
+
+
+def policy_snapshots(train_dir: str | Path) -> dict[int, Path]:
+    """Episodes -> folder of every policy saved so far on the checkpoint's training history.
+
+    The snapshots up to the checkpoint, and the checkpoint itself (a run from an older crowdnav
+    can have been killed after its checkpoint and before its snapshot). A snapshot newer than
+    the checkpoint (or any snapshot without one) was saved just before a kill; the resume
+    trains that stretch again.
+    """
+    folders: dict[int, Path] = {}
+    latest = 0
+    if (checkpoint_dir(train_dir) / POLICY_FILE).is_file():
+        latest = checkpoint_episodes(train_dir)
+        folders[latest] = checkpoint_dir(train_dir)
+    snapshots = Path(train_dir) / SNAPSHOTS_DIR
+    for folder in sorted(snapshots.iterdir()) if snapshots.is_dir() else []:
+        match = _SNAPSHOT.match(folder.name)
+        if match and (folder / POLICY_FILE).is_file() and int(match.group(1)) <= latest:
+            folders[int(match.group(1))] = folder
+    return folders
+
+
+def logged_episodes(train_dir: str | Path) -> int:
+    """Training episodes the episode log has a row for so far (cheap: reads the last row's index)."""
+    log = episode_log(train_dir)
+    if not log.is_file():
+        return 0
+    lines = log.read_text(encoding="utf-8").splitlines()
+    if len(lines) < 2:
+        return 0
+    first = lines[-1].split(",", 1)[0]
+    return int(first) + 1 if first.isdigit() else 0
