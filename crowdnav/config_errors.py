@@ -26,6 +26,7 @@ from pydantic import BaseModel, ValidationError
 from pydantic.fields import FieldInfo
 
 from crowdnav.suggest import did_you_mean
+from crowdnav.yaml_input import YamlLimitError, read_bounded_yaml
 
 
 def show(value: Any) -> str:
@@ -90,9 +91,12 @@ def yaml_line(root: yaml.Node | None, dotted: str) -> int | None:
 
 
 def read_yaml(text: str) -> tuple[Any, yaml.Node | None]:
-    """``(document, node tree)`` of a YAML text; ``yaml.YAMLError`` is turned into one :class:`ConfigIssue`."""
+    """``(document, node tree)`` of a YAML text at a bounded cost (:mod:`crowdnav.yaml_input`);
+    malformed YAML or a text over the limits is turned into one :class:`ConfigIssue`."""
     try:
-        return yaml.safe_load(text), yaml.compose(text, Loader=yaml.SafeLoader)
+        return read_bounded_yaml(text)
+    except YamlLimitError as error:
+        raise YamlProblem(ConfigIssue("", str(error), error.line)) from None
     except yaml.YAMLError as error:
         mark = getattr(error, "problem_mark", None)
         line = None if mark is None else mark.line + 1

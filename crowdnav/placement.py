@@ -97,12 +97,10 @@ def build_placement(scenario: Scenario, obstacles: StaticObstacles) -> Placement
     robot_start = _candidates(robot.start, "robot.start", robot.radius, world_box, occupied)
     robot_goal = _candidates(robot.goal, "robot.goal", robot.radius, world_box, occupied)
     slack = 2 * math.sqrt(2) * JITTER
-    distance = np.abs(robot_start.points[:, None] - robot_goal.points[None, :])
-    start_goal_ok = distance >= robot.min_start_goal_distance + slack
+    start_goal_ok, largest = _far_pairs(robot_start.points, robot_goal.points, robot.min_start_goal_distance + slack)
     if robot_start.ring_center is not None or robot_goal.ring_center is not None:
         start_goal_ok = np.ones_like(start_goal_ok)  # rotated rings: checked at draw time instead
     if not start_goal_ok.any():
-        largest = float(distance.max())
         if largest < 1e-9:
             message = "robot.start and robot.goal only offer the same position; expected a goal away from the start"
         else:
@@ -111,6 +109,15 @@ def build_placement(scenario: Scenario, obstacles: StaticObstacles) -> Placement
                 f"(largest distance available: {largest:.2f} m); expected a smaller distance or regions further apart"
             )
         raise GeometryError("robot.min_start_goal_distance", message)
+    if robot_start.ring_center is None and robot_goal.ring_center is None:
+        beyond_goal, _ = _far_pairs(robot_start.points, robot_goal.points, robot.goal_radius + slack)
+        if (start_goal_ok & ~beyond_goal).any():  # an episode could start inside its goal
+            raise GeometryError(
+                "robot.goal_radius",
+                f"a start in robot.start can lie within the goal radius ({robot.goal_radius:g} m) of a goal in robot.goal, so an "
+                "episode could end as a success before the robot moves; expected robot.min_start_goal_distance above the goal "
+                "radius, or a smaller goal radius",
+            )
     spawn = goal = None
     if humans.max_count > 0:
         spawn_sets = [_candidates(r, f"humans.spawn.{i}", humans.radius, world_box, occupied) for i, r in enumerate(humans.spawn)]
@@ -167,15 +174,29 @@ def _candidates(region, path: str, radius: float, world_box, occupied) -> Candid
     shape = _region_polygon(region, path)
     if not shape.within(world_box.buffer(1e-9)):
         raise GeometryError(path, _outside_message(world_box))
-    free_area = shape if occupied.is_empty else shape.difference(occupied.buffer(clearance))
+    free_area = shape if occupied.is_empty else shape.difference(_grown(occupied, clearance))
     if free_area.is_empty or free_area.area < 1e-9:
         raise GeometryError(path, "region is entirely covered by obstacles (with the agent's radius); expected some free space")
-    points = _best_lattice(free_area, spacing)
+    points = _best_lattice(free_area, _bounded_spacing(free_area, spacing))
     if len(points) == 0:
         rep = free_area.representative_point()
         points = np.array([complex(rep.x, rep.y)])
         return CandidateSet(points, 0.0)
     return CandidateSet(points, JITTER)
+
+
+_GROWN: list = [None, {}]  # [the world's obstacle union, {clearance: buffered union}]
+
+
+def _grown(occupied, clearance: float):
+    """``occupied.buffer(clearance)``, computed once per world and clearance (buffering thousands
+    of obstacles is the slowest step of loading; a world's regions share one or two clearances)."""
+    if _GROWN[0] is not occupied:
+        _GROWN[0], _GROWN[1] = occupied, {}  # one world at a time: no stale geometry is kept alive
+    grown = _GROWN[1]
+    if clearance not in grown:
+        grown[clearance] = occupied.buffer(clearance)
+    return grown[clearance]
 
 
 def _region_polygon(region, path: str) -> ShapelyPolygon:
@@ -190,6 +211,26 @@ def _region_polygon(region, path: str) -> ShapelyPolygon:
 
         raise GeometryError(f"{path}.points", f"polygon is not valid ({explain_validity(shape)}); expected a simple polygon with non-zero area")
     return shape
+
+
+_CHUNK = 512  # rows per block of the pairwise distance tables built at load time
+
+MAX_CANDIDATES = 4_000
+"""Lattice points per region at most: a larger region gets a proportionally coarser lattice.
+
+Every library region holds fewer than 200 points, so this only bounds the cost of huge worlds
+(start x goal pairs, pairwise merges and draws are all quadratic in it): a 100 m world covered
+by regions loads in about a second instead of needing 10 GB."""
+
+
+def _bounded_spacing(area, spacing: float) -> float:
+    """``spacing``, widened so the lattice over ``area`` (and over its bounding box, which the
+    lattice scan allocates) stays within :data:`MAX_CANDIDATES` (resp. 25 times that) points."""
+    minx, miny, maxx, maxy = area.bounds
+    cell = spacing * spacing * math.sqrt(3) / 2  # area per hexagonal lattice point
+    points, scanned = area.area / cell, (maxx - minx + spacing) * (maxy - miny + spacing) / cell
+    factor = max(1.0, points / MAX_CANDIDATES, scanned / (25 * MAX_CANDIDATES))
+    return spacing * math.sqrt(factor)
 
 
 def _best_lattice(area, spacing: float) -> np.ndarray:
@@ -214,9 +255,13 @@ def _merge(sets: list[CandidateSet], spacing: float) -> CandidateSet:
     ring = next((s.ring_center for s in sets if s.ring_center is not None), None)
     jitter = min(s.jitter for s in sets)
     if spacing > 0 and len(points) > 1:
-        close = np.abs(points[:, None] - points[None, :]) < spacing - 1e-9
-        keep = ~np.triu(close, 1).any(0)
-        points = points[keep]
+        dropped = np.zeros(len(points), dtype=bool)  # close to an earlier point
+        later = np.arange(len(points))
+        for lo in range(0, len(points), _CHUNK):  # row blocks: memory stays at _CHUNK x K
+            rows = slice(lo, lo + _CHUNK)
+            close = np.abs(points[rows, None] - points[None, :]) < spacing - 1e-9
+            dropped |= (close & (later[None, :] > later[rows, None])).any(0)
+        points = points[~dropped]
     return CandidateSet(points, jitter, ring if len(sets) == 1 else None)
 
 
@@ -240,4 +285,15 @@ def _outside_message(world_box) -> str:
 def _max_blocked_by_robot(spawn: np.ndarray, starts: np.ndarray, reach: float) -> int:
     if len(spawn) == 0 or len(starts) == 0:
         return 0
-    return int((np.abs(starts[:, None] - spawn[None, :]) < reach).sum(1).max())
+    return max(int((np.abs(starts[lo : lo + _CHUNK, None] - spawn[None, :]) < reach).sum(1).max()) for lo in range(0, len(starts), _CHUNK))
+
+
+def _far_pairs(starts: np.ndarray, goals: np.ndarray, threshold: float) -> tuple[np.ndarray, float]:
+    """(K_start, K_goal) bool of pairs at least ``threshold`` apart, and the largest distance, in row blocks."""
+    ok = np.empty((len(starts), len(goals)), dtype=bool)
+    largest = 0.0
+    for lo in range(0, len(starts), _CHUNK):
+        distance = np.abs(starts[lo : lo + _CHUNK, None] - goals[None, :])
+        ok[lo : lo + _CHUNK] = distance >= threshold
+        largest = max(largest, float(distance.max()))
+    return ok, largest

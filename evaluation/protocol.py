@@ -28,8 +28,12 @@ def _at_least(minimum: int) -> BeforeValidator:
     return BeforeValidator(check)
 
 
-Count = Annotated[int, _at_least(1), Field(ge=1)]
-SeedBase = Annotated[int, _at_least(0), Field(ge=0)]
+# Upper bounds: far beyond any real protocol, and below what numpy seeds and ranges can hold
+# (2**63 test episodes would overflow instead of failing with the field's name).
+MAX_COUNT = 1_000_000
+MAX_SEED_BASE = 2**31
+Count = Annotated[int, _at_least(1), Field(ge=1, le=MAX_COUNT)]
+SeedBase = Annotated[int, _at_least(0), Field(ge=0, le=MAX_SEED_BASE)]
 
 
 def _option(default: Any, doc: str) -> Any:

@@ -20,7 +20,7 @@ from typing import Any
 import yaml
 from pydantic import ValidationError
 
-from crowdnav.config_errors import yaml_line
+from crowdnav.config_errors import YamlProblem, read_yaml, yaml_line
 from crowdnav.paths import safe_stem
 from crowdnav.scenario import library
 from crowdnav.scenario.errors import ScenarioError, ScenarioIssue, show
@@ -108,13 +108,9 @@ def _read_yaml(path: Path) -> tuple[dict[str, Any], yaml.Node | None]:
     except (OSError, UnicodeDecodeError) as error:
         raise ScenarioError(label, [ScenarioIssue("", f"cannot read file: {error}")]) from None
     try:
-        root = yaml.compose(text, Loader=yaml.SafeLoader)
-        document = yaml.safe_load(text)
-    except yaml.YAMLError as error:
-        mark = getattr(error, "problem_mark", None)
-        line = mark.line + 1 if mark is not None else None
-        problem = getattr(error, "problem", None) or str(error)
-        raise ScenarioError(label, [ScenarioIssue("", f"malformed YAML: {problem}", line)]) from None
+        document, root = read_yaml(text)  # bounded cost, one error style
+    except YamlProblem as problem:
+        raise ScenarioError(label, [ScenarioIssue("", problem.issue.message, problem.issue.line)]) from None
     if not isinstance(document, dict):
         kind = "an empty file" if document is None else type(document).__name__
         raise ScenarioError(label, [ScenarioIssue("", f"expected a mapping of scenario fields at the top level, got {kind}", 1)])
@@ -124,8 +120,15 @@ def _read_yaml(path: Path) -> tuple[dict[str, Any], yaml.Node | None]:
     return document, root
 
 
-def _duplicate_keys(node: yaml.Node, path: str) -> list[ScenarioIssue]:
-    """YAML silently keeps the last of two equal keys; for a config file that is always a mistake."""
+def _duplicate_keys(node: yaml.Node, path: str, seen: set[int] | None = None) -> list[ScenarioIssue]:
+    """YAML silently keeps the last of two equal keys; for a config file that is always a mistake.
+
+    Each distinct node is visited once: an aliased node is one object however often it is used.
+    """
+    seen = set() if seen is None else seen
+    if id(node) in seen:
+        return []
+    seen.add(id(node))
     issues = []
     if isinstance(node, yaml.MappingNode):
         first_line: dict[str, int] = {}
@@ -137,10 +140,10 @@ def _duplicate_keys(node: yaml.Node, path: str) -> list[ScenarioIssue]:
                 message = f"duplicate key '{name}' (first given at line {first_line[name]}); expected it once"
                 issues.append(ScenarioIssue(child, message, line))
             first_line.setdefault(name, line)
-            issues.extend(_duplicate_keys(value, child))
+            issues.extend(_duplicate_keys(value, child, seen))
     elif isinstance(node, yaml.SequenceNode):
         for index, item in enumerate(node.value):
-            issues.extend(_duplicate_keys(item, f"{path}.{index}" if path else str(index)))
+            issues.extend(_duplicate_keys(item, f"{path}.{index}" if path else str(index), seen))
     return issues
 
 

@@ -20,9 +20,13 @@ from crowdnav.paths import SAFE_NAME_EXPECTATION, is_safe_name
 from crowdnav.scenario.errors import show
 from crowdnav.scenario.reward_presets import DEFAULT_PRESET, REWARD_PRESETS, REWARD_TERMS, unknown_preset_message
 
-PositiveFloat = Annotated[float, Field(gt=0, allow_inf_nan=False)]
-NonNegativeFloat = Annotated[float, Field(ge=0, allow_inf_nan=False)]
+# Lengths, speeds, times and strengths beyond 10 km (or 10^4 of their unit) are typos that would
+# only reach shapely or numpy as overflow or GEOS errors: refuse them here, naming the field.
+MAX_MAGNITUDE = 10_000.0
+PositiveFloat = Annotated[float, Field(gt=0, le=MAX_MAGNITUDE, allow_inf_nan=False)]
+NonNegativeFloat = Annotated[float, Field(ge=0, le=MAX_MAGNITUDE, allow_inf_nan=False)]
 FiniteFloat = Annotated[float, Field(allow_inf_nan=False)]
+Coordinate = Annotated[float, Field(ge=-MAX_MAGNITUDE, le=MAX_MAGNITUDE, allow_inf_nan=False)]
 
 # The shape checks below run before pydantic's own, so that a wrong shape reads
 # "expected a point [x, y] ..." instead of pydantic's generic tuple/union messages.
@@ -35,13 +39,13 @@ def _is_number(value: Any) -> bool:
 def _pair_of(what: str) -> Callable[[Any], Any]:
     def check(value: Any) -> Any:
         if isinstance(value, (list, tuple)) and len(value) == 2:
-            return value
+            return tuple(value)  # YAML gives lists; the models are strict about tuples
         raise ValueError(f"expected {what}, got {show(value)}")
 
     return check
 
 
-Point = Annotated[tuple[FiniteFloat, FiniteFloat], BeforeValidator(_pair_of("a point [x, y] of two numbers in metres"))]
+Point = Annotated[tuple[Coordinate, Coordinate], BeforeValidator(_pair_of("a point [x, y] of two numbers in metres"))]
 """A 2-D point ``[x, y]`` in metres, world frame."""
 Size = Annotated[
     tuple[PositiveFloat, PositiveFloat], BeforeValidator(_pair_of("a size [w, h] of two positive numbers in metres"))
@@ -49,11 +53,16 @@ Size = Annotated[
 """Width and depth ``[w, h]`` in metres."""
 
 
+def _is_whole(value: Any) -> bool:
+    # ints of any size (a 400-digit count must fail with its field's name, not overflow in float())
+    return isinstance(value, int) and not isinstance(value, bool) or isinstance(value, float) and value.is_integer()
+
+
 def _count_shape(value: Any) -> Any:
-    whole = _is_number(value) and float(value).is_integer()
-    pair = isinstance(value, (list, tuple)) and len(value) == 2 and all(_is_number(v) and float(v).is_integer() for v in value)
+    whole = _is_whole(value)
+    pair = isinstance(value, (list, tuple)) and len(value) == 2 and all(_is_whole(v) for v in value)
     if whole or pair:
-        return [int(v) for v in value] if pair else int(value)
+        return tuple(int(v) for v in value) if pair else int(value)
     raise ValueError(f"expected a whole number of humans, or [min, max] sampled per episode, got {show(value)}")
 
 
@@ -63,10 +72,18 @@ def _heading_shape(value: Any) -> Any:
     raise ValueError(f"expected 'random', 'toward_goal' or an angle in degrees, got {show(value)}")
 
 
-class StrictModel(BaseModel):
-    """Base model: unknown keys are errors, values are checked on assignment too."""
+# Caps that keep loading any file under 2 s on a laptop (2,000 discs load in ~1 s); the library's
+# busiest scenario has a few dozen obstacles.
+MAX_OBSTACLES = 2_000
+MAX_HUMANS = 10_000
+MAX_VERTICES = 10_000
 
-    model_config = ConfigDict(extra="forbid", validate_assignment=True)
+
+class StrictModel(BaseModel):
+    """Base model: unknown keys are errors, values are checked on assignment too, and types are strict
+    (no ``true`` or ``"1e3"`` where a number belongs: YAML's quoting must not change a value's meaning)."""
+
+    model_config = ConfigDict(extra="forbid", validate_assignment=True, strict=True)
 
 
 # --------------------------------------------------------------------------- regions
@@ -135,7 +152,7 @@ class World(StrictModel):
 class Wall(StrictModel):
     """A wall: a polyline thickened into a polygon."""
 
-    points: list[Point] = Field(min_length=2, description="Polyline vertices [[x, y], ...] in metres.")
+    points: list[Point] = Field(min_length=2, max_length=MAX_VERTICES, description="Polyline vertices [[x, y], ...] in metres (at most 10,000).")
     thickness: PositiveFloat = Field(default=0.1, description="Wall thickness in metres.")
     name: str | None = Field(default=None, description="Optional label.")
 
@@ -188,7 +205,9 @@ class Robot(StrictModel):
     )
     start: Region = Field(description="Region the start position is sampled from.")
     goal: Region = Field(description="Region the goal position is sampled from.")
-    goal_radius: PositiveFloat = Field(default=0.3, description="The goal is reached when the centre is this close (m).")
+    goal_radius: float = Field(
+        default=0.3, ge=0.01, le=MAX_MAGNITUDE, description="The goal is reached when the centre is this close (m, at least 1 cm)."
+    )
     min_start_goal_distance: NonNegativeFloat = Field(
         default=0.0, description="Minimum straight-line distance between start and goal in metres."
     )
@@ -262,8 +281,8 @@ class Humans(StrictModel):
     @classmethod
     def _count_in_range(cls, count: int | tuple[int, int]) -> int | tuple[int, int]:
         low, high = count if isinstance(count, tuple) else (count, count)
-        if low < 0 or low > high:
-            raise ValueError(f"expected a count >= 0, or [min, max] with 0 <= min <= max, got {show(count)}")
+        if low < 0 or low > high or high > MAX_HUMANS:
+            raise ValueError(f"expected a count from 0 to {MAX_HUMANS:,}, or [min, max] with 0 <= min <= max <= {MAX_HUMANS:,}, got {show(count)}")
         return count
 
     @field_validator("preferred_speed")
@@ -403,12 +422,12 @@ class Scenario(StrictModel):
     name: str | None = Field(default=None, description="Scenario name, folder-safe (defaults to the file name); it names videos.")
     description: str = Field(min_length=1, description="One-line description shown by `crowdnav scenario list`.")
     world: World = Field(default_factory=World, description="World extent and boundary.")
-    walls: list[Wall] = Field(default_factory=list, description="Interior walls.")
-    furniture: list[Furniture] = Field(default_factory=list, description="Static furniture.")
+    walls: list[Wall] = Field(default_factory=list, max_length=MAX_OBSTACLES, description="Interior walls (at most 2,000).")
+    furniture: list[Furniture] = Field(default_factory=list, max_length=MAX_OBSTACLES, description="Static furniture (at most 2,000 pieces).")
     robot: Robot = Field(description="The robot.")
     humans: Humans = Field(default_factory=Humans, description="The crowd.")
     time_step: PositiveFloat = Field(default=0.2, description="Simulation time step in seconds.")
-    max_steps: Annotated[int, Field(ge=1)] = Field(default=150, description="Steps before an episode is truncated.")
+    max_steps: Annotated[int, Field(ge=1, le=100_000)] = Field(default=150, description="Steps before an episode is truncated (at most 100,000).")
     sensors: Sensors = Field(default_factory=Sensors, description="Default sensor settings.")
     reward: RewardWeights = Field(
         default_factory=RewardWeights, description="Reward weights: a preset (default: 'default') and terms overriding it."
