@@ -160,13 +160,60 @@ class AgentPolicy:
         return CrowdNavEnv(**{**self.env_options, **extra})
 
 
-def load_policy(path: str | Path, device: str = "cpu") -> AgentPolicy:
-    """Load a checkpoint as a deterministic policy (see :class:`AgentPolicy`)."""
+def load_policy(path: str | Path, device: str = "cpu", *, trusted: bool = False) -> AgentPolicy:
+    """Load a checkpoint as a deterministic policy (see :class:`AgentPolicy`).
+
+    By default only the network parameters are read (:func:`model_from_parameters`): SB3's
+    ``model.zip`` also holds cloudpickled objects that run code when unpickled, so a checkpoint
+    from elsewhere cannot run code through evaluation or rendering. ``trusted=True`` loads the whole
+    SB3 model (``<Algo>.load``), which a checkpoint without its training config needs
+    (docs/security.md).
+    """
     folder = checkpoint_folder(path)
     info = read_policy_info(folder)
     encoder = None
     if info.get("leog_encoder"):
         from crowdnav.agents.pretrain import load_encoder
 
-        encoder, _ = load_encoder(folder / info["leog_encoder"])
-    return AgentPolicy(load_model(folder, device=device), info, encoder)
+        encoder, _ = load_encoder(folder / info["leog_encoder"])  # torch.load with weights_only=True
+    model = load_model(folder, device=device) if trusted else model_from_parameters(folder, info, encoder, device)
+    return AgentPolicy(model, info, encoder)
+
+
+class UntrustedCheckpointError(ValueError):
+    """A checkpoint that cannot be rebuilt from its config alone; only a trusted full load would read it."""
+
+
+def model_from_parameters(folder: Path, info: Mapping[str, Any], encoder: Any = None, device: str = "cpu") -> BaseAlgorithm:
+    """The checkpoint's model rebuilt from its training config, then its parameters loaded.
+
+    SB3's ``set_parameters`` reads only the zip's ``.pth`` tensors (``torch.load`` with
+    ``weights_only=True``), never its pickled ``data``. The replay buffer gets one transition:
+    a policy does not learn.
+    """
+    from crowdnav.agents.config import ConfigError, config_from_mapping
+    from crowdnav.agents.factory import make_env, make_model
+
+    document = info.get("config")
+    if not isinstance(document, Mapping):
+        raise UntrustedCheckpointError(f"{folder}: the checkpoint holds no training config to rebuild its network from; "
+                                       "load it with trusted=True only if you trust where it came from")
+    try:
+        config = config_from_mapping({**document, "device": device, "progress": False, "tensorboard": False})
+        off_policy = "buffer_size" in type(config).model_fields and config.algo in ("sac", "td3", "ddpg")
+        config = config.model_copy(update={"buffer_size": 1, "learning_starts": 0} if off_policy else {})
+        saved_encoder = None
+        if config.encoder.mode == "finetune":  # the network's LEOG layers take the pre-trained architecture
+            from crowdnav.agents.factory import load_leog_weights
+
+            _, saved_encoder = load_leog_weights(config)
+        env = make_env(config, encoder, scales=scales_from_json(info["observation_normalization"])
+                       if info.get("observation_normalization") is not None else None)
+        model = make_model(config, env, saved_encoder)
+    except ConfigError as error:
+        raise UntrustedCheckpointError(f"{folder}: cannot rebuild the network from the checkpoint's config ({error})") from None
+    try:
+        model.set_parameters(str(folder / MODEL_FILE), exact_match=True, device=device)
+    except (ValueError, RuntimeError, KeyError) as error:
+        raise UntrustedCheckpointError(f"{folder}: the parameters in {MODEL_FILE} do not fit the network its config describes ({error})") from None
+    return model

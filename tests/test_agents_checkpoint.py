@@ -135,3 +135,47 @@ def test_a_checkpoint_renders_as_a_video_with_the_env_options_it_was_trained_wit
     paths = render_policy("open_space", str(tmp_path / "run" / "checkpoint"), episodes=1, seed=3, out=tmp_path / "videos",
                           video_format="gif", progress=False)
     assert [path.name for path in paths] == ["open_space_checkpoint_seed3.gif"] and paths[0].stat().st_size > 0
+
+
+@pytest.mark.parametrize(("algo", "modalities"), [("sac", ["leog", "lidar", "goal"]), ("td3", ["lidar", "goal"]),
+                                                  ("a2c", ["goal", "closest_obstacle"]),
+                                                  ("ppo", ["lidar", "goal"])])
+def test_loading_only_parameters_acts_exactly_like_the_full_sb3_load(tmp_path, algo, modalities):
+    train(tiny_config(tmp_path, algo=algo, modalities=modalities, episodes=2))
+    safe, full = load_policy(tmp_path), load_policy(tmp_path, trusted=True)
+    env = safe.make_env()
+    observation, _ = env.reset(seed=2)
+    for _ in range(10):
+        action = safe(observation)
+        np.testing.assert_array_equal(action, full(observation))
+        observation, _, terminated, truncated, _ = env.step(action)
+        if terminated or truncated:
+            observation, _ = env.reset()
+
+
+def test_parameters_only_loading_never_unpickles_the_models_data(tmp_path, monkeypatch):
+    import cloudpickle
+
+    train(tiny_config(tmp_path, episodes=2))
+
+    def poisoned(*args, **kwargs):
+        raise AssertionError("a pickle was loaded")
+
+    monkeypatch.setattr(cloudpickle, "loads", poisoned)
+    monkeypatch.setattr("pickle.loads", poisoned)
+    policy = load_policy(tmp_path)  # would fail if SB3's data (cloudpickle) or any pickle were read
+    observation, _ = policy.make_env().reset(seed=0)
+    assert policy(observation).shape == (2,)
+
+
+def test_a_checkpoint_without_its_config_needs_a_trusted_load(tmp_path):
+    from crowdnav.agents.checkpoint import UntrustedCheckpointError
+
+    train(tiny_config(tmp_path, episodes=2))
+    info_path = tmp_path / "checkpoint" / "policy.json"
+    info = json.loads(info_path.read_text())
+    del info["config"]
+    info_path.write_text(json.dumps(info))
+    with pytest.raises(UntrustedCheckpointError, match="trusted=True only if you trust where it came from"):
+        load_policy(tmp_path)
+    assert load_policy(tmp_path, trusted=True)(load_policy(tmp_path, trusted=True).make_env().reset(seed=0)[0]).shape == (2,)

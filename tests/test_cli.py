@@ -186,3 +186,16 @@ def test_unrelated_missing_module_is_not_hidden(monkeypatch):
     parser._subparsers._group_actions[0].choices["train"].set_defaults(handler=handler)
     with pytest.raises(ModuleNotFoundError):
         main(["train"])
+
+
+def test_a_command_whose_extra_is_missing_stops_before_its_handler_starts(monkeypatch, capsys):
+    import importlib.util
+
+    real = importlib.util.find_spec
+    monkeypatch.setattr(importlib.util, "find_spec", lambda name, *a: None if name == "pandas" else real(name, *a))
+    started = []
+    parser = build_parser()
+    monkeypatch.setattr("crowdnav.cli.build_parser", lambda: parser)
+    parser._subparsers._group_actions[0].choices["benchmark"].set_defaults(handler=lambda args: started.append(1) or 0)
+    assert main(["benchmark"]) == 1 and not started
+    assert capsys.readouterr().err.strip().endswith("needs pandas, which the core install leaves out: pip install 'crowdnav[bench]'")

@@ -11,6 +11,7 @@ so that ``crowdnav --help`` and the scenario tools load neither torch nor pygame
 from __future__ import annotations
 
 import argparse
+import importlib.util
 import os
 import sys
 from collections.abc import Sequence
@@ -21,7 +22,20 @@ from crowdnav.cli.common import CliError
 # Packages that only an extra installs (pyproject.toml), so a command run on the core install
 # names the extra to add instead of failing with a traceback.
 EXTRA_OF_MODULE = {"torch": "train", "stable_baselines3": "train", "matplotlib": "train", "pandas": "bench", "seaborn": "bench", "ray": "ray"}
-EXTRA_OF_COMMAND = {"train": "train", "benchmark": "bench"}
+EXTRA_OF_COMMAND = {"train": "train", "collect-dataset": "train", "pretrain-encoder": "train", "benchmark": "bench", "plot": "bench",
+                    "leaderboard": "bench"}
+# What each command's layer needs, checked before it starts: a benchmark's worker processes would
+# otherwise each fail on the missing import, after the command had already begun.
+NEEDS = {"train": ("torch", "stable_baselines3"), "collect-dataset": ("torch",), "pretrain-encoder": ("torch", "matplotlib"),
+         "benchmark": ("torch", "stable_baselines3", "pandas", "seaborn", "matplotlib"), "plot": ("pandas", "seaborn", "matplotlib"),
+         "leaderboard": ("pandas",)}
+
+
+def _require(modules: Sequence[str]) -> None:
+    """ModuleNotFoundError for the first of ``modules`` that is not installed (found without importing it)."""
+    for module in modules:
+        if importlib.util.find_spec(module) is None:
+            raise ModuleNotFoundError(f"No module named {module!r}", name=module)
 
 
 def command_groups() -> tuple:
@@ -51,6 +65,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     except SystemExit as exit_:  # --help, --version and usage errors
         return exit_.code if isinstance(exit_.code, int) else 0 if exit_.code is None else 2
     try:
+        _require(NEEDS.get(args.command, ()))
         return args.handler(args)
     except CliError as error:
         print(f"crowdnav: error: {error}", file=sys.stderr)
