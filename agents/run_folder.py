@@ -92,3 +92,43 @@ def logged_episodes(train_dir: str | Path) -> int:
         return 0
     first = lines[-1].split(",", 1)[0]
     return int(first) + 1 if first.isdigit() else 0
+
+
+def _complete(folder: Path) -> int | None:
+    """Episodes of a complete checkpoint folder (policy.json is written last), else None."""
+    info = folder / POLICY_FILE
+    if not info.is_file():
+        return None
+    try:
+        return int(json.loads(info.read_text(encoding="utf-8"))["episodes"])
+    except (ValueError, KeyError, TypeError):
+        return None
+
+
+def recover_checkpoint(train_dir: str | Path) -> int:
+    """Make ``checkpoint/`` the newest complete checkpoint a kill left behind; returns its episodes (0: none).
+
+    A checkpoint is written into ``checkpoint.partial`` and swapped in through ``checkpoint.old``
+    (:func:`crowdnav.agents.checkpoint.save_checkpoint`). A kill can leave any of the three; the
+    complete one with the most episodes becomes ``checkpoint/`` and the others are removed, so a
+    resume never restarts from scratch while a complete checkpoint exists.
+    """
+    import shutil
+
+    current = checkpoint_dir(train_dir)
+    candidates = [current, current.with_name(current.name + ".partial"), current.with_name(current.name + ".old")]
+    complete = [(episodes, k) for k, folder in enumerate(candidates) if folder.is_dir() and (episodes := _complete(folder)) is not None]
+    if not complete:
+        for folder in candidates[1:]:
+            if folder.is_dir():
+                shutil.rmtree(folder)
+        return 0
+    best_episodes, best = max(complete, key=lambda item: (item[0], -item[1]))  # ties: the current one first
+    if best != 0:
+        if current.exists():
+            shutil.rmtree(current)
+        candidates[best].rename(current)
+    for folder in candidates[1:]:
+        if folder.is_dir():
+            shutil.rmtree(folder)
+    return best_episodes

@@ -21,7 +21,7 @@ import json
 import shutil
 import time
 import warnings
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -41,7 +41,7 @@ from crowdnav.agents.factory import (
     observation_normalization,
     precomputes_leog,
 )
-from crowdnav.agents.run_folder import SNAPSHOTS_DIR, checkpoint_dir, episode_log, snapshot_dir
+from crowdnav.agents.run_folder import SNAPSHOTS_DIR, checkpoint_dir, episode_log, recover_checkpoint, snapshot_dir
 from crowdnav.agents.seeding import train_seed
 from crowdnav.agents.wrappers import scales_from_json, scales_to_json
 from stable_baselines3.common.base_class import BaseAlgorithm
@@ -72,8 +72,13 @@ class TrainResult:
         return self.successes / self.episodes if self.episodes else 0.0
 
 
-def train(config: TrainConfig | Mapping[str, Any] | str | Path, *, resume: bool = False) -> TrainResult:
-    """Train an agent as ``config`` says (a TrainConfig, a mapping, or a YAML file path)."""
+def train(config: TrainConfig | Mapping[str, Any] | str | Path, *, resume: bool = False,
+          on_checkpoint: Callable[[int], None] | None = None) -> TrainResult:
+    """Train an agent as ``config`` says (a TrainConfig, a mapping, or a YAML file path).
+
+    ``on_checkpoint(episodes)`` is called after each checkpoint is saved (the evaluation runner
+    saves its timing there, so a kill loses no recorded time).
+    """
     if isinstance(config, (str, Path)):
         config = load_config(config)
     elif isinstance(config, Mapping):
@@ -82,6 +87,8 @@ def train(config: TrainConfig | Mapping[str, Any] | str | Path, *, resume: bool 
     torch.set_num_threads(config.torch_threads)
     out = Path(config.out)
     checkpoint = checkpoint_dir(out)
+    if resume:
+        recover_checkpoint(out)  # a kill during a checkpoint swap leaves a complete .partial or .old
     state = _resume_state(checkpoint, config) if resume else None
     if state and state["normalization"] is None and config.normalize_observations:
         # a checkpoint from before observation normalisation: its model was trained on raw observations
@@ -128,6 +135,8 @@ def train(config: TrainConfig | Mapping[str, Any] | str | Path, *, resume: bool 
         save_snapshot(episodes)
         save_checkpoint(model, checkpoint, info(episodes), encoder_file=encoder_copy,
                         replay_buffer=config.save_replay_buffer and config.algo in OFF_POLICY)
+        if on_checkpoint is not None:
+            on_checkpoint(episodes)
 
     callback = EpisodeCallback(
         config.episodes, first_episode, lambda episode: train_seed(config.seed, episode),

@@ -22,7 +22,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from crowdnav.agents.run_folder import checkpoint_dir, checkpoint_episodes, checkpoint_info, episode_log, policy_snapshots
+from crowdnav.agents.run_folder import checkpoint_dir, checkpoint_info, episode_log, policy_snapshots, recover_checkpoint
 from crowdnav.evaluation.protocol import Protocol
 from crowdnav.evaluation.storage import (
     ENCODER_DIR,
@@ -35,6 +35,7 @@ from crowdnav.evaluation.storage import (
     ResultsError,
     atomic_write_csv,
     atomic_write_json,
+    clean_temporaries,
     read_json,
 )
 
@@ -135,16 +136,17 @@ def run_unit(spec: UnitSpec | Mapping[str, Any], out_dir: str | Path, *, on_even
         return _summary(spec, out_dir, read_json(out_dir / META_FILE), "skipped")
     from crowdnav.agents import load_policy, train
 
+    clean_temporaries(out_dir)  # files a kill left half-written before their rename
     clock = _Clock(out_dir / "timing.json")
     protocol = Protocol(**spec.protocol)
     config = spec.config_for(out_dir)
     train_dir = out_dir / TRAIN_DIR
-    trained = checkpoint_episodes(train_dir)
+    trained = recover_checkpoint(train_dir)
     resumed = trained > 0 or (out_dir / EVALUATIONS_DIR).is_dir()
     evaluator = _Evaluator(spec, out_dir, protocol, load_policy, clock, hook)
     if trained < protocol.train_episodes:
         evaluator.evaluate_available(train_dir)  # before resuming replaces the checkpoint
-        train(config, resume=checkpoint_dir(train_dir).exists())
+        train(config, resume=checkpoint_dir(train_dir).exists(), on_checkpoint=lambda episodes: clock.save())
         clock.save()
         hook("trained", {"episodes": protocol.train_episodes})
     evaluator.evaluate_available(train_dir)

@@ -55,6 +55,19 @@ def atomic_write_text(path: str | Path, text: str) -> Path:
     return path
 
 
+def clean_temporaries(folder: str | Path) -> list[Path]:
+    """Remove the temporary files that atomic writes leave when killed before their rename; returns them.
+
+    Only a run's own process writes in its folder (the folder is claimed), so any such file there
+    is an orphan.
+    """
+    orphans = [path for path in Path(folder).rglob(".*.tmp") if path.is_file()]
+    orphans += [path for path in Path(folder).rglob("*.csv.tmp") if path.is_file()]  # the training log's own temporary
+    for path in orphans:
+        path.unlink(missing_ok=True)
+    return orphans
+
+
 def atomic_write_json(path: str | Path, document: Any) -> Path:
     return atomic_write_text(path, json.dumps(document, indent=2, sort_keys=True, default=str) + "\n")
 
