@@ -144,7 +144,7 @@ class TrainConfig(_Section):
         for key in weights:
             if key != "preset" and key not in REWARD_TERMS:
                 raise ValueError(unknown_name_message("reward term", key, ("preset", *REWARD_TERMS)))
-        if "preset" in weights and weights["preset"] not in REWARD_PRESETS:
+        if "preset" in weights and (not isinstance(weights["preset"], str) or weights["preset"] not in REWARD_PRESETS):
             raise ValueError(unknown_preset_message(weights["preset"]))
         return weights
 

@@ -85,7 +85,7 @@ REWARD_PRESETS: Mapping[str, RewardPreset] = MappingProxyType({preset.name: pres
 
 def preset_weights(name: str) -> dict[str, float]:
     """A copy of preset ``name``'s weights; ValueError (listing the presets) for an unknown name."""
-    if name not in REWARD_PRESETS:
+    if not isinstance(name, str) or name not in REWARD_PRESETS:
         raise ValueError(unknown_preset_message(name))
     return dict(REWARD_PRESETS[name].weights)
 
