@@ -160,14 +160,15 @@ class AgentPolicy:
         return CrowdNavEnv(**{**self.env_options, **extra})
 
 
-def load_policy(path: str | Path, device: str = "cpu", *, trusted: bool = False) -> AgentPolicy:
+def load_policy(path: str | Path, device: str = "cpu", *, trusted: bool = False, config: Any = None) -> AgentPolicy:
     """Load a checkpoint as a deterministic policy (see :class:`AgentPolicy`).
 
     By default only the network parameters are read (:func:`model_from_parameters`): SB3's
     ``model.zip`` also holds cloudpickled objects that run code when unpickled, so a checkpoint
     from elsewhere cannot run code through evaluation or rendering. ``trusted=True`` loads the whole
     SB3 model (``<Algo>.load``), which a checkpoint without its training config needs
-    (docs/security.md).
+    (docs/security.md). ``config``: the run's TrainConfig when the caller holds it already (the
+    evaluation runner), so the checkpoint's copy is not validated again.
     """
     folder = checkpoint_folder(path)
     info = read_policy_info(folder)
@@ -176,7 +177,7 @@ def load_policy(path: str | Path, device: str = "cpu", *, trusted: bool = False)
         from crowdnav.agents.pretrain import load_encoder
 
         encoder, _ = load_encoder(folder / info["leog_encoder"])  # torch.load with weights_only=True
-    model = load_model(folder, device=device) if trusted else model_from_parameters(folder, info, encoder, device)
+    model = load_model(folder, device=device) if trusted else model_from_parameters(folder, info, encoder, device, config)
     return AgentPolicy(model, info, encoder)
 
 
@@ -184,7 +185,8 @@ class UntrustedCheckpointError(ValueError):
     """A checkpoint that cannot be rebuilt from its config alone; only a trusted full load would read it."""
 
 
-def model_from_parameters(folder: Path, info: Mapping[str, Any], encoder: Any = None, device: str = "cpu") -> BaseAlgorithm:
+def model_from_parameters(folder: Path, info: Mapping[str, Any], encoder: Any = None, device: str = "cpu",
+                          config: Any = None) -> BaseAlgorithm:
     """The checkpoint's model rebuilt from its training config, then its parameters loaded.
 
     SB3's ``set_parameters`` reads only the zip's ``.pth`` tensors (``torch.load`` with
@@ -195,11 +197,13 @@ def model_from_parameters(folder: Path, info: Mapping[str, Any], encoder: Any = 
     from crowdnav.agents.factory import make_env, make_model
 
     document = info.get("config")
-    if not isinstance(document, Mapping):
+    if config is None and not isinstance(document, Mapping):
         raise UntrustedCheckpointError(f"{folder}: the checkpoint holds no training config to rebuild its network from; "
                                        "load it with trusted=True only if you trust where it came from")
     try:
-        config = config_from_mapping({**document, "device": device, "progress": False, "tensorboard": False})
+        if config is None:
+            config = config_from_mapping({**document, "device": device})
+        config = config.model_copy(update={"device": device, "progress": False, "tensorboard": False})
         off_policy = "buffer_size" in type(config).model_fields and config.algo in ("sac", "td3", "ddpg")
         config = config.model_copy(update={"buffer_size": 1, "learning_starts": 0} if off_policy else {})
         saved_encoder = None

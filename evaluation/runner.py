@@ -143,7 +143,8 @@ def run_unit(spec: UnitSpec | Mapping[str, Any], out_dir: str | Path, *, on_even
     train_dir = out_dir / TRAIN_DIR
     trained = recover_checkpoint(train_dir)
     resumed = trained > 0 or (out_dir / EVALUATIONS_DIR).is_dir()
-    evaluator = _Evaluator(spec, out_dir, protocol, load_policy, clock, hook)
+    # the run's own TrainConfig rebuilds each snapshot's network: validated once, at experiment load
+    evaluator = _Evaluator(spec, out_dir, protocol, lambda folder: load_policy(folder, config=config), clock, hook)
     if trained < protocol.train_episodes:
         evaluator.evaluate_available(train_dir)  # before resuming replaces the checkpoint
         train(config, resume=checkpoint_dir(train_dir).exists(), on_checkpoint=lambda episodes: clock.save())
