@@ -35,7 +35,9 @@ def facts(folder: Path) -> str:
     done = folder.parent / f"{folder.name}.done"
     elapsed = f"{int(done.read_text()) / 60:.0f} min elapsed, " if done.exists() else ""
     total = sum(m["wall_time_s"] for m in learned)
-    defaults = experiment.get("defaults", {})
+    # the results folder's experiment.yaml holds each configuration resolved (defaults merged in)
+    first = experiment["configurations"][0].get("train", {})
+    defaults = experiment.get("defaults") or {key: first[key] for key in ("scenario", "overrides", "reward_weights") if key in first}
     lines = [
         "```bash", f"crowdnav benchmark {folder.name} --workers 2 --no-video   # or benchmarks/run_figure4.sh", "```", "",
         f"* **Protocol:** {protocol['train_episodes']} training episodes, evaluation every {protocol['eval_every']} on the same "
