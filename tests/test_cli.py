@@ -199,3 +199,14 @@ def test_a_command_whose_extra_is_missing_stops_before_its_handler_starts(monkey
     parser._subparsers._group_actions[0].choices["benchmark"].set_defaults(handler=lambda args: started.append(1) or 0)
     assert main(["benchmark"]) == 1 and not started
     assert capsys.readouterr().err.strip().endswith("needs pandas, which the core install leaves out: pip install 'crowdnav[bench]'")
+
+
+def test_train_help_shows_the_config_defaults_and_set_merges_scenario_overrides(capsys, tmp_path):
+    assert main(["train", "--help"]) == 0
+    text = " ".join(capsys.readouterr().out.split())
+    assert "RL algorithm (default: sac)" in text and "(default: lidar,goal)" in text and "--set PATH=VALUE" in text
+    config = tmp_path / "c.yaml"
+    config.write_text("overrides: {max_steps: 80}\n")
+    assert main(["train", "--config", str(config), "--set", "humans.count=3", "--print-config"]) == 0
+    printed = capsys.readouterr().out
+    assert "humans.count: 3" in printed and "max_steps: 80" in printed

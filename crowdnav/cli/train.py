@@ -8,15 +8,39 @@ Each ``register_*`` adds one command to the ``crowdnav`` sub-parsers and sets it
 from __future__ import annotations
 
 import argparse
+import re
 import sys
 from pathlib import Path
 from typing import Any
 
-from crowdnav.cli.common import CliError, add_reward_options, reward_options
+from crowdnav.cli.common import CliError, add_override_option, add_reward_options, parse_overrides, reward_options
 from crowdnav.registry import ALGORITHM_NAMES, ENCODER_MODES
 
 ALGOS = ALGORITHM_NAMES  # the registry's names (also the config's and the factory's)
 MODES = tuple(ENCODER_MODES)
+
+
+class _ConfigDefaultsFormatter(argparse.HelpFormatter):
+    """Fills ``{field}`` in help texts with the TrainConfig default, imported only when help is printed."""
+
+    def _expand_help(self, action: argparse.Action) -> str:
+        text = super()._expand_help(action)
+        if "{" not in text:
+            return text
+        from crowdnav.agents.config import TrainConfig, config_to_dict
+
+        defaults = _flatten(config_to_dict(TrainConfig()))
+        shown = {key: ",".join(map(str, value)) if isinstance(value, list) else value for key, value in defaults.items()}
+        return re.sub(r"\{([a-z_.]+)\}", lambda match: str(shown[match.group(1)]), text)
+
+
+def _flatten(document: dict[str, Any], prefix: str = "") -> dict[str, Any]:
+    flat: dict[str, Any] = {}
+    for key, value in document.items():
+        if isinstance(value, dict) and value and key != "overrides":
+            flat.update(_flatten(value, f"{prefix}{key}."))
+        flat[f"{prefix}{key}"] = value
+    return flat
 
 
 def register(groups: argparse._SubParsersAction) -> None:
@@ -30,19 +54,22 @@ def register_train(groups: argparse._SubParsersAction) -> None:
     parser = groups.add_parser(
         "train", help=f"train an RL agent ({', '.join(name.upper() for name in ALGOS)}) on a scenario",
         description="Train an agent from a YAML config; the flags override the config's fields. "
-                    "Outputs (checkpoint, snapshots, episodes.csv) go to --out.",
+                    "Outputs (checkpoint, snapshots, episodes.csv) go to --out. Defaults shown are the config's.",
+        formatter_class=_ConfigDefaultsFormatter,
     )
+    # "{field}" in a help text is the config field's default, read only when help is printed
     parser.add_argument("--config", type=Path, metavar="CONFIG.yaml", help="training config (default: all defaults)")
-    parser.add_argument("--scenario", metavar="NAME_OR_PATH", help="library scenario name or scenario YAML file")
-    parser.add_argument("--algo", choices=ALGOS, help="RL algorithm")
-    parser.add_argument("--modalities", metavar="KEYS", help="comma-separated observation keys, e.g. leog,lidar,goal")
-    parser.add_argument("--encoder", choices=MODES, help="LEOG encoder mode")
-    parser.add_argument("--encoder-weights", metavar="PATH", help="pre-trained encoder (encoder.pt or its folder)")
-    parser.add_argument("--episodes", type=int, metavar="N", help="training episodes in all")
-    parser.add_argument("--seed", type=int, metavar="N", help="seed of the networks and the training episodes")
-    parser.add_argument("--out", metavar="DIR", help="output folder")
-    parser.add_argument("--threads", type=int, metavar="N", help="torch threads (default 1)")
-    parser.add_argument("--device", metavar="DEVICE", help="torch device: cpu, cuda, auto")
+    parser.add_argument("--scenario", metavar="NAME_OR_PATH", help="library scenario name or scenario YAML file (default: {scenario})")
+    parser.add_argument("--algo", choices=ALGOS, help="RL algorithm (default: {algo})")
+    parser.add_argument("--modalities", metavar="KEYS", help="comma-separated observation keys, e.g. leog,lidar,goal (default: {modalities})")
+    parser.add_argument("--encoder", choices=MODES, help="LEOG encoder mode (default: {encoder.mode})")
+    parser.add_argument("--encoder-weights", metavar="PATH", help="pre-trained encoder (encoder.pt or its folder) (default: {encoder.weights})")
+    parser.add_argument("--episodes", type=int, metavar="N", help="training episodes in all (default: {episodes})")
+    parser.add_argument("--seed", type=int, metavar="N", help="seed of the networks and the training episodes (default: {seed})")
+    parser.add_argument("--out", metavar="DIR", help="output folder (default: {out})")
+    parser.add_argument("--threads", type=int, metavar="N", help="torch threads (default: {torch_threads})")
+    parser.add_argument("--device", metavar="DEVICE", help="torch device: cpu, cuda, auto (default: {device})")
+    add_override_option(parser)  # --set PATH=VALUE: scenario overrides, merged into the config's own
     add_reward_options(parser)  # --reward PRESET, --reward-weight TERM=VALUE: into reward_weights
     parser.add_argument("--resume", action="store_true", help="continue the run in --out from its checkpoint")
     parser.add_argument("--no-progress", action="store_true", help="no progress bar")
@@ -116,6 +143,9 @@ def train_command(args: argparse.Namespace) -> int:
         return 0
     try:
         config = load_config(args.config, train_overrides(args))
+        scenario_overrides = parse_overrides(args.overrides)
+        if scenario_overrides:  # --set adds to the config's own scenario overrides
+            config = load_config(args.config, {**train_overrides(args), "overrides": {**config.overrides, **scenario_overrides}})
     except ConfigError as error:
         raise CliError(str(error)) from None
     if args.print_config:
