@@ -41,7 +41,8 @@ def is_baseline(configuration: str) -> bool:
     return str(configuration).startswith(BASELINE_PREFIX)
 
 
-def _policy(name: str) -> Any:
+def scripted_policy(name: str) -> Any:
+    """The scripted robot policy of a baseline name (``straight``, ``social_force``)."""
     from crowdnav.policies import SocialForceRobot, StraightToGoal
 
     return {"straight": StraightToGoal, "social_force": SocialForceRobot}[name]()
@@ -84,7 +85,7 @@ def evaluate_baseline(experiment: str, configuration: str, label: str, env_optio
     name = _baseline_name(configuration)
     episodes = HeldOutEpisodes(env_options, protocol.test_seeds)
     try:
-        rows = episodes.run(_policy(name), privileged=True)
+        rows = episodes.run(scripted_policy(name), privileged=True)
     finally:
         episodes.close()
     once = pd.DataFrame(rows)

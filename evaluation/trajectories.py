@@ -91,3 +91,54 @@ def write_trajectories(episodes: list[Mapping[str, Any]], stem: str | Path) -> l
     csv = atomic_write_csv(tidy_table(episodes), stem.with_name(stem.name + ".csv"))
     ndjson = atomic_write_text(stem.with_name(stem.name + ".ndjson"), "\n".join(trajnet_lines(episodes)) + "\n")
     return [csv, ndjson]
+
+
+class ReplayMismatchError(RuntimeError):
+    """A replayed test episode ended differently from the one the run recorded."""
+
+
+def replay_evaluation(run_dir: str | Path, evaluation: int | None = None) -> list[dict[str, Any]]:
+    """The test episodes of evaluation ``evaluation`` (default: the last) of a finished run, recorded.
+
+    ``run_dir``: ``<experiment>/<configuration>/seed_<n>`` (a learned run: its policy snapshot for
+    that evaluation is played) or ``<experiment>/baseline_<name>/baseline`` (a scripted baseline,
+    the same at every evaluation). Raises :class:`ReplayMismatchError` unless every episode's
+    outcome matches the run's recorded one.
+    """
+    import pandas as pd
+    from crowdnav.evaluation.baselines import scripted_policy
+    from crowdnav.evaluation.protocol import Protocol
+    from crowdnav.evaluation.rollout import HeldOutEpisodes
+    from crowdnav.evaluation.storage import ResultsError, read_json
+
+    run_dir = Path(run_dir)
+    meta = read_json(run_dir / "meta.json") if (run_dir / "meta.json").is_file() else None
+    if meta is None:
+        raise ResultsError(f"{run_dir}: not a finished run (no meta.json)")
+    protocol = Protocol(**meta["protocol"])
+    recorded = pd.read_csv(run_dir / "test_episodes.csv", keep_default_na=False, na_values=["nan"])
+    if meta.get("kind") == "baseline":
+        episodes = HeldOutEpisodes(meta["env"], protocol.test_seeds)
+        rows = episodes.run(scripted_policy(meta["policy"]), privileged=True, record=True)
+        expected = recorded.drop_duplicates("test_episode").set_index("test_episode")["outcome"]
+    else:
+        from crowdnav.agents import load_policy
+        from crowdnav.agents.run_folder import policy_snapshots
+
+        k = protocol.evaluations - 1 if evaluation is None else evaluation
+        if not 0 <= k < protocol.evaluations:
+            raise ResultsError(f"{run_dir}: evaluation {k} does not exist; expected 0 to {protocol.evaluations - 1}")
+        this = recorded[recorded["evaluation"] == k]
+        folder = policy_snapshots(run_dir / "train").get(int(this["training_episodes"].iloc[0]))
+        if folder is None:
+            raise ResultsError(f"{run_dir}: no policy snapshot after {int(this['training_episodes'].iloc[0])} episodes to replay")
+        policy = load_policy(folder)
+        episodes = HeldOutEpisodes(policy.env_options, protocol.test_seeds)
+        rows = episodes.run(policy, record=True)
+        expected = this.set_index("test_episode")["outcome"]
+    episodes.close()
+    replayed = {row["test_episode"]: row["outcome"] for row in rows}
+    differ = {k: (expected[k], replayed[k]) for k in expected.index if replayed.get(k) != expected[k]}
+    if differ:
+        raise ReplayMismatchError(f"{run_dir}: replayed outcomes differ from the recorded ones (episode: recorded, replayed): {differ}")
+    return rows

@@ -61,3 +61,29 @@ def test_trajnet_lines_hold_one_scene_per_episode_and_unique_ids_and_frames(tmp_
     assert [path.suffix for path in written] == [".csv", ".ndjson"]
     assert len(pd.read_csv(written[0])) == len(tidy_table(episodes))
     assert written[1].read_text().count("\n") == len(lines)
+
+
+def test_trajectories_command_replays_every_run_of_an_experiment_and_checks_the_outcomes(tmp_path_factory, tmp_path, capsys):
+    import shutil
+
+    from evaluation_tiny import tiny_results
+
+    from crowdnav.cli import main
+
+    results = tmp_path / "results"
+    shutil.copytree(tiny_results(tmp_path_factory), results)
+    assert main(["trajectories", str(results)]) == 0
+    written = sorted(results.glob("*/*/trajectories/*.csv"))
+    runs = sorted(results.glob("*/*/meta.json"))
+    assert len(written) == len(runs) >= 4
+    table = pd.read_csv(written[0])
+    assert tuple(table.columns) == TIDY_COLUMNS and set(table["agent"]) >= {"robot", "human_0"}
+    # a recorded outcome that the replay does not reproduce is reported, not exported
+    learned = next(run.parent for run in runs if run.parent.name.startswith("seed_"))
+    episodes_csv = learned / "test_episodes.csv"
+    frame = pd.read_csv(episodes_csv, keep_default_na=False)
+    last = frame["evaluation"] == frame["evaluation"].max()
+    frame.loc[last & (frame["test_episode"] == 0), "outcome"] = "impossible"
+    frame.to_csv(episodes_csv, index=False)
+    assert main(["trajectories", str(learned)]) == 1
+    assert "replayed outcomes differ from the recorded ones" in capsys.readouterr().err
