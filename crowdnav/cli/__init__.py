@@ -23,12 +23,13 @@ from crowdnav.cli.common import CliError
 # names the extra to add instead of failing with a traceback.
 EXTRA_OF_MODULE = {"torch": "train", "stable_baselines3": "train", "matplotlib": "train", "pandas": "bench", "seaborn": "bench", "ray": "ray"}
 EXTRA_OF_COMMAND = {"train": "train", "collect-dataset": "train", "pretrain-encoder": "train", "benchmark": "bench", "plot": "bench",
-                    "leaderboard": "bench", "trajectories": "bench"}
+                    "leaderboard": "bench", "trajectories": "bench", "evaluate": "bench"}
 # What each command's layer needs, checked before it starts: a benchmark's worker processes would
 # otherwise each fail on the missing import, after the command had already begun.
 NEEDS = {"train": ("torch", "stable_baselines3"), "collect-dataset": ("torch",), "pretrain-encoder": ("torch", "matplotlib"),
          "benchmark": ("torch", "stable_baselines3", "pandas", "seaborn", "matplotlib"), "plot": ("pandas", "seaborn", "matplotlib"),
-         "leaderboard": ("pandas",), "trajectories": ("torch", "stable_baselines3", "pandas")}
+         "leaderboard": ("pandas",), "trajectories": ("torch", "stable_baselines3", "pandas"),
+         "evaluate": ("torch", "stable_baselines3", "pandas")}
 
 
 def _require(modules: Sequence[str]) -> None:

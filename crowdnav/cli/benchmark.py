@@ -7,7 +7,7 @@ import os
 import sys
 from pathlib import Path
 
-from crowdnav.cli.common import CliError
+from crowdnav.cli.common import CliError, add_override_option, parse_overrides
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -66,6 +66,23 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     board.add_argument("results", nargs="+", metavar="RESULTS_DIR", help="folders written by `crowdnav benchmark`")
     board.add_argument("--out", metavar="PATH", help="output path without extension (default: RESULTS_DIR/leaderboard, first folder)")
     board.set_defaults(handler=leaderboard_command)
+
+    evaluate = subparsers.add_parser(
+        "evaluate", help="evaluate any policy on a scenario's fixed test episodes, ranked by `crowdnav leaderboard`",
+        description="POLICY: a crowdnav run folder or checkpoint, an SB3 model .zip, module:function (one observation dict "
+                    "-> 2 numbers), or baseline:straight / baseline:social_force. Plays the test episodes with seeds "
+                    "--test-seed-base, +1, ... and writes OUT/evaluate/<name>/eval/ in the protocol's format "
+                    "(docs/evaluate.md).",
+    )
+    evaluate.add_argument("policy", metavar="POLICY")
+    evaluate.add_argument("--scenario", required=True, metavar="NAME_OR_PATH", help="library scenario name or YAML file")
+    evaluate.add_argument("--modalities", metavar="KEYS", help="comma-separated observation keys (default: the scenario's)")
+    evaluate.add_argument("--episodes", type=int, default=20, metavar="N", help="test episodes (default: %(default)s; 500 for final rankings)")
+    evaluate.add_argument("--test-seed-base", type=int, default=0, metavar="S", help="seed of the first test episode (default: %(default)s)")
+    evaluate.add_argument("--name", metavar="NAME", help="configuration name in the results (default: from POLICY)")
+    evaluate.add_argument("--out", default="results", metavar="DIR", help="results folder (default: %(default)s)")
+    add_override_option(evaluate)
+    evaluate.set_defaults(handler=evaluate_command)
 
     traj = subparsers.add_parser(
         "trajectories", help="export the test episodes of finished runs: per-step CSV and TrajNet++ ndjson",
@@ -179,4 +196,24 @@ def trajectories_command(args: argparse.Namespace) -> int:
         label = "baseline" if run.name == "baseline" else f"evaluation_{args.evaluation if args.evaluation is not None else 'last'}"
         for path in write_trajectories(episodes, run / "trajectories" / label):
             print(f"wrote {path}")
+    return 0
+
+
+def evaluate_command(args: argparse.Namespace) -> int:
+    from crowdnav.evaluation.evaluate import PolicyError, evaluate_policy
+    from crowdnav.scenario import ScenarioError
+
+    modalities = [key.strip() for key in args.modalities.split(",") if key.strip()] if args.modalities else None
+    if args.episodes < 1:
+        raise CliError(f"--episodes must be at least 1, got {args.episodes}")
+    try:
+        folder = evaluate_policy(args.policy, args.scenario, args.out, modalities=modalities, episodes=args.episodes,
+                                 test_seed_base=args.test_seed_base, overrides=parse_overrides(args.overrides), name=args.name)
+    except (PolicyError, ScenarioError, ValueError) as error:
+        raise CliError(str(error).splitlines()[0]) from None
+    import json
+
+    final = json.loads((folder / "meta.json").read_text())["final"]
+    print(f"{args.policy}: " + ", ".join(f"{outcome} {rate:.0%}" for outcome, rate in final.items()) + f" on {args.episodes} test episodes")
+    print(f"wrote {folder}; rank with: crowdnav leaderboard {args.out}")
     return 0

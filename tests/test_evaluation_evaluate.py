@@ -1,0 +1,78 @@
+"""crowdnav evaluate: any policy (baseline, callable, SB3 zip, crowdnav run) on the same fixed test episodes."""
+
+from __future__ import annotations
+
+import sys
+import textwrap
+
+import numpy as np
+import pytest
+from crowdnav.evaluation.evaluate import PolicyError, evaluate_policy
+from crowdnav.evaluation.leaderboard import write_leaderboard
+
+from crowdnav.cli import main
+
+TOWARD_GOAL = textwrap.dedent('''
+    import numpy as np
+
+    def toward_goal(observation):
+        distance, sin, cos = observation["goal"]
+        return np.array([cos, sin], dtype=np.float32)
+
+    def broken(observation):
+        return "forward"
+''')
+
+
+@pytest.fixture
+def module_on_path(tmp_path, monkeypatch):
+    (tmp_path / "my_policies.py").write_text(TOWARD_GOAL)
+    monkeypatch.syspath_prepend(str(tmp_path))
+    yield "my_policies"
+    sys.modules.pop("my_policies", None)
+
+
+def test_a_callable_that_drives_at_the_goal_scores_exactly_the_straight_baseline(tmp_path, module_on_path):
+    ours = evaluate_policy(f"{module_on_path}:toward_goal", "open_space", tmp_path, modalities=["goal"], episodes=6)
+    baseline = evaluate_policy("baseline:straight", "open_space", tmp_path, episodes=6)
+    table, _ = write_leaderboard([tmp_path], tmp_path / "board")
+    rows = table.set_index("configuration")
+    assert rows.loc["my_policies_toward_goal", "final_success_mean"] == rows.loc["baseline_straight", "final_success_mean"]
+    assert ours.name == baseline.name == "eval" and (ours / "test_episodes.csv").is_file()
+
+
+def test_an_sb3_zip_is_evaluated_and_a_space_mismatch_is_one_clear_line(tmp_path):
+    from stable_baselines3 import PPO
+
+    from crowdnav import CrowdNavEnv
+
+    model = PPO("MultiInputPolicy", CrowdNavEnv("open_space", modalities=["goal"]), n_steps=32, batch_size=16, seed=0)
+    model.save(tmp_path / "my_ppo.zip")
+    folder = evaluate_policy(str(tmp_path / "my_ppo.zip"), "open_space", tmp_path / "results", modalities=["goal"], episodes=3)
+    assert folder.parent.name == "my_ppo"
+    with pytest.raises(PolicyError, match=r"expects observations \{goal: \(3,\)\}, but the scenario with modalities \['lidar'\] gives"):
+        evaluate_policy(str(tmp_path / "my_ppo.zip"), "open_space", tmp_path / "results", modalities=["lidar"], episodes=3)
+
+
+def test_bad_policies_are_one_line_errors(tmp_path, module_on_path, capsys):
+    assert main(["evaluate", "nowhere:nothing", "--scenario", "open_space", "--out", str(tmp_path)]) == 1
+    assert "cannot import 'nothing' from 'nowhere'" in capsys.readouterr().err
+    assert main(["evaluate", "baseline:teleport", "--scenario", "open_space", "--out", str(tmp_path)]) == 1
+    assert "unknown baseline 'teleport'; expected one of: baseline:straight, baseline:social_force" in capsys.readouterr().err
+    assert main(["evaluate", f"{module_on_path}:broken", "--scenario", "open_space", "--modalities", "goal", "--out", str(tmp_path)]) == 1
+    err = capsys.readouterr().err.strip()
+    assert err.count("\n") == 0 and "must be 2 numbers" in err
+
+
+def test_a_crowdnav_run_is_evaluated_by_its_parameters_with_its_own_modalities(tmp_path):
+    from agents_tiny import tiny_config
+    from crowdnav.agents import train
+
+    train(tiny_config(tmp_path / "runs" / "sac", modalities=["goal", "closest_obstacle"], episodes=2))
+    folder = evaluate_policy(str(tmp_path / "runs" / "sac"), "open_space", tmp_path / "results", episodes=3)
+    assert folder.parent.name == "sac"
+    import json
+
+    meta = json.loads((folder / "meta.json").read_text())
+    assert meta["env"]["modalities"] == ["goal", "closest_obstacle"] and meta["test_episodes"] == 3
+    assert np.isclose(sum(meta["final"].values()), 1.0)
