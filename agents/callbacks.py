@@ -68,13 +68,16 @@ class EpisodeRecord:
 class EpisodeCallback(BaseCallback):
     """Stop after ``episodes`` episodes in all; ``first_episode`` were done before (resume).
 
-    Checkpoints: every ``checkpoint_every`` episodes ``save(episodes_done)`` is called at the
-    end of the current rollout (for off-policy algorithms right after the step's transition
-    enters the replay buffer), so the saved buffer and episode count agree.
+    Checkpoints: every ``checkpoint_every`` episodes ``snapshot(episodes_done)`` is called at once
+    (the policy does not change within a rollout, so it is the policy after exactly that many
+    episodes, however long the rollout: PPO's 2,048 steps span several episodes), and
+    ``save(episodes_done)`` at the end of the current rollout (for off-policy algorithms right
+    after the step's transition enters the replay buffer), so the saved buffer and episode count agree.
     """
 
     def __init__(self, episodes: int, first_episode: int, seed_of: Callable[[int], int], *,
                  checkpoint_every: int, save: Callable[[int], None] | None = None,
+                 snapshot: Callable[[int], None] | None = None,
                  log_file: str | Path | None = None, progress: bool = False, successes_before: int = 0):
         super().__init__()
         self.episodes = episodes
@@ -83,6 +86,7 @@ class EpisodeCallback(BaseCallback):
         self.seed_of = seed_of
         self.checkpoint_every = checkpoint_every
         self.save = save
+        self.snapshot = snapshot
         self.records: list[EpisodeRecord] = []
         self._log_path = Path(log_file) if log_file is not None else None
         self._log: TextIO | None = None
@@ -137,8 +141,10 @@ class EpisodeCallback(BaseCallback):
         if self._bar is not None:
             self._bar.update(1)
             self._bar.set_postfix(success=f"{self.success_rate:.0%}", steps_per_s=f"{self.steps_per_second:.0f}", refresh=False)
-        if self.save is not None and self.done % self.checkpoint_every == 0:
-            self._save_due = True
+        if self.done % self.checkpoint_every == 0:
+            if self.snapshot is not None:
+                self.snapshot(self.done)
+            self._save_due = self.save is not None
 
     @property
     def steps_per_second(self) -> float:

@@ -131,8 +131,10 @@ def train(config: TrainConfig | Mapping[str, Any] | str | Path, *, resume: bool 
 
     def save(episodes: int) -> None:
         # The snapshot first: once the checkpoint says N episodes, snapshot N exists, so a kill
-        # between the two writes cannot lose an evaluation point.
-        save_snapshot(episodes)
+        # between the two writes cannot lose an evaluation point. (The callback usually took it
+        # already, when episode N ended; a rollout can run past it before the checkpoint.)
+        if not snapshot_folder(out, episodes).is_dir():
+            save_snapshot(episodes)
         save_checkpoint(model, checkpoint, info(episodes), encoder_file=encoder_copy,
                         replay_buffer=config.save_replay_buffer and config.algo in OFF_POLICY)
         if on_checkpoint is not None:
@@ -140,7 +142,7 @@ def train(config: TrainConfig | Mapping[str, Any] | str | Path, *, resume: bool 
 
     callback = EpisodeCallback(
         config.episodes, first_episode, lambda episode: train_seed(config.seed, episode),
-        checkpoint_every=config.checkpoint_every, save=save, log_file=episode_log(out),
+        checkpoint_every=config.checkpoint_every, save=save, snapshot=save_snapshot, log_file=episode_log(out),
         progress=config.progress, successes_before=state["successes"] if state else 0,
     )
     _set_aside_snapshots_after(out, state["episodes"] if state else 0)

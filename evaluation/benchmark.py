@@ -128,7 +128,13 @@ def describe_baseline(folder: Path) -> str:
 
 
 def claim_folder(folder: Path, experiment: Experiment) -> None:
-    """Write experiment.yaml, or check that ``folder`` holds this experiment (more seeds may be added)."""
+    """Write experiment.yaml, or check that ``folder`` holds this experiment.
+
+    Only what every run shares must match: the protocol (more seeds may be added) and the
+    encoder pre-training. A new description or label, an added or edited configuration leaves
+    the finished runs alone: each run checks its own spec (:func:`evaluation.runner.run_unit`
+    starts an edited configuration's runs afresh and keeps the old ones aside).
+    """
     path = folder / EXPERIMENT_FILE
     wanted = experiment.to_dict()
     if path.is_file():
@@ -139,8 +145,8 @@ def claim_folder(folder: Path, experiment: Experiment) -> None:
         if not isinstance(existing, dict):
             raise ResultsError(f"{path}: not an experiment record; remove it or use another --out")
         comparable = {**existing, "protocol": {**existing.get("protocol", {}), "seeds": experiment.protocol.seeds}}
-        if comparable != wanted:
-            changed = sorted(key for key in wanted if comparable.get(key) != wanted[key])
+        changed = sorted(key for key in ("protocol", "pretrain_encoder") if comparable.get(key) != wanted[key])
+        if changed:
             raise ResultsError(f"{folder} holds results of a different version of experiment '{experiment.name}' "
                                f"({', '.join(changed)} differ); use another --out or remove {folder}")
         wanted["protocol"]["seeds"] = max(existing["protocol"]["seeds"], experiment.protocol.seeds)

@@ -160,15 +160,26 @@ def run_unit(spec: UnitSpec | Mapping[str, Any], out_dir: str | Path, *, on_even
 
 
 def _claim(out_dir: Path, spec: UnitSpec) -> None:
-    """Write spec.json, or check that the folder holds this very run."""
+    """Write spec.json, or check that the folder holds this run.
+
+    A folder of the same experiment, configuration and seed whose training config, protocol or
+    label changed (the experiment file was edited) is moved aside to ``<folder>.replaced-N`` and
+    the run starts afresh: nothing is overwritten. A folder of another run is refused.
+    """
     path = out_dir / SPEC_FILE
     if path.is_file():
         existing = read_json(path)
-        if existing != spec.to_dict():
-            changed = sorted(key for key in spec.to_dict() if existing.get(key) != spec.to_dict()[key])
-            raise ResultsError(f"{out_dir} holds a different run (its {', '.join(changed)} differ from this experiment's); "
-                               "use another output folder or remove that one")
-    else:
+        wanted = spec.to_dict()
+        if existing != wanted:
+            changed = sorted(key for key in wanted if existing.get(key) != wanted[key])
+            if any(existing.get(key) != wanted[key] for key in ("experiment", "configuration", "seed")):
+                raise ResultsError(f"{out_dir} holds a different run (its {', '.join(changed)} differ from this experiment's); "
+                                   "use another output folder or remove that one")
+            aside = next(out_dir.with_name(f"{out_dir.name}.replaced-{n}") for n in range(1, 10_000)
+                         if not out_dir.with_name(f"{out_dir.name}.replaced-{n}").exists())
+            out_dir.rename(aside)  # the edited configuration's old run, kept
+            out_dir.mkdir(parents=True)
+    if not path.is_file():
         atomic_write_json(path, spec.to_dict())
 
 

@@ -82,14 +82,18 @@ def read_json(path: str | Path) -> Any:
 
 
 def finished_runs(paths: Iterable[str | Path]) -> list[Path]:
-    """Folders of the complete runs (those with meta.json) below each path, sorted; ResultsError if a path is missing."""
+    """Folders of the complete runs (those with meta.json) below each path, sorted; ResultsError if a path is missing.
+
+    Runs set aside when their configuration was edited (``<run>.replaced-N``) are not results.
+    """
     runs: set[Path] = set()
     for path in map(Path, paths):
         if not path.exists():
             raise ResultsError(f"{path}: no such results folder")
         if not path.is_dir():
             raise ResultsError(f"{path}: not a folder (expected a results folder written by `crowdnav benchmark`)")
-        runs.update(meta.parent for meta in path.rglob(META_FILE) if (meta.parent / TEST_FILE).is_file())
+        runs.update(meta.parent for meta in path.rglob(META_FILE)
+                    if (meta.parent / TEST_FILE).is_file() and not any(".replaced-" in part for part in meta.parent.parts))
     return sorted(runs)
 
 

@@ -158,13 +158,18 @@ def test_malformed_yaml_and_missing_file_are_one_line_errors(tmp_path):
         load_experiment(tmp_path / "missing.yaml")
 
 
-def test_results_folder_of_a_different_experiment_config_is_refused(tmp_path):
+def test_editing_an_experiment_keeps_its_folder_but_a_different_protocol_is_refused(tmp_path):
     document = tiny_experiment_document()
     claim_folder(tmp_path / "tiny", experiment_from_mapping(document))
     claim_folder(tmp_path / "tiny", experiment_from_mapping(tiny_experiment_document(seeds=3)))  # more seeds: fine
+    edited = copy.deepcopy(document)
+    edited["description"] = "reworded"
+    edited["defaults"]["algo"] = "td3"  # every configuration edited: their runs start afresh, one by one
+    edited["configurations"].append({"name": "extra", "train": {"modalities": ["goal"]}})
+    claim_folder(tmp_path / "tiny", experiment_from_mapping(edited))
     changed = copy.deepcopy(document)
-    changed["defaults"]["algo"] = "td3"
-    with pytest.raises(ResultsError, match="different version of experiment 'tiny' \\(configurations differ\\)"):
+    changed["protocol"]["test_episodes"] = 5
+    with pytest.raises(ResultsError, match="different version of experiment 'tiny' \\(protocol differ\\)"):
         claim_folder(tmp_path / "tiny", experiment_from_mapping(changed))
 
 

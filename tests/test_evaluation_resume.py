@@ -155,3 +155,28 @@ def test_a_failing_run_is_reported_and_the_others_finish_in_the_process_pool(tmp
     assert "holds a different run" in report.failures[0]["error"] and (broken / "error.log").is_file()
     assert [(s["configuration"], s["status"]) for s in report.summaries] == [("closest", "done")]
     assert (tmp_path / "tiny" / "leaderboard.md").is_file()  # the report covers the runs that finished
+
+
+@pytest.mark.parametrize("algo", ["ppo", "a2c"])
+def test_on_policy_rollouts_longer_than_an_evaluation_interval_still_evaluate_at_every_point(tmp_path, algo):
+    """A rollout of 512 steps spans many 40-step episodes: snapshots are taken when the episode ends, not at the rollout's end."""
+    spec = tiny_unit_spec(train_episodes=6, eval_every=1)
+    spec["train"] = {key: value for key, value in spec["train"].items() if key not in ("batch_size", "buffer_size", "learning_starts", "algo_kwargs")}
+    spec["train"].update(algo=algo, algo_kwargs={"n_steps": 512, **({"batch_size": 64, "n_epochs": 1} if algo == "ppo" else {})})
+    summary = run_unit(spec, tmp_path)
+    evaluations = pd.read_csv(tmp_path / "test_episodes.csv").drop_duplicates("evaluation")
+    assert summary["status"] == "done" and list(evaluations["training_episodes"]) == [1, 2, 3, 4, 5, 6]
+
+
+def test_an_edited_configuration_starts_afresh_and_its_old_run_is_kept_aside(tmp_path):
+    spec = tiny_unit_spec()
+    run_unit(spec, tmp_path / "run")
+    edited = {**spec, "train": {**spec["train"], "net_arch": [8]}}
+    summary = run_unit(edited, tmp_path / "run")
+    assert summary["status"] == "done"
+    assert json.loads((tmp_path / "run" / "spec.json").read_text())["train"]["net_arch"] == [8]
+    assert json.loads((tmp_path / "run.replaced-1" / "spec.json").read_text())["train"]["net_arch"] == [16]
+    assert (tmp_path / "run.replaced-1" / "meta.json").is_file()
+    from crowdnav.evaluation.storage import finished_runs
+
+    assert finished_runs([tmp_path]) == [tmp_path / "run"]  # the old run is kept, not counted
