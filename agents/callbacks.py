@@ -77,7 +77,7 @@ class EpisodeCallback(BaseCallback):
 
     def __init__(self, episodes: int, first_episode: int, seed_of: Callable[[int], int], *,
                  checkpoint_every: int, save: Callable[[int], None] | None = None,
-                 snapshot: Callable[[int], None] | None = None,
+                 snapshot: Callable[[int], None] | None = None, on_start: Callable[[], None] | None = None,
                  log_file: str | Path | None = None, progress: bool = False, successes_before: int = 0):
         super().__init__()
         self.episodes = episodes
@@ -87,6 +87,7 @@ class EpisodeCallback(BaseCallback):
         self.checkpoint_every = checkpoint_every
         self.save = save
         self.snapshot = snapshot
+        self.on_start = on_start
         self.records: list[EpisodeRecord] = []
         self._log_path = Path(log_file) if log_file is not None else None
         self._log: TextIO | None = None
@@ -101,6 +102,8 @@ class EpisodeCallback(BaseCallback):
         return self.successes / self.done if self.done else 0.0
 
     def _on_training_start(self) -> None:
+        if self.on_start is not None:  # a resumed run's catch-up, once SB3 has set up learning
+            self.on_start()
         self._start_time = time.perf_counter()
         self._start_steps = self.model.num_timesteps
         if self._log_path is not None:

@@ -26,7 +26,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from crowdnav.agents.run_folder import CHECKPOINT_DIR, POLICY_FILE, REPLAY_FILE
+from crowdnav.agents.run_folder import CHECKPOINT_DIR, POLICY_FILE, REPLAY_FILE, RNG_FILE
 from crowdnav.agents.wrappers import ObservationScales, encode_grids, normalize_observation, scales_from_json
 from stable_baselines3.common.base_class import BaseAlgorithm
 
@@ -42,6 +42,7 @@ def save_checkpoint(
     *,
     encoder_file: str | Path | None = None,
     replay_buffer: bool = False,
+    rng_state: bool = False,
 ) -> Path:
     """Write a checkpoint folder, replacing an existing one only once the new one is complete.
 
@@ -56,6 +57,8 @@ def save_checkpoint(
     model.save(staging / MODEL_FILE)
     if replay_buffer and getattr(model, "replay_buffer", None) is not None:
         model.save_replay_buffer(staging / REPLAY_FILE)
+    if rng_state:  # a resumable checkpoint: the random streams too, so the resumed run is the same run
+        save_rng_state(model, staging / RNG_FILE)
     if encoder_file is not None:
         shutil.copyfile(encoder_file, staging / ENCODER_FILE)
     document = {"format": POLICY_FORMAT, **info, "leog_encoder": ENCODER_FILE if encoder_file is not None else None}
@@ -221,3 +224,38 @@ def model_from_parameters(folder: Path, info: Mapping[str, Any], encoder: Any = 
     except (ValueError, RuntimeError, KeyError) as error:
         raise UntrustedCheckpointError(f"{folder}: the parameters in {MODEL_FILE} do not fit the network its config describes ({error})") from None
     return model
+
+
+def save_rng_state(model: BaseAlgorithm, path: Path) -> None:
+    """The random streams training draws from (torch, numpy, Python, the action space) as a pickle.
+
+    SB3 re-seeds all of them when a model is loaded, so without this a resumed run would draw other
+    exploration noise and other replay batches than the run it continues.
+    """
+    import pickle
+    import random
+
+    import torch
+
+    space = getattr(model, "action_space", None)
+    state = {"torch": torch.get_rng_state(), "numpy": np.random.get_state(), "random": random.getstate(),
+             "action_space": space.np_random.bit_generator.state if space is not None and space._np_random is not None else None}
+    path.write_bytes(pickle.dumps(state))
+
+
+def restore_rng_state(model: BaseAlgorithm, path: Path) -> bool:
+    """Put back what :func:`save_rng_state` saved (a resumed run's own file: trusted); False without it."""
+    import pickle
+    import random
+
+    import torch
+
+    if not path.is_file():
+        return False
+    state = pickle.loads(path.read_bytes())
+    torch.set_rng_state(state["torch"])
+    np.random.set_state(state["numpy"])
+    random.setstate(state["random"])
+    if state.get("action_space") is not None:
+        model.action_space.np_random.bit_generator.state = state["action_space"]
+    return True

@@ -24,6 +24,8 @@ EPISODE_LOG = "episodes.csv"
 POLICY_FILE = "policy.json"
 """A policy folder (checkpoint or snapshot) is complete once it holds this file (written last)."""
 REPLAY_FILE = "replay_buffer.pkl"
+RNG_FILE = "rng_state.pkl"
+"""The checkpoint's random streams (torch, numpy, Python, action space), so a resumed run continues the same run."""
 """The checkpoint's replay buffer (off-policy runs with ``save_replay_buffer``)."""
 
 _SNAPSHOT = re.compile(r"episode_(\d+)$")

@@ -29,7 +29,17 @@ from typing import Any
 import torch
 import yaml
 from crowdnav.agents.callbacks import EpisodeCallback, EpisodeRecord
-from crowdnav.agents.checkpoint import ENCODER_FILE, MODEL_FILE, REPLAY_FILE, checkpoint_folder, load_model, read_policy_info, save_checkpoint
+from crowdnav.agents.checkpoint import (
+    ENCODER_FILE,
+    MODEL_FILE,
+    REPLAY_FILE,
+    RNG_FILE,
+    checkpoint_folder,
+    load_model,
+    read_policy_info,
+    restore_rng_state,
+    save_checkpoint,
+)
 from crowdnav.agents.config import ConfigError, TrainConfig, config_from_mapping, config_to_dict, load_config
 from crowdnav.agents.factory import (
     OFF_POLICY,
@@ -107,12 +117,16 @@ def train(config: TrainConfig | Mapping[str, Any] | str | Path, *, resume: bool 
     env = make_env(config, encoder if precompute else None, first_episode, scales_from_json(stored) if stored is not None else None)
     scales = observation_normalization(env)
     tensorboard_log = _tensorboard_folder(config, out)
+    on_start = None
     if state:
         model = load_model(checkpoint, env=env, device=config.device)
         if tensorboard_log is not None:
             model.tensorboard_log = tensorboard_log
         if config.algo in OFF_POLICY and (checkpoint / REPLAY_FILE).is_file():
             model.load_replay_buffer(checkpoint / REPLAY_FILE)
+        # loading re-seeded every stream: continue the saved ones, and take the update the checkpoint preceded
+        if restore_rng_state(model, checkpoint / RNG_FILE):
+            on_start = lambda: _pending_update(model, config)  # noqa: E731 (once SB3's logger exists)
     else:
         model = make_model(config, env, saved_encoder, tensorboard_log)
     # copied into every checkpoint, so a checkpoint stands alone
@@ -136,13 +150,13 @@ def train(config: TrainConfig | Mapping[str, Any] | str | Path, *, resume: bool 
         if not snapshot_folder(out, episodes).is_dir():
             save_snapshot(episodes)
         save_checkpoint(model, checkpoint, info(episodes), encoder_file=encoder_copy,
-                        replay_buffer=config.save_replay_buffer and config.algo in OFF_POLICY)
+                        replay_buffer=config.save_replay_buffer and config.algo in OFF_POLICY, rng_state=True)
         if on_checkpoint is not None:
             on_checkpoint(episodes)
 
     callback = EpisodeCallback(
         config.episodes, first_episode, lambda episode: train_seed(config.seed, episode),
-        checkpoint_every=config.checkpoint_every, save=save, snapshot=save_snapshot, log_file=episode_log(out),
+        checkpoint_every=config.checkpoint_every, save=save, snapshot=save_snapshot, on_start=on_start, log_file=episode_log(out),
         progress=config.progress, successes_before=state["successes"] if state else 0,
     )
     _set_aside_snapshots_after(out, state["episodes"] if state else 0)
@@ -162,6 +176,20 @@ def train(config: TrainConfig | Mapping[str, Any] | str | Path, *, resume: bool 
         seconds=seconds, steps_per_second=(model.num_timesteps - start_steps) / seconds if seconds > 0 else 0.0,
         records=callback.records, model=model,
     )
+
+
+def _pending_update(model: BaseAlgorithm, config: TrainConfig) -> None:
+    """The gradient steps an off-policy run takes right after the rollout it checkpointed at.
+
+    The checkpoint is written when a rollout ends, before SB3 trains on it; the uninterrupted run
+    does those steps next, so the resumed one does them first (one rollout = ``train_freq`` steps:
+    exact for the default of one step per rollout).
+    """
+    if config.algo not in OFF_POLICY or not model.num_timesteps > model.learning_starts:
+        return
+    steps = model.gradient_steps if model.gradient_steps >= 0 else model.train_freq.frequency
+    if steps > 0:
+        model.train(batch_size=model.batch_size, gradient_steps=steps)
 
 
 def snapshot_folder(out: Path, episodes: int) -> Path:

@@ -65,3 +65,20 @@ def test_every_checkpoint_is_announced_so_the_runner_can_save_its_timing(tmp_pat
     saved = []
     train(tiny_config(tmp_path, episodes=4, checkpoint_every=2), on_checkpoint=saved.append)
     assert saved[:2] == [2, 4] and set(saved) == {2, 4}
+
+
+def test_a_checkpoint_carries_the_random_streams_and_a_resume_restores_them(tmp_path):
+    import random
+
+    import numpy as np
+    import torch
+    from crowdnav.agents.checkpoint import load_model, restore_rng_state
+
+    train(tiny_config(tmp_path, episodes=2, checkpoint_every=2))
+    path = tmp_path / "checkpoint" / "rng_state.pkl"
+    assert path.is_file()
+    model = load_model(tmp_path / "checkpoint")  # loading re-seeds every stream ...
+    assert restore_rng_state(model, path)       # ... and these are the ones the run had reached
+    draws = (torch.rand(3).tolist(), np.random.rand(3).tolist(), random.random(), model.action_space.sample().tolist())
+    restore_rng_state(model, path)
+    assert draws == (torch.rand(3).tolist(), np.random.rand(3).tolist(), random.random(), model.action_space.sample().tolist())
