@@ -87,6 +87,10 @@ class Placement:
     """None when humans use the mirror rule (or there are none)."""
     start_goal_ok: np.ndarray
     """(K_start, K_goal) bool: pairs far enough apart for min_start_goal_distance, jitter included."""
+    start_component: np.ndarray | None = None
+    """Free-space component of each robot start candidate (None: all starts and goals share one)."""
+    goal_component: np.ndarray | None = None
+    """Free-space component of each robot goal candidate (None: all starts and goals share one)."""
 
 
 def build_placement(scenario: Scenario, obstacles: StaticObstacles) -> Placement:
@@ -109,7 +113,17 @@ def build_placement(scenario: Scenario, obstacles: StaticObstacles) -> Placement
                 f"(largest distance available: {largest:.2f} m); expected a smaller distance or regions further apart"
             )
         raise GeometryError("robot.min_start_goal_distance", message)
+    start_component = goal_component = None
     if robot_start.ring_center is None and robot_goal.ring_center is None:
+        # only pairs the robot's disc can travel between: walls and furniture may close the way
+        components = _free_components(world_box, occupied, robot.radius)
+        start_component, goal_component = _component_of(robot_start.points, components), _component_of(robot_goal.points, components)
+        same = start_component[:, None] == goal_component[None, :]
+        if start_goal_ok.any() and not (start_goal_ok & same).any():
+            raise GeometryError("robot.goal", f"no goal in robot.goal can be reached from a start in robot.start: walls or furniture "
+                                f"close the way for a robot of radius {robot.radius:g} m; expected start and goal regions in one "
+                                "connected free space")
+        start_goal_ok &= same
         beyond_goal, _ = _far_pairs(robot_start.points, robot_goal.points, robot.goal_radius + slack)
         if (start_goal_ok & ~beyond_goal).any():  # an episode could start inside its goal
             raise GeometryError(
@@ -118,6 +132,8 @@ def build_placement(scenario: Scenario, obstacles: StaticObstacles) -> Placement
                 "episode could end as a success before the robot moves; expected robot.min_start_goal_distance above the goal "
                 "radius, or a smaller goal radius",
             )
+    split = start_component is not None and len(set(start_component.tolist()) | set(goal_component.tolist())) > 1
+    components_kept = (start_component, goal_component) if split else (None, None)
     spawn = goal = None
     if humans.max_count > 0:
         spawn_sets = [_candidates(r, f"humans.spawn.{i}", humans.radius, world_box, occupied) for i, r in enumerate(humans.spawn)]
@@ -137,6 +153,8 @@ def build_placement(scenario: Scenario, obstacles: StaticObstacles) -> Placement
         else:
             goal_sets = [_candidates(r, f"humans.goal.{i}", humans.radius, world_box, occupied) for i, r in enumerate(humans.goal)]
             goal = _merge(goal_sets, spacing=0.0)
+        if goal is not None:
+            _check_human_reachability(humans, world_box, occupied, spawn_sets, goal_sets)
         # The robot start takes room from the crowd: keep capacity for the densest case.
         capacity = len(spawn.points) - _max_blocked_by_robot(spawn.points, robot_start.points, robot.radius + humans.radius + GAP + slack)
         if capacity < humans.max_count:
@@ -147,7 +165,7 @@ def build_placement(scenario: Scenario, obstacles: StaticObstacles) -> Placement
                 f"(asked for up to {humans.max_count}); expected a smaller count, a smaller radius or larger spawn regions",
             )
     empty = CandidateSet(np.zeros(0, dtype=complex), 0.0)
-    return Placement(robot_start, robot_goal, spawn or empty, goal, start_goal_ok)
+    return Placement(robot_start, robot_goal, spawn or empty, goal, start_goal_ok, *components_kept)
 
 
 def _candidates(region, path: str, radius: float, world_box, occupied) -> CandidateSet:
@@ -197,6 +215,37 @@ def _grown(occupied, clearance: float):
     if clearance not in grown:
         grown[clearance] = occupied.buffer(clearance)
     return grown[clearance]
+
+
+def _free_components(world_box, occupied, radius: float) -> list:
+    """The connected parts of the free space for a disc of ``radius`` (its centre's reachable set)."""
+    free = world_box if occupied.is_empty else world_box.difference(occupied.buffer(radius))
+    parts = list(getattr(free, "geoms", [free]))
+    for part in parts:
+        shapely.prepare(part)
+    return parts
+
+
+def _component_of(points: np.ndarray, components: list) -> np.ndarray:
+    """Index of the component holding each point (-1: none, e.g. a point on an obstacle's margin)."""
+    index = np.full(len(points), -1)
+    for k, part in enumerate(components):
+        index[(index < 0) & shapely.intersects_xy(part, points.real, points.imag)] = k
+    return index
+
+
+def _check_human_reachability(humans, world_box, occupied, spawn_sets, goal_sets) -> None:
+    """Every human spawn and goal region must share the free space of the others (humans take any goal)."""
+    components = _free_components(world_box, occupied, humans.radius)
+    if len(components) < 2:
+        return
+    sets = [(f"humans.spawn.{i}", s) for i, s in enumerate(spawn_sets)] + [(f"humans.goal.{i}", s) for i, s in enumerate(goal_sets)]
+    reached = [set(_component_of(s.points, components).tolist()) - {-1} for _, s in sets]
+    common = set.intersection(*reached) if reached else set()
+    if not common:
+        path = next(path for (path, _), parts in zip(sets, reached, strict=True) if parts != reached[0]) if len(sets) > 1 else sets[0][0]
+        raise GeometryError(path, f"region is walled off from the other human regions for a human of radius {humans.radius:g} m "
+                            "(humans take any goal); expected every spawn and goal region in one connected free space")
 
 
 def _region_polygon(region, path: str) -> ShapelyPolygon:

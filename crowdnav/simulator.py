@@ -164,8 +164,12 @@ class Simulator:
         rng, robot, humans, placement = self._rng, self.scenario.robot, self.scenario.humans, self.placement
         n = int(rng.integers(humans.min_count, humans.max_count + 1))
         start = placement.robot_start.draw(rng, 1, allowed=placement.start_goal_ok.any(1))
+        reachable = None
+        if placement.start_component is not None:  # walls split the free space: a goal on the start's side
+            nearest = int(np.argmin(np.abs(placement.robot_start.points - start[0])))
+            reachable = placement.goal_component == placement.start_component[nearest]
         goal = placement.robot_goal.draw(
-            rng, 1, away_from=start, min_distance=robot.min_start_goal_distance + math.sqrt(2) * JITTER
+            rng, 1, allowed=reachable, away_from=start, min_distance=robot.min_start_goal_distance + math.sqrt(2) * JITTER
         )[0]
         if robot.start_heading == "random":
             heading = float(rng.uniform(-math.pi, math.pi))

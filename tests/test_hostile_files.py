@@ -98,3 +98,42 @@ def test_protocol_counts_too_large_for_numpy_name_their_field():
 
     with pytest.raises(ValueError, match=r"test_episodes: expected an integer <= 1000000"):
         Protocol(test_episodes=2**63)
+
+
+def _walled_room(**changes) -> dict:
+    """The empty 10 m room split by a full-height wall at x = 0 (no door)."""
+    document = yaml.safe_load((library_dir() / "empty_room.yaml").read_text())
+    document["walls"] = [{"points": [[0.0, -5.0], [0.0, 5.0]], "thickness": 0.2}]
+    for dotted, value in changes.items():
+        node = document
+        *parents, last = dotted.split(".")
+        for part in parents:
+            node = node[part]
+        node[last] = value
+    return document
+
+
+def test_a_robot_goal_region_walled_off_from_the_starts_is_refused():
+    left, right = {"type": "rectangle", "min": [-4.5, -4.5], "max": [-1.0, 4.5]}, {"type": "rectangle", "min": [1.0, -4.5], "max": [4.5, 4.5]}
+    with pytest.raises(ScenarioError, match=r"robot\.goal: no goal in robot\.goal can be reached from a start in robot\.start"):
+        load_world(_walled_room(**{"robot.start": left, "robot.goal": right, "robot.min_start_goal_distance": 0.0}))
+
+
+def test_partly_reachable_regions_only_pair_starts_and_goals_on_the_same_side():
+    import numpy as np
+
+    from crowdnav import Simulator
+
+    both = {"type": "rectangle", "min": [-4.5, -4.5], "max": [4.5, 4.5]}
+    document = _walled_room(**{"robot.start": both, "robot.goal": both, "robot.min_start_goal_distance": 1.0})
+    sim = Simulator(document)
+    for seed in range(30):
+        sim.reset(seed=seed)
+        assert np.sign(sim.robot_position.real) == np.sign(sim.robot_goal.real)
+
+
+def test_human_regions_walled_off_from_each_other_are_refused():
+    left, right = {"type": "rectangle", "min": [-4.5, -4.5], "max": [-1.0, 4.5]}, {"type": "rectangle", "min": [1.0, -4.5], "max": [4.5, 4.5]}
+    document = _walled_room(**{"humans.count": 2, "humans.spawn": [left], "humans.goal": [right]})
+    with pytest.raises(ScenarioError, match=r"humans\.goal\.0: region is walled off from the other human regions"):
+        load_world(document)
