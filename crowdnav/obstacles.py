@@ -97,6 +97,10 @@ def nearest_on_edges(points: np.ndarray, edges: EdgeSet) -> tuple[np.ndarray, np
     return offset.ravel()[flat].reshape(m, p), dist.ravel()[flat].reshape(m, p)
 
 
+OUTSIDE_LABEL = "world.outside"
+"""Label of the solid parts of a polygon world's bounding box (drawn as outside, not as walls)."""
+
+
 def build_obstacles(scenario: Scenario) -> StaticObstacles:
     polygons: list[Polygon] = []
     labels: list[str] = []
@@ -110,6 +114,15 @@ def build_obstacles(scenario: Scenario) -> StaticObstacles:
         for rect in (box(x0 - t, y0 - t, x1 + t, y0), box(x0 - t, y1, x1 + t, y1 + t), box(x0 - t, y0, x0, y1), box(x1, y0, x1 + t, y1)):
             polygons.append(rect)
             labels.append("world.boundary")
+    if world.points is not None:  # the floor polygon: the rest of the world's box is solid, like a wall
+        floor = Polygon(world.points)
+        if not floor.is_valid or floor.area <= 0:
+            raise GeometryError("world.points", f"polygon is not valid ({explain_validity(floor)}); expected a simple polygon with non-zero area")
+        if not floor.within(world_box.buffer(1e-9)):
+            raise GeometryError("world.points", "the floor polygon extends outside [world.min, world.max]; expected it inside")
+        for part in _polygon_parts(world_box.difference(floor)):
+            polygons.append(part)
+            labels.append(OUTSIDE_LABEL)
     for i, wall in enumerate(scenario.walls):
         path = f"walls.{i}"
         line = LineString(wall.points)

@@ -137,3 +137,39 @@ def test_human_regions_walled_off_from_each_other_are_refused():
     document = _walled_room(**{"humans.count": 2, "humans.spawn": [left], "humans.goal": [right]})
     with pytest.raises(ScenarioError, match=r"humans\.goal\.0: region is walled off from the other human regions"):
         load_world(document)
+
+
+L_HALL = {
+    "description": "An L-shaped hallway.",
+    "world": {"points": [[0, 0], [10, 0], [10, 2], [2, 2], [2, 8], [0, 8]]},
+    "robot": {"start": {"type": "rectangle", "min": [8, 0.4], "max": [9.6, 1.6]},
+              "goal": {"type": "rectangle", "min": [0.4, 6], "max": [1.6, 7.6]}},
+    "humans": {"count": 3, "spawn": [{"type": "rectangle", "min": [0.4, 0.4], "max": [1.6, 7.6]}],
+               "goal": [{"type": "rectangle", "min": [0.4, 0.4], "max": [9.6, 1.6]}]},
+}
+
+
+def test_a_polygon_world_is_solid_outside_its_floor_for_placement_sensors_and_collisions():
+    import numpy as np
+
+    from crowdnav import CrowdNavEnv
+
+    world = load_world(L_HALL)
+    assert world.scenario.world.min == (0.0, 0.0) and world.scenario.world.max == (10.0, 8.0)  # the floor's bounds
+    assert "world.outside" in world.obstacles.labels
+    env = CrowdNavEnv(L_HALL, modalities=["lidar", "goal"])
+    for seed in range(5):
+        observation, _ = env.reset(seed=seed)
+        assert env.simulator.robot_position.imag < 2.0 and env.simulator.robot_goal.real < 2.0
+        assert observation["lidar"].min() < 1.0  # the hallway's walls, 2 m apart, are seen
+    env.reset(seed=0)
+    for _ in range(40):  # driving sideways in a 2 m hallway ends against its walls: a static collision
+        _, _, terminated, _, info = env.step(np.array([0.0, 1.0]))
+        if terminated:
+            break
+    assert info.get("collision_kind") == "static"
+    closed_off = {**L_HALL, "robot": {**L_HALL["robot"], "goal": {"type": "rectangle", "min": [6, 5], "max": [8, 7]}}}
+    with pytest.raises(ScenarioError, match=r"robot\.goal: region is entirely covered by obstacles"):
+        load_world(closed_off)
+    with pytest.raises(ScenarioError, match=r"world\.points: polygon is not valid"):
+        load_world({**L_HALL, "world": {"points": [[0, 0], [4, 4], [4, 0], [0, 4]]}})

@@ -198,6 +198,8 @@ class Renderer:
         obstacles = self.sim.obstacles
         for polygon, label in zip(obstacles.polygons, obstacles.labels, strict=True):
             colour = self.palette.furniture if label.startswith("furniture") else self.palette.wall
+            if label == "world.outside":  # the solid part of a polygon world: not floor, not a wall
+                colour = self.palette.outside
             for ring in [polygon.exterior, *polygon.interiors]:
                 xy = np.asarray(ring.coords)
                 pygame.draw.polygon(surface, colour, self.to_pixels(xy[:, 0] + 1j * xy[:, 1]))

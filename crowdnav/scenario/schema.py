@@ -141,6 +141,23 @@ class World(StrictModel):
     max: Point = Field(default=(5.0, 5.0), description="Upper-right corner [x, y] of the world in metres.")
     boundary_walls: bool = Field(default=True, description="Surround the world with walls (false: open space).")
     boundary_thickness: PositiveFloat = Field(default=0.1, description="Thickness of the boundary walls in metres.")
+    points: list[Point] | None = Field(
+        default=None, min_length=3, max_length=MAX_VERTICES,
+        description="Floor polygon [[x, y], ...] (an L, a T, rooms joined by doors); the rest of [min, max] is solid. "
+                    "min/max default to its bounds.",
+    )
+
+    @model_validator(mode="before")
+    @classmethod
+    def _bounds_of_the_floor(cls, data: Any) -> Any:
+        # a polygon world needs no corners written twice: its bounding box is the world's extent
+        if isinstance(data, dict) and isinstance(data.get("points"), list) and data["points"]:
+            try:
+                xs, ys = zip(*[(float(p[0]), float(p[1])) for p in data["points"]], strict=True)
+            except (TypeError, ValueError, IndexError):
+                return data  # the field's own validation reports the shape
+            data = {"min": [min(xs), min(ys)], "max": [max(xs), max(ys)], **data}
+        return data
 
     @model_validator(mode="after")
     def _corners_ordered(self) -> World:

@@ -3,7 +3,7 @@
     python docs/figures/make_figures.py
 
 Writes docs/figures/room_furniture_lidar.png (the README's picture), cafe.png and corridor.png
-(docs/rendering.md): a few steps of the social-force robot, with the LIDAR rays, the
+(docs/rendering.md), l_hallway.png (docs/scenarios.md, from the YAML shown there): a few steps of the social-force robot, with the LIDAR rays, the
 closest-obstacle point, the LEOG inset, the legend and the scale bar.
 """
 
@@ -19,7 +19,7 @@ from crowdnav.policies import SocialForceRobot
 HERE = Path(__file__).parent
 
 
-def frame(scenario: str, path: Path, seed: int = 3, steps: int = 20) -> Path:
+def frame(scenario: str | dict, path: Path, seed: int = 3, steps: int = 20) -> Path:
     env = CrowdNavEnv(
         scenario,
         modalities=["goal", "lidar", "leog", "closest_obstacle"],
@@ -41,3 +41,9 @@ if __name__ == "__main__":
     print(f"wrote {frame('room_furniture', HERE / 'room_furniture_lidar.png')}")
     print(f"wrote {frame('cafe', HERE / 'cafe.png', seed=1, steps=15)}")
     print(f"wrote {frame('corridor', HERE / 'corridor.png', seed=1, steps=10)}")
+    import re
+
+    import yaml
+
+    hallway = re.search(r"A polygon world.*?```yaml\n(.*?)```", (HERE.parent / "scenarios.md").read_text(), re.S)[1]
+    print(f"wrote {frame(yaml.safe_load(hallway), HERE / 'l_hallway.png', seed=0, steps=12)}")
