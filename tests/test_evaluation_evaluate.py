@@ -76,3 +76,12 @@ def test_a_crowdnav_run_is_evaluated_by_its_parameters_with_its_own_modalities(t
     meta = json.loads((folder / "meta.json").read_text())
     assert meta["env"]["modalities"] == ["goal", "closest_obstacle"] and meta["test_episodes"] == 3
     assert np.isclose(sum(meta["final"].values()), 1.0)
+
+
+def test_render_takes_the_same_policy_forms_as_evaluate(tmp_path, module_on_path):
+    for policy, extra in ((f"{module_on_path}:toward_goal", ["--modalities", "goal"]), ("baseline:social_force", [])):
+        code = main(["render", "open_space", "--policy", policy, *extra, "--episodes", "1", "--format", "gif", "--out", str(tmp_path),
+                     "--no-progress"])
+        assert code == 0
+    assert sorted(path.name for path in tmp_path.glob("*.gif")) == ["open_space_baseline_social_force_seed0.gif",
+                                                                     "open_space_my_policies_toward_goal_seed0.gif"]

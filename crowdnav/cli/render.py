@@ -17,8 +17,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument(
         "--policy",
         default="social-force",
-        help="social-force, straight, random, or the path to a trained checkpoint (default: social-force)",
+        help="social-force, straight, random, a crowdnav checkpoint or run folder, or any POLICY of `crowdnav evaluate`: "
+             "baseline:NAME, module:function, an SB3 model .zip (default: social-force)",
     )
+    parser.add_argument("--modalities", metavar="KEYS", help="observation keys a module:function or SB3 zip policy reads (default: the scenario's)")
     parser.add_argument("--episodes", type=int, default=3, help="number of episodes (default: 3)")
     parser.add_argument("--seed", type=int, default=0, help="seed of the first episode; the next ones use seed+1, ... (default: 0)")
     parser.add_argument("--out", default="videos", help="output folder (default: videos/)")
@@ -37,6 +39,8 @@ def run(args: argparse.Namespace) -> int:
 
     if args.episodes < 1:
         raise CliError(f"--episodes must be at least 1, got {args.episodes}")
+    if _foreign(args.policy):  # the forms crowdnav evaluate loads: the evaluation layer resolves them
+        return _render_foreign(args)
     try:
         paths = render_policy(
             args.scenario,
@@ -52,6 +56,41 @@ def run(args: argparse.Namespace) -> int:
         )
     except (ScenarioError, PolicyLoadError, OutputPathError) as error:
         raise CliError(str(error)) from None
+    for path in paths:
+        print(f"wrote {path}")
+    return 0
+
+
+def _foreign(policy: str) -> bool:
+    return policy.startswith("baseline:") or policy.endswith(".zip") or (":" in policy and not policy.startswith(("/", ".")))
+
+
+def _render_foreign(args: argparse.Namespace) -> int:
+    import numpy as np
+
+    from crowdnav.evaluation.evaluate import PolicyError, resolve_policy
+    from crowdnav.paths import OutputPathError
+    from crowdnav.rendering.episodes import render_episodes
+    from crowdnav.scenario import ScenarioError
+
+    options = {"scenario": args.scenario, "overrides": parse_overrides(args.overrides)}
+    if args.modalities:
+        options["modalities"] = [key.strip() for key in args.modalities.split(",") if key.strip()]
+    try:
+        name, _, act, privileged, env_options = resolve_policy(args.policy, options)
+
+        def play(env, observation):  # one episode at a time: a batch of one
+            if privileged:
+                return act(env.simulator)
+            return np.asarray(act({key: np.asarray(value)[None] for key, value in observation.items()}))[0]
+
+        extra = {key: value for key, value in env_options.items() if key not in ("scenario", "overrides")}
+        paths = render_episodes(args.scenario, play, label=name, env_options=extra, episodes=args.episodes, seed=args.seed, out=args.out,
+                                video_format=args.video_format, overrides=env_options.get("overrides"),
+                                reward_weights=reward_options(args), render_options={"human_goals": args.human_goals},
+                                progress=not args.no_progress)
+    except (PolicyError, ScenarioError, OutputPathError, ValueError) as error:
+        raise CliError(str(error).splitlines()[0]) from None
     for path in paths:
         print(f"wrote {path}")
     return 0
