@@ -56,7 +56,7 @@ def _load_sb3_zip(path: Path) -> Any:
             return algorithm.load(path, device="cpu")
         except Exception:  # noqa: BLE001 - the wrong class for this zip: try the next
             continue
-    raise PolicyError(f"{path}: not a model zip that Stable-Baselines3 (or sb3-contrib) can load")
+    raise PolicyError(f"cannot load checkpoint {path}: not a model zip that Stable-Baselines3 (or sb3-contrib) can load")
 
 
 def _check_spaces(label: str, model_space: Any, env_space: Any, modalities: Sequence[str] | None) -> None:
