@@ -81,7 +81,7 @@ class RayExecutor(Executor):
         return self._episodes.get(job.name, 0)
 
     def run(self, jobs: Sequence[Job], *, verbose: bool = False) -> Iterator[dict[str, Any]]:
-        jobs = [Job(job.spec, str(Path(job.out_dir).resolve())) for job in jobs]  # the tasks run in other folders
+        jobs = [Job(job.spec, str(Path(job.out_dir).resolve()), job.unit) for job in jobs]  # the tasks run in other folders
         todo = []
         for job in jobs:  # finished runs (and folders of other runs) are handled here, without a task
             if (Path(job.out_dir) / META_FILE).is_file() or _holds_other_run(job):
@@ -132,7 +132,8 @@ class RayExecutor(Executor):
                 while queue and len(pending) < limit:
                     job = queue.pop(0)
                     ref = _run_task.options(name=f"crowdnav {job.name}", **resources).remote(
-                        job.spec, job.out_dir, str(root), storage_id, encoders.get(_experiment_dir(job)), board)
+                        job.unit if job.unit is not None else job.spec, job.out_dir, str(root), storage_id,
+                        encoders.get(_experiment_dir(job)), board)
                     pending[ref] = job
                 ready, _ = ray.wait(list(pending), num_returns=1, timeout=POLL_SECONDS)
                 self._read_board(board, verbose)
@@ -255,11 +256,16 @@ class _Board:
 
 
 @ray.remote
-def _run_task(spec: dict[str, Any], out_dir: str, storage: str, storage_id: str, encoder: bytes | None, board: Any) -> dict[str, Any]:
-    """One run in its working folder; returns the summary (or failure record), with the run packed when it lies elsewhere."""
+def _run_task(unit: Any, out_dir: str, storage: str, storage_id: str, encoder: bytes | None, board: Any) -> dict[str, Any]:
+    """One run in its working folder; returns the summary (or failure record), with the run packed when it lies elsewhere.
+
+    ``unit``: the validated UnitSpec (its TrainConfig travels with it: not validated again on the
+    worker), or its dict.
+    """
     import torch
 
     torch.set_num_threads(1)
+    spec = unit if isinstance(unit, dict) else unit.to_dict()
     job = Job(spec, out_dir)
     name = job.name
     try:
@@ -278,7 +284,7 @@ def _run_task(spec: dict[str, Any], out_dir: str, storage: str, storage_id: str,
 
     base = {"attempts": attempt, "work_dir": str(work_dir), "shared": shared, "files": None, "node": platform.node()}
     try:
-        summary = run_unit(spec, work_dir, on_event=on_event)
+        summary = run_unit(unit, work_dir, on_event=on_event)
     except Exception as error:  # a bug or bad input: reported, not retried (retrying would fail the same way)
         text = traceback.format_exc()
         log = write_error_log(work_dir, text)
