@@ -80,7 +80,10 @@ def render_episodes(
                     bar.update(1)
             bar.update(env.scenario.max_steps - env.simulator.step_count)  # an early end skips the rest
             bar.set_postfix_str(f"episode {episode + 1}/{episodes}: {info['outcome']}")
-            paths.append(path)
+            # named by how the episode ended, so a folder of videos reads at a glance
+            named = inside(out, f"{env.scenario.name}_{label}_seed{seed + episode}_{info['outcome']}{suffix}")
+            path.replace(named)
+            paths.append(named)
     finally:
         bar.close()
         env.close()
