@@ -134,7 +134,7 @@ def test_a_checkpoint_renders_as_a_video_with_the_env_options_it_was_trained_wit
     train(tiny_config(tmp_path / "run", episodes=1, max_steps=10))
     paths = render_policy("open_space", str(tmp_path / "run" / "checkpoint"), episodes=1, seed=3, out=tmp_path / "videos",
                           video_format="gif", progress=False)
-    assert [path.name for path in paths] == ["open_space_checkpoint_seed3.gif"] and paths[0].stat().st_size > 0
+    assert len(paths) == 1 and paths[0].name.startswith("open_space_checkpoint_seed3_") and paths[0].stat().st_size > 0  # + outcome
 
 
 @pytest.mark.parametrize(("algo", "modalities"), [("sac", ["leog", "lidar", "goal"]), ("td3", ["lidar", "goal"]),

@@ -54,6 +54,8 @@ def workdir(tmp_path: Path) -> Path:
 def run_file(file: str, tmp_path: Path, monkeypatch, *, include_slow: bool) -> int:
     folder = workdir(tmp_path)
     monkeypatch.chdir(folder)
+    # the examples register modalities (docs/sensors.md): on a copy of the registry, not the suite's
+    monkeypatch.setattr("crowdnav.sensors.base.MODALITIES", dict(__import__("crowdnav.sensors.base", fromlist=["MODALITIES"]).MODALITIES))
     monkeypatch.syspath_prepend(str(folder))
     env = {**os.environ, "PATH": f"{Path(sys.executable).parent}{os.pathsep}{os.environ.get('PATH', '')}", "PYTHONPATH": str(folder)}
     namespace: dict = {"__name__": "__docs__"}
