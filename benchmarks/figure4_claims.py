@@ -93,19 +93,29 @@ class Runs:
 
 
 def load(path: Path) -> dict[str, Runs]:
+    """Per configuration, the rates of every seed at each evaluation, aligned by evaluation index.
+
+    An on-policy run can be evaluated a few episodes after the scheduled point (its snapshot
+    came at a rollout's end, as crowdnav did before snapshots were taken when the episode ends);
+    the evaluation index, not the exact episode count, says which point it is. The x of each
+    point is its earliest episode count over seeds (the scheduled one).
+    """
     rows: dict[str, dict[int, dict[int, dict[str, float]]]] = defaultdict(lambda: defaultdict(dict))
+    points: dict[str, dict[int, int]] = defaultdict(dict)
     with open(path, newline="", encoding="utf-8") as handle:
         for row in csv.DictReader(handle):
             if row["configuration"].startswith("baseline_"):
                 continue
-            rows[row["configuration"]][int(row["seed"])][int(row["training_episodes"])] = {
-                k: float(row.get(k) or 0.0) for k in ("success", "collision", "out_of_bounds", "truncated")}
+            k, name = int(row["evaluation"]), row["configuration"]
+            rows[name][int(row["seed"])][k] = {key: float(row.get(key) or 0.0) for key in ("success", "collision", "out_of_bounds", "truncated")}
+            points[name][k] = min(points[name].get(k, 10**9), int(row["training_episodes"]))
     out = {}
     for name, seeds in rows.items():
-        episodes = np.array(sorted(next(iter(seeds.values()))))
-        complete = [s for s in sorted(seeds) if sorted(seeds[s]) == list(episodes)]
-        out[name] = Runs(episodes, {k: np.array([[seeds[s][e][k] for e in episodes] for s in complete])
-                                    for k in ("success", "collision", "out_of_bounds", "truncated")})
+        evaluations = sorted(points[name])
+        complete = [s for s in sorted(seeds) if sorted(seeds[s]) == evaluations]
+        out[name] = Runs(np.array([points[name][k] for k in evaluations]),
+                         {key: np.array([[seeds[s][k][key] for k in evaluations] for s in complete])
+                          for key in ("success", "collision", "out_of_bounds", "truncated")})
     return out
 
 

@@ -41,3 +41,16 @@ def test_modalities_claims_are_judged_by_their_stated_rules():
 def test_a_truncation_spike_counts_runs_and_evaluations_at_or_above_a_quarter_after_the_first():
     spiky = runs([[0.5, 0.5, 0.5]], truncated=[[0.9, 0.25, 0.1]])
     assert spiky.spikes() == 1
+
+
+def test_seeds_evaluated_a_few_episodes_late_are_aligned_by_evaluation_index(tmp_path):
+    """Older on-policy runs were evaluated at 601 instead of 600 episodes: the seed still counts."""
+    path = tmp_path / "evaluation_rates.csv"
+    lines = ["experiment,configuration,seed,evaluation,training_episodes,success,collision,out_of_bounds,truncated"]
+    for seed in range(3):
+        for k in range(3):
+            episodes = (k + 1) * 50 + (1 if seed == 2 and k == 1 else 0)
+            lines.append(f"paradigms,a2c,{seed},{k},{episodes},0.5,0.5,0,0")
+    path.write_text("\n".join(lines) + "\n")
+    runs = claims.load(path)["a2c"]
+    assert runs.rates["success"].shape == (3, 3) and list(runs.episodes) == [50, 100, 150]
