@@ -88,7 +88,9 @@ def curves_figure(tests: Any, window: int, title: str | None = None, band: str =
 
     if band not in BANDS:
         raise ValueError(f"unknown band {band!r}; expected one of {', '.join(BANDS)}")
-    scripted = tests["configuration"].map(is_baseline)
+    # reference lines: the scripted baselines, and policies evaluated without training (crowdnav evaluate)
+    untrained = tests.groupby("configuration")["training_episodes"].transform("max") == 0
+    scripted = tests["configuration"].map(is_baseline) | untrained
     baselines, tests = tests[scripted], tests[~scripted]
     curves = rate_curves(tests, window) if len(tests) else None
     labels = list(dict.fromkeys(tests.sort_values(["configuration"])["label"]))
@@ -126,8 +128,13 @@ def curves_figure(tests: Any, window: int, title: str | None = None, band: str =
 
 def _baseline_style(baseline: Any, tests: Any, palette: dict) -> dict[str, Any]:
     """Dashed for straight-to-goal, dotted for social force; grey, or the colour of the configuration whose
-    environment it shares when an experiment has several (``baseline_<name>_<configuration>``)."""
+    environment it shares when an experiment has several (``baseline_<name>_<configuration>``); dash-dot
+    for a policy evaluated without training."""
+    from crowdnav.evaluation.baselines import is_baseline
+
     configuration = str(baseline["configuration"].iloc[0])
+    if not is_baseline(configuration):  # an evaluated policy: dash-dot, a colour of its own
+        return {"linestyle": "-.", "color": "C3"}
     linestyle = ":" if "social_force" in configuration else "--"
     for name, label in tests[["configuration", "label"]].drop_duplicates().itertuples(index=False):
         if configuration.endswith(f"_{name}") and label in palette:

@@ -86,3 +86,20 @@ def test_render_takes_the_same_policy_forms_as_evaluate(tmp_path, module_on_path
     names = sorted(path.name for path in tmp_path.glob("*.gif"))
     assert names[0] == "open_space_baseline_social_force_seed0_success.gif"  # the privileged robot reaches the goal
     assert names[1].startswith("open_space_my_policies_toward_goal_seed0_") and len(names) == 2
+
+
+def test_evaluated_policies_are_reference_lines_in_the_curves_next_to_trained_runs(tmp_path_factory, tmp_path, module_on_path):
+    import shutil
+
+    from crowdnav.evaluation.curves import curves_figure
+    from crowdnav.evaluation.storage import load_results
+    from evaluation_tiny import tiny_results
+
+    results = tmp_path / "results"
+    shutil.copytree(tiny_results(tmp_path_factory), results)
+    evaluate_policy(f"{module_on_path}:toward_goal", "open_space", results, modalities=["goal"], episodes=3)
+    tests, _, _ = load_results([results])
+    figure = curves_figure(tests, window=2)
+    lines = figure.axes[0].get_lines()
+    assert any(line.get_linestyle() == "-." and len(set(line.get_ydata())) == 1 for line in lines)
+    assert main(["plot", str(results / "evaluate"), "--out", str(tmp_path / "curves")]) == 0
