@@ -47,6 +47,7 @@ def workdir(tmp_path: Path) -> Path:
     (tmp_path / "my_scenarios").mkdir()
     shutil.copy(ROOT / "scenarios" / "room_furniture.yaml", tmp_path / "my_scenarios" / "lab.yaml")
     evaluate = (ROOT / "docs" / "evaluate.md").read_text(encoding="utf-8")
+    shutil.copytree(ROOT / "notebooks", tmp_path / "notebooks")  # the docs run it from the repository root
     (tmp_path / "my_policies.py").write_text(re.search(r"```python\n(import numpy as np\n\n\ndef toward_goal.*?)```", evaluate, re.S)[1])
     return tmp_path
 
