@@ -23,15 +23,20 @@ from crowdnav.envs import CrowdNavParallelEnv  # noqa: E402
 
 env = gym.make("crowdnav/RoomFurniture-v0", render_mode="rgb_array")
 obs, _ = env.reset(seed=0)
+env.action_space.seed(0)  # the same actions on every CI run
 for _ in range(5):
     obs, reward, terminated, truncated, _ = env.step(env.action_space.sample())
+    if terminated or truncated:
+        obs, _ = env.reset()
 frame = env.render()
 assert frame.ndim == 3 and frame.shape[2] == 3 and frame.std() > 0, "rgb_array frame is empty"
 env.close()
 
 parallel = CrowdNavParallelEnv("open_space")
 observations, _ = parallel.reset(seed=0)
-for _ in range(5):
+for step in range(5):
+    if not parallel.agents:
+        observations, _ = parallel.reset(seed=step)
     observations, rewards, terminations, truncations, _ = parallel.step({agent: parallel.action_space(agent).sample() for agent in parallel.agents})
 parallel.close()
 
