@@ -77,14 +77,27 @@ class PlacementError(RuntimeError):
 
 
 @dataclass
+class GroupPlacement:
+    """Candidate sets of one human group."""
+
+    path: str
+    """Where the group is written in the file (``humans`` or ``humans.groups.<i>``), for error messages."""
+    spawn: CandidateSet
+    """Walking groups: member start positions; standing groups: centres of the circle."""
+    goal: CandidateSet | None
+    """Goal candidates; None for the mirror rule, standing groups and empty groups."""
+    circle_radius: float = 0.0
+    """Radius (m) of a standing group's circle of member centres (0 for walking groups)."""
+
+
+@dataclass
 class Placement:
     """All candidate sets of a scenario."""
 
     robot_start: CandidateSet
     robot_goal: CandidateSet
-    human_spawn: CandidateSet
-    human_goal: CandidateSet | None
-    """None when humans use the mirror rule (or there are none)."""
+    groups: list[GroupPlacement]
+    """One per human group, in file order (one for a file without ``humans.groups``)."""
     start_goal_ok: np.ndarray
     """(K_start, K_goal) bool: pairs far enough apart for min_start_goal_distance, jitter included."""
     start_component: np.ndarray | None = None
@@ -134,38 +147,83 @@ def build_placement(scenario: Scenario, obstacles: StaticObstacles) -> Placement
             )
     split = start_component is not None and len(set(start_component.tolist()) | set(goal_component.tolist())) > 1
     components_kept = (start_component, goal_component) if split else (None, None)
-    spawn = goal = None
-    if humans.max_count > 0:
-        spawn_sets = [_candidates(r, f"humans.spawn.{i}", humans.radius, world_box, occupied) for i, r in enumerate(humans.spawn)]
-        spawn = _merge(spawn_sets, spacing=2 * humans.radius + GAP + slack)
-        if humans.goal_rule == "mirror":
-            center = complex(*(humans.mirror_center or scenario.world_center))
-            mirrored = 2 * center - spawn.points
-            free = _free(mirrored, humans.radius + GAP + slack / 2, occupied) & shapely.contains_xy(world_box, mirrored.real, mirrored.imag)
-            if not free.any():
-                where = "humans.mirror_center" if humans.mirror_center is not None else "humans.goal_rule"
-                raise GeometryError(
-                    where,
-                    f"mirroring the spawn points through ({center.real:g}, {center.imag:g}) puts every goal outside the world or in an "
-                    "obstacle; expected a mirror centre between the spawn regions and free space",
-                )
-            spawn = CandidateSet(spawn.points[free], spawn.jitter, spawn.ring_center)
-        else:
-            goal_sets = [_candidates(r, f"humans.goal.{i}", humans.radius, world_box, occupied) for i, r in enumerate(humans.goal)]
-            goal = _merge(goal_sets, spacing=0.0)
-        if goal is not None:
-            _check_human_reachability(humans, world_box, occupied, spawn_sets, goal_sets)
-        # The robot start takes room from the crowd: keep capacity for the densest case.
-        capacity = len(spawn.points) - _max_blocked_by_robot(spawn.points, robot_start.points, robot.radius + humans.radius + GAP + slack)
-        if capacity < humans.max_count:
-            raise GeometryError(
-                "humans.count",
-                f"the spawn regions hold at most {max(capacity, 0)} human{'' if capacity == 1 else 's'} of radius {humans.radius:g} m "
-                "next to the robot "
-                f"(asked for up to {humans.max_count}); expected a smaller count, a smaller radius or larger spawn regions",
-            )
+    groups = [_group_placement(scenario, path, group, world_box, occupied) for path, group in humans.crowd]
+    _check_capacity(scenario, robot_start, robot_goal, groups)
+    return Placement(robot_start, robot_goal, groups, start_goal_ok, *components_kept)
+
+
+def _group_placement(scenario: Scenario, path: str, group, world_box, occupied) -> GroupPlacement:
+    """Candidate sets of one group: member spawns and goals (walking) or circle centres (standing)."""
+    humans, slack = scenario.humans, 2 * math.sqrt(2) * JITTER
     empty = CandidateSet(np.zeros(0, dtype=complex), 0.0)
-    return Placement(robot_start, robot_goal, spawn or empty, goal, start_goal_ok, *components_kept)
+    if group.max_count == 0:
+        return GroupPlacement(path, empty, None)
+    if group.standing:
+        ring = group.circle_radius_for(humans.radius)
+        # the circle is one disc of radius ring + radius for obstacles; its members stay in the world too
+        sets = [_candidates(r, f"{path}.spawn.{i}", ring + humans.radius, world_box, occupied) for i, r in enumerate(group.spawn)]
+        centres = _merge(sets, spacing=0.0)
+        inside = shapely.contains_xy(world_box.buffer(-ring - math.sqrt(2) * JITTER), centres.points.real, centres.points.imag)
+        if not inside.any():
+            raise GeometryError(f"{path}.spawn", f"no centre leaves the standing circle (radius {ring:.2f} m) inside the world; "
+                                "expected a region further from the world's edge")
+        return GroupPlacement(path, CandidateSet(centres.points[inside], centres.jitter, centres.ring_center), None, ring)
+    spawn_sets = [_candidates(r, f"{path}.spawn.{i}", humans.radius, world_box, occupied) for i, r in enumerate(group.spawn)]
+    spawn = _merge(spawn_sets, spacing=2 * humans.radius + GAP + slack)
+    goal = None
+    if group.goal_rule == "mirror":
+        center = complex(*(group.mirror_center or scenario.world_center))
+        mirrored = 2 * center - spawn.points
+        free = _free(mirrored, humans.radius + GAP + slack / 2, occupied) & shapely.contains_xy(world_box, mirrored.real, mirrored.imag)
+        if not free.any():
+            where = f"{path}.mirror_center" if group.mirror_center is not None else f"{path}.goal_rule"
+            raise GeometryError(
+                where,
+                f"mirroring the spawn points through ({center.real:g}, {center.imag:g}) puts every goal outside the world or in an "
+                "obstacle; expected a mirror centre between the spawn regions and free space",
+            )
+        spawn = CandidateSet(spawn.points[free], spawn.jitter, spawn.ring_center)
+    else:
+        goal_sets = [_candidates(r, f"{path}.goal.{i}", humans.radius, world_box, occupied) for i, r in enumerate(group.goal)]
+        goal = _merge(goal_sets, spacing=0.0)
+        _check_human_reachability(path, humans.radius, world_box, occupied, spawn_sets, goal_sets)
+    return GroupPlacement(path, spawn, goal)
+
+
+def _check_capacity(scenario: Scenario, robot_start: CandidateSet, robot_goal: CandidateSet, groups: list[GroupPlacement]) -> None:
+    """Every group finds room at reset whatever the robot's start and the groups placed before it.
+
+    Groups are placed in file order. Each agent placed earlier blocks at most ``_max_blocked``
+    of a group's candidates, so subtracting the worst case of all of them is a sufficient bound
+    (for one group it is the robot start's block only).
+    """
+    robot, humans, slack = scenario.robot, scenario.humans, 2 * math.sqrt(2) * JITTER
+    crowd = [group for _, group in humans.crowd]
+    for k, (placement, group) in enumerate(zip(groups, crowd, strict=True)):
+        if group.max_count == 0:
+            continue
+        points, ring = placement.spawn.points, placement.circle_radius
+        capacity = len(points) - _max_blocked(points, robot_start.points, robot.radius + ring + humans.radius + GAP + slack)
+        if group.standing:
+            capacity -= _max_blocked(points, robot_goal.points, robot.radius + ring + humans.radius + GAP + slack)
+        for earlier, other in zip(groups[:k], crowd[:k], strict=False):
+            if other.max_count == 0:
+                continue
+            reach = ring + earlier.circle_radius + 2 * humans.radius + GAP + slack
+            capacity -= (1 if other.standing else other.max_count) * _max_blocked(points, earlier.spawn.points, reach)
+        needed = 1 if group.standing else group.max_count
+        if capacity < needed:
+            path = placement.path
+            if group.standing:
+                raise GeometryError(f"{path}.spawn", "no room is sure to be left for the standing circle next to the robot and the "
+                                    "groups listed before it; expected larger spawn regions or the group listed earlier")
+            field = f"{path}.count"
+            raise GeometryError(
+                field,
+                f"the spawn regions hold at most {max(capacity, 0)} human{'' if capacity == 1 else 's'} of radius {humans.radius:g} m "
+                f"next to the robot{' and the groups listed before' if k else ''} "
+                f"(asked for up to {group.max_count}); expected a smaller count, a smaller radius or larger spawn regions",
+            )
 
 
 def _candidates(region, path: str, radius: float, world_box, occupied) -> CandidateSet:
@@ -234,18 +292,18 @@ def _component_of(points: np.ndarray, components: list) -> np.ndarray:
     return index
 
 
-def _check_human_reachability(humans, world_box, occupied, spawn_sets, goal_sets) -> None:
-    """Every human spawn and goal region must share the free space of the others (humans take any goal)."""
-    components = _free_components(world_box, occupied, humans.radius)
+def _check_human_reachability(path: str, radius: float, world_box, occupied, spawn_sets, goal_sets) -> None:
+    """A group's spawn and goal regions must share one free space (its members take any of its goals)."""
+    components = _free_components(world_box, occupied, radius)
     if len(components) < 2:
         return
-    sets = [(f"humans.spawn.{i}", s) for i, s in enumerate(spawn_sets)] + [(f"humans.goal.{i}", s) for i, s in enumerate(goal_sets)]
+    sets = [(f"{path}.spawn.{i}", s) for i, s in enumerate(spawn_sets)] + [(f"{path}.goal.{i}", s) for i, s in enumerate(goal_sets)]
     reached = [set(_component_of(s.points, components).tolist()) - {-1} for _, s in sets]
     common = set.intersection(*reached) if reached else set()
     if not common:
         path = next(path for (path, _), parts in zip(sets, reached, strict=True) if parts != reached[0]) if len(sets) > 1 else sets[0][0]
-        raise GeometryError(path, f"region is walled off from the other human regions for a human of radius {humans.radius:g} m "
-                            "(humans take any goal); expected every spawn and goal region in one connected free space")
+        raise GeometryError(path, f"region is walled off from the group's other regions for a human of radius {radius:g} m "
+                            "(members take any goal); expected every spawn and goal region in one connected free space")
 
 
 def _region_polygon(region, path: str) -> ShapelyPolygon:
@@ -331,7 +389,8 @@ def _outside_message(world_box) -> str:
     return f"region extends outside the world; expected it inside x in [{minx:g}, {maxx:g}], y in [{miny:g}, {maxy:g}]"
 
 
-def _max_blocked_by_robot(spawn: np.ndarray, starts: np.ndarray, reach: float) -> int:
+def _max_blocked(spawn: np.ndarray, starts: np.ndarray, reach: float) -> int:
+    """The most ``spawn`` candidates one agent on any of ``starts`` (with jitter in ``reach``) can block."""
     if len(spawn) == 0 or len(starts) == 0:
         return 0
     return max(int((np.abs(starts[lo : lo + _CHUNK, None] - spawn[None, :]) < reach).sum(1).max()) for lo in range(0, len(starts), _CHUNK))

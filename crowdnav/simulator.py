@@ -59,6 +59,8 @@ class Simulator:
         self.obstacles = self.world.obstacles
         self.placement = self.world.placement
         self.dt = scenario.time_step
+        self.groups = [group for _, group in scenario.humans.crowd]
+        """The crowd's groups in file order (one, named ``crowd``, for a file without ``humans.groups``)."""
         self.max_humans = scenario.humans.max_count
         force = scenario.humans.social_force
         self._force = force
@@ -107,8 +109,9 @@ class Simulator:
             if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
                 raise ValueError(f"seed must be a non-negative integer or None, got {seed!r}")
             self._rng = np.random.default_rng(seed)
-        rng, robot, humans, placement = self._rng, self.scenario.robot, self.scenario.humans, self.placement
-        n = int(rng.integers(humans.min_count, humans.max_count + 1))
+        rng, robot, placement = self._rng, self.scenario.robot, self.placement
+        counts = [int(rng.integers(group.min_count, group.max_count + 1)) for group in self.groups]
+        n = sum(counts)
         start = placement.robot_start.draw(rng, 1, allowed=placement.start_goal_ok.any(1))
         reachable = None
         if placement.start_component is not None:  # walls split the free space: a goal on the start's side
@@ -123,18 +126,25 @@ class Simulator:
             heading = cmath.phase(goal - start[0])
         else:
             heading = math.radians(float(robot.start_heading))
-        spawn = np.zeros(0, dtype=complex)
-        if n:
-            reach = robot.radius + humans.radius + GAP + math.sqrt(2) * JITTER
-            spawn = placement.human_spawn.draw(rng, n, away_from=start, min_distance=reach)
-        self.positions = np.concatenate([start, spawn])
+        # groups in file order, each away from the robot and the groups before it; then goals, then speeds
+        # (one group draws exactly what the crowd drew before groups existed: same seed, same episode)
+        spawn = self._place_groups(start, complex(goal), counts)
+        self.positions = np.concatenate([start, *spawn])
         self.velocities = np.zeros(n + 1, dtype=complex)
         self.robot_goal = complex(goal)
         self.robot_heading = heading
-        self.human_goals = self._first_goals(spawn)
-        self.human_preferred_speed = rng.uniform(*humans.preferred_speed, size=n)
+        self.human_group = np.repeat(np.arange(len(counts)), counts)
+        """Index into :attr:`groups` of every human."""
+        standing = np.repeat([group.standing for group in self.groups], counts).astype(bool)
+        self.human_goals = np.concatenate([np.zeros(0, dtype=complex), *self._first_goals(spawn)])
+        self.human_preferred_speed = np.concatenate([np.zeros(0), *(
+            np.zeros(count) if group.standing else rng.uniform(*group.preferred_speed, size=count)
+            for group, count in zip(self.groups, counts, strict=True))])
         self.human_max_speed = self.human_preferred_speed * self._force.max_speed_factor
-        self.human_stopped = np.zeros(n, dtype=bool)
+        # standing members have no speed; a cap of 1 keeps the shared command formula free of 0 / 0
+        self._command_cap = np.where(standing, 1.0, self.human_max_speed) if standing.any() else self.human_max_speed
+        self.human_stopped = standing.copy()
+        """Humans that do not move: standing groups, arrivals under ``on_goal: stop``, humans a multi-agent env let leave."""
         self.human_arrived = np.zeros(n, dtype=bool)
         """Humans that reached their goal in the last step (under ``on_goal: stop``, on arrival only)."""
         self.step_count = 0
@@ -142,19 +152,43 @@ class Simulator:
         self.refresh()
         self._ready = True
 
-    def _first_goals(self, spawn: np.ndarray) -> np.ndarray:
-        humans = self.scenario.humans
-        if len(spawn) == 0:
-            return np.zeros(0, dtype=complex)
-        if humans.goal_rule == "mirror":
-            return 2 * self._mirror_center - spawn
-        goals = self.placement.human_goal
-        return goals.draw(self._rng, len(spawn), replace=len(spawn) > len(goals))
+    def _place_groups(self, start: np.ndarray, goal: complex, counts: list[int]) -> list[np.ndarray]:
+        """Member positions of every group (complex arrays, file order)."""
+        robot, radius, rng = self.scenario.robot, self.scenario.humans.radius, self._rng
+        margin = GAP + math.sqrt(2) * JITTER  # the new point's jitter; placed agents are where they are
+        placed, out = [start], []
+        for group, places, count in zip(self.groups, self.placement.groups, counts, strict=True):
+            if count == 0:
+                out.append(np.zeros(0, dtype=complex))
+                continue
+            humans_placed = np.concatenate(placed[1:]) if len(placed) > 1 else np.zeros(0, dtype=complex)
+            ring = places.circle_radius
+            if group.standing:  # keep the robot's goal reachable: no circle around it
+                away = np.concatenate([start, [goal], humans_placed])
+                near = np.full(len(away), ring + 2 * radius + margin)
+                near[:2] = robot.radius + ring + radius + margin
+                centre = places.spawn.draw(rng, 1, away_from=away, min_distance=near)[0]
+                phase = rng.uniform(0, 2 * math.pi)
+                members = centre + ring * np.exp(1j * (phase + 2 * math.pi * np.arange(count) / count))
+            else:
+                away = np.concatenate([start, humans_placed])
+                near = np.full(len(away), 2 * radius + margin)
+                near[0] = robot.radius + radius + margin
+                members = places.spawn.draw(rng, count, away_from=away, min_distance=near)
+            placed.append(members)
+            out.append(members)
+        return out
 
-    @property
-    def _mirror_center(self) -> complex:
-        humans = self.scenario.humans
-        return complex(*(humans.mirror_center or self.scenario.world_center))
+    def _first_goals(self, spawn: list[np.ndarray]) -> list[np.ndarray]:
+        goals = []
+        for group, places, members in zip(self.groups, self.placement.groups, spawn, strict=True):
+            if len(members) == 0 or group.standing:
+                goals.append(members.copy())  # standing members' goal is where they stand
+            elif group.goal_rule == "mirror":
+                goals.append(2 * _mirror_center(group, self.scenario) - members)
+            else:
+                goals.append(places.goal.draw(self._rng, len(members), replace=len(members) > len(places.goal)))
+        return goals
 
     def _prepare_pair_constants(self, n: int) -> None:
         """Constants of the pairwise and obstacle repulsion for a crowd of ``n`` (cached per ``n``)."""
@@ -244,7 +278,7 @@ class Simulator:
         to_goal = self.human_goals - self.positions[1:]
         total = sf.goal_force(to_goal, force.goal_weight, force.goal_saturation_distance)
         total += self._repulsion[1:]
-        return sf.velocity_command(total, self.velocities[1:], self.human_preferred_speed, self.human_max_speed, self._relax)
+        return sf.velocity_command(total, self.velocities[1:], self.human_preferred_speed, self._command_cap, self._relax)
 
     @property
     def robot_social_force(self) -> complex:
@@ -367,42 +401,50 @@ class Simulator:
     # ------------------------------------------------------------------ goal rule
 
     def _apply_goal_rule(self) -> None:
-        humans = self.scenario.humans
         arrived = np.abs(self.human_goals - self.positions[1:]) <= self._force.goal_tolerance
         self.human_arrived = arrived & ~self.human_stopped
-        if humans.on_goal == "stop":
-            self.human_stopped |= arrived
-            self.velocities[1:][self.human_stopped] = 0.0
-            return
-        if not arrived.any():
-            return
-        index = np.flatnonzero(arrived)
-        if humans.on_goal == "respawn":
-            index = self._respawn(index)
-            if len(index) == 0:
-                return
-        if humans.goal_rule == "mirror":
-            self.human_goals[index] = 2 * self._mirror_center - self.human_goals[index]
-        else:
-            self.human_goals[index] = self.placement.human_goal.draw(self._rng, len(index), replace=True)
+        single = len(self.groups) == 1
+        for g, (group, places) in enumerate(zip(self.groups, self.placement.groups, strict=True)):
+            if group.standing or group.max_count == 0:
+                continue
+            mine = arrived if single else arrived & (self.human_group == g)
+            if group.on_goal == "stop":
+                self.human_stopped |= mine
+                self.velocities[1:][self.human_stopped] = 0.0
+                continue
+            if not mine.any():
+                continue
+            index = np.flatnonzero(mine)
+            if group.on_goal == "respawn":
+                index = self._respawn(index, group, places)
+                if len(index) == 0:
+                    continue
+            if group.goal_rule == "mirror":
+                self.human_goals[index] = 2 * _mirror_center(group, self.scenario) - self.human_goals[index]
+            else:
+                self.human_goals[index] = places.goal.draw(self._rng, len(index), replace=True)
 
-    def _respawn(self, index: np.ndarray) -> np.ndarray:
-        """Move arrived humans to free spawn points; returns those that moved (the rest wait)."""
-        humans, robot = self.scenario.humans, self.scenario.robot
+    def _respawn(self, index: np.ndarray, group, places) -> np.ndarray:
+        """Move arrived members to free spawn points of their group; returns those that moved (the rest wait)."""
+        radius, robot = self.scenario.humans.radius, self.scenario.robot
         others = np.delete(self.positions, index + 1)
-        reach = max(robot.radius, humans.radius) + humans.radius + GAP + math.sqrt(2) * JITTER
-        spawn = self.placement.human_spawn
+        reach = max(robot.radius, radius) + radius + GAP + math.sqrt(2) * JITTER
         for count in range(len(index), 0, -1):  # at most len(index) tries, usually one
             try:
-                new = spawn.draw(self._rng, count, away_from=others, min_distance=reach)
+                new = places.spawn.draw(self._rng, count, away_from=others, min_distance=reach)
             except PlacementError:
                 continue
             moved = index[:count]
             self.positions[moved + 1] = new
             self.velocities[moved + 1] = 0.0
-            if humans.goal_rule == "mirror":
+            if group.goal_rule == "mirror":
                 # the mirror rule flips the goal below, so store the spawn's mirror image twice-flipped
                 self.human_goals[moved] = new
             self.refresh()
             return moved
         return index[:0]
+
+
+def _mirror_center(group, scenario) -> complex:
+    """Centre of a group's mirror rule (default: the world's centre)."""
+    return complex(*(group.mirror_center or scenario.world_center))

@@ -72,7 +72,7 @@ def test_a_huge_world_covered_by_regions_loads_on_a_bounded_lattice():
     world = load_world(document)
     from crowdnav.placement import MAX_CANDIDATES
 
-    assert len(world.placement.robot_start) <= 1.2 * MAX_CANDIDATES and len(world.placement.human_spawn) <= 2.4 * MAX_CANDIDATES
+    assert len(world.placement.robot_start) <= 1.2 * MAX_CANDIDATES and len(world.placement.groups[0].spawn) <= 2.4 * MAX_CANDIDATES
 
 
 @pytest.mark.parametrize(
@@ -135,7 +135,7 @@ def test_partly_reachable_regions_only_pair_starts_and_goals_on_the_same_side():
 def test_human_regions_walled_off_from_each_other_are_refused():
     left, right = {"type": "rectangle", "min": [-4.5, -4.5], "max": [-1.0, 4.5]}, {"type": "rectangle", "min": [1.0, -4.5], "max": [4.5, 4.5]}
     document = _walled_room(**{"humans.count": 2, "humans.spawn": [left], "humans.goal": [right]})
-    with pytest.raises(ScenarioError, match=r"humans\.goal\.0: region is walled off from the other human regions"):
+    with pytest.raises(ScenarioError, match=r"humans\.goal\.0: region is walled off from the group.s other regions"):
         load_world(document)
 
 

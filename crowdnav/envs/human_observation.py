@@ -60,8 +60,8 @@ class HumanObservations:
         self._slots = max(self.max_humans - 1, 0)
         self._disc_radius = obstacles.disc_radius
         self._static_count = obstacles.polygon_count + obstacles.disc_count
-        self._preferred_max = humans.preferred_speed[1] * _ROUNDING
-        self._speed_max = humans.preferred_speed[1] * humans.social_force.max_speed_factor * _ROUNDING
+        self._preferred_max = humans.max_preferred_speed * _ROUNDING
+        self._speed_max = humans.max_preferred_speed * humans.social_force.max_speed_factor * _ROUNDING
         self._radius_max = max(humans.radius, robot.radius) * _ROUNDING
         self._robot_speed_max = robot.max_speed * _ROUNDING
         self._others = np.zeros((0, 0), dtype=np.intp)

@@ -36,7 +36,9 @@ class CrowdNavParallelEnv(ParallelEnv):
     nearest point of each static obstacle, and the robot when the scenario's ``see_robot`` is
     on). Action: Box(-1, 1, (2,), float32), the velocity command in the world frame divided by
     the human's max speed (``max_speed`` in its observation). :class:`SocialForcePolicy` gives
-    the built-in crowd's actions. Reward: 0, or ``human_reward(simulator)``. Info:
+    the built-in crowd's actions; members of a standing group (``behaviour: stand``) stay where
+    they are whatever their action. Reward: 0, or ``human_reward(simulator)``. Info: ``group``
+    (the name of its group, ``crowd`` for a file without ``humans.groups``; also at reset) and
     ``goal_reached`` (it reached its goal this step).
 
     **Episode end.** Success, collision or the robot leaving the world terminates every agent,
@@ -107,7 +109,15 @@ class CrowdNavParallelEnv(ParallelEnv):
         self._active_humans = self._human_names[: self.simulator.n_humans]
         self.agents = [ROBOT, *self._active_humans]
         observations = self._observations(robot_observation)
-        return observations, {agent: {} for agent in self.agents}
+        infos: dict[str, dict[str, Any]] = {ROBOT: {}}
+        infos.update({name: {"group": group} for name, group in zip(self._active_humans, self._group_names(), strict=True)})
+        return observations, infos
+
+    def _group_names(self, index: np.ndarray | None = None) -> list[str]:
+        """Group name of each active human (or of the humans at ``index``)."""
+        sim = self.simulator
+        group = sim.human_group if index is None else sim.human_group[index]
+        return [sim.groups[g].name for g in group.tolist()]
 
     def step(self, actions: Mapping[str, Any]):
         """One action per agent in ``agents``; out-of-range values are clipped, NaN/inf raise ValueError."""
@@ -131,9 +141,10 @@ class CrowdNavParallelEnv(ParallelEnv):
             arrived = sim.human_arrived[index]
             human_rewards = self.human_reward(sim)[index] if self.human_reward is not None else np.zeros(len(index))
             leaving = np.asarray(self.human_exit(sim), dtype=bool)[index] if self.human_exit is not None else np.zeros(len(index), bool)
+            groups = self._group_names(index)
             for k, name in enumerate(self._active_humans):
                 rewards[name] = float(human_rewards[k])
-                infos[name] = {"goal_reached": bool(arrived[k])}
+                infos[name] = {"group": groups[k], "goal_reached": bool(arrived[k])}
                 terminations[name] = terminated or bool(leaving[k])
             if leaving.any() and not (terminated or truncated):
                 sim.human_stopped[index[leaving]] = True  # it stays in the world, standing

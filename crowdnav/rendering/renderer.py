@@ -57,6 +57,8 @@ class Palette:
     closest: tuple[int, int, int] = (190, 40, 190)
     text: tuple[int, int, int] = (20, 20, 20)
     outline: tuple[int, int, int] = (30, 30, 30)
+    groups: tuple[tuple[int, int, int], ...] = ((66, 120, 200), (215, 135, 40), (125, 80, 175), (70, 155, 90), (200, 80, 140), (110, 110, 110))
+    """Colours of human groups without their own ``colour``, in file order (the first is ``human``)."""
 
 
 @dataclass
@@ -105,6 +107,7 @@ class Renderer:
         self.sim = sim
         self.options = options or RenderOptions()
         self.palette = Palette()
+        self._group_colours = _group_colours(sim, self.palette)
         world = sim.scenario.world
         margin = 0.4 + (world.boundary_thickness if world.boundary_walls else 0.0)
         self._x0, self._y1 = world.min[0] - margin, world.max[1] + margin
@@ -242,8 +245,9 @@ class Renderer:
         pygame.draw.circle(surface, palette.goal, goal, goal_px, 3)
         _cross(surface, palette.goal, goal, max(5.0, goal_px * 0.6))
         radius = sim.scenario.humans.radius * scale
-        for position, velocity in zip(self.to_pixels(sim.human_positions), sim.human_velocities, strict=True):
-            pygame.draw.circle(surface, palette.human, position, radius)
+        colours = self._group_colours
+        for position, velocity, group in zip(self.to_pixels(sim.human_positions), sim.human_velocities, sim.human_group, strict=True):
+            pygame.draw.circle(surface, colours[group], position, radius)
             pygame.draw.circle(surface, palette.outline, position, radius, 1)
             if abs(velocity) > 1e-6:
                 tip = position + radius * np.array([velocity.real, -velocity.imag]) / abs(velocity)
@@ -284,7 +288,12 @@ class Renderer:
 
     def _legend_entries(self, overlays: Overlays) -> list[tuple[str, str, tuple[int, int, int]]]:
         palette = self.palette
-        entries = [("disc", "robot", palette.robot), ("goal", "robot goal", palette.goal), ("disc", "human", palette.human)]
+        entries = [("disc", "robot", palette.robot), ("goal", "robot goal", palette.goal)]
+        if self.sim.scenario.humans.groups:  # one entry per named group
+            entries += [("disc", f"{group.name}{' (standing)' if group.standing else ''}", colour)
+                        for group, colour in zip(self.sim.groups, self._group_colours, strict=True)]
+        else:
+            entries.append(("disc", "human", palette.human))
         if overlays.human_goals:
             entries.append(("cross", "human goal", palette.human_goal))
         entries += [("line", "robot path", palette.robot_path), ("line", "human trail", palette.human_trail),
@@ -299,8 +308,13 @@ class Renderer:
         """One entry per row from (left, top); below the map, in columns that fit the panel's height."""
         pygame = _pygame()
         row, column_width = self._row, 150
-        rows = max(1, (self._panel_rect.bottom - top - 8) // row) if self._below else 99
-        for k, (kind, label, colour) in enumerate(self._legend_entries(overlays)):
+        entries = self._legend_entries(overlays)
+        if self._below:
+            rows = max(1, (self._panel_rect.bottom - top - 8) // row)
+        else:  # one column above the scale bar: rows close up when there are many groups
+            rows = len(entries)
+            row = max(self._font.get_height(), min(row, (self._panel_rect.bottom - _SCALE_BAR_ROOM - top) // max(1, rows)))
+        for k, (kind, label, colour) in enumerate(entries):
             x, cy = left + (k // rows) * column_width, top + (k % rows) * row + row // 2
             if kind == "disc":
                 pygame.draw.circle(surface, colour, (x + 8, cy), 7)
@@ -331,6 +345,10 @@ class Renderer:
         surface.blit(label, (x, y - 8 - label.get_height()))
 
 
+_SCALE_BAR_ROOM = 40
+"""Pixels at the panel's bottom kept for the scale bar and its label."""
+
+
 def _fit(font: pygame.font.Font, text: str, width: int) -> str:
     """``text`` cut (with an ellipsis) to fit ``width`` pixels."""
     if font.size(text)[0] <= width:
@@ -338,6 +356,12 @@ def _fit(font: pygame.font.Font, text: str, width: int) -> str:
     while text and font.size(text + "...")[0] > width:
         text = text[:-1]
     return text + "..."
+
+
+def _group_colours(sim: Simulator, palette: Palette) -> list[tuple[int, int, int]]:
+    """Each group's drawing colour: its own ``colour``, else the palette's group colours in turn."""
+    return [tuple(int(group.colour[i : i + 2], 16) for i in (1, 3, 5)) if group.colour else palette.groups[k % len(palette.groups)]
+            for k, group in enumerate(sim.groups)]
 
 
 def _cross(surface: pygame.Surface, colour, centre: np.ndarray, half: float) -> None:

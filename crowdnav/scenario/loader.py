@@ -204,10 +204,17 @@ def consistency_issues(scenario: Scenario) -> list[ScenarioIssue]:
         issues.append(
             ScenarioIssue("robot.max_angular_speed", "only applies to unicycle kinematics; remove it or set kinematics: unicycle")
         )
-    if humans.max_count > 0 and not humans.spawn:
-        issues.append(ScenarioIssue("humans.spawn", "expected at least one spawn region when humans.count > 0"))
-    if humans.max_count > 0 and humans.goal_rule == "sample" and not humans.goal:
-        issues.append(ScenarioIssue("humans.goal", "expected at least one goal region when goal_rule is 'sample'"))
+    for path, group in humans.crowd:
+        if group.max_count > 0 and not group.spawn:
+            issues.append(ScenarioIssue(f"{path}.spawn", f"expected at least one spawn region when {path}.count > 0"))
+        if group.max_count > 0 and not group.standing and group.goal_rule == "sample" and not group.goal:
+            issues.append(ScenarioIssue(f"{path}.goal", "expected at least one goal region when goal_rule is 'sample'"))
+        if group.standing and group.circle_radius is not None and group.max_count > 1:
+            chord = 2 * group.circle_radius * math.sin(math.pi / group.max_count)
+            if chord < 2 * humans.radius:
+                issues.append(ScenarioIssue(f"{path}.circle_radius", (
+                    f"{group.max_count} humans of radius {humans.radius:g} m overlap on a circle of radius {group.circle_radius:g} m; "
+                    f"expected at least {humans.radius / math.sin(math.pi / group.max_count):.2f} m")))
     # A body moving less than its diameter per step cannot jump across an edge unnoticed,
     # which keeps collision checks at step ends exact.
     robot_step = robot.max_speed * scenario.time_step
@@ -219,13 +226,22 @@ def consistency_issues(scenario: Scenario) -> list[ScenarioIssue]:
         ))
     # Humans are pushed back out of walls after each step; moving less than their radius
     # per step guarantees their centre never crosses a wall before that happens.
-    human_step = humans.preferred_speed[1] * humans.social_force.max_speed_factor * scenario.time_step
+    human_step = humans.max_preferred_speed * humans.social_force.max_speed_factor * scenario.time_step
     if humans.max_count > 0 and human_step >= humans.radius:
         issues.append(ScenarioIssue(
-            "humans.preferred_speed",
+            _fastest_speed_field(humans),
             f"humans move up to {human_step:g} m per step (preferred_speed max * max_speed_factor * time_step); "
             f"expected less than their radius {humans.radius:g} m: lower preferred_speed or time_step",
         ))
     if robot.start_heading not in ("random", "toward_goal") and not math.isfinite(float(robot.start_heading)):
         issues.append(ScenarioIssue("robot.start_heading", "expected 'random', 'toward_goal' or a finite angle in degrees"))
     return issues
+
+
+def _fastest_speed_field(humans) -> str:
+    """Where the fastest walking speed is written: a group's own preferred_speed, or the shared one."""
+    for i, group in enumerate(humans.groups):
+        own = group.preferred_speed
+        if own is not None and not group.standing and own[1] == humans.max_preferred_speed:
+            return f"humans.groups.{i}.preferred_speed"
+    return "humans.preferred_speed"

@@ -16,7 +16,14 @@ from typing import Annotated, Any, Literal
 from pydantic import BeforeValidator, Field, field_validator, model_serializer, model_validator
 
 from crowdnav.paths import SAFE_NAME_EXPECTATION, is_safe_name
-from crowdnav.scenario.errors import show
+from crowdnav.scenario.crowd import (  # noqa: F401  (re-exported: the schema's public names)
+    CIRCLE_SPACING,
+    IMPLICIT_GROUP,
+    MIN_FORCE_RANGE,
+    HumanGroup,
+    Humans,
+    SocialForce,
+)
 from crowdnav.scenario.fields import (  # noqa: F401  (re-exported: the schema's public names)
     MAX_HUMANS,
     MAX_MAGNITUDE,
@@ -72,91 +79,6 @@ class Robot(StrictModel):
     start_heading: Annotated[Literal["random", "toward_goal"] | FiniteFloat, BeforeValidator(_heading_shape)] = Field(
         default="random", description="Initial heading: 'random', 'toward_goal', or a fixed angle in degrees."
     )
-
-
-# Decay lengths below 1 cm make exp(contact / range) overflow to inf (then inf * 0 = NaN) for
-# human-sized radii, and no crowd model needs a force field thinner than that.
-MIN_FORCE_RANGE = 0.01
-
-
-class SocialForce(StrictModel):
-    """Parameters of the humans' social-force model (see docs/simulator.md for the formulas)."""
-
-    goal_weight: NonNegativeFloat = Field(default=1.0, description="Weight of the goal force (dimensionless).")
-    goal_saturation_distance: PositiveFloat = Field(
-        default=1.0, description="Distance to the goal (m) beyond which the goal force has unit magnitude."
-    )
-    human_strength: NonNegativeFloat = Field(default=2.0, description="Human-human repulsion at contact (dimensionless).")
-    human_range: float = Field(
-        default=0.3, ge=MIN_FORCE_RANGE, description="Decay length of human-human repulsion in metres (at least 1 cm)."
-    )
-    obstacle_strength: NonNegativeFloat = Field(default=3.0, description="Obstacle repulsion at contact (dimensionless).")
-    obstacle_range: float = Field(
-        default=0.2, ge=MIN_FORCE_RANGE, description="Decay length of obstacle repulsion in metres (at least 1 cm)."
-    )
-    robot_strength: NonNegativeFloat = Field(
-        default=2.0, description="Repulsion from the robot at contact, used only when see_robot is on."
-    )
-    robot_range: float = Field(
-        default=0.3, ge=MIN_FORCE_RANGE, description="Decay length of robot repulsion in metres (at least 1 cm)."
-    )
-    relaxation_time: PositiveFloat = Field(
-        default=0.5, description="Time (s) over which a human adapts its velocity to the desired one."
-    )
-    max_speed_factor: Annotated[float, Field(ge=1.0, allow_inf_nan=False)] = Field(
-        default=1.2, description="Speed cap as a multiple of the human's preferred speed."
-    )
-    goal_tolerance: PositiveFloat = Field(default=0.3, description="A human has reached its goal within this distance (m).")
-
-
-class Humans(StrictModel):
-    """The crowd."""
-
-    count: Annotated[int | tuple[int, int], BeforeValidator(_count_shape)] = Field(
-        default=0, description="Crowd size: a number, or [min, max] sampled uniformly per episode."
-    )
-    radius: PositiveFloat = Field(default=0.3, description="Body radius of every human in metres.")
-    preferred_speed: Annotated[
-        tuple[PositiveFloat, PositiveFloat], BeforeValidator(_pair_of("a speed range [min, max] of two positive numbers in m/s"))
-    ] = Field(
-        default=(0.8, 1.2), description="[min, max] preferred walking speed in m/s, sampled per human."
-    )
-    spawn: list[Region] = Field(default_factory=list, description="Regions humans start in.")
-    goal_rule: Literal["sample", "mirror"] = Field(
-        default="sample", description="sample: goals drawn from `goal`; mirror: goal is the start mirrored through mirror_center."
-    )
-    goal: list[Region] = Field(default_factory=list, description="Regions goals are sampled from (goal_rule: sample).")
-    mirror_center: Point | None = Field(
-        default=None, description="Centre of the mirror rule [x, y] in metres (default: world centre)."
-    )
-    on_goal: Literal["new_goal", "stop", "respawn"] = Field(
-        default="new_goal", description="What a human does at its goal: take a new goal, stop there, or respawn."
-    )
-    see_robot: bool = Field(default=False, description="Whether humans are repelled by the robot (off as in the paper).")
-    social_force: SocialForce = Field(default_factory=SocialForce, description="Social-force model parameters.")
-
-    @field_validator("count")
-    @classmethod
-    def _count_in_range(cls, count: int | tuple[int, int]) -> int | tuple[int, int]:
-        low, high = count if isinstance(count, tuple) else (count, count)
-        if low < 0 or low > high or high > MAX_HUMANS:
-            raise ValueError(f"expected a count from 0 to {MAX_HUMANS:,}, or [min, max] with 0 <= min <= max <= {MAX_HUMANS:,}, got {show(count)}")
-        return count
-
-    @field_validator("preferred_speed")
-    @classmethod
-    def _speed_range_ordered(cls, speed: tuple[float, float]) -> tuple[float, float]:
-        if speed[0] > speed[1]:
-            raise ValueError(f"expected [min, max] with min <= max, got {list(speed)}")
-        return speed
-
-    @property
-    def min_count(self) -> int:
-        return self.count[0] if isinstance(self.count, tuple) else self.count
-
-    @property
-    def max_count(self) -> int:
-        return self.count[1] if isinstance(self.count, tuple) else self.count
 
 
 # ---------------------------------------------------------------- sensors and reward

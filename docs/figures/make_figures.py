@@ -3,7 +3,8 @@
     python docs/figures/make_figures.py
 
 Writes docs/figures/room_furniture_lidar.png (the README's picture), cafe.png and corridor.png
-(docs/rendering.md), l_hallway.png (docs/scenarios.md, from the YAML shown there): a few steps of the social-force robot, with the LIDAR rays, the
+(docs/rendering.md), l_hallway.png (docs/scenarios.md, from the YAML shown there), station_hall.png
+(docs/scenarios.md, human groups): a few steps of the social-force robot, with the LIDAR rays, the
 closest-obstacle point, the LEOG inset, the legend and the scale bar.
 """
 
@@ -41,6 +42,7 @@ if __name__ == "__main__":
     print(f"wrote {frame('room_furniture', HERE / 'room_furniture_lidar.png')}")
     print(f"wrote {frame('cafe', HERE / 'cafe.png', seed=1, steps=15)}")
     print(f"wrote {frame('corridor', HERE / 'corridor.png', seed=1, steps=10)}")
+    print(f"wrote {frame('station_hall', HERE / 'station_hall.png', seed=0, steps=25)}")
     import re
 
     import yaml

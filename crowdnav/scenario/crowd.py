@@ -1,0 +1,257 @@
+"""The crowd part of a scenario file: social-force parameters, named groups, the crowd.
+
+Part of the scenario schema (:mod:`crowdnav.scenario.schema` re-exports every name here).
+
+A crowd is one or more **groups**. Files written before groups existed give one unnamed
+population with ``humans.count`` / ``spawn`` / ``goal`` / ``goal_rule`` / ``on_goal``; that
+is read as a single group named ``crowd`` and gives the same episodes as before. A file with
+``humans.groups`` lists named groups instead, each with its own count, regions, speeds, goal
+rule and colour; the body radius, ``see_robot`` and the social-force parameters stay shared.
+A group with ``behaviour: stand`` is a standing conversation circle: its members stand still
+all episode, evenly spaced on a circle whose centre is drawn from the group's ``spawn``.
+"""
+
+from __future__ import annotations
+
+import math
+import re
+from typing import Annotated, Literal
+
+from pydantic import AfterValidator, BeforeValidator, Field, ValidationError, field_validator, model_validator
+from pydantic_core import InitErrorDetails, PydanticCustomError
+
+from crowdnav.paths import SAFE_NAME_EXPECTATION, is_safe_name
+from crowdnav.scenario.errors import show
+from crowdnav.scenario.fields import (
+    MAX_HUMANS,
+    NonNegativeFloat,
+    Point,
+    PositiveFloat,
+    Region,
+    StrictModel,
+    _count_shape,
+    _pair_of,
+)
+
+# Decay lengths below 1 cm make exp(contact / range) overflow to inf (then inf * 0 = NaN) for
+# human-sized radii, and no crowd model needs a force field thinner than that.
+MIN_FORCE_RANGE = 0.01
+
+CIRCLE_SPACING = 0.2
+"""Default free space (m) between neighbours in a standing circle: people in conversation stand close."""
+
+IMPLICIT_GROUP = "crowd"
+"""Name of the single group a file without ``humans.groups`` describes."""
+
+_COLOUR = re.compile(r"^#[0-9A-Fa-f]{6}$")
+_GROUP_ONLY = ("count", "spawn", "goal_rule", "goal", "mirror_center", "on_goal")
+"""Top-level crowd fields that belong to each group once ``humans.groups`` is used."""
+
+
+def _field_error(field: str, value: object, message: str) -> ValidationError:
+    """A validation error located at ``field`` (a model validator's own errors sit at the model)."""
+    error = PydanticCustomError("value_error", "Value error, {message}", {"message": message})  # worded like a ValueError
+    return ValidationError.from_exception_data("Humans", [InitErrorDetails(type=error, loc=(field,), input=value)])
+
+
+class SocialForce(StrictModel):
+    """Parameters of the humans' social-force model (see docs/simulator.md for the formulas)."""
+
+    goal_weight: NonNegativeFloat = Field(default=1.0, description="Weight of the goal force (dimensionless).")
+    goal_saturation_distance: PositiveFloat = Field(
+        default=1.0, description="Distance to the goal (m) beyond which the goal force has unit magnitude."
+    )
+    human_strength: NonNegativeFloat = Field(default=2.0, description="Human-human repulsion at contact (dimensionless).")
+    human_range: float = Field(
+        default=0.3, ge=MIN_FORCE_RANGE, description="Decay length of human-human repulsion in metres (at least 1 cm)."
+    )
+    obstacle_strength: NonNegativeFloat = Field(default=3.0, description="Obstacle repulsion at contact (dimensionless).")
+    obstacle_range: float = Field(
+        default=0.2, ge=MIN_FORCE_RANGE, description="Decay length of obstacle repulsion in metres (at least 1 cm)."
+    )
+    robot_strength: NonNegativeFloat = Field(
+        default=2.0, description="Repulsion from the robot at contact, used only when see_robot is on."
+    )
+    robot_range: float = Field(
+        default=0.3, ge=MIN_FORCE_RANGE, description="Decay length of robot repulsion in metres (at least 1 cm)."
+    )
+    relaxation_time: PositiveFloat = Field(
+        default=0.5, description="Time (s) over which a human adapts its velocity to the desired one."
+    )
+    max_speed_factor: Annotated[float, Field(ge=1.0, allow_inf_nan=False)] = Field(
+        default=1.2, description="Speed cap as a multiple of the human's preferred speed."
+    )
+    goal_tolerance: PositiveFloat = Field(default=0.3, description="A human has reached its goal within this distance (m).")
+
+
+def _check_count(count: int | tuple[int, int]) -> int | tuple[int, int]:
+    low, high = count if isinstance(count, tuple) else (count, count)
+    if low < 0 or low > high or high > MAX_HUMANS:
+        raise ValueError(f"expected a count from 0 to {MAX_HUMANS:,}, or [min, max] with 0 <= min <= max <= {MAX_HUMANS:,}, got {show(count)}")
+    return count
+
+
+def _check_speed(speed: tuple[float, float] | None) -> tuple[float, float] | None:
+    if speed is not None and speed[0] > speed[1]:
+        raise ValueError(f"expected [min, max] with min <= max, got {list(speed)}")
+    return speed
+
+
+Count = Annotated[int | tuple[int, int], BeforeValidator(_count_shape), AfterValidator(_check_count)]
+"""A number of humans, or [min, max] drawn per episode."""
+SpeedRange = Annotated[
+    tuple[PositiveFloat, PositiveFloat],
+    BeforeValidator(_pair_of("a speed range [min, max] of two positive numbers in m/s")),
+    AfterValidator(_check_speed),
+]
+"""[min, max] walking speed in m/s."""
+
+
+class HumanGroup(StrictModel):
+    """One named group of the crowd, with its own size, regions, speeds, goal rule and colour."""
+
+    name: str = Field(description="Group name, unique in the file (shown in legends and per-agent infos).")
+    count: Count = Field(description="Group size: a number, or [min, max] sampled uniformly per episode.")
+    behaviour: Literal["walk", "stand"] = Field(
+        default="walk", description="walk: members walk to goals by social force; stand: a standing circle that never moves."
+    )
+    preferred_speed: SpeedRange | None = Field(
+        default=None, description="[min, max] preferred walking speed in m/s, per member (default: humans.preferred_speed; walk only)."
+    )
+    spawn: list[Region] = Field(
+        min_length=1, description="walk: regions members start in; stand: regions the circle's centre is drawn from."
+    )
+    goal_rule: Literal["sample", "mirror"] = Field(
+        default="sample", description="sample: goals drawn from `goal`; mirror: the start mirrored through mirror_center (walk only)."
+    )
+    goal: list[Region] = Field(default_factory=list, description="Regions goals are sampled from (walk, goal_rule: sample).")
+    mirror_center: Point | None = Field(
+        default=None, description="Centre of the mirror rule [x, y] in metres (default: world centre; walk only)."
+    )
+    on_goal: Literal["new_goal", "stop", "respawn"] = Field(
+        default="new_goal", description="What a member does at its goal: take a new goal, stop there, or respawn (walk only)."
+    )
+    circle_radius: PositiveFloat | None = Field(
+        default=None,
+        description=f"Radius (m) of the standing circle's member centres (stand only; default: {CIRCLE_SPACING:g} m between neighbours).",
+    )
+    colour: str | None = Field(default=None, description="Drawing colour '#rrggbb' (default: one of the renderer's group colours).")
+
+    @field_validator("name")
+    @classmethod
+    def _safe_name(cls, name: str) -> str:
+        if not is_safe_name(name):
+            raise ValueError(f"expected {SAFE_NAME_EXPECTATION}, got {name!r}")
+        return name
+
+    @field_validator("colour")
+    @classmethod
+    def _hex_colour(cls, colour: str | None) -> str | None:
+        if colour is not None and not _COLOUR.match(colour):
+            raise ValueError(f"expected a colour '#rrggbb' (six hex digits), got {colour!r}")
+        return colour
+
+    @model_validator(mode="after")
+    def _walking_fields_only_when_walking(self) -> HumanGroup:
+        if self.behaviour == "stand":
+            walking = [f for f in ("preferred_speed", "goal_rule", "goal", "mirror_center", "on_goal") if f in self.model_fields_set]
+            if walking:
+                raise ValueError(f"a standing group does not walk; remove {', '.join(walking)} (or set behaviour: walk)")
+        elif "circle_radius" in self.model_fields_set:
+            raise ValueError("circle_radius only applies to standing groups; remove it or set behaviour: stand")
+        return self
+
+    @property
+    def min_count(self) -> int:
+        return self.count[0] if isinstance(self.count, tuple) else self.count
+
+    @property
+    def max_count(self) -> int:
+        return self.count[1] if isinstance(self.count, tuple) else self.count
+
+    @property
+    def standing(self) -> bool:
+        return self.behaviour == "stand"
+
+    def circle_radius_for(self, human_radius: float) -> float:
+        """Radius (m) of the standing circle: the given one, or neighbours CIRCLE_SPACING apart at the largest count."""
+        if self.circle_radius is not None:
+            return self.circle_radius
+        n = self.max_count
+        if n < 2:
+            return 0.0
+        return (2 * human_radius + CIRCLE_SPACING) / (2 * math.sin(math.pi / n))
+
+
+class Humans(StrictModel):
+    """The crowd: one population (count, spawn, goal, ...) or named ``groups``; radius and social force are shared."""
+
+    count: Count = Field(default=0, description="Crowd size: a number, or [min, max] sampled uniformly per episode.")
+    radius: PositiveFloat = Field(default=0.3, description="Body radius of every human in metres.")
+    preferred_speed: SpeedRange = Field(
+        default=(0.8, 1.2), description="[min, max] preferred walking speed in m/s, sampled per human (groups' default)."
+    )
+    spawn: list[Region] = Field(default_factory=list, description="Regions humans start in.")
+    goal_rule: Literal["sample", "mirror"] = Field(
+        default="sample", description="sample: goals drawn from `goal`; mirror: goal is the start mirrored through mirror_center."
+    )
+    goal: list[Region] = Field(default_factory=list, description="Regions goals are sampled from (goal_rule: sample).")
+    mirror_center: Point | None = Field(
+        default=None, description="Centre of the mirror rule [x, y] in metres (default: world centre)."
+    )
+    on_goal: Literal["new_goal", "stop", "respawn"] = Field(
+        default="new_goal", description="What a human does at its goal: take a new goal, stop there, or respawn."
+    )
+    groups: list[HumanGroup] = Field(
+        default_factory=list, max_length=64,
+        description="Named groups (at most 64), instead of count/spawn/goal/goal_rule/mirror_center/on_goal above.",
+    )
+    see_robot: bool = Field(default=False, description="Whether humans are repelled by the robot (off as in the paper).")
+    social_force: SocialForce = Field(default_factory=SocialForce, description="Social-force model parameters.")
+
+    @model_validator(mode="after")
+    def _one_way_to_describe_the_crowd(self) -> Humans:
+        if self.groups:
+            both = [f for f in _GROUP_ONLY if f in self.model_fields_set]
+            if both:  # reported at the first such field, so its line (or "from override") is named
+                fields = ", ".join(f"humans.{f}" for f in both)
+                raise _field_error(both[0], getattr(self, both[0]), f"give the crowd either as humans.groups or with {fields}, "
+                                   "not both; move these fields into each group")
+            names = [group.name for group in self.groups]
+            repeated = sorted({name for name in names if names.count(name) > 1})
+            if repeated:
+                raise ValueError(f"expected unique group names, got {', '.join(map(repr, repeated))} more than once")
+            if sum(group.max_count for group in self.groups) > MAX_HUMANS:
+                raise ValueError(f"expected at most {MAX_HUMANS:,} humans over all groups")
+        return self
+
+    @property
+    def crowd(self) -> list[tuple[str, HumanGroup]]:
+        """Every group with the dotted path of its fields in the file (``humans.groups.1`` or, for a
+        file without groups, ``humans`` for the implicit group ``crowd``); walking groups' speeds filled in."""
+        if not self.groups:
+            implicit = HumanGroup.model_construct(
+                name=IMPLICIT_GROUP, count=self.count, behaviour="walk", preferred_speed=self.preferred_speed, spawn=self.spawn,
+                goal_rule=self.goal_rule, goal=self.goal, mirror_center=self.mirror_center, on_goal=self.on_goal,
+                circle_radius=None, colour=None,
+            )
+            return [("humans", implicit)]
+        return [
+            (f"humans.groups.{i}", group if group.preferred_speed is not None or group.standing
+             else group.model_copy(update={"preferred_speed": self.preferred_speed}))
+            for i, group in enumerate(self.groups)
+        ]
+
+    @property
+    def min_count(self) -> int:
+        return sum(group.min_count for _, group in self.crowd)
+
+    @property
+    def max_count(self) -> int:
+        return sum(group.max_count for _, group in self.crowd)
+
+    @property
+    def max_preferred_speed(self) -> float:
+        """The fastest preferred speed any walking member can draw (m/s; humans.preferred_speed's max without walkers)."""
+        speeds = [group.preferred_speed[1] for _, group in self.crowd if not group.standing]
+        return max(speeds, default=self.preferred_speed[1])
