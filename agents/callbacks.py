@@ -10,6 +10,7 @@ from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import TextIO
 
+from crowdnav.agents.resume_point import ResumePoint
 from stable_baselines3.common.callbacks import BaseCallback
 
 EPISODE_LOG_HEADER = "episode,seed,outcome,return,length,timesteps,seconds"
@@ -78,7 +79,8 @@ class EpisodeCallback(BaseCallback):
     def __init__(self, episodes: int, first_episode: int, seed_of: Callable[[int], int], *,
                  checkpoint_every: int, save: Callable[[int], None] | None = None,
                  snapshot: Callable[[int], None] | None = None, on_start: Callable[[], None] | None = None,
-                 log_file: str | Path | None = None, progress: bool = False, successes_before: int = 0):
+                 log_file: str | Path | None = None, progress: bool = False, successes_before: int = 0,
+                 resume_point: ResumePoint | None = None):
         super().__init__()
         self.episodes = episodes
         self.done = first_episode
@@ -88,6 +90,7 @@ class EpisodeCallback(BaseCallback):
         self.save = save
         self.snapshot = snapshot
         self.on_start = on_start
+        self.resume_point = resume_point
         self.records: list[EpisodeRecord] = []
         self._log_path = Path(log_file) if log_file is not None else None
         self._log: TextIO | None = None
@@ -126,6 +129,8 @@ class EpisodeCallback(BaseCallback):
         return self.done < self.episodes
 
     def _record(self, info: dict) -> None:
+        if self.resume_point is not None:
+            self.resume_point.mark()
         episode = info.get("episode", {})
         record = EpisodeRecord(
             episode=self.done, seed=self.seed_of(self.done), outcome=info.get("outcome", "truncated"),
@@ -154,7 +159,13 @@ class EpisodeCallback(BaseCallback):
         elapsed = time.perf_counter() - self._start_time
         return (self.model.num_timesteps - self._start_steps) / elapsed if elapsed > 0 else 0.0
 
+    def _on_rollout_start(self) -> None:
+        if self.resume_point is not None:
+            self.resume_point.rollout_started()
+
     def _on_rollout_end(self) -> None:
+        if self.resume_point is not None:
+            self.resume_point.rollout_ended()
         if self._save_due and self.save is not None:
             self._save_due = False
             self.save(self.done)

@@ -42,7 +42,7 @@ def save_checkpoint(
     *,
     encoder_file: str | Path | None = None,
     replay_buffer: bool = False,
-    rng_state: bool = False,
+    rng_state: bool | Mapping[str, Any] = False,
 ) -> Path:
     """Write a checkpoint folder, replacing an existing one only once the new one is complete.
 
@@ -57,8 +57,8 @@ def save_checkpoint(
     model.save(staging / MODEL_FILE)
     if replay_buffer and getattr(model, "replay_buffer", None) is not None:
         model.save_replay_buffer(staging / REPLAY_FILE)
-    if rng_state:  # a resumable checkpoint: the random streams too, so the resumed run is the same run
-        save_rng_state(model, staging / RNG_FILE)
+    if rng_state is not False:  # a resumable checkpoint: the random streams too, so the resumed run is the same run
+        save_rng_state(model, staging / RNG_FILE, rng_state if isinstance(rng_state, Mapping) else None)
     if encoder_file is not None:
         shutil.copyfile(encoder_file, staging / ENCODER_FILE)
     document = {"format": POLICY_FORMAT, **info, "leog_encoder": ENCODER_FILE if encoder_file is not None else None}
@@ -226,36 +226,41 @@ def model_from_parameters(folder: Path, info: Mapping[str, Any], encoder: Any = 
     return model
 
 
-def save_rng_state(model: BaseAlgorithm, path: Path) -> None:
-    """The random streams training draws from (torch, numpy, Python, the action space) as a pickle.
-
-    SB3 re-seeds all of them when a model is loaded, so without this a resumed run would draw other
-    exploration noise and other replay batches than the run it continues.
-    """
-    import pickle
+def rng_state(model: BaseAlgorithm) -> dict[str, Any]:
+    """The random streams training draws from: torch, numpy, Python and the action space's."""
     import random
 
     import torch
 
     space = getattr(model, "action_space", None)
-    state = {"torch": torch.get_rng_state(), "numpy": np.random.get_state(), "random": random.getstate(),
-             "action_space": space.np_random.bit_generator.state if space is not None and space._np_random is not None else None}
-    path.write_bytes(pickle.dumps(state))
+    return {"torch": torch.get_rng_state(), "numpy": np.random.get_state(), "random": random.getstate(),
+            "action_space": space.np_random.bit_generator.state if space is not None and space._np_random is not None else None}
 
 
-def restore_rng_state(model: BaseAlgorithm, path: Path) -> bool:
-    """Put back what :func:`save_rng_state` saved (a resumed run's own file: trusted); False without it."""
+def save_rng_state(model: BaseAlgorithm, path: Path, state: Mapping[str, Any] | None = None) -> None:
+    """The random streams (now, or the given ``state``) as a pickle.
+
+    SB3 re-seeds all of them when a model is loaded, so without this a resumed run would draw other
+    exploration noise and other replay batches than the run it continues.
+    """
+    import pickle
+
+    path.write_bytes(pickle.dumps(dict(state) if state is not None else rng_state(model)))
+
+
+def restore_rng_state(model: BaseAlgorithm, path: Path) -> dict[str, Any] | None:
+    """Put back what :func:`save_rng_state` saved (a resumed run's own file: trusted); returns it, None without it."""
     import pickle
     import random
 
     import torch
 
     if not path.is_file():
-        return False
+        return None
     state = pickle.loads(path.read_bytes())
     torch.set_rng_state(state["torch"])
     np.random.set_state(state["numpy"])
     random.setstate(state["random"])
     if state.get("action_space") is not None:
         model.action_space.np_random.bit_generator.state = state["action_space"]
-    return True
+    return state

@@ -14,7 +14,10 @@ Torch-free; a policy folder loads with :func:`crowdnav.agents.load_policy` (torc
 from __future__ import annotations
 
 import json
+import os
 import re
+from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
@@ -24,9 +27,11 @@ EPISODE_LOG = "episodes.csv"
 POLICY_FILE = "policy.json"
 """A policy folder (checkpoint or snapshot) is complete once it holds this file (written last)."""
 REPLAY_FILE = "replay_buffer.pkl"
+"""The checkpoint's replay buffer (off-policy runs with ``save_replay_buffer``)."""
 RNG_FILE = "rng_state.pkl"
 """The checkpoint's random streams (torch, numpy, Python, action space), so a resumed run continues the same run."""
-"""The checkpoint's replay buffer (off-policy runs with ``save_replay_buffer``)."""
+LOCK_FILE = "writer.lock"
+"""Held (an OS file lock) by the one process writing a run folder; holds that process's PID."""
 
 _SNAPSHOT = re.compile(r"episode_(\d+)$")
 
@@ -134,3 +139,38 @@ def recover_checkpoint(train_dir: str | Path) -> int:
         if folder.is_dir():
             shutil.rmtree(folder)
     return best_episodes
+
+
+class RunBusyError(RuntimeError):
+    """Another process is writing this run folder."""
+
+
+@contextmanager
+def writing(folder: str | Path) -> Iterator[None]:
+    """Hold the folder's writer lock while writing it: a second writer gets :class:`RunBusyError` at once.
+
+    Two processes resuming one run (an orphaned worker of a killed sweep, two terminals) would
+    otherwise interleave rows in the same logs. The lock is the OS's (``flock``), so it is released
+    when its holder exits in any way, kill included. Where ``fcntl`` does not exist (Windows) no
+    lock is taken.
+    """
+    try:
+        import fcntl
+    except ImportError:  # pragma: no cover - Windows
+        yield
+        return
+    folder = Path(folder)
+    folder.mkdir(parents=True, exist_ok=True)
+    with open(folder / LOCK_FILE, "a+", encoding="utf-8") as handle:
+        try:
+            fcntl.flock(handle, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            handle.seek(0)
+            holder = handle.read().strip() or "unknown"
+            raise RunBusyError(f"{folder} is being written by another process (PID {holder}); wait for it to finish or stop it, "
+                               "then resume") from None
+        handle.seek(0)
+        handle.truncate()
+        handle.write(f"{os.getpid()}\n")
+        handle.flush()
+        yield

@@ -51,7 +51,8 @@ from crowdnav.agents.factory import (
     observation_normalization,
     precomputes_leog,
 )
-from crowdnav.agents.run_folder import SNAPSHOTS_DIR, checkpoint_dir, episode_log, recover_checkpoint, snapshot_dir
+from crowdnav.agents.resume_point import STEPS_AFTER_KEY, ResumePoint
+from crowdnav.agents.run_folder import SNAPSHOTS_DIR, checkpoint_dir, episode_log, recover_checkpoint, snapshot_dir, writing
 from crowdnav.agents.seeding import train_seed
 from crowdnav.agents.wrappers import scales_from_json, scales_to_json
 from stable_baselines3.common.base_class import BaseAlgorithm
@@ -95,6 +96,11 @@ def train(config: TrainConfig | Mapping[str, Any] | str | Path, *, resume: bool 
         config = config_from_mapping(config)
     # a TrainConfig was checked when it was built: not again here (one validation per run)
     torch.set_num_threads(config.torch_threads)
+    with writing(config.out):  # one process writes a run at a time
+        return _train(config, resume, on_checkpoint)
+
+
+def _train(config: TrainConfig, resume: bool, on_checkpoint: Callable[[int], None] | None) -> TrainResult:
     out = Path(config.out)
     checkpoint = checkpoint_dir(out)
     if resume:
@@ -124,11 +130,14 @@ def train(config: TrainConfig | Mapping[str, Any] | str | Path, *, resume: bool 
             model.tensorboard_log = tensorboard_log
         if config.algo in OFF_POLICY and (checkpoint / REPLAY_FILE).is_file():
             model.load_replay_buffer(checkpoint / REPLAY_FILE)
-        # loading re-seeded every stream: continue the saved ones, and take the update the checkpoint preceded
-        if restore_rng_state(model, checkpoint / RNG_FILE):
-            on_start = lambda: _pending_update(model, config)  # noqa: E731 (once SB3's logger exists)
+        # loading re-seeded every stream: continue the saved ones, and the rollout the checkpoint interrupted
+        saved_streams = restore_rng_state(model, checkpoint / RNG_FILE)
     else:
         model = make_model(config, env, saved_encoder, tensorboard_log)
+    resume_point = ResumePoint(model, off_policy=config.algo in OFF_POLICY)
+    if state and saved_streams is not None:
+        steps_after = int(saved_streams.get(STEPS_AFTER_KEY, 0))
+        on_start = lambda: resume_point.continue_run(steps_after)  # noqa: E731 (once SB3's logger exists)
     # copied into every checkpoint, so a checkpoint stands alone
     encoder_copy = out / ENCODER_FILE if precompute else None
     if encoder_copy is not None and not resume:
@@ -149,15 +158,17 @@ def train(config: TrainConfig | Mapping[str, Any] | str | Path, *, resume: bool 
         # already, when episode N ended; a rollout can run past it before the checkpoint.)
         if not snapshot_folder(out, episodes).is_dir():
             save_snapshot(episodes)
-        save_checkpoint(model, checkpoint, info(episodes), encoder_file=encoder_copy,
-                        replay_buffer=config.save_replay_buffer and config.algo in OFF_POLICY, rng_state=True)
+        with resume_point.rewound() as streams:  # the checkpoint is the last episode's end, not the rollout's
+            save_checkpoint(model, checkpoint, info(episodes), encoder_file=encoder_copy,
+                            replay_buffer=config.save_replay_buffer and config.algo in OFF_POLICY,
+                            rng_state=streams if streams is not None else True)
         if on_checkpoint is not None:
             on_checkpoint(episodes)
 
     callback = EpisodeCallback(
         config.episodes, first_episode, lambda episode: train_seed(config.seed, episode),
         checkpoint_every=config.checkpoint_every, save=save, snapshot=save_snapshot, on_start=on_start, log_file=episode_log(out),
-        progress=config.progress, successes_before=state["successes"] if state else 0,
+        progress=config.progress, successes_before=state["successes"] if state else 0, resume_point=resume_point,
     )
     _set_aside_snapshots_after(out, state["episodes"] if state else 0)
     if state and not snapshot_folder(out, state["episodes"]).is_dir():
@@ -166,7 +177,9 @@ def train(config: TrainConfig | Mapping[str, Any] | str | Path, *, resume: bool 
     start_steps = model.num_timesteps
     if callback.done < config.episodes:
         max_steps = env.unwrapped.scenario.max_steps
-        budget = (config.episodes - callback.done) * max_steps + 1  # an upper bound: the callback stops on episodes
+        # an upper bound (the callback stops on episodes), and the same total as an uninterrupted run's,
+        # so a learning-rate schedule sees the same progress after a resume
+        budget = max((config.episodes - callback.done) * max_steps + 1, config.episodes * max_steps + 1 - model.num_timesteps)
         model.learn(budget, callback=callback, reset_num_timesteps=state is None, tb_log_name=config.algo)
         save(callback.done)
     seconds = time.perf_counter() - started
@@ -176,20 +189,6 @@ def train(config: TrainConfig | Mapping[str, Any] | str | Path, *, resume: bool 
         seconds=seconds, steps_per_second=(model.num_timesteps - start_steps) / seconds if seconds > 0 else 0.0,
         records=callback.records, model=model,
     )
-
-
-def _pending_update(model: BaseAlgorithm, config: TrainConfig) -> None:
-    """The gradient steps an off-policy run takes right after the rollout it checkpointed at.
-
-    The checkpoint is written when a rollout ends, before SB3 trains on it; the uninterrupted run
-    does those steps next, so the resumed one does them first (one rollout = ``train_freq`` steps:
-    exact for the default of one step per rollout).
-    """
-    if config.algo not in OFF_POLICY or not model.num_timesteps > model.learning_starts:
-        return
-    steps = model.gradient_steps if model.gradient_steps >= 0 else model.train_freq.frequency
-    if steps > 0:
-        model.train(batch_size=model.batch_size, gradient_steps=steps)
 
 
 def snapshot_folder(out: Path, episodes: int) -> Path:

@@ -66,7 +66,8 @@ class LocalExecutor(Executor):
         return f"local, {self.workers} worker process(es)"
 
     def run(self, jobs: Sequence[Job], *, verbose: bool = False) -> Iterator[dict[str, Any]]:
-        pool = ProcessPoolExecutor(max_workers=self.workers, mp_context=get_context("spawn"), initializer=_init_worker)
+        pool = ProcessPoolExecutor(max_workers=self.workers, mp_context=get_context("spawn"), initializer=_init_worker,
+                                   initargs=(os.getpid(),))
         try:
             futures = {pool.submit(run_guarded, job.spec, job.out_dir, verbose, job.unit): job for job in jobs}
             for future in as_completed(futures):
@@ -109,10 +110,37 @@ def make_executor(kind: str = "local", *, workers: int | None = None, address: s
                        retries=3 if retries is None else retries)
 
 
-def _init_worker() -> None:
-    """One torch thread per worker (the pool already uses every core); remember a Ctrl-C."""
+def _init_worker(parent: int | None = None) -> None:
+    """One torch thread per worker (the pool already uses every core); remember a Ctrl-C; die with the parent.
+
+    A worker outliving a killed sweep would go on writing its run while the next sweep resumes
+    it; on Linux the kernel now kills the worker when the sweep's process dies (and a run folder's
+    writer lock refuses a second writer everywhere).
+    """
+    if parent is not None:
+        _die_with_parent(parent)
     os.environ["OMP_NUM_THREADS"] = "1"
     import torch
 
     torch.set_num_threads(1)
     signal.signal(signal.SIGINT, on_interrupt)
+
+
+PR_SET_PDEATHSIG, PR_GET_PDEATHSIG = 1, 2
+"""Linux prctl options: the signal a process gets when its parent dies, and reading it back."""
+
+
+def _die_with_parent(parent: int) -> None:
+    """Ask Linux to SIGKILL this process when its parent dies (elsewhere: nothing, the writer lock still guards runs)."""
+    import ctypes
+    import sys
+
+    if not sys.platform.startswith("linux"):
+        return
+    try:
+        libc = ctypes.CDLL(None, use_errno=True)
+        libc.prctl(PR_SET_PDEATHSIG, signal.SIGKILL)
+    except (OSError, AttributeError):  # no prctl in this libc: the writer lock still guards runs
+        return
+    if os.getppid() != parent:  # the parent died before the request took effect
+        os._exit(1)

@@ -22,7 +22,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from crowdnav.agents.run_folder import checkpoint_dir, checkpoint_info, episode_log, policy_snapshots, recover_checkpoint
+from crowdnav.agents.run_folder import checkpoint_dir, checkpoint_info, episode_log, policy_snapshots, recover_checkpoint, writing
 from crowdnav.evaluation.protocol import Protocol
 from crowdnav.evaluation.storage import (
     ENCODER_DIR,
@@ -134,6 +134,13 @@ def run_unit(spec: UnitSpec | Mapping[str, Any], out_dir: str | Path, *, on_even
     _claim(out_dir, spec)
     if (out_dir / META_FILE).is_file():
         return _summary(spec, out_dir, read_json(out_dir / META_FILE), "skipped")
+    with writing(out_dir):  # one process per run: a second one (an orphaned worker, another sweep) is refused
+        if (out_dir / META_FILE).is_file():  # finished by the process that held the lock before
+            return _summary(spec, out_dir, read_json(out_dir / META_FILE), "skipped")
+        return _train_and_evaluate(spec, out_dir, hook)
+
+
+def _train_and_evaluate(spec: UnitSpec, out_dir: Path, hook: EventHook) -> dict[str, Any]:
     from crowdnav.agents import load_policy, train
 
     clean_temporaries(out_dir)  # files a kill left half-written before their rename

@@ -1,0 +1,113 @@
+"""Where a resumable checkpoint puts an off-policy run: the end of its last episode, exactly.
+
+A checkpoint is written when SB3's rollout ends. With ``train_freq`` above one step, that is up
+to ``train_freq - 1`` steps into the next episode, and a resumed run restarts that episode: it
+would collect those steps a second time, with other random numbers, and train at other moments.
+So the checkpoint is rewound to the episode's end instead:
+
+* when an episode ends, :meth:`ResumePoint.mark` notes the step count, the replay buffer's
+  write position (after the episode's last transition) and every random stream;
+* the checkpoint saves the model with that step count, the buffer with that position (the
+  slots after it hold the next episode's first steps, which nothing reads before they are
+  written again with the same data) and those random streams, plus how many steps the
+  interrupted rollout had left after the episode end;
+* a resumed run collects exactly those steps as its first rollout, then trains as the
+  uninterrupted run did (:meth:`ResumePoint.continue_run`).
+
+With the default ``train_freq`` of one step, the episode end is the rollout end and the first
+thing a resumed run does is the gradient update the checkpoint preceded. On-policy algorithms
+(A2C, PPO) keep their rollout buffer only in memory; their resume collects the interrupted
+rollout again and is not bit-exact (docs/agents.md#training-outputs-checkpoints-and-resuming).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterator
+from contextlib import contextmanager
+from dataclasses import dataclass
+from typing import Any
+
+from crowdnav.agents.checkpoint import rng_state
+from stable_baselines3.common.base_class import BaseAlgorithm
+from stable_baselines3.common.type_aliases import TrainFreq, TrainFrequencyUnit
+
+STEPS_AFTER_KEY = "steps_after_episode_end"
+"""Key of the RNG file holding how many steps the interrupted rollout had left after the episode end."""
+
+
+@dataclass
+class _EpisodeEnd:
+    timesteps: int
+    buffer_position: tuple[int, bool] | None
+    """The replay buffer's (pos, full) once the episode's last transition is stored."""
+    rng: dict[str, Any]
+
+
+class ResumePoint:
+    """The last episode end of an off-policy run, and how a resumed run continues from it."""
+
+    def __init__(self, model: BaseAlgorithm, off_policy: bool):
+        self.model = model
+        self.off_policy = off_policy
+        self._end: _EpisodeEnd | None = None
+
+    def mark(self) -> None:
+        """Called when an episode ends, before SB3 stores its last transition (callbacks run first)."""
+        model = self.model
+        if not self.off_policy:
+            return
+        buffer = getattr(model, "replay_buffer", None)
+        position = None
+        if buffer is not None:
+            after = buffer.pos + 1  # where SB3 is about to write the episode's last transition, plus one
+            position = (after % buffer.buffer_size, buffer.full or after == buffer.buffer_size)
+        self._end = _EpisodeEnd(model.num_timesteps, position, rng_state(model))
+
+    @contextmanager
+    def rewound(self) -> Iterator[dict[str, Any] | None]:
+        """The model and buffer as they were at the last episode end (restored afterwards); yields the RNG state to save."""
+        end, model = self._end, self.model
+        if end is None:
+            yield None
+            return
+        buffer = getattr(model, "replay_buffer", None)
+        now = (model.num_timesteps, (buffer.pos, buffer.full) if buffer is not None else None)
+        model.num_timesteps = end.timesteps
+        if buffer is not None and end.buffer_position is not None:
+            buffer.pos, buffer.full = end.buffer_position
+        try:
+            yield {**end.rng, STEPS_AFTER_KEY: now[0] - end.timesteps}
+        finally:
+            model.num_timesteps = now[0]
+            if buffer is not None and now[1] is not None:
+                buffer.pos, buffer.full = now[1]
+
+    def continue_run(self, steps_after: int) -> None:
+        """Start of a resumed run: take the update the checkpoint preceded, or first finish the interrupted rollout."""
+        model = self.model
+        if not self.off_policy:
+            return
+        if steps_after <= 0:
+            if model.num_timesteps > model.learning_starts:
+                steps = model.gradient_steps if model.gradient_steps >= 0 else model.train_freq.frequency
+                if steps > 0:
+                    model.train(batch_size=model.batch_size, gradient_steps=steps)
+            return
+        # the first rollout is the rest of the interrupted one; then the usual rollouts
+        self._restore = (model.train_freq, model.gradient_steps)
+        if model.gradient_steps < 0:  # "as many updates as steps": the whole interrupted rollout's
+            model.gradient_steps = model.train_freq.frequency
+        model.train_freq = TrainFreq(steps_after, TrainFrequencyUnit.STEP)
+
+    def rollout_ended(self) -> None:
+        """End of the first rollout of a resumed run: the next rollouts have the configured length."""
+        restore = getattr(self, "_restore", None)
+        if restore is not None:
+            self.model.train_freq = restore[0]
+
+    def rollout_started(self) -> None:
+        """Start of the second rollout: the first one's update used the interrupted rollout's gradient steps."""
+        restore = getattr(self, "_restore", None)
+        if restore is not None and self.model.train_freq is restore[0]:
+            self.model.gradient_steps = restore[1]
+            self._restore = None
