@@ -26,7 +26,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from crowdnav.agents.run_folder import CHECKPOINT_DIR, POLICY_FILE, REPLAY_FILE, RNG_FILE
+from crowdnav.agents.run_folder import CHECKPOINT_DIR, POLICY_FILE, REPLAY_FILE, RNG_FILE, ROLLOUT_FILE
 from crowdnav.agents.wrappers import ObservationScales, encode_grids, normalize_observation, scales_from_json
 from stable_baselines3.common.base_class import BaseAlgorithm
 
@@ -43,6 +43,7 @@ def save_checkpoint(
     encoder_file: str | Path | None = None,
     replay_buffer: bool = False,
     rng_state: bool | Mapping[str, Any] = False,
+    rollout_state: Mapping[str, Any] | None = None,
 ) -> Path:
     """Write a checkpoint folder, replacing an existing one only once the new one is complete.
 
@@ -59,6 +60,10 @@ def save_checkpoint(
         model.save_replay_buffer(staging / REPLAY_FILE)
     if rng_state is not False:  # a resumable checkpoint: the random streams too, so the resumed run is the same run
         save_rng_state(model, staging / RNG_FILE, rng_state if isinstance(rng_state, Mapping) else None)
+    if rollout_state is not None:  # an on-policy run's collected rollout and env, for an exact resume
+        import pickle
+
+        (staging / ROLLOUT_FILE).write_bytes(pickle.dumps(dict(rollout_state)))
     if encoder_file is not None:
         shutil.copyfile(encoder_file, staging / ENCODER_FILE)
     document = {"format": POLICY_FORMAT, **info, "leog_encoder": ENCODER_FILE if encoder_file is not None else None}

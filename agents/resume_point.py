@@ -15,9 +15,13 @@ So the checkpoint is rewound to the episode's end instead:
   uninterrupted run did (:meth:`ResumePoint.continue_run`).
 
 With the default ``train_freq`` of one step, the episode end is the rollout end and the first
-thing a resumed run does is the gradient update the checkpoint preceded. On-policy algorithms
-(A2C, PPO) keep their rollout buffer only in memory; their resume collects the interrupted
-rollout again and is not bit-exact (docs/agents.md#training-outputs-checkpoints-and-resuming).
+thing a resumed run does is the gradient update the checkpoint preceded.
+
+On-policy algorithms (A2C, PPO) cannot be rewound: their rollout spans episodes and is trained
+on as a whole. Their checkpoint (written when the rollout is complete, before SB3 trains on it)
+keeps the rollout buffer, the environments mid-episode and the last observation
+(:meth:`ResumePoint.rollout_state`, pickled like the replay buffer); a resumed run puts them
+back and takes that update first.
 """
 
 from __future__ import annotations
@@ -82,10 +86,31 @@ class ResumePoint:
             if buffer is not None and now[1] is not None:
                 buffer.pos, buffer.full = now[1]
 
+    def rollout_state(self) -> dict[str, Any] | None:
+        """An on-policy run's collected rollout, environments and last observation (None off-policy or mid-rollout)."""
+        model = self.model
+        buffer = getattr(model, "rollout_buffer", None)
+        if self.off_policy or buffer is None or not buffer.full:
+            return None
+        return {"env": model.get_env(), "rollout_buffer": buffer, "last_obs": model._last_obs,
+                "last_episode_starts": model._last_episode_starts}
+
+    def restore_rollout(self, state: dict[str, Any]) -> None:
+        """Put back what :meth:`rollout_state` saved (after loading the model, before ``learn``)."""
+        model = self.model
+        model.set_env(state["env"], force_reset=False)
+        model._last_obs, model._last_episode_starts = state["last_obs"], state["last_episode_starts"]
+        model.rollout_buffer = state["rollout_buffer"]
+        self._pending_rollout = True
+
     def continue_run(self, steps_after: int) -> None:
         """Start of a resumed run: take the update the checkpoint preceded, or first finish the interrupted rollout."""
         model = self.model
         if not self.off_policy:
+            if getattr(self, "_pending_rollout", False):  # as SB3's loop does after a rollout
+                model._update_current_progress_remaining(model.num_timesteps, model._total_timesteps)
+                model.train()
+                self._pending_rollout = False
             return
         if steps_after <= 0:
             if model.num_timesteps > model.learning_starts:

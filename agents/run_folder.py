@@ -30,6 +30,8 @@ REPLAY_FILE = "replay_buffer.pkl"
 """The checkpoint's replay buffer (off-policy runs with ``save_replay_buffer``)."""
 RNG_FILE = "rng_state.pkl"
 """The checkpoint's random streams (torch, numpy, Python, action space), so a resumed run continues the same run."""
+ROLLOUT_FILE = "rollout_state.pkl"
+"""An on-policy checkpoint's unfinished business: the collected rollout, the env mid-episode, the last observation."""
 LOCK_FILE = "writer.lock"
 """Held (an OS file lock) by the one process writing a run folder; holds that process's PID."""
 

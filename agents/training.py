@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import importlib.util
 import json
+import pickle
 import shutil
 import time
 import warnings
@@ -34,6 +35,7 @@ from crowdnav.agents.checkpoint import (
     MODEL_FILE,
     REPLAY_FILE,
     RNG_FILE,
+    ROLLOUT_FILE,
     checkpoint_folder,
     load_model,
     read_policy_info,
@@ -135,6 +137,11 @@ def _train(config: TrainConfig, resume: bool, on_checkpoint: Callable[[int], Non
     else:
         model = make_model(config, env, saved_encoder, tensorboard_log)
     resume_point = ResumePoint(model, off_policy=config.algo in OFF_POLICY)
+    # the resumed run is the uninterrupted one: off-policy checkpoints are rewound to an episode end,
+    # on-policy ones carry their rollout (without these files, from an older crowdnav: a close resume)
+    exact = bool(state) and saved_streams is not None and (config.algo in OFF_POLICY or (checkpoint / ROLLOUT_FILE).is_file())
+    if state and (checkpoint / ROLLOUT_FILE).is_file() and config.algo not in OFF_POLICY:
+        resume_point.restore_rollout(pickle.loads((checkpoint / ROLLOUT_FILE).read_bytes()))  # the run's own file: trusted
     if state and saved_streams is not None:
         steps_after = int(saved_streams.get(STEPS_AFTER_KEY, 0))
         on_start = lambda: resume_point.continue_run(steps_after)  # noqa: E731 (once SB3's logger exists)
@@ -161,7 +168,7 @@ def _train(config: TrainConfig, resume: bool, on_checkpoint: Callable[[int], Non
         with resume_point.rewound() as streams:  # the checkpoint is the last episode's end, not the rollout's
             save_checkpoint(model, checkpoint, info(episodes), encoder_file=encoder_copy,
                             replay_buffer=config.save_replay_buffer and config.algo in OFF_POLICY,
-                            rng_state=streams if streams is not None else True)
+                            rng_state=streams if streams is not None else True, rollout_state=resume_point.rollout_state())
         if on_checkpoint is not None:
             on_checkpoint(episodes)
 
@@ -179,7 +186,9 @@ def _train(config: TrainConfig, resume: bool, on_checkpoint: Callable[[int], Non
         max_steps = env.unwrapped.scenario.max_steps
         # an upper bound (the callback stops on episodes), and the same total as an uninterrupted run's,
         # so a learning-rate schedule sees the same progress after a resume
-        budget = max((config.episodes - callback.done) * max_steps + 1, config.episodes * max_steps + 1 - model.num_timesteps)
+        budget = config.episodes * max_steps + 1 - model.num_timesteps  # enough: the steps already taken count
+        if state and not exact:  # the steps of the interrupted episode are taken again
+            budget = max(budget, (config.episodes - callback.done) * max_steps + 1)
         model.learn(budget, callback=callback, reset_num_timesteps=state is None, tb_log_name=config.algo)
         save(callback.done)
     seconds = time.perf_counter() - started

@@ -33,6 +33,8 @@ def _weights(result) -> list[bytes]:
 @pytest.mark.parametrize(("algo", "algo_kwargs"), [
     ("sac", {"train_freq": 4, "gradient_steps": -1}),  # the checkpoint falls 0-3 steps into the next episode
     ("td3", {"train_freq": 3}),
+    ("a2c", {"n_steps": 16}),  # the checkpoint keeps the collected rollout and the env mid-episode
+    ("ppo", {"n_steps": 32, "n_epochs": 1}),
 ])
 def test_a_run_stopped_after_a_checkpoint_and_resumed_trains_bit_for_bit_like_the_uninterrupted_run(tmp_path, algo, algo_kwargs):
     whole = train(tiny_config(tmp_path / "whole", algo=algo, episodes=6, algo_kwargs=algo_kwargs))
@@ -47,6 +49,19 @@ def test_a_run_stopped_after_a_checkpoint_and_resumed_trains_bit_for_bit_like_th
     resumed = train(config, resume=True)
     assert _episodes(resumed) == _episodes(whole)[2:]
     assert _weights(resumed) == _weights(whole)
+
+
+def test_pretraining_the_encoder_again_with_its_seed_gives_the_same_weights(tmp_path):
+    # a kill during pre-training restarts it; the restart must give the encoder the runs were promised
+    import torch
+    from crowdnav.agents import pretrain_encoder
+
+    grids = (np.random.default_rng(0).random((64, 1, 30, 30)) < 0.1).astype(np.uint8)
+    runs = [pretrain_encoder(grids, tmp_path / name, channels=[4], kernels=[5], strides=[5], latent=4, epochs=2, seed=3)
+            for name in ("first", "again")]
+    assert runs[0].train_loss == runs[1].train_loss and runs[0].val_loss == runs[1].val_loss
+    saved = [torch.load(run.encoder_path, weights_only=True)["encoder"] for run in runs]
+    assert all(torch.equal(saved[0][key], saved[1][key]) for key in saved[0])
 
 
 def test_a_second_writer_of_a_run_folder_is_refused_with_the_holders_pid_and_the_lock_is_released_after(tmp_path):
@@ -114,15 +129,18 @@ def _table(path: Path) -> pd.DataFrame:
 
 
 @pytest.mark.slow
-def test_a_sweep_sigkilled_at_three_moments_ends_with_the_results_of_one_never_killed(tmp_path):
+def test_a_sweep_sigkilled_at_ten_moments_ends_with_the_results_of_one_never_killed(tmp_path):
     (tmp_path / "experiment.yaml").write_text(EXPERIMENT, encoding="utf-8")
     assert _benchmark(tmp_path, "whole").wait(timeout=300) == 0
     log = tmp_path / "killed" / "killed" / "lidar" / "seed_0" / "train" / "episodes.csv"
-    for episodes in (4, 13, 22):  # before the first checkpoint, between checkpoints, late
+    rng = np.random.default_rng(21)
+    moments = sorted(rng.choice(np.arange(1, 30), size=10, replace=False))
+    for episodes, delay in zip(moments, rng.uniform(0.0, 0.05, size=10), strict=True):
         child = _benchmark(tmp_path, "killed")
         deadline = time.monotonic() + 120
         while time.monotonic() < deadline and (not log.exists() or len(log.read_text().splitlines()) <= episodes):
-            time.sleep(0.01)
+            time.sleep(0.005)
+        time.sleep(delay)  # a few milliseconds on: some kills land in a checkpoint or results write
         os.kill(child.pid, signal.SIGKILL)  # the sweep's process only: its worker must not live on
         child.wait()
     assert _benchmark(tmp_path, "killed").wait(timeout=300) == 0
@@ -132,3 +150,4 @@ def test_a_sweep_sigkilled_at_three_moments_ends_with_the_results_of_one_never_k
     for name in files:
         pd.testing.assert_frame_equal(_table(whole / name), _table(killed / name), obj=str(name))
     assert np.array_equal(pd.read_csv(log)["episode"], np.arange(30))
+    assert (log.parent / "episodes.csv.discarded").is_file()  # the kills did interrupt training
