@@ -3,7 +3,10 @@
 State lives in numpy arrays indexed by agent, robot first: ``positions[0]`` is the robot,
 ``positions[1:]`` the active humans. Points and velocities are complex numbers
 (``x + 1j*y``, metres and m/s, world frame). A step costs a fixed number of array operations
-whatever the crowd size: there is no Python loop over humans, pairs or edges.
+whatever the crowd size: there is no Python loop over humans, pairs or edges. Up to
+``grid_from`` humans every pair is measured; larger crowds measure only pairs within the
+human-human force's reach, found with a grid of cells (:mod:`crowdnav.crowd_grid`, the same model
+within a stated tolerance).
 
 Step order: humans' commands (social force, or given actions) and robot kinematics ->
 integrate -> measure the new geometry once (pairwise distances, nearest obstacle points) ->
@@ -26,6 +29,7 @@ import math
 import numpy as np
 
 from crowdnav import social_force as sf
+from crowdnav.crowd_grid import CrowdGrid
 from crowdnav.events import OUTCOMES, Collision, SimulationError, StepEvents  # noqa: F401  (re-exported: their public home)
 from crowdnav.obstacles import nearest_on_edges
 from crowdnav.placement import GAP, JITTER, PlacementError
@@ -47,6 +51,10 @@ class Simulator:
     ``scenario``: a library name, YAML path, mapping or Scenario (loaded and compiled by
     :func:`crowdnav.world.load_world`), or an already compiled world (then no ``overrides``).
     """
+
+    grid_from: int = 250
+    """Crowds of at least this many humans use the neighbour grid (:mod:`crowdnav.crowd_grid`) instead of
+    all pairs: the same model within a stated tolerance, at a cost that grows with n instead of n^2."""
 
     def __init__(self, scenario: WorldSource | CompiledWorld, overrides: Overrides | None = None):
         if isinstance(scenario, CompiledWorld):
@@ -192,18 +200,30 @@ class Simulator:
 
     def _prepare_pair_constants(self, n: int) -> None:
         """Constants of the pairwise and obstacle repulsion for a crowd of ``n`` (cached per ``n``)."""
-        cached = self._constants.get(n)
+        key = (n, n >= self.grid_from)
+        cached = self._constants.get(key)
         if cached is None:
-            self._compute_pair_constants(n)
-            self._constants[n] = (self.radii, self._contact, self._gain, self._decay, self._contact_all)
+            self._compute_pair_constants(n, grid=key[1])
+            self._constants[key] = (self.radii, self._contact, self._gain, self._decay, self._contact_all, self._grid)
         else:
-            self.radii, self._contact, self._gain, self._decay, self._contact_all = cached
+            self.radii, self._contact, self._gain, self._decay, self._contact_all, self._grid = cached
 
-    def _compute_pair_constants(self, n: int) -> None:
+    def _compute_pair_constants(self, n: int, grid: bool = False) -> None:
         robot, humans, force = self.scenario.robot, self.scenario.humans, self._force
         radii = np.full(n + 1, humans.radius)
         radii[0] = robot.radius
         self.radii = radii
+        self._grid = None
+        if grid:  # no (n+1)^2 tables: the robot's row and column, the obstacles' columns, one human-human gain
+            obstacles = self.obstacles
+            static_strength = np.full((n + 1, 1), force.obstacle_strength)
+            static_strength[0] = 0.0
+            static_contact = radii[:, None] + obstacles.surface_radius[None, :]
+            static_gain = sf.repulsion_gain(static_strength, static_contact, force.obstacle_range)
+            self._grid = CrowdGrid(n, robot.radius, humans.radius, force, humans.see_robot, static_gain, -1.0 / force.obstacle_range,
+                                   static_contact, _SELF_DISTANCE)
+            self._contact = self._gain = self._decay = self._contact_all = None
+            return
         self._contact = radii[:, None] + radii[None, :]
         strength = np.full((n + 1, n + 1), force.human_strength)
         decay = np.full((n + 1, n + 1), force.human_range)
@@ -256,7 +276,7 @@ class Simulator:
             raise SimulationError(f"step {self.step_count}: the position of {who} became non-finite (its velocity: {self.velocities[bad[0]]}); "
                                   "check the scenario's social_force parameters")
         self.refresh()
-        if self.n_humans and self._gap[1:].min() < 0.0:  # a human touches someone or something
+        if self.n_humans and self._humans_touch:  # a human touches someone or something
             self._resolve_human_overlaps()
             self.refresh()
         collision = self.robot_collision()
@@ -325,18 +345,24 @@ class Simulator:
     def refresh(self) -> None:
         """Geometry at the current positions, computed once per step and read by sensors.
 
-        Sets ``pair_offset`` / ``pair_distance`` ((n+1, n+1): from agent i to agent j, centre
-        distance, the diagonal a huge number), ``polygon_offset`` / ``polygon_distance``
+        Sets ``robot_offset`` / ``robot_distance`` ((n+1,): from the robot to every agent, centre
+        distance, its own a huge number), ``pair_offset`` / ``pair_distance`` ((n+1, n+1): from
+        agent i to agent j; for crowds of ``grid_from`` humans or more they are built only when
+        read), ``polygon_offset`` / ``polygon_distance``
         ((n+1, P): to the nearest point of each static polygon) and, with round obstacles,
         ``disc_offset`` / ``disc_distance`` ((n+1, C): to each disc's centre, centre distance).
         Also the repulsion on every agent from humans (and the robot if seen) and obstacles.
         Call it after editing ``positions`` by hand (tests, scripted set-ups).
         """
         z = self.positions
+        if self._grid is not None:
+            self._refresh_grid(z)
+            return
         offset = z[None, :] - z[:, None]  # row i, column j: from agent i to agent j
         distance = np.abs(offset)
         distance.flat[:: len(z) + 1] = _SELF_DISTANCE
-        self.pair_offset, self.pair_distance = offset, distance
+        self._pair_offset, self._pair_distance = offset, distance
+        self.robot_offset, self.robot_distance = offset[0], distance[0]
         if self._static_count:
             obstacles = self.obstacles
             static_offset, static_distance = nearest_on_edges(z, obstacles.surface)  # polygons, then disc centres
@@ -351,7 +377,49 @@ class Simulator:
             self.polygon_offset = self.disc_offset = empty.astype(complex)
             self.polygon_distance = self.disc_distance = empty
         self._gap = distance - self._contact_all  # surface gaps: agents then obstacles, (n+1, n+1+P+C)
+        self._robot_gap = self._gap[0]
+        self._humans_touch = len(z) > 1 and bool(self._gap[1:].min() < 0.0)
         self._repulsion = sf.repulsion(offset, distance, self._gain, self._decay)
+
+    def _refresh_grid(self, z: np.ndarray) -> None:
+        """:meth:`refresh` for a large crowd: the robot against everyone, humans against neighbours."""
+        static_offset = static_distance = None
+        if self._static_count:
+            obstacles = self.obstacles
+            static_offset, static_distance = nearest_on_edges(z, obstacles.surface)
+            count = obstacles.polygon_count
+            self.polygon_offset, self.polygon_distance = static_offset[:, :count], static_distance[:, :count]
+            self.disc_offset, self.disc_distance = static_offset[:, count:], static_distance[:, count:]
+        else:
+            empty = np.zeros((len(z), 0))
+            self.polygon_offset = self.disc_offset = empty.astype(complex)
+            self.polygon_distance = self.disc_distance = empty
+        geometry = self._grid.refresh(z, static_offset, static_distance)
+        self._geometry = geometry
+        self._pair_offset = self._pair_distance = None  # built from positions only if someone asks
+        self.robot_offset, self.robot_distance = geometry.robot_offset, geometry.robot_distance
+        self._robot_gap, self._humans_touch, self._repulsion = geometry.robot_gap, geometry.humans_touch, geometry.repulsion
+
+    @property
+    def pair_offset(self) -> np.ndarray:
+        """(n+1, n+1) complex: from agent i to agent j (all pairs; built on demand for large crowds)."""
+        if self._pair_offset is None:
+            self._dense_pairs()
+        return self._pair_offset
+
+    @property
+    def pair_distance(self) -> np.ndarray:
+        """(n+1, n+1): centre distances, the diagonal a huge number (built on demand for large crowds)."""
+        if self._pair_distance is None:
+            self._dense_pairs()
+        return self._pair_distance
+
+    def _dense_pairs(self) -> None:
+        z = self.positions
+        offset = z[None, :] - z[:, None]
+        distance = np.abs(offset)
+        distance.flat[:: len(z) + 1] = _SELF_DISTANCE
+        self._pair_offset, self._pair_distance = offset, distance
 
     def _resolve_human_overlaps(self) -> None:
         """Push humans apart (half the overlap each), then out of walls and furniture.
@@ -362,11 +430,15 @@ class Simulator:
         holds humans out of walls and furniture (penetration under 1 cm, docs/simulator.md).
         """
         n = self.n_humans
-        pair_gap = self._gap[1:, 1 : n + 1]
-        self.positions[1:] += ((self.pair_offset[1:, 1:] / self.pair_distance[1:, 1:]) * (np.minimum(pair_gap, 0.0) / 2)).sum(1)
+        if self._grid is not None:
+            self.positions += self._grid.push_apart(self._geometry)
+            contact = self._grid.static_contact[1:]
+        else:
+            pair_gap = self._gap[1:, 1 : n + 1]
+            self.positions[1:] += ((self._pair_offset[1:, 1:] / self._pair_distance[1:, 1:]) * (np.minimum(pair_gap, 0.0) / 2)).sum(1)
+            contact = self._contact_all[1:, n + 1 :]
         if not self._static_count:
             return
-        contact = self._contact_all[1:, n + 1 :]
         for _ in range(_OBSTACLE_PASSES):
             offset, distance = nearest_on_edges(self.positions[1:], self.obstacles.surface)
             gap = distance - contact
@@ -377,7 +449,7 @@ class Simulator:
 
     def robot_collision(self) -> Collision | None:
         """The robot's deepest contact in the current state (touching counts), or None."""
-        gaps = self._gap[0]
+        gaps = self._robot_gap
         if not len(gaps) or gaps.min() > 0.0:
             return None  # the common case, decided with one reduction
         k = int(gaps.argmin())

@@ -1,7 +1,7 @@
 """``closest_obstacle``: the nearest point of any obstacle, from the geometry the simulator caches.
 
 The simulator already measured, after the last reset/step, the robot's offset to every human
-centre (``pair_offset`` row 0), to the nearest point of every static polygon
+centre (``robot_offset``), to the nearest point of every static polygon
 (``polygon_offset`` row 0) and to every round obstacle's centre (``disc_offset`` row 0), so
 this modality only picks the smallest of three short rows.
 """
@@ -65,10 +65,10 @@ class ClosestObstacleModality(Modality):
         """World-frame vector from the robot's centre to the nearest obstacle point (None: no obstacle)."""
         best_distance, best = np.inf, None
         if sim.n_humans:
-            surface = np.abs(sim.pair_distance[0, 1:] - sim.radii[1:])
+            surface = np.abs(sim.robot_distance[1:] - sim.radii[1:])
             j = int(surface.argmin())
             if surface[j] < best_distance:
-                best_distance, best = surface[j], ("disc", sim.pair_offset[0, j + 1], sim.radii[j + 1])
+                best_distance, best = surface[j], ("disc", sim.robot_offset[j + 1], sim.radii[j + 1])
         if self._has_polygons:
             distances = sim.polygon_distance[0]
             k = int(distances.argmin())
