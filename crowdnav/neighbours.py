@@ -14,6 +14,8 @@ import numpy as np
 
 _HALF_BLOCK = ((0, 0), (1, 0), (-1, 1), (0, 1), (1, 1))
 """Cell offsets (dx, dy) that meet every neighbouring cell pair exactly once."""
+_TABLE_CELLS = 1 << 20
+"""Grids of up to this many cells (8 MB of counts) use a lookup table; larger ones a binary search."""
 
 
 def close_pairs(points: np.ndarray, cutoff: float) -> tuple[np.ndarray, np.ndarray]:
@@ -32,12 +34,20 @@ def close_pairs(points: np.ndarray, cutoff: float) -> tuple[np.ndarray, np.ndarr
     width = int(cx.max()) + 2
     key = cy * width + cx
     order = np.argsort(key, kind="stable")
-    sorted_key = key[order]
+    cells = width * (int(cy.max()) + 2)
+    if cells <= _TABLE_CELLS:  # each cell's run in the sorted order, read off a table
+        per_cell = np.bincount(key, minlength=cells)
+        cell_start = np.cumsum(per_cell) - per_cell
+    else:  # a few points spread over a huge area: binary search instead of a table
+        sorted_key = key[order]
     first, second = [], []
     for dx, dy in _HALF_BLOCK:
         target = key + (dy * width + dx)
-        start = np.searchsorted(sorted_key, target, side="left")
-        count = np.searchsorted(sorted_key, target, side="right") - start
+        if cells <= _TABLE_CELLS:
+            start, count = cell_start[target], per_cell[target]
+        else:
+            start = np.searchsorted(sorted_key, target, side="left")
+            count = np.searchsorted(sorted_key, target, side="right") - start
         total = int(count.sum())
         if total == 0:
             continue

@@ -52,7 +52,7 @@ class Simulator:
     :func:`crowdnav.world.load_world`), or an already compiled world (then no ``overrides``).
     """
 
-    grid_from: int = 250
+    grid_from: int = 200
     """Crowds of at least this many humans use the neighbour grid (:mod:`crowdnav.crowd_grid`) instead of
     all pairs: the same model within a stated tolerance, at a cost that grows with n instead of n^2."""
 
