@@ -229,3 +229,12 @@ def test_group_mistakes_are_one_line_errors_with_file_line_and_field(tmp_path, h
     assert message.startswith(f"{path}:") and "\n" not in message.strip()
     for fragment in fragments:
         assert fragment in message, message
+
+
+def test_a_dumped_group_scenario_loads_again_as_the_same_scenario():
+    # defaults are dumped too: the group rules judge values, not which keys were written
+    from crowdnav.scenario.schema import Scenario
+
+    for name in ("station_hall", "hotel_lobby"):
+        scenario = Simulator(name).scenario
+        assert Scenario.model_validate(scenario.model_dump()).model_dump() == scenario.model_dump()
