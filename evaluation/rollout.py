@@ -73,7 +73,10 @@ class HeldOutEpisodes:
         episodes = [self._episode(i, positions[i], forces[i], returns[i], ends[i]) for i in range(len(self.envs))]
         if frames is not None:
             for episode, states, env in zip(episodes, frames, self.envs, strict=True):
-                episode["frames"] = {"dt": float(env.simulator.dt), **{key: np.stack([s[key] for s in states]) for key in states[0]}}
+                sim = env.simulator  # each agent's group, for the whole episode (the robot is its own)
+                groups = ["robot", *(sim.groups[g].name for g in sim.human_group.tolist())]
+                episode["frames"] = {"dt": float(sim.dt), "groups": groups,
+                                     **{key: np.stack([s[key] for s in states]) for key in states[0]}}
         return episodes
 
     def _episode(self, i: int, positions: list[np.ndarray], forces: list[float], total: float, info: dict[str, Any]) -> dict[str, Any]:

@@ -15,6 +15,7 @@ column            meaning
 ``outcome``       how the episode ended (success, collision, out_of_bounds, truncated)
 ``step``          0 for the reset state, then one per env step; ``time_s`` = step * dt
 ``agent``         ``robot`` or ``human_<i>``
+``group``         the human's group (``crowd`` for a file without ``humans.groups``); ``robot`` for the robot
 ``x, y``          centre
 ``vx, vy``        velocity
 ``goal_x, goal_y`` current goal (a human's goal changes when it reaches one)
@@ -35,7 +36,7 @@ from typing import Any
 
 import numpy as np
 
-TIDY_COLUMNS = ("test_episode", "test_seed", "outcome", "step", "time_s", "agent", "x", "y", "vx", "vy", "goal_x", "goal_y")
+TIDY_COLUMNS = ("test_episode", "test_seed", "outcome", "step", "time_s", "agent", "group", "x", "y", "vx", "vy", "goal_x", "goal_y")
 TRACK_ID_STRIDE = 1000
 
 
@@ -57,6 +58,7 @@ def tidy_table(episodes: Iterable[Mapping[str, Any]]) -> Any:
             "test_episode": episode["test_episode"], "test_seed": episode["test_seed"], "outcome": episode["outcome"],
             "step": np.repeat(np.arange(steps), agents), "time_s": np.repeat(np.arange(steps) * states["dt"], agents),
             "agent": np.tile(agent_names(agents), steps),
+            "group": np.tile(states.get("groups", ["robot", *["crowd"] * (agents - 1)]), steps),
             "x": positions.real.ravel(), "y": positions.imag.ravel(), "vx": velocities.real.ravel(), "vy": velocities.imag.ravel(),
             "goal_x": goals.real.ravel(), "goal_y": goals.imag.ravel(),
         }))

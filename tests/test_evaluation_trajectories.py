@@ -87,3 +87,15 @@ def test_trajectories_command_replays_every_run_of_an_experiment_and_checks_the_
     frame.to_csv(episodes_csv, index=False)
     assert main(["trajectories", str(learned)]) == 1
     assert "replayed outcomes differ from the recorded ones" in capsys.readouterr().err
+
+
+def test_the_tidy_table_names_each_humans_group():
+    episodes = HeldOutEpisodes({"scenario": "station_hall", "modalities": ["goal"]}, [0])
+    try:
+        table = tidy_table(episodes.run(StraightToGoal(), privileged=True, record=True))
+    finally:
+        episodes.close()
+    groups = table[table["step"] == 0].set_index("agent")["group"]
+    assert groups["robot"] == "robot" and set(groups.drop("robot")) == {"commuters", "shoppers", "talking", "meeting"}
+    plain = tidy_table(_recorded())
+    assert set(plain["group"]) == {"robot", "crowd"}
