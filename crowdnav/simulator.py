@@ -31,8 +31,9 @@ import numpy as np
 from crowdnav import social_force as sf
 from crowdnav.crowd_grid import CrowdGrid
 from crowdnav.events import OUTCOMES, Collision, SimulationError, StepEvents  # noqa: F401  (re-exported: their public home)
+from crowdnav.groups import apply_goal_rules, first_goals, place_groups
 from crowdnav.obstacles import nearest_on_edges
-from crowdnav.placement import GAP, JITTER, PlacementError
+from crowdnav.placement import JITTER
 from crowdnav.scenario.loader import Overrides
 from crowdnav.world import CompiledWorld, WorldSource, load_world
 
@@ -136,7 +137,7 @@ class Simulator:
             heading = math.radians(float(robot.start_heading))
         # groups in file order, each away from the robot and the groups before it; then goals, then speeds
         # (one group draws exactly what the crowd drew before groups existed: same seed, same episode)
-        spawn = self._place_groups(start, complex(goal), counts)
+        spawn = place_groups(self, start, complex(goal), counts)
         self.positions = np.concatenate([start, *spawn])
         self.velocities = np.zeros(n + 1, dtype=complex)
         self.robot_goal = complex(goal)
@@ -144,7 +145,7 @@ class Simulator:
         self.human_group = np.repeat(np.arange(len(counts)), counts)
         """Index into :attr:`groups` of every human."""
         standing = np.repeat([group.standing for group in self.groups], counts).astype(bool)
-        self.human_goals = np.concatenate([np.zeros(0, dtype=complex), *self._first_goals(spawn)])
+        self.human_goals = np.concatenate([np.zeros(0, dtype=complex), *first_goals(self, spawn)])
         self.human_preferred_speed = np.concatenate([np.zeros(0), *(
             np.zeros(count) if group.standing else rng.uniform(*group.preferred_speed, size=count)
             for group, count in zip(self.groups, counts, strict=True))])
@@ -159,44 +160,6 @@ class Simulator:
         self._prepare_pair_constants(n)
         self.refresh()
         self._ready = True
-
-    def _place_groups(self, start: np.ndarray, goal: complex, counts: list[int]) -> list[np.ndarray]:
-        """Member positions of every group (complex arrays, file order)."""
-        robot, radius, rng = self.scenario.robot, self.scenario.humans.radius, self._rng
-        margin = GAP + math.sqrt(2) * JITTER  # the new point's jitter; placed agents are where they are
-        placed, out = [start], []
-        for group, places, count in zip(self.groups, self.placement.groups, counts, strict=True):
-            if count == 0:
-                out.append(np.zeros(0, dtype=complex))
-                continue
-            humans_placed = np.concatenate(placed[1:]) if len(placed) > 1 else np.zeros(0, dtype=complex)
-            ring = places.circle_radius
-            if group.standing:  # keep the robot's goal reachable: no circle around it
-                away = np.concatenate([start, [goal], humans_placed])
-                near = np.full(len(away), ring + 2 * radius + margin)
-                near[:2] = robot.radius + ring + radius + margin
-                centre = places.spawn.draw(rng, 1, away_from=away, min_distance=near)[0]
-                phase = rng.uniform(0, 2 * math.pi)
-                members = centre + ring * np.exp(1j * (phase + 2 * math.pi * np.arange(count) / count))
-            else:
-                away = np.concatenate([start, humans_placed])
-                near = np.full(len(away), 2 * radius + margin)
-                near[0] = robot.radius + radius + margin
-                members = places.spawn.draw(rng, count, away_from=away, min_distance=near)
-            placed.append(members)
-            out.append(members)
-        return out
-
-    def _first_goals(self, spawn: list[np.ndarray]) -> list[np.ndarray]:
-        goals = []
-        for group, places, members in zip(self.groups, self.placement.groups, spawn, strict=True):
-            if len(members) == 0 or group.standing:
-                goals.append(members.copy())  # standing members' goal is where they stand
-            elif group.goal_rule == "mirror":
-                goals.append(2 * _mirror_center(group, self.scenario) - members)
-            else:
-                goals.append(places.goal.draw(self._rng, len(members), replace=len(members) > len(places.goal)))
-        return goals
 
     def _prepare_pair_constants(self, n: int) -> None:
         """Constants of the pairwise and obstacle repulsion for a crowd of ``n`` (cached per ``n``)."""
@@ -283,7 +246,7 @@ class Simulator:
         left_world = self.robot_left_world()
         goal_reached = abs(self.robot_goal - self.positions[0]) <= self.scenario.robot.goal_radius
         if self.n_humans:
-            self._apply_goal_rule()
+            apply_goal_rules(self)
         truncated = self.step_count >= self.scenario.max_steps
         return StepEvents(goal_reached=bool(goal_reached), collision=collision, truncated=truncated, left_world=left_world)
 
@@ -469,54 +432,3 @@ class Simulator:
         x0, y0, x1, y1 = self._bounds
         robot = complex(self.positions[0])
         return not (x0 <= robot.real <= x1 and y0 <= robot.imag <= y1)
-
-    # ------------------------------------------------------------------ goal rule
-
-    def _apply_goal_rule(self) -> None:
-        arrived = np.abs(self.human_goals - self.positions[1:]) <= self._force.goal_tolerance
-        self.human_arrived = arrived & ~self.human_stopped
-        single = len(self.groups) == 1
-        for g, (group, places) in enumerate(zip(self.groups, self.placement.groups, strict=True)):
-            if group.standing or group.max_count == 0:
-                continue
-            mine = arrived if single else arrived & (self.human_group == g)
-            if group.on_goal == "stop":
-                self.human_stopped |= mine
-                self.velocities[1:][self.human_stopped] = 0.0
-                continue
-            if not mine.any():
-                continue
-            index = np.flatnonzero(mine)
-            if group.on_goal == "respawn":
-                index = self._respawn(index, group, places)
-                if len(index) == 0:
-                    continue
-            if group.goal_rule == "mirror":
-                self.human_goals[index] = 2 * _mirror_center(group, self.scenario) - self.human_goals[index]
-            else:
-                self.human_goals[index] = places.goal.draw(self._rng, len(index), replace=True)
-
-    def _respawn(self, index: np.ndarray, group, places) -> np.ndarray:
-        """Move arrived members to free spawn points of their group; returns those that moved (the rest wait)."""
-        radius, robot = self.scenario.humans.radius, self.scenario.robot
-        others = np.delete(self.positions, index + 1)
-        reach = max(robot.radius, radius) + radius + GAP + math.sqrt(2) * JITTER
-        for count in range(len(index), 0, -1):  # at most len(index) tries, usually one
-            try:
-                new = places.spawn.draw(self._rng, count, away_from=others, min_distance=reach)
-            except PlacementError:
-                continue
-            moved = index[:count]
-            self.positions[moved + 1] = new
-            self.velocities[moved + 1] = 0.0
-            if group.goal_rule == "mirror":
-                # the mirror rule flips the goal below, so store the spawn's mirror image twice-flipped
-                self.human_goals[moved] = new
-            self.refresh()
-            return moved
-        return index[:0]
-
-
-def _mirror_center(group, scenario) -> complex:
-    """Centre of a group's mirror rule (default: the world's centre)."""
-    return complex(*(group.mirror_center or scenario.world_center))

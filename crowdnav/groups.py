@@ -1,0 +1,109 @@
+"""What the crowd's groups do: where members start, their first goals, and what they do at a goal.
+
+The simulator calls these with itself (``sim``): :func:`place_groups` and :func:`first_goals` at
+reset, :func:`apply_goal_rules` after each step. Groups are visited in file order, and a file
+without ``humans.groups`` is one group: it draws the same random numbers in the same order as
+before groups existed, so its episodes did not change. Loops run over groups (a scenario's
+constant), never over humans.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import numpy as np
+
+from crowdnav.placement import GAP, JITTER, PlacementError
+
+
+def place_groups(sim: Any, start: np.ndarray, goal: complex, counts: list[int]) -> list[np.ndarray]:
+    """Member positions of every group (complex arrays, file order), each away from the robot and the groups before it."""
+    robot, radius, rng = sim.scenario.robot, sim.scenario.humans.radius, sim.rng
+    margin = GAP + math.sqrt(2) * JITTER  # the new point's jitter; placed agents are where they are
+    placed, out = [start], []
+    for group, places, count in zip(sim.groups, sim.placement.groups, counts, strict=True):
+        if count == 0:
+            out.append(np.zeros(0, dtype=complex))
+            continue
+        humans_placed = np.concatenate(placed[1:]) if len(placed) > 1 else np.zeros(0, dtype=complex)
+        ring = places.circle_radius
+        if group.standing:  # keep the robot's goal reachable: no circle around it
+            away = np.concatenate([start, [goal], humans_placed])
+            near = np.full(len(away), ring + 2 * radius + margin)
+            near[:2] = robot.radius + ring + radius + margin
+            centre = places.spawn.draw(rng, 1, away_from=away, min_distance=near)[0]
+            phase = rng.uniform(0, 2 * math.pi)
+            members = centre + ring * np.exp(1j * (phase + 2 * math.pi * np.arange(count) / count))
+        else:
+            away = np.concatenate([start, humans_placed])
+            near = np.full(len(away), 2 * radius + margin)
+            near[0] = robot.radius + radius + margin
+            members = places.spawn.draw(rng, count, away_from=away, min_distance=near)
+        placed.append(members)
+        out.append(members)
+    return out
+
+def first_goals(sim: Any, spawn: list[np.ndarray]) -> list[np.ndarray]:
+    """Every member's first goal, group by group (standing members: where they stand)."""
+    goals = []
+    for group, places, members in zip(sim.groups, sim.placement.groups, spawn, strict=True):
+        if len(members) == 0 or group.standing:
+            goals.append(members.copy())  # standing members' goal is where they stand
+        elif group.goal_rule == "mirror":
+            goals.append(2 * mirror_center(group, sim.scenario) - members)
+        else:
+            goals.append(places.goal.draw(sim.rng, len(members), replace=len(members) > len(places.goal)))
+    return goals
+
+
+def apply_goal_rules(sim: Any) -> None:
+    """After a step: humans at their goals follow their group's ``on_goal`` and ``goal_rule``."""
+    arrived = np.abs(sim.human_goals - sim.positions[1:]) <= sim.scenario.humans.social_force.goal_tolerance
+    sim.human_arrived = arrived & ~sim.human_stopped
+    single = len(sim.groups) == 1
+    for g, (group, places) in enumerate(zip(sim.groups, sim.placement.groups, strict=True)):
+        if group.standing or group.max_count == 0:
+            continue
+        mine = arrived if single else arrived & (sim.human_group == g)
+        if group.on_goal == "stop":
+            sim.human_stopped |= mine
+            sim.velocities[1:][sim.human_stopped] = 0.0
+            continue
+        if not mine.any():
+            continue
+        index = np.flatnonzero(mine)
+        if group.on_goal == "respawn":
+            index = _respawn(sim, index, group, places)
+            if len(index) == 0:
+                continue
+        if group.goal_rule == "mirror":
+            sim.human_goals[index] = 2 * mirror_center(group, sim.scenario) - sim.human_goals[index]
+        else:
+            sim.human_goals[index] = places.goal.draw(sim.rng, len(index), replace=True)
+
+
+def _respawn(sim: Any, index: np.ndarray, group: Any, places: Any) -> np.ndarray:
+    """Move arrived members to free spawn points of their group; returns those that moved (the rest wait)."""
+    radius, robot = sim.scenario.humans.radius, sim.scenario.robot
+    others = np.delete(sim.positions, index + 1)
+    reach = max(robot.radius, radius) + radius + GAP + math.sqrt(2) * JITTER
+    for count in range(len(index), 0, -1):  # at most len(index) tries, usually one
+        try:
+            new = places.spawn.draw(sim.rng, count, away_from=others, min_distance=reach)
+        except PlacementError:
+            continue
+        moved = index[:count]
+        sim.positions[moved + 1] = new
+        sim.velocities[moved + 1] = 0.0
+        if group.goal_rule == "mirror":
+            # the mirror rule flips the goal below, so store the spawn's mirror image twice-flipped
+            sim.human_goals[moved] = new
+        sim.refresh()
+        return moved
+    return index[:0]
+
+
+def mirror_center(group: Any, scenario: Any) -> complex:
+    """Centre of a group's mirror rule (default: the world's centre)."""
+    return complex(*(group.mirror_center or scenario.world_center))
