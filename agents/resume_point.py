@@ -43,7 +43,7 @@ STEPS_AFTER_KEY = "steps_after_episode_end"
 class _EpisodeEnd:
     timesteps: int
     buffer_position: tuple[int, bool] | None
-    """The replay buffer's (pos, full) once the episode's last transition is stored."""
+    """The replay buffer's (pos, full) when the episode ended, before its last transition was stored."""
     rng: dict[str, Any]
 
 
@@ -54,6 +54,10 @@ class ResumePoint:
         self.model = model
         self.off_policy = off_policy
         self._end: _EpisodeEnd | None = None
+        self._restore: tuple[TrainFreq, int] | None = None
+        """A resumed run's configured (train_freq, gradient_steps) while its first, shorter rollout runs."""
+        self._pending_rollout = False
+        """An on-policy resume whose saved rollout still waits for its update."""
 
     def mark(self) -> None:
         """Called when an episode ends, before SB3 stores its last transition (callbacks run first)."""
@@ -61,10 +65,7 @@ class ResumePoint:
         if not self.off_policy:
             return
         buffer = getattr(model, "replay_buffer", None)
-        position = None
-        if buffer is not None:
-            after = buffer.pos + 1  # where SB3 is about to write the episode's last transition, plus one
-            position = (after % buffer.buffer_size, buffer.full or after == buffer.buffer_size)
+        position = (buffer.pos, buffer.full) if buffer is not None else None
         self._end = _EpisodeEnd(model.num_timesteps, position, rng_state(model))
 
     @contextmanager
@@ -78,7 +79,7 @@ class ResumePoint:
         now = (model.num_timesteps, (buffer.pos, buffer.full) if buffer is not None else None)
         model.num_timesteps = end.timesteps
         if buffer is not None and end.buffer_position is not None:
-            buffer.pos, buffer.full = end.buffer_position
+            buffer.pos, buffer.full = _after_episode_end(buffer, end.buffer_position)
         try:
             yield {**end.rng, STEPS_AFTER_KEY: now[0] - end.timesteps}
         finally:
@@ -107,7 +108,7 @@ class ResumePoint:
         """Start of a resumed run: take the update the checkpoint preceded, or first finish the interrupted rollout."""
         model = self.model
         if not self.off_policy:
-            if getattr(self, "_pending_rollout", False):  # as SB3's loop does after a rollout
+            if self._pending_rollout:  # as SB3's loop does after a rollout
                 model._update_current_progress_remaining(model.num_timesteps, model._total_timesteps)
                 model.train()
                 self._pending_rollout = False
@@ -126,13 +127,23 @@ class ResumePoint:
 
     def rollout_ended(self) -> None:
         """End of the first rollout of a resumed run: the next rollouts have the configured length."""
-        restore = getattr(self, "_restore", None)
-        if restore is not None:
-            self.model.train_freq = restore[0]
+        if self._restore is not None:
+            self.model.train_freq = self._restore[0]
 
     def rollout_started(self) -> None:
         """Start of the second rollout: the first one's update used the interrupted rollout's gradient steps."""
-        restore = getattr(self, "_restore", None)
-        if restore is not None and self.model.train_freq is restore[0]:
-            self.model.gradient_steps = restore[1]
+        if self._restore is not None and self.model.train_freq is self._restore[0]:
+            self.model.gradient_steps = self._restore[1]
             self._restore = None
+
+
+def _after_episode_end(buffer: Any, marked: tuple[int, bool]) -> tuple[int, bool]:
+    """The buffer's (pos, full) with the ended episode's last transition in it, and nothing after.
+
+    SB3 stores that transition right after the callback marked the episode's end, unless the
+    callback ended training there (the run's last episode): then the buffer is still as marked.
+    """
+    if (buffer.pos, buffer.full) == marked:
+        return marked
+    after = marked[0] + 1
+    return after % buffer.buffer_size, marked[1] or after == buffer.buffer_size

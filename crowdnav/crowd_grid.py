@@ -86,9 +86,7 @@ class CrowdGrid:
         pair_distance = np.abs(pair_offset)
         # each pair pushes both ends: on `first` along -offset, on `second` along +offset (gain < 0)
         push = pair_offset * (self.pair_gain * np.exp(np.multiply(pair_distance, self.pair_decay, dtype=np.float32)) / pair_distance)
-        n1 = len(z)
-        repulsion = (np.bincount(first, push.real, n1) - np.bincount(second, push.real, n1)) * 1.0 + 0j
-        repulsion.imag = np.bincount(first, push.imag, n1) - np.bincount(second, push.imag, n1)
+        repulsion = _scatter(first, second, push, len(z))
         # the robot's row (force on it from every human) and column (its push on humans who see it)
         row = self.row_gain * np.exp(np.multiply(robot_distance, self.row_decay, dtype=np.float32)) / robot_distance
         repulsion[0] += (robot_offset * row).sum()
@@ -108,7 +106,11 @@ class CrowdGrid:
         overlap = geometry.pair_distance < self.contact
         first, second = geometry.first[overlap], geometry.second[overlap]
         step = (geometry.pair_offset[overlap] / geometry.pair_distance[overlap]) * ((geometry.pair_distance[overlap] - self.contact) / 2)
-        n1 = self.n + 1
-        moved = np.bincount(first, step.real, n1) - np.bincount(second, step.real, n1) + 0j
-        moved.imag = np.bincount(first, step.imag, n1) - np.bincount(second, step.imag, n1)
-        return moved
+        return _scatter(first, second, step, self.n + 1)
+
+
+def _scatter(first: np.ndarray, second: np.ndarray, value: np.ndarray, size: int) -> np.ndarray:
+    """(size,) complex: ``+value`` summed onto each pair's ``first`` agent, ``-value`` onto its ``second``."""
+    real = np.bincount(first, value.real, size) - np.bincount(second, value.real, size)
+    imag = np.bincount(first, value.imag, size) - np.bincount(second, value.imag, size)
+    return real + 1j * imag

@@ -176,13 +176,14 @@ class Simulator:
         radii = np.full(n + 1, humans.radius)
         radii[0] = robot.radius
         self.radii = radii
+        # Obstacle columns (both geometries): polygons by surface distance, discs by centre distance
+        # with their radius folded into the gain (same force, one array op less per step).
+        static_strength = np.full((n + 1, 1), force.obstacle_strength)
+        static_strength[0] = 0.0  # the robot does not follow the social force
+        static_contact = radii[:, None] + self.obstacles.surface_radius[None, :]
+        static_gain = sf.repulsion_gain(static_strength, static_contact, force.obstacle_range)
         self._grid = None
         if grid:  # no (n+1)^2 tables: the robot's row and column, the obstacles' columns, one human-human gain
-            obstacles = self.obstacles
-            static_strength = np.full((n + 1, 1), force.obstacle_strength)
-            static_strength[0] = 0.0
-            static_contact = radii[:, None] + obstacles.surface_radius[None, :]
-            static_gain = sf.repulsion_gain(static_strength, static_contact, force.obstacle_range)
             self._grid = CrowdGrid(n, robot.radius, humans.radius, force, humans.see_robot, static_gain, -1.0 / force.obstacle_range,
                                    static_contact, _SELF_DISTANCE)
             self._contact = self._gain = self._decay = self._contact_all = None
@@ -196,17 +197,11 @@ class Simulator:
         decay[1:, 0] = force.robot_range
         np.fill_diagonal(strength, 0.0)
         pair_gain = sf.repulsion_gain(strength, self._contact, decay)
-        # Obstacle columns: polygons by surface distance, discs by centre distance with their
-        # radius folded into the gain (same force, one array op less per step).
-        obstacles = self.obstacles
-        static_strength = np.full((n + 1, 1), force.obstacle_strength)
-        static_strength[0] = 0.0  # the robot does not follow the social force
-        static_gain = sf.repulsion_gain(static_strength, radii[:, None] + obstacles.surface_radius[None, :], force.obstacle_range)
         self._gain = np.concatenate([pair_gain, static_gain], axis=1)
         self._decay = np.concatenate([-1.0 / decay, np.full((n + 1, self._static_count), -1.0 / force.obstacle_range)], axis=1)
         # Surface contact distance for every column of the fused distance matrix: touching
         # agents or obstacles have distance - contact <= 0.
-        self._contact_all = np.concatenate([self._contact, radii[:, None] + obstacles.surface_radius[None, :]], axis=1)
+        self._contact_all = np.concatenate([self._contact, static_contact], axis=1)
 
     # ------------------------------------------------------------------------ step
 
@@ -326,38 +321,34 @@ class Simulator:
         distance.flat[:: len(z) + 1] = _SELF_DISTANCE
         self._pair_offset, self._pair_distance = offset, distance
         self.robot_offset, self.robot_distance = offset[0], distance[0]
-        if self._static_count:
-            obstacles = self.obstacles
-            static_offset, static_distance = nearest_on_edges(z, obstacles.surface)  # polygons, then disc centres
-            count = obstacles.polygon_count
-            self.polygon_offset, self.polygon_distance = static_offset[:, :count], static_distance[:, :count]
-            self.disc_offset, self.disc_distance = static_offset[:, count:], static_distance[:, count:]
-            self._static_offset, self._static_distance = static_offset, static_distance
+        static_offset, static_distance = self._measure_obstacles(z)
+        if static_offset is not None:
             offset = np.concatenate([offset, static_offset], axis=1)
             distance = np.concatenate([distance, static_distance], axis=1)
-        else:
-            empty = np.zeros((len(z), 0))
-            self.polygon_offset = self.disc_offset = empty.astype(complex)
-            self.polygon_distance = self.disc_distance = empty
         self._gap = distance - self._contact_all  # surface gaps: agents then obstacles, (n+1, n+1+P+C)
         self._robot_gap = self._gap[0]
         self._humans_touch = len(z) > 1 and bool(self._gap[1:].min() < 0.0)
         self._repulsion = sf.repulsion(offset, distance, self._gain, self._decay)
 
-    def _refresh_grid(self, z: np.ndarray) -> None:
-        """:meth:`refresh` for a large crowd: the robot against everyone, humans against neighbours."""
-        static_offset = static_distance = None
-        if self._static_count:
-            obstacles = self.obstacles
-            static_offset, static_distance = nearest_on_edges(z, obstacles.surface)
-            count = obstacles.polygon_count
-            self.polygon_offset, self.polygon_distance = static_offset[:, :count], static_distance[:, :count]
-            self.disc_offset, self.disc_distance = static_offset[:, count:], static_distance[:, count:]
-        else:
+    def _measure_obstacles(self, z: np.ndarray) -> tuple[np.ndarray | None, np.ndarray | None]:
+        """Every agent's offset and distance to each static obstacle (polygons, then disc centres; None without any).
+
+        Also sets the per-kind views the sensors read: ``polygon_*`` and ``disc_*``.
+        """
+        if not self._static_count:
             empty = np.zeros((len(z), 0))
             self.polygon_offset = self.disc_offset = empty.astype(complex)
             self.polygon_distance = self.disc_distance = empty
-        geometry = self._grid.refresh(z, static_offset, static_distance)
+            return None, None
+        static_offset, static_distance = nearest_on_edges(z, self.obstacles.surface)
+        count = self.obstacles.polygon_count
+        self.polygon_offset, self.polygon_distance = static_offset[:, :count], static_distance[:, :count]
+        self.disc_offset, self.disc_distance = static_offset[:, count:], static_distance[:, count:]
+        return static_offset, static_distance
+
+    def _refresh_grid(self, z: np.ndarray) -> None:
+        """:meth:`refresh` for a large crowd: the robot against everyone, humans against neighbours."""
+        geometry = self._grid.refresh(z, *self._measure_obstacles(z))
         self._geometry = geometry
         self._pair_offset = self._pair_distance = None  # built from positions only if someone asks
         self.robot_offset, self.robot_distance = geometry.robot_offset, geometry.robot_distance

@@ -47,9 +47,8 @@ def test_hostile_yaml_is_refused_in_one_line_naming_the_file(tmp_path, kind, cas
     assert str(path) in message and expected in message and len(message.splitlines()) == 1
 
 
-def _room(**changes) -> dict:
-    document = yaml.safe_load((library_dir() / "room_furniture.yaml").read_text())
-    document = copy.deepcopy(document)
+def _set_dotted(document: dict, changes: dict) -> dict:
+    """``document`` with each dotted path (``humans.radius``) set to its value."""
     for dotted, value in changes.items():
         node = document
         *parents, last = dotted.split(".")
@@ -57,6 +56,12 @@ def _room(**changes) -> dict:
             node = node[part]
         node[last] = value
     return document
+
+
+def _room(**changes) -> dict:
+    document = yaml.safe_load((library_dir() / "room_furniture.yaml").read_text())
+    document = copy.deepcopy(document)
+    return _set_dotted(document, changes)
 
 
 def test_five_thousand_obstacles_are_refused_naming_the_field():
@@ -104,13 +109,7 @@ def _walled_room(**changes) -> dict:
     """The empty 10 m room split by a full-height wall at x = 0 (no door)."""
     document = yaml.safe_load((library_dir() / "empty_room.yaml").read_text())
     document["walls"] = [{"points": [[0.0, -5.0], [0.0, 5.0]], "thickness": 0.2}]
-    for dotted, value in changes.items():
-        node = document
-        *parents, last = dotted.split(".")
-        for part in parents:
-            node = node[part]
-        node[last] = value
-    return document
+    return _set_dotted(document, changes)
 
 
 def test_a_robot_goal_region_walled_off_from_the_starts_is_refused():

@@ -109,15 +109,9 @@ class CrowdNavParallelEnv(ParallelEnv):
         self._active_humans = self._human_names[: self.simulator.n_humans]
         self.agents = [ROBOT, *self._active_humans]
         observations = self._observations(robot_observation)
-        infos: dict[str, dict[str, Any]] = {ROBOT: {}}
-        infos.update({name: {"group": group} for name, group in zip(self._active_humans, self._group_names(), strict=True)})
-        return observations, infos
-
-    def _group_names(self, index: np.ndarray | None = None) -> list[str]:
-        """Group name of each active human (or of the humans at ``index``)."""
-        sim = self.simulator
-        group = sim.human_group if index is None else sim.human_group[index]
-        return [sim.groups[g].name for g in group.tolist()]
+        sim = self.simulator  # a human's group is fixed for the episode: named once here
+        self._group_of = dict(zip(self._active_humans, (sim.groups[g].name for g in sim.human_group.tolist()), strict=True))
+        return observations, {ROBOT: {}, **{name: {"group": group} for name, group in self._group_of.items()}}
 
     def step(self, actions: Mapping[str, Any]):
         """One action per agent in ``agents``; out-of-range values are clipped, NaN/inf raise ValueError."""
@@ -141,10 +135,9 @@ class CrowdNavParallelEnv(ParallelEnv):
             arrived = sim.human_arrived[index]
             human_rewards = self.human_reward(sim)[index] if self.human_reward is not None else np.zeros(len(index))
             leaving = np.asarray(self.human_exit(sim), dtype=bool)[index] if self.human_exit is not None else np.zeros(len(index), bool)
-            groups = self._group_names(index)
             for k, name in enumerate(self._active_humans):
                 rewards[name] = float(human_rewards[k])
-                infos[name] = {"group": groups[k], "goal_reached": bool(arrived[k])}
+                infos[name] = {"group": self._group_of[name], "goal_reached": bool(arrived[k])}
                 terminations[name] = terminated or bool(leaving[k])
             if leaving.any() and not (terminated or truncated):
                 sim.human_stopped[index[leaving]] = True  # it stays in the world, standing

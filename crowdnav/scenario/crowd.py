@@ -46,10 +46,14 @@ IMPLICIT_GROUP = "crowd"
 _COLOUR = re.compile(r"^#[0-9A-Fa-f]{6}$")
 _GROUP_ONLY = ("count", "spawn", "goal_rule", "goal", "mirror_center", "on_goal")
 """Top-level crowd fields that belong to each group once ``humans.groups`` is used."""
-_SINGLE_POPULATION_DEFAULTS = {"count": 0, "spawn": [], "goal_rule": "sample", "goal": [], "mirror_center": None, "on_goal": "new_goal"}
-"""Their values when not given: with groups, any other value is an error."""
-_WALKING_DEFAULTS = {"preferred_speed": None, "goal_rule": "sample", "goal": [], "mirror_center": None, "on_goal": "new_goal"}
-"""A group's walking fields when not given: a standing group must leave them so."""
+_WALKING_ONLY = ("preferred_speed", "goal_rule", "goal", "mirror_center", "on_goal")
+"""A group's fields that a standing group must leave at their defaults."""
+
+
+def _changed(model: StrictModel, fields: tuple[str, ...]) -> list[str]:
+    """Those of ``fields`` whose value differs from the field's default (by value, not by whether the key was
+    written: a dumped scenario, defaults included, loads again)."""
+    return [f for f in fields if getattr(model, f) != type(model).model_fields[f].get_default(call_default_factory=True)]
 
 
 def _field_error(field: str, value: object, message: str) -> ValidationError:
@@ -157,9 +161,8 @@ class HumanGroup(StrictModel):
 
     @model_validator(mode="after")
     def _walking_fields_only_when_walking(self) -> HumanGroup:
-        # judged by value, not by which keys were written: a dumped scenario (defaults included) loads again
         if self.behaviour == "stand":
-            walking = [f for f, default in _WALKING_DEFAULTS.items() if getattr(self, f) != default]
+            walking = _changed(self, _WALKING_ONLY)
             if walking:
                 raise ValueError(f"a standing group does not walk; remove {', '.join(walking)} (or set behaviour: walk)")
         elif self.circle_radius is not None:
@@ -217,7 +220,7 @@ class Humans(StrictModel):
     @model_validator(mode="after")
     def _one_way_to_describe_the_crowd(self) -> Humans:
         if self.groups:
-            both = [f for f in _GROUP_ONLY if getattr(self, f) != _SINGLE_POPULATION_DEFAULTS[f]]
+            both = _changed(self, _GROUP_ONLY)
             if both:  # reported at the first such field, so its line (or "from override") is named
                 fields = ", ".join(f"humans.{f}" for f in both)
                 raise _field_error(both[0], getattr(self, both[0]), f"give the crowd either as humans.groups or with {fields}, "
