@@ -114,6 +114,11 @@ class Simulator:
 
     def reset(self, seed: int | None = None) -> None:
         """Start an episode; the same seed gives the same episode bit for bit (seed: a non-negative integer or None)."""
+        self.draw_episode(seed)
+        self.refresh()
+
+    def draw_episode(self, seed: int | None = None) -> None:
+        """:meth:`reset` without measuring the geometry (the batched simulator measures many worlds' at once)."""
         if seed is not None:
             if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
                 raise ValueError(f"seed must be a non-negative integer or None, got {seed!r}")
@@ -158,7 +163,6 @@ class Simulator:
         """Humans that reached their goal in the last step (under ``on_goal: stop``, on arrival only)."""
         self.step_count = 0
         self._prepare_pair_constants(n)
-        self.refresh()
         self._ready = True
 
     def _prepare_pair_constants(self, n: int) -> None:

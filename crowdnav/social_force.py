@@ -40,7 +40,7 @@ def repulsion(offset: np.ndarray, distance: np.ndarray, gain: np.ndarray, neg_in
     # array op at high density; 1e-7 relative error on a force is far below the model's fidelity.
     magnitude = gain * np.exp(np.multiply(distance, neg_inv_range, dtype=np.float32))
     magnitude /= distance
-    return (offset * magnitude).sum(axis=1)
+    return (offset * magnitude).sum(axis=-1)  # the last axis: one world (N, M) or a batch (K, N, M)
 
 
 def repulsion_gain(strength: np.ndarray | float, contact: np.ndarray | float, decay_range: np.ndarray | float) -> np.ndarray:

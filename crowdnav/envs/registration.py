@@ -10,6 +10,7 @@ NAMESPACE = "crowdnav"
 SCENARIO_FILE_ID = f"{NAMESPACE}/Scenario-v0"
 """Id for any scenario: ``gymnasium.make("crowdnav/Scenario-v0", scenario="path/to/file.yaml")``."""
 _ENTRY_POINT = "crowdnav.envs.single:CrowdNavEnv"
+_VECTOR_ENTRY_POINT = "crowdnav.envs.vector:CrowdNavVectorEnv"  # make_vec(..., vectorization_mode="vector_entry_point")
 
 
 def env_id(name: str) -> str:
@@ -23,7 +24,7 @@ def register_envs() -> list[str]:
     for name in library_names():
         ids.append(env_id(name))
         if ids[-1] not in gym.registry:
-            gym.register(id=ids[-1], entry_point=_ENTRY_POINT, kwargs={"scenario": name})
+            gym.register(id=ids[-1], entry_point=_ENTRY_POINT, vector_entry_point=_VECTOR_ENTRY_POINT, kwargs={"scenario": name})
     if SCENARIO_FILE_ID not in gym.registry:
-        gym.register(id=SCENARIO_FILE_ID, entry_point=_ENTRY_POINT)  # CrowdNavEnv asks for scenario=
+        gym.register(id=SCENARIO_FILE_ID, entry_point=_ENTRY_POINT, vector_entry_point=_VECTOR_ENTRY_POINT)  # CrowdNavEnv asks for scenario=
     return ids

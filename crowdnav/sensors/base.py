@@ -6,7 +6,8 @@ that never moves is precomputed in ``__init__``; ``observe`` then reads the simu
 and the geometry the simulator caches after every reset/step.
 
 Adding a modality is one class with a ``key``, ``make_space`` and ``observe``, decorated with
-:func:`register_modality` (see docs/sensors.md). Each modality also declares the typical range
+:func:`register_modality` (see docs/sensors.md); ``observe_batch`` (K worlds at once, for the
+native vector environment) is optional. Each modality also declares the typical range
 of its entries (:meth:`Modality.scale`, by default derived from the Box), which the agents use
 to feed their networks O(1) numbers (:meth:`Modality.normalize`).
 """
@@ -22,6 +23,7 @@ from gymnasium import spaces
 from pydantic import BaseModel
 
 if TYPE_CHECKING:  # imported for type hints only: the sensors never build a simulator
+    from crowdnav.batch.state import BatchState
     from crowdnav.scenario.schema import Sensors
     from crowdnav.simulator import Simulator
     from crowdnav.world import CompiledWorld
@@ -62,6 +64,18 @@ class Modality(abc.ABC):
     @abc.abstractmethod
     def observe(self, sim: Simulator) -> np.ndarray:
         """A new array in :meth:`space` describing the simulator's current state."""
+
+    def observe_batch(self, state: BatchState) -> np.ndarray:
+        """(K, *space.shape) array of the space's dtype: row k is :meth:`observe` of world k, bit for bit.
+
+        Used by the native vector environment, which steps K worlds as arrays and never builds
+        one simulator per world. The built-in modalities implement it; this default raises.
+        """
+        raise NotImplementedError(
+            f"modality {self.key!r} ({type(self).__name__}) has no batched observation: implement "
+            "observe_batch(state) (see docs/sensors.md, 'Batched observation (vector env)'), or use "
+            'gymnasium.make_vec(..., vectorization_mode="sync"), which calls observe() once per world'
+        )
 
     def scale(self) -> tuple[np.ndarray, np.ndarray]:
         """``(offset, scale)``: float32 arrays of the observation's shape, in the observation's own units.

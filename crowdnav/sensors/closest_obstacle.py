@@ -13,11 +13,13 @@ from typing import TYPE_CHECKING
 import numpy as np
 from gymnasium import spaces
 
+from crowdnav.batch.scalar_math import cmul
 from crowdnav.scenario.schema import ClosestObstacleSensor
 from crowdnav.sensors.base import Modality, register_modality
-from crowdnav.sensors.frames import encode_vector, to_robot_frame, vector_space
+from crowdnav.sensors.frames import encode_vector, encode_vectors, to_robot_frame, to_robot_frame_batch, vector_space
 
 if TYPE_CHECKING:
+    from crowdnav.batch.state import BatchState
     from crowdnav.simulator import Simulator
     from crowdnav.world import CompiledWorld
 
@@ -88,3 +90,46 @@ class ClosestObstacleModality(Modality):
             # from the robot to the centre, minus one radius along that line
             offset = offset * (1.0 - radius / centre_distance) if centre_distance > 0.0 else complex(radius, 0.0)
         return offset
+
+    @np.errstate(invalid="ignore")  # rotating the no-obstacle fill (inf) may give NaN; it is replaced
+    def observe_batch(self, state: BatchState) -> np.ndarray:
+        re, im = self.nearest_offset_batch(state)
+        # abs(offset) >= max_range (or no obstacle: inf) reads max_range at bearing 0
+        far = ~(np.hypot(re, im) < self.max_range)
+        re, im = cmul(re, im, *to_robot_frame_batch(state))
+        re, im = np.where(far, self.max_range, re), np.where(far, 0.0, im)
+        return encode_vectors(re, im, self.frame, self.max_range)
+
+    @np.errstate(invalid="ignore")  # the no-obstacle fill (inf) makes NaN products, replaced in observe_batch
+    def nearest_offset_batch(self, state: BatchState) -> tuple[np.ndarray, np.ndarray]:
+        """(K,) real and imaginary parts of :meth:`nearest_offset` per world (inf where there is no obstacle)."""
+        worlds = np.arange(state.worlds)
+        best_distance = np.full(state.worlds, np.inf)
+        offset = np.full(state.worlds, np.inf + 0j)
+        radius = np.zeros(state.worlds)
+        is_disc = np.zeros(state.worlds, dtype=bool)
+        # (kind is a disc, surface distances, offsets, radii per column) in the order nearest_offset
+        # tries them; strict '<' keeps the earlier kind on a tie, as there
+        candidates = []
+        if state.n_humans:
+            candidates.append((True, np.abs(state.robot_distance[:, 1:] - state.radii[1:]), state.robot_offset[:, 1:], state.radii[1:]))
+        if self._has_polygons:
+            candidates.append((False, state.polygon_distance, state.polygon_offset, None))
+        if self._has_discs:
+            candidates.append((True, np.abs(state.disc_distance - self._disc_radius), state.disc_offset, self._disc_radius))
+        for disc, distances, offsets, radii in candidates:  # at most three kinds, not a loop over obstacles
+            column = distances.argmin(axis=1)
+            better = distances[worlds, column] < best_distance
+            best_distance = np.where(better, distances[worlds, column], best_distance)
+            offset = np.where(better, offsets[worlds, column], offset)
+            radius = np.where(better, radii[column] if disc else 0.0, radius)
+            is_disc = np.where(better, disc, is_disc)
+        re, im = offset.real, offset.imag
+        # discs: offset * (1 - r / |offset|), a Python complex times a float; complex(r, 0) at the centre
+        centre_distance = np.hypot(re, im)
+        with np.errstate(divide="ignore"):
+            shrunk_re, shrunk_im = cmul(re, im, 1.0 - radius / centre_distance, 0.0)
+        at_centre = is_disc & ~(centre_distance > 0.0)
+        re = np.where(is_disc, np.where(at_centre, radius, shrunk_re), re)
+        im = np.where(is_disc, np.where(at_centre, 0.0, shrunk_im), im)
+        return re, im

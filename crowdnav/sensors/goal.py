@@ -7,11 +7,13 @@ from typing import TYPE_CHECKING
 import numpy as np
 from gymnasium import spaces
 
+from crowdnav.batch.scalar_math import cmul
 from crowdnav.scenario.schema import GoalSensor
 from crowdnav.sensors.base import Modality, register_modality
-from crowdnav.sensors.frames import encode_vector, to_robot_frame, vector_space
+from crowdnav.sensors.frames import encode_vector, encode_vectors, to_robot_frame, to_robot_frame_batch, vector_space
 
 if TYPE_CHECKING:
+    from crowdnav.batch.state import BatchState
     from crowdnav.simulator import Simulator
     from crowdnav.world import CompiledWorld
 
@@ -49,3 +51,10 @@ class GoalModality(Modality):
     def observe(self, sim: Simulator) -> np.ndarray:
         relative = (sim.robot_goal - complex(sim.positions[0])) * to_robot_frame(sim)
         return encode_vector(relative, self.frame, self.bound)
+
+    def observe_batch(self, state: BatchState) -> np.ndarray:
+        robot = state.positions[:, 0]
+        # (goal - robot) * to_robot_frame: Python complex math, emulated with real arrays
+        rotation = to_robot_frame_batch(state)
+        relative = cmul(state.robot_goal.real - robot.real, state.robot_goal.imag - robot.imag, *rotation)
+        return encode_vectors(*relative, self.frame, self.bound)

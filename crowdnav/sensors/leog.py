@@ -21,13 +21,15 @@ from typing import TYPE_CHECKING
 import numpy as np
 from gymnasium import spaces
 
+from crowdnav.batch.scalar_math import cmul
 from crowdnav.scenario.schema import LeogSensor
 from crowdnav.sensors.base import Modality, register_modality
-from crowdnav.sensors.frames import to_robot_frame
+from crowdnav.sensors.frames import to_robot_frame, to_robot_frame_batch
 from crowdnav.sensors.runs import expand_runs
 from crowdnav.sensors.static_edges import oriented_edges
 
 if TYPE_CHECKING:
+    from crowdnav.batch.state import BatchState
     from crowdnav.simulator import Simulator
     from crowdnav.world import CompiledWorld
 
@@ -67,6 +69,9 @@ class LeogModality(Modality):
         self._disc_cache: tuple[np.ndarray, np.ndarray] = (np.zeros((2, 0)), np.zeros(0))
         self._ones = self._minus_ones = np.zeros(0, dtype=np.intp)
         self._grid_origin = complex(n / 2 + 0.5, n / 2 + 0.5)
+        self._batch_radii: np.ndarray | None = None  # a copy of the BatchState radii the batch constants were built from
+        self._batch_constants: tuple[np.ndarray, np.ndarray] = self._disc_cache
+        self._batch_marks = np.zeros(0, dtype=np.int32)  # scratch of _running_counts_batch, grown on demand
 
     def make_space(self) -> spaces.Box:
         return spaces.Box(low=0, high=OCCUPIED, shape=(1, self.cells, self.cells), dtype=np.uint8)
@@ -77,6 +82,14 @@ class LeogModality(Modality):
         grid = occupied.view(np.uint8)  # True/False -> 1/0 without a copy
         np.negative(grid, out=grid)  # 1 -> 255 in uint8 arithmetic
         return grid.reshape(n, n + 1)[:, :n].reshape(1, n, n)
+
+    def observe_batch(self, state: BatchState) -> np.ndarray:
+        n, worlds = self.cells, state.worlds
+        counts = self._running_counts_batch(state).reshape(worlds, n, n + 1)[:, :, :n]
+        grid = np.empty((worlds, 1, n, n), dtype=np.uint8)
+        np.greater(counts, 0, out=grid.view(np.bool_)[:, 0])
+        np.negative(grid, out=grid)  # True/False -> 255/0, as observe
+        return grid
 
     def coverage(self, sim: Simulator) -> np.ndarray:
         """(H, W) int: how many obstacles cover each cell centre (0 = free)."""
@@ -153,12 +166,101 @@ class LeogModality(Modality):
         Rebuilt when the simulator's radii array changes (it is replaced at every reset).
         """
         if sim.radii is not self._radii_source:
-            radius = np.concatenate((sim.radii[1:], self._static_disc_radius)) / self.resolution
-            self._disc_cache = (np.stack((-radius, radius)), radius**2)
+            self._disc_cache = self._constants_for(sim.radii)
             self._radii_source = sim.radii
             # a disc spans at most 2 r / resolution + 1 rows
+            radius = self._disc_cache[0][1]
             chords = int(np.ceil(2 * radius + 1).sum()) if len(radius) else 0
             if len(self._ones) < chords:
                 self._ones = np.ones(chords, dtype=np.intp)
                 self._minus_ones = -self._ones
         return self._disc_cache
+
+    def _constants_for(self, radii: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        radius = np.concatenate((radii[1:], self._static_disc_radius)) / self.resolution
+        return np.stack((-radius, radius)), radius**2
+
+    # ------------------------------------------------------------- K worlds at once
+
+    @np.errstate(divide="ignore", invalid="ignore")  # as _running_counts
+    def _running_counts_batch(self, state: BatchState) -> np.ndarray:
+        """(K * H * (W + 1),) :meth:`_running_counts` of every world, one after the other, bit for bit.
+
+        The same elementwise operations on (K, ...) arrays; the Python scalar complex math of the
+        single code (the grid transform) is emulated with real arrays. The (primitive, row) pairs of
+        all worlds form one flat list, all worlds' edges before all worlds' discs; world k's rows
+        are rows k * H ... of one tall grid, so one scatter-add and one cumulative sum do them all.
+        Returns a view of a scratch buffer, overwritten by the next call.
+        """
+        n, edges, worlds = self.cells, self._edge_count, state.worlds
+        discs = state.n_humans + len(self._static_disc_radius)
+        # scale = to_robot_frame * (-1 / resolution) and the shift grid_origin - robot * scale: Python complex math
+        scale_re, scale_im = cmul(*to_robot_frame_batch(state), -1.0 / self.resolution, 0.0)
+        robot = state.positions[:, 0]
+        robot_re, robot_im = cmul(robot.real, robot.imag, scale_re, scale_im)
+        scale, shift = np.empty(worlds, dtype=complex), np.empty(worlds, dtype=complex)
+        scale.real, scale.imag = scale_re, scale_im
+        shift.real, shift.imag = self._grid_origin.real - robot_re, self._grid_origin.imag - robot_im
+        z = np.empty((worlds, 2 * edges + discs), dtype=complex)
+        z[:, :edges], z[:, edges : 2 * edges] = self._edge_end, self._edge_start
+        z[:, 2 * edges : 2 * edges + state.n_humans] = state.positions[:, 1:]
+        z[:, 2 * edges + state.n_humans :] = self._static_disc_center
+        z *= scale[:, None]  # numpy complex multiply, as the single code's array *= scalar (same bits)
+        z += shift[:, None]
+        end, start, centre = z[:, :edges], z[:, edges : 2 * edges], z[:, 2 * edges :]
+        radius_span, radius2 = self._batch_disc_constants(state.radii)
+
+        # (2, primitive) spans, every world's edges then every world's discs
+        edge_span = np.sort(z.real[:, : 2 * edges].reshape(worlds, 2, edges), axis=1)
+        disc_span = centre.real[:, None, :] + radius_span
+        span = np.concatenate((edge_span.transpose(1, 0, 2).reshape(2, -1), disc_span.transpose(1, 0, 2).reshape(2, -1)), axis=1)
+        np.maximum(span, 0.0, out=span)
+        np.minimum(span, n, out=span)
+        first, stop = span.astype(np.intp)
+        count = stop - first
+        row, ends = expand_runs(first, count)
+        edge_count = worlds * edges
+        edge_pairs = int(ends[edge_count - 1]) if edge_count else 0
+        world = np.concatenate((np.arange(worlds).repeat(edges), np.arange(worlds).repeat(discs))).repeat(count)
+
+        delta = end - start
+        anchor = np.concatenate(((start - 1.0).ravel(), (centre - 1.0).ravel())).repeat(count)
+        shape = np.concatenate(((delta.imag / delta.real).ravel(), np.tile(radius2, worlds))).repeat(count)
+        edge_sign = np.sign(delta.real).astype(np.int32).ravel().repeat(count[:edge_count])
+        offset = row - anchor.real
+
+        crossing = offset[:edge_pairs] * shape[:edge_pairs]
+        crossing += anchor.imag[:edge_pairs]
+        half = offset[edge_pairs:]
+        half *= half
+        np.subtract(shape[edge_pairs:], half, out=half)
+        np.maximum(half, 0.0, out=half)
+        np.sqrt(half, out=half)
+        middle = anchor.imag[edge_pairs:]
+
+        u = np.concatenate((crossing, middle - half, middle + half))
+        np.maximum(u, 0.0, out=u)
+        np.minimum(u, n, out=u)
+        world *= n  # row of the tall grid
+        world += row
+        flat = np.concatenate((world, world[edge_pairs:]))
+        flat *= n + 1
+        flat += u.astype(np.intp)
+        chords = len(row) - edge_pairs
+        sign = np.concatenate((edge_sign, np.ones(chords, dtype=np.int32), np.full(chords, -1, dtype=np.int32)))
+        # int32 (a count never exceeds the number of primitives) in a buffer kept between calls:
+        # a fresh grid-sized array per call costs more in page faults than the marks themselves
+        size = worlds * n * (n + 1)
+        if len(self._batch_marks) < size:
+            self._batch_marks = np.zeros(size, dtype=np.int32)
+        marks = self._batch_marks[:size]
+        marks.fill(0)
+        np.add.at(marks, flat, sign)
+        return np.add.accumulate(marks, out=marks)  # in place
+
+    def _batch_disc_constants(self, radii: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """:meth:`_disc_constants` for a BatchState's radii (cached on their values, kept apart from the single cache)."""
+        if self._batch_radii is None or not np.array_equal(radii, self._batch_radii):
+            self._batch_constants = self._constants_for(radii)
+            self._batch_radii = np.array(radii, dtype=float)
+        return self._batch_constants

@@ -23,12 +23,14 @@ from typing import TYPE_CHECKING
 import numpy as np
 from gymnasium import spaces
 
+from crowdnav.batch.scalar_math import remainder
 from crowdnav.scenario.schema import LidarSensor
 from crowdnav.sensors.base import Modality, register_modality
 from crowdnav.sensors.runs import expand_runs
 from crowdnav.sensors.static_edges import oriented_edges
 
 if TYPE_CHECKING:
+    from crowdnav.batch.state import BatchState
     from crowdnav.simulator import Simulator
     from crowdnav.world import CompiledWorld
 
@@ -71,6 +73,8 @@ class LidarModality(Modality):
         self._radii_source: np.ndarray | None = None  # sim.radii the disc constants were built from
         self._disc_constants: tuple[np.ndarray, np.ndarray] = (np.zeros(0), np.zeros(0))
         self._no_hit = np.full(self.beams, 1.0 / self.max_range)
+        self._batch_radii: np.ndarray | None = None  # a copy of the BatchState radii the batch constants were built from
+        self._batch_constants: tuple[np.ndarray, np.ndarray] = self._disc_constants
 
     def make_space(self) -> spaces.Box:
         return spaces.Box(low=0.0, high=1.0, shape=(self.beams,), dtype=np.float32)
@@ -79,6 +83,11 @@ class LidarModality(Modality):
         out = np.empty(self.beams, dtype=np.float32)
         # (1 / max_range) / inverse <= 1: the inverse ranges start at 1 / max_range
         np.divide(1.0 / self.max_range, self._inverse_ranges(sim), out=out)
+        return out
+
+    def observe_batch(self, state: BatchState) -> np.ndarray:
+        out = np.empty((state.worlds, self.beams), dtype=np.float32)
+        np.divide(1.0 / self.max_range, self._inverse_ranges_batch(state), out=out)
         return out
 
     def ranges(self, sim: Simulator) -> np.ndarray:
@@ -180,8 +189,90 @@ class LidarModality(Modality):
         Rebuilt when the simulator's radii array changes (it is replaced at every reset).
         """
         if sim.radii is not self._radii_source:
-            # arcsin(x) <= x * pi / 2 on [0, 1]: (r * pi / 2) / d bounds a disc's bearing half-width
-            radius = np.concatenate((np.zeros(self._edge_count), sim.radii[1:], self._static_disc_radius))
-            self._disc_constants = (radius * (math.pi / 2) / self.step, radius**2)
+            self._disc_constants = self._constants_for(sim.radii)
             self._radii_source = sim.radii
         return self._disc_constants
+
+    def _constants_for(self, radii: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        # arcsin(x) <= x * pi / 2 on [0, 1]: (r * pi / 2) / d bounds a disc's bearing half-width
+        radius = np.concatenate((np.zeros(self._edge_count), radii[1:], self._static_disc_radius))
+        return radius * (math.pi / 2) / self.step, radius**2
+
+    # ------------------------------------------------------------- K worlds at once
+
+    @np.errstate(divide="ignore", invalid="ignore")  # as _inverse_ranges
+    def _inverse_ranges_batch(self, state: BatchState) -> np.ndarray:
+        """(K, B): :meth:`_inverse_ranges` of every world, bit for bit.
+
+        The same elementwise operations on (K, ...) arrays, in the same order; per-world scalars
+        (the heading's shift and rotation) are computed elementwise first, as the single code
+        computes them before broadcasting. The (world, primitive, beam) pairs of all worlds form
+        one flat list, all worlds' edges before all worlds' discs, so one scatter maximum fills
+        every scan.
+        """
+        worlds, beams, edges = state.worlds, self.beams, self._edge_count
+        discs = state.n_humans + self._static_disc_count
+        primitives = edges + discs
+        heading = remainder(state.robot_heading, TWO_PI)
+        half_width_numerator, radius2 = self._batch_primitive_constants(state.radii)
+        humans = state.positions[:, 1:]
+        z = np.empty((worlds, 2 * primitives), dtype=complex)
+        for at, part in enumerate((self._edge_end, self._edge_start)):  # [ends, discs | starts, discs], as the single code
+            z[:, at * primitives : at * primitives + edges] = part
+            z[:, at * primitives + edges : (at + 1) * primitives - self._static_disc_count] = humans
+            z[:, (at + 1) * primitives - self._static_disc_count : (at + 1) * primitives] = self._static_disc_center
+        z -= state.positions[:, :1]
+        bearing = np.arctan2(z.imag, z.real)
+        bearing *= 1.0 / self.step
+        bearing += ((self.fov / 2 - heading) / self.step - 0.5 + 3 * self._beams_per_turn)[:, None]
+        near = z[:, :primitives]
+        distance = np.abs(near)
+        half_width = half_width_numerator / distance
+        low = bearing[:, :primitives] - half_width
+        high = bearing[:, primitives:] + half_width
+
+        start_conj = z[:, primitives : primitives + edges].conj()
+        scale = np.empty((worlds, primitives))
+        np.divide(-1.0, (start_conj * self._edge_vector).imag, out=scale[:, :edges])
+        gap2 = distance[:, edges:]
+        gap2 *= gap2
+        gap2 -= radius2[edges:]
+        np.divide(1.0, gap2, out=scale[:, edges:])
+        factor = np.empty((worlds, primitives), dtype=complex)
+        np.multiply(self._edge_vector_conj, scale[:, :edges], out=factor[:, :edges])
+        np.multiply(near[:, edges:].conj(), scale[:, edges:], out=factor[:, edges:])
+        start_factor = start_conj * scale[:, :edges]
+        radius2 = radius2 * (scale * scale)
+
+        def by_kind(values: np.ndarray) -> np.ndarray:  # (K, P) -> every world's edges, then every world's discs
+            return np.concatenate((values[:, :edges].ravel(), values[:, edges:].ravel()))
+
+        edge_count = worlds * edges
+        beam, count, edge_pairs = self._beam_runs(by_kind(low), by_kind(high), by_kind(scale > 0.0), edge_count)
+        # (world, beam) of every pair as one index into (K, B) tables: the directions and the scan
+        world_beam = by_kind(np.broadcast_to(np.arange(0, worlds * beams, beams)[:, None], (worlds, primitives))).repeat(count)
+        world_beam += beam
+        rotation = np.empty(worlds, dtype=complex)
+        rotation.real, rotation.imag = np.cos(heading), np.sin(heading)
+        # numpy's complex multiply gives each element the same bits whatever the layout, so one
+        # (K, B) product looked up per pair equals the single code's per-pair product
+        direction = (self._directions * rotation[:, None]).take(world_beam)
+        local = by_kind(factor).repeat(count) * direction
+        inverse = np.empty(len(beam))
+        hit = local.imag[:edge_pairs]
+        along = (start_factor.ravel().repeat(count[:edge_count]) * direction[:edge_pairs]).imag
+        np.multiply(hit, along * (along + hit) <= 0.0, out=inverse[:edge_pairs])
+        disc_local = local[edge_pairs:]
+        root = radius2[:, edges:].ravel().repeat(count[edge_count:]) - disc_local.imag**2
+        np.sqrt(root, out=root)
+        np.add(root, disc_local.real, out=inverse[edge_pairs:])
+        out = np.full(worlds * beams, 1.0 / self.max_range)
+        np.fmax.at(out, world_beam, inverse)
+        return out.reshape(worlds, beams)
+
+    def _batch_primitive_constants(self, radii: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """:meth:`_primitive_constants` for a BatchState's radii (cached on their values, kept apart from the single cache)."""
+        if self._batch_radii is None or not np.array_equal(radii, self._batch_radii):
+            self._batch_constants = self._constants_for(radii)
+            self._batch_radii = np.array(radii, dtype=float)
+        return self._batch_constants

@@ -7,10 +7,12 @@ from typing import TYPE_CHECKING
 import numpy as np
 from gymnasium import spaces
 
+from crowdnav.batch.scalar_math import cmul
 from crowdnav.sensors.base import Modality, register_modality
-from crowdnav.sensors.frames import encode_vector, to_robot_frame, vector_space
+from crowdnav.sensors.frames import encode_vector, encode_vectors, to_robot_frame, to_robot_frame_batch, vector_space
 
 if TYPE_CHECKING:
+    from crowdnav.batch.state import BatchState
     from crowdnav.simulator import Simulator
     from crowdnav.world import CompiledWorld
 
@@ -35,3 +37,8 @@ class VelocityModality(Modality):
     def observe(self, sim: Simulator) -> np.ndarray:
         velocity = complex(sim.velocities[0]) * to_robot_frame(sim)
         return encode_vector(velocity, "cartesian", self.bound)
+
+    def observe_batch(self, state: BatchState) -> np.ndarray:
+        robot = state.velocities[:, 0]
+        velocity = cmul(robot.real, robot.imag, *to_robot_frame_batch(state))
+        return encode_vectors(*velocity, "cartesian", self.bound)

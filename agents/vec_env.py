@@ -1,0 +1,119 @@
+"""Stable-Baselines3 collecting from the native vector env: a ``VecEnv`` over :class:`CrowdNavVectorEnv`.
+
+    from crowdnav.agents.vec_env import CrowdNavSB3VecEnv
+    env = CrowdNavSB3VecEnv.make("open_space", num_envs=16, seed=0, modalities=["lidar", "goal"])
+    SAC("MultiInputPolicy", env).learn(10_000)
+
+World ``i`` is what SB3's ``DummyVecEnv`` would give for ``Monitor(CrowdNavEnv)`` number ``i``
+seeded ``seed + i``: the same observations, rewards, dones and infos, bit for bit (tested), with
+SB3's conventions: a finished world is reset in the same step, its last observation in
+``infos[i]["terminal_observation"]`` and ``infos[i]["TimeLimit.truncated"]`` set when the time
+limit (not an event) ended it; ``infos[i]["episode"]`` (return ``r``, length ``l``, time ``t``)
+as SB3's ``Monitor`` writes it, so SB3 logs episode returns. ``scales`` (modality key -> offset,
+scale) normalises observations like :class:`crowdnav.agents.wrappers.NormalizeObservation`.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Mapping, Sequence
+from typing import Any
+
+import numpy as np
+from crowdnav.agents.wrappers import ObservationScales, normalize_observation
+from gymnasium import spaces
+from gymnasium.vector import AutoresetMode
+from stable_baselines3.common.vec_env.base_vec_env import VecEnv, VecEnvObs, VecEnvStepReturn
+
+from crowdnav.envs.vector import CrowdNavVectorEnv
+from crowdnav.sensors.base import checked_scale, normalized_box
+
+
+class CrowdNavSB3VecEnv(VecEnv):
+    """SB3's ``VecEnv`` interface over one :class:`CrowdNavVectorEnv` in ``SAME_STEP`` autoreset mode."""
+
+    def __init__(self, env: CrowdNavVectorEnv, seed: int | None = None, scales: ObservationScales | None = None):
+        if env.autoreset_mode is not AutoresetMode.SAME_STEP:
+            raise ValueError("CrowdNavSB3VecEnv needs a CrowdNavVectorEnv with autoreset_mode=AutoresetMode.SAME_STEP (SB3 resets in the same step)")
+        self.env = env
+        space = env.single_observation_space
+        if scales is not None:  # as NormalizeObservation: scaled keys get their mapped Box, the others pass through
+            scales = {key: checked_scale(key, space[key], *scales[key]) for key in space.spaces if key in scales}
+            space = spaces.Dict({key: normalized_box(box, *scales[key]) if key in scales else box for key, box in space.spaces.items()})
+        self.scales = scales
+        super().__init__(env.num_envs, space, env.single_action_space)
+        self._seed = seed
+        self._actions: np.ndarray | None = None
+        self._returns = np.zeros(self.num_envs)
+        self._lengths = np.zeros(self.num_envs, dtype=np.int64)
+        self._start = time.time()
+
+    @classmethod
+    def make(cls, scenario: Any, num_envs: int, seed: int | None = None, scales: ObservationScales | None = None,
+             **options: Any) -> CrowdNavSB3VecEnv:
+        """Build the vector env (``options``: the single env's) and wrap it."""
+        return cls(CrowdNavVectorEnv(scenario, num_envs, autoreset_mode=AutoresetMode.SAME_STEP, **options), seed, scales)
+
+    def _observe(self, observation: Mapping[str, np.ndarray]) -> dict[str, np.ndarray]:
+        return dict(observation) if self.scales is None else normalize_observation(observation, self.scales)
+
+    def reset(self) -> VecEnvObs:
+        # VecEnv.seed() (SB3 calls it with the algorithm's seed) wins over the constructor's; either applies to this reset only
+        seed = self._seeds if any(s is not None for s in self._seeds) else self._seed
+        observation, _ = self.env.reset(seed=seed)
+        self._reset_seeds()
+        self._seed = None
+        self._returns[:] = 0.0
+        self._lengths[:] = 0
+        return self._observe(observation)
+
+    def step_async(self, actions: np.ndarray) -> None:
+        self._actions = np.asarray(actions)
+
+    def step_wait(self) -> VecEnvStepReturn:
+        observation, rewards, terminated, truncated, infos = self.env.step(self._actions)
+        dones = terminated | truncated
+        self._returns += rewards
+        self._lengths += 1
+        out = []
+        for i in range(self.num_envs):  # SB3's API: one info dict per world
+            info = _world_info(infos["final_info"] if dones[i] else infos, i)
+            info["TimeLimit.truncated"] = bool(truncated[i] and not terminated[i])
+            if dones[i]:
+                info["terminal_observation"] = self._observe(infos["final_obs"][i])
+                info["episode"] = {"r": round(float(self._returns[i]), 6), "l": int(self._lengths[i]), "t": round(time.time() - self._start, 6)}
+            out.append(info)
+        self._returns[dones] = 0.0
+        self._lengths[dones] = 0
+        return self._observe(observation), rewards.astype(np.float32), dones, out
+
+    def close(self) -> None:
+        self.env.close()
+
+    def get_attr(self, attr_name: str, indices: Any = None) -> list[Any]:
+        return [getattr(self.env, attr_name) for _ in self._get_indices(indices)]
+
+    def set_attr(self, attr_name: str, value: Any, indices: Any = None) -> None:
+        setattr(self.env, attr_name, value)
+
+    def env_method(self, method_name: str, *method_args: Any, indices: Any = None, **method_kwargs: Any) -> list[Any]:
+        return [getattr(self.env, method_name)(*method_args, **method_kwargs) for _ in self._get_indices(indices)]
+
+    def env_is_wrapped(self, wrapper_class: type, indices: Any = None) -> list[bool]:
+        return [False for _ in self._get_indices(indices)]
+
+    def get_images(self) -> Sequence[np.ndarray | None]:
+        return [None] * self.num_envs
+
+
+def _world_info(infos: Mapping[str, Any], i: int) -> dict[str, Any]:
+    """World ``i``'s entries of Gymnasium vector ``infos``, as the single env's info dict."""
+    out: dict[str, Any] = {}
+    for key, value in infos.items():
+        if key.startswith("_") or key in ("final_obs", "final_info") or not infos[f"_{key}"][i]:
+            continue
+        if isinstance(value, dict):
+            out[key] = _world_info(value, i)
+        else:
+            out[key] = value[i].item() if isinstance(value[i], np.generic) else value[i]
+    return out

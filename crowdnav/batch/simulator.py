@@ -1,0 +1,380 @@
+"""Many worlds of one scenario stepped as one batch: the simulator of the native vector env.
+
+World ``i`` of a batch evolves exactly, bit for bit, like a :class:`crowdnav.Simulator` given the
+same seed and actions: every quantity is computed with the same numpy operations on the same
+values, in the same order, with a leading world axis (see :mod:`crowdnav.batch.scalar_math` for
+the robot's scalar math). Worlds whose crowds differ in size are kept in one stack per size (a
+*bucket*): padding a crowd would change the length of the force sums, and numpy's pairwise
+summation rounds differently for another length, so a padded world would drift from the single
+simulator in the last bits. A step loops over the crowd sizes present (a scenario's count range),
+never over worlds, humans, pairs or edges.
+
+Resets, and the goal rules of worlds where a human reached its goal, draw from each world's own
+generator: they run per world, on each world's own :class:`crowdnav.Simulator` (its *slot*), and
+their results are copied into the stacks. Crowds large enough for the neighbour grid
+(``Simulator.grid_from`` humans) are not batched.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from crowdnav import social_force as sf
+from crowdnav.batch.scalar_math import TWO_PI, cmul, remainder
+from crowdnav.batch.state import BatchState
+from crowdnav.events import Collision, SimulationError
+from crowdnav.groups import apply_goal_rules
+from crowdnav.obstacles import nearest_on_edges
+from crowdnav.simulator import _OBSTACLE_PASSES, _SELF_DISTANCE, Simulator
+from crowdnav.world import CompiledWorld
+
+_PER_WORLD = ("positions", "velocities", "human_goals", "human_preferred_speed", "_command_cap", "human_stopped", "human_arrived", "human_group")
+"""Simulator arrays with one row per world in a bucket (robot first where the robot has an entry)."""
+_SCALARS = ("robot_goal", "robot_heading", "step_count")
+
+
+@dataclass
+class StepResult:
+    """What happened in every world during one batch step (arrays over all worlds of the batch)."""
+
+    goal_reached: np.ndarray
+    left_world: np.ndarray
+    truncated: np.ndarray
+    collisions: dict[int, Collision] = field(default_factory=dict)
+    """World index -> the robot's deepest contact, for the worlds where the robot collided."""
+
+    @property
+    def collided(self) -> np.ndarray:
+        out = np.zeros(len(self.goal_reached), dtype=bool)
+        out[list(self.collisions)] = True
+        return out
+
+    @property
+    def terminated(self) -> np.ndarray:
+        return self.goal_reached | self.left_world | self.collided
+
+
+class Bucket:
+    """The worlds of a batch that have ``n`` humans this episode, stacked row by row."""
+
+    def __init__(self, n: int, slot: Simulator):
+        self.n = n
+        self.radii = slot.radii
+        self.contact_all = slot._contact_all
+        self.gain, self.decay = slot._gain, slot._decay
+        self.world = np.zeros(0, dtype=np.intp)
+        """(K,) the batch index of each row's world."""
+        for name in _PER_WORLD:
+            template = getattr(slot, name)
+            setattr(self, name, np.zeros((0, *template.shape), dtype=template.dtype))
+        self.robot_goal = np.zeros(0, dtype=complex)
+        self.robot_heading = np.zeros(0)
+        self.step_count = np.zeros(0, dtype=np.intp)
+
+    def __len__(self) -> int:
+        return len(self.world)
+
+    def row(self, world: int) -> int:
+        return int(np.flatnonzero(self.world == world)[0])
+
+    def add(self, world: int, slot: Simulator) -> None:
+        """Append ``world`` with the state its slot holds after a reset."""
+        self.world = np.append(self.world, world)
+        for name in _PER_WORLD:
+            setattr(self, name, np.concatenate([getattr(self, name), getattr(slot, name)[None]]))
+        self.robot_goal = np.append(self.robot_goal, slot.robot_goal)
+        self.robot_heading = np.append(self.robot_heading, slot.robot_heading)
+        self.step_count = np.append(self.step_count, slot.step_count)
+        for name in _GEOMETRY:  # a row for the newcomer, filled by the refresh that follows its reset
+            stack = getattr(self, name, None)
+            if stack is not None:
+                setattr(self, name, np.concatenate([stack, np.zeros((1, *stack.shape[1:]), dtype=stack.dtype)]))
+
+    def replace(self, row: int, slot: Simulator) -> None:
+        """Overwrite ``row`` with the state its slot holds after a reset (same crowd size)."""
+        for name in _PER_WORLD:
+            getattr(self, name)[row] = getattr(slot, name)
+        self.robot_goal[row], self.robot_heading[row], self.step_count[row] = slot.robot_goal, slot.robot_heading, slot.step_count
+
+    def remove(self, row: int) -> None:
+        keep = np.arange(len(self)) != row
+        self.world = self.world[keep]
+        for name in (*_PER_WORLD, *_SCALARS):
+            setattr(self, name, getattr(self, name)[keep])
+        for name in _GEOMETRY:
+            if hasattr(self, name):
+                setattr(self, name, getattr(self, name)[keep])
+
+
+_GEOMETRY = ("pair_offset", "pair_distance", "gap", "repulsion", "humans_touch", "polygon_offset", "polygon_distance", "disc_offset", "disc_distance")
+
+
+class BatchSimulator:
+    """``num_worlds`` copies of one compiled world, reset one by one and stepped together.
+
+    >>> batch = BatchSimulator(load_world("room_furniture"), 4)
+    >>> batch.reset(range(4), [0, 1, 2, 3])
+    >>> result = batch.step(np.zeros((4, 2)))
+    """
+
+    def __init__(self, world: CompiledWorld, num_worlds: int):
+        if isinstance(num_worlds, bool) or not isinstance(num_worlds, (int, np.integer)) or num_worlds < 1:
+            raise ValueError(f"num_worlds must be a positive integer, got {num_worlds!r}")
+        self.num_worlds = int(num_worlds)
+        self.slots = [Simulator(world) for _ in range(self.num_worlds)]
+        """One single simulator per world: its resets and goal rules (each world's own generator)."""
+        first = self.slots[0]
+        self.world = world
+        self.scenario = world.scenario
+        self.dt = first.dt
+        if first.max_humans >= first.grid_from:
+            raise ValueError(f"the batched simulator handles crowds below {first.grid_from} humans (all pairs); "
+                             f"this scenario allows {first.max_humans}: use gymnasium.make_vec(..., vectorization_mode='sync')")
+        self._surface = first.obstacles.surface
+        self._static_count = first._static_count
+        self._polygons = first.obstacles.polygon_count
+        self._force, self._relax, self._bounds = first._force, first._relax, first._bounds
+        robot = self.scenario.robot
+        self._unicycle = robot.kinematics != "holonomic"
+        self.buckets: dict[int, Bucket] = {}
+        self._where = np.full((self.num_worlds, 2), -1, dtype=np.intp)  # world -> (crowd size, row); -1: never reset
+
+    # ------------------------------------------------------------------ reset
+
+    def reset(self, worlds: Sequence[int], seeds: Sequence[int | None]) -> None:
+        """Start a new episode in each of ``worlds`` (``seeds[k]`` for ``worlds[k]``; None continues its generator)."""
+        fresh: dict[int, list[int]] = {}
+        for world, seed in zip(worlds, seeds, strict=True):  # per reset event: placement draws from each world's generator
+            slot = self.slots[world]
+            slot.draw_episode(seed)
+            n = slot.n_humans
+            size, row = self._where[world]
+            if size == n:
+                self.buckets[n].replace(row, slot)
+            else:
+                if size >= 0:
+                    self._drop(world, size, row)
+                bucket = self.buckets.get(n)
+                if bucket is None:
+                    bucket = self.buckets[n] = Bucket(n, slot)
+                bucket.add(world, slot)
+                self._where[world] = n, len(bucket) - 1
+            fresh.setdefault(n, []).append(int(world))
+        for n, fresh_worlds in fresh.items():  # one geometry pass per crowd size for all the new episodes
+            self._refresh(self.buckets[n], self._where[fresh_worlds, 1])
+
+    def _drop(self, world: int, size: int, row: int) -> None:
+        bucket = self.buckets[size]
+        bucket.remove(row)
+        self._where[bucket.world, 1] = np.arange(len(bucket))
+        if not len(bucket):
+            del self.buckets[size]
+
+    def crowd_size(self, world: int) -> int:
+        return int(self._where[world, 0])
+
+    def locate(self, world: int) -> tuple[Bucket, int]:
+        """The bucket holding ``world`` and its row there."""
+        size, row = self._where[world]
+        if size < 0:
+            raise RuntimeError(f"world {world} has not been reset")
+        return self.buckets[int(size)], int(row)
+
+    # ------------------------------------------------------------------- step
+
+    def step(self, actions: np.ndarray, active: np.ndarray | None = None) -> StepResult:
+        """Advance the worlds where ``active`` is True (default: all) by one step; ``actions`` (num_worlds, 2), checked finite.
+
+        Inactive worlds are left exactly as they are.
+        """
+        b = self.num_worlds
+        result = StepResult(np.zeros(b, dtype=bool), np.zeros(b, dtype=bool), np.zeros(b, dtype=bool))
+        for bucket in self.buckets.values():
+            rows = np.arange(len(bucket)) if active is None else np.flatnonzero(active[bucket.world])
+            if len(rows):
+                self._advance(bucket, rows, actions[bucket.world[rows]], result)
+        return result
+
+    def _advance(self, bucket: Bucket, rows: np.ndarray, actions: np.ndarray, result: StepResult) -> None:
+        n, dt = bucket.n, self.dt
+        positions = bucket.positions[rows]
+        velocities = bucket.velocities[rows]
+        robot_re, robot_im, heading = self._robot_velocity(actions, bucket.robot_heading[rows])
+        force = self._force
+        if n:
+            to_goal = bucket.human_goals[rows] - positions[:, 1:]
+            total = sf.goal_force(to_goal, force.goal_weight, force.goal_saturation_distance)
+            total += bucket.repulsion[rows, 1:]
+            commands = sf.velocity_command(total, velocities[:, 1:], bucket.human_preferred_speed[rows], bucket._command_cap[rows], self._relax)
+            stopped = bucket.human_stopped[rows]
+            if stopped.any():  # np.where picks the command itself where not stopped: exact for the others
+                commands = np.where(stopped, 0.0, commands)
+            velocities[:, 1:] = commands
+        velocities.real[:, 0], velocities.imag[:, 0] = robot_re, robot_im  # exactly the scalar's parts
+        positions += velocities * dt
+        bucket.robot_heading[rows] = heading
+        bucket.step_count[rows] += 1
+        self._check_finite(bucket, rows, positions, velocities)
+        bucket.positions[rows], bucket.velocities[rows] = positions, velocities
+        self._refresh(bucket, rows)
+        if n:
+            touch = rows[bucket.humans_touch[rows]]
+            if len(touch):
+                self._resolve_overlaps(bucket, touch)
+                self._refresh(bucket, touch)
+        self._robot_events(bucket, rows, result)
+        if n:
+            self._goal_rules(bucket, rows)
+        result.truncated[bucket.world[rows]] = bucket.step_count[rows] >= self.scenario.max_steps
+
+    def _robot_velocity(self, actions: np.ndarray, heading: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """:meth:`Simulator._robot_velocity` for every row: (velocity re, im, new heading), in CPython's scalar arithmetic."""
+        robot = self.scenario.robot
+        a0 = np.minimum(1.0, np.maximum(-1.0, actions[:, 0]))
+        a1 = np.minimum(1.0, np.maximum(-1.0, actions[:, 1]))
+        if not self._unicycle:
+            norm = np.hypot(a0, a1)
+            over = norm > 1.0
+            # command /= norm: CPython divides by complex(norm, 0): (re + im * 0) / norm, (im - re * 0) / norm
+            cr = np.where(over, (a0 + a1 * 0.0) / norm, a0)
+            ci = np.where(over, (a1 - a0 * 0.0) / norm, a1)
+            cr, ci = cmul(cr, ci, robot.max_speed, 0.0)
+            h = 0.0 + heading  # 1j * heading: its imaginary part is 0 * 0 + 1 * h
+            re, im = cmul(cr, ci, np.cos(h), np.sin(h))
+            return re, im, heading
+        dt = self.dt
+        speed, turn = a0 * robot.max_speed, a1 * robot.max_angular_speed
+        new_heading = heading + turn * dt
+        turning = np.abs(turn) > 1e-9
+        with np.errstate(divide="ignore", invalid="ignore"):
+            # (speed / turn) * -1j * (exp(1j new) - exp(1j old)); -1j is complex(-0.0, -1.0)
+            kr, ki = cmul(speed / turn, 0.0, -0.0, -1.0)
+            h_new, h_old = 0.0 + new_heading, 0.0 + heading
+            arc_re, arc_im = cmul(kr, ki, np.cos(h_new) - np.cos(h_old), np.sin(h_new) - np.sin(h_old))
+        line_re, line_im = cmul(speed * dt, 0.0, np.cos(0.0 + heading), np.sin(0.0 + heading))
+        dr, di = np.where(turning, arc_re, line_re), np.where(turning, arc_im, line_im)
+        # displacement / dt: CPython divides by complex(dt, 0)
+        return (dr + di * 0.0) / dt, (di - dr * 0.0) / dt, remainder(new_heading, TWO_PI)
+
+    def _check_finite(self, bucket: Bucket, rows: np.ndarray, positions: np.ndarray, velocities: np.ndarray) -> None:
+        finite = np.isfinite(positions)
+        if finite.all():
+            return
+        k, agent = np.argwhere(~finite)[0]
+        who = "the robot" if agent == 0 else f"human {agent - 1}"
+        raise SimulationError(f"world {bucket.world[rows[k]]}, step {bucket.step_count[rows[k]]}: the position of {who} became "
+                              f"non-finite (its velocity: {velocities[k, agent]}); check the scenario's social_force parameters")
+
+    # --------------------------------------------------------------- geometry
+
+    def _refresh(self, bucket: Bucket, rows: np.ndarray) -> None:
+        """:meth:`Simulator.refresh` for ``rows`` of ``bucket`` (the stacks are filled on first use)."""
+        z = bucket.positions[rows]
+        k, m = z.shape
+        offset = z[:, None, :] - z[:, :, None]  # [world, i, j]: from agent i to agent j
+        distance = np.abs(offset)
+        distance.reshape(k, m * m)[:, :: m + 1] = _SELF_DISTANCE
+        geometry = {"pair_offset": offset, "pair_distance": distance}
+        if self._static_count:
+            static_offset, static_distance = nearest_on_edges(z.reshape(-1), self._surface)
+            static_offset = static_offset.reshape(k, m, -1)
+            static_distance = static_distance.reshape(k, m, -1)
+            offset = np.concatenate([offset, static_offset], axis=2)
+            distance = np.concatenate([distance, static_distance], axis=2)
+            p = self._polygons
+            geometry.update(polygon_offset=static_offset[:, 0, :p], polygon_distance=static_distance[:, 0, :p],
+                            disc_offset=static_offset[:, 0, p:], disc_distance=static_distance[:, 0, p:])
+        else:
+            empty = np.zeros((k, 0))
+            geometry.update(polygon_offset=empty.astype(complex), polygon_distance=empty, disc_offset=empty.astype(complex), disc_distance=empty)
+        gap = distance - bucket.contact_all
+        geometry["gap"] = gap
+        geometry["humans_touch"] = gap[:, 1:].reshape(k, -1).min(1) < 0.0 if m > 1 else np.zeros(k, dtype=bool)
+        geometry["repulsion"] = sf.repulsion(offset, distance, bucket.gain, bucket.decay)
+        for name, value in geometry.items():
+            stack = getattr(bucket, name, None)
+            if stack is None:
+                stack = np.zeros((len(bucket), *value.shape[1:]), dtype=value.dtype)
+                setattr(bucket, name, stack)
+            stack[rows] = value
+
+    def _resolve_overlaps(self, bucket: Bucket, rows: np.ndarray) -> None:
+        """:meth:`Simulator._resolve_human_overlaps` for ``rows`` (worlds where a human touches someone or something)."""
+        n = bucket.n
+        positions = bucket.positions[rows]
+        pair_gap = bucket.gap[rows, 1:, 1 : n + 1]
+        push = (bucket.pair_offset[rows, 1:, 1:] / bucket.pair_distance[rows, 1:, 1:]) * (np.minimum(pair_gap, 0.0) / 2)
+        positions[:, 1:] += push.sum(-1)
+        bucket.positions[rows] = positions
+        if not self._static_count:
+            return
+        contact = bucket.contact_all[1:, n + 1 :]
+        for _ in range(_OBSTACLE_PASSES):
+            humans = bucket.positions[rows, 1:]
+            offset, distance = nearest_on_edges(humans.reshape(-1), self._surface)
+            offset, distance = offset.reshape(len(rows), n, -1), distance.reshape(len(rows), n, -1)
+            gap = distance - contact
+            overlapping = gap.reshape(len(rows), -1).min(1) < 0.0  # a world whose humans are clear stops here
+            if not overlapping.any():
+                return
+            rows, humans, offset, distance, gap = rows[overlapping], humans[overlapping], offset[overlapping], distance[overlapping], gap[overlapping]
+            direction = offset / np.maximum(distance, 1e-12)
+            humans += (direction * np.minimum(gap, 0.0)).sum(-1)
+            bucket.positions[rows, 1:] = humans
+
+    # ----------------------------------------------------------------- events
+
+    def _robot_events(self, bucket: Bucket, rows: np.ndarray, result: StepResult) -> None:
+        n, worlds = bucket.n, bucket.world[rows]
+        robot_gap = bucket.gap[rows, 0]
+        if robot_gap.shape[1]:
+            for k in np.flatnonzero(robot_gap.min(1) <= 0.0):  # per collision event
+                j = int(robot_gap[k].argmin())
+                if j <= n:
+                    hit = Collision("human", f"human_{j - 1}", float(robot_gap[k, j]))
+                else:
+                    labels = self.slots[0].obstacles.labels + self.slots[0].obstacles.disc_labels
+                    hit = Collision("static", labels[j - n - 1], float(robot_gap[k, j]))
+                result.collisions[int(worlds[k])] = hit
+        robot = bucket.positions[rows, 0]
+        if self._bounds is not None:
+            x0, y0, x1, y1 = self._bounds
+            result.left_world[worlds] = ~((x0 <= robot.real) & (robot.real <= x1) & (y0 <= robot.imag) & (robot.imag <= y1))
+        goal = bucket.robot_goal[rows]
+        result.goal_reached[worlds] = np.hypot(goal.real - robot.real, goal.imag - robot.imag) <= self.scenario.robot.goal_radius
+
+    def _goal_rules(self, bucket: Bucket, rows: np.ndarray) -> None:
+        """:func:`crowdnav.groups.apply_goal_rules`: vectorized where nobody arrived, per world where someone did."""
+        tolerance = self.scenario.humans.social_force.goal_tolerance
+        arrived = np.abs(bucket.human_goals[rows] - bucket.positions[rows, 1:]) <= tolerance
+        stopped = bucket.human_stopped[rows]
+        bucket.human_arrived[rows] = arrived & ~stopped
+        moved = []
+        for k in np.flatnonzero((arrived & ~stopped).any(1)):  # per arrival event: the rules draw from the world's generator
+            row = rows[k]
+            slot = self.slots[bucket.world[row]]
+            # the slot works on the stacks' rows in place (views; rebound at its next event or reset)
+            views = {name: getattr(bucket, name)[row] for name in ("positions", "velocities", "human_goals", "human_stopped")}
+            before = views["positions"].copy()
+            for name, view in views.items():
+                setattr(slot, name, view)
+            apply_goal_rules(slot)
+            if not np.array_equal(before, views["positions"]):
+                moved.append(row)
+        if moved:  # respawned humans: the geometry of the new positions, as the single simulator's refresh
+            self._refresh(bucket, np.array(moved))
+
+    # ------------------------------------------------------------------ views
+
+    def state(self, bucket: Bucket, rows: np.ndarray | None = None) -> BatchState:
+        """What the sensors read, for ``rows`` of ``bucket`` (default: all)."""
+        rows = np.arange(len(bucket)) if rows is None else rows
+        return BatchState(
+            positions=bucket.positions[rows], velocities=bucket.velocities[rows], robot_heading=bucket.robot_heading[rows],
+            robot_goal=bucket.robot_goal[rows], radii=bucket.radii, robot_offset=bucket.pair_offset[rows, 0],
+            robot_distance=bucket.pair_distance[rows, 0], polygon_offset=bucket.polygon_offset[rows],
+            polygon_distance=bucket.polygon_distance[rows], disc_offset=bucket.disc_offset[rows], disc_distance=bucket.disc_distance[rows],
+        )

@@ -1,0 +1,312 @@
+"""The native vector environment: B worlds of one scenario stepped as one batch.
+
+``gymnasium.make_vec("crowdnav/<Scenario>-v0", num_envs=B, vectorization_mode="vector_entry_point")``
+returns a :class:`CrowdNavVectorEnv`; ``vectorization_mode="sync"`` still gives Gymnasium's
+``SyncVectorEnv`` of B single envs. Both behave the same, world for world and bit for bit.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from typing import Any
+
+import numpy as np
+from gymnasium import spaces
+from gymnasium.vector import AutoresetMode, VectorEnv
+from gymnasium.vector.utils import batch_space
+
+from crowdnav.batch.memory import keep_freed_memory as _keep_freed_memory
+from crowdnav.batch.simulator import BatchSimulator, StepResult
+from crowdnav.envs.core import ScenarioSource, load_env_world, option_overrides, real_array
+from crowdnav.envs.reward import REWARD_TERMS
+
+
+class CrowdNavVectorEnv(VectorEnv):
+    """``num_envs`` copies of :class:`crowdnav.envs.CrowdNavEnv` in one batch (a Gymnasium ``VectorEnv``).
+
+    **Spec.** World ``i`` is exactly the single env: the same observation keys, spaces, reward
+    terms, outcomes and infos; reset with seed ``s`` it plays, bit for bit, the episodes the single
+    env plays after ``reset(seed=s + i)`` (a list of seeds gives each world its own; later
+    episodes continue each world's generator, as ``reset()`` without a seed does). Options are
+    the single env's (``scenario``, ``modalities``, ``sensors``, ``reward_weights``, ``overrides``)
+    plus ``num_envs`` and ``autoreset_mode``. Rendering is the single env's job (render_mode None).
+
+    **Spaces.** ``single_observation_space`` / ``single_action_space`` are the single env's;
+    ``observation_space`` is a Dict of arrays with a leading axis of ``num_envs``, ``action_space``
+    a ``(num_envs, 2)`` Box. Rewards are float64 (num_envs,), flags bool (num_envs,).
+
+    **Infos** follow Gymnasium's vector convention (a key's values in an array, ``_key`` marking
+    the worlds that have it): ``reward_terms`` (a dict of per-term arrays) for every world that
+    stepped; ``outcome``, ``is_success`` for worlds whose episode ended this step;
+    ``collision_kind`` and ``collision_partner`` after collisions.
+
+    **Autoreset** (``autoreset_mode``, Gymnasium's :class:`AutoresetMode`):
+
+    * ``NEXT_STEP`` (default, like ``SyncVectorEnv``): the step after a world's episode ended resets
+      it (its action is ignored, reward 0, flags False, no infos) and returns the first observation;
+    * ``SAME_STEP``: an ended world is reset in the same step; the observation returned is the new
+      episode's first, the last one is in ``infos["final_obs"][i]`` and its info in
+      ``infos["final_info"][i]`` (for SB3-style training loops);
+    * ``DISABLED``: an ended world stays as it ended (its actions are ignored, its flags repeat,
+      reward 0) until ``reset(options={"reset_mask": mask})`` resets it (for evaluation).
+
+    A step loops over the crowd sizes present, never over worlds, humans, beams or cells
+    (:mod:`crowdnav.batch.simulator`); resets and goal-rule draws run per world that needs one.
+    Crowds of ``Simulator.grid_from`` humans or more are refused (use the sync mode).
+
+    **Memory.** With ``keep_freed_memory`` (default) the env raises glibc malloc's trim threshold
+    to 64 MB for its process (:mod:`crowdnav.batch.memory`): the batch's temporaries are then reused
+    instead of mapped again every step (about 1.5x, docs/simulator.md). Pass False to leave the
+    process's allocator alone.
+    """
+
+    metadata = {"render_modes": [], "autoreset_mode": AutoresetMode.NEXT_STEP}
+
+    def __init__(
+        self,
+        scenario: ScenarioSource | None = None,
+        num_envs: int = 1,
+        *,
+        autoreset_mode: AutoresetMode | str = AutoresetMode.NEXT_STEP,
+        modalities: Sequence[str] | None = None,
+        sensors: Mapping[str, Any] | None = None,
+        reward_weights: Mapping[str, float] | None = None,
+        overrides: Mapping[str, Any] | None = None,
+        render_mode: str | None = None,
+        keep_freed_memory: bool = True,
+    ):
+        if render_mode is not None:
+            raise ValueError("the vector env does not render; render a single env (gymnasium.make(..., render_mode=...))")
+        try:
+            self.autoreset_mode = AutoresetMode(autoreset_mode)
+        except ValueError:
+            raise ValueError(f"autoreset_mode must be one of {[mode.value for mode in AutoresetMode]}, got {autoreset_mode!r}") from None
+        world, self.modalities = load_env_world(scenario, option_overrides(modalities, sensors, reward_weights, overrides))
+        self.scenario = world.scenario
+        self.batch = BatchSimulator(world, num_envs)
+        if keep_freed_memory:
+            _keep_freed_memory()
+        self.num_envs = self.batch.num_worlds
+        self.metadata = {**self.metadata, "autoreset_mode": self.autoreset_mode}
+        self.single_observation_space = spaces.Dict({key: modality.space() for key, modality in self.modalities.items()})
+        self.single_action_space = spaces.Box(-1.0, 1.0, shape=(2,), dtype=np.float32)
+        self.observation_space = batch_space(self.single_observation_space, self.num_envs)
+        self.action_space = batch_space(self.single_action_space, self.num_envs)
+        self._sensors = tuple((key, self.modalities[key]) for key in self.single_observation_space.spaces)
+        weights = self.scenario.reward
+        self._weights = {term: float(getattr(weights, term)) for term in REWARD_TERMS}
+        b = self.num_envs
+        self._previous_distance = np.zeros(b)
+        self._started = np.zeros(b, dtype=bool)
+        self._ended = np.zeros(b, dtype=bool)  # the episode ended at the last step (NEXT_STEP: reset next; DISABLED: wait)
+        self._last_flags = (np.zeros(b, dtype=bool), np.zeros(b, dtype=bool))
+        self._observations = {key: np.zeros((b, *space.shape), dtype=space.dtype) for key, space in self.single_observation_space.spaces.items()}
+
+    # ------------------------------------------------------------------ reset
+
+    def reset(self, *, seed: int | Sequence[int | None] | None = None, options: dict[str, Any] | None = None):
+        """Reset every world (or those of ``options["reset_mask"]``); ``seed``: None, an int s (world i gets s + i) or one per world."""
+        super().reset(seed=seed if isinstance(seed, int) else None)
+        b = self.num_envs
+        if seed is None:
+            seeds: list[int | None] = [None] * b
+        elif isinstance(seed, (int, np.integer)) and not isinstance(seed, bool):
+            seeds = [int(seed) + i for i in range(b)]
+        else:
+            seeds = list(seed)
+            if len(seeds) != b:
+                raise ValueError(f"seed: a list of seeds needs one per world ({b}), got {len(seeds)}")
+        mask = np.ones(b, dtype=bool)
+        if options and "reset_mask" in options:
+            mask = np.asarray(options["reset_mask"])
+            if mask.shape != (b,) or mask.dtype != np.bool_ or not mask.any():
+                raise ValueError(f"options['reset_mask'] must be a bool array of shape ({b},) with at least one True, got {options['reset_mask']!r}")
+        worlds = np.flatnonzero(mask)
+        self._reset_worlds(worlds, [seeds[i] for i in worlds])
+        self._observe_all()
+        return self._copy_observations(), {}
+
+    def _reset_worlds(self, worlds: np.ndarray, seeds: Sequence[int | None]) -> None:
+        self.batch.reset(worlds, seeds)
+        self._started[worlds] = True
+        self._ended[worlds] = False
+        for flags in self._last_flags:
+            flags[worlds] = False
+        self._previous_distance[worlds] = self._goal_distance(worlds)
+
+    def _goal_distance(self, worlds: np.ndarray) -> np.ndarray:
+        """The robot-goal distance of ``worlds`` (as the single simulator's ``abs(goal - position)``: libm hypot)."""
+        out = np.zeros(self.num_envs)
+        for bucket in self.batch.buckets.values():
+            gap = bucket.robot_goal - bucket.positions[:, 0]
+            out[bucket.world] = np.hypot(gap.real, gap.imag)
+        return out[worlds]
+
+    # ------------------------------------------------------------------- step
+
+    def step(self, actions: Any):
+        if not self._started.all():
+            raise RuntimeError("call reset() before step(): some worlds have not been reset")
+        actions = self._checked_actions(actions)
+        b = self.num_envs
+        rewards = np.zeros(b)
+        infos: dict[str, Any] = {}
+        stepping = ~self._ended
+        if self.autoreset_mode is AutoresetMode.NEXT_STEP and self._ended.any():
+            self._reset_worlds(np.flatnonzero(self._ended), [None] * int(self._ended.sum()))
+        if not stepping.any():  # every world is waiting (DISABLED) or was just reset
+            self._observe_all()
+            return self._copy_observations(), rewards, *self._flags(stepping), infos
+        result = self.batch.step(actions, None if stepping.all() else stepping)
+        terminated = result.terminated & stepping
+        truncated = result.truncated & stepping & ~terminated
+        rewards[stepping], terms = self._rewards(result, stepping)
+        infos["reward_terms"] = {}
+        for term in REWARD_TERMS:
+            values = np.zeros(b)
+            values[stepping] = terms[term]
+            infos["reward_terms"][term], infos["reward_terms"][f"_{term}"] = values, stepping.copy()
+        infos["_reward_terms"] = stepping.copy()
+        ended = terminated | truncated
+        self._end_infos(infos, result, terminated, truncated, ended)
+        self._observe_all()
+        if self.autoreset_mode is AutoresetMode.DISABLED:
+            waiting = self._ended.copy()
+            terminated |= waiting & self._last_flags[0]
+            truncated |= waiting & self._last_flags[1]
+        self._last_flags = (terminated.copy(), truncated.copy())
+        self._ended = self._ended | ended if self.autoreset_mode is AutoresetMode.DISABLED else ended
+        if self.autoreset_mode is AutoresetMode.SAME_STEP and ended.any():
+            infos = self._same_step_reset(infos, ended)
+        return self._copy_observations(), rewards, terminated, truncated, infos
+
+    def _flags(self, stepping: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        if self.autoreset_mode is AutoresetMode.DISABLED:
+            return self._last_flags[0] & self._ended, self._last_flags[1] & self._ended
+        return np.zeros(self.num_envs, dtype=bool), np.zeros(self.num_envs, dtype=bool)
+
+    def _checked_actions(self, actions: Any) -> np.ndarray:
+        values = real_array(actions, "the robot actions")
+        if values.shape != (self.num_envs, 2):
+            raise ValueError(f"the robot actions must have shape ({self.num_envs}, 2), got shape {values.shape}")
+        bad = ~np.isfinite(values).all(1)
+        if bad.any():
+            i = int(np.flatnonzero(bad)[0])
+            raise ValueError(f"the robot action of world {i} must be finite (no NaN or inf), got {values[i].tolist()}")
+        return values
+
+    def _rewards(self, result: StepResult, stepping: np.ndarray) -> tuple[np.ndarray, dict[str, np.ndarray]]:
+        """:class:`crowdnav.envs.reward.Reward` for the stepping worlds, in the same float operations and order."""
+        worlds = np.flatnonzero(stepping)
+        distance = self._goal_distance(worlds)
+        progress = self._previous_distance[worlds] - distance
+        self._previous_distance[worlds] = distance
+        force = self.robot_social_force()[worlds]
+        w = self._weights
+        failed = result.collided[worlds] | result.left_world[worlds]
+        success = result.goal_reached[worlds] & ~failed
+        terms = {
+            "step": np.full(len(worlds), w["step"]),
+            "goal_progress": w["goal_progress"] * progress,
+            "social": w["social"] * np.hypot(force.real, force.imag),
+            "goal_reached": np.where(success, w["goal_reached"], 0.0),
+            "collision": np.where(failed, w["collision"], 0.0),
+        }
+        reward = terms["step"] + terms["goal_progress"] + terms["social"] + terms["goal_reached"] + terms["collision"]
+        return reward, terms
+
+    def _end_infos(self, infos: dict[str, Any], result: StepResult, terminated: np.ndarray, truncated: np.ndarray, ended: np.ndarray) -> None:
+        if not ended.any():
+            return
+        b = self.num_envs
+        outcome = np.full(b, None, dtype=object)
+        outcome[truncated] = "truncated"
+        outcome[terminated & result.goal_reached] = "success"
+        outcome[terminated & result.left_world] = "out_of_bounds"
+        collided = np.zeros(b, dtype=bool)
+        kind, partner = np.full(b, None, dtype=object), np.full(b, None, dtype=object)
+        for i, hit in result.collisions.items():  # per collision event
+            if terminated[i]:
+                outcome[i], kind[i], partner[i], collided[i] = "collision", hit.kind, hit.partner, True
+        infos["outcome"], infos["_outcome"] = outcome, ended.copy()
+        infos["is_success"], infos["_is_success"] = outcome == "success", ended.copy()
+        if collided.any():
+            infos["collision_kind"], infos["_collision_kind"] = kind, collided
+            infos["collision_partner"], infos["_collision_partner"] = partner, collided.copy()
+
+    def _same_step_reset(self, infos: dict[str, Any], ended: np.ndarray) -> dict[str, Any]:
+        """Reset the ended worlds now; their last observation and info move to ``final_obs`` / ``final_info``.
+
+        As ``SyncVectorEnv`` does: the top-level infos keep the worlds still running, ``final_info``
+        holds the ended worlds' infos (vectorized), ``final_obs`` their observations (one dict each).
+        """
+        worlds = np.flatnonzero(ended)
+        final_obs = np.full(self.num_envs, None, dtype=object)
+        for i in worlds:  # per ended episode: its last observation, unbatched (Gymnasium's convention)
+            final_obs[i] = {key: values[i].copy() for key, values in self._observations.items()}
+        out = _restricted(infos, ~ended)
+        out["final_obs"], out["_final_obs"] = final_obs, ended.copy()
+        out["final_info"], out["_final_info"] = _restricted(infos, ended), ended.copy()
+        self._reset_worlds(worlds, [None] * len(worlds))
+        self._ended[worlds] = False
+        self._observe_all()
+        return out
+
+    # ----------------------------------------------------------- observations
+
+    def _observe_all(self) -> None:
+        for bucket in self.batch.buckets.values():
+            state = self.batch.state(bucket)
+            for key, modality in self._sensors:
+                self._observations[key][bucket.world] = modality.observe_batch(state)
+
+    def _copy_observations(self) -> dict[str, np.ndarray]:
+        return {key: values.copy() for key, values in self._observations.items()}
+
+    # ---------------------------------------------------------- world access
+
+    def robot_social_force(self) -> np.ndarray:
+        """(num_envs,) complex: the humans' social-force repulsion on each robot (the reward's social term reads its length)."""
+        out = np.zeros(self.num_envs, dtype=complex)
+        for bucket in self.batch.buckets.values():
+            out[bucket.world] = bucket.repulsion[:, 0]
+        return out
+
+    def positions(self, world: int) -> np.ndarray:
+        """(n+1,) complex: robot then humans of ``world`` (a copy)."""
+        bucket, row = self.batch.locate(world)
+        return bucket.positions[row].copy()
+
+    def velocities(self, world: int) -> np.ndarray:
+        bucket, row = self.batch.locate(world)
+        return bucket.velocities[row].copy()
+
+    def human_goals(self, world: int) -> np.ndarray:
+        bucket, row = self.batch.locate(world)
+        return bucket.human_goals[row].copy()
+
+    def robot_goal(self, world: int) -> complex:
+        bucket, row = self.batch.locate(world)
+        return complex(bucket.robot_goal[row])
+
+    def simulator(self, world: int) -> Any:
+        """``world``'s own :class:`crowdnav.Simulator` (its groups, radii, scenario; its state arrays are stale)."""
+        return self.batch.slots[world]
+
+
+def _restricted(infos: dict[str, Any], keep: np.ndarray) -> dict[str, Any]:
+    """Vector ``infos`` for the worlds in ``keep`` only: other entries cleared, keys no kept world has dropped."""
+    out: dict[str, Any] = {}
+    for key, value in infos.items():
+        if key.startswith("_"):
+            continue
+        mask = infos[f"_{key}"] & keep
+        if not mask.any():
+            continue
+        if isinstance(value, dict):
+            value = _restricted(value, keep)
+        else:
+            value = value.copy()
+            value[~mask] = None if value.dtype == object else 0
+        out[key], out[f"_{key}"] = value, mask
+    return out
