@@ -8,7 +8,7 @@ Four ways to step the same B worlds (all modalities unless ``--modalities``), ra
 * ``sync``: ``gymnasium.make_vec(..., vectorization_mode="sync")``, B single envs in a loop;
 * ``native``: ``gymnasium.make_vec(..., vectorization_mode="vector_entry_point")``;
 * ``kernels``: the native env's batched simulator step and batched sensors alone, no rewards,
-  infos, autoreset or copies (the floor the env's own bookkeeping adds to).
+  infos, autoreset bookkeeping or copies (the floor the env's own work adds to).
 
 Printed: median env-steps/s over the repeats and the ratios native / sync and native / kernels.
 """
@@ -57,7 +57,7 @@ def vector(args: argparse.Namespace, mode: str) -> float:
 def kernels(args: argparse.Namespace) -> float:
     env = gym.make_vec(env_id(args.scenario), num_envs=args.batch, vectorization_mode="vector_entry_point", **_options(args)).unwrapped
     env.reset(seed=0)
-    batch, sensors = env.batch, env._sensors
+    batch = env.batch
     actions = np.random.default_rng(0).uniform(-1, 1, (args.steps, args.batch, 2))
     start = time.perf_counter()
     for action in actions:
@@ -65,10 +65,7 @@ def kernels(args: argparse.Namespace) -> float:
         done = np.flatnonzero(result.terminated | result.truncated)
         if len(done):
             batch.reset(done, [None] * len(done))
-        for bucket in batch.buckets.values():
-            state = batch.state(bucket)
-            for _, modality in sensors:
-                modality.observe_batch(state)
+        env._observe_all()  # the batched sensors, in the env's chunks of worlds
     return args.steps * args.batch / (time.perf_counter() - start)
 
 

@@ -157,3 +157,12 @@ def test_held_out_episodes_batched_equal_one_env_per_seed_with_recorded_frames()
         assert a.keys() == b.keys() and all(a[k] == b[k] or (a[k] != a[k] and b[k] != b[k]) for k in a)  # NaN: no time to goal
         assert frames_a["groups"] == frames_b["groups"]
         assert all(np.array_equal(frames_a[k], frames_b[k]) for k in ("positions", "velocities", "goals"))
+
+
+def test_worlds_stepped_in_small_chunks_still_equal_sync(monkeypatch):
+    import crowdnav.batch.simulator as batch_simulator
+
+    monkeypatch.setattr(batch_simulator, "CHUNK_ELEMENTS", 200)  # two worlds per chunk in room_furniture with 5 humans
+    env = CrowdNavVectorEnv("room_furniture", 5, modalities=["goal"], overrides={"humans.count": 5})
+    assert env.batch.chunk_size(5) == 2
+    assert _compare_with_sync("RoomFurniture", AutoresetMode.NEXT_STEP, 80, num_envs=5, modalities=ALL, overrides={"humans.count": 5}) > 0

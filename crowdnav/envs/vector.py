@@ -256,9 +256,12 @@ class CrowdNavVectorEnv(VectorEnv):
 
     def _observe_all(self) -> None:
         for bucket in self.batch.buckets.values():
-            state = self.batch.state(bucket)
-            for key, modality in self._sensors:
-                self._observations[key][bucket.world] = modality.observe_batch(state)
+            rows, size = np.arange(len(bucket)), self.batch.chunk_size(bucket.n)
+            for start in range(0, len(rows), size):  # chunks of worlds, as the simulator steps them
+                chunk = rows[start : start + size]
+                state = self.batch.state(bucket, chunk)
+                for key, modality in self._sensors:
+                    self._observations[key][bucket.world[chunk]] = modality.observe_batch(state)
 
     def _copy_observations(self) -> dict[str, np.ndarray]:
         return {key: values.copy() for key, values in self._observations.items()}
