@@ -145,6 +145,7 @@ class CrowdNavVectorEnv(VectorEnv):
     # ------------------------------------------------------------------- step
 
     def step(self, actions: Any):
+        """Step every running world with its row of ``actions`` ((num_envs, 2), each checked finite); autoreset per the mode."""
         if not self._started.all():
             raise RuntimeError("call reset() before step(): some worlds have not been reset")
         actions = self._checked_actions(actions)
@@ -156,7 +157,7 @@ class CrowdNavVectorEnv(VectorEnv):
             self._reset_worlds(np.flatnonzero(self._ended), [None] * int(self._ended.sum()))
         if not stepping.any():  # every world is waiting (DISABLED) or was just reset
             self._observe_all()
-            return self._copy_observations(), rewards, *self._flags(stepping), infos
+            return self._copy_observations(), rewards, *self._waiting_flags(), infos
         result = self.batch.step(actions, None if stepping.all() else stepping)
         terminated = result.terminated & stepping
         truncated = result.truncated & stepping & ~terminated
@@ -180,7 +181,8 @@ class CrowdNavVectorEnv(VectorEnv):
             infos = self._same_step_reset(infos, ended)
         return self._copy_observations(), rewards, terminated, truncated, infos
 
-    def _flags(self, stepping: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    def _waiting_flags(self) -> tuple[np.ndarray, np.ndarray]:
+        """(terminated, truncated) when no world stepped: waiting worlds repeat theirs (DISABLED), others are False."""
         if self.autoreset_mode is AutoresetMode.DISABLED:
             return self._last_flags[0] & self._ended, self._last_flags[1] & self._ended
         return np.zeros(self.num_envs, dtype=bool), np.zeros(self.num_envs, dtype=bool)
