@@ -57,39 +57,27 @@ class HeldOutEpisodes:
         """
         if batched and not privileged:
             return self._run_batched(policy, record)
-        observations = [env.reset(seed=seed)[0] for env, seed in zip(self.envs, self.seeds, strict=True)]
-        positions = [[env.simulator.positions.copy()] for env in self.envs]
-        frames = [[_state(env.simulator)] for env in self.envs] if record else None
-        forces: list[list[float]] = [[] for _ in self.envs]
-        returns = [0.0] * len(self.envs)
-        ends: list[dict[str, Any] | None] = [None] * len(self.envs)
-        running = list(range(len(self.envs)))
+        envs = self.envs
+        observations = [env.reset(seed=seed)[0] for env, seed in zip(envs, self.seeds, strict=True)]
+        log = _Log([env.simulator.positions.copy() for env in envs], [_state(env.simulator) for env in envs] if record else None)
+        running = list(range(len(envs)))
         while running:
             if privileged:
-                actions = np.stack([policy(self.envs[i].simulator) for i in running])
+                actions = np.stack([policy(envs[i].simulator) for i in running])
             else:
                 batch = {key: np.stack([observations[i][key] for i in running]) for key in observations[running[0]]}
                 actions = np.asarray(policy(batch)).reshape(len(running), -1)
             still = []
             for action, i in zip(actions, running, strict=True):
-                env = self.envs[i]
-                observations[i], reward, terminated, truncated, info = env.step(action)
-                sim = env.simulator
-                positions[i].append(sim.positions.copy())  # the simulator updates its arrays in place
-                if frames is not None:
-                    frames[i].append(_state(sim))
-                forces[i].append(abs(complex(sim.robot_social_force)))
-                returns[i] += float(reward)
+                observations[i], reward, terminated, truncated, info = envs[i].step(action)
+                sim = envs[i].simulator  # it updates its arrays in place: the log copies them
+                log.step(i, sim.positions.copy(), lambda sim=sim: _state(sim), complex(sim.robot_social_force), reward)
                 if terminated or truncated:
-                    ends[i] = info
+                    log.ends[i] = info
                 else:
                     still.append(i)
             running = still
-        episodes = [self._episode(i, positions[i], forces[i], returns[i], ends[i]) for i in range(len(self.envs))]
-        if frames is not None:
-            for episode, states, env in zip(episodes, frames, self.envs, strict=True):
-                _add_frames(episode, states, env.simulator)
-        return episodes
+        return log.episodes(self, [env.simulator for env in envs])
 
     def _run_batched(self, policy: BatchPolicy, record: bool) -> list[dict[str, Any]]:
         """:meth:`run` for a learned policy, the episodes stepped as one batch (ended worlds wait)."""
@@ -99,40 +87,25 @@ class HeldOutEpisodes:
             self._vector = CrowdNavVectorEnv(num_envs=len(self.seeds), autoreset_mode="Disabled", **self.env_options)
         env, count = self._vector, len(self.seeds)
         observations, _ = env.reset(seed=self.seeds)
-        positions = [[env.positions(i)] for i in range(count)]
-        frames = [[_world_state(env, i)] for i in range(count)] if record else None
-        forces: list[list[float]] = [[] for _ in range(count)]
-        returns = [0.0] * count
-        ends: list[dict[str, Any] | None] = [None] * count
+        log = _Log([env.positions(i) for i in range(count)], [_world_state(env, i) for i in range(count)] if record else None)
         running = np.ones(count, dtype=bool)
         while running.any():
             live = np.flatnonzero(running)
-            batch = {key: values[live] for key, values in observations.items()}
             actions = np.zeros((count, 2))
-            actions[live] = np.asarray(policy(batch)).reshape(len(live), -1)
+            actions[live] = np.asarray(policy({key: values[live] for key, values in observations.items()})).reshape(len(live), -1)
             observations, rewards, terminated, truncated, infos = env.step(actions)
             force = env.robot_social_force()
             for i in live.tolist():  # bookkeeping of the trajectories, per running episode
-                positions[i].append(env.positions(i))
-                if frames is not None:
-                    frames[i].append(_world_state(env, i))
-                forces[i].append(abs(complex(force[i])))
-                returns[i] += float(rewards[i])
+                log.step(i, env.positions(i), lambda i=i: _world_state(env, i), force[i], rewards[i])
                 if terminated[i] or truncated[i]:
-                    ends[i] = {"outcome": infos["outcome"][i]}
+                    log.ends[i] = {"outcome": infos["outcome"][i]}
                     if infos.get("_collision_kind", np.zeros(count, dtype=bool))[i]:
-                        ends[i]["collision_kind"] = infos["collision_kind"][i]
+                        log.ends[i]["collision_kind"] = infos["collision_kind"][i]
                     running[i] = False
-        sims = [env.simulator(i) for i in range(count)]
-        episodes = [self._episode(i, positions[i], forces[i], returns[i], ends[i], sims[i]) for i in range(count)]
-        if frames is not None:
-            for episode, states, sim in zip(episodes, frames, sims, strict=True):
-                _add_frames(episode, states, sim)
-        return episodes
+        return log.episodes(self, [env.simulator(i) for i in range(count)])
 
-    def _episode(self, i: int, positions: list[np.ndarray], forces: list[float], total: float, info: dict[str, Any],
-                 sim: Any = None) -> dict[str, Any]:
-        sim = self.envs[i].simulator if sim is None else sim
+    def _episode(self, i: int, sim: Any, positions: list[np.ndarray], forces: list[float], total: float,
+                 info: dict[str, Any]) -> dict[str, Any]:
         trajectory = Trajectory(
             positions=np.stack(positions), radii=np.asarray(sim.radii, dtype=float).copy(), goal=complex(sim.robot_goal),
             goal_radius=float(sim.scenario.robot.goal_radius), dt=float(sim.dt), social_force=np.asarray(forces),
@@ -150,10 +123,35 @@ class HeldOutEpisodes:
             self._vector.close()
 
 
-def _add_frames(episode: dict[str, Any], states: list[dict[str, np.ndarray]], sim: Any) -> None:
-    """The recorded states of an episode, and each agent's group for the whole episode (the robot is its own)."""
-    groups = ["robot", *(sim.groups[g].name for g in sim.human_group.tolist())]
-    episode["frames"] = {"dt": float(sim.dt), "groups": groups, **{key: np.stack([s[key] for s in states]) for key in states[0]}}
+class _Log:
+    """What the test episodes keep step by step: positions, social force, return, how each ended (and frames)."""
+
+    def __init__(self, first_positions: list[np.ndarray], first_states: list[dict[str, np.ndarray]] | None):
+        count = len(first_positions)
+        self.positions = [[p] for p in first_positions]
+        self.frames = None if first_states is None else [[s] for s in first_states]
+        self.forces: list[list[float]] = [[] for _ in range(count)]
+        self.returns = [0.0] * count
+        self.ends: list[dict[str, Any] | None] = [None] * count
+        """Per episode: its last info (``outcome``, ``collision_kind`` after a collision) once it ended."""
+
+    def step(self, i: int, positions: np.ndarray, state: Callable[[], dict[str, np.ndarray]], force: complex, reward: float) -> None:
+        """Episode ``i`` took a step: its new positions (a copy), its state (called only when recording), force and reward."""
+        self.positions[i].append(positions)
+        if self.frames is not None:
+            self.frames[i].append(state())
+        self.forces[i].append(abs(complex(force)))
+        self.returns[i] += float(reward)
+
+    def episodes(self, owner: HeldOutEpisodes, sims: Sequence[Any]) -> list[dict[str, Any]]:
+        """One dict per episode (see :meth:`HeldOutEpisodes.run`); ``sims``: each episode's simulator (radii, goal, groups)."""
+        out = [owner._episode(i, sim, self.positions[i], self.forces[i], self.returns[i], self.ends[i]) for i, sim in enumerate(sims)]
+        if self.frames is not None:
+            for episode, states, sim in zip(out, self.frames, sims, strict=True):
+                # each agent's group, for the whole episode (the robot is its own)
+                groups = ["robot", *(sim.groups[g].name for g in sim.human_group.tolist())]
+                episode["frames"] = {"dt": float(sim.dt), "groups": groups, **{key: np.stack([s[key] for s in states]) for key in states[0]}}
+        return out
 
 
 def _world_state(env: Any, i: int) -> dict[str, np.ndarray]:

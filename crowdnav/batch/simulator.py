@@ -34,6 +34,9 @@ from crowdnav.world import CompiledWorld
 _PER_WORLD = ("positions", "velocities", "human_goals", "human_preferred_speed", "_command_cap", "human_stopped", "human_arrived", "human_group")
 """Simulator arrays with one row per world in a bucket (robot first where the robot has an entry)."""
 _SCALARS = ("robot_goal", "robot_heading", "step_count")
+"""Simulator scalars, one entry per world in a bucket."""
+_GEOMETRY = ("pair_offset", "pair_distance", "gap", "repulsion", "humans_touch", "polygon_offset", "polygon_distance", "disc_offset", "disc_distance")
+"""What a refresh measures, one row per world in a bucket (created by the first refresh)."""
 CHUNK_ELEMENTS = 65_536
 """Worlds are stepped in chunks of about this many agent-column entries ((n+1) x (n+1+obstacles) per world):
 larger temporaries leave the CPU caches. Measured (benchmarks/bench_vector.py, 64 worlds): 50 humans ran at
@@ -81,17 +84,13 @@ class Bucket:
     def __len__(self) -> int:
         return len(self.world)
 
-    def row(self, world: int) -> int:
-        return int(np.flatnonzero(self.world == world)[0])
-
     def add(self, world: int, slot: Simulator) -> None:
         """Append ``world`` with the state its slot holds after a reset."""
         self.world = np.append(self.world, world)
         for name in _PER_WORLD:
             setattr(self, name, np.concatenate([getattr(self, name), getattr(slot, name)[None]]))
-        self.robot_goal = np.append(self.robot_goal, slot.robot_goal)
-        self.robot_heading = np.append(self.robot_heading, slot.robot_heading)
-        self.step_count = np.append(self.step_count, slot.step_count)
+        for name in _SCALARS:
+            setattr(self, name, np.append(getattr(self, name), getattr(slot, name)))
         for name in _GEOMETRY:  # a row for the newcomer, filled by the refresh that follows its reset
             stack = getattr(self, name, None)
             if stack is not None:
@@ -99,21 +98,15 @@ class Bucket:
 
     def replace(self, row: int, slot: Simulator) -> None:
         """Overwrite ``row`` with the state its slot holds after a reset (same crowd size)."""
-        for name in _PER_WORLD:
+        for name in (*_PER_WORLD, *_SCALARS):
             getattr(self, name)[row] = getattr(slot, name)
-        self.robot_goal[row], self.robot_heading[row], self.step_count[row] = slot.robot_goal, slot.robot_heading, slot.step_count
 
     def remove(self, row: int) -> None:
         keep = np.arange(len(self)) != row
         self.world = self.world[keep]
-        for name in (*_PER_WORLD, *_SCALARS):
+        for name in (*_PER_WORLD, *_SCALARS, *(g for g in _GEOMETRY if hasattr(self, g))):
             setattr(self, name, getattr(self, name)[keep])
-        for name in _GEOMETRY:
-            if hasattr(self, name):
-                setattr(self, name, getattr(self, name)[keep])
 
-
-_GEOMETRY = ("pair_offset", "pair_distance", "gap", "repulsion", "humans_touch", "polygon_offset", "polygon_distance", "disc_offset", "disc_distance")
 
 
 class BatchSimulator:

@@ -279,16 +279,19 @@ class CrowdNavVectorEnv(VectorEnv):
 
     def positions(self, world: int) -> np.ndarray:
         """(n+1,) complex: robot then humans of ``world`` (a copy)."""
-        bucket, row = self.batch.locate(world)
-        return bucket.positions[row].copy()
+        return self._row("positions", world)
 
     def velocities(self, world: int) -> np.ndarray:
-        bucket, row = self.batch.locate(world)
-        return bucket.velocities[row].copy()
+        """(n+1,) complex: velocities over the last step of ``world`` (a copy)."""
+        return self._row("velocities", world)
 
     def human_goals(self, world: int) -> np.ndarray:
+        """(n,) complex: the humans' current goals in ``world`` (a copy)."""
+        return self._row("human_goals", world)
+
+    def _row(self, name: str, world: int) -> np.ndarray:
         bucket, row = self.batch.locate(world)
-        return bucket.human_goals[row].copy()
+        return getattr(bucket, name)[row].copy()
 
     def robot_goal(self, world: int) -> complex:
         bucket, row = self.batch.locate(world)

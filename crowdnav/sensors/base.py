@@ -15,7 +15,7 @@ to feed their networks O(1) numbers (:meth:`Modality.normalize`).
 from __future__ import annotations
 
 import abc
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from typing import TYPE_CHECKING, Any, ClassVar, TypeVar
 
 import numpy as np
@@ -136,6 +136,27 @@ def normalized_box(space: spaces.Box, offset: np.ndarray, scale: np.ndarray) -> 
     """Float32 Box of ``space``'s bounds mapped like :func:`normalize_values` (so it contains every mapped observation)."""
     low, high = normalize_values(space.low, offset, scale), normalize_values(space.high, offset, scale)
     return spaces.Box(low=low, high=high, dtype=np.float32)
+
+
+class RadiiConstants:
+    """Per-primitive constants a sensor derives from the agents' radii, built once per radii vector.
+
+    The radii depend only on the crowd size, so one entry per size a scenario allows; the single
+    path (``sim.radii``) and the batched path (``state.radii``) share the entries.
+    """
+
+    def __init__(self, build: Callable[[np.ndarray], Any], limit: int = 64):
+        self._build, self._limit = build, limit
+        self._cache: dict[bytes, Any] = {}
+
+    def __call__(self, radii: np.ndarray) -> Any:
+        key = radii.tobytes()
+        value = self._cache.get(key)
+        if value is None:
+            if len(self._cache) >= self._limit:  # bounded: radii edited by hand never pile up
+                self._cache.clear()
+            value = self._cache[key] = self._build(radii)
+        return value
 
 
 MODALITIES: dict[str, type[Modality]] = {}

@@ -23,7 +23,7 @@ from gymnasium import spaces
 
 from crowdnav.batch.scalar_math import cmul
 from crowdnav.scenario.schema import LeogSensor
-from crowdnav.sensors.base import Modality, register_modality
+from crowdnav.sensors.base import Modality, RadiiConstants, register_modality
 from crowdnav.sensors.frames import to_robot_frame, to_robot_frame_batch
 from crowdnav.sensors.runs import expand_runs
 from crowdnav.sensors.static_edges import oriented_edges
@@ -65,12 +65,10 @@ class LeogModality(Modality):
         obstacles = world.obstacles
         self._static_disc_center = obstacles.disc_center
         self._static_disc_radius = obstacles.disc_radius
-        self._radii_source: np.ndarray | None = None  # sim.radii the disc constants were built from
-        self._disc_cache: tuple[np.ndarray, np.ndarray] = (np.zeros((2, 0)), np.zeros(0))
         self._ones = self._minus_ones = np.zeros(0, dtype=np.intp)
+        self._disc_constants = RadiiConstants(self._constants_for)
+        """radii -> (2, n + C) disc radii in cells as [-r, +r], and (n + C,) their squares; humans first."""
         self._grid_origin = complex(n / 2 + 0.5, n / 2 + 0.5)
-        self._batch_radii: np.ndarray | None = None  # a copy of the BatchState radii the batch constants were built from
-        self._batch_constants: tuple[np.ndarray, np.ndarray] = self._disc_cache
         self._batch_marks = np.zeros(0, dtype=np.int32)  # scratch of _running_counts_batch, grown on demand
 
     def make_space(self) -> spaces.Box:
@@ -109,7 +107,7 @@ class LeogModality(Modality):
         z *= scale
         z += self._grid_origin - complex(sim.positions[0]) * scale
         end, start, centre = z[:edges], z[edges : 2 * edges], z[2 * edges :]
-        radius_span, radius2 = self._disc_constants(sim)
+        radius_span, radius2 = self._disc_constants(sim.radii)
 
         # Each edge and disc is paired with the run of rows whose centre line v = i + 1 falls in
         # its span [v0, v1): floor(v0) <= i < floor(v1). The half-open rule counts a polygon
@@ -160,24 +158,13 @@ class LeogModality(Modality):
         # so one flat cumulative sum over the rows restarts at zero on each row.
         return marks.cumsum()
 
-    def _disc_constants(self, sim: Simulator) -> tuple[np.ndarray, np.ndarray]:
-        """(2, n + C) disc radii in cells as [-r, +r], and (n + C,) their squares; humans first.
-
-        Rebuilt when the simulator's radii array changes (it is replaced at every reset).
-        """
-        if sim.radii is not self._radii_source:
-            self._disc_cache = self._constants_for(sim.radii)
-            self._radii_source = sim.radii
-            # a disc spans at most 2 r / resolution + 1 rows
-            radius = self._disc_cache[0][1]
-            chords = int(np.ceil(2 * radius + 1).sum()) if len(radius) else 0
-            if len(self._ones) < chords:
-                self._ones = np.ones(chords, dtype=np.intp)
-                self._minus_ones = -self._ones
-        return self._disc_cache
-
     def _constants_for(self, radii: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         radius = np.concatenate((radii[1:], self._static_disc_radius)) / self.resolution
+        # a disc spans at most 2 r / resolution + 1 rows: enough +1/-1 chord marks for all of them
+        chords = int(np.ceil(2 * radius + 1).sum()) if len(radius) else 0
+        if len(self._ones) < chords:
+            self._ones = np.ones(chords, dtype=np.intp)
+            self._minus_ones = -self._ones
         return np.stack((-radius, radius)), radius**2
 
     # ------------------------------------------------------------- K worlds at once
@@ -208,7 +195,7 @@ class LeogModality(Modality):
         z *= scale[:, None]  # numpy complex multiply, as the single code's array *= scalar (same bits)
         z += shift[:, None]
         end, start, centre = z[:, :edges], z[:, edges : 2 * edges], z[:, 2 * edges :]
-        radius_span, radius2 = self._batch_disc_constants(state.radii)
+        radius_span, radius2 = self._disc_constants(state.radii)
 
         # (2, primitive) spans, every world's edges then every world's discs
         edge_span = np.sort(z.real[:, : 2 * edges].reshape(worlds, 2, edges), axis=1)
@@ -257,10 +244,3 @@ class LeogModality(Modality):
         marks.fill(0)
         np.add.at(marks, flat, sign)
         return np.add.accumulate(marks, out=marks)  # in place
-
-    def _batch_disc_constants(self, radii: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """:meth:`_disc_constants` for a BatchState's radii (cached on their values, kept apart from the single cache)."""
-        if self._batch_radii is None or not np.array_equal(radii, self._batch_radii):
-            self._batch_constants = self._constants_for(radii)
-            self._batch_radii = np.array(radii, dtype=float)
-        return self._batch_constants

@@ -25,7 +25,7 @@ from gymnasium import spaces
 
 from crowdnav.batch.scalar_math import remainder
 from crowdnav.scenario.schema import LidarSensor
-from crowdnav.sensors.base import Modality, register_modality
+from crowdnav.sensors.base import Modality, RadiiConstants, register_modality
 from crowdnav.sensors.runs import expand_runs
 from crowdnav.sensors.static_edges import oriented_edges
 
@@ -70,11 +70,9 @@ class LidarModality(Modality):
         self._static_disc_count = obstacles.disc_count
         self._static_disc_center = obstacles.disc_center
         self._static_disc_radius = obstacles.disc_radius
-        self._radii_source: np.ndarray | None = None  # sim.radii the disc constants were built from
-        self._disc_constants: tuple[np.ndarray, np.ndarray] = (np.zeros(0), np.zeros(0))
+        self._primitive_constants = RadiiConstants(self._constants_for)
+        """radii -> (P,) per primitive: numerator of the bearing half-width and squared radius (both 0 for edges)."""
         self._no_hit = np.full(self.beams, 1.0 / self.max_range)
-        self._batch_radii: np.ndarray | None = None  # a copy of the BatchState radii the batch constants were built from
-        self._batch_constants: tuple[np.ndarray, np.ndarray] = self._disc_constants
 
     def make_space(self) -> spaces.Box:
         return spaces.Box(low=0.0, high=1.0, shape=(self.beams,), dtype=np.float32)
@@ -102,7 +100,7 @@ class LidarModality(Modality):
         heading = math.remainder(sim.robot_heading, TWO_PI)
         edges = self._edge_count
         primitives = edges + sim.n_humans + self._static_disc_count
-        half_width_numerator, radius2 = self._primitive_constants(sim)
+        half_width_numerator, radius2 = self._primitive_constants(sim.radii)
         humans = sim.positions[1:]
         # World-frame offsets from the robot, laid out so that one arctan2 gives every bearing
         # interval: [edge ends, disc centres | edge starts, disc centres]. Per-primitive arrays
@@ -183,16 +181,6 @@ class LidarModality(Modality):
         beam, ends = expand_runs(first.T.astype(np.intp).ravel(), count.T.ravel())
         return beam, count.sum(0), int(ends[2 * edges - 1]) if edges else 0
 
-    def _primitive_constants(self, sim: Simulator) -> tuple[np.ndarray, np.ndarray]:
-        """(P,) per primitive: numerator of the bearing half-width and squared radius (both 0 for edges).
-
-        Rebuilt when the simulator's radii array changes (it is replaced at every reset).
-        """
-        if sim.radii is not self._radii_source:
-            self._disc_constants = self._constants_for(sim.radii)
-            self._radii_source = sim.radii
-        return self._disc_constants
-
     def _constants_for(self, radii: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         # arcsin(x) <= x * pi / 2 on [0, 1]: (r * pi / 2) / d bounds a disc's bearing half-width
         radius = np.concatenate((np.zeros(self._edge_count), radii[1:], self._static_disc_radius))
@@ -214,7 +202,7 @@ class LidarModality(Modality):
         discs = state.n_humans + self._static_disc_count
         primitives = edges + discs
         heading = remainder(state.robot_heading, TWO_PI)
-        half_width_numerator, radius2 = self._batch_primitive_constants(state.radii)
+        half_width_numerator, radius2 = self._primitive_constants(state.radii)
         humans = state.positions[:, 1:]
         z = np.empty((worlds, 2 * primitives), dtype=complex)
         for at, part in enumerate((self._edge_end, self._edge_start)):  # [ends, discs | starts, discs], as the single code
@@ -269,10 +257,3 @@ class LidarModality(Modality):
         out = np.full(worlds * beams, 1.0 / self.max_range)
         np.fmax.at(out, world_beam, inverse)
         return out.reshape(worlds, beams)
-
-    def _batch_primitive_constants(self, radii: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """:meth:`_primitive_constants` for a BatchState's radii (cached on their values, kept apart from the single cache)."""
-        if self._batch_radii is None or not np.array_equal(radii, self._batch_radii):
-            self._batch_constants = self._constants_for(radii)
-            self._batch_radii = np.array(radii, dtype=float)
-        return self._batch_constants
