@@ -80,9 +80,14 @@ class EpisodeCallback(BaseCallback):
                  checkpoint_every: int, save: Callable[[int], None] | None = None,
                  snapshot: Callable[[int], None] | None = None, on_start: Callable[[], None] | None = None,
                  log_file: str | Path | None = None, progress: bool = False, successes_before: int = 0,
-                 resume_point: ResumePoint | None = None):
+                 resume_point: ResumePoint | None = None, timesteps: int | None = None, checkpoint_every_steps: int | None = None):
         super().__init__()
         self.episodes = episodes
+        self.timesteps = timesteps
+        """A budget in env steps (over all worlds) instead of ``episodes``; ``checkpoint_every_steps`` then sets the points."""
+        self.checkpoint_every_steps = checkpoint_every_steps
+        self.point = 0
+        """With a step budget: the last evaluation point (env steps) reached."""
         self.done = first_episode
         self.successes = successes_before
         self.seed_of = seed_of
@@ -110,12 +115,14 @@ class EpisodeCallback(BaseCallback):
         self._start_time = time.perf_counter()
         self._start_steps = self.model.num_timesteps
         if self._log_path is not None:
-            new = not self._log_path.exists()
+            # empty: a kill before the first row (a step budget checkpoints before any episode ends)
+            new = not self._log_path.exists() or self._log_path.stat().st_size == 0
             if not new:
                 set_aside_episodes_from(self._log_path, self.done)
             self._log = open(self._log_path, "a", encoding="utf-8")  # noqa: SIM115 (closed in _on_training_end)
             if new:
                 self._log.write(EPISODE_LOG_HEADER + "\n")
+                self._log.flush()
         if self._progress:
             from tqdm import tqdm
 
@@ -124,16 +131,33 @@ class EpisodeCallback(BaseCallback):
 
     def _on_step(self) -> bool:
         for done, info in zip(self.locals["dones"], self.locals["infos"], strict=True):
-            if done:
+            # several worlds can end in the step that reaches an episode budget: the run is exactly `episodes` long
+            if done and (self.timesteps is not None or self.done < self.episodes):
                 self._record(info)
-        return self.done < self.episodes
+        if self.timesteps is None:
+            return self.done < self.episodes
+        every = self.checkpoint_every_steps
+        if every is not None and self.model.num_timesteps >= self.point + every:
+            # the policy after the first step of all worlds that reaches the point (the policy is fixed within a step)
+            self.point = self.model.num_timesteps // every * every
+            if self.snapshot is not None:
+                self.snapshot(self.point)
+            self._save_due = self.save is not None
+        return self.model.num_timesteps < self.timesteps
+
+    @property
+    def finished(self) -> bool:
+        """Whether the budget (episodes, or env steps) is spent."""
+        return self.done >= self.episodes if self.timesteps is None else self.model.num_timesteps >= self.timesteps
 
     def _record(self, info: dict) -> None:
         if self.resume_point is not None:
             self.resume_point.mark()
         episode = info.get("episode", {})
+        # batched training: the finished world's own episode seed (episodes end in another order than they start)
+        seed = info["episode_seed"] if "episode_seed" in info else self.seed_of(self.done)
         record = EpisodeRecord(
-            episode=self.done, seed=self.seed_of(self.done), outcome=info.get("outcome", "truncated"),
+            episode=self.done, seed=seed, outcome=info.get("outcome", "truncated"),
             reward=round(float(episode.get("r", float("nan"))), 4), length=int(episode.get("l", 0)),
             timesteps=self.model.num_timesteps, seconds=round(time.perf_counter() - self._start_time, 3),
         )
@@ -149,7 +173,7 @@ class EpisodeCallback(BaseCallback):
         if self._bar is not None:
             self._bar.update(1)
             self._bar.set_postfix(success=f"{self.success_rate:.0%}", steps_per_s=f"{self.steps_per_second:.0f}", refresh=False)
-        if self.done % self.checkpoint_every == 0:
+        if self.timesteps is None and self.done % self.checkpoint_every == 0:
             if self.snapshot is not None:
                 self.snapshot(self.done)
             self._save_due = self.save is not None

@@ -23,7 +23,7 @@ from pydantic import AfterValidator, BaseModel, BeforeValidator, ConfigDict, Fie
 from crowdnav.config_errors import ConfigIssue, FieldProblems, YamlProblem, format_issues, read_yaml, validation_issues, yaml_line
 from crowdnav.registry import ALGORITHM_NAMES, ENCODER_MODES, modality_names, unknown_name_message
 
-__all__ = ["ALGORITHM_NAMES", "ENCODER_MODES", "ConfigError", "EncoderConfig", "ExtractorConfig", "TrainConfig", "config_from_mapping",
+__all__ = ["ALGORITHM_NAMES", "ENCODER_MODES", "ConfigError", "DemonstrationConfig", "EncoderConfig", "ExtractorConfig", "TrainConfig", "config_from_mapping",
            "config_to_dict", "describe_fields", "load_config"]
 
 
@@ -88,6 +88,7 @@ class ExtractorConfig(_Section):
     rbf_centres: Int = option(16, "Gaussian RBF centres per low-dimensional input value (goal, closest_obstacle, velocity); 0: no RBF.", ge=0)
     rbf_trainable: Bool = option(False, "Learn the RBF centres and widths (otherwise fixed, evenly spread over the value's range).")
     lowdim_hidden: list[Size] = option([32], "Fully connected layers after the RBF layer, per low-dimensional key.")
+    table_hidden: list[Size] = option([64], "Fully connected layers on a flattened table of rows (the humans modality's nearest humans).")
 
 
 class EncoderConfig(_Section):
@@ -98,6 +99,21 @@ class EncoderConfig(_Section):
     )
     weights: Text | None = option(None, "Pre-trained encoder file (encoder.pt from pretrain-encoder); required by frozen and finetune.")
     precompute: Bool = option(True, "Frozen only: encode the grid once per env step in a wrapper, so the replay buffer stores latents.")
+
+
+class DemonstrationConfig(_Section):
+    """A warm start from the privileged social-force robot before RL (docs/agents.md#demonstrations-warm-start); off by default."""
+
+    episodes: Int = option(0, "Episodes of the social-force robot cloned before training starts (0: off, pure RL).", ge=0)
+    epochs: Int = option(30, "Passes of behaviour cloning over the demonstrations (each DAgger round too).", ge=1)
+    batch_size: Int = option(256, "Minibatch of behaviour cloning.", ge=1)
+    learning_rate: Float = option(1e-3, "Adam learning rate of behaviour cloning (a fresh optimizer; the algorithm's own is untouched).", gt=0)
+    action_std: Float = option(0.3, "Gaussian std after cloning: PPO/A2C's log_std is set to it, SAC's log-std head is cloned towards it.", gt=0)
+    value_pretraining: Bool = option(True, "Also fit the value function (PPO/A2C) or the critics at the demonstrated actions "
+                                           "(SAC/TD3/DDPG) to the demonstrations' discounted returns.")
+    into_replay_buffer: Bool = option(True, "Off-policy: store the demonstration transitions in the replay buffer (ordinary transitions).")
+    dagger_rounds: Int = option(0, "DAgger rounds after cloning: the clone drives `episodes` more episodes, the expert labels them, "
+                                   "cloning restarts on all.", ge=0)
 
 
 class TrainConfig(_Section):
@@ -111,7 +127,13 @@ class TrainConfig(_Section):
     overrides: dict[str, Any] = option({}, "Dotted scenario overrides, e.g. {humans.count: 5}.")
     reward_weights: dict[str, Any] = option({}, "Reward preset and weight overrides, e.g. {preset: paper, social: -50} (docs/agents.md#reward).")
     algo: Algorithm = option("sac", "Stable-Baselines3 algorithm (crowdnav.registry.ALGORITHMS).")
-    episodes: Int = option(700, "Training length in episodes (the paper trains for 700).", ge=1)
+    episodes: Int = option(700, "Training length in episodes (the paper trains for 700); ignored when timesteps is set.", ge=1)
+    timesteps: Int | None = option(None, "Training length in env steps, counted over all worlds (None: the episodes budget).", ge=1)
+    num_envs: Int = option(32, "Worlds collected from at once (the native vector env, docs/agents.md#batched-training); "
+                               "1: one env, as the published single-env results were trained.", ge=1, le=4096)
+    updates_per_step: Float | None = option(None, "Off-policy with num_envs > 1: gradient steps per env step, the update-to-data "
+                                                  "ratio (None: per-algorithm default).", gt=0, le=16)
+    n_steps: Int | None = option(None, "On-policy: steps per world in each rollout (None: per-algorithm default).", ge=1)
     seed: Int = option(0, "Seed of the networks and of the training episodes (episode i uses seed train_seed(seed, i)).")
     out: Text = option("runs/train", "Output folder: checkpoint, snapshots, episode log, resolved config.")
     net_arch: list[Size] | None = option(None, "Hidden layers of the actor and critic heads on top of the latent (None: per-algorithm default).")
@@ -128,7 +150,11 @@ class TrainConfig(_Section):
     policy_kwargs: dict[str, Any] = option({}, "Further SB3 policy_kwargs, e.g. {share_features_extractor: true} (the extractor is crowdnav's).")
     extractor: ExtractorConfig = Field(default_factory=ExtractorConfig, description="Sizes of the multi-modal encoder.")
     encoder: EncoderConfig = Field(default_factory=EncoderConfig, description="LEOG encoder mode and pre-trained weights.")
+    demonstrations: DemonstrationConfig = Field(default_factory=DemonstrationConfig,
+                                                description="Warm start from the social-force robot's demonstrations (off by default).")
     checkpoint_every: Int = option(50, "Save a resumable checkpoint (and a policy snapshot) every this many episodes.", ge=1)
+    checkpoint_every_steps: Int | None = option(None, "With timesteps: save the checkpoint and a snapshot every this many env steps "
+                                                      "instead (snapshots/steps_<N>).", ge=1)
     pack_grids: Bool = option(True, "Off-policy: store LEOG grids in the replay buffer at 1 bit per cell (8x less memory than uint8).")
     save_replay_buffer: Bool = option(True, "Store the replay buffer with the checkpoint so a resumed run continues with it.")
     torch_threads: Int = option(1, "torch.set_num_threads for this process.", ge=1)
@@ -167,6 +193,10 @@ def cross_field_problems(config: TrainConfig) -> list[tuple[str, str]]:
         problems.append(("encoder.weights", f"encoder mode {config.encoder.mode!r} needs pre-trained weights (crowdnav pretrain-encoder)"))
     if config.encoder.mode != "scratch" and "leog" not in config.modalities:
         problems.append(("encoder.mode", f"{config.encoder.mode!r} applies to the LEOG, but 'leog' is not among the modalities {config.modalities}"))
+    if config.checkpoint_every_steps is not None and config.timesteps is None:
+        problems.append(("checkpoint_every_steps", "applies to a budget in env steps; set timesteps too (or use checkpoint_every)"))
+    if config.updates_per_step is not None and config.num_envs == 1:
+        problems.append(("updates_per_step", "applies to batched training (num_envs > 1); one env takes algo_kwargs.train_freq / gradient_steps"))
     extractor = config.extractor
     if not (len(extractor.leog_channels) == len(extractor.leog_kernels) == len(extractor.leog_strides)) or not extractor.leog_channels:
         problems.append(("extractor", "leog_channels, leog_kernels and leog_strides must be non-empty lists of the same length"))

@@ -188,6 +188,21 @@ class LidarEncoder(nn.Module):
         return self.fc(proximity)
 
 
+class TableEncoder(nn.Module):
+    """A table of rows (B, rows, features), e.g. the ``humans`` modality's nearest humans -> flattened -> fully connected layers.
+
+    The rows come sorted (nearest human first) and absent ones are zeros with a presence flag, so
+    a plain MLP on the flattened table sees each slot at a fixed place.
+    """
+
+    def __init__(self, shape: Sequence[int], hidden: Sequence[int]):
+        super().__init__()
+        self.fc, self.out_features = mlp(int(np.prod(shape)), hidden)
+
+    def forward(self, table: torch.Tensor) -> torch.Tensor:
+        return self.fc(table.flatten(1))
+
+
 class LowDimEncoder(nn.Module):
     """A few bounded values -> Gaussian RBF expansion -> fully connected layers."""
 

@@ -8,7 +8,9 @@ Branch per key (in the observation space's key order):
   frozen encoder's latent (see :class:`agents.wrappers.LeogLatentWrapper`) and only the head runs;
 * vectors longer than :data:`LOWDIM_MAX` values (the LIDAR) -> :class:`~agents.encoders.LidarEncoder`;
 * short vectors (goal, closest_obstacle, velocity) -> :class:`~agents.encoders.LowDimEncoder`
-  (Gaussian RBF, then fully connected layers).
+  (Gaussian RBF, then fully connected layers);
+* tables ``(rows, features)`` (the ``humans`` modality) -> :class:`~agents.encoders.TableEncoder`
+  (flattened, then the ``table_hidden`` fully connected layers).
 
 **Grid scaling.** SB3's ``preprocess_obs`` divides a uint8 observation by 255 only when
 ``normalize_images`` is on *and* ``is_image_space`` recognizes the Box (uint8, bounds 0..255);
@@ -33,7 +35,7 @@ from typing import Any
 
 import torch
 from crowdnav.agents import batch_cache
-from crowdnav.agents.encoders import LeogEncoder, LidarEncoder, LowDimEncoder, leog_architecture, mlp
+from crowdnav.agents.encoders import LeogEncoder, LidarEncoder, LowDimEncoder, TableEncoder, leog_architecture, mlp
 from crowdnav.agents.rbf import GaussianRBF
 from gymnasium import spaces
 from stable_baselines3.common.preprocessing import preprocess_obs
@@ -132,6 +134,9 @@ class MultiModalExtractor(BaseFeaturesExtractor):
                 branches[key], sizes[key] = branch, branch.out_features
             elif len(space.shape) == 1:
                 branch = LowDimEncoder(space.low, space.high, settings["rbf_centres"], settings["lowdim_hidden"], settings["rbf_trainable"])
+                branches[key], sizes[key] = branch, branch.out_features
+            elif len(space.shape) == 2:
+                branch = TableEncoder(space.shape, settings["table_hidden"])
                 branches[key], sizes[key] = branch, branch.out_features
             else:
                 raise ValueError(f"observation {key!r} has shape {space.shape}: register an encoder for it with agents.register_encoder")

@@ -16,6 +16,8 @@ from crowdnav.agents.config import ConfigError, TrainConfig
 from crowdnav.agents.encoders import LeogEncoder
 from crowdnav.agents.extractor import MultiModalExtractor
 from crowdnav.agents.replay_buffer import PackedGridReplayBuffer
+from crowdnav.agents.seeding import EpisodeSeedCounter
+from crowdnav.agents.vec_env import CrowdNavSB3VecEnv
 from crowdnav.agents.wrappers import EpisodeSeeds, LeogLatentWrapper, NormalizeObservation, ObservationScales
 from stable_baselines3 import A2C, DDPG, PPO, SAC, TD3
 from stable_baselines3.common.base_class import BaseAlgorithm
@@ -42,20 +44,33 @@ ALGORITHM_DEFAULTS: dict[str, dict[str, Any]] = {
              "n_step_returns": 5},
     "ddpg": {"net_arch": [64, 64], "learning_rate": 3e-4, "batch_size": 256, "buffer_size": 100_000, "learning_starts": 1_000, "gamma": 0.95,
              "n_step_returns": 5},
-    "a2c": {"net_arch": [64, 64], "learning_rate": 7e-4, "gamma": 0.95},
-    "ppo": {"net_arch": [64, 64], "learning_rate": 3e-4, "batch_size": 64, "gamma": 0.95},
+    "a2c": {"net_arch": [64, 64], "learning_rate": 7e-4, "gamma": 0.95, "n_steps": 5},
+    "ppo": {"net_arch": [64, 64], "learning_rate": 3e-4, "batch_size": 64, "gamma": 0.95, "n_steps": 2048},
 }
 """crowdnav's defaults for the config fields left at ``None`` (small networks: CPU training)."""
+
+BATCHED_DEFAULTS: dict[str, dict[str, Any]] = {
+    # measured in docs/agents.md#batched-training: one gradient step per 8 env steps on 4x larger batches keeps
+    # SAC/TD3/DDPG learning at several hundred env steps/s on 2 cores; PPO/A2C roll out n_steps per world
+    "sac": {"updates_per_step": 0.125, "batch_size": 512},
+    "td3": {"updates_per_step": 0.125, "batch_size": 512},
+    "ddpg": {"updates_per_step": 0.125, "batch_size": 512},
+    "a2c": {"n_steps": 8},
+    "ppo": {"n_steps": 64, "batch_size": 512},
+}
+"""Defaults that replace :data:`ALGORITHM_DEFAULTS` entries when a run collects from ``num_envs > 1`` worlds."""
 
 
 def hyperparameters(config: TrainConfig) -> dict[str, Any]:
     """The config's algorithm fields, ``None`` replaced by :data:`ALGORITHM_DEFAULTS` (only those the algorithm takes)."""
-    defaults = ALGORITHM_DEFAULTS[config.algo]
+    defaults = dict(ALGORITHM_DEFAULTS[config.algo])
+    if config.num_envs > 1:
+        defaults.update(BATCHED_DEFAULTS[config.algo])
     chosen = {}
     for name, default in defaults.items():
         value = getattr(config, name)
         chosen[name] = default if value is None else value
-    for name in ("batch_size", "buffer_size", "learning_starts", "n_step_returns"):
+    for name in ("batch_size", "buffer_size", "learning_starts", "n_step_returns", "n_steps"):
         if getattr(config, name) is not None and name not in defaults:
             raise ConfigError(f"{name} does not apply to {config.algo}; remove it (or pass algorithm options in algo_kwargs)")
     return chosen
@@ -91,8 +106,36 @@ def make_env(config: TrainConfig, encoder: LeogEncoder | None = None, first_epis
     return env
 
 
-def observation_normalization(env: gym.Env) -> ObservationScales | None:
-    """The scales a :func:`make_env` environment applies (None: raw observations, no NormalizeObservation)."""
+def make_vec_env(config: TrainConfig, encoder: LeogEncoder | None = None, first_episode: int = 0,
+                 scales: ObservationScales | None = None) -> CrowdNavSB3VecEnv:
+    """The batched counterpart of :func:`make_env`: ``config.num_envs`` worlds of the native vector env for SB3.
+
+    The same observations as :func:`make_env` gives (normalised with the modalities' scales or
+    ``scales``, the frozen encoder's latent when ``encoder`` is given), the same rewards (scaled
+    for the algorithm only), and every episode seeded by the run's own numbering from
+    ``first_episode`` on (:class:`~crowdnav.agents.seeding.EpisodeSeedCounter`), never by the
+    seed the algorithm passes.
+    """
+    from gymnasium.vector import AutoresetMode
+
+    from crowdnav.envs.vector import CrowdNavVectorEnv
+
+    vector = CrowdNavVectorEnv(num_envs=config.num_envs, autoreset_mode=AutoresetMode.SAME_STEP, **env_options(config))
+    if config.normalize_observations and scales is None:
+        scales = {key: modality.normalization() for key, modality in vector.modalities.items()
+                  if np.issubdtype(modality.space().dtype, np.floating)}
+    if not config.normalize_observations:
+        scales = None
+    if encoder is not None:
+        check_leog_shape(config, encoder.architecture, vector.single_observation_space)
+    return CrowdNavSB3VecEnv(vector, scales=scales, episode_seeds=EpisodeSeedCounter(config.seed, first_episode),
+                             reward_scale=config.reward_scale, encoder=encoder)
+
+
+def observation_normalization(env: gym.Env | CrowdNavSB3VecEnv) -> ObservationScales | None:
+    """The scales a :func:`make_env` or :func:`make_vec_env` environment applies (None: raw observations)."""
+    if isinstance(env, CrowdNavSB3VecEnv):
+        return env.scales
     while isinstance(env, gym.Wrapper):
         if isinstance(env, NormalizeObservation):
             return env.scales
@@ -160,7 +203,11 @@ def make_model(config: TrainConfig, env: gym.Env, saved_encoder: dict[str, Any] 
     results, more time per step: the baseline of ``benchmarks/bench_train.py`` and of the tests.
     """
     hyper = hyperparameters(config)
-    kwargs: dict[str, Any] = {k: v for k, v in hyper.items() if k not in ("net_arch", "n_step_returns")}
+    kwargs: dict[str, Any] = {k: v for k, v in hyper.items() if k not in ("net_arch", "n_step_returns", "updates_per_step")}
+    if config.algo in OFF_POLICY and config.num_envs > 1:
+        # one rollout = one step of every world; the update-to-data ratio sets the gradient steps after it
+        kwargs["train_freq"] = 1
+        kwargs["gradient_steps"] = max(1, round(hyper["updates_per_step"] * config.num_envs))
     if config.algo in ("td3", "ddpg") and config.action_noise > 0:
         dims = env.action_space.shape[0]
         kwargs["action_noise"] = NormalActionNoise(np.zeros(dims), np.full(dims, config.action_noise))

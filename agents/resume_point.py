@@ -22,6 +22,12 @@ on as a whole. Their checkpoint (written when the rollout is complete, before SB
 keeps the rollout buffer, the environments mid-episode and the last observation
 (:meth:`ResumePoint.rollout_state`, pickled like the replay buffer); a resumed run puts them
 back and takes that update first.
+
+Batched training (``num_envs > 1``) cannot be rewound either, for any algorithm: when one world's
+episode ends the others are mid-episode. Its checkpoints (written at a rollout's end, before the
+update that follows it) keep the vector env with every world mid-episode and the last
+observation, as the on-policy ones do, plus the replay buffer off-policy; a resumed run puts
+them back and takes the pending update first.
 """
 
 from __future__ import annotations
@@ -50,9 +56,10 @@ class _EpisodeEnd:
 class ResumePoint:
     """The last episode end of an off-policy run, and how a resumed run continues from it."""
 
-    def __init__(self, model: BaseAlgorithm, off_policy: bool):
+    def __init__(self, model: BaseAlgorithm, off_policy: bool, batched: bool = False):
         self.model = model
         self.off_policy = off_policy
+        self.batched = batched
         self._end: _EpisodeEnd | None = None
         self._restore: tuple[TrainFreq, int] | None = None
         """A resumed run's configured (train_freq, gradient_steps) while its first, shorter rollout runs."""
@@ -62,7 +69,7 @@ class ResumePoint:
     def mark(self) -> None:
         """Called when an episode ends, before SB3 stores its last transition (callbacks run first)."""
         model = self.model
-        if not self.off_policy:
+        if not self.off_policy or self.batched:
             return
         buffer = getattr(model, "replay_buffer", None)
         position = (buffer.pos, buffer.full) if buffer is not None else None
@@ -90,6 +97,9 @@ class ResumePoint:
     def rollout_state(self) -> dict[str, Any] | None:
         """An on-policy run's collected rollout, environments and last observation (None off-policy or mid-rollout)."""
         model = self.model
+        if self.off_policy and self.batched:  # the worlds mid-episode; the replay buffer is saved on its own
+            return {"env": model.get_env(), "last_obs": model._last_obs, "last_original_obs": model._last_original_obs,
+                    "last_episode_starts": model._last_episode_starts, "episode_num": model._episode_num}
         buffer = getattr(model, "rollout_buffer", None)
         if self.off_policy or buffer is None or not buffer.full:
             return None
@@ -101,7 +111,10 @@ class ResumePoint:
         model = self.model
         model.set_env(state["env"], force_reset=False)
         model._last_obs, model._last_episode_starts = state["last_obs"], state["last_episode_starts"]
-        model.rollout_buffer = state["rollout_buffer"]
+        if "rollout_buffer" in state:
+            model.rollout_buffer = state["rollout_buffer"]
+        else:  # batched off-policy
+            model._last_original_obs, model._episode_num = state["last_original_obs"], state["episode_num"]
         self._pending_rollout = True
 
     def continue_run(self, steps_after: int) -> None:
@@ -112,6 +125,15 @@ class ResumePoint:
                 model._update_current_progress_remaining(model.num_timesteps, model._total_timesteps)
                 model.train()
                 self._pending_rollout = False
+            return
+        if self.batched:
+            if self._pending_rollout and model.num_timesteps > model.learning_starts:  # as SB3's loop does after a rollout
+                # gradient_steps -1: as many as the rollout's env steps (checkpoints end rollouts of train_freq steps of every world)
+                steps = model.gradient_steps if model.gradient_steps >= 0 else model.train_freq.frequency * model.n_envs
+                model._update_current_progress_remaining(model.num_timesteps, model._total_timesteps)
+                if steps > 0:
+                    model.train(batch_size=model.batch_size, gradient_steps=steps)
+            self._pending_rollout = False
             return
         if steps_after <= 0:
             if model.num_timesteps > model.learning_starts:
@@ -147,3 +169,17 @@ def _after_episode_end(buffer: Any, marked: tuple[int, bool]) -> tuple[int, bool
         return marked
     after = marked[0] + 1
     return after % buffer.buffer_size, marked[1] or after == buffer.buffer_size
+
+
+def end_open_episodes(buffer: Any) -> None:
+    """Mark the newest transition of every world still mid-episode as a time-limit end (bootstrapped, not terminal).
+
+    A batched run resumed without its worlds (its final checkpoint, taken inside a step) starts
+    new episodes: without the mark, n-step returns would run from the abandoned episodes into them.
+    """
+    if buffer is None or not (buffer.pos or buffer.full) or not getattr(buffer, "handle_timeout_termination", False):
+        return
+    last = (buffer.pos - 1) % buffer.buffer_size
+    open_ = buffer.dones[last] == 0
+    buffer.timeouts[last, open_] = 1.0
+    buffer.dones[last, open_] = 1.0

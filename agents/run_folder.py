@@ -4,6 +4,7 @@
 
     <train_dir>/checkpoint/              the latest checkpoint (crowdnav.agents.checkpoint): policy.json, model.zip, ...
     <train_dir>/snapshots/episode_<N>/   the policy after N episodes (saved every checkpoint_every episodes)
+    <train_dir>/snapshots/steps_<N>/     with a budget in env steps: the policy after N env steps (every checkpoint_every_steps)
     <train_dir>/episodes.csv             one row per training episode
 
 Training writes this layout and everything that reads a run (evaluation, the benchmark's
@@ -35,7 +36,9 @@ ROLLOUT_FILE = "rollout_state.pkl"
 LOCK_FILE = "writer.lock"
 """Held (an OS file lock) by the one process writing a run folder; holds that process's PID."""
 
-_SNAPSHOT = re.compile(r"episode_(\d+)$")
+_SNAPSHOT = {"episodes": re.compile(r"episode_(\d+)$"), "steps": re.compile(r"steps_(\d+)$")}
+UNITS = tuple(_SNAPSHOT)
+"""What a run's evaluation points count: training episodes, or env steps over all worlds."""
 
 
 def checkpoint_dir(train_dir: str | Path) -> Path:
@@ -43,9 +46,9 @@ def checkpoint_dir(train_dir: str | Path) -> Path:
     return Path(train_dir) / CHECKPOINT_DIR
 
 
-def snapshot_dir(train_dir: str | Path, episodes: int) -> Path:
-    """The folder of the policy snapshot after ``episodes`` training episodes."""
-    return Path(train_dir) / SNAPSHOTS_DIR / f"episode_{episodes:05d}"
+def snapshot_dir(train_dir: str | Path, point: int, unit: str = "episodes") -> Path:
+    """The folder of the policy snapshot after ``point`` training episodes (or env steps, ``unit="steps"``)."""
+    return Path(train_dir) / SNAPSHOTS_DIR / (f"episode_{point:05d}" if unit == "episodes" else f"steps_{point:09d}")
 
 
 def episode_log(train_dir: str | Path) -> Path:
@@ -70,22 +73,25 @@ def checkpoint_episodes(train_dir: str | Path) -> int:
     return int(info["episodes"]) if info is not None else 0
 
 
-def policy_snapshots(train_dir: str | Path) -> dict[int, Path]:
-    """Episodes -> folder of every policy saved so far on the checkpoint's training history.
+def policy_snapshots(train_dir: str | Path, unit: str = "episodes") -> dict[int, Path]:
+    """Episodes (or env steps, ``unit="steps"``) -> folder of every policy saved so far on the checkpoint's training history.
 
-    The snapshots up to the checkpoint, and the checkpoint itself (a run from an older crowdnav
-    can have been killed after its checkpoint and before its snapshot). A snapshot newer than
-    the checkpoint (or any snapshot without one) was saved just before a kill; the resume
+    The snapshots up to the checkpoint, and (episodes) the checkpoint itself (a run from an older
+    crowdnav can have been killed after its checkpoint and before its snapshot). A snapshot newer
+    than the checkpoint (or any snapshot without one) was saved just before a kill; the resume
     trains that stretch again.
     """
     folders: dict[int, Path] = {}
     latest = 0
     if (checkpoint_dir(train_dir) / POLICY_FILE).is_file():
-        latest = checkpoint_episodes(train_dir)
-        folders[latest] = checkpoint_dir(train_dir)
+        if unit == "episodes":
+            latest = checkpoint_episodes(train_dir)
+            folders[latest] = checkpoint_dir(train_dir)
+        else:  # a step-budget checkpoint is taken at a rollout's end, at or after the evaluation point it follows
+            latest = int((checkpoint_info(train_dir) or {}).get("timesteps", 0))
     snapshots = Path(train_dir) / SNAPSHOTS_DIR
     for folder in sorted(snapshots.iterdir()) if snapshots.is_dir() else []:
-        match = _SNAPSHOT.match(folder.name)
+        match = _SNAPSHOT[unit].match(folder.name)
         if match and (folder / POLICY_FILE).is_file() and int(match.group(1)) <= latest:
             folders[int(match.group(1))] = folder
     return folders

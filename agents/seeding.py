@@ -1,10 +1,12 @@
-"""Seed rules: which seed each training episode and each grid-collection episode uses.
+"""Seed rules: which seed each training, grid-collection and demonstration episode uses.
 
 Plain arithmetic without torch, so evaluation (the protocol's check that test seeds never meet
 training seeds) can use the rules without loading the training stack.
 """
 
 from __future__ import annotations
+
+from collections.abc import Iterable
 
 TRAIN_SEED_BASE = 1_000_000
 """Training seeds start here; seeds below it are free for held-out test episodes."""
@@ -26,3 +28,49 @@ def dataset_seed(seed: int, episode: int) -> int:
     training episode, so an encoder pre-trained on the collection never saw a test episode.
     """
     return TRAIN_SEED_BASE * (seed + 1) + DATASET_SEED_OFFSET + episode
+
+
+DEMONSTRATION_SEED_OFFSET = TRAIN_SEED_BASE // 4
+"""Demonstration episodes use the second quarter of each seed's band, [250,000, 500,000): below
+the grid collections' half, above every training episode of a run shorter than 250,000 episodes."""
+
+DEMONSTRATION_EPISODES = DATASET_SEED_OFFSET - DEMONSTRATION_SEED_OFFSET
+"""How many demonstration episodes one seed's quarter holds (250,000)."""
+
+
+def demonstration_seed(seed: int, episode: int) -> int:
+    """Seed of demonstration episode ``episode`` (0-based) of the scripted expert, for a run with seed ``seed``.
+
+    Disjoint from the held-out test seeds (below :data:`TRAIN_SEED_BASE`), from the grid
+    collections (:func:`dataset_seed`) and from the run's training episodes 0..249,999, so a
+    warm-started agent never imitated a test episode nor an episode it later trains on.
+    """
+    if not 0 <= episode < DEMONSTRATION_EPISODES:
+        raise ValueError(f"demonstration episode {episode} outside the band's quarter [0, {DEMONSTRATION_EPISODES})")
+    return TRAIN_SEED_BASE * (seed + 1) + DEMONSTRATION_SEED_OFFSET + episode
+
+
+class EpisodeSeedCounter:
+    """Numbers the training episodes of a run that collects from several worlds at once.
+
+    Episodes are numbered in the order they start: the first reset gives worlds 0..B-1 the
+    episodes ``first_episode`` .. ``first_episode + B - 1``; afterwards, the worlds whose
+    episodes ended in one step start the next numbers in ascending world order. Episode ``i``
+    uses seed :func:`train_seed` ``(seed, i)``: a run is the same from the same seed whatever
+    seed an algorithm passes to the environment, and never meets a held-out test seed.
+    Picklable (a checkpoint stores it with the environment).
+    """
+
+    def __init__(self, seed: int, first_episode: int = 0):
+        self.run_seed = seed
+        self.next_episode = first_episode
+        self.episode_of: dict[int, int] = {}
+        """World -> the episode it is playing."""
+
+    def __call__(self, worlds: Iterable[int]) -> list[int]:
+        seeds = []
+        for world in worlds:
+            self.episode_of[int(world)] = self.next_episode
+            seeds.append(train_seed(self.run_seed, self.next_episode))
+            self.next_episode += 1
+        return seeds

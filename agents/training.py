@@ -50,10 +50,11 @@ from crowdnav.agents.factory import (
     load_leog_weights,
     make_env,
     make_model,
+    make_vec_env,
     observation_normalization,
     precomputes_leog,
 )
-from crowdnav.agents.resume_point import STEPS_AFTER_KEY, ResumePoint
+from crowdnav.agents.resume_point import STEPS_AFTER_KEY, ResumePoint, end_open_episodes
 from crowdnav.agents.run_folder import SNAPSHOTS_DIR, checkpoint_dir, episode_log, recover_checkpoint, snapshot_dir, writing
 from crowdnav.agents.seeding import train_seed
 from crowdnav.agents.wrappers import scales_from_json, scales_to_json
@@ -122,8 +123,14 @@ def _train(config: TrainConfig, resume: bool, on_checkpoint: Callable[[int], Non
     precompute = precomputes_leog(config)
     first_episode = state["episodes"] if state else 0
     stored = state["normalization"] if state else None
-    env = make_env(config, encoder if precompute else None, first_episode, scales_from_json(stored) if stored is not None else None)
+    batched = config.num_envs > 1  # the native vector env (every algorithm), or one env as the published results were trained
+    # batched: episodes end in another order than they start, so the first one not yet started can be past the count
+    # (only used when the checkpoint's own vector env is not restored: its counter goes on)
+    first_started = (state.get("next_episode") or first_episode) if state and batched else first_episode
+    env = (make_vec_env if batched else make_env)(config, encoder if precompute else None, first_started,
+                                                  scales_from_json(stored) if stored is not None else None)
     scales = observation_normalization(env)
+    unit = "episodes" if config.timesteps is None else "steps"
     tensorboard_log = _tensorboard_folder(config, out)
     on_start = None
     if state:
@@ -136,12 +143,18 @@ def _train(config: TrainConfig, resume: bool, on_checkpoint: Callable[[int], Non
         saved_streams = restore_rng_state(model, checkpoint / RNG_FILE)
     else:
         model = make_model(config, env, saved_encoder, tensorboard_log)
-    resume_point = ResumePoint(model, off_policy=config.algo in OFF_POLICY)
-    # the resumed run is the uninterrupted one: off-policy checkpoints are rewound to an episode end,
-    # on-policy ones carry their rollout (without these files, from an older crowdnav: a close resume)
-    exact = bool(state) and saved_streams is not None and (config.algo in OFF_POLICY or (checkpoint / ROLLOUT_FILE).is_file())
-    if state and (checkpoint / ROLLOUT_FILE).is_file() and config.algo not in OFF_POLICY:
+        from crowdnav.agents.demonstrations import warm_start
+
+        warm_start(model, config)  # demonstrations (off by default); a resumed run carries them in its weights and buffer
+    rewinds = config.algo in OFF_POLICY and not batched
+    resume_point = ResumePoint(model, off_policy=config.algo in OFF_POLICY, batched=batched)
+    # the resumed run is the uninterrupted one: single-env off-policy checkpoints are rewound to an episode end,
+    # the others carry their worlds mid-episode (without these files, from an older crowdnav: a close resume)
+    exact = bool(state) and saved_streams is not None and (rewinds or (checkpoint / ROLLOUT_FILE).is_file())
+    if state and (checkpoint / ROLLOUT_FILE).is_file() and not rewinds:
         resume_point.restore_rollout(pickle.loads((checkpoint / ROLLOUT_FILE).read_bytes()))  # the run's own file: trusted
+    elif state and batched and config.algo in OFF_POLICY:
+        end_open_episodes(getattr(model, "replay_buffer", None))  # the worlds start new episodes
     if state and saved_streams is not None:
         steps_after = int(saved_streams.get(STEPS_AFTER_KEY, 0))
         on_start = lambda: resume_point.continue_run(steps_after)  # noqa: E731 (once SB3's logger exists)
@@ -151,24 +164,29 @@ def _train(config: TrainConfig, resume: bool, on_checkpoint: Callable[[int], Non
         shutil.copyfile(_encoder_path(config), encoder_copy)
 
     def info(episodes: int) -> dict[str, Any]:
+        started = {"next_episode": model.get_env().episode_seeds.next_episode} if batched else {}
         return {"algo": config.algo, "env": env_options(config),
                 "observation_normalization": None if scales is None else scales_to_json(scales),
-                "episodes": episodes, "timesteps": model.num_timesteps,
+                "episodes": episodes, "timesteps": model.num_timesteps, **started,
                 "successes": callback.successes, "hyperparameters": hyperparameters(config), "config": config_to_dict(config)}
 
-    def save_snapshot(episodes: int) -> None:
-        save_checkpoint(model, snapshot_folder(out, episodes), info(episodes), encoder_file=encoder_copy)
+    def save_snapshot(point: int) -> None:
+        save_checkpoint(model, snapshot_folder(out, point, unit), info(callback.done), encoder_file=encoder_copy)
 
-    def save(episodes: int) -> None:
+    def save(episodes: int, final: bool = False) -> None:
         # The snapshot first: once the checkpoint says N episodes, snapshot N exists, so a kill
         # between the two writes cannot lose an evaluation point. (The callback usually took it
         # already, when episode N ended; a rollout can run past it before the checkpoint.)
-        if not snapshot_folder(out, episodes).is_dir():
-            save_snapshot(episodes)
+        point = episodes if unit == "episodes" else callback.point
+        if point and not snapshot_folder(out, point, unit).is_dir():
+            save_snapshot(point)
+        # a batched run ends inside a step (SB3 stops before it stores the step's transitions and observations):
+        # its worlds cannot be continued, a resume with a larger budget starts new episodes (next_episode on)
+        rollout = None if final and batched else resume_point.rollout_state()
         with resume_point.rewound() as streams:  # the checkpoint is the last episode's end, not the rollout's
             save_checkpoint(model, checkpoint, info(episodes), encoder_file=encoder_copy,
                             replay_buffer=config.save_replay_buffer and config.algo in OFF_POLICY,
-                            rng_state=streams if streams is not None else True, rollout_state=resume_point.rollout_state())
+                            rng_state=streams if streams is not None else True, rollout_state=rollout)
         if on_checkpoint is not None:
             on_checkpoint(episodes)
 
@@ -176,21 +194,31 @@ def _train(config: TrainConfig, resume: bool, on_checkpoint: Callable[[int], Non
         config.episodes, first_episode, lambda episode: train_seed(config.seed, episode),
         checkpoint_every=config.checkpoint_every, save=save, snapshot=save_snapshot, on_start=on_start, log_file=episode_log(out),
         progress=config.progress, successes_before=state["successes"] if state else 0, resume_point=resume_point,
+        timesteps=config.timesteps, checkpoint_every_steps=config.checkpoint_every_steps,
     )
-    _set_aside_snapshots_after(out, state["episodes"] if state else 0)
-    if state and not snapshot_folder(out, state["episodes"]).is_dir():
-        save_snapshot(state["episodes"])  # a run checkpointed by an older crowdnav, killed before its snapshot
+    if unit == "steps":
+        every = config.checkpoint_every_steps
+        callback.point = model.num_timesteps // every * every if state and every else 0
+        _set_aside_snapshots_after(out, model.num_timesteps if state else 0, unit)
+    else:
+        _set_aside_snapshots_after(out, state["episodes"] if state else 0, unit)
+        if state and not snapshot_folder(out, state["episodes"]).is_dir():
+            save_snapshot(state["episodes"])  # a run checkpointed by an older crowdnav, killed before its snapshot
     started = time.perf_counter()
     start_steps = model.num_timesteps
-    if callback.done < config.episodes:
-        max_steps = env.unwrapped.scenario.max_steps
-        # an upper bound (the callback stops on episodes), and the same total as an uninterrupted run's,
+    callback.model = model  # the budget check reads its step count before learn() binds it
+    if not callback.finished:
+        max_steps = (env.env if batched else env.unwrapped).scenario.max_steps
+        # an upper bound (the callback stops on the budget), and the same total as an uninterrupted run's,
         # so a learning-rate schedule sees the same progress after a resume
-        budget = config.episodes * max_steps + 1 - model.num_timesteps  # enough: the steps already taken count
-        if state and not exact:  # the steps of the interrupted episode are taken again
-            budget = max(budget, (config.episodes - callback.done) * max_steps + 1)
+        # (B worlds finish N episodes of at most max_steps within ceil(N / B) * max_steps steps each; one env: as before batching)
+        worlds = config.num_envs - 1
+        total = config.timesteps if config.timesteps is not None else (config.episodes + worlds) * max_steps + 1
+        budget = total - model.num_timesteps  # enough: the steps already taken count
+        if state and not exact and config.timesteps is None:  # the steps of the interrupted episodes are taken again
+            budget = max(budget, (config.episodes - callback.done + worlds) * max_steps + 1)
         model.learn(budget, callback=callback, reset_num_timesteps=state is None, tb_log_name=config.algo)
-        save(callback.done)
+        save(callback.done, final=True)
     seconds = time.perf_counter() - started
     env.close()
     return TrainResult(
@@ -200,21 +228,22 @@ def _train(config: TrainConfig, resume: bool, on_checkpoint: Callable[[int], Non
     )
 
 
-def snapshot_folder(out: Path, episodes: int) -> Path:
-    """Where a run saves its policy after ``episodes`` training episodes."""
-    return snapshot_dir(out, episodes)
+def snapshot_folder(out: Path, point: int, unit: str = "episodes") -> Path:
+    """Where a run saves its policy after ``point`` training episodes (or env steps, ``unit="steps"``)."""
+    return snapshot_dir(out, point, unit)
 
 
-def _set_aside_snapshots_after(out: Path, episodes: int) -> None:
+def _set_aside_snapshots_after(out: Path, point: int, unit: str) -> None:
     """Move snapshots newer than the checkpoint (a kill between snapshot and checkpoint) to ``snapshots_discarded/``.
 
     They come from a training history that the resume throws away; the resumed run saves its
-    own snapshot at the same episode, and the old one is kept for inspection, not evaluated.
+    own snapshot at the same point, and the old one is kept for inspection, not evaluated.
     """
     snapshots = out / SNAPSHOTS_DIR
-    for folder in sorted(snapshots.glob("episode_*")) if snapshots.is_dir() else []:
-        number = folder.name.removeprefix("episode_")
-        if number.isdigit() and int(number) > episodes:
+    prefix = "episode_" if unit == "episodes" else "steps_"
+    for folder in sorted(snapshots.glob(f"{prefix}*")) if snapshots.is_dir() else []:
+        number = folder.name.removeprefix(prefix)
+        if number.isdigit() and int(number) > point:
             target = out / "snapshots_discarded" / folder.name
             suffix = 1
             while target.exists():
@@ -231,6 +260,9 @@ def _resume_state(checkpoint: Path, config: TrainConfig) -> dict[str, Any]:
     info = read_policy_info(folder)
     if not (folder / MODEL_FILE).is_file():
         raise ConfigError(f"cannot resume: {folder / MODEL_FILE} is missing")
+    trained_worlds = int((info.get("config") or {}).get("num_envs", 1))  # older checkpoints: one env
+    if trained_worlds != config.num_envs:
+        raise ConfigError(f"cannot resume: {folder} was trained with num_envs {trained_worlds}, the config asks for {config.num_envs}")
     if info["algo"] != config.algo or info["env"]["modalities"] != list(config.modalities):
         raise ConfigError(
             f"cannot resume: {folder} was trained with algo {info['algo']} on {info['env']['modalities']}, "
@@ -244,7 +276,7 @@ def _resume_state(checkpoint: Path, config: TrainConfig) -> dict[str, Any]:
             f"the config asks for {str(config.normalize_observations).lower()}"
         )
     return {"episodes": int(info["episodes"]), "successes": int(info.get("successes", 0)), "config": info.get("config"),
-            "normalization": normalization}
+            "normalization": normalization, "next_episode": info.get("next_episode")}
 
 
 def _encoder_path(config: TrainConfig) -> Path:

@@ -11,6 +11,14 @@ SB3's conventions: a finished world is reset in the same step, its last observat
 limit (not an event) ended it; ``infos[i]["episode"]`` (return ``r``, length ``l``, time ``t``)
 as SB3's ``Monitor`` writes it, so SB3 logs episode returns. ``scales`` (modality key -> offset,
 scale) normalises observations like :class:`crowdnav.agents.wrappers.NormalizeObservation`.
+
+For training (:func:`crowdnav.agents.factory.make_vec_env`): ``episode_seeds`` (an
+:class:`~crowdnav.agents.seeding.EpisodeSeedCounter`) numbers and seeds every episode, the first
+ones included, whatever seed the algorithm passes to ``VecEnv.seed`` (SB3 passes its own, which
+would otherwise replay held-out test seeds); a finished world's info then has ``episode_index``
+and ``episode_seed``. ``reward_scale`` multiplies the rewards the algorithm sees (the logged
+returns stay in env units); ``encoder`` replaces ``leog`` by a frozen encoder's latent, as
+:class:`crowdnav.agents.wrappers.LeogLatentWrapper` does for one env.
 """
 
 from __future__ import annotations
@@ -20,7 +28,8 @@ from collections.abc import Mapping, Sequence
 from typing import Any
 
 import numpy as np
-from crowdnav.agents.wrappers import ObservationScales, normalize_observation
+from crowdnav.agents.seeding import EpisodeSeedCounter, train_seed
+from crowdnav.agents.wrappers import ObservationScales, encode_grids, normalize_observation
 from gymnasium import spaces
 from gymnasium.vector import AutoresetMode
 from stable_baselines3.common.vec_env.base_vec_env import VecEnv, VecEnvObs, VecEnvStepReturn
@@ -32,7 +41,8 @@ from crowdnav.sensors.base import checked_scale, normalized_box
 class CrowdNavSB3VecEnv(VecEnv):
     """SB3's ``VecEnv`` interface over one :class:`CrowdNavVectorEnv` in ``SAME_STEP`` autoreset mode."""
 
-    def __init__(self, env: CrowdNavVectorEnv, seed: int | None = None, scales: ObservationScales | None = None):
+    def __init__(self, env: CrowdNavVectorEnv, seed: int | None = None, scales: ObservationScales | None = None, *,
+                 episode_seeds: EpisodeSeedCounter | None = None, reward_scale: float = 1.0, encoder: Any = None):
         if env.autoreset_mode is not AutoresetMode.SAME_STEP:
             raise ValueError("CrowdNavSB3VecEnv needs a CrowdNavVectorEnv with autoreset_mode=AutoresetMode.SAME_STEP (SB3 resets in the same step)")
         self.env = env
@@ -40,7 +50,14 @@ class CrowdNavSB3VecEnv(VecEnv):
         if scales is not None:  # as NormalizeObservation: scaled keys get their mapped Box, the others pass through
             scales = {key: checked_scale(key, space[key], *scales[key]) for key in space.spaces if key in scales}
             space = spaces.Dict({key: normalized_box(box, *scales[key]) if key in scales else box for key, box in space.spaces.items()})
+        if encoder is not None:  # the frozen encoder's latent instead of the grid
+            encoder = encoder.eval().requires_grad_(False)
+            space = spaces.Dict({**space.spaces, "leog": spaces.Box(-1.0, 1.0, shape=(encoder.latent,), dtype=np.float32)})
         self.scales = scales
+        self.encoder = encoder
+        self.episode_seeds = episode_seeds
+        self.reward_scale = float(reward_scale)
+        env.episode_seeds = episode_seeds
         super().__init__(env.num_envs, space, env.single_action_space)
         self._seed = seed
         self._actions: np.ndarray | None = None
@@ -49,17 +66,27 @@ class CrowdNavSB3VecEnv(VecEnv):
         self._start = time.time()
 
     @classmethod
-    def make(cls, scenario: Any, num_envs: int, seed: int | None = None, scales: ObservationScales | None = None,
+    def make(cls, scenario: Any, num_envs: int, seed: int | None = None, scales: ObservationScales | None = None, *,
+             episode_seeds: EpisodeSeedCounter | None = None, reward_scale: float = 1.0, encoder: Any = None,
              **options: Any) -> CrowdNavSB3VecEnv:
         """Build the vector env (``options``: the single env's) and wrap it."""
-        return cls(CrowdNavVectorEnv(scenario, num_envs, autoreset_mode=AutoresetMode.SAME_STEP, **options), seed, scales)
+        return cls(CrowdNavVectorEnv(scenario, num_envs, autoreset_mode=AutoresetMode.SAME_STEP, **options), seed, scales,
+                   episode_seeds=episode_seeds, reward_scale=reward_scale, encoder=encoder)
 
     def _observe(self, observation: Mapping[str, np.ndarray]) -> dict[str, np.ndarray]:
-        return dict(observation) if self.scales is None else normalize_observation(observation, self.scales)
+        observation = dict(observation) if self.scales is None else normalize_observation(observation, self.scales)
+        if self.encoder is not None:
+            grids = observation["leog"]
+            single = grids.ndim == 3  # a terminal observation: one world's (1, H, W) grid
+            latents = encode_grids(self.encoder, grids[None] if single else grids)
+            observation["leog"] = latents[0] if single else latents
+        return observation
 
     def reset(self) -> VecEnvObs:
         # VecEnv.seed() (SB3 calls it with the algorithm's seed) wins over the constructor's; either applies to this reset only
         seed = self._seeds if any(s is not None for s in self._seeds) else self._seed
+        if self.episode_seeds is not None:  # training: the run's own episode numbering, never the algorithm's seed
+            seed = self.episode_seeds(range(self.num_envs))
         observation, _ = self.env.reset(seed=seed)
         self._reset_seeds()
         self._seed = None
@@ -71,6 +98,7 @@ class CrowdNavSB3VecEnv(VecEnv):
         self._actions = np.asarray(actions)
 
     def step_wait(self) -> VecEnvStepReturn:
+        playing = dict(self.episode_seeds.episode_of) if self.episode_seeds is not None else None
         observation, rewards, terminated, truncated, infos = self.env.step(self._actions)
         dones = terminated | truncated
         self._returns += rewards
@@ -82,9 +110,14 @@ class CrowdNavSB3VecEnv(VecEnv):
             if dones[i]:
                 info["terminal_observation"] = self._observe(infos["final_obs"][i])
                 info["episode"] = {"r": round(float(self._returns[i]), 6), "l": int(self._lengths[i]), "t": round(time.time() - self._start, 6)}
+                if playing is not None:
+                    info["episode_index"] = playing[i]
+                    info["episode_seed"] = train_seed(self.episode_seeds.run_seed, playing[i])
             out.append(info)
         self._returns[dones] = 0.0
         self._lengths[dones] = 0
+        if self.reward_scale != 1.0:
+            rewards = rewards * self.reward_scale
         return self._observe(observation), rewards.astype(np.float32), dones, out
 
     def close(self) -> None:

@@ -26,7 +26,7 @@ import numpy as np
 from crowdnav.envs import CrowdNavEnv
 from crowdnav.envs.core import checked_robot_action, step_info
 
-ALL_MODALITIES = ["goal", "closest_obstacle", "lidar", "leog", "velocity"]
+ALL_MODALITIES = ["goal", "closest_obstacle", "lidar", "leog", "velocity", "humans"]
 
 
 def env_seconds_per_step(env: CrowdNavEnv, actions: np.ndarray, seed: int) -> float:

@@ -2,6 +2,16 @@
 
     python benchmarks/bench_train.py [--algos sac td3 ddpg a2c] [--cases ...] [--steps 1000] [--repeats 3]
                                      [--threads 1] [--no-baseline] [--no-reference] [--json FILE]
+    python benchmarks/bench_train.py --batched [--algos ppo a2c sac td3 ddpg] [--num-envs 32] [--processes 2]
+
+**Batched training** (``--batched``): every algorithm in the Figure-4 setting (room_furniture,
+5 humans at 0.5-1.2 m/s, closest obstacle + goal) with crowdnav's batched defaults
+(``num_envs`` worlds of the native vector env, :data:`agents.factory.BATCHED_DEFAULTS`), timed
+over ``--batched-steps`` env steps after a warm-up past ``learning_starts``, next to the
+single-env path in the same run (one env, the defaults ``crowdnav train`` had before batching:
+SAC at one gradient step per env step); the ``vs single SAC`` column is the ratio of wall-clock
+rates. ``--processes N`` also runs N independent trainings of each batched case at once (a
+process per core) and reports their summed rate.
 
 Each case builds a fresh agent with crowdnav's defaults (``agents.make_model``) on
 ``open_space``, runs ``--warmup`` steps (past ``learning_starts``, so every timed step
@@ -41,7 +51,7 @@ from pathlib import Path
 
 import torch
 from crowdnav.agents.config import EncoderConfig, TrainConfig
-from crowdnav.agents.factory import OFF_POLICY, load_leog_weights, make_env, make_model, precomputes_leog
+from crowdnav.agents.factory import OFF_POLICY, load_leog_weights, make_env, make_model, make_vec_env, precomputes_leog
 from stable_baselines3 import SAC
 from stable_baselines3.common.monitor import Monitor
 
@@ -54,6 +64,47 @@ CASES = {
     "leog+lidar+goal": (["leog", "lidar", "goal"], "scratch", True),
 }
 """Case name -> (modalities, encoder mode, precompute)."""
+
+
+FIGURE4 = {"humans.count": 5, "humans.preferred_speed": [0.5, 1.2]}
+"""The Figure-4 setting's crowd in room_furniture (docs/results/README.md)."""
+
+
+def build_batched(algo: str, num_envs: int, warmup: int):
+    """A model with crowdnav's defaults for ``num_envs`` worlds (1: the single-env path) in the Figure-4 setting."""
+    fields = {"learning_starts": warmup // 2} if algo in OFF_POLICY else {}
+    config = TrainConfig(scenario="room_furniture", overrides=FIGURE4, modalities=["closest_obstacle", "goal"], algo=algo,
+                         num_envs=num_envs, **fields)
+    return make_model(config, make_vec_env(config) if num_envs > 1 else make_env(config))
+
+
+def _batched_rate(algo: str, num_envs: int, steps: int, warmup: int, threads: int) -> tuple[float, float]:
+    torch.set_num_threads(threads)  # a worker process of --processes
+    return steps_per_second(lambda: build_batched(algo, num_envs, warmup), steps, warmup)
+
+
+def batched(args: argparse.Namespace, results: dict) -> None:
+    """The --batched table: each algorithm batched, against the single-env SAC path measured in the same run."""
+    from concurrent.futures import ProcessPoolExecutor
+
+    single = [steps_per_second(lambda: build_batched("sac", 1, args.warmup), args.steps, args.warmup) for _ in range(args.repeats)]
+    report("sac single env (before batching)", single, results)
+    base = statistics.median(r[0] for r in single)
+    for algo in args.algos:
+        warmup = max(args.warmup, 2 * args.num_envs)
+        runs = [_batched_rate(algo, args.num_envs, args.batched_steps, warmup, args.threads) for _ in range(args.repeats)]
+        name = f"{algo} batched ({args.num_envs} worlds)"
+        report(name, runs, results)
+        results[name]["vs_single_sac"] = results[name]["steps_per_second"] / base
+        print(f"{'':40s} {results[name]['vs_single_sac']:7.1f}x the single-env SAC path", flush=True)
+        if args.processes > 1:
+            with ProcessPoolExecutor(args.processes) as pool:
+                jobs = [pool.submit(_batched_rate, algo, args.num_envs, args.batched_steps, warmup, args.threads)
+                        for _ in range(args.processes)]
+                rates = [job.result() for job in jobs]
+            total = sum(rate[0] for rate in rates)
+            results[f"{name} x{args.processes} processes"] = {"steps_per_second": total, "vs_single_sac": total / base}
+            print(f"{name + f' x{args.processes} processes':40s} {total:7.1f} steps/s in all ({total / base:.1f}x)", flush=True)
 
 
 def pretrained_encoder(folder: Path) -> Path:
@@ -120,11 +171,27 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--no-reference", action="store_true", help="skip the plain SB3 SAC references")
     parser.add_argument("--no-buffer", action="store_true", help="skip the replay-buffer size table")
     parser.add_argument("--json", type=Path, help="also write the results here")
+    parser.add_argument("--batched", action="store_true", help="the batched-training table instead (see the module doc)")
+    parser.add_argument("--num-envs", type=int, default=32, help="--batched: worlds per training")
+    parser.add_argument("--batched-steps", type=int, default=40_000, help="--batched: env steps timed per batched run")
+    parser.add_argument("--processes", type=int, default=1, help="--batched: also run this many trainings at once")
     args = parser.parse_args(argv)
     torch.set_num_threads(args.threads)
     print(f"# {platform.processor() or platform.machine()}, {os.cpu_count()} CPUs, torch {torch.__version__}, "
           f"{args.threads} thread(s); load average at start {os.getloadavg()[0]:.2f}", flush=True)
     results: dict[str, dict[str, float]] = {}
+    if args.batched:
+        batched(args, results)
+    else:
+        single_env_tables(args, results)
+    print(f"# load average at end {os.getloadavg()[0]:.2f}")
+    if args.json is not None:
+        args.json.write_text(json.dumps(results, indent=2) + "\n")
+    return 0
+
+
+def single_env_tables(args: argparse.Namespace, results: dict) -> None:
+    """The per-algorithm, per-case tables of one env (with the before-the-speed-ups baseline) and the buffer sizes."""
     with tempfile.TemporaryDirectory() as folder:
         encoder_file = pretrained_encoder(Path(folder))
         if not args.no_reference:
@@ -148,10 +215,6 @@ def main(argv: list[str] | None = None) -> int:
                 packed, plain = (buffer_bytes(build("sac", case, encoder_file, args.warmup, pack)) for pack in (True, False))
                 results[f"buffer {case}"] = {"bytes_per_transition": packed, "bytes_per_transition_uint8": plain}
                 print(f"{case:45s} {packed:8d} B {packed * 1e5 / 1e9:7.3f} GB {plain:8d} B {plain * 1e5 / 1e9:7.3f} GB", flush=True)
-    print(f"# load average at end {os.getloadavg()[0]:.2f}")
-    if args.json is not None:
-        args.json.write_text(json.dumps(results, indent=2) + "\n")
-    return 0
 
 
 if __name__ == "__main__":

@@ -40,7 +40,7 @@ def facts(folder: Path) -> str:
     defaults = experiment.get("defaults") or {key: first[key] for key in ("scenario", "overrides", "reward_weights") if key in first}
     lines = [
         "```bash", f"crowdnav benchmark {folder.name} --workers 2 --no-video   # or benchmarks/run_figure4.sh", "```", "",
-        f"* **Protocol:** {protocol['train_episodes']} training episodes, evaluation every {protocol['eval_every']} on the same "
+        f"* **Protocol:** {_budget(protocol)} on the same "
         f"{protocol['test_episodes']} held-out test episodes, {protocol['seeds']} seeds per configuration, sliding window "
         f"{protocol['window']}, final rates over the last {protocol['final_evaluations']} evaluations.",
         f"* **Setting:** scenario `{defaults.get('scenario')}`, overrides `{defaults.get('overrides', {})}`, reward "
@@ -50,6 +50,13 @@ def facts(folder: Path) -> str:
         f"* **Code:** commit(s) {', '.join(commits)}.",
     ]
     return "\n".join(lines) + "\n"
+
+
+def _budget(protocol: dict) -> str:
+    """The training budget and evaluation interval, in the protocol's unit (episodes, or env steps)."""
+    if "train_steps" in protocol:
+        return f"{protocol['train_steps']:,} training env steps, evaluation every {protocol['eval_every_steps']:,}"
+    return f"{protocol['train_episodes']} training episodes, evaluation every {protocol['eval_every']}"
 
 
 def main() -> None:

@@ -13,7 +13,9 @@ Each baseline is stored like a run, ``<experiment>/baseline_<name>/<env>/`` with
 and ``test_episodes.csv`` (the same per-episode columns as a learned run), so the leaderboard
 ranks it and the notebook reads it without special cases. A scripted policy is deterministic
 and the test episodes are the same at every evaluation, so it is played once and its rows are
-repeated at each evaluation point; the curves draw it as a horizontal reference line.
+repeated at each evaluation point (``training_episodes``, or ``training_steps`` with ``training_episodes`` 0
+for a protocol in env steps: the learned runs' point columns); the curves draw it as a horizontal
+reference line.
 """
 
 from __future__ import annotations
@@ -79,7 +81,7 @@ def evaluate_baseline(experiment: str, configuration: str, label: str, env_optio
     out_dir = Path(out_dir)
     if (out_dir / META_FILE).is_file():
         meta = read_json(out_dir / META_FILE)
-        if meta.get("env") == dict(env_options) and _episodes_of(meta["protocol"]) == _episodes_of(protocol.to_dict()):
+        if meta.get("env") == dict(env_options) and _episodes_of(Protocol(**meta["protocol"])) == _episodes_of(protocol):
             return out_dir  # deterministic: the same episodes give the same rows
     started = time.perf_counter()
     name = _baseline_name(configuration)
@@ -92,8 +94,10 @@ def evaluate_baseline(experiment: str, configuration: str, label: str, env_optio
     frames = []
     for k, point in enumerate(protocol.evaluation_points):
         frame = once.copy()
-        for position, (column, value) in enumerate(zip((*RUN_COLUMNS, "training_episodes", "evaluation"),
-                                                       (experiment, configuration, label, 0, point, k), strict=True)):
+        # the learned runs' columns: in env steps they also say how many episodes were trained (none, here)
+        points = {"training_episodes": point} if protocol.unit == "episodes" else {"training_episodes": 0, "training_steps": point}
+        for position, (column, value) in enumerate(zip((*RUN_COLUMNS, *points, "evaluation"),
+                                                       (experiment, configuration, label, 0, *points.values(), k), strict=True)):
             frame.insert(position, column, value)
         frames.append(frame)
     tests = pd.concat(frames, ignore_index=True)
@@ -111,9 +115,9 @@ def evaluate_baseline(experiment: str, configuration: str, label: str, env_optio
     return out_dir
 
 
-def _episodes_of(protocol: Mapping[str, Any]) -> tuple:
-    """What decides a baseline's rows: the test episodes and the evaluation points (not the number of seeds)."""
-    return tuple(protocol[key] for key in ("train_episodes", "eval_every", "test_episodes", "test_seed_base"))
+def _episodes_of(protocol: Protocol) -> tuple:
+    """What decides a baseline's rows: the test episodes and the evaluation points in their unit (not the number of seeds)."""
+    return protocol.unit, protocol.budget, protocol.interval, protocol.test_episodes, protocol.test_seed_base
 
 
 def _baseline_name(configuration: str) -> str:

@@ -28,6 +28,7 @@ from crowdnav.evaluation.executors import make_executor
 from crowdnav.evaluation.experiment import Experiment
 from crowdnav.evaluation.jobs import Executor, Job, run_name
 from crowdnav.evaluation.progress import ProgressBar
+from crowdnav.evaluation.protocol import UNIT_NAMES, protocol_unit
 from crowdnav.evaluation.storage import (
     EXPERIMENT_FILE,
     META_FILE,
@@ -130,10 +131,11 @@ def describe_baseline(folder: Path) -> str:
 def claim_folder(folder: Path, experiment: Experiment) -> None:
     """Write experiment.yaml, or check that ``folder`` holds this experiment.
 
-    Only what every run shares must match: the protocol (more seeds may be added) and the
-    encoder pre-training. A new description or label, an added or edited configuration leaves
-    the finished runs alone: each run checks its own spec (:func:`evaluation.runner.run_unit`
-    starts an edited configuration's runs afresh and keeps the old ones aside).
+    Only what every run shares must match: the protocol (more seeds may be added; a budget in
+    another unit, episodes or env steps, is another protocol) and the encoder pre-training. A
+    new description or label, an added or edited configuration leaves the finished runs alone:
+    each run checks its own spec (:func:`evaluation.runner.run_unit` starts an edited
+    configuration's runs afresh and keeps the old ones aside).
     """
     path = folder / EXPERIMENT_FILE
     wanted = experiment.to_dict()
@@ -147,8 +149,10 @@ def claim_folder(folder: Path, experiment: Experiment) -> None:
         comparable = {**existing, "protocol": {**existing.get("protocol", {}), "seeds": experiment.protocol.seeds}}
         changed = sorted(key for key in ("protocol", "pretrain_encoder") if comparable.get(key) != wanted[key])
         if changed:
+            was, now = protocol_unit(comparable["protocol"]), experiment.protocol.unit  # older records have no unit: episodes
+            unit = f": its budget is in {UNIT_NAMES[was]}, this one's in {UNIT_NAMES[now]}" if was != now else ""
             raise ResultsError(f"{folder} holds results of a different version of experiment '{experiment.name}' "
-                               f"({', '.join(changed)} differ); use another --out or remove {folder}")
+                               f"({', '.join(changed)} differ{unit}); use another --out or remove {folder}")
         wanted["protocol"]["seeds"] = max(existing["protocol"]["seeds"], experiment.protocol.seeds)
     atomic_write_text(path, yaml.safe_dump(wanted, sort_keys=False))
 

@@ -9,7 +9,8 @@ episode. The figure shows the mean over seeds and a band, clipped to [0, 1]: one
 deviation (the paper's style, the default) or a 95% bootstrap interval of the mean. Scripted
 baselines (:mod:`evaluation.baselines`) are grey horizontal lines at their rate on the same
 test episodes. One panel per outcome of :data:`crowdnav.simulator.OUTCOMES`; results written
-before ``out_of_bounds`` existed draw a zero rate there.
+before ``out_of_bounds`` existed draw a zero rate there. With a protocol in env steps the x axis
+is ``training_steps`` (training env steps) instead of ``training_episodes``, the same way.
 """
 
 from __future__ import annotations
@@ -19,31 +20,40 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from crowdnav.evaluation.protocol import AXIS_LABELS, POINT_COLUMNS, protocol_unit
 
 from crowdnav.simulator import OUTCOMES
 
 RUN_KEYS = ["experiment", "configuration", "label", "seed"]
 
 
-def rate_curves(tests: Any, window: int) -> Any:
-    """Long table of the sliding rates: run columns, ``training_episodes`` (x), ``metric`` (outcome), ``rate``."""
+def results_unit(tests: Any) -> str:
+    """The unit of a results table's evaluation points: ``steps`` if it has ``training_steps`` values, else ``episodes``
+    (the only unit of results written before budgets in env steps existed)."""
+    return "steps" if "training_steps" in tests.columns and tests["training_steps"].notna().any() else "episodes"
+
+
+def rate_curves(tests: Any, window: int, unit: str = "episodes") -> Any:
+    """Long table of the sliding rates: run columns, x (``training_episodes``, or ``training_steps`` for
+    ``unit="steps"``), ``metric`` (outcome), ``rate``."""
     import pandas as pd
 
+    column = POINT_COLUMNS[unit]
     frames = []
     for _, run in tests.groupby(RUN_KEYS, sort=True):
         run = run.sort_values(["evaluation", "test_episode"])
-        points = run.groupby("evaluation", sort=True)["training_episodes"].first()
+        points = run.groupby("evaluation", sort=True)[column].first()
         previous = pd.Series(np.concatenate([[0], points.to_numpy()[:-1]]), index=points.index)
         size = run.groupby("evaluation")["test_episode"].transform("size").to_numpy()
         position = run.groupby("evaluation").cumcount().to_numpy() + 1
         start = previous.loc[run["evaluation"]].to_numpy()
-        end = run["training_episodes"].to_numpy()
+        end = run[column].to_numpy()
         x = start + position / size * (end - start)
         for outcome in OUTCOMES:
             hit = (run["outcome"] == outcome).astype(float)
             rate = hit.rolling(window, min_periods=1).mean().to_numpy()
             frame = run[RUN_KEYS].copy()
-            frame["training_episodes"], frame["metric"], frame["rate"] = x, outcome, rate
+            frame[column], frame["metric"], frame["rate"] = x, outcome, rate
             frames.append(frame)
     return pd.concat(frames, ignore_index=True)
 
@@ -76,11 +86,12 @@ def seed_band(rates: Any, band: str = "std", seed: int = 0) -> tuple[np.ndarray,
     return mean, np.clip(low, 0.0, 1.0), np.clip(high, 0.0, 1.0)
 
 
-def curves_figure(tests: Any, window: int, title: str | None = None, band: str = "std") -> Any:
+def curves_figure(tests: Any, window: int, title: str | None = None, band: str = "std", unit: str | None = None) -> Any:
     """A matplotlib Figure: one panel per outcome, one line per configuration (mean over seeds and a band).
 
     ``band``: see :data:`BANDS`. Lines differ by colour, style and a marker at each evaluation;
-    the legend sits below the panels, where it hides no curve.
+    the legend sits below the panels, where it hides no curve. ``unit``: of the x axis,
+    ``episodes`` or ``steps`` (None: :func:`results_unit` of ``tests``).
     """
     import seaborn as sns
     from crowdnav.evaluation.baselines import is_baseline
@@ -88,20 +99,24 @@ def curves_figure(tests: Any, window: int, title: str | None = None, band: str =
 
     if band not in BANDS:
         raise ValueError(f"unknown band {band!r}; expected one of {', '.join(BANDS)}")
+    unit = unit or results_unit(tests)
+    column = POINT_COLUMNS[unit]
+    if column not in tests.columns:  # policies evaluated without training (crowdnav evaluate) have no training_steps
+        tests = tests.assign(**{column: 0})
     # reference lines: the scripted baselines, and policies evaluated without training (crowdnav evaluate)
-    untrained = tests.groupby("configuration")["training_episodes"].transform("max") == 0
+    untrained = tests[column].fillna(0).groupby(tests["configuration"]).transform("max") == 0
     scripted = tests["configuration"].map(is_baseline) | untrained
     baselines, tests = tests[scripted], tests[~scripted]
-    curves = rate_curves(tests, window) if len(tests) else None
+    curves = rate_curves(tests, window, unit) if len(tests) else None
     labels = list(dict.fromkeys(tests.sort_values(["configuration"])["label"]))
-    evaluation_points = set(tests["training_episodes"].unique())
+    evaluation_points = set(tests[column].unique())
     figure = Figure(figsize=(4.2 * len(OUTCOMES), 4.2), layout="constrained")
     axes = figure.subplots(1, len(OUTCOMES), sharex=True, sharey=True)
     palette = dict(zip(labels, sns.color_palette("colorblind", len(labels)), strict=True))
     for axis, outcome in zip(axes, OUTCOMES, strict=True):
         for k, label in enumerate(labels if curves is not None else []):
             rows = curves[(curves["metric"] == outcome) & (curves["label"] == label)]
-            rates = rows.pivot_table(index="training_episodes", columns="seed", values="rate", aggfunc="mean")
+            rates = rows.pivot_table(index=column, columns="seed", values="rate", aggfunc="mean")
             mean, low, high = seed_band(rates.to_numpy(), band)
             x = rates.index.to_numpy()
             linestyle, marker = STYLES[k % len(STYLES)]
@@ -112,7 +127,7 @@ def curves_figure(tests: Any, window: int, title: str | None = None, band: str =
         for label, frame in baselines.groupby("label", sort=True):
             axis.axhline(float((frame["outcome"] == outcome).mean()), label=label, linewidth=1.2, **_baseline_style(frame, tests, palette))
         axis.set_title(f"{outcome.replace('_', ' ')} rate")
-        axis.set_xlabel("training episodes")
+        axis.set_xlabel(AXIS_LABELS[unit])
         axis.set_ylabel(f"rate (sliding window of {window} test episodes)" if axis is axes[0] else "")
         axis.set_ylim(-0.02, 1.02)
         axis.grid(alpha=0.3)
@@ -156,12 +171,15 @@ def plot_curves(paths: Iterable[str | Path], out: str | Path | None = None, band
     for run, meta in zip(finished_runs(paths), metas, strict=True):  # runs live in <experiment>/<configuration>/<seed>
         folders.setdefault(meta["experiment"], run.parent.parent)
     windows = {meta["experiment"]: meta["protocol"]["window"] for meta in metas}
+    # every run of an experiment shares its protocol (the results folder refuses another); older ones: episodes
+    units = {meta["experiment"]: protocol_unit(meta["protocol"]) for meta in metas if meta.get("kind") != "evaluated"}
     experiments = sorted(tests["experiment"].unique())
     if out is not None and len(experiments) > 1:
         raise ResultsError(f"--out names one figure, but the results hold {len(experiments)} experiments: {', '.join(experiments)}")
     written = []
     for experiment in experiments:
-        figure = curves_figure(tests[tests["experiment"] == experiment], windows[experiment], title=experiment, band=band)
+        figure = curves_figure(tests[tests["experiment"] == experiment], windows[experiment], title=experiment, band=band,
+                               unit=units.get(experiment, "episodes"))
         stem = Path(out) if out is not None else folders.get(experiment, Path(paths[0])) / "curves"
         stem.parent.mkdir(parents=True, exist_ok=True)
         for suffix in (".png", ".pdf"):

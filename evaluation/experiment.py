@@ -5,6 +5,7 @@ An experiment file (YAML; examples in ``evaluation/experiments/``)::
     name: modalities                # folder under the results folder (default: the file name)
     description: Figure 4(b) ...
     protocol: {train_episodes: 700, eval_every: 50, test_episodes: 20, seeds: 5}   # optional
+    # or a budget in env steps: protocol: {train_steps: 2000000, eval_every_steps: 100000, ...}
     defaults: {scenario: room_furniture, algo: sac}     # TrainConfig fields shared by all
     pretrain_encoder: {scenario: room_furniture, grids: 5000, epochs: 20}        # optional
     configurations:
@@ -14,7 +15,8 @@ An experiment file (YAML; examples in ``evaluation/experiments/``)::
 
 ``train`` is merged over ``defaults`` (mappings key by key) and checked as an
 :class:`agents.TrainConfig`; the protocol sets ``seed``, ``out``, ``episodes``,
-``checkpoint_every``, ``progress``, ``torch_threads`` and ``save_replay_buffer`` itself.
+``checkpoint_every`` (or ``timesteps`` and ``checkpoint_every_steps``), ``progress``,
+``torch_threads`` and ``save_replay_buffer`` itself.
 With a ``pretrain_encoder`` section, a LEOG encoder is pre-trained once per experiment and
 given to every configuration whose ``encoder.mode`` is frozen or finetune without weights.
 
@@ -159,6 +161,9 @@ class Experiment:
         protocol = quick(self.protocol) if quick_protocol else self.protocol
         if seeds is not None:
             protocol = Protocol(**{**protocol.to_dict(), "seeds": seeds})
+        problems = _skipped_points(protocol, self.configurations)
+        if problems:
+            raise ExperimentError(f"{self.source}: protocol.eval_every_steps: {problems[0]}")
         return replace(self, protocol=protocol)
 
     def units(self, folder: str | Path) -> list[tuple[UnitSpec, Path]]:
@@ -248,7 +253,25 @@ def experiment_from_mapping(document: Any, label: str = "<experiment>", root: An
     except ValueError as error:
         message = str(error).split(": ", 1)[1]
         raise _error(label, [ConfigIssue("protocol.test_seed_base", message, yaml_line(root, "protocol.test_seed_base"))]) from None
+    skipped = _skipped_points(parsed.protocol, items)
+    if skipped:
+        raise _error(label, [ConfigIssue("protocol.eval_every_steps", problem, yaml_line(root, "protocol.eval_every_steps"))
+                             for problem in skipped])
     return Experiment(parsed.name or default_name, parsed.description, parsed.protocol, tuple(items), pretrain, label)
+
+
+def _skipped_points(protocol: Protocol, configurations: tuple[Configuration, ...] | list[Configuration]) -> list[str]:
+    """Configurations whose worlds would step past evaluation points of a protocol in env steps.
+
+    One training step adds ``num_envs`` env steps: with more worlds than ``eval_every_steps``
+    a step can cross two points at once and the earlier one gets no snapshot.
+    """
+    if protocol.unit != "steps":
+        return []
+    return [f"{protocol.eval_every_steps} is less than num_envs ({item.config.num_envs}) of configuration '{item.name}': "
+            f"one step of its {item.config.num_envs} worlds would pass an evaluation point; evaluate every "
+            f"{item.config.num_envs} env steps or more" for item in configurations
+            if item.config is not None and item.config.num_envs > protocol.eval_every_steps]
 
 
 def _error(label: str, issues: list[ConfigIssue]) -> ExperimentError:

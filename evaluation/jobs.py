@@ -94,7 +94,8 @@ def run_guarded(spec: dict[str, Any], out_dir: str, verbose: bool = False, unit:
 def describe_evaluation(spec: dict[str, Any], data: dict[str, Any]) -> str:
     """The line a verbose benchmark prints after an evaluation (run_unit's ``evaluated`` event)."""
     rates = ", ".join(f"{outcome} {data.get(outcome, 0.0):.0%}" for outcome in OUTCOMES)
-    return f"run {run_name(spec)}: evaluation {data['evaluation']} after {data['training_episodes']} episodes: {rates}"
+    after = f"{data['training_steps']} env steps" if "training_steps" in data else f"{data['training_episodes']} episodes"
+    return f"run {run_name(spec)}: evaluation {data['evaluation']} after {after}: {rates}"
 
 
 def one_line(error: BaseException) -> str:

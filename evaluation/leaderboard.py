@@ -14,7 +14,10 @@ Columns (definitions in docs/evaluation.md):
 * social metrics: over the final test episodes of all seeds: mean SPL, path length, time to goal
   (successful episodes), minimum human distance, intimate and personal zone shares, mean jerk
   and cumulative social force; median minimum time to collision;
-* env steps and wall time: mean per run.
+* env steps and wall time: mean per run;
+* budget: the learned runs' training budget in their protocol's unit, ``700 episodes`` or
+  ``2,000,000 env steps`` (``-`` for the scripted baselines and untrained policies). The markdown
+  says it once under the table (``budget: 700 episodes per run``) when every learned row shares it, else in a column.
 
 Scripted baselines (:mod:`evaluation.baselines`, ``kind`` baseline) are ranked with the learned
 configurations, on the same test episodes; their one deterministic run counts as one seed.
@@ -31,6 +34,7 @@ from typing import Any
 
 import numpy as np
 from crowdnav.evaluation.baselines import is_baseline
+from crowdnav.evaluation.protocol import describe_budget
 
 from crowdnav.simulator import OUTCOMES
 
@@ -96,6 +100,8 @@ def leaderboard_table(tests: Any, metas: list[dict[str, Any]]) -> Any:
                       if (experiment, configuration, seed) in run_meta]
         row["env_steps"] = float(np.mean([m["env_steps"]["total"] for m in metas_here])) if metas_here else float("nan")
         row["wall_time_s"] = float(np.mean([m["wall_time_s"] for m in metas_here])) if metas_here else float("nan")
+        trained = [m for m in metas_here if m.get("kind") not in ("baseline", "evaluated") and not is_baseline(configuration)]
+        row["budget"] = ", ".join(sorted({describe_budget(m["protocol"]) for m in trained})) or "-"
         rows.append(row)
     table = pd.DataFrame(rows)
     return table.sort_values(["final_success_mean", "experiment", "configuration"], ascending=[False, True, True],
@@ -111,16 +117,22 @@ def _number(value: float, digits: int = 3) -> str:
 
 
 def to_markdown(table: Any) -> str:
-    """A GitHub markdown table with the main columns (all of them are in the CSV)."""
+    """A GitHub markdown table with the main columns (all of them are in the CSV), and the training budget.
+
+    The budget is one line under the table when the learned rows share it (``budget: 700
+    episodes per run``), a column when they differ (experiments in other units or lengths).
+    """
     several = table["experiment"].nunique() > 1
+    budgets = sorted({budget for budget in table["budget"] if budget != "-"}) if "budget" in table else []
+    column = len(budgets) > 1
     header = (["experiment"] if several else []) + [
-        "configuration", "seeds", *OUTCOMES, "success IQM [95% CI]", "success AUC",
+        "configuration", "seeds", *(["budget"] if column else []), *OUTCOMES, "success IQM [95% CI]", "success AUC",
         "SPL", "min human dist. (m)", "intimate share", "social force", "env steps", "wall time (s)",
     ]
     lines = ["| " + " | ".join(header) + " |", "|" + "|".join(["---"] * len(header)) + "|"]
     for row in table.to_dict("records"):
         cells = ([row["experiment"]] if several else []) + [
-            row["label"], str(row["seeds"]),
+            row["label"], str(row["seeds"]), *([row["budget"]] if column else []),
             *(f"{_number(row[f'final_{o}_mean'])} ± {_number(row[f'final_{o}_std'])}" for o in OUTCOMES),
             f"{_number(row['success_iqm'])} [{_number(row['success_iqm_low'])}, {_number(row['success_iqm_high'])}]",
             f"{_number(row['success_auc_mean'])} ± {_number(row['success_auc_std'])}",
@@ -128,6 +140,8 @@ def to_markdown(table: Any) -> str:
             _number(row["env_steps"], 0), _number(row["wall_time_s"], 0),
         ]
         lines.append("| " + " | ".join(cells) + " |")
+    if len(budgets) == 1:
+        lines += ["", f"budget: {budgets[0]} per run"]
     return "\n".join(lines) + "\n"
 
 
@@ -138,7 +152,9 @@ def to_csv(table: Any) -> str:
 def evaluation_rates(tests: Any) -> Any:
     """Per run and evaluation: the outcome rates over its test episodes (the numbers behind the curves)."""
     keys = ["experiment", "configuration", "seed", "evaluation", "training_episodes"]
-    rates = tests.groupby(keys, sort=True)["outcome"].value_counts(normalize=True).unstack(fill_value=0.0)
+    if "training_steps" in tests.columns:  # a protocol in env steps; runs in episodes next to it have none (nan)
+        keys.append("training_steps")
+    rates = tests.groupby(keys, sort=True, dropna=False)["outcome"].value_counts(normalize=True).unstack(fill_value=0.0)
     return rates.reindex(columns=list(OUTCOMES), fill_value=0.0).reset_index()
 
 

@@ -1,5 +1,10 @@
 """The benchmark's live progress: one bar over the episodes (training and test) of all runs.
 
+With a protocol in env steps the number of training episodes is not known in advance: the bar
+then counts the training env steps of all runs (test episodes are not counted; a run's share is
+full once it is complete). The functions keep their names; their counts are in the protocol's
+unit.
+
 Where the counts come from depends on the executor: the local executors read the files the
 runs write (:func:`episodes_on_disk`); the Ray executor receives them from its tasks, which
 may write on other machines. The bar only asks ``count(job)`` once per interval.
@@ -12,24 +17,49 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
-from crowdnav.agents.run_folder import logged_episodes
+from crowdnav.agents.run_folder import episode_log, logged_episodes
 from crowdnav.evaluation.protocol import Protocol
 from crowdnav.evaluation.storage import EVALUATIONS_DIR, META_FILE, TRAIN_DIR
 
 
 def run_episodes(protocol: Protocol) -> int:
-    """Training plus test episodes of one complete run."""
+    """Training plus test episodes of one complete run (a protocol in env steps: its training env steps)."""
+    if protocol.unit == "steps":
+        return protocol.train_steps
     return protocol.train_episodes + protocol.evaluations * protocol.test_episodes
 
 
 def episodes_on_disk(folder: str | Path, protocol: Protocol) -> int:
-    """Episodes a run has done so far, read from its folder (training log lines and evaluation files)."""
+    """Episodes a run has done so far, read from its folder (training log lines and evaluation files);
+    a protocol in env steps: the env steps of its last logged training episode."""
     folder = Path(folder)
     if (folder / META_FILE).is_file():
         return run_episodes(protocol)
+    if protocol.unit == "steps":
+        return min(logged_steps(folder / TRAIN_DIR), protocol.train_steps)
     trained = logged_episodes(folder / TRAIN_DIR)
     evaluations = len(list((folder / EVALUATIONS_DIR).glob("evaluation_*.csv"))) if (folder / EVALUATIONS_DIR).is_dir() else 0
     return min(trained, protocol.train_episodes) + evaluations * protocol.test_episodes
+
+
+def logged_steps(train_dir: str | Path) -> int:
+    """The run's env steps when its last logged training episode ended (0 before the first); reads the log's tail only."""
+    log = episode_log(train_dir)
+    if not log.is_file():
+        return 0
+    with open(log, "rb") as file:
+        header = file.readline().decode("utf-8").strip().split(",")
+        size = file.seek(0, 2)
+        file.seek(max(0, size - 4096))
+        lines = file.read().decode("utf-8", errors="replace").splitlines()
+    if "timesteps" not in header:
+        return 0
+    column = header.index("timesteps")
+    for line in reversed(lines):  # the last complete row (a row being written can be cut short)
+        fields = line.split(",")
+        if len(fields) == len(header) and fields[column].isdigit():
+            return int(fields[column])
+    return 0
 
 
 class ProgressBar:
@@ -44,7 +74,8 @@ class ProgressBar:
         if enabled:
             from tqdm import tqdm
 
-            self.bar = tqdm(total=self.runs * run_episodes(protocol), unit="ep", desc=title, dynamic_ncols=True)
+            self.bar = tqdm(total=self.runs * run_episodes(protocol), unit="ep" if protocol.unit == "episodes" else "step", desc=title,
+                            dynamic_ncols=True, unit_scale=protocol.unit == "steps")
             self._refresh()
             self._thread = threading.Thread(target=self._poll, args=(interval,), daemon=True)
             self._thread.start()

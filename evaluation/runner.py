@@ -7,7 +7,8 @@ last checkpoint and evaluates only the evaluation points not yet on disk; nothin
 written is overwritten.
 
 How the protocol maps onto training: ``agents.train`` saves a policy snapshot every
-``eval_every`` episodes (``checkpoint_every``), and each snapshot is evaluated on the
+``eval_every`` episodes (``checkpoint_every``), or every ``eval_every_steps`` env steps
+(``checkpoint_every_steps``) for a protocol in env steps, and each snapshot is evaluated on the
 held-out test episodes with the deterministic policy. Evaluating a saved snapshot is the
 same as evaluating during training (the test episodes touch neither the model nor its replay
 buffer), and it lets a resumed run evaluate what the interrupted one had trained.
@@ -22,8 +23,16 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from crowdnav.agents.run_folder import checkpoint_dir, checkpoint_info, episode_log, policy_snapshots, recover_checkpoint, writing
-from crowdnav.evaluation.protocol import Protocol
+from crowdnav.agents.run_folder import (
+    POLICY_FILE,
+    checkpoint_dir,
+    checkpoint_info,
+    episode_log,
+    policy_snapshots,
+    recover_checkpoint,
+    writing,
+)
+from crowdnav.evaluation.protocol import AXIS_LABELS, Protocol
 from crowdnav.evaluation.storage import (
     ENCODER_DIR,
     EVALUATIONS_DIR,
@@ -41,7 +50,8 @@ from crowdnav.evaluation.storage import (
 
 from crowdnav.simulator import OUTCOMES
 
-PROTOCOL_FIELDS = ("seed", "out", "episodes", "checkpoint_every", "progress", "torch_threads", "save_replay_buffer")
+PROTOCOL_FIELDS = ("seed", "out", "episodes", "checkpoint_every", "timesteps", "checkpoint_every_steps", "progress", "torch_threads",
+                   "save_replay_buffer")
 """TrainConfig fields the protocol sets for every run (an experiment may not set them)."""
 
 PRETRAINED = "<pretrained>"
@@ -51,8 +61,9 @@ RUN_COLUMNS = ("experiment", "configuration", "label", "seed")
 """The columns that name the run, first in every table."""
 
 EventHook = Callable[[str, dict[str, Any]], None]
-"""``hook(event, data)``: ``"trained"`` ({episodes}) and ``"evaluated"`` ({evaluation, training_episodes} and the
-rate of each of :data:`OUTCOMES`: success, collision, out_of_bounds, truncated)."""
+"""``hook(event, data)``: ``"trained"`` ({episodes}, and {steps} for a protocol in env steps) and ``"evaluated"``
+({evaluation, training_episodes}, {training_steps} for a protocol in env steps, and the rate of each of
+:data:`OUTCOMES`: success, collision, out_of_bounds, truncated)."""
 
 
 @dataclass(frozen=True)
@@ -106,8 +117,11 @@ class UnitSpec:
 
     def _protocol_fields(self, out_dir: Path) -> dict[str, Any]:
         protocol = Protocol(**self.protocol)
-        return {"seed": self.seed, "out": str(out_dir / TRAIN_DIR), "episodes": protocol.train_episodes,
-                "checkpoint_every": protocol.eval_every, "progress": False, "torch_threads": self.torch_threads,
+        if protocol.unit == "steps":  # episodes and checkpoint_every stay at their defaults: training ignores them then
+            budget = {"timesteps": protocol.train_steps, "checkpoint_every_steps": protocol.eval_every_steps}
+        else:
+            budget = {"episodes": protocol.train_episodes, "checkpoint_every": protocol.eval_every}
+        return {"seed": self.seed, "out": str(out_dir / TRAIN_DIR), **budget, "progress": False, "torch_threads": self.torch_threads,
                 "save_replay_buffer": True}
 
     @staticmethod
@@ -148,22 +162,30 @@ def _train_and_evaluate(spec: UnitSpec, out_dir: Path, hook: EventHook) -> dict[
     protocol = Protocol(**spec.protocol)
     config = spec.config_for(out_dir)
     train_dir = out_dir / TRAIN_DIR
-    trained = recover_checkpoint(train_dir)
+    trained = _trained(train_dir, recover_checkpoint(train_dir), protocol)
     resumed = trained > 0 or (out_dir / EVALUATIONS_DIR).is_dir()
     # the run's own TrainConfig rebuilds each snapshot's network: validated once, at experiment load
     evaluator = _Evaluator(spec, out_dir, protocol, lambda folder: load_policy(folder, config=config), clock, hook)
-    if trained < protocol.train_episodes:
+    if trained < protocol.budget:
         evaluator.evaluate_available(train_dir)  # before resuming replaces the checkpoint
-        train(config, resume=checkpoint_dir(train_dir).exists(), on_checkpoint=lambda episodes: clock.save())
+        result = train(config, resume=checkpoint_dir(train_dir).exists(), on_checkpoint=lambda episodes: clock.save())
         clock.save()
-        hook("trained", {"episodes": protocol.train_episodes})
+        hook("trained", {"episodes": protocol.train_episodes} if protocol.unit == "episodes" else
+             {"episodes": result.episodes, "steps": protocol.train_steps})
     evaluator.evaluate_available(train_dir)
     evaluator.close()
     missing = [k for k in range(protocol.evaluations) if not evaluator.done(k)]
     if missing:
         raise ResultsError(f"{train_dir}: no policy snapshot for evaluation(s) {missing} "
-                           f"(after {[protocol.evaluation_points[k] for k in missing]} episodes)")
+                           f"(after {[protocol.evaluation_points[k] for k in missing]} {AXIS_LABELS[protocol.unit]})")
     return _finish(spec, out_dir, protocol, config, clock, resumed)
+
+
+def _trained(train_dir: Path, episodes: int, protocol: Protocol) -> int:
+    """How far the checkpoint has trained, in the protocol's unit (``episodes``: what recover_checkpoint returned)."""
+    if protocol.unit == "episodes":
+        return episodes
+    return int((checkpoint_info(train_dir) or {}).get("timesteps", 0))
 
 
 def _claim(out_dir: Path, spec: UnitSpec) -> None:
@@ -171,7 +193,9 @@ def _claim(out_dir: Path, spec: UnitSpec) -> None:
 
     A folder of the same experiment, configuration and seed whose training config, protocol or
     label changed (the experiment file was edited) is moved aside to ``<folder>.replaced-N`` and
-    the run starts afresh: nothing is overwritten. A folder of another run is refused.
+    the run starts afresh: nothing is overwritten (a protocol whose budget changed unit, episodes
+    or env steps, is such a change: its snapshots and rows are never mixed). A folder of another
+    run is refused.
     """
     path = out_dir / SPEC_FILE
     if path.is_file():
@@ -206,18 +230,18 @@ class _Evaluator:
 
     def evaluate_available(self, train_dir: Path) -> None:
         """Evaluate every scheduled point that has a saved policy and no results yet."""
-        folders = policy_snapshots(train_dir)
+        folders = policy_snapshots(train_dir, self.protocol.unit)  # a step run's snapshots are steps_<N>, named by the point
         points = self.protocol.evaluation_points
         for k, point in enumerate(points):
             if self.done(k):
                 continue
             # The policy saved at the point (a snapshot can land a few episodes late: it is taken at a rollout's end).
-            upper = points[k + 1] if k + 1 < len(points) else point + self.protocol.eval_every
-            candidates = sorted(episodes for episodes in folders if point <= episodes < upper)
+            upper = points[k + 1] if k + 1 < len(points) else point + self.protocol.interval
+            candidates = sorted(saved for saved in folders if point <= saved < upper)
             if candidates:
                 self._evaluate(k, candidates[0], folders[candidates[0]])
 
-    def _evaluate(self, k: int, training_episodes: int, folder: Path) -> None:
+    def _evaluate(self, k: int, saved_at: int, folder: Path) -> None:
         import pandas as pd
         from crowdnav.evaluation.rollout import HeldOutEpisodes
 
@@ -227,15 +251,19 @@ class _Evaluator:
         rows = self.episodes.run(policy)
         spec = self.spec
         frame = pd.DataFrame(rows)
+        if self.protocol.unit == "episodes":  # the columns every result had before step budgets: older tables read the same
+            points = {"training_episodes": saved_at}
+        else:  # the point in env steps, and the episodes the run had finished by then (its snapshot records them)
+            points = {"training_episodes": int(read_json(folder / POLICY_FILE)["episodes"]), "training_steps": saved_at}
         for position, (name, value) in enumerate(zip(
-            (*RUN_COLUMNS, "training_episodes", "evaluation"),
-            (spec.experiment, spec.configuration, spec.display_label, spec.seed, training_episodes, k), strict=True,
+            (*RUN_COLUMNS, *points, "evaluation"),
+            (spec.experiment, spec.configuration, spec.display_label, spec.seed, *points.values(), k), strict=True,
         )):
             frame.insert(position, name, value)
         atomic_write_csv(frame, self.path(k))
         self.clock.save()
         rates = {outcome: float((frame["outcome"] == outcome).mean()) for outcome in OUTCOMES}
-        self.hook("evaluated", {"evaluation": k, "training_episodes": training_episodes, **rates})
+        self.hook("evaluated", {"evaluation": k, **points, **rates})
 
     def close(self) -> None:
         if self.episodes is not None:

@@ -131,9 +131,11 @@ def replay_evaluation(run_dir: str | Path, evaluation: int | None = None) -> lis
         if not 0 <= k < protocol.evaluations:
             raise ResultsError(f"{run_dir}: evaluation {k} does not exist; expected 0 to {protocol.evaluations - 1}")
         this = recorded[recorded["evaluation"] == k]
-        folder = policy_snapshots(run_dir / "train").get(int(this["training_episodes"].iloc[0]))
+        unit = "steps" if "training_steps" in this.columns else "episodes"  # the protocol's points, as the columns name them
+        point = int(this["training_steps" if unit == "steps" else "training_episodes"].iloc[0])
+        folder = policy_snapshots(run_dir / "train", unit).get(point)
         if folder is None:
-            raise ResultsError(f"{run_dir}: no policy snapshot after {int(this['training_episodes'].iloc[0])} episodes to replay")
+            raise ResultsError(f"{run_dir}: no policy snapshot after {point} {'env steps' if unit == 'steps' else 'episodes'} to replay")
         policy = load_policy(folder)
         episodes = HeldOutEpisodes(policy.env_options, protocol.test_seeds)
         rows = episodes.run(policy, record=True)

@@ -18,11 +18,14 @@ def tiny_config(out, *, algo: str = "sac", modalities=("lidar", "goal"), episode
 
     Off-policy algorithms take one gradient step every 4 env steps, on-policy ones update
     every 16 (A2C) or 32 (PPO) steps: enough updates to exercise the whole training path.
+    One env (``num_envs: 1``) unless the test asks for more: most tests check the single-env
+    path (episode seeds in order, rewound resumes); batched tests pass ``num_envs``.
     """
     config: dict[str, Any] = {
         "scenario": "open_space", "modalities": list(modalities), "algo": algo, "episodes": episodes, "seed": 0,
         "out": str(out), "overrides": {"max_steps": max_steps, "humans.count": 3}, "sensors": SMALL_LEOG,
         "net_arch": [16], "extractor": dict(TINY_EXTRACTOR), "progress": False, "checkpoint_every": 2,
+        "num_envs": 1,
     }
     if algo in ("sac", "td3", "ddpg"):
         config.update(batch_size=16, buffer_size=2_000, learning_starts=30, algo_kwargs={"train_freq": 4})

@@ -15,10 +15,11 @@ import pytest
 
 from crowdnav import Simulator
 from crowdnav.batch.state import BatchState
-from crowdnav.scenario.schema import ClosestObstacleSensor, GoalSensor, LeogSensor, LidarSensor
+from crowdnav.scenario.schema import ClosestObstacleSensor, GoalSensor, HumansSensor, LeogSensor, LidarSensor
 from crowdnav.sensors import (
     ClosestObstacleModality,
     GoalModality,
+    HumansModality,
     LeogModality,
     LidarModality,
     Modality,
@@ -27,11 +28,11 @@ from crowdnav.sensors import (
 )
 from crowdnav.sensors.frames import encode_vector, encode_vectors
 
-BUILT_IN = ["goal", "velocity", "closest_obstacle", "lidar", "leog"]
+BUILT_IN = ["goal", "velocity", "closest_obstacle", "lidar", "leog", "humans"]
 
 
 def all_modalities(world) -> dict[str, Modality]:
-    """The scenario's built-in modalities plus variants: partial-fov LIDARs, cartesian frames, a short range, a coarse grid."""
+    """The scenario's built-in modalities plus variants: partial-fov LIDARs, cartesian frames, short ranges, a coarse grid, k humans."""
     modalities = build_modalities(BUILT_IN, world, world.scenario.sensors)
     modalities["lidar_fov180"] = LidarModality(world, LidarSensor(beams=90, fov_deg=180))
     modalities["lidar_fov270_odd"] = LidarModality(world, LidarSensor(beams=77, fov_deg=270, max_range=8.0))
@@ -40,6 +41,8 @@ def all_modalities(world) -> dict[str, Modality]:
     modalities["closest_short_range"] = ClosestObstacleModality(world, ClosestObstacleSensor(max_range=0.8))
     modalities["closest_short_cartesian"] = ClosestObstacleModality(world, ClosestObstacleSensor(frame="cartesian", max_range=0.8))
     modalities["leog_coarse"] = LeogModality(world, LeogSensor(size=4.0, resolution=0.25))
+    modalities["humans_short"] = HumansModality(world, HumansSensor(count=2, max_range=0.8))
+    modalities["humans_all"] = HumansModality(world, HumansSensor(count=64, max_range=100.0))
     return modalities
 
 
@@ -172,7 +175,7 @@ def test_batch_constants_follow_new_radii_without_disturbing_single_caches():
 
 
 def test_every_built_in_modality_implements_observe_batch():
-    for cls in (GoalModality, VelocityModality, ClosestObstacleModality, LidarModality, LeogModality):
+    for cls in (GoalModality, VelocityModality, ClosestObstacleModality, LidarModality, LeogModality, HumansModality):
         assert cls.observe_batch is not Modality.observe_batch, cls.__name__
 
 

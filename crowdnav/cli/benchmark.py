@@ -132,7 +132,7 @@ def benchmark(args: argparse.Namespace) -> int:
 
     protocol = experiment.protocol
     print(f"experiment {experiment.name}: {len(experiment.configurations)} configurations x {protocol.seeds} seeds, "
-          f"{protocol.train_episodes} training episodes, {protocol.evaluations} evaluations of {protocol.test_episodes} "
+          f"{protocol.describe_budget()} of training, {protocol.evaluations} evaluations of {protocol.test_episodes} "
           f"test episodes; executor {executor.describe()}", flush=True)
     try:
         report = run_experiment(experiment, args.out, executor=executor, progress=not args.no_progress,

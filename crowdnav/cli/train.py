@@ -65,6 +65,10 @@ def register_train(groups: argparse._SubParsersAction) -> None:
     parser.add_argument("--encoder", choices=MODES, help="LEOG encoder mode (default: {encoder.mode})")
     parser.add_argument("--encoder-weights", metavar="PATH", help="pre-trained encoder (encoder.pt or its folder) (default: {encoder.weights})")
     parser.add_argument("--episodes", type=int, metavar="N", help="training episodes in all (default: {episodes})")
+    parser.add_argument("--timesteps", type=int, metavar="N", help="training length in env steps over all worlds, instead of --episodes")
+    parser.add_argument("--num-envs", type=int, metavar="N", help="worlds collected from at once; 1: one env (default: {num_envs})")
+    parser.add_argument("--updates-per-step", type=float, metavar="R",
+                        help="off-policy, batched: gradient steps per env step (default: per algorithm)")
     parser.add_argument("--seed", type=int, metavar="N", help="seed of the networks and the training episodes (default: {seed})")
     parser.add_argument("--out", metavar="DIR", help="output folder (default: {out})")
     parser.add_argument("--threads", type=int, metavar="N", help="torch threads (default: {torch_threads})")
@@ -120,6 +124,7 @@ def train_overrides(args: argparse.Namespace) -> dict[str, Any]:
     """The flags given on the command line, as dotted config overrides."""
     overrides: dict[str, Any] = {}
     simple = {"scenario": "scenario", "algo": "algo", "episodes": "episodes", "seed": "seed", "out": "out",
+              "timesteps": "timesteps", "num_envs": "num_envs", "updates_per_step": "updates_per_step",
               "threads": "torch_threads", "device": "device", "encoder": "encoder.mode", "encoder_weights": "encoder.weights"}
     for flag, field in simple.items():
         value = getattr(args, flag)

@@ -37,6 +37,9 @@ class CrowdNavEnv(gym.Env):
       occupancy grid centred on the robot and turning with it, row 0 farthest ahead, column 0
       farthest left; 255 where a cell's centre is inside a human, round obstacle or polygon.
     * ``velocity`` (2,) the robot's velocity in the robot frame, m/s, in [-max_speed, max_speed].
+    * ``humans`` (count, 6) float32: the nearest humans by surface distance within ``max_range``,
+      one row each ``(x, y, vx, vy, radius, 1)`` (position and velocity relative to the robot, robot
+      frame); absent rows all zero.
 
     **Reward.** Sum of the named terms of :mod:`crowdnav.envs.reward` (weights: scenario
     ``reward`` section, a preset plus single-term overrides, overridable with ``reward_weights``;

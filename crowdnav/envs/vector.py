@@ -7,7 +7,7 @@ returns a :class:`CrowdNavVectorEnv`; ``vectorization_mode="sync"`` still gives 
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from typing import Any
 
 import numpy as np
@@ -54,6 +54,11 @@ class CrowdNavVectorEnv(VectorEnv):
     (:mod:`crowdnav.batch.simulator`); resets and goal-rule draws run per world that needs one.
     Crowds of ``Simulator.grid_from`` humans or more are refused (use the sync mode).
 
+    **Episode seeds.** ``episode_seeds(worlds)`` (optional) gives the seeds of the episodes an
+    autoreset starts, for ``worlds`` in ascending order (training numbers its episodes this way,
+    :class:`crowdnav.agents.seeding.EpisodeSeedCounter`); without it an autoreset continues each
+    world's generator.
+
     **Memory.** With ``keep_freed_memory`` (default) the env raises glibc malloc's trim threshold
     to 64 MB for its process (:mod:`crowdnav.batch.memory`): the batch's temporaries are then reused
     instead of mapped again every step (about 1.5x, docs/simulator.md). Pass False to leave the
@@ -74,6 +79,7 @@ class CrowdNavVectorEnv(VectorEnv):
         overrides: Mapping[str, Any] | None = None,
         render_mode: str | None = None,
         keep_freed_memory: bool = True,
+        episode_seeds: Callable[[np.ndarray], Sequence[int | None]] | None = None,
     ):
         if render_mode is not None:
             raise ValueError("the vector env does not render; render a single env (gymnasium.make(..., render_mode=...))")
@@ -83,6 +89,7 @@ class CrowdNavVectorEnv(VectorEnv):
             raise ValueError(f"autoreset_mode must be one of {[mode.value for mode in AutoresetMode]}, got {autoreset_mode!r}") from None
         world, self.modalities = load_env_world(scenario, option_overrides(modalities, sensors, reward_weights, overrides))
         self.scenario = world.scenario
+        self.episode_seeds = episode_seeds
         self.batch = BatchSimulator(world, num_envs)
         if keep_freed_memory:
             _keep_freed_memory()
@@ -134,6 +141,10 @@ class CrowdNavVectorEnv(VectorEnv):
             flags[worlds] = False
         self._previous_distance[worlds] = self._goal_distance(worlds)
 
+    def _autoreset(self, worlds: np.ndarray) -> None:
+        seeds = [None] * len(worlds) if self.episode_seeds is None else list(self.episode_seeds(worlds))
+        self._reset_worlds(worlds, seeds)
+
     def _goal_distance(self, worlds: np.ndarray) -> np.ndarray:
         """The robot-goal distance of ``worlds`` (as the single simulator's ``abs(goal - position)``: libm hypot)."""
         out = np.zeros(self.num_envs)
@@ -154,7 +165,7 @@ class CrowdNavVectorEnv(VectorEnv):
         infos: dict[str, Any] = {}
         stepping = ~self._ended
         if self.autoreset_mode is AutoresetMode.NEXT_STEP and self._ended.any():
-            self._reset_worlds(np.flatnonzero(self._ended), [None] * int(self._ended.sum()))
+            self._autoreset(np.flatnonzero(self._ended))
         if not stepping.any():  # every world is waiting (DISABLED) or was just reset
             self._observe_all()
             return self._copy_observations(), rewards, *self._waiting_flags(), infos
@@ -249,7 +260,7 @@ class CrowdNavVectorEnv(VectorEnv):
         out = _restricted(infos, ~ended)
         out["final_obs"], out["_final_obs"] = final_obs, ended.copy()
         out["final_info"], out["_final_info"] = _restricted(infos, ended), ended.copy()
-        self._reset_worlds(worlds, [None] * len(worlds))
+        self._autoreset(worlds)
         self._ended[worlds] = False
         self._observe_all()
         return out

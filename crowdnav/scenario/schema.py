@@ -125,6 +125,15 @@ class LeogSensor(StrictModel):
         return self
 
 
+class HumansSensor(StrictModel):
+    """The k nearest humans as a tracker reports them: robot-frame position, relative velocity, radius."""
+
+    count: Annotated[int, Field(ge=1, le=64)] = Field(default=5, description="Number of human slots k (the nearest k humans).")
+    max_range: PositiveFloat = Field(
+        default=5.0, description="Humans whose surface (centre distance - radius) is farther than this (m) are absent."
+    )
+
+
 class Sensors(StrictModel):
     """Default settings of the robot's sensing modalities (env options may override)."""
 
@@ -137,6 +146,7 @@ class Sensors(StrictModel):
     )
     lidar: LidarSensor = Field(default_factory=LidarSensor, description="LIDAR settings.")
     leog: LeogSensor = Field(default_factory=LeogSensor, description="Occupancy-grid settings.")
+    humans: HumansSensor = Field(default_factory=HumansSensor, description="Nearest-humans settings.")
 
 
 def _preset_term(description: str) -> Any:

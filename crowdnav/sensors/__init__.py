@@ -2,12 +2,13 @@
 
 ``build_modalities(names, world, sensors)`` returns ``{key: Modality}``; each modality has a
 fixed ``space()`` (a gymnasium Box) and ``observe(sim)``. Built-in keys: ``goal``,
-``closest_obstacle``, ``lidar``, ``leog``, ``velocity``. See docs/sensors.md.
+``closest_obstacle``, ``lidar``, ``leog``, ``velocity``, ``humans``. See docs/sensors.md.
 """
 
 from crowdnav.sensors.base import MODALITIES, Modality, build_modalities, register_modality
 from crowdnav.sensors.closest_obstacle import ClosestObstacleModality
 from crowdnav.sensors.goal import GoalModality
+from crowdnav.sensors.humans import HumansModality
 from crowdnav.sensors.leog import LeogModality
 from crowdnav.sensors.lidar import LidarModality
 from crowdnav.sensors.velocity import VelocityModality
@@ -16,6 +17,7 @@ __all__ = [
     "MODALITIES",
     "ClosestObstacleModality",
     "GoalModality",
+    "HumansModality",
     "LeogModality",
     "LidarModality",
     "Modality",

@@ -1,0 +1,458 @@
+"""Demonstrations: a warm start from the privileged social-force robot, before (and under) RL.
+
+Off by default (``demonstrations.episodes: 0``): the main job and every published run are pure RL.
+With ``episodes: N`` a new run (never a resumed one: its weights and buffer carry the warm start
+already) does, right after its model is made (:func:`warm_start`):
+
+1. **Collect** (:func:`collect_demonstrations`): :class:`crowdnav.policies.SocialForceRobot`, which
+   reads the true simulator state, drives N episodes of the run's environment (its scenario,
+   overrides, modalities, sensors and reward), one single env per running episode, the episodes
+   stepped side by side in lock-step. Episode ``i`` uses seed
+   :func:`~crowdnav.agents.seeding.demonstration_seed` ``(config.seed, i)``: never a held-out test
+   seed, a grid-collection seed or one of the run's training episodes. Observations are what the
+   agent receives: normalised with the training env's scales (``NormalizeObservation`` /
+   ``CrowdNavSB3VecEnv``), the LEOG grid replaced by the frozen encoder's latent when the run
+   precomputes it; this is applied to all steps at once. Actions are the expert's, as
+   ``env.step`` takes them: float32 (2,) in [-1, 1] (robot-frame velocity in max-speed units for
+   a holonomic robot, forward speed and turn rate for a unicycle).
+2. **Clone** (:func:`behaviour_cloning`) the SB3 policy's actor on (observation, expert action),
+   with a fresh Adam (the algorithm's own optimizer is left untouched):
+
+   * PPO / A2C: mean squared error of the Gaussian's mean; then its state-independent
+     ``log_std`` is set to ``log(action_std)`` (the clone's exploration when fine-tuning starts);
+   * SAC: mean squared error of the deterministic action ``tanh(mean)``, and of the log-std
+     head's output against ``log(action_std)``;
+   * TD3 / DDPG: mean squared error of the actor's (tanh) action; the target actor is synced.
+
+   With ``value_pretraining`` the value function (PPO/A2C; through its own layers, on the
+   extractor's detached features when the extractor is shared with the actor) or both critics
+   at the demonstrated actions (SAC/TD3/DDPG; target critics synced) are fitted to the
+   demonstrations' discounted returns-to-go, at the algorithm's ``gamma`` and ``reward_scale``.
+   An episode cut by the time limit is not bootstrapped (rare for the expert).
+3. **DAgger** (``dagger_rounds``): the clone drives ``episodes`` further episodes (deterministic
+   actions; the next demonstration seeds), the expert labels every state it visits, and
+   cloning continues on everything collected so far.
+4. **Replay buffer** (SAC/TD3/DDPG, ``into_replay_buffer``): every collected transition (the
+   executed action, the reward the algorithm learns from) is added as an ordinary transition,
+   laid out so that n-step returns never run from one episode into another
+   (:func:`add_to_replay_buffer`); the FIFO overwrites them like any other.
+
+A report (transitions, expert outcomes, losses before and after) is returned and written to
+``OUT/demonstrations.json``. Every random choice (minibatch order) is drawn from a generator
+seeded with the run's seed; the expert is deterministic.
+
+Why not the ``imitation`` package: its latest release (1.0.1) requires ``gymnasium~=0.29`` and
+``stable-baselines3~=2.2.1``; installing it would downgrade crowdnav's gymnasium 1.x and SB3 2.9
+(and bring ~50 packages: datasets, optuna, sacred, tensorboard). Its BC is also a policy-only
+trainer on SB3's own ``ActorCriticPolicy``; it neither clones SAC/TD3 actors nor fills their
+replay buffers. The in-house path is the few loops below.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+from crowdnav.agents.config import ConfigError, TrainConfig
+from crowdnav.agents.factory import OFF_POLICY, env_options, hyperparameters, load_leog_weights, precomputes_leog
+from crowdnav.agents.seeding import demonstration_seed
+from crowdnav.agents.vec_env import CrowdNavSB3VecEnv
+from crowdnav.agents.wrappers import LeogLatentWrapper, NormalizeObservation, ObservationScales, encode_grids, normalize_observation
+from stable_baselines3.common.base_class import BaseAlgorithm
+from stable_baselines3 import SAC
+from stable_baselines3.common.distributions import DiagGaussianDistribution
+from stable_baselines3.common.off_policy_algorithm import OffPolicyAlgorithm
+from stable_baselines3.common.vec_env import DummyVecEnv, VecEnv, VecEnvWrapper
+
+REPORT_FILE = "demonstrations.json"
+EXPERT = "social-force"
+
+Learner = Callable[[Mapping[str, np.ndarray]], np.ndarray]
+"""Agent-view observations stacked per key, (N, ...) -> actions (N, 2): the clone driving DAgger episodes."""
+
+
+@dataclass
+class Demonstrations:
+    """Transitions of demonstration episodes, in episode order then step order, as the agent sees them."""
+
+    observations: dict[str, np.ndarray]
+    """Key -> (N, ...) agent-view observations (normalised; the frozen encoder's latent for a precomputed LEOG)."""
+    next_observations: dict[str, np.ndarray]
+    """Key -> (N, ...) the observation after each step (the episode's last one at its end)."""
+    actions: np.ndarray
+    """(N, 2) float32: the action executed (the expert's, or the clone's in DAgger episodes)."""
+    expert_actions: np.ndarray
+    """(N, 2) float32: the expert's action in each state (the cloning target)."""
+    rewards: np.ndarray
+    """(N,) float32 in env units (not scaled by ``reward_scale``)."""
+    terminated: np.ndarray
+    """(N,) bool: the episode ended by an event (goal, collision, out of bounds)."""
+    truncated: np.ndarray
+    """(N,) bool: the episode ended by the time limit."""
+    episode: np.ndarray
+    """(N,) int64: demonstration episode index (its seed: ``demonstration_seed(config.seed, index)``)."""
+    outcomes: dict[int, str] = field(default_factory=dict)
+    """Episode index -> outcome (success, collision, out_of_bounds, truncated)."""
+    driver: dict[int, str] = field(default_factory=dict)
+    """Episode index -> who drove it: ``social-force`` or ``clone`` (DAgger)."""
+
+    def __len__(self) -> int:
+        return len(self.actions)
+
+    @property
+    def dones(self) -> np.ndarray:
+        return self.terminated | self.truncated
+
+    @property
+    def episodes(self) -> int:
+        return len(self.outcomes)
+
+    def returns(self, gamma: float, scale: float = 1.0) -> np.ndarray:
+        """(N,) float32 discounted return-to-go of each step within its episode (rewards times ``scale``)."""
+        out = np.zeros(len(self), dtype=np.float64)
+        running = 0.0
+        for t in range(len(self) - 1, -1, -1):
+            if self.dones[t] or t == len(self) - 1 or self.episode[t] != self.episode[t + 1]:
+                running = 0.0
+            running = float(self.rewards[t]) * scale + gamma * running
+            out[t] = running
+        return out.astype(np.float32)
+
+    def success_rate(self, driver: str | None = None) -> float:
+        outcomes = [o for e, o in self.outcomes.items() if driver is None or self.driver.get(e) == driver]
+        return sum(o == "success" for o in outcomes) / len(outcomes) if outcomes else 0.0
+
+    def __add__(self, other: Demonstrations) -> Demonstrations:
+        def join(a: dict[str, np.ndarray], b: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
+            return {key: np.concatenate([a[key], b[key]]) for key in a}
+
+        return Demonstrations(
+            join(self.observations, other.observations), join(self.next_observations, other.next_observations),
+            np.concatenate([self.actions, other.actions]), np.concatenate([self.expert_actions, other.expert_actions]),
+            np.concatenate([self.rewards, other.rewards]), np.concatenate([self.terminated, other.terminated]),
+            np.concatenate([self.truncated, other.truncated]), np.concatenate([self.episode, other.episode]),
+            {**self.outcomes, **other.outcomes}, {**self.driver, **other.driver},
+        )
+
+
+# ---------------------------------------------------------------------------------------------- collection
+
+
+def declared_scales(config: TrainConfig) -> ObservationScales | None:
+    """The scales a new run's env applies (the modalities' declared ones; None without normalisation)."""
+    if not config.normalize_observations:
+        return None
+    from crowdnav.agents.wrappers import observation_scales
+    from crowdnav.envs import CrowdNavEnv
+
+    return observation_scales(CrowdNavEnv(**env_options(config)))
+
+
+def agent_view(env: Any) -> tuple[ObservationScales | None, Any]:
+    """``(scales, frozen encoder)`` of a training env (:func:`make_vec_env`'s, or SB3's ``DummyVecEnv`` of :func:`make_env`'s)."""
+    while isinstance(env, VecEnvWrapper):
+        env = env.venv
+    if isinstance(env, CrowdNavSB3VecEnv):
+        return env.scales, env.encoder
+    if isinstance(env, DummyVecEnv):
+        scales, encoder, inner = None, None, env.envs[0]
+        while hasattr(inner, "env"):
+            if isinstance(inner, NormalizeObservation):
+                scales = inner.scales
+            if isinstance(inner, LeogLatentWrapper):
+                encoder = inner.encoder
+            inner = inner.env
+        return scales, encoder
+    raise TypeError(f"cannot read the observation scaling of {type(env).__name__}; pass scales and encoder explicitly")
+
+
+def to_agent_view(observations: Mapping[str, np.ndarray], scales: ObservationScales | None, encoder: Any = None) -> dict[str, np.ndarray]:
+    """Raw CrowdNavEnv observations stacked per key -> what the agent receives (normalised; LEOG latent with ``encoder``)."""
+    view = dict(observations) if scales is None else normalize_observation(observations, scales)
+    if encoder is not None and "leog" in view:
+        grids = np.asarray(view["leog"])
+        view["leog"] = np.concatenate([encode_grids(encoder, grids[i : i + 4096]) for i in range(0, len(grids), 4096)])
+    return view
+
+
+def collect_demonstrations(config: TrainConfig | Mapping[str, Any], episodes: int | None = None, *, first_episode: int = 0,
+                           scales: ObservationScales | None | str = "declared", encoder: Any = "config", learner: Learner | None = None,
+                           worlds: int | None = None) -> Demonstrations:
+    """Play demonstration episodes ``first_episode`` .. ``first_episode + episodes - 1`` in the run's environment.
+
+    ``episodes``: default ``config.demonstrations.episodes``. ``scales``: the agent's observation
+    scaling (``"declared"``: the modalities' own when ``config.normalize_observations``, what
+    a new run uses; None: raw). ``encoder``: the frozen LEOG encoder whose latent replaces the
+    grid (``"config"``: the config's, when it precomputes the latent; None: keep the grid).
+    ``learner``: drives instead of the expert (DAgger); the expert still labels every state.
+    ``worlds``: episodes played side by side (default ``config.num_envs``). The result does not
+    depend on ``worlds``: each episode is its own seeded env.
+    """
+    from crowdnav.envs import CrowdNavEnv
+    from crowdnav.policies import SocialForceRobot
+
+    if not isinstance(config, TrainConfig):
+        from crowdnav.agents.config import config_from_mapping
+
+        config = config_from_mapping(config)
+    episodes = config.demonstrations.episodes if episodes is None else episodes
+    if episodes < 1:
+        raise ValueError(f"expected at least one demonstration episode, got {episodes}")
+    demonstration_seed(config.seed, first_episode + episodes - 1)  # the last seed is in the band (ValueError otherwise)
+    if isinstance(scales, str):
+        scales = declared_scales(config)
+    if isinstance(encoder, str):
+        encoder = load_leog_weights(config)[0] if precomputes_leog(config) else None
+    expert = SocialForceRobot()
+    envs = [CrowdNavEnv(**env_options(config)) for _ in range(min(worlds or config.num_envs, episodes))]
+    steps: dict[int, list[tuple]] = {}
+    outcomes: dict[int, str] = {}
+    playing: list[int | None] = [None] * len(envs)
+    current: list[dict[str, np.ndarray] | None] = [None] * len(envs)
+    upcoming = iter(range(first_episode, first_episode + episodes))
+
+    def start(w: int) -> None:
+        index = next(upcoming, None)
+        playing[w] = index
+        if index is not None:
+            current[w] = envs[w].reset(seed=demonstration_seed(config.seed, index))[0]
+            steps[index] = []
+
+    for w in range(len(envs)):
+        start(w)
+    while live := [w for w in range(len(envs)) if playing[w] is not None]:
+        labels = np.stack([np.asarray(expert(envs[w].simulator), dtype=np.float32) for w in live])
+        if learner is None:
+            actions = labels
+        else:
+            batch = to_agent_view({key: np.stack([current[w][key] for w in live]) for key in current[live[0]]}, scales, encoder)
+            actions = np.clip(np.asarray(learner(batch), dtype=np.float32).reshape(len(live), -1), -1.0, 1.0)
+        for w, action, label in zip(live, actions, labels, strict=True):
+            observation, reward, terminated, truncated, info = envs[w].step(action)
+            steps[playing[w]].append((current[w], observation, action, label, reward, terminated, truncated))
+            current[w] = observation
+            if terminated or truncated:
+                outcomes[playing[w]] = str(info.get("outcome", "truncated"))
+                start(w)
+    for env in envs:
+        env.close()
+    rows = [row for index in sorted(steps) for row in steps[index]]
+    keys = list(rows[0][0])
+    raw = {key: np.stack([row[0][key] for row in rows]) for key in keys}
+    raw_next = {key: np.stack([row[1][key] for row in rows]) for key in keys}
+    driver = "clone" if learner is not None else EXPERT
+    return Demonstrations(
+        observations=to_agent_view(raw, scales, encoder), next_observations=to_agent_view(raw_next, scales, encoder),
+        actions=np.stack([row[2] for row in rows]).astype(np.float32), expert_actions=np.stack([row[3] for row in rows]),
+        rewards=np.array([row[4] for row in rows], dtype=np.float32), terminated=np.array([row[5] for row in rows], dtype=bool),
+        truncated=np.array([row[6] for row in rows], dtype=bool),
+        episode=np.concatenate([np.full(len(steps[index]), index, dtype=np.int64) for index in sorted(steps)]),
+        outcomes={index: outcomes[index] for index in sorted(steps)}, driver={index: driver for index in steps},
+    )
+
+
+# ------------------------------------------------------------------------------------------------ cloning
+
+
+class _Heads:
+    """What cloning trains in one SB3 model: the predicted action, the value / Q estimates, and after-care."""
+
+    def __init__(self, model: BaseAlgorithm, action_std: float):
+        self.model = model
+        self.log_std = math.log(action_std)
+        self.on_policy = not isinstance(model, OffPolicyAlgorithm)
+        self.sac = isinstance(model, SAC)
+        policy = model.policy
+        if self.on_policy:
+            if not isinstance(policy.action_dist, DiagGaussianDistribution) or getattr(policy, "use_sde", False):
+                raise ConfigError("demonstrations: on-policy cloning needs a diagonal Gaussian policy (no gSDE)")
+            self.actor_parameters = [p for name, p in policy.named_parameters() if p.requires_grad and name != "log_std"]
+            self.critic_parameters: list[torch.nn.Parameter] = []
+        else:
+            self.actor_parameters = [p for p in model.actor.parameters() if p.requires_grad]
+            shared = getattr(policy, "share_features_extractor", False)
+            self.critic_parameters = [p for name, p in model.critic.named_parameters()
+                                      if p.requires_grad and not (shared and name.startswith("features_extractor"))]
+
+    def losses(self, obs: dict[str, torch.Tensor], targets: torch.Tensor, actions: torch.Tensor,
+               returns: torch.Tensor | None) -> tuple[torch.Tensor, torch.Tensor | None]:
+        """(action loss, value loss or None) on one minibatch."""
+        model, policy = self.model, self.model.policy
+        value_loss = None
+        if self.on_policy:
+            features = policy.extract_features(obs)
+            shared = policy.share_features_extractor
+            pi_features, vf_features = (features, features.detach()) if shared else features
+            mean = policy.action_net(policy.mlp_extractor.forward_actor(pi_features))
+            action_loss = torch.nn.functional.mse_loss(mean, targets)
+            if returns is not None:
+                values = policy.value_net(policy.mlp_extractor.forward_critic(vf_features)).flatten()
+                value_loss = torch.nn.functional.mse_loss(values, returns)
+            return action_loss, value_loss
+        if self.sac:  # squashed Gaussian
+            mean, log_std, _ = model.actor.get_action_dist_params(obs)
+            action_loss = torch.nn.functional.mse_loss(torch.tanh(mean), targets)
+            action_loss = action_loss + torch.nn.functional.mse_loss(log_std, torch.full_like(log_std, self.log_std))
+        else:  # TD3 / DDPG: deterministic tanh actor
+            action_loss = torch.nn.functional.mse_loss(model.actor(obs), targets)
+        if returns is not None:
+            q_values = model.critic(obs, actions)
+            value_loss = sum(torch.nn.functional.mse_loss(q.flatten(), returns) for q in q_values) / len(q_values)
+        return action_loss, value_loss
+
+    def predicted_actions(self, obs: dict[str, torch.Tensor]) -> torch.Tensor:
+        """The deterministic action, before the env's clipping (PPO/A2C: the Gaussian's mean)."""
+        policy = self.model.policy
+        if self.on_policy:
+            return policy.get_distribution(obs).distribution.mean
+        return self.model.actor(obs, deterministic=True) if self.sac else self.model.actor(obs)
+
+    def finish(self) -> None:
+        """Set the on-policy std, sync the target networks."""
+        model = self.model
+        if self.on_policy:
+            with torch.no_grad():
+                model.policy.log_std.fill_(self.log_std)
+            return
+        if getattr(model, "actor_target", None) is not None:
+            model.actor_target.load_state_dict(model.actor.state_dict())
+        model.critic_target.load_state_dict(model.critic.state_dict())
+
+
+def _tensors(model: BaseAlgorithm, demonstrations: Demonstrations, gamma: float, scale: float) -> dict[str, Any]:
+    device = model.device
+    return {
+        "obs": {key: torch.as_tensor(values, device=device) for key, values in demonstrations.observations.items()},
+        "targets": torch.as_tensor(demonstrations.expert_actions, device=device),
+        "actions": torch.as_tensor(demonstrations.actions, device=device),
+        "returns": torch.as_tensor(demonstrations.returns(gamma, scale), device=device),
+    }
+
+
+def _evaluate(heads: _Heads, data: dict[str, Any], value: bool) -> tuple[float, float | None]:
+    """(action MSE of the deterministic action against the expert's, value MSE or None) over all demonstrations."""
+    n = len(data["targets"])
+    action_error, value_error = 0.0, 0.0
+    with torch.no_grad():
+        for start in range(0, n, 4096):
+            rows = slice(start, start + 4096)
+            obs = {key: values[rows] for key, values in data["obs"].items()}
+            predicted = heads.predicted_actions(obs).clamp(-1.0, 1.0)
+            action_error += float(((predicted - data["targets"][rows]) ** 2).sum()) / 2
+            if value:
+                _, loss = heads.losses(obs, data["targets"][rows], data["actions"][rows], data["returns"][rows])
+                value_error += float(loss) * len(data["targets"][rows])
+    return action_error / n, (value_error / n if value else None)
+
+
+def behaviour_cloning(model: BaseAlgorithm, demonstrations: Demonstrations, *, epochs: int = 30, batch_size: int = 256,
+                      learning_rate: float = 1e-3, action_std: float = 0.3, value_pretraining: bool = True, gamma: float = 0.95,
+                      reward_scale: float = 1.0, seed: int = 0) -> dict[str, Any]:
+    """Clone the expert's actions into ``model``'s actor (and fit its value / critics); the losses before and after.
+
+    ``action_mse``: mean over the demonstrations of the squared error per action value between
+    the policy's deterministic action (clipped to [-1, 1], as the env applies it) and the expert's.
+    """
+    heads = _Heads(model, action_std)
+    data = _tensors(model, demonstrations, gamma, reward_scale)
+    action_before, value_before = _evaluate(heads, data, value_pretraining)
+    parameters = heads.actor_parameters + (heads.critic_parameters if value_pretraining else [])
+    optimizer = torch.optim.Adam(parameters, lr=learning_rate)
+    rng = np.random.default_rng(seed)
+    n = len(demonstrations)
+    for _ in range(epochs):
+        order = torch.as_tensor(rng.permutation(n), device=model.device)
+        for start in range(0, n, batch_size):
+            rows = order[start : start + batch_size]
+            obs = {key: values[rows] for key, values in data["obs"].items()}
+            action_loss, value_loss = heads.losses(obs, data["targets"][rows], data["actions"][rows],
+                                                   data["returns"][rows] if value_pretraining else None)
+            loss = action_loss if value_loss is None else action_loss + value_loss
+            optimizer.zero_grad(set_to_none=True)
+            loss.backward()
+            optimizer.step()
+    heads.finish()
+    action_after, value_after = _evaluate(heads, data, value_pretraining)
+    report = {"transitions": n, "epochs": epochs, "action_mse_before": action_before, "action_mse_after": action_after}
+    if value_pretraining:
+        report.update(value_mse_before=value_before, value_mse_after=value_after)
+    return report
+
+
+# ------------------------------------------------------------------------------------------ replay buffer
+
+
+def add_to_replay_buffer(model: BaseAlgorithm, demonstrations: Demonstrations, reward_scale: float = 1.0) -> int:
+    """Add the demonstrations to an off-policy model's replay buffer as ordinary transitions; returns how many.
+
+    The buffer keeps ``n_envs`` columns (one per world), and n-step returns run down a column.
+    The transitions, in episode order, are cut into ``n_envs`` equal runs, one per column; the
+    last transition of each run that does not end its episode is marked a time-limit truncation
+    (bootstrapped from its true next observation, never summed into the next run or into the
+    training transitions written after it). The remainder (fewer than ``n_envs``) is left out,
+    and so are the oldest rows when they would not fit in the buffer.
+    """
+    buffer = model.replay_buffer
+    columns = buffer.n_envs
+    rows = min(len(demonstrations) // columns, buffer.buffer_size)
+    if rows == 0:
+        return 0
+    skip = len(demonstrations) // columns - rows  # rows that would not fit: drop the oldest of each run
+    dones = demonstrations.dones
+    starts = np.arange(columns) * (len(demonstrations) // columns) + skip
+    for row in range(rows):
+        index = starts + row
+        cut = (row == rows - 1) & ~dones[index]
+        timeouts = demonstrations.truncated[index] | cut
+        buffer.add(
+            {key: values[index] for key, values in demonstrations.observations.items()},
+            {key: values[index] for key, values in demonstrations.next_observations.items()},
+            demonstrations.actions[index], demonstrations.rewards[index] * reward_scale, dones[index] | cut,
+            [{"TimeLimit.truncated": bool(t)} for t in timeouts],
+        )
+    return rows * columns
+
+
+# --------------------------------------------------------------------------------------------- warm start
+
+
+def warm_start(model: BaseAlgorithm, config: TrainConfig) -> dict[str, Any] | None:
+    """Warm-start a NEW model from demonstrations as ``config.demonstrations`` says; None (and nothing done) when off.
+
+    Called once by :func:`crowdnav.agents.train` after a new model is made, never on resume.
+    Writes the report to ``OUT/demonstrations.json`` when ``config.out`` exists.
+    """
+    settings = config.demonstrations
+    if settings.episodes == 0:
+        return None
+    scales, encoder = agent_view(model.get_env())
+    hyper = hyperparameters(config)
+    cloning = {"epochs": settings.epochs, "batch_size": settings.batch_size, "learning_rate": settings.learning_rate,
+               "action_std": settings.action_std, "value_pretraining": settings.value_pretraining, "gamma": hyper["gamma"],
+               "reward_scale": config.reward_scale, "seed": config.seed}
+    demonstrations = collect_demonstrations(config, settings.episodes, scales=scales, encoder=encoder)
+    rounds = [{"driver": EXPERT, "episodes": settings.episodes, "success_rate": demonstrations.success_rate(),
+               **behaviour_cloning(model, demonstrations, **cloning)}]
+    for round_index in range(1, settings.dagger_rounds + 1):
+        def learner(obs: Mapping[str, np.ndarray]) -> np.ndarray:
+            return model.policy.predict(dict(obs), deterministic=True)[0]
+
+        more = collect_demonstrations(config, settings.episodes, first_episode=round_index * settings.episodes, scales=scales,
+                                      encoder=encoder, learner=learner)
+        demonstrations = demonstrations + more
+        rounds.append({"driver": "clone", "dagger_round": round_index, "episodes": settings.episodes, "success_rate": more.success_rate(),
+                       **behaviour_cloning(model, demonstrations, **{**cloning, "seed": config.seed + round_index})})
+    report: dict[str, Any] = {"expert": EXPERT, "episodes": demonstrations.episodes, "transitions": len(demonstrations),
+                              "expert_success_rate": demonstrations.success_rate(EXPERT), "rounds": rounds, "replay_buffer": 0}
+    if config.algo in OFF_POLICY and settings.into_replay_buffer:
+        report["replay_buffer"] = add_to_replay_buffer(model, demonstrations, config.reward_scale)
+    out = Path(config.out)
+    if out.is_dir():
+        (out / REPORT_FILE).write_text(json.dumps(report, indent=2) + "\n", encoding="utf-8")
+    return report

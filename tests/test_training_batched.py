@@ -1,0 +1,231 @@
+"""Batched training (``num_envs > 1``, the native vector env): reproducible from the seed, every
+episode seeded by the run's own numbering, an exact budget, exact resumes, step budgets,
+reward scaling for the algorithm only, and the frozen encoder's latents computed in the env."""
+
+from __future__ import annotations
+
+import pickle
+
+import numpy as np
+import pandas as pd
+import pytest
+from agents_tiny import SMALL_LEOG, TINY_EXTRACTOR, tiny_config
+from crowdnav.agents import ConfigError, train
+from crowdnav.agents.config import config_from_mapping
+from crowdnav.agents.run_folder import ROLLOUT_FILE, checkpoint_dir, checkpoint_info, policy_snapshots
+from crowdnav.agents.seeding import TRAIN_SEED_BASE, train_seed
+from crowdnav.agents.vec_env import CrowdNavSB3VecEnv
+
+WORLDS = 4
+
+
+def batched_config(out, algo: str = "sac", **fields):
+    """``tiny_config`` collecting from ``WORLDS`` worlds, with crowdnav's batched collection (no single-env train_freq)."""
+    batched = {"num_envs": WORLDS, "algo_kwargs": {}}
+    if algo in ("sac", "td3", "ddpg"):
+        batched["updates_per_step"] = 0.5  # 2 gradient steps after each step of the 4 worlds
+    elif algo == "ppo":
+        batched.update(n_steps=16, algo_kwargs={"n_epochs": 1})  # 64 env steps per rollout
+    elif algo == "a2c":
+        batched["n_steps"] = 4
+    return tiny_config(out, algo=algo, **{**batched, **fields})
+
+
+class Stopped(Exception):
+    """Stands for a kill right after a checkpoint (as in test_resume_exact.py)."""
+
+
+def _log(folder) -> pd.DataFrame:
+    return pd.read_csv(folder / "episodes.csv").drop(columns=["seconds"])
+
+
+def _episodes(result) -> list[tuple]:
+    return [(r.episode, r.seed, r.outcome, r.reward, r.length, r.timesteps) for r in result.records]
+
+
+def _weights(result) -> list[bytes]:
+    return [p.detach().numpy().tobytes() for p in result.model.policy.parameters()]
+
+
+@pytest.mark.parametrize("algo", ["sac", "ppo"])
+def test_the_same_seed_gives_the_same_episodes_and_final_weights(tmp_path, algo):
+    first = train(batched_config(tmp_path / "first", algo, episodes=10))
+    again = train(batched_config(tmp_path / "again", algo, episodes=10))
+    assert first.model.n_envs == WORLDS and first.model._n_updates > 0
+    pd.testing.assert_frame_equal(_log(tmp_path / "first"), _log(tmp_path / "again"))
+    assert _weights(first) == _weights(again)
+    other = train(batched_config(tmp_path / "other", algo, episodes=10, seed=1))
+    assert set(_log(tmp_path / "other")["seed"]).isdisjoint(_log(tmp_path / "first")["seed"])
+
+
+def test_every_episode_has_a_training_seed_although_sb3_seeds_the_vector_env(tmp_path, monkeypatch):
+    seeded = []
+    original = CrowdNavSB3VecEnv.seed
+
+    def spy(self, seed=None):
+        seeded.append(seed)
+        return original(self, seed)
+
+    monkeypatch.setattr(CrowdNavSB3VecEnv, "seed", spy)
+    train(batched_config(tmp_path, episodes=12))
+    assert seeded == [0]  # SB3 passed the algorithm's seed: without the run's numbering the worlds would replay test seeds 0..3
+    seeds = _log(tmp_path)["seed"]
+    assert (seeds >= TRAIN_SEED_BASE).all()
+    # episodes are numbered as they start: the 4 first ones, then one per autoreset, at most 3 still running at the end
+    started = {train_seed(0, index) for index in range(12 + WORLDS - 1)}
+    assert set(seeds) <= started and {train_seed(0, index) for index in range(WORLDS)} <= set(seeds)
+
+
+def test_each_episode_is_logged_once_with_its_own_seed_and_the_budget_is_exact(tmp_path):
+    # 3 humans, 60 steps: worlds that time out together end in the same step, so budgets fall mid-step
+    for episodes in (5, 6, 7):
+        result = train(batched_config(tmp_path / str(episodes), "ppo", episodes=episodes))
+        log = _log(tmp_path / str(episodes))
+        assert list(log["episode"]) == list(range(episodes)) and result.episodes == episodes == len(result.records)
+        assert log["seed"].is_unique
+        assert checkpoint_info(tmp_path / str(episodes))["episodes"] == episodes
+        assert sorted(policy_snapshots(tmp_path / str(episodes))) == sorted({*range(2, episodes + 1, 2), episodes})
+
+
+@pytest.mark.parametrize("algo", ["sac", "ppo"])
+def test_a_finished_batched_run_resumed_with_a_larger_budget_logs_new_episodes_with_new_seeds(tmp_path, algo):
+    first = train(batched_config(tmp_path, algo, episodes=6))
+    assert not (checkpoint_dir(tmp_path) / ROLLOUT_FILE).exists()  # it ended inside a step: its worlds are not continued
+    started = checkpoint_info(tmp_path)["next_episode"]
+    assert started > 6  # episodes still running (or ended past the budget) when it stopped
+    more = train(batched_config(tmp_path, algo, episodes=12), resume=True)
+    log = _log(tmp_path)
+    assert list(log["episode"]) == list(range(12)) and log["seed"].is_unique
+    assert [r.seed for r in first.records] == list(log["seed"][:6])
+    assert {r.seed for r in more.records} >= {train_seed(0, started)}
+    assert all(r.seed >= train_seed(0, started) for r in more.records)  # never an episode the first session started
+    if algo == "sac":  # the abandoned episodes end in the buffer: no n-step return runs on into the new ones
+        buffer = more.model.replay_buffer
+        row = first.timesteps // WORLDS - 2  # the step that reached the budget was not stored
+        assert buffer.dones[row].all() and buffer.timeouts[row].any()
+
+
+@pytest.mark.parametrize(("algo", "fields"), [
+    ("sac", {}),
+    ("sac", {"algo_kwargs": {"train_freq": 2, "gradient_steps": -1}}),  # rollouts of 2 steps of every world, 8 updates after each
+    ("td3", {}),
+    ("ppo", {}),
+    ("a2c", {}),
+], ids=["sac", "sac-train_freq2", "td3", "ppo", "a2c"])
+def test_a_batched_run_stopped_after_a_checkpoint_and_resumed_trains_bit_for_bit_like_the_uninterrupted_run(tmp_path, algo, fields):
+    whole = train(batched_config(tmp_path / "whole", algo, episodes=12, **fields))
+    config = batched_config(tmp_path / "stopped", algo, episodes=12, **fields)
+    stopped_at = []
+
+    def stop(episodes):
+        # the first checkpoint that leaves worlds mid-episode (often all 4 time out together): the resume must continue them
+        saved = pickle.loads((checkpoint_dir(tmp_path / "stopped") / ROLLOUT_FILE).read_bytes())
+        if (saved["env"]._lengths > 0).any():
+            stopped_at.append(episodes)
+            raise Stopped
+
+    with pytest.raises(Stopped):
+        train(config, on_checkpoint=stop)
+    assert 0 < stopped_at[0] < 12
+    resumed = train(config, resume=True)
+    assert resumed.records and _episodes(resumed) == _episodes(whole)[stopped_at[0]:]
+    pd.testing.assert_frame_equal(_log(tmp_path / "stopped"), _log(tmp_path / "whole"))
+    assert _weights(resumed) == _weights(whole)
+    assert resumed.model._n_updates == whole.model._n_updates
+
+
+@pytest.mark.parametrize("algo", ["sac", "ppo"])
+def test_a_step_budget_saves_snapshots_every_so_many_env_steps_and_stops_at_the_budget(tmp_path, algo):
+    result = train(batched_config(tmp_path, algo, episodes=1, timesteps=250, checkpoint_every_steps=64))
+    assert 250 <= result.timesteps < 250 + WORLDS  # the step that reaches the budget is the last one
+    assert result.episodes > 1  # the episode budget is ignored
+    snapshots = policy_snapshots(tmp_path, unit="steps")
+    assert sorted(snapshots) == [64, 128, 192]
+    assert [p.name for p in snapshots.values()] == ["steps_000000064", "steps_000000128", "steps_000000192"]
+    # each the policy that acted in the step reaching its point
+    assert [_info(folder)["timesteps"] for folder in snapshots.values()] == [64, 128, 192]
+    assert checkpoint_info(tmp_path)["timesteps"] == result.timesteps
+    assert not (tmp_path / "snapshots" / "episode_00002").exists()
+
+
+def _info(folder) -> dict:
+    import json
+
+    return json.loads((folder / "policy.json").read_text())
+
+
+def test_a_step_budget_run_stopped_after_a_checkpoint_resumes_exactly(tmp_path):
+    fields = {"episodes": 1, "timesteps": 320, "checkpoint_every_steps": 64}
+    whole = train(batched_config(tmp_path / "whole", **fields))
+    config = batched_config(tmp_path / "stopped", **fields)
+
+    def stop(episodes):
+        raise Stopped
+
+    with pytest.raises(Stopped):
+        train(config, on_checkpoint=stop)
+    assert sorted(policy_snapshots(tmp_path / "stopped", unit="steps")) == [64]
+    resumed = train(config, resume=True)
+    pd.testing.assert_frame_equal(_log(tmp_path / "stopped"), _log(tmp_path / "whole"))
+    assert _weights(resumed) == _weights(whole)
+    assert sorted(policy_snapshots(tmp_path / "stopped", unit="steps")) == sorted(policy_snapshots(tmp_path / "whole", unit="steps"))
+
+
+def test_reward_scale_multiplies_what_the_algorithm_learns_from_and_not_the_logged_returns(tmp_path):
+    # no gradient step within the run (learning_starts beyond it): both runs take the same random actions
+    plain = train(batched_config(tmp_path / "plain", episodes=6, learning_starts=10_000))
+    scaled = train(batched_config(tmp_path / "scaled", episodes=6, learning_starts=10_000, reward_scale=3.0))
+    pd.testing.assert_frame_equal(_log(tmp_path / "plain"), _log(tmp_path / "scaled"))
+    stored = plain.model.replay_buffer.pos
+    assert stored > 100 and scaled.model.replay_buffer.pos == stored
+    rewards = plain.model.replay_buffer.rewards[:stored]
+    assert np.abs(rewards).max() > 0
+    np.testing.assert_allclose(scaled.model.replay_buffer.rewards[:stored], 3.0 * rewards, rtol=1e-6)
+
+
+@pytest.fixture(scope="module")
+def encoder_file(tmp_path_factory):
+    """A quickly pre-trained encoder with the tiny architecture, for 30x30 grids (as test_agents_encoder_modes.py)."""
+    from crowdnav.agents import collect_grids, pretrain_encoder
+
+    grids = collect_grids("room_furniture", 64, seed=0, sensors=SMALL_LEOG)
+    result = pretrain_encoder(grids, tmp_path_factory.mktemp("encoder"), channels=TINY_EXTRACTOR["leog_channels"],
+                              kernels=TINY_EXTRACTOR["leog_kernels"], strides=TINY_EXTRACTOR["leog_strides"],
+                              latent=TINY_EXTRACTOR["leog_latent"], epochs=1)
+    return result.encoder_path
+
+
+def test_frozen_precomputed_encoder_gives_the_worlds_the_single_envs_latents_and_trains(tmp_path, encoder_file):
+    from crowdnav.agents import load_policy
+    from crowdnav.agents.factory import load_leog_weights, make_env, make_vec_env
+
+    fields = {"modalities": ["leog", "goal"], "scenario": "room_furniture", "encoder": {"mode": "frozen", "weights": str(encoder_file)}}
+    config = config_from_mapping(batched_config(tmp_path / "run", **fields))
+    encoder, _ = load_leog_weights(config)
+    worlds = make_vec_env(config, encoder)
+    single = make_env(config.model_copy(update={"num_envs": 1}), encoder)
+    latent = TINY_EXTRACTOR["leog_latent"]
+    assert worlds.observation_space == single.observation_space and worlds.observation_space["leog"].shape == (latent,)
+    batch = worlds.reset()
+    for world in range(WORLDS):  # world i plays episode i: the single env's i-th episode, latent and all
+        observation, _ = single.reset()
+        for key in observation:
+            np.testing.assert_allclose(batch[key][world], observation[key], rtol=1e-5, atol=1e-6, err_msg=key)
+    worlds.close()
+    single.close()
+
+    result = train(batched_config(tmp_path / "run", episodes=6, **fields))
+    assert result.model.observation_space["leog"].shape == (latent,) and result.model._n_updates > 0
+    assert result.model.replay_buffer.observations["leog"].shape[-1] == latent
+    assert load_policy(tmp_path / "run").encoder is not None
+
+
+def test_resuming_with_another_number_of_worlds_is_refused(tmp_path):
+    train(batched_config(tmp_path / "batched", episodes=2))
+    with pytest.raises(ConfigError, match=r"trained with num_envs 4, the config asks for 3"):
+        train(batched_config(tmp_path / "batched", episodes=4, num_envs=3), resume=True)
+    with pytest.raises(ConfigError, match=r"trained with num_envs 4, the config asks for 1"):
+        train(tiny_config(tmp_path / "batched", episodes=4), resume=True)
+    train(tiny_config(tmp_path / "single", episodes=2))
+    with pytest.raises(ConfigError, match=r"trained with num_envs 1, the config asks for 4"):
+        train(batched_config(tmp_path / "single", episodes=4), resume=True)
