@@ -74,6 +74,10 @@ class EpisodeCallback(BaseCallback):
     episodes, however long the rollout: PPO's 2,048 steps span several episodes), and
     ``save(episodes_done)`` at the end of the current rollout (for off-policy algorithms right
     after the step's transition enters the replay buffer), so the saved buffer and episode count agree.
+
+    With ``timesteps`` (a budget in env steps over all worlds) it stops at the first step that
+    reaches the budget; with ``checkpoint_every_steps`` too, ``snapshot(point)`` and ``save`` follow
+    every multiple of it instead of the episode count.
     """
 
     def __init__(self, episodes: int, first_episode: int, seed_of: Callable[[int], int], *,
@@ -84,7 +88,7 @@ class EpisodeCallback(BaseCallback):
         super().__init__()
         self.episodes = episodes
         self.timesteps = timesteps
-        """A budget in env steps (over all worlds) instead of ``episodes``; ``checkpoint_every_steps`` then sets the points."""
+        """A budget in env steps (over all worlds) instead of ``episodes``; ``checkpoint_every_steps``, if given, sets the points."""
         self.checkpoint_every_steps = checkpoint_every_steps
         self.point = 0
         """With a step budget: the last evaluation point (env steps) reached."""
@@ -126,8 +130,12 @@ class EpisodeCallback(BaseCallback):
         if self._progress:
             from tqdm import tqdm
 
-            self._bar = tqdm(total=self.episodes, initial=self.done, unit="ep", desc=f"train {type(self.model).__name__}",
-                             dynamic_ncols=True)
+            if self.timesteps is None:
+                self._bar = tqdm(total=self.episodes, initial=self.done, unit="ep", desc=f"train {type(self.model).__name__}",
+                                 dynamic_ncols=True)
+            else:  # a budget in env steps: the bar counts them
+                self._bar = tqdm(total=self.timesteps, initial=min(self.model.num_timesteps, self.timesteps), unit="step",
+                                 desc=f"train {type(self.model).__name__}", dynamic_ncols=True)
 
     def _on_step(self) -> bool:
         for done, info in zip(self.locals["dones"], self.locals["infos"], strict=True):
@@ -136,6 +144,8 @@ class EpisodeCallback(BaseCallback):
                 self._record(info)
         if self.timesteps is None:
             return self.done < self.episodes
+        if self._bar is not None:
+            self._bar.update(min(self.model.num_timesteps, self.timesteps) - self._bar.n)
         every = self.checkpoint_every_steps
         if every is not None and self.model.num_timesteps >= self.point + every:
             # the policy after the first step of all worlds that reaches the point (the policy is fixed within a step)
@@ -171,9 +181,11 @@ class EpisodeCallback(BaseCallback):
         self.logger.record("episode/return", record.reward)
         self.logger.record("episode/length", record.length)
         if self._bar is not None:
-            self._bar.update(1)
+            if self.timesteps is None:
+                self._bar.update(1)
             self._bar.set_postfix(success=f"{self.success_rate:.0%}", steps_per_s=f"{self.steps_per_second:.0f}", refresh=False)
-        if self.timesteps is None and self.done % self.checkpoint_every == 0:
+        # a step budget without checkpoint_every_steps still checkpoints every checkpoint_every episodes (resumable)
+        if self.checkpoint_every_steps is None and self.done % self.checkpoint_every == 0:
             if self.snapshot is not None:
                 self.snapshot(self.done)
             self._save_due = self.save is not None

@@ -211,7 +211,9 @@ def model_from_parameters(folder: Path, info: Mapping[str, Any], encoder: Any = 
     try:
         if config is None:
             config = config_from_mapping({**document, "device": device})
-        config = config.model_copy(update={"device": device, "progress": False, "tensorboard": False})
+        # one env to act in: the collection settings (worlds, rollout sizes) do not shape the network
+        config = config.model_copy(update={"device": device, "progress": False, "tensorboard": False, "num_envs": 1,
+                                           "updates_per_step": None, "n_steps": None})
         off_policy = "buffer_size" in type(config).model_fields and config.algo in ("sac", "td3", "ddpg")
         config = config.model_copy(update={"buffer_size": 1, "learning_starts": 0} if off_policy else {})
         saved_encoder = None

@@ -23,8 +23,8 @@ from pydantic import AfterValidator, BaseModel, BeforeValidator, ConfigDict, Fie
 from crowdnav.config_errors import ConfigIssue, FieldProblems, YamlProblem, format_issues, read_yaml, validation_issues, yaml_line
 from crowdnav.registry import ALGORITHM_NAMES, ENCODER_MODES, modality_names, unknown_name_message
 
-__all__ = ["ALGORITHM_NAMES", "ENCODER_MODES", "ConfigError", "DemonstrationConfig", "EncoderConfig", "ExtractorConfig", "TrainConfig", "config_from_mapping",
-           "config_to_dict", "describe_fields", "load_config"]
+__all__ = ["ALGORITHM_NAMES", "ENCODER_MODES", "ConfigError", "DemonstrationConfig", "EncoderConfig", "ExtractorConfig", "TrainConfig",
+           "config_from_mapping", "config_to_dict", "describe_fields", "load_config"]
 
 
 class ConfigError(ValueError):
@@ -113,7 +113,7 @@ class DemonstrationConfig(_Section):
                                            "(SAC/TD3/DDPG) to the demonstrations' discounted returns.")
     into_replay_buffer: Bool = option(True, "Off-policy: store the demonstration transitions in the replay buffer (ordinary transitions).")
     dagger_rounds: Int = option(0, "DAgger rounds after cloning: the clone drives `episodes` more episodes, the expert labels them, "
-                                   "cloning restarts on all.", ge=0)
+                                   "cloning goes on over all of them.", ge=0)
 
 
 class TrainConfig(_Section):
@@ -138,6 +138,8 @@ class TrainConfig(_Section):
     out: Text = option("runs/train", "Output folder: checkpoint, snapshots, episode log, resolved config.")
     net_arch: list[Size] | None = option(None, "Hidden layers of the actor and critic heads on top of the latent (None: per-algorithm default).")
     learning_rate: Float | None = option(None, "Optimizer learning rate (None: per-algorithm default).", gt=0)
+    learning_rate_schedule: Literal["constant", "linear"] | None = option(
+        None, "linear: the learning rate decays to 0 over the budget (timesteps, or an episodes bound); None: per-algorithm default.")
     batch_size: Int | None = option(None, "Minibatch size (None: per-algorithm default; unused by A2C).", ge=1)
     buffer_size: Int | None = option(None, "Replay buffer capacity in transitions (off-policy only; None: default).", ge=1)
     learning_starts: Int | None = option(None, "Steps of random actions before gradient updates start (off-policy only; None: default).", ge=0)

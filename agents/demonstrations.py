@@ -57,6 +57,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+import gymnasium as gym
 import numpy as np
 import torch
 from crowdnav.agents.config import ConfigError, TrainConfig
@@ -64,11 +65,11 @@ from crowdnav.agents.factory import OFF_POLICY, env_options, hyperparameters, lo
 from crowdnav.agents.seeding import demonstration_seed
 from crowdnav.agents.vec_env import CrowdNavSB3VecEnv
 from crowdnav.agents.wrappers import LeogLatentWrapper, NormalizeObservation, ObservationScales, encode_grids, normalize_observation
-from stable_baselines3.common.base_class import BaseAlgorithm
 from stable_baselines3 import SAC
+from stable_baselines3.common.base_class import BaseAlgorithm
 from stable_baselines3.common.distributions import DiagGaussianDistribution
 from stable_baselines3.common.off_policy_algorithm import OffPolicyAlgorithm
-from stable_baselines3.common.vec_env import DummyVecEnv, VecEnv, VecEnvWrapper
+from stable_baselines3.common.vec_env import DummyVecEnv, VecEnvWrapper
 
 REPORT_FILE = "demonstrations.json"
 EXPERT = "social-force"
@@ -149,9 +150,13 @@ def declared_scales(config: TrainConfig) -> ObservationScales | None:
     if not config.normalize_observations:
         return None
     from crowdnav.agents.wrappers import observation_scales
+
     from crowdnav.envs import CrowdNavEnv
 
-    return observation_scales(CrowdNavEnv(**env_options(config)))
+    env = CrowdNavEnv(**env_options(config))
+    scales = observation_scales(env)
+    env.close()
+    return scales
 
 
 def agent_view(env: Any) -> tuple[ObservationScales | None, Any]:
@@ -162,7 +167,7 @@ def agent_view(env: Any) -> tuple[ObservationScales | None, Any]:
         return env.scales, env.encoder
     if isinstance(env, DummyVecEnv):
         scales, encoder, inner = None, None, env.envs[0]
-        while hasattr(inner, "env"):
+        while isinstance(inner, gym.Wrapper):
             if isinstance(inner, NormalizeObservation):
                 scales = inner.scales
             if isinstance(inner, LeogLatentWrapper):

@@ -27,7 +27,10 @@ Batched training (``num_envs > 1``) cannot be rewound either, for any algorithm:
 episode ends the others are mid-episode. Its checkpoints (written at a rollout's end, before the
 update that follows it) keep the vector env with every world mid-episode and the last
 observation, as the on-policy ones do, plus the replay buffer off-policy; a resumed run puts
-them back and takes the pending update first.
+them back and takes the pending update first. The final checkpoint is taken inside the step that
+spent the budget (SB3 stops before storing it), so it keeps no worlds: a resume with a larger
+budget starts new episodes, numbered after every episode already started, and the abandoned
+ones end in the replay buffer (:func:`end_open_episodes`).
 """
 
 from __future__ import annotations

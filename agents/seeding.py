@@ -30,19 +30,22 @@ def dataset_seed(seed: int, episode: int) -> int:
     return TRAIN_SEED_BASE * (seed + 1) + DATASET_SEED_OFFSET + episode
 
 
-DEMONSTRATION_SEED_OFFSET = TRAIN_SEED_BASE // 4
-"""Demonstration episodes use the second quarter of each seed's band, [250,000, 500,000): below
-the grid collections' half, above every training episode of a run shorter than 250,000 episodes."""
+DEMONSTRATION_SEED_OFFSET = TRAIN_SEED_BASE * 3 // 4
+"""Demonstration episodes use the last quarter of each seed's band, [750,000, 1,000,000): above the
+grid collections' [500,000, 750,000) and every training episode (at most 500,000, see EpisodeSeedCounter)."""
 
-DEMONSTRATION_EPISODES = DATASET_SEED_OFFSET - DEMONSTRATION_SEED_OFFSET
+DEMONSTRATION_EPISODES = TRAIN_SEED_BASE - DEMONSTRATION_SEED_OFFSET
 """How many demonstration episodes one seed's quarter holds (250,000)."""
+
+MAX_TRAIN_EPISODES = DATASET_SEED_OFFSET
+"""Training episodes a run may start (500,000): beyond, their seeds would be grid-collection seeds."""
 
 
 def demonstration_seed(seed: int, episode: int) -> int:
     """Seed of demonstration episode ``episode`` (0-based) of the scripted expert, for a run with seed ``seed``.
 
     Disjoint from the held-out test seeds (below :data:`TRAIN_SEED_BASE`), from the grid
-    collections (:func:`dataset_seed`) and from the run's training episodes 0..249,999, so a
+    collections (:func:`dataset_seed`) and from the run's training episodes, so a
     warm-started agent never imitated a test episode nor an episode it later trains on.
     """
     if not 0 <= episode < DEMONSTRATION_EPISODES:
@@ -70,6 +73,9 @@ class EpisodeSeedCounter:
     def __call__(self, worlds: Iterable[int]) -> list[int]:
         seeds = []
         for world in worlds:
+            if self.next_episode >= MAX_TRAIN_EPISODES:  # 10+ M env steps of short episodes; the next band is the grids'
+                raise RuntimeError(f"a run may start at most {MAX_TRAIN_EPISODES:,} training episodes (their seeds would reach "
+                                   "the grid-collection band, agents.seeding); split the budget over run seeds")
             self.episode_of[int(world)] = self.next_episode
             seeds.append(train_seed(self.run_seed, self.next_episode))
             self.next_episode += 1

@@ -7,11 +7,13 @@ Output folder (``config.out``):
 * ``checkpoint/``: the latest resumable checkpoint (see :mod:`agents.checkpoint`), rewritten
   every ``checkpoint_every`` episodes and at the end;
 * ``snapshots/episode_<N>/``: the policy after N episodes (no replay buffer), for evaluation
-  along training;
+  along training; ``snapshots/steps_<N>/`` after N env steps with ``checkpoint_every_steps``;
 * ``tensorboard/`` with ``tensorboard: true``.
 
 ``resume=True`` continues from ``checkpoint/``: the episode count, the episode seeds, the
-model and (if saved) the replay buffer carry on; the budget is still ``config.episodes`` in all.
+model and (if saved) the replay buffer carry on; the budget is still ``config.episodes`` (or
+``config.timesteps``) in all. With ``num_envs > 1`` the run collects from that many worlds of the
+native vector env (:func:`crowdnav.agents.factory.make_vec_env`); a resume needs the same number.
 """
 
 from __future__ import annotations
@@ -130,7 +132,7 @@ def _train(config: TrainConfig, resume: bool, on_checkpoint: Callable[[int], Non
     env = (make_vec_env if batched else make_env)(config, encoder if precompute else None, first_started,
                                                   scales_from_json(stored) if stored is not None else None)
     scales = observation_normalization(env)
-    unit = "episodes" if config.timesteps is None else "steps"
+    unit = "steps" if config.checkpoint_every_steps is not None else "episodes"  # what snapshots and checkpoints count
     tensorboard_log = _tensorboard_folder(config, out)
     on_start = None
     if state:

@@ -57,7 +57,8 @@ class CrowdNavSB3VecEnv(VecEnv):
         self.encoder = encoder
         self.episode_seeds = episode_seeds
         self.reward_scale = float(reward_scale)
-        env.episode_seeds = episode_seeds
+        if episode_seeds is not None:  # without it, the vector env's own hook (if any) is left alone
+            env.episode_seeds = episode_seeds
         super().__init__(env.num_envs, space, env.single_action_space)
         self._seed = seed
         self._actions: np.ndarray | None = None

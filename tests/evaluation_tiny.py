@@ -10,8 +10,10 @@ TINY_TRAIN = {
     "scenario": "open_space", "algo": "sac", "overrides": {"max_steps": 40, "humans.count": 3},
     "sensors": {"lidar": {"beams": 16}}, "net_arch": [16], "batch_size": 16, "buffer_size": 2000, "learning_starts": 30,
     "algo_kwargs": {"train_freq": 4}, "extractor": {"lidar_hidden": [16], "rbf_centres": 4, "lowdim_hidden": [8]},
+    "num_envs": 1,
 }
-"""TrainConfig fields of a run that trains in well under a second per episode."""
+"""TrainConfig fields of a run that trains in well under a second per episode, from one env (the kill/resume tests
+time their kills by single episodes; batched runs through the pipeline: tests/test_evaluation_step_budget.py)."""
 
 TINY_PROTOCOL = {"train_episodes": 4, "eval_every": 2, "test_episodes": 3, "seeds": 2, "window": 3, "final_evaluations": 1}
 

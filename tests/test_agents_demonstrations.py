@@ -7,7 +7,7 @@ import json
 import numpy as np
 import pytest
 import torch
-from agents_tiny import SMALL_LEOG, tiny_config
+from agents_tiny import tiny_config
 from crowdnav.agents import demonstrations as demos
 from crowdnav.agents.config import config_from_mapping
 from crowdnav.agents.demonstrations import (
@@ -22,6 +22,8 @@ from crowdnav.agents.factory import env_options, make_env, make_model, make_vec_
 from crowdnav.agents.seeding import (
     DATASET_SEED_OFFSET,
     DEMONSTRATION_EPISODES,
+    DEMONSTRATION_SEED_OFFSET,
+    MAX_TRAIN_EPISODES,
     TRAIN_SEED_BASE,
     dataset_seed,
     demonstration_seed,
@@ -29,6 +31,15 @@ from crowdnav.agents.seeding import (
 )
 from crowdnav.agents.training import train
 from crowdnav.agents.vec_env import CrowdNavSB3VecEnv
+
+
+@pytest.fixture(autouse=True)
+def one_torch_thread():
+    """Networks this small gain nothing from threads; on a busy 2-core machine torch's spinning threads cost 10x."""
+    threads = torch.get_num_threads()
+    torch.set_num_threads(1)
+    yield
+    torch.set_num_threads(threads)
 
 
 def config(tmp_path, algo="sac", **fields):
@@ -48,9 +59,9 @@ def test_demonstration_seeds_never_meet_test_dataset_or_training_seeds():
     for seed in range(4):
         first, last = demonstration_seed(seed, 0), demonstration_seed(seed, DEMONSTRATION_EPISODES - 1)
         assert first >= TRAIN_SEED_BASE  # test seeds lie below
-        for other in range(4):  # every run's training episodes 0..249,999 and grid collections lie elsewhere
-            trained = (train_seed(other, 0), train_seed(other, DEMONSTRATION_EPISODES - 1))
-            collected = (dataset_seed(other, 0), dataset_seed(other, TRAIN_SEED_BASE - DATASET_SEED_OFFSET - 1))
+        for other in range(4):  # every run's training episodes and its grid collections' quarter lie elsewhere
+            trained = (train_seed(other, 0), train_seed(other, MAX_TRAIN_EPISODES - 1))
+            collected = (dataset_seed(other, 0), dataset_seed(other, DEMONSTRATION_SEED_OFFSET - DATASET_SEED_OFFSET - 1))
             for low, high in (trained, collected):
                 assert last < low or first > high
     with pytest.raises(ValueError, match="outside the band"):
@@ -171,6 +182,13 @@ def test_warm_start_fills_the_buffer_only_when_asked_and_writes_its_report(tmp_p
         assert (report["replay_buffer"] > 0) == into and model.replay_buffer.pos == report["replay_buffer"] // 3
         assert json.loads((tmp_path / str(into) / "sac" / REPORT_FILE).read_text()) == report
         assert report["episodes"] == 2 and report["rounds"][0]["action_mse_after"] < report["rounds"][0]["action_mse_before"]
+
+
+def test_a_training_run_keeps_the_demonstrations_in_its_buffer(tmp_path):
+    result = train(tiny_config(tmp_path / "run", num_envs=2, episodes=2, demonstrations={"episodes": 2, "epochs": 2}))
+    report = json.loads((tmp_path / "run" / REPORT_FILE).read_text())
+    stored_by_training = result.model.replay_buffer.pos * 2 - report["replay_buffer"]  # the step that hit the budget is not stored
+    assert report["replay_buffer"] > 0 and result.timesteps - 2 <= stored_by_training <= result.timesteps
 
 
 def test_dagger_rounds_label_the_clones_own_episodes(tmp_path):

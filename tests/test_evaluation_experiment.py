@@ -20,8 +20,9 @@ def write(tmp_path, document, name="experiment.yaml"):
     return path
 
 
-def test_shipped_experiments_cover_figure_4_and_the_default():
-    assert set(shipped_experiments()) == {"default", "encoders", "modalities", "modalities_paper", "fusion", "paradigms", "learning_check"}
+def test_shipped_experiments_cover_figure_4_the_default_and_the_reference_agents():
+    assert set(shipped_experiments()) == {"default", "encoders", "modalities", "modalities_paper", "fusion", "paradigms", "learning_check",
+                                          "reference_figure4", "reference_room"}
     labels = {name: [c.name for c in load_experiment(name).configurations] for name in shipped_experiments()}
     assert labels["encoders"] == ["frozen", "finetune", "scratch"]
     assert labels["modalities"] == labels["modalities_paper"] == ["leog", "lidar", "closest_obstacle"]
@@ -57,16 +58,19 @@ def test_figure_4_experiments_share_one_setting_walking_crowd_of_five_default_pr
             env.close()
 
 
-def test_the_main_job_learns_from_the_defaults_in_a_bounded_crowd_of_five_with_two_seeds():
+def test_the_main_job_learns_from_the_batched_defaults_in_the_furnished_room_with_five_humans_two_seeds_100_test_episodes():
     from crowdnav.envs import CrowdNavEnv
 
     experiment = load_experiment(None)
-    assert experiment.protocol.seeds >= 2 and experiment.protocol.evaluation_points[0] <= 25
+    protocol = experiment.protocol
+    assert protocol.seeds >= 2 and protocol.unit == "steps" and protocol.test_episodes >= 100 and protocol.evaluations >= 10
     for configuration in experiment.configurations:
-        # nothing beyond the scenario, the algorithm and the input: the curve is the defaults' own
-        assert set(configuration.train) <= {"scenario", "algo", "modalities"}
-        env = CrowdNavEnv(configuration.train["scenario"], modalities=configuration.train["modalities"])
-        assert env.scenario.humans.min_count >= 5 and env.scenario.reward.preset == "default"
+        # nothing beyond the setting, the algorithm and the input: the curve is the defaults' own (batched, pure RL)
+        assert set(configuration.train) <= {"scenario", "overrides", "algo", "modalities"}
+        env = CrowdNavEnv(configuration.train["scenario"], modalities=configuration.train["modalities"],
+                          overrides=configuration.train["overrides"])
+        assert env.scenario.name == "room_furniture" and env.scenario.humans.min_count >= 5
+        assert env.scenario.reward.preset == "default" and not env.scenario.humans.see_robot
         env.close()
 
 
@@ -74,7 +78,9 @@ def test_the_learning_check_runs_crowdnavs_defaults_in_two_library_scenarios():
     experiment = load_experiment("learning_check")
     assert experiment.protocol.seeds == 5 and experiment.protocol.evaluation_points == [50, 100, 150, 200, 250, 300]
     assert [c.train["scenario"] for c in experiment.configurations] == ["open_space", "room_furniture"]
-    assert all(set(c.train) <= {"scenario", "algo", "modalities"} for c in experiment.configurations)
+    # besides num_envs: 1, the single env its published results were trained with (docs/agents.md#batched-training)
+    assert all(set(c.train) <= {"scenario", "algo", "modalities", "num_envs"} for c in experiment.configurations)
+    assert all(c.train["num_envs"] == 1 for c in experiment.configurations)
 
 
 def test_configuration_train_fields_are_merged_over_the_defaults():

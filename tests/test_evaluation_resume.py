@@ -109,6 +109,7 @@ run_unit(json.loads(sys.argv[1]), sys.argv[2])
 
 def test_killed_process_resumes_training_from_its_checkpoint_without_duplicate_or_lost_rows(tmp_path):
     spec = tiny_unit_spec(train_episodes=12, eval_every=2)
+    spec["train"]["num_envs"] = 1  # one env: seeds in episode order, a checkpoint every 2 episodes (batched: test_training_batched.py)
     child = subprocess.Popen([sys.executable, "-c", _CHILD, json.dumps(spec), str(tmp_path)], cwd=Path(__file__).parent.parent,
                              stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     log = tmp_path / "train" / "episodes.csv"

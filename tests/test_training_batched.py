@@ -4,6 +4,7 @@ reward scaling for the algorithm only, and the frozen encoder's latents computed
 
 from __future__ import annotations
 
+import json
 import pickle
 
 import numpy as np
@@ -13,7 +14,7 @@ from agents_tiny import SMALL_LEOG, TINY_EXTRACTOR, tiny_config
 from crowdnav.agents import ConfigError, train
 from crowdnav.agents.config import config_from_mapping
 from crowdnav.agents.run_folder import ROLLOUT_FILE, checkpoint_dir, checkpoint_info, policy_snapshots
-from crowdnav.agents.seeding import TRAIN_SEED_BASE, train_seed
+from crowdnav.agents.seeding import TRAIN_SEED_BASE, EpisodeSeedCounter, train_seed
 from crowdnav.agents.vec_env import CrowdNavSB3VecEnv
 
 WORLDS = 4
@@ -47,6 +48,41 @@ def _weights(result) -> list[bytes]:
     return [p.detach().numpy().tobytes() for p in result.model.policy.parameters()]
 
 
+def _info(folder) -> dict:
+    return json.loads((folder / "policy.json").read_text())
+
+
+def test_each_world_plays_the_single_env_episode_of_the_seed_the_counter_gave_it_autoresets_included():
+    from crowdnav.envs import CrowdNavEnv
+
+    options = {"modalities": ["goal", "lidar"], "overrides": {"humans.count": 3, "max_steps": 25}, "sensors": {"lidar": {"beams": 16}}}
+    counter = EpisodeSeedCounter(2, first_episode=5)
+    worlds = CrowdNavSB3VecEnv.make("open_space", 3, episode_seeds=counter, **options)
+    worlds.seed(0)  # as SB3 does: ignored, the counter seeds every episode
+    replicas = [CrowdNavEnv("open_space", **options) for _ in range(3)]
+    batch = worlds.reset()
+    rng, ended = np.random.default_rng(0), []
+    for i, replica in enumerate(replicas):
+        observation, _ = replica.reset(seed=train_seed(2, 5 + i))
+        assert all(observation[k].tobytes() == batch[k][i].tobytes() for k in observation)
+    for _ in range(60):
+        actions = rng.uniform(-1, 1, (3, 2)).astype(np.float32)
+        worlds.step_async(actions)
+        batch, rewards, dones, infos = worlds.step_wait()
+        for i, replica in enumerate(replicas):
+            observation, reward, terminated, truncated, _ = replica.step(actions[i])
+            assert np.float32(reward) == rewards[i] and (terminated or truncated) == dones[i]
+            if dones[i]:
+                assert infos[i]["episode_seed"] == train_seed(2, infos[i]["episode_index"])
+                ended.append(infos[i]["episode_index"])
+                observation, _ = replica.reset(seed=train_seed(2, counter.episode_of[i]))
+            assert all(observation[k].tobytes() == batch[k][i].tobytes() for k in observation)
+    # numbered in start order: 5, 6, 7 first, then one number per autoreset
+    assert sorted(ended) == sorted(set(ended)) and set(ended) <= set(range(5, counter.next_episode)) and len(ended) >= 6
+    assert counter.next_episode == 5 + 3 + len(ended)
+    worlds.close()
+
+
 @pytest.mark.parametrize("algo", ["sac", "ppo"])
 def test_the_same_seed_gives_the_same_episodes_and_final_weights(tmp_path, algo):
     first = train(batched_config(tmp_path / "first", algo, episodes=10))
@@ -55,7 +91,16 @@ def test_the_same_seed_gives_the_same_episodes_and_final_weights(tmp_path, algo)
     pd.testing.assert_frame_equal(_log(tmp_path / "first"), _log(tmp_path / "again"))
     assert _weights(first) == _weights(again)
     other = train(batched_config(tmp_path / "other", algo, episodes=10, seed=1))
-    assert set(_log(tmp_path / "other")["seed"]).isdisjoint(_log(tmp_path / "first")["seed"])
+    assert set(_log(tmp_path / "other")["seed"]).isdisjoint(_log(tmp_path / "first")["seed"]) and _weights(other) != _weights(first)
+
+
+@pytest.mark.parametrize("algo", ["sac", "td3", "ddpg", "a2c", "ppo"])
+def test_every_algorithm_trains_batched_on_grids_and_lidar(tmp_path, algo):
+    result = train(batched_config(tmp_path, algo, modalities=["leog", "lidar", "goal"], episodes=6))
+    assert result.episodes == 6 and result.model.n_envs == WORLDS and result.model._n_updates > 0
+    assert result.timesteps >= sum(record.length for record in result.records)  # the worlds still playing count too
+    if algo in ("sac", "td3", "ddpg"):  # the grids stored at 1 bit per cell, one column per world
+        assert result.model.replay_buffer.observations["leog"].shape[1:] == (WORLDS, 30 * 30 // 8 + 1)
 
 
 def test_every_episode_has_a_training_seed_although_sb3_seeds_the_vector_env(tmp_path, monkeypatch):
@@ -148,10 +193,11 @@ def test_a_step_budget_saves_snapshots_every_so_many_env_steps_and_stops_at_the_
     assert not (tmp_path / "snapshots" / "episode_00002").exists()
 
 
-def _info(folder) -> dict:
-    import json
-
-    return json.loads((folder / "policy.json").read_text())
+def test_a_step_budget_without_step_checkpoints_checkpoints_every_checkpoint_every_episodes_and_shows_steps(tmp_path, capsys):
+    result = train(batched_config(tmp_path, episodes=1, timesteps=240, progress=True))
+    assert result.timesteps == 240 and "240/240" in capsys.readouterr().err  # the bar counts env steps
+    assert sorted(policy_snapshots(tmp_path)) == sorted({*range(2, result.episodes + 1, 2), result.episodes})
+    assert not policy_snapshots(tmp_path, unit="steps")
 
 
 def test_a_step_budget_run_stopped_after_a_checkpoint_resumes_exactly(tmp_path):
@@ -214,10 +260,19 @@ def test_frozen_precomputed_encoder_gives_the_worlds_the_single_envs_latents_and
     worlds.close()
     single.close()
 
-    result = train(batched_config(tmp_path / "run", episodes=6, **fields))
+    result = train(batched_config(tmp_path / "run", episodes=8, **fields))
     assert result.model.observation_space["leog"].shape == (latent,) and result.model._n_updates > 0
     assert result.model.replay_buffer.observations["leog"].shape[-1] == latent
     assert load_policy(tmp_path / "run").encoder is not None
+
+    def stop(episodes):  # the checkpoint carries the worlds, encoder and all
+        raise Stopped
+
+    with pytest.raises(Stopped):
+        train(batched_config(tmp_path / "stopped", episodes=8, **fields), on_checkpoint=stop)
+    resumed = train(batched_config(tmp_path / "stopped", episodes=8, **fields), resume=True)
+    pd.testing.assert_frame_equal(_log(tmp_path / "stopped"), _log(tmp_path / "run"))
+    assert _weights(resumed) == _weights(result)
 
 
 def test_resuming_with_another_number_of_worlds_is_refused(tmp_path):
@@ -229,3 +284,42 @@ def test_resuming_with_another_number_of_worlds_is_refused(tmp_path):
     train(tiny_config(tmp_path / "single", episodes=2))
     with pytest.raises(ConfigError, match=r"trained with num_envs 1, the config asks for 4"):
         train(batched_config(tmp_path / "single", episodes=4), resume=True)
+
+
+@pytest.mark.parametrize(("worlds", "ratio", "train_freq", "expected"), [
+    (4, 0.125, None, 1),   # 0.5 rounds half up (Python's round would give 0, then the floor of 1 by luck)
+    (12, 0.125, None, 2),  # 1.5 -> 2 (round-half-even would also give 2)
+    (20, 0.125, None, 3),  # 2.5 -> 3 (round-half-even: 2, a lower ratio than asked)
+    (4, 0.5, 3, 6),        # a rollout of 3 steps of all worlds: 3 x 4 x 0.5 updates after it
+])
+def test_off_policy_batched_gradient_steps_are_the_update_to_data_ratio_times_the_env_steps_of_a_rollout(
+        tmp_path, worlds, ratio, train_freq, expected):
+    from crowdnav.agents.factory import make_model, make_vec_env
+
+    fields = {"num_envs": worlds, "updates_per_step": ratio, "algo_kwargs": {} if train_freq is None else {"train_freq": train_freq}}
+    config = config_from_mapping(tiny_config(tmp_path, algo="sac", **fields))
+    model = make_model(config, make_vec_env(config))
+    assert model.gradient_steps == expected
+    assert model.train_freq.frequency == (train_freq or 1)
+
+
+def test_a_run_refuses_to_start_more_training_episodes_than_its_seed_band_holds():
+    from crowdnav.agents.seeding import MAX_TRAIN_EPISODES, dataset_seed
+
+    counter = EpisodeSeedCounter(0, first_episode=MAX_TRAIN_EPISODES - 1)
+    assert counter([0]) == [train_seed(0, MAX_TRAIN_EPISODES - 1)]
+    assert train_seed(0, MAX_TRAIN_EPISODES) == dataset_seed(0, 0)  # why: the next seed is a grid collection's
+    with pytest.raises(RuntimeError, match="at most 500,000 training episodes"):
+        counter([1])
+
+
+def test_a_linear_learning_rate_schedule_decays_to_zero_over_the_budget_and_survives_a_checkpoint(tmp_path):
+    from crowdnav.agents.checkpoint import load_model
+
+    result = train(batched_config(tmp_path / "run", algo="ppo", learning_rate=1e-3, learning_rate_schedule="linear",
+                                  timesteps=256, episodes=1000))
+    model = result.model
+    assert model.lr_schedule(1.0) == pytest.approx(1e-3) and model.lr_schedule(0.25) == pytest.approx(2.5e-4)
+    # the last update ran near the end of the budget, at a small fraction of the initial rate
+    assert model.policy.optimizer.param_groups[0]["lr"] < 0.5e-3
+    assert load_model(checkpoint_dir(tmp_path / "run")).lr_schedule(0.5) == pytest.approx(5e-4)
