@@ -27,7 +27,7 @@ from typing import Any
 
 import numpy as np
 from crowdnav.agents.run_folder import CHECKPOINT_DIR, POLICY_FILE, REPLAY_FILE, RNG_FILE, ROLLOUT_FILE
-from crowdnav.agents.wrappers import ObservationScales, encode_grids, normalize_observation, scales_from_json
+from crowdnav.agents.wrappers import ObservationScales, agent_observation, scales_from_json
 from stable_baselines3.common.base_class import BaseAlgorithm
 
 POLICY_FORMAT = "crowdnav-policy/1"
@@ -143,15 +143,7 @@ class AgentPolicy:
 
     def preprocess(self, observation: Mapping[str, np.ndarray]) -> dict[str, np.ndarray]:
         """A raw CrowdNavEnv observation (or batch) -> the model's input: normalised, LEOG encoded if trained so."""
-        observation = dict(observation)
-        if self.scales is not None:
-            observation = normalize_observation(observation, self.scales)
-        if self.encoder is not None:
-            grid = np.asarray(observation["leog"])
-            batched = grid.ndim == 4
-            latent = encode_grids(self.encoder, grid if batched else grid[None])
-            observation["leog"] = latent if batched else latent[0]
-        return observation
+        return agent_observation(observation, self.scales, self.encoder)
 
     def __call__(self, observation: Mapping[str, np.ndarray]) -> np.ndarray:
         action, _ = self.model.predict(self.preprocess(observation), deterministic=True)

@@ -57,12 +57,13 @@ from typing import Any
 
 import gymnasium as gym
 import numpy as np
+from crowdnav.agents import wrappers
 from crowdnav.agents.cloning import Demonstrations, behaviour_cloning
 from crowdnav.agents.config import TrainConfig
 from crowdnav.agents.factory import OFF_POLICY, env_options, hyperparameters, load_leog_weights, precomputes_leog
 from crowdnav.agents.seeding import demonstration_seed
 from crowdnav.agents.vec_env import CrowdNavSB3VecEnv
-from crowdnav.agents.wrappers import LeogLatentWrapper, NormalizeObservation, ObservationScales, encode_grids, normalize_observation
+from crowdnav.agents.wrappers import LeogLatentWrapper, NormalizeObservation, ObservationScales, agent_observation
 from stable_baselines3.common.base_class import BaseAlgorithm
 from stable_baselines3.common.vec_env import DummyVecEnv, VecEnvWrapper
 
@@ -77,12 +78,10 @@ def declared_scales(config: TrainConfig) -> ObservationScales | None:
     """The scales a new run's env applies (the modalities' declared ones; None without normalisation)."""
     if not config.normalize_observations:
         return None
-    from crowdnav.agents.wrappers import observation_scales
-
     from crowdnav.envs import CrowdNavEnv
 
     env = CrowdNavEnv(**env_options(config))
-    scales = observation_scales(env)
+    scales = wrappers.declared_scales(env.core.modalities)
     env.close()
     return scales
 
@@ -103,15 +102,6 @@ def agent_view(env: Any) -> tuple[ObservationScales | None, Any]:
             inner = inner.env
         return scales, encoder
     raise TypeError(f"cannot read the observation scaling of {type(env).__name__}; pass scales and encoder explicitly")
-
-
-def to_agent_view(observations: Mapping[str, np.ndarray], scales: ObservationScales | None, encoder: Any = None) -> dict[str, np.ndarray]:
-    """Raw CrowdNavEnv observations stacked per key -> what the agent receives (normalised; LEOG latent with ``encoder``)."""
-    view = dict(observations) if scales is None else normalize_observation(observations, scales)
-    if encoder is not None and "leog" in view:
-        grids = np.asarray(view["leog"])
-        view["leog"] = np.concatenate([encode_grids(encoder, grids[i : i + 4096]) for i in range(0, len(grids), 4096)])
-    return view
 
 
 def collect_demonstrations(config: TrainConfig | Mapping[str, Any], episodes: int | None = None, *, first_episode: int = 0,
@@ -164,7 +154,7 @@ def collect_demonstrations(config: TrainConfig | Mapping[str, Any], episodes: in
         if learner is None:
             actions = labels
         else:
-            batch = to_agent_view({key: np.stack([current[w][key] for w in live]) for key in current[live[0]]}, scales, encoder)
+            batch = agent_observation({key: np.stack([current[w][key] for w in live]) for key in current[live[0]]}, scales, encoder)
             actions = np.clip(np.asarray(learner(batch), dtype=np.float32).reshape(len(live), -1), -1.0, 1.0)
         for w, action, label in zip(live, actions, labels, strict=True):
             observation, reward, terminated, truncated, info = envs[w].step(action)
@@ -181,7 +171,7 @@ def collect_demonstrations(config: TrainConfig | Mapping[str, Any], episodes: in
     raw_next = {key: np.stack([row[1][key] for row in rows]) for key in keys}
     driver = "clone" if learner is not None else EXPERT
     return Demonstrations(
-        observations=to_agent_view(raw, scales, encoder), next_observations=to_agent_view(raw_next, scales, encoder),
+        observations=agent_observation(raw, scales, encoder), next_observations=agent_observation(raw_next, scales, encoder),
         actions=np.stack([row[2] for row in rows]).astype(np.float32), expert_actions=np.stack([row[3] for row in rows]),
         rewards=np.array([row[4] for row in rows], dtype=np.float32), terminated=np.array([row[5] for row in rows], dtype=bool),
         truncated=np.array([row[6] for row in rows], dtype=bool),

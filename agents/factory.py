@@ -18,7 +18,7 @@ from crowdnav.agents.extractor import MultiModalExtractor
 from crowdnav.agents.replay_buffer import PackedGridReplayBuffer
 from crowdnav.agents.seeding import EpisodeSeedCounter
 from crowdnav.agents.vec_env import CrowdNavSB3VecEnv
-from crowdnav.agents.wrappers import EpisodeSeeds, LeogLatentWrapper, NormalizeObservation, ObservationScales
+from crowdnav.agents.wrappers import EpisodeSeeds, LeogLatentWrapper, NormalizeObservation, ObservationScales, declared_scales
 from stable_baselines3 import A2C, DDPG, PPO, SAC, TD3
 from stable_baselines3.common.base_class import BaseAlgorithm
 from stable_baselines3.common.monitor import Monitor
@@ -135,11 +135,10 @@ def make_vec_env(config: TrainConfig, encoder: LeogEncoder | None = None, first_
     from crowdnav.envs.vector import CrowdNavVectorEnv
 
     vector = CrowdNavVectorEnv(num_envs=config.num_envs, autoreset_mode=AutoresetMode.SAME_STEP, **env_options(config))
-    if config.normalize_observations and scales is None:
-        scales = {key: modality.normalization() for key, modality in vector.modalities.items()
-                  if np.issubdtype(modality.space().dtype, np.floating)}
     if not config.normalize_observations:
         scales = None
+    elif scales is None:
+        scales = declared_scales(vector.modalities)
     if encoder is not None:
         check_leog_shape(config, encoder.architecture, vector.single_observation_space)
     return CrowdNavSB3VecEnv(vector, scales=scales, episode_seeds=EpisodeSeedCounter(config.seed, first_episode),

@@ -89,24 +89,47 @@ def policy_snapshots(train_dir: str | Path, unit: str = "episodes") -> dict[int,
             folders[latest] = checkpoint_dir(train_dir)
         else:  # a step-budget checkpoint is taken at a rollout's end, at or after the evaluation point it follows
             latest = int((checkpoint_info(train_dir) or {}).get("timesteps", 0))
+    for point, folder in snapshot_folders(train_dir, unit).items():
+        if (folder / POLICY_FILE).is_file() and point <= latest:
+            folders[point] = folder
+    return folders
+
+
+def snapshot_folders(train_dir: str | Path, unit: str = "episodes") -> dict[int, Path]:
+    """Point -> folder of every snapshot named in ``unit`` (complete or not, before or after the checkpoint), in order."""
     snapshots = Path(train_dir) / SNAPSHOTS_DIR
+    folders = {}
     for folder in sorted(snapshots.iterdir()) if snapshots.is_dir() else []:
-        match = _SNAPSHOT[unit].match(folder.name)
-        if match and (folder / POLICY_FILE).is_file() and int(match.group(1)) <= latest:
+        if match := _SNAPSHOT[unit].match(folder.name):
             folders[int(match.group(1))] = folder
     return folders
 
 
-def logged_episodes(train_dir: str | Path) -> int:
-    """Training episodes the episode log has a row for so far (cheap: reads the last row's index)."""
+def last_logged_row(train_dir: str | Path) -> dict[str, str] | None:
+    """The episode log's last complete row as ``{column: text}`` (None before the first); reads the log's tail only.
+
+    A row being written can be cut short: the last row with every column (and a whole-number
+    ``episode``) counts.
+    """
     log = episode_log(train_dir)
     if not log.is_file():
-        return 0
-    lines = log.read_text(encoding="utf-8").splitlines()
-    if len(lines) < 2:
-        return 0
-    first = lines[-1].split(",", 1)[0]
-    return int(first) + 1 if first.isdigit() else 0
+        return None
+    with open(log, "rb") as file:
+        header = file.readline().decode("utf-8").strip().split(",")
+        size = file.seek(0, 2)
+        file.seek(max(0, size - 4096))
+        lines = file.read().decode("utf-8", errors="replace").splitlines()
+    for line in reversed(lines):
+        fields = line.split(",")
+        if len(fields) == len(header) and fields[0].isdigit():
+            return dict(zip(header, fields, strict=True))
+    return None
+
+
+def logged_episodes(train_dir: str | Path) -> int:
+    """Training episodes the episode log has a row for so far (cheap: reads the last row's index)."""
+    row = last_logged_row(train_dir)
+    return int(row["episode"]) + 1 if row is not None else 0
 
 
 def _complete(folder: Path) -> int | None:

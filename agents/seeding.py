@@ -69,6 +69,8 @@ class EpisodeSeedCounter:
         self.next_episode = first_episode
         self.episode_of: dict[int, int] = {}
         """World -> the episode it is playing."""
+        self.ended_of: dict[int, int] = {}
+        """World -> the episode it played before its current one (the one that just ended, right after an autoreset)."""
 
     def __call__(self, worlds: Iterable[int]) -> list[int]:
         seeds = []
@@ -76,6 +78,8 @@ class EpisodeSeedCounter:
             if self.next_episode >= MAX_TRAIN_EPISODES:  # 10+ M env steps of short episodes; the next band is the grids'
                 raise RuntimeError(f"a run may start at most {MAX_TRAIN_EPISODES:,} training episodes (their seeds would reach "
                                    "the grid-collection band, agents.seeding); split the budget over run seeds")
+            if int(world) in self.episode_of:
+                self.ended_of[int(world)] = self.episode_of[int(world)]
             self.episode_of[int(world)] = self.next_episode
             seeds.append(train_seed(self.run_seed, self.next_episode))
             self.next_episode += 1

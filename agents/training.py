@@ -57,7 +57,7 @@ from crowdnav.agents.factory import (
     precomputes_leog,
 )
 from crowdnav.agents.resume_point import STEPS_AFTER_KEY, ResumePoint, end_open_episodes
-from crowdnav.agents.run_folder import SNAPSHOTS_DIR, checkpoint_dir, episode_log, recover_checkpoint, snapshot_dir, writing
+from crowdnav.agents.run_folder import checkpoint_dir, episode_log, recover_checkpoint, snapshot_dir, snapshot_folders, writing
 from crowdnav.agents.seeding import train_seed
 from crowdnav.agents.wrappers import scales_from_json, scales_to_json
 from stable_baselines3.common.base_class import BaseAlgorithm
@@ -241,11 +241,8 @@ def _set_aside_snapshots_after(out: Path, point: int, unit: str) -> None:
     They come from a training history that the resume throws away; the resumed run saves its
     own snapshot at the same point, and the old one is kept for inspection, not evaluated.
     """
-    snapshots = out / SNAPSHOTS_DIR
-    prefix = "episode_" if unit == "episodes" else "steps_"
-    for folder in sorted(snapshots.glob(f"{prefix}*")) if snapshots.is_dir() else []:
-        number = folder.name.removeprefix(prefix)
-        if number.isdigit() and int(number) > point:
+    for number, folder in snapshot_folders(out, unit).items():
+        if number > point:
             target = out / "snapshots_discarded" / folder.name
             suffix = 1
             while target.exists():

@@ -29,7 +29,7 @@ from typing import Any
 
 import numpy as np
 from crowdnav.agents.seeding import EpisodeSeedCounter, train_seed
-from crowdnav.agents.wrappers import ObservationScales, encode_grids, normalize_observation
+from crowdnav.agents.wrappers import ObservationScales, agent_observation
 from gymnasium import spaces
 from gymnasium.vector import AutoresetMode
 from stable_baselines3.common.vec_env.base_vec_env import VecEnv, VecEnvObs, VecEnvStepReturn
@@ -75,13 +75,7 @@ class CrowdNavSB3VecEnv(VecEnv):
                    episode_seeds=episode_seeds, reward_scale=reward_scale, encoder=encoder)
 
     def _observe(self, observation: Mapping[str, np.ndarray]) -> dict[str, np.ndarray]:
-        observation = dict(observation) if self.scales is None else normalize_observation(observation, self.scales)
-        if self.encoder is not None:
-            grids = observation["leog"]
-            single = grids.ndim == 3  # a terminal observation: one world's (1, H, W) grid
-            latents = encode_grids(self.encoder, grids[None] if single else grids)
-            observation["leog"] = latents[0] if single else latents
-        return observation
+        return agent_observation(observation, self.scales, self.encoder)
 
     def reset(self) -> VecEnvObs:
         # VecEnv.seed() (SB3 calls it with the algorithm's seed) wins over the constructor's; either applies to this reset only
@@ -99,7 +93,6 @@ class CrowdNavSB3VecEnv(VecEnv):
         self._actions = np.asarray(actions)
 
     def step_wait(self) -> VecEnvStepReturn:
-        playing = dict(self.episode_seeds.episode_of) if self.episode_seeds is not None else None
         observation, rewards, terminated, truncated, infos = self.env.step(self._actions)
         dones = terminated | truncated
         self._returns += rewards
@@ -111,9 +104,9 @@ class CrowdNavSB3VecEnv(VecEnv):
             if dones[i]:
                 info["terminal_observation"] = self._observe(infos["final_obs"][i])
                 info["episode"] = {"r": round(float(self._returns[i]), 6), "l": int(self._lengths[i]), "t": round(time.time() - self._start, 6)}
-                if playing is not None:
-                    info["episode_index"] = playing[i]
-                    info["episode_seed"] = train_seed(self.episode_seeds.run_seed, playing[i])
+                if self.episode_seeds is not None:  # the episode that ended (its world has started the next)
+                    index = self.episode_seeds.ended_of[i]
+                    info["episode_index"], info["episode_seed"] = index, train_seed(self.episode_seeds.run_seed, index)
             out.append(info)
         self._returns[dones] = 0.0
         self._lengths[dones] = 0

@@ -65,11 +65,14 @@ def observation_scales(env: gym.Env) -> ObservationScales:
         if isinstance(inner, NormalizeObservation):
             scaled |= set(inner.scales)
         inner = inner.env
-    return {
-        key: modalities[key].normalization()
-        for key, box in space.spaces.items()
-        if key in modalities and key not in scaled and box == modalities[key].space() and np.issubdtype(box.dtype, np.floating)
-    }
+    return {key: scale for key, scale in declared_scales(modalities).items()
+            if key in space.spaces and key not in scaled and space[key] == modalities[key].space()}
+
+
+def declared_scales(modalities: Mapping[str, Any]) -> ObservationScales:
+    """Key -> the declared ``(offset, scale)`` of every float modality (integer keys, the uint8 grid, are left out)."""
+    return {key: modality.normalization() for key, modality in modalities.items()
+            if np.issubdtype(modality.space().dtype, np.floating)}
 
 
 def normalize_observation(observation: Mapping[str, np.ndarray], scales: ObservationScales) -> dict[str, np.ndarray]:
@@ -151,8 +154,31 @@ class LeogLatentWrapper(gym.ObservationWrapper):
         return observation
 
 
+def agent_observation(observation: Mapping[str, np.ndarray], scales: ObservationScales | None,
+                      encoder: LeogEncoder | None = None) -> dict[str, np.ndarray]:
+    """A raw CrowdNavEnv observation (one, or a batch stacked per key) -> what the agent's network receives.
+
+    Each key of ``scales`` normalised (:func:`normalize_observation`), then, with ``encoder``, the
+    ``leog`` grid replaced by the frozen encoder's latent: the one mapping training
+    (:class:`~agents.vec_env.CrowdNavSB3VecEnv`), a loaded policy and the demonstrations apply.
+    """
+    observation = dict(observation) if scales is None else normalize_observation(observation, scales)
+    if encoder is not None:
+        grid = np.asarray(observation["leog"])
+        single = grid.ndim == 3  # one (1, H, W) grid
+        latent = encode_grids(encoder, grid[None] if single else grid)
+        observation["leog"] = latent[0] if single else latent
+    return observation
+
+
+ENCODE_CHUNK = 4096
+"""Grids encoded per forward pass: a demonstration set of many thousand grids stays within memory."""
+
+
 def encode_grids(encoder: LeogEncoder, grids: np.ndarray) -> np.ndarray:
     """(N, 1, H, W) grids (non-zero = occupied) -> (N, latent) float32 latents, without gradients."""
+    grids = np.asarray(grids)
     with torch.no_grad():
-        grid = torch.as_tensor(np.asarray(grids) > 0, dtype=torch.float32)
-        return encoder(grid).numpy()
+        if len(grids) > ENCODE_CHUNK:
+            return np.concatenate([encode_grids(encoder, grids[i : i + ENCODE_CHUNK]) for i in range(0, len(grids), ENCODE_CHUNK)])
+        return encoder(torch.as_tensor(grids > 0, dtype=torch.float32)).numpy()

@@ -17,7 +17,7 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
-from crowdnav.agents.run_folder import episode_log, logged_episodes
+from crowdnav.agents.run_folder import last_logged_row, logged_episodes
 from crowdnav.evaluation.protocol import Protocol
 from crowdnav.evaluation.storage import EVALUATIONS_DIR, META_FILE, TRAIN_DIR
 
@@ -44,22 +44,8 @@ def episodes_on_disk(folder: str | Path, protocol: Protocol) -> int:
 
 def logged_steps(train_dir: str | Path) -> int:
     """The run's env steps when its last logged training episode ended (0 before the first); reads the log's tail only."""
-    log = episode_log(train_dir)
-    if not log.is_file():
-        return 0
-    with open(log, "rb") as file:
-        header = file.readline().decode("utf-8").strip().split(",")
-        size = file.seek(0, 2)
-        file.seek(max(0, size - 4096))
-        lines = file.read().decode("utf-8", errors="replace").splitlines()
-    if "timesteps" not in header:
-        return 0
-    column = header.index("timesteps")
-    for line in reversed(lines):  # the last complete row (a row being written can be cut short)
-        fields = line.split(",")
-        if len(fields) == len(header) and fields[column].isdigit():
-            return int(fields[column])
-    return 0
+    row = last_logged_row(train_dir)
+    return int(row["timesteps"]) if row is not None and row.get("timesteps", "").isdigit() else 0
 
 
 class ProgressBar:
