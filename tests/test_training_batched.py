@@ -17,6 +17,8 @@ from crowdnav.agents.run_folder import ROLLOUT_FILE, checkpoint_dir, checkpoint_
 from crowdnav.agents.seeding import TRAIN_SEED_BASE, EpisodeSeedCounter, train_seed
 from crowdnav.agents.vec_env import CrowdNavSB3VecEnv
 
+from crowdnav.scenario.library import library_names
+
 WORLDS = 4
 
 
@@ -323,3 +325,12 @@ def test_a_linear_learning_rate_schedule_decays_to_zero_over_the_budget_and_surv
     # the last update ran near the end of the budget, at a small fraction of the initial rate
     assert model.policy.optimizer.param_groups[0]["lr"] < 0.5e-3
     assert load_model(checkpoint_dir(tmp_path / "run")).lr_schedule(0.5) == pytest.approx(5e-4)
+
+
+@pytest.mark.parametrize("scenario", library_names())
+def test_batched_training_runs_in_every_library_scenario_with_the_humans_modality(tmp_path, scenario):
+    result = train({"scenario": scenario, "algo": "ppo", "modalities": ["humans", "closest_obstacle", "goal"], "num_envs": 4,
+                    "n_steps": 16, "timesteps": 128, "out": str(tmp_path), "progress": False, "net_arch": [16]})
+    assert result.timesteps == 128
+    logged = _log(tmp_path)
+    assert (logged["seed"] >= TRAIN_SEED_BASE).all() and logged["seed"].is_unique
