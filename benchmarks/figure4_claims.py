@@ -4,7 +4,10 @@ Reads ``docs/results/<experiment>/evaluation_rates.csv`` (one row per run and ev
 success / collision / out_of_bounds / truncated rates over the 20 held-out test episodes) for the
 experiments encoders, modalities, fusion, paradigms and modalities_paper, and judges every claim
 of the paper by a rule fixed in this file before the runs were read (``CLAIMS``). Missing
-experiments are listed as "not run yet".
+experiments are listed as "not run yet". ``modalities_steps`` and ``paradigms_steps`` (Figure 4(b)
+and 4(d) under an env-step budget, batched training) are judged by the same rules, with x in
+training env steps and every span the same fraction of the budget (early = 50-300 of 700 is
+1/14-3/7 of the budget; the budget is the last evaluation's x).
 
     python benchmarks/figure4_claims.py [--results docs/results] [--out docs/results/README.md]
 
@@ -32,9 +35,10 @@ from pathlib import Path
 
 import numpy as np
 
-EXPERIMENTS = ("encoders", "modalities", "fusion", "paradigms", "modalities_paper")
+EXPERIMENTS = ("encoders", "modalities", "fusion", "paradigms", "modalities_paper", "modalities_steps", "paradigms_steps")
 FINAL_EVALUATIONS = 3
-EARLY = (50, 300)  # training episodes
+PAPER_BUDGET = 700  # training episodes of the paper's protocol; the spans below are stated in them
+EARLY = (50, 300)  # training episodes of 700; an env-step experiment uses the same fractions of its budget
 RESAMPLES = 10_000
 EXCELLENT = 0.8  # final success that counts as "excellent performance"
 SIMILAR = 0.15  # final success within this many points counts as "similar performance"
@@ -64,7 +68,8 @@ CLAIM_TEXTS = {
         "(d) DDPG and A2C drift towards truncation; A2C's truncation rate goes to 1",
     ],
 }
-CLAIM_TEXTS["modalities_paper"] = CLAIM_TEXTS["modalities"]
+CLAIM_TEXTS["modalities_paper"] = CLAIM_TEXTS["modalities_steps"] = CLAIM_TEXTS["modalities"]
+CLAIM_TEXTS["paradigms_steps"] = CLAIM_TEXTS["paradigms"]
 """The paper's claims per experiment (Figure 4 and its discussion), in the order they are judged."""
 
 
@@ -74,15 +79,23 @@ class Runs:
 
     episodes: np.ndarray
     rates: dict[str, np.ndarray]
+    budget: int = PAPER_BUDGET
+    """The last evaluation's x (700 episodes, or the env-step budget): spans scale with it."""
+
+    def scaled(self, low: int, high: int) -> tuple[float, float]:
+        """A span stated in episodes of the paper's 700, as the same fraction of this budget."""
+        return low * self.budget / PAPER_BUDGET, high * self.budget / PAPER_BUDGET
 
     def final(self, outcome: str = "success") -> np.ndarray:
         return self.rates[outcome][:, -FINAL_EVALUATIONS:].mean(axis=1)
 
     def span(self, low: int, high: int, outcome: str = "success") -> np.ndarray:
+        low, high = self.scaled(low, high)
         keep = (self.episodes >= low) & (self.episodes <= high)
         return self.rates[outcome][:, keep].mean(axis=1)
 
     def std(self, low: int = 0, high: int = 10**9, outcome: str = "success") -> float:
+        low, high = self.scaled(low, high)
         keep = (self.episodes >= low) & (self.episodes <= high)
         values = self.rates[outcome][:, keep]
         return float(values.std(axis=0, ddof=1).mean()) if len(values) > 1 else 0.0
@@ -108,14 +121,17 @@ def load(path: Path) -> dict[str, Runs]:
                 continue
             k, name = int(row["evaluation"]), row["configuration"]
             rows[name][int(row["seed"])][k] = {key: float(row.get(key) or 0.0) for key in ("success", "collision", "out_of_bounds", "truncated")}
-            points[name][k] = min(points[name].get(k, 10**9), int(row["training_episodes"]))
+            x = int(row["training_steps"]) if row.get("training_steps") else int(row["training_episodes"])
+            points[name][k] = min(points[name].get(k, 10**15), x)
     out = {}
     for name, seeds in rows.items():
         evaluations = sorted(points[name])
         complete = [s for s in sorted(seeds) if sorted(seeds[s]) == evaluations]
-        out[name] = Runs(np.array([points[name][k] for k in evaluations]),
+        xs = np.array([points[name][k] for k in evaluations])
+        out[name] = Runs(xs,
                          {key: np.array([[seeds[s][k][key] for k in evaluations] for s in complete])
-                          for key in ("success", "collision", "out_of_bounds", "truncated")})
+                          for key in ("success", "collision", "out_of_bounds", "truncated")},
+                         budget=int(xs[-1]))
     return out
 
 
@@ -233,7 +249,7 @@ def paradigms(r: dict[str, Runs]) -> list[tuple[str, Verdict]]:
     finals = {k: v.final() for k, v in r.items()}
     sac_best = max(finals, key=lambda k: finals[k].mean()) == "sac"
     p_min = min(improvement(finals["sac"], finals[k])[0] for k in finals if k != "sac")
-    sac_trunc = r["sac"].rates["truncated"][:, r["sac"].episodes >= 100].mean()
+    sac_trunc = r["sac"].rates["truncated"][:, r["sac"].episodes >= r["sac"].scaled(100, 0)[0]].mean()
     noise = {k: float(np.abs(np.diff(v.rates["success"], axis=1)).mean()) for k, v in r.items()}
     drift = {k: (r[k].span(*EARLY, "truncated").mean(), r[k].final("truncated").mean()) for k in ("ddpg", "a2c")}
     drift_hits = sum(late > early for early, late in drift.values()) + (drift["a2c"][1] >= 0.9)
@@ -255,6 +271,7 @@ def paradigms(r: dict[str, Runs]) -> list[tuple[str, Verdict]]:
 
 CLAIMS: dict[str, Callable[[dict[str, Runs]], list[tuple[str, Verdict]]]] = {
     "encoders": encoders, "modalities": modalities, "fusion": fusion, "paradigms": paradigms, "modalities_paper": modalities,
+    "modalities_steps": modalities, "paradigms_steps": paradigms,
 }
 
 

@@ -22,13 +22,22 @@ def write(tmp_path, document, name="experiment.yaml"):
 
 def test_shipped_experiments_cover_figure_4_the_default_and_the_reference_agents():
     assert set(shipped_experiments()) == {"default", "encoders", "modalities", "modalities_paper", "fusion", "paradigms", "learning_check",
-                                          "reference_figure4", "reference_room"}
+                                          "reference_figure4", "reference_room", "modalities_steps", "paradigms_steps"}
     labels = {name: [c.name for c in load_experiment(name).configurations] for name in shipped_experiments()}
     assert labels["encoders"] == ["frozen", "finetune", "scratch"]
     assert labels["modalities"] == labels["modalities_paper"] == ["leog", "lidar", "closest_obstacle"]
     assert labels["fusion"] == ["leog", "lidar", "leog_lidar"]
     assert labels["paradigms"] == ["sac", "td3", "ddpg", "a2c"]
+    assert labels["modalities_steps"] == labels["modalities"] and labels["paradigms_steps"] == [*labels["paradigms"], "ppo"]
     assert load_experiment(None).name == "default"
+
+
+def test_figure_4_under_env_step_budgets_trains_batched_with_5_seeds_and_the_frozen_pretrained_encoder():
+    for name, budget in (("modalities_steps", 2_000_000), ("paradigms_steps", 1_000_000)):
+        experiment = load_experiment(name)
+        assert experiment.protocol.evaluation_points[-1] == budget and experiment.protocol.seeds == 5
+        assert all("num_envs" not in c.train for c in experiment.configurations)  # batched default, unlike the 700-episode files
+        assert experiment.pretrain_encoder is not None
 
 
 def test_paper_experiments_use_the_papers_protocol_and_a_pretrained_encoder_where_frozen_or_finetuned():

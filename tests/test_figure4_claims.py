@@ -54,3 +54,17 @@ def test_seeds_evaluated_a_few_episodes_late_are_aligned_by_evaluation_index(tmp
     path.write_text("\n".join(lines) + "\n")
     runs = claims.load(path)["a2c"]
     assert runs.rates["success"].shape == (3, 3) and list(runs.episodes) == [50, 100, 150]
+
+
+def test_an_env_step_budget_scales_every_span_to_the_same_fraction_as_700_episodes(tmp_path):
+    """Early = episodes 50-300 of 700 becomes 1/14-3/7 of a 2 M-step budget: the evaluations at 0.2-0.8 M."""
+    path = tmp_path / "evaluation_rates.csv"
+    lines = ["experiment,configuration,seed,evaluation,training_episodes,training_steps,success,collision,out_of_bounds,truncated"]
+    for seed in range(2):
+        for k in range(10):
+            lines.append(f"modalities_steps,lidar,{seed},{k},0,{(k + 1) * 200_000},{k / 10},{1 - k / 10},0,0")
+    path.write_text("\n".join(lines) + "\n")
+    lidar = claims.load(path)["lidar"]
+    assert lidar.budget == 2_000_000 and lidar.scaled(*claims.EARLY) == (2_000_000 / 14, 2_000_000 * 3 / 7)
+    assert np.allclose(lidar.span(*claims.EARLY), np.mean([0.0, 0.1, 0.2, 0.3]))
+    assert np.allclose(lidar.final(), np.mean([0.7, 0.8, 0.9]))
