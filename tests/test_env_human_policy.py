@@ -15,12 +15,14 @@ CASES = {
     "room_furniture_see_robot": ("room_furniture", {"humans.see_robot": True}),
     "corridor_see_robot": ("corridor", {"humans.see_robot": True}),  # respawn and mirror goals
     "crowd_range": ("cafe", {"humans.count": [1, 6]}),
+    "standing_groups": ("station_hall", {}),  # members with max speed 0: action 0, never 0 / 0
 }
 
 
 def builtin_actions(env) -> np.ndarray:
+    """The simulator's commands / max speed; 0 for standing members (max speed 0), whom the simulator holds still."""
     sim = env.simulator
-    command = sim.social_force_commands() / sim.human_max_speed
+    command = np.divide(sim.social_force_commands(), sim.human_max_speed, out=np.zeros(sim.n_humans, complex), where=sim.human_max_speed > 0)
     return np.stack([command.real, command.imag], axis=-1)
 
 

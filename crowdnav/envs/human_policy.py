@@ -27,12 +27,18 @@ from crowdnav import social_force as sf
 from crowdnav.scenario.schema import Scenario
 
 _UNUSED_DISTANCE = 1.0
-"""Distance given to padding slots: any positive value, their gain is zero."""
+"""Distance given to padding slots and zero offsets: any positive value (a zero offset pushes with zero force)."""
 
 
 def _complex(xy: np.ndarray) -> np.ndarray:
     """float array (..., 2) -> complex128 array (...)."""
     return np.ascontiguousarray(xy, dtype=np.float64).view(np.complex128)[..., 0]
+
+
+def _distance(offset: np.ndarray) -> np.ndarray:
+    """|offset|, with zero lengths (an inactive human's all-zero observation) replaced to keep 0 / 0 out."""
+    distance = np.abs(offset)
+    return np.where(distance > 0, distance, _UNUSED_DISTANCE)
 
 
 def _stack(arrays: list[np.ndarray]) -> np.ndarray:
@@ -46,6 +52,9 @@ class SocialForcePolicy:
     ``scenario`` supplies the model parameters (``humans.social_force``) and the time step
     (``env.scenario`` of the env the observations come from). An action is the velocity
     command in m/s divided by the human's max speed: a (2,) float32 in [-1, 1], world frame.
+    Every action is finite: a human whose ``max_speed`` is 0 (members of a standing group,
+    ``behaviour: stand``; inactive humans of ``fixed_agents=True``, whose observation is zero)
+    gets the action 0.
     """
 
     def __init__(self, scenario: Scenario):
@@ -85,16 +94,20 @@ class SocialForcePolicy:
         if obstacles.size:
             strength, decay = self._obstacle
             gain = sf.repulsion_gain(strength, radius[:, None], decay)
-            force += sf.repulsion(obstacles, np.abs(obstacles), gain, -1.0 / decay)
+            force += sf.repulsion(obstacles, _distance(obstacles), gain, -1.0 / decay)
 
         if "robot_offset" in batch:  # present only when the scenario's humans see the robot
             offset = _complex(batch["robot_offset"])[:, None]
             strength, decay = self._robot
             contact = radius + np.asarray(batch["robot_radius"], dtype=np.float64)[:, 0]
             gain = sf.repulsion_gain(strength, contact, decay)[:, None]
-            force += sf.repulsion(offset, np.abs(offset), gain, -1.0 / decay)
+            force += sf.repulsion(offset, _distance(offset), gain, -1.0 / decay)
 
         preferred = np.asarray(batch["preferred_speed"], dtype=np.float64)[:, 0]
         max_speed = np.asarray(batch["max_speed"], dtype=np.float64)[:, 0]
-        command = sf.velocity_command(force, velocity, preferred, max_speed, self._relax) / max_speed
+        # A human with max speed 0 (a standing group's member, or an inactive slot of
+        # fixed_agents) cannot move: its action is 0. A cap of 1 keeps 0 / 0 out of the formula.
+        moving = max_speed > 0
+        cap = np.where(moving, max_speed, 1.0)
+        command = np.where(moving, sf.velocity_command(force, velocity, preferred, cap, self._relax) / cap, 0.0)
         return np.stack([command.real, command.imag], axis=-1).astype(np.float32)
