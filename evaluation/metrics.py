@@ -3,8 +3,8 @@
 Every function is pure and works on numpy arrays (positions as complex numbers ``x + 1j*y``,
 metres, world frame), so it can be checked by hand on small made-up trajectories. The
 formulas, with their sources (Francis et al. 2023, "Principles and Guidelines for Evaluating
-Social Robot Navigation Algorithms"; Anderson et al. 2018 for SPL; Hall 1966 for the
-proxemic zones), are in docs/evaluation.md.
+Social Robot Navigation Algorithms", for STL and personal-space compliance; Anderson et al.
+2018 for SPL; Hall 1966 for the proxemic zones), are in docs/evaluation.md.
 
 Conventions: a trajectory has states ``t = 0 .. T`` (0: after reset, t: after step t); the
 per-step quantities (distances, zones, time to collision, social force) use the states after
@@ -24,10 +24,13 @@ PERSONAL = 1.2
 """Upper bound (m) of the personal zone."""
 SOCIAL = 3.6
 """Upper bound (m) of the social zone."""
+PERSONAL_SPACE = INTIMATE
+"""Radius (m, surface to surface) of the personal space that personal-space compliance counts
+intrusions into: the intimate zone, the space a stranger should not enter."""
 
 METRIC_COLUMNS = (
-    "steps", "time_to_goal", "path_length", "straight_line_distance", "spl", "min_human_distance",
-    "intimate_share", "personal_share", "social_share", "mean_speed", "max_speed", "mean_acceleration",
+    "steps", "time_to_goal", "path_length", "straight_line_distance", "spl", "stl", "min_human_distance",
+    "intimate_share", "personal_share", "social_share", "psc", "mean_speed", "max_speed", "mean_acceleration",
     "max_acceleration", "mean_jerk", "max_jerk", "min_time_to_collision", "social_force",
 )
 """The keys of :func:`episode_metrics`, in column order."""
@@ -49,6 +52,8 @@ class Trajectory:
     """Time step (s)."""
     social_force: np.ndarray
     """(T,) magnitude of the humans' social force on the robot after each step (the reward's social term / w_social)."""
+    max_speed: float
+    """The robot's maximum speed (m/s): the fastest time to the goal is the straight line at this speed."""
 
     @property
     def steps(self) -> int:
@@ -71,6 +76,23 @@ def spl(success: bool, length: float, shortest: float) -> float:
         return 0.0
     longest = max(length, shortest)
     return 1.0 if longest <= 0.0 else shortest / longest
+
+
+def stl(success: bool, duration: float, fastest: float) -> float:
+    """Success weighted by time length (Francis et al. 2023): ``S * t* / max(t, t*)`` (1 when ``t* == t == 0`` and successful).
+
+    ``duration``: the episode's time ``T dt`` (s); ``fastest``: ``t* = l / v_max``, the straight
+    line into the goal disc at the robot's maximum speed.
+    """
+    if not success:
+        return 0.0
+    longest = max(duration, fastest)
+    return 1.0 if longest <= 0.0 else fastest / longest
+
+
+def personal_space_compliance(closest: np.ndarray) -> float:
+    """Share of steps with no human closer than :data:`PERSONAL_SPACE` (surface distance); 1 without steps or humans."""
+    return float(np.mean(closest >= PERSONAL_SPACE)) if len(closest) else 1.0
 
 
 def surface_distances(robot: np.ndarray, humans: np.ndarray, robot_radius: float, human_radii: np.ndarray) -> np.ndarray:
@@ -170,8 +192,10 @@ def episode_metrics(trajectory: Trajectory, success: bool) -> dict[str, float]:
         "path_length": length,
         "straight_line_distance": shortest,
         "spl": spl(success, length, shortest),
+        "stl": stl(success, steps * dt, shortest / trajectory.max_speed),
         "min_human_distance": float(closest.min()) if len(closest) else float("inf"),
         **zone_shares(closest),
+        "psc": personal_space_compliance(closest),
     }
     metrics["mean_speed"], metrics["max_speed"] = _mean_max(speed)
     metrics["mean_acceleration"], metrics["max_acceleration"] = _mean_max(acceleration)

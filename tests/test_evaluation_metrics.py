@@ -15,7 +15,9 @@ from crowdnav.evaluation.metrics import (
     min_time_to_collision,
     motion_magnitudes,
     path_length,
+    personal_space_compliance,
     spl,
+    stl,
     straight_line_distance,
     surface_distances,
     time_to_collision,
@@ -92,7 +94,7 @@ def _straight_episode(success: bool = True) -> Trajectory:
     robot = np.arange(5, dtype=complex)
     human = np.full(5, 2 + 1.6j)
     return Trajectory(positions=np.stack([robot, human], axis=1), radii=np.array([0.3, 0.3]), goal=4.2 + 0j, goal_radius=0.3,
-                      dt=1.0, social_force=np.array([0.1, 0.2, 0.2, 0.1]))
+                      dt=1.0, social_force=np.array([0.1, 0.2, 0.2, 0.1]), max_speed=2.0)
 
 
 def test_episode_metrics_of_a_straight_run_past_a_standing_human():
@@ -104,7 +106,9 @@ def test_episode_metrics_of_a_straight_run_past_a_standing_human():
     assert metrics["path_length"] == pytest.approx(4.0)
     assert metrics["straight_line_distance"] == pytest.approx(3.9)
     assert metrics["spl"] == pytest.approx(3.9 / 4.0)
+    assert metrics["stl"] == pytest.approx((3.9 / 2.0) / 4.0)  # 3.9 m at 2 m/s against the 4 s it took
     assert metrics["min_human_distance"] == pytest.approx(1.0)
+    assert metrics["psc"] == 1.0  # never closer than 1.0 m > 0.45 m
     assert metrics["personal_share"] == pytest.approx(np.mean((after >= 0.45) & (after < 1.2)))
     assert metrics["social_share"] == pytest.approx(np.mean((after >= 1.2) & (after < 3.6)))
     assert metrics["intimate_share"] == 0.0
@@ -115,9 +119,21 @@ def test_episode_metrics_of_a_straight_run_past_a_standing_human():
     assert metrics["social_force"] == pytest.approx(0.6)
 
 
-def test_failed_episode_has_no_time_to_goal_and_zero_spl():
+def test_failed_episode_has_no_time_to_goal_and_zero_spl_and_stl():
     metrics = episode_metrics(_straight_episode(), success=False)
-    assert math.isnan(metrics["time_to_goal"]) and metrics["spl"] == 0.0
+    assert math.isnan(metrics["time_to_goal"]) and metrics["spl"] == 0.0 and metrics["stl"] == 0.0
+
+
+def test_stl_is_one_at_full_speed_on_the_straight_line_and_never_above_one():
+    assert stl(True, duration=2.0, fastest=2.0) == 1.0 and stl(True, duration=4.0, fastest=2.0) == 0.5
+    assert stl(True, duration=1.0, fastest=2.0) == 1.0  # faster than t* (a goal disc reached early) is capped
+    assert stl(True, 0.0, 0.0) == 1.0 and stl(False, 2.0, 2.0) == 0.0
+
+
+def test_personal_space_compliance_counts_steps_with_every_human_beyond_the_personal_space():
+    closest = np.array([1.0, 0.44, 0.45, -0.1])
+    assert personal_space_compliance(closest) == 0.5  # 0.44 and the overlap intrude, 0.45 does not
+    assert personal_space_compliance(np.full(3, np.inf)) == 1.0 and personal_space_compliance(np.array([])) == 1.0
 
 
 def _goal_seeking(batch):
