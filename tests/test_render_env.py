@@ -92,3 +92,22 @@ def test_render_command_says_clearly_when_a_checkpoint_cannot_be_loaded(tmp_path
     bogus.write_bytes(b"not a checkpoint")
     assert main(["render", "empty_room", "--policy", str(bogus), "--no-progress"]) == 1
     assert "cannot load checkpoint" in capsys.readouterr().err
+
+
+def test_a_frame_renders_with_every_overlay_switched_off_even_without_any_sensor_to_draw():
+    options = {"lidar": False, "leog": False, "closest_obstacle": False}
+    env = crowdnav.CrowdNavEnv("room_furniture", modalities=["goal"], render_mode="rgb_array", render_options=options)
+    env.reset(seed=0)
+    frame = env.render()
+    assert frame.ndim == 3 and frame.shape[2] == 3
+    env.close()
+
+
+def test_crowdnav_render_hides_the_named_overlays_and_names_an_unknown_one(tmp_path, capsys):
+    from crowdnav.cli import main
+
+    assert main(["render", "empty_room", "--episodes", "1", "--hide", "lidar,leog,closest_obstacle", "--out", str(tmp_path),
+                 "--no-progress"]) == 0
+    assert len(list(tmp_path.glob("*.mp4"))) == 1
+    assert main(["render", "empty_room", "--hide", "lidr", "--out", str(tmp_path)]) == 1
+    assert "did you mean 'lidar'" in capsys.readouterr().err

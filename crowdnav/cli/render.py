@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 
 from crowdnav.cli.common import CliError, add_override_option, add_reward_options, parse_overrides, reward_options
+from crowdnav.suggest import unknown_name_message
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -26,6 +27,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("--out", default="videos", help="output folder (default: videos/)")
     parser.add_argument("--format", dest="video_format", choices=["mp4", "gif"], default="mp4", help="video format (default: mp4)")
     parser.add_argument("--human-goals", action="store_true", help="mark every human's goal")
+    parser.add_argument("--hide", metavar="OVERLAYS", default="",
+                        help="overlays to leave out, comma-separated: " + ", ".join(HIDEABLE) + " (default: draw them all)")
     parser.add_argument("--no-progress", action="store_true", help="hide the progress bar")
     add_override_option(parser)
     add_reward_options(parser)
@@ -51,7 +54,7 @@ def run(args: argparse.Namespace) -> int:
             video_format=args.video_format,
             overrides=parse_overrides(args.overrides),
             reward_weights=reward_options(args),
-            render_options={"human_goals": args.human_goals},
+            render_options=_render_options(args),
             progress=not args.no_progress,
         )
     except (ScenarioError, PolicyLoadError, OutputPathError) as error:
@@ -59,6 +62,18 @@ def run(args: argparse.Namespace) -> int:
     for path in paths:
         print(f"wrote {path}")
     return 0
+
+
+HIDEABLE = ("lidar", "leog", "closest_obstacle")
+"""Overlays `--hide` can leave out (crowdnav.rendering.renderer.RenderOptions)."""
+
+
+def _render_options(args: argparse.Namespace) -> dict[str, bool]:
+    hidden = [name.strip() for name in args.hide.split(",") if name.strip()]
+    unknown = [name for name in hidden if name not in HIDEABLE]
+    if unknown:
+        raise CliError("--hide: " + unknown_name_message("overlay", unknown[0], HIDEABLE))
+    return {"human_goals": args.human_goals, **{name: False for name in hidden}}
 
 
 def _foreign(policy: str) -> bool:
@@ -87,7 +102,7 @@ def _render_foreign(args: argparse.Namespace) -> int:
         extra = {key: value for key, value in env_options.items() if key not in ("scenario", "overrides")}
         paths = render_episodes(args.scenario, play, label=name, env_options=extra, episodes=args.episodes, seed=args.seed, out=args.out,
                                 video_format=args.video_format, overrides=env_options.get("overrides"),
-                                reward_weights=reward_options(args), render_options={"human_goals": args.human_goals},
+                                reward_weights=reward_options(args), render_options=_render_options(args),
                                 progress=not args.no_progress)
     except (PolicyError, ScenarioError, OutputPathError, ValueError) as error:
         raise CliError(str(error).splitlines()[0]) from None

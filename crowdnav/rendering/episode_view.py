@@ -47,7 +47,7 @@ class EpisodeView:
         wanted = [key for key, on in (("lidar", self.options.lidar), ("leog", self.options.leog),
                                       ("closest_obstacle", self.options.closest_obstacle)) if on]
         # Render-only sensors with the scenario's settings, used when the robot does not observe them.
-        self._sensors = build_modalities(wanted, sim.world, sim.scenario.sensors)
+        self._sensors = build_modalities(wanted, sim.world, sim.scenario.sensors) if wanted else {}
         self.fps = 1.0 / sim.scenario.time_step
         self._return = 0.0
         self._last_reward: float | None = None
