@@ -210,3 +210,11 @@ def test_train_help_shows_the_config_defaults_and_set_merges_scenario_overrides(
     assert main(["train", "--config", str(config), "--set", "humans.count=3", "--print-config"]) == 0
     printed = capsys.readouterr().out
     assert "humans.count: 3" in printed and "max_steps: 80" in printed
+
+
+def test_benchmark_help_lists_every_shipped_experiment(capsys):
+    from crowdnav.evaluation.experiment import shipped_experiments
+
+    assert main(["benchmark", "--help"]) == 0
+    text = " ".join(capsys.readouterr().out.split())
+    assert all(name in text for name in shipped_experiments()) and len(shipped_experiments()) >= 9

@@ -10,6 +10,14 @@ from pathlib import Path
 from crowdnav.cli.common import CliError, add_override_option, parse_overrides
 
 
+def _shipped() -> list[str]:
+    """The shipped experiments' names, read from the package's folder (without importing the evaluation layer)."""
+    from importlib.resources import files
+
+    return sorted(entry.name[: -len(".yaml")] for entry in files("crowdnav.evaluation").joinpath("experiments").iterdir()
+                  if entry.name.endswith(".yaml"))
+
+
 def register(subparsers: argparse._SubParsersAction) -> None:
     """Add ``benchmark``, ``plot`` and ``leaderboard``."""
     parser = subparsers.add_parser(
@@ -19,8 +27,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                     "best final policy to OUT/<experiment>. Re-running skips finished runs and resumes the others.",
     )
     parser.add_argument("experiment", nargs="?", metavar="EXPERIMENT.yaml",
-                        help="experiment file, or the name of a shipped one (default, encoders, modalities, fusion, "
-                             "paradigms); default: the small default experiment")
+                        help=f"experiment file, or the name of a shipped one ({', '.join(_shipped())}); "
+                             "default: the main job (default)")
     parser.add_argument("--out", default="results", metavar="DIR", help="results folder (default: results/)")
     parser.add_argument("--seeds", type=int, metavar="N", help="runs per configuration (default: the experiment's)")
     parser.add_argument("--workers", type=int, metavar="N",
