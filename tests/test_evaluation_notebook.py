@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import shutil
 from pathlib import Path
 
 import nbformat
@@ -21,3 +22,15 @@ def test_plot_results_notebook_draws_the_curves_and_the_leaderboard(tmp_path_fac
     assert any("image/png" in output.get("data", {}) for output in outputs)
     tables = [output["data"]["text/markdown"] for output in outputs if "text/markdown" in output.get("data", {})]
     assert tables and "| LIDAR | 2 |" in tables[0] and "| closest obstacle | 2 |" in tables[0]
+
+
+def test_the_notebook_started_in_notebooks_finds_results_beside_it_without_configuration(tmp_path_factory, monkeypatch, tmp_path):
+    """Jupyter's working folder is notebooks/: the default results/default is read from the repository root."""
+    shutil.copytree(tiny_results(tmp_path_factory), tmp_path / "results" / "default")
+    (tmp_path / "notebooks").mkdir()
+    monkeypatch.delenv("CROWDNAV_RESULTS", raising=False)
+    notebook = nbformat.read(NOTEBOOK, as_version=4)
+    notebook.cells = notebook.cells[:2]  # the loading cell is what this checks
+    NotebookClient(notebook, timeout=120, kernel_name="python3", resources={"metadata": {"path": str(tmp_path / "notebooks")}}).execute()
+    printed = "".join(output.get("text", "") for output in notebook.cells[1].outputs)
+    assert printed.startswith("6 runs") and printed.rstrip().endswith(str(tmp_path / "results" / "default"))
