@@ -31,7 +31,9 @@ API_CASES = {
 
 INACTIVE_HUMANS_WARNING = "No agents present but not all possible_agents are terminated or truncated"
 """With a crowd-size range, humans beyond this episode's count never enter ``agents``, so they
-are never terminated; PettingZoo's API test notes it. It is the only warning allowed."""
+are never terminated; PettingZoo's API test notes it (it counts as finished only agents that were
+live, so reporting their termination cannot silence it). It is the only warning allowed here;
+``fixed_agents=True`` passes without any (tests/test_supersuit_fixed_agents.py)."""
 
 
 @pytest.mark.parametrize("case", API_CASES)

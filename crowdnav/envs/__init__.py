@@ -28,13 +28,14 @@ def parallel_env(
     flat_observations: bool = False,
     human_reward: HumanReward | None = None,
     human_exit: HumanExit | None = None,
+    fixed_agents: bool = False,
 ) -> CrowdNavParallelEnv:
     """The PettingZoo ParallelEnv for ``scenario`` (library name or YAML path); options as in
     CrowdNavEnv, plus the multi-agent ones of :class:`CrowdNavParallelEnv`."""
     return CrowdNavParallelEnv(
         scenario, modalities=modalities, sensors=sensors, reward_weights=reward_weights,
         overrides=overrides, render_mode=render_mode, flat_observations=flat_observations,
-        human_reward=human_reward, human_exit=human_exit,
+        human_reward=human_reward, human_exit=human_exit, fixed_agents=fixed_agents,
     )
 
 

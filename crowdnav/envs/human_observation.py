@@ -23,9 +23,13 @@ key                   shape     meaning
 ``robot_offset``      (2,)      robot centre minus own centre (only with ``see_robot``)
 ``robot_velocity``    (2,)      robot velocity minus own velocity (only with ``see_robot``)
 ``robot_radius``      (1,)      robot body radius (only with ``see_robot``)
+``active``            (1,)      1.0 for an active human, 0.0 for an inactive one (only with
+                                the env's ``fixed_agents``; first in the flat vector)
 ====================  ========  ===========================================================
 
 Slot k of human i holds human k if k < i and human k+1 otherwise (index order, itself skipped).
+With ``fixed_agents`` (:meth:`HumanObservations.fixed`) every possible human has a row: an
+inactive one's (absent this episode, or gone through ``human_exit``) is all zeros.
 """
 
 from __future__ import annotations
@@ -53,8 +57,9 @@ def _box(low: float, high: float, shape: tuple[int, ...]) -> spaces.Box:
 class HumanObservations:
     """Observation spaces and vectorized observations of the ``human_<i>`` agents."""
 
-    def __init__(self, scenario: Scenario, obstacles: StaticObstacles):
+    def __init__(self, scenario: Scenario, obstacles: StaticObstacles, *, active_flag: bool = False):
         humans, robot = scenario.humans, scenario.robot
+        self.active_flag = active_flag
         self.max_humans = humans.max_count
         self.see_robot = humans.see_robot
         self._slots = max(self.max_humans - 1, 0)
@@ -66,6 +71,7 @@ class HumanObservations:
         self._robot_speed_max = robot.max_speed * _ROUNDING
         self._others = np.zeros((0, 0), dtype=np.intp)
         self._constants: dict[str, np.ndarray] = {}
+        self._shapes = {key: space.shape for key, space in self.space().spaces.items()}
 
     def space(self) -> spaces.Dict:
         """A new Dict space for one human (each agent gets its own object, seeded separately)."""
@@ -89,6 +95,8 @@ class HumanObservations:
             fields["robot_offset"] = _box(-inf, inf, (2,))
             fields["robot_velocity"] = _box(-relative, relative, (2,))
             fields["robot_radius"] = _box(0.0, self._radius_max, (1,))
+        if self.active_flag:
+            fields["active"] = _box(0.0, 1.0, (1,))
         return spaces.Dict(fields)
 
     def reset(self, sim: Simulator) -> None:
@@ -136,6 +144,19 @@ class HumanObservations:
         if self.see_robot:
             out["robot_offset"] = _xy(sim.pair_offset[1:, 0])
             out["robot_velocity"] = _xy(sim.velocities[0] - own_velocity)
+        return out
+
+    def fixed(self, sim: Simulator, active: np.ndarray) -> dict[str, np.ndarray]:
+        """Every possible human's observation as new (N, ...) arrays, row i for ``human_<i>``.
+
+        ``active``: simulator indices of the active humans; every other row is all zeros, its
+        ``active`` entry included (the values sit inside the space: each bound spans 0).
+        """
+        out = {key: np.zeros((self.max_humans, *shape), dtype=np.float32) for key, shape in self._shapes.items()}
+        if len(active):
+            for key, values in self.batch(sim).items():  # a loop over keys, not humans
+                out[key][active] = values[active]
+            out["active"][active] = 1.0
         return out
 
     def _static_offset(self, sim: Simulator) -> np.ndarray:

@@ -19,6 +19,9 @@ column      meaning
 **Flat observations** (``flat_observations=True``): every agent's Dict observation becomes one
 float32 Box, in the order of :func:`gymnasium.spaces.flatten_space` (the Dict's keys in order,
 each array row-major), so SuperSuit's wrappers and MARL libraries that take Box spaces work.
+With a crowd-size range or ``human_exit``, SuperSuit's ``pettingzoo_env_to_vec_env_v1`` also
+needs the env's ``fixed_agents=True`` (every possible human an agent every step, the inactive
+ones flagged and zero).
 
 **Human rewards and exits** are pluggable: ``human_reward(simulator) -> (n,) floats`` and
 ``human_exit(simulator) -> (n,) bools``, called after each step on the episode's ``n`` humans.

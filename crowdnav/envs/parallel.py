@@ -22,7 +22,21 @@ class CrowdNavParallelEnv(ParallelEnv):
 
     **Agents.** ``possible_agents`` is ``["robot", "human_0", ..., "human_{N-1}"]`` with N the
     scenario's maximum crowd size. With a crowd-size range, ``agents`` after reset holds the
-    robot and ``human_<i>`` for ``i <`` this episode's crowd size.
+    robot and ``human_<i>`` for ``i <`` this episode's crowd size (``fixed_agents`` below
+    changes that). PettingZoo's ``parallel_api_test`` warns "No agents present but not all
+    possible_agents are terminated or truncated" for such an episode: it expects every possible
+    agent to enter ``agents`` at some point, which a human absent this episode never does.
+
+    **Fixed agent set** (``fixed_agents=True``, for SuperSuit's ``pettingzoo_env_to_vec_env_v1``
+    and MARL tools that need the same agents every step): ``agents`` is ``possible_agents``
+    from reset to the episode end, whatever this episode's crowd size. A human is *active*
+    while it is in this episode's crowd and has not left through ``human_exit``; an inactive
+    one has an all-zero observation (its ``active`` entry 0: the first value of the flat vector
+    with ``flat_observations``), ``infos[name]["active"]`` False, reward 0, and its action is
+    checked but has no effect. A human that exits stays an agent: the step it exits on gives
+    its last real observation, the following steps the inactive one. No human terminates
+    alone: every agent terminates or truncates at the episode end. Active humans' observations
+    carry ``active`` 1; the robot is always active (its observation has no such entry).
 
     **Robot.** Observation: the same Dict as :class:`crowdnav.envs.single.CrowdNavEnv` (one
     key per modality); action: Box(-1, 1, (2,), float32), (vx, vy) in the robot frame times the
@@ -38,8 +52,9 @@ class CrowdNavParallelEnv(ParallelEnv):
     the human's max speed (``max_speed`` in its observation). :class:`SocialForcePolicy` gives
     the built-in crowd's actions; members of a standing group (``behaviour: stand``) stay where
     they are whatever their action. Reward: 0, or ``human_reward(simulator)``. Info: ``group``
-    (the name of its group, ``crowd`` for a file without ``humans.groups``; also at reset) and
-    ``goal_reached`` (it reached its goal this step).
+    (the name of its group, ``crowd`` for a file without ``humans.groups``; also at reset;
+    None for a human absent this episode under ``fixed_agents``), ``goal_reached`` (it reached
+    its goal this step) and, under ``fixed_agents`` only, ``active``.
 
     **Episode end.** Success, collision or the robot leaving the world terminates every agent,
     the time limit truncates every agent. A human also terminates alone when ``human_exit``
@@ -68,17 +83,19 @@ class CrowdNavParallelEnv(ParallelEnv):
         flat_observations: bool = False,
         human_reward: HumanReward | None = None,
         human_exit: HumanExit | None = None,
+        fixed_agents: bool = False,
         **options: Any,
     ):
         # The engine both envs share (simulator, sensors, reward); it takes and checks the options.
         self.core = EnvCore(scenario, **options)
         self.flat_observations = bool(flat_observations)
+        self.fixed_agents = bool(fixed_agents)
         self.human_reward, self.human_exit = human_reward, human_exit
         self.render_mode = self.core.render_mode
         self.scenario = self.core.scenario
         self.simulator = self.core.simulator
         self.metadata = {**self.metadata, "render_fps": 1.0 / self.scenario.time_step}
-        self._humans = HumanObservations(self.scenario, self.simulator.obstacles)
+        self._humans = HumanObservations(self.scenario, self.simulator.obstacles, active_flag=self.fixed_agents)
         self._human_names = [f"human_{i}" for i in range(self.scenario.humans.max_count)]
         self.possible_agents = [ROBOT, *self._human_names]
         self.agents: list[str] = []
@@ -107,11 +124,15 @@ class CrowdNavParallelEnv(ParallelEnv):
         robot_observation = self.core.reset(seed)
         self._humans.reset(self.simulator)
         self._active_humans = self._human_names[: self.simulator.n_humans]
-        self.agents = [ROBOT, *self._active_humans]
+        self.agents = list(self.possible_agents) if self.fixed_agents else [ROBOT, *self._active_humans]
         observations = self._observations(robot_observation)
         sim = self.simulator  # a human's group is fixed for the episode: named once here
         self._group_of = dict(zip(self._active_humans, (sim.groups[g].name for g in sim.human_group.tolist()), strict=True))
-        return observations, {ROBOT: {}, **{name: {"group": group} for name, group in self._group_of.items()}}
+        if self.fixed_agents:
+            infos = {name: {"group": self._group_of.get(name), "active": name in self._group_of} for name in self._human_names}
+        else:
+            infos = {name: {"group": group} for name, group in self._group_of.items()}
+        return observations, {ROBOT: {}, **infos}
 
     def step(self, actions: Mapping[str, Any]):
         """One action per agent in ``agents``; out-of-range values are clipped, NaN/inf raise ValueError."""
@@ -130,6 +151,9 @@ class CrowdNavParallelEnv(ParallelEnv):
         terminations, truncations = dict.fromkeys(agents, terminated), dict.fromkeys(agents, truncated)
         infos: dict[str, dict[str, Any]] = {agent: {} for agent in agents}
         infos[ROBOT] = step_info(events, terms)
+        fixed = self.fixed_agents
+        if fixed:  # inactive humans' infos; the active ones' are overwritten below
+            infos.update((name, {"group": self._group_of.get(name), "goal_reached": False, "active": False}) for name in self._human_names)
         if self._active_humans:
             index = self._active_index
             arrived = sim.human_arrived[index]
@@ -138,12 +162,16 @@ class CrowdNavParallelEnv(ParallelEnv):
             for k, name in enumerate(self._active_humans):
                 rewards[name] = float(human_rewards[k])
                 infos[name] = {"group": self._group_of[name], "goal_reached": bool(arrived[k])}
-                terminations[name] = terminated or bool(leaving[k])
+                if fixed:
+                    infos[name]["active"] = True
+                else:
+                    terminations[name] = terminated or bool(leaving[k])
             if leaving.any() and not (terminated or truncated):
                 sim.human_stopped[index[leaving]] = True  # it stays in the world, standing
                 sim.velocities[1:][index[leaving]] = 0.0
                 self._active_humans = [name for name, gone in zip(self._active_humans, leaving, strict=True) if not gone]
-                self.agents = [ROBOT, *self._active_humans]
+                if not fixed:  # under fixed_agents it stays an agent, inactive from the next step on
+                    self.agents = [ROBOT, *self._active_humans]
         if terminated or truncated:
             self.agents = []
         return observations, rewards, terminations, truncations, infos
@@ -164,7 +192,15 @@ class CrowdNavParallelEnv(ParallelEnv):
         if self.flat_observations:
             robot_observation = spaces.flatten(self._dict_spaces[ROBOT], robot_observation).astype(np.float32, copy=False)
         observations: dict[str, Any] = {ROBOT: robot_observation}
-        if self._active_humans:
+        if self.fixed_agents and self._human_names:
+            batch = self._humans.fixed(self.simulator, self._active_index)
+            if self.flat_observations:
+                rows = flatten_batch(self._dict_spaces[self._human_names[0]], batch, len(self._human_names))
+                observations.update(zip(self._human_names, rows, strict=True))
+            else:
+                for i, name in enumerate(self._human_names):
+                    observations[name] = {key: values[i] for key, values in batch.items()}
+        elif self._active_humans:
             batch = self._humans.batch(self.simulator)
             index = self._active_index
             if self.flat_observations:
@@ -176,8 +212,11 @@ class CrowdNavParallelEnv(ParallelEnv):
         return observations
 
     def _human_actions(self, actions: Mapping[str, Any]) -> np.ndarray:
-        """The humans' actions as an (n, 2) array in agent order, with clear errors."""
-        humans = self._active_humans
+        """The episode's humans' (n, 2) velocity commands / max speed, in simulator order, with clear errors.
+
+        Every human in ``agents`` must have a valid action; only the active ones' move anyone.
+        """
+        humans = self.agents[1:]
         if len(actions) != len(self.agents) or ROBOT not in actions or not all(name in actions for name in humans):
             missing = [agent for agent in self.agents if agent not in actions]
             unknown = [agent for agent in actions if agent not in self.agents]
@@ -195,8 +234,10 @@ class CrowdNavParallelEnv(ParallelEnv):
         if not finite.all():
             bad = {humans[i]: stacked[i].tolist() for i in np.flatnonzero(~finite)}
             raise ValueError(f"human actions must be finite (no NaN or inf), got {bad}")
-        if len(humans) == self.simulator.n_humans:
+        index = self._active_index
+        if not self.fixed_agents and len(humans) == self.simulator.n_humans:
             return stacked
         commands = np.zeros((self.simulator.n_humans, 2))  # humans that left stand still
-        commands[self._active_index] = stacked
+        # rows of ``stacked``: the active humans in order, or every possible human (fixed_agents)
+        commands[index] = stacked[index] if self.fixed_agents else stacked
         return commands
