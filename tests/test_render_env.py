@@ -101,6 +101,10 @@ def test_a_frame_renders_with_every_overlay_switched_off_even_without_any_sensor
     frame = env.render()
     assert frame.ndim == 3 and frame.shape[2] == 3
     env.close()
+    parallel = crowdnav.parallel_env("room_furniture", render_mode="rgb_array", render_options=options)
+    parallel.reset(seed=0)
+    assert parallel.render().shape == frame.shape
+    parallel.close()
 
 
 def test_crowdnav_render_hides_the_named_overlays_and_names_an_unknown_one(tmp_path, capsys):

@@ -25,6 +25,7 @@ def parallel_env(
     reward_weights: Mapping[str, float] | None = None,
     overrides: Mapping[str, Any] | None = None,
     render_mode: str | None = None,
+    render_options: Mapping[str, Any] | None = None,
     flat_observations: bool = False,
     human_reward: HumanReward | None = None,
     human_exit: HumanExit | None = None,
@@ -34,7 +35,7 @@ def parallel_env(
     CrowdNavEnv, plus the multi-agent ones of :class:`CrowdNavParallelEnv`."""
     return CrowdNavParallelEnv(
         scenario, modalities=modalities, sensors=sensors, reward_weights=reward_weights,
-        overrides=overrides, render_mode=render_mode, flat_observations=flat_observations,
+        overrides=overrides, render_mode=render_mode, render_options=render_options, flat_observations=flat_observations,
         human_reward=human_reward, human_exit=human_exit, fixed_agents=fixed_agents,
     )
 
