@@ -2,7 +2,8 @@
 
 A checkpoint folder holds:
 
-* ``model.zip``: the SB3 model (``<Algo>.load``);
+* ``model.zip``: the SB3 model (parameters and optimizers as tensors; read without unpickling,
+  :mod:`agents.model_zip`);
 * ``policy.json``: ``format``, ``algo``, ``env`` (the :class:`crowdnav.envs.CrowdNavEnv`
   keyword arguments the model needs: scenario, modalities, sensors, overrides,
   reward_weights), ``observation_normalization`` (``{key: {"offset": [...], "scale": [...]}}``,
@@ -11,7 +12,10 @@ A checkpoint folder holds:
   that turns the ``leog`` grid into the latent the model was trained on, or null),
   ``episodes``, ``timesteps``, ``config``;
 * ``encoder.pt``: that frozen encoder, when the model was trained on precomputed latents;
-* ``replay_buffer.pkl``: the replay buffer (off-policy runs with ``save_replay_buffer``).
+* resumable checkpoints: ``training_state.json``, ``replay_buffer.npz`` (off-policy runs with
+  ``save_replay_buffer``) and ``rollout_state.npz`` (:mod:`agents.resume_state`): JSON and
+  arrays, no pickle. Checkpoints of older crowdnav versions hold pickles instead
+  (``rng_state.pkl``, ``replay_buffer.pkl``, ``rollout_state.pkl``), read only on request.
 
 :func:`load_policy` accepts a checkpoint folder, its ``policy.json``, or a run folder
 (then ``checkpoint/`` inside it).
@@ -26,6 +30,15 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from crowdnav.agents.model_zip import ModelZipError, check_layers, read_model_zip
+from crowdnav.agents.resume_state import (
+    REPLAY_ARRAYS,
+    ROLLOUT_ARRAYS,
+    STATE_FILE,
+    save_replay_buffer,
+    save_training_state,
+)
+from crowdnav.agents.resume_state import rng_state as streams_now
 from crowdnav.agents.run_folder import CHECKPOINT_DIR, POLICY_FILE, REPLAY_FILE, RNG_FILE, ROLLOUT_FILE
 from crowdnav.agents.wrappers import ObservationScales, agent_observation, scales_from_json
 from stable_baselines3.common.base_class import BaseAlgorithm
@@ -33,6 +46,7 @@ from stable_baselines3.common.base_class import BaseAlgorithm
 POLICY_FORMAT = "crowdnav-policy/1"
 MODEL_FILE = "model.zip"
 ENCODER_FILE = "encoder.pt"
+MAX_POLICY_BYTES = 16 << 20
 
 
 def save_checkpoint(
@@ -48,7 +62,9 @@ def save_checkpoint(
     """Write a checkpoint folder, replacing an existing one only once the new one is complete.
 
     ``info`` becomes ``policy.json`` (``format`` and ``leog_encoder`` are filled in here);
-    ``encoder_file`` is copied in when the model sees precomputed latents.
+    ``encoder_file`` is copied in when the model sees precomputed latents. ``rng_state`` (True:
+    the streams now; a mapping: those streams) makes it resumable: ``training_state.json``;
+    ``rollout_state``: :meth:`ResumePoint.rollout_state`'s dict, written as ``rollout_state.npz``.
     """
     folder = Path(folder)
     staging = folder.with_name(folder.name + ".partial")
@@ -57,13 +73,13 @@ def save_checkpoint(
     staging.mkdir(parents=True)
     model.save(staging / MODEL_FILE)
     if replay_buffer and getattr(model, "replay_buffer", None) is not None:
-        model.save_replay_buffer(staging / REPLAY_FILE)
-    if rng_state is not False:  # a resumable checkpoint: the random streams too, so the resumed run is the same run
-        save_rng_state(model, staging / RNG_FILE, rng_state if isinstance(rng_state, Mapping) else None)
-    if rollout_state is not None:  # an on-policy run's collected rollout and env, for an exact resume
-        import pickle
+        save_replay_buffer(model.replay_buffer, staging / REPLAY_ARRAYS)
+    if rng_state is not False:  # a resumable checkpoint: counters and random streams, so the resumed run is the same run
+        save_training_state(model, staging / STATE_FILE, rng_state if isinstance(rng_state, Mapping) else streams_now(model))
+    if rollout_state is not None:  # an on-policy or batched run's collected rollout and worlds, for an exact resume
+        from crowdnav.agents.resume_worlds import save_rollout
 
-        (staging / ROLLOUT_FILE).write_bytes(pickle.dumps(dict(rollout_state)))
+        save_rollout(staging / ROLLOUT_ARRAYS, rollout_state)
     if encoder_file is not None:
         shutil.copyfile(encoder_file, staging / ENCODER_FILE)
     document = {"format": POLICY_FORMAT, **info, "leog_encoder": ENCODER_FILE if encoder_file is not None else None}
@@ -95,14 +111,24 @@ def checkpoint_folder(path: str | Path) -> Path:
 def read_policy_info(path: str | Path) -> dict[str, Any]:
     """The ``policy.json`` of a checkpoint, checked."""
     file = checkpoint_folder(path) / POLICY_FILE
-    info = json.loads(file.read_text(encoding="utf-8"))
-    if info.get("format") != POLICY_FORMAT:
+    if file.stat().st_size > MAX_POLICY_BYTES:
+        raise ValueError(f"{file}: {file.stat().st_size:,} bytes, more than a policy.json holds ({MAX_POLICY_BYTES:,})")
+    try:
+        info = json.loads(file.read_text(encoding="utf-8"))
+    except (UnicodeDecodeError, json.JSONDecodeError, RecursionError) as error:
+        raise ValueError(f"{file}: not JSON ({str(error).splitlines()[0]})") from None
+    if not isinstance(info, dict) or info.get("format") != POLICY_FORMAT:
+        info = info if isinstance(info, dict) else {}
         raise ValueError(f"{file}: unsupported policy format {info.get('format')!r} (expected {POLICY_FORMAT!r})")
     return info
 
 
 def load_model(path: str | Path, env: Any = None, device: str = "cpu") -> BaseAlgorithm:
-    """The SB3 model of a checkpoint (on ``env`` if given, e.g. to resume training)."""
+    """The SB3 model of a checkpoint by SB3's own ``<Algo>.load`` (on ``env`` if given).
+
+    That unpickles the zip's ``data``, which can run code: only for checkpoints you trust
+    (``load_policy(..., trusted=True)``, ``train(..., trust_pickle=True)``).
+    """
     from crowdnav.agents.factory import ALGORITHMS
 
     folder = checkpoint_folder(path)
@@ -189,9 +215,10 @@ def model_from_parameters(folder: Path, info: Mapping[str, Any], encoder: Any = 
                           config: Any = None) -> BaseAlgorithm:
     """The checkpoint's model rebuilt from its training config, then its parameters loaded.
 
-    SB3's ``set_parameters`` reads only the zip's ``.pth`` tensors (``torch.load`` with
-    ``weights_only=True``), never its pickled ``data``. The replay buffer gets one transition:
-    a policy does not learn.
+    The network sizes are checked first (:func:`check_network_size`), so a hostile config is one
+    line, not gigabytes; the zip is read by :func:`load_parameters` (tensors only, never its
+    pickled ``data``). The replay buffer gets one transition and the rollout a few steps: a
+    policy does not learn.
     """
     from crowdnav.agents.config import ConfigError, config_from_mapping
     from crowdnav.agents.factory import make_env, make_model
@@ -204,10 +231,13 @@ def model_from_parameters(folder: Path, info: Mapping[str, Any], encoder: Any = 
         if config is None:
             config = config_from_mapping({**document, "device": device})
         # one env to act in: the collection settings (worlds, rollout sizes) do not shape the network
+        small = {key: value for key, value in config.algo_kwargs.items() if key not in ("n_steps", "buffer_size", "batch_size")}
         config = config.model_copy(update={"device": device, "progress": False, "tensorboard": False, "num_envs": 1,
-                                           "updates_per_step": None, "n_steps": None})
+                                           "updates_per_step": None, "n_steps": None, "algo_kwargs": small})
         off_policy = "buffer_size" in type(config).model_fields and config.algo in ("sac", "td3", "ddpg")
-        config = config.model_copy(update={"buffer_size": 1, "learning_starts": 0} if off_policy else {})
+        config = config.model_copy(update={"buffer_size": 1, "learning_starts": 0} if off_policy else
+                                   {"n_steps": 8, **({"batch_size": 8} if config.algo == "ppo" else {})})
+        check_network_size(config, str(folder))
         saved_encoder = None
         if config.encoder.mode == "finetune":  # the network's LEOG layers take the pre-trained architecture
             from crowdnav.agents.factory import load_leog_weights
@@ -219,36 +249,82 @@ def model_from_parameters(folder: Path, info: Mapping[str, Any], encoder: Any = 
     except ConfigError as error:
         raise UntrustedCheckpointError(f"{folder}: cannot rebuild the network from the checkpoint's config ({error})") from None
     try:
-        model.set_parameters(str(folder / MODEL_FILE), exact_match=True, device=device)
+        load_parameters(model, folder / MODEL_FILE, device)
     except (ValueError, RuntimeError, KeyError) as error:
-        raise UntrustedCheckpointError(f"{folder}: the parameters in {MODEL_FILE} do not fit the network its config describes ({error})") from None
+        raise UntrustedCheckpointError(f"{folder}: the parameters in {MODEL_FILE} do not fit the network its config describes "
+                                       f"({str(error).splitlines()[0][:300]})") from None
     return model
 
 
-def rng_state(model: BaseAlgorithm) -> dict[str, Any]:
-    """The random streams training draws from: torch, numpy, Python and the action space's."""
-    import random
+def check_network_size(config: Any, label: str) -> None:
+    """UntrustedCheckpointError unless every layer the config asks for is within :data:`agents.model_zip.MAX_UNITS`.
 
-    import torch
-
-    space = getattr(model, "action_space", None)
-    return {"torch": torch.get_rng_state(), "numpy": np.random.get_state(), "random": random.getstate(),
-            "action_space": space.np_random.bit_generator.state if space is not None and space._np_random is not None else None}
-
-
-def save_rng_state(model: BaseAlgorithm, path: Path, state: Mapping[str, Any] | None = None) -> None:
-    """The random streams (now, or the given ``state``) as a pickle.
-
-    SB3 re-seeds all of them when a model is loaded, so without this a resumed run would draw other
-    exploration noise and other replay batches than the run it continues.
+    Checked before the network is built: ``net_arch: [20000, 20000]`` would otherwise allocate
+    gigabytes before the parameters are found not to fit.
     """
-    import pickle
+    from crowdnav.agents.factory import hyperparameters
 
-    path.write_bytes(pickle.dumps(dict(state) if state is not None else rng_state(model)))
+    extractor = config.extractor
+    try:
+        check_layers(f"{label}: net_arch", hyperparameters(config)["net_arch"])
+        for name in ("leog_channels", "leog_kernels", "leog_strides", "leog_head", "lidar_hidden", "lidar_conv_channels",
+                     "lowdim_hidden", "table_hidden"):
+            check_layers(f"{label}: extractor.{name}", list(getattr(extractor, name)))
+        check_layers(f"{label}: extractor.leog_latent", [extractor.leog_latent])
+        check_layers(f"{label}: extractor.rbf_centres", [extractor.rbf_centres] if extractor.rbf_centres else [])
+        critics = config.policy_kwargs.get("n_critics", 2)
+        if not isinstance(critics, int) or not 1 <= critics <= 16:
+            raise ModelZipError(f"{label}: policy_kwargs.n_critics must be 1..16, got {str(critics)[:40]}")
+    except ModelZipError as error:
+        raise UntrustedCheckpointError(str(error)) from None
 
 
-def restore_rng_state(model: BaseAlgorithm, path: Path) -> dict[str, Any] | None:
-    """Put back what :func:`save_rng_state` saved (a resumed run's own file: trusted); returns it, None without it."""
+def load_parameters(model: BaseAlgorithm, path: Path, device: str = "cpu") -> None:
+    """The zip's tensors into ``model`` (built from the run's config): networks, optimizers, SB3's variables.
+
+    The same tensors SB3's ``load`` restores (SAC's entropy coefficient is such a variable),
+    read by :func:`agents.model_zip.read_model_zip`: nothing in the zip is unpickled.
+    """
+    import torch
+    from stable_baselines3.common.utils import get_device
+
+    zipped = read_model_zip(path, str(get_device(device)))
+    model.set_parameters(zipped.parameters, exact_match=True, device=device)
+    expected = set(model._get_torch_save_params()[1])
+    if set(zipped.variables) != expected:
+        raise ModelZipError(f"{path}: variables {sorted(zipped.variables)}, the network has {sorted(expected)}")
+    from stable_baselines3.common.save_util import recursive_getattr
+
+    with torch.no_grad():
+        for name, value in zipped.variables.items():
+            target = recursive_getattr(model, name)
+            if not isinstance(value, torch.Tensor) or value.shape != target.shape or value.dtype != target.dtype:
+                raise ModelZipError(f"{path}: variable {name} does not fit the network")
+            target.copy_(value)
+
+
+def resume_model(folder: Path, config: Any, env: Any, saved_encoder: Any = None, tensorboard_log: str | None = None) -> BaseAlgorithm:
+    """A resumed run's model: built from the run's config on ``env``, the checkpoint's tensors loaded (no pickle)."""
+    from crowdnav.agents.factory import make_model
+
+    check_network_size(config, str(folder))
+    model = make_model(config, env, saved_encoder, tensorboard_log)
+    try:
+        load_parameters(model, folder / MODEL_FILE, config.device)
+    except (ValueError, RuntimeError, KeyError) as error:
+        from crowdnav.agents.config import ConfigError
+
+        raise ConfigError(f"cannot resume: the parameters in {folder / MODEL_FILE} do not fit the network the config describes "
+                          f"({str(error).splitlines()[0][:300]})") from None
+    return model
+
+
+LEGACY_FILES = (RNG_FILE, REPLAY_FILE, ROLLOUT_FILE)
+"""What checkpoints of older crowdnav versions pickled; read only with ``trust_pickle``."""
+
+
+def restore_pickled_rng_state(model: BaseAlgorithm, path: Path) -> dict[str, Any] | None:
+    """An older checkpoint's pickled random streams (``rng_state.pkl``): runs code; only with ``trust_pickle``."""
     import pickle
     import random
 

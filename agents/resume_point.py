@@ -20,8 +20,9 @@ thing a resumed run does is the gradient update the checkpoint preceded.
 On-policy algorithms (A2C, PPO) cannot be rewound: their rollout spans episodes and is trained
 on as a whole. Their checkpoint (written when the rollout is complete, before SB3 trains on it)
 keeps the rollout buffer, the environments mid-episode and the last observation
-(:meth:`ResumePoint.rollout_state`, pickled like the replay buffer); a resumed run puts them
-back and takes that update first.
+(:meth:`ResumePoint.rollout_state`, stored as arrays by :mod:`agents.resume_worlds`: each world
+as its episode's seed and the actions taken since); a resumed run puts them back and takes
+that update first.
 
 Batched training (``num_envs > 1``) cannot be rewound either, for any algorithm: when one world's
 episode ends the others are mid-episode. Its checkpoints (written at a rollout's end, before the
@@ -40,7 +41,7 @@ from contextlib import contextmanager
 from dataclasses import dataclass
 from typing import Any
 
-from crowdnav.agents.checkpoint import rng_state
+from crowdnav.agents.resume_state import rng_state
 from stable_baselines3.common.base_class import BaseAlgorithm
 from stable_baselines3.common.type_aliases import TrainFreq, TrainFrequencyUnit
 
@@ -110,13 +111,14 @@ class ResumePoint:
                 "last_episode_starts": model._last_episode_starts}
 
     def restore_rollout(self, state: dict[str, Any]) -> None:
-        """Put back what :meth:`rollout_state` saved (after loading the model, before ``learn``)."""
+        """Take up what :func:`agents.resume_worlds.load_rollout` read back (after loading the model, before ``learn``).
+
+        The worlds and the rollout buffer are already in place; this sets the last observation
+        and marks the update the checkpoint preceded as pending.
+        """
         model = self.model
-        model.set_env(state["env"], force_reset=False)
         model._last_obs, model._last_episode_starts = state["last_obs"], state["last_episode_starts"]
-        if "rollout_buffer" in state:
-            model.rollout_buffer = state["rollout_buffer"]
-        else:  # batched off-policy
+        if "rollout_buffer" not in state:  # batched off-policy
             model._last_original_obs, model._episode_num = state["last_original_obs"], state["episode_num"]
         self._pending_rollout = True
 

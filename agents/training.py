@@ -20,11 +20,11 @@ from __future__ import annotations
 
 import importlib.util
 import json
-import pickle
 import shutil
 import time
 import warnings
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Iterator, Mapping
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -34,14 +34,15 @@ import yaml
 from crowdnav.agents.callbacks import EpisodeCallback, EpisodeRecord
 from crowdnav.agents.checkpoint import (
     ENCODER_FILE,
+    LEGACY_FILES,
     MODEL_FILE,
     REPLAY_FILE,
     RNG_FILE,
-    ROLLOUT_FILE,
     checkpoint_folder,
     load_model,
     read_policy_info,
-    restore_rng_state,
+    restore_pickled_rng_state,
+    resume_model,
     save_checkpoint,
 )
 from crowdnav.agents.config import ConfigError, TrainConfig, config_from_mapping, config_to_dict, load_config
@@ -57,10 +58,20 @@ from crowdnav.agents.factory import (
     precomputes_leog,
 )
 from crowdnav.agents.resume_point import STEPS_AFTER_KEY, ResumePoint, end_open_episodes
+from crowdnav.agents.resume_state import (
+    REPLAY_ARRAYS,
+    ROLLOUT_ARRAYS,
+    STATE_FILE,
+    ActionLog,
+    ResumeStateError,
+    load_replay_buffer,
+    restore_training_state,
+)
 from crowdnav.agents.run_folder import checkpoint_dir, episode_log, recover_checkpoint, snapshot_dir, snapshot_folders, writing
 from crowdnav.agents.seeding import train_seed
 from crowdnav.agents.wrappers import scales_from_json, scales_to_json
 from stable_baselines3.common.base_class import BaseAlgorithm
+from stable_baselines3.common.vec_env import DummyVecEnv
 
 
 @dataclass
@@ -89,11 +100,13 @@ class TrainResult:
 
 
 def train(config: TrainConfig | Mapping[str, Any] | str | Path, *, resume: bool = False,
-          on_checkpoint: Callable[[int], None] | None = None) -> TrainResult:
+          on_checkpoint: Callable[[int], None] | None = None, trust_pickle: bool = False) -> TrainResult:
     """Train an agent as ``config`` says (a TrainConfig, a mapping, or a YAML file path).
 
     ``on_checkpoint(episodes)`` is called after each checkpoint is saved (the evaluation runner
-    saves its timing there, so a kill loses no recorded time).
+    saves its timing there, so a kill loses no recorded time). A resume reads no pickle
+    (:mod:`agents.resume_state`); a checkpoint of an older crowdnav, whose state is pickled, is
+    refused unless ``trust_pickle`` (its worlds mid-episode are then not continued).
     """
     if isinstance(config, (str, Path)):
         config = load_config(config)
@@ -102,15 +115,15 @@ def train(config: TrainConfig | Mapping[str, Any] | str | Path, *, resume: bool 
     # a TrainConfig was checked when it was built: not again here (one validation per run)
     torch.set_num_threads(config.torch_threads)
     with writing(config.out):  # one process writes a run at a time
-        return _train(config, resume, on_checkpoint)
+        return _train(config, resume, on_checkpoint, trust_pickle)
 
 
-def _train(config: TrainConfig, resume: bool, on_checkpoint: Callable[[int], None] | None) -> TrainResult:
+def _train(config: TrainConfig, resume: bool, on_checkpoint: Callable[[int], None] | None, trust_pickle: bool = False) -> TrainResult:
     out = Path(config.out)
     checkpoint = checkpoint_dir(out)
     if resume:
         recover_checkpoint(out)  # a kill during a checkpoint swap leaves a complete .partial or .old
-    state = _resume_state(checkpoint, config) if resume else None
+    state = _resume_state(checkpoint, config, trust_pickle) if resume else None
     if state and state["normalization"] is None and config.normalize_observations:
         # a checkpoint from before observation normalisation: its model was trained on raw observations
         warnings.warn(f"{checkpoint} predates observation normalisation; resuming on raw observations "
@@ -132,31 +145,46 @@ def _train(config: TrainConfig, resume: bool, on_checkpoint: Callable[[int], Non
     env = (make_vec_env if batched else make_env)(config, encoder if precompute else None, first_started,
                                                   scales_from_json(stored) if stored is not None else None)
     scales = observation_normalization(env)
+    collecting = env  # what the model steps: on-policy and batched checkpoints store its worlds mid-episode (agents.resume_worlds)
+    if batched or config.algo not in OFF_POLICY:
+        collecting = ActionLog(env if batched else DummyVecEnv([lambda: env]))
     unit = "steps" if config.checkpoint_every_steps is not None else "episodes"  # what snapshots and checkpoints count
     tensorboard_log = _tensorboard_folder(config, out)
     on_start = None
-    if state:
-        model = load_model(checkpoint, env=env, device=config.device)
+    saved_streams = None
+    if state and state["legacy"]:  # trust_pickle: an older crowdnav's pickles (SB3's full load included)
+        model = load_model(checkpoint, env=collecting, device=config.device)
         if tensorboard_log is not None:
             model.tensorboard_log = tensorboard_log
         if config.algo in OFF_POLICY and (checkpoint / REPLAY_FILE).is_file():
             model.load_replay_buffer(checkpoint / REPLAY_FILE)
-        # loading re-seeded every stream: continue the saved ones, and the rollout the checkpoint interrupted
-        saved_streams = restore_rng_state(model, checkpoint / RNG_FILE)
+        saved_streams = restore_pickled_rng_state(model, checkpoint / RNG_FILE)
+    elif state:  # tensors, JSON and arrays only
+        model = resume_model(checkpoint, config, collecting, saved_encoder, tensorboard_log)
+        if config.algo in OFF_POLICY and (checkpoint / REPLAY_ARRAYS).is_file():
+            with _resume_errors():
+                load_replay_buffer(model.replay_buffer, checkpoint / REPLAY_ARRAYS)
     else:
-        model = make_model(config, env, saved_encoder, tensorboard_log)
+        model = make_model(config, collecting, saved_encoder, tensorboard_log)
         from crowdnav.agents.demonstrations import warm_start
 
         warm_start(model, config)  # demonstrations (off by default); a resumed run carries them in its weights and buffer
     rewinds = config.algo in OFF_POLICY and not batched
     resume_point = ResumePoint(model, off_policy=config.algo in OFF_POLICY, batched=batched)
     # the resumed run is the uninterrupted one: single-env off-policy checkpoints are rewound to an episode end,
-    # the others carry their worlds mid-episode (without these files, from an older crowdnav: a close resume)
-    exact = bool(state) and saved_streams is not None and (rewinds or (checkpoint / ROLLOUT_FILE).is_file())
-    if state and (checkpoint / ROLLOUT_FILE).is_file() and not rewinds:
-        resume_point.restore_rollout(pickle.loads((checkpoint / ROLLOUT_FILE).read_bytes()))  # the run's own file: trusted
+    # the others carry their worlds mid-episode (without them, e.g. an older crowdnav's: a close resume)
+    worlds = bool(state) and not state["legacy"] and not rewinds and (checkpoint / ROLLOUT_ARRAYS).is_file()
+    if worlds:
+        from crowdnav.agents.resume_worlds import load_rollout
+
+        with _resume_errors():
+            resume_point.restore_rollout(load_rollout(checkpoint / ROLLOUT_ARRAYS, model))
     elif state and batched and config.algo in OFF_POLICY:
         end_open_episodes(getattr(model, "replay_buffer", None))  # the worlds start new episodes
+    if state and not state["legacy"]:  # building the model re-seeded every stream: continue the saved ones (last: nothing draws after)
+        with _resume_errors():
+            saved_streams = restore_training_state(model, checkpoint / STATE_FILE)
+    exact = bool(state) and saved_streams is not None and (rewinds or worlds)
     if state and saved_streams is not None:
         steps_after = int(saved_streams.get(STEPS_AFTER_KEY, 0))
         on_start = lambda: resume_point.continue_run(steps_after)  # noqa: E731 (once SB3's logger exists)
@@ -222,7 +250,7 @@ def _train(config: TrainConfig, resume: bool, on_checkpoint: Callable[[int], Non
         model.learn(budget, callback=callback, reset_num_timesteps=state is None, tb_log_name=config.algo)
         save(callback.done, final=True)
     seconds = time.perf_counter() - started
-    env.close()
+    collecting.close()
     return TrainResult(
         out=out, checkpoint=checkpoint, episodes=callback.done, timesteps=model.num_timesteps, successes=callback.successes,
         seconds=seconds, steps_per_second=(model.num_timesteps - start_steps) / seconds if seconds > 0 else 0.0,
@@ -251,14 +279,23 @@ def _set_aside_snapshots_after(out: Path, point: int, unit: str) -> None:
             folder.rename(target)
 
 
-def _resume_state(checkpoint: Path, config: TrainConfig) -> dict[str, Any]:
+def _resume_state(checkpoint: Path, config: TrainConfig, trust_pickle: bool = False) -> dict[str, Any]:
     try:
         folder = checkpoint_folder(checkpoint)
     except FileNotFoundError:
         raise ConfigError(f"cannot resume: {checkpoint} holds no checkpoint (start the run without --resume)") from None
-    info = read_policy_info(folder)
+    try:
+        info = read_policy_info(folder)
+    except ValueError as error:
+        raise ConfigError(f"cannot resume: {error}") from None
     if not (folder / MODEL_FILE).is_file():
         raise ConfigError(f"cannot resume: {folder / MODEL_FILE} is missing")
+    legacy = not (folder / STATE_FILE).is_file()  # written before resume state was stored without pickle
+    if legacy and not trust_pickle:
+        pickles = [name for name in LEGACY_FILES if (folder / name).is_file()]
+        raise ConfigError(f"cannot resume: {folder} was written by an older crowdnav, whose resume state is pickled "
+                          f"({', '.join(pickles + [MODEL_FILE + ' data'])}), and unpickling can run code; resume with "
+                          "--trust-pickle (train(..., trust_pickle=True)) only if you trust where it came from")
     trained_worlds = int((info.get("config") or {}).get("num_envs", 1))  # older checkpoints: one env
     if trained_worlds != config.num_envs:
         raise ConfigError(f"cannot resume: {folder} was trained with num_envs {trained_worlds}, the config asks for {config.num_envs}")
@@ -267,15 +304,24 @@ def _resume_state(checkpoint: Path, config: TrainConfig) -> dict[str, Any]:
             f"cannot resume: {folder} was trained with algo {info['algo']} on {info['env']['modalities']}, "
             f"the config asks for {config.algo} on {config.modalities}"
         )
-    legacy = "observation_normalization" not in info  # written before normalisation existed: raw observations
+    raw = "observation_normalization" not in info  # written before normalisation existed: raw observations
     normalization = info.get("observation_normalization")
-    if not legacy and (normalization is not None) != config.normalize_observations:
+    if not raw and (normalization is not None) != config.normalize_observations:
         raise ConfigError(
             f"cannot resume: {folder} was trained with normalize_observations: {str(normalization is not None).lower()}, "
             f"the config asks for {str(config.normalize_observations).lower()}"
         )
     return {"episodes": int(info["episodes"]), "successes": int(info.get("successes", 0)), "config": info.get("config"),
-            "normalization": normalization, "next_episode": info.get("next_episode")}
+            "normalization": normalization, "next_episode": info.get("next_episode"), "legacy": legacy}
+
+
+@contextmanager
+def _resume_errors() -> Iterator[None]:
+    """A damaged or foreign resume file: the CLI's one-line ConfigError."""
+    try:
+        yield
+    except ResumeStateError as error:
+        raise ConfigError(f"cannot resume: {error}") from None
 
 
 def _encoder_path(config: TrainConfig) -> Path:

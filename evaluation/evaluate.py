@@ -5,10 +5,13 @@
 * ``baseline:straight`` / ``baseline:social_force``: the scripted robots (privileged: they read
   the simulator);
 * ``module:function``: a Python callable ``function(observation) -> action`` taking one
-  observation dict of :class:`crowdnav.envs.CrowdNavEnv` (raw units) and returning 2 numbers;
-* a ``.zip`` saved by Stable-Baselines3 (SAC, TD3, DDPG, A2C, PPO; sb3-contrib's algorithms too
-  when installed), trained on the scenario's observation ``Dict`` (``--modalities``). Loading an
-  SB3 zip unpickles it: evaluate only models you trust (docs/security.md);
+  observation dict of :class:`crowdnav.envs.CrowdNavEnv` (raw units) and returning 2 numbers.
+  This imports and runs that module: code by request (docs/security.md);
+* a ``.zip`` saved by Stable-Baselines3 (SAC, TD3, DDPG, A2C, PPO with ``MultiInputPolicy``),
+  trained on the scenario's observation ``Dict`` (``--modalities``). Only its parameters and
+  plain JSON are read, never its pickled objects (:mod:`agents.model_zip`), so custom policy
+  classes and sb3-contrib's algorithms are refused; a crowdnav checkpoint's own ``model.zip``
+  loads as its checkpoint folder;
 * a crowdnav training run folder or checkpoint (its own modalities and scenario settings unless
   ``--scenario`` names another scenario); only its parameters are loaded.
 
@@ -37,37 +40,24 @@ class PolicyError(ValueError):
     """A POLICY that cannot be loaded, or whose spaces do not fit the scenario; one line."""
 
 
-def _sb3_classes() -> list[Any]:
-    from stable_baselines3 import A2C, DDPG, PPO, SAC, TD3
+def _load_sb3_zip(path: Path, options: Mapping[str, Any]) -> Callable:
+    """A zip saved by SB3 itself, rebuilt from its parameters and JSON (nothing unpickled)."""
+    from crowdnav.agents.model_zip import ModelZipError, describe_shapes, zip_policy
 
-    classes = [SAC, TD3, DDPG, PPO, A2C]
-    try:  # optional: sb3-contrib's algorithms load the same way
-        import sb3_contrib
+    from crowdnav.envs import CrowdNavEnv
 
-        classes += [getattr(sb3_contrib, name) for name in ("TQC", "CrossQ", "RecurrentPPO", "ARS", "TRPO") if hasattr(sb3_contrib, name)]
-    except ImportError:
-        pass
-    return classes
-
-
-def _load_sb3_zip(path: Path) -> Any:
-    for algorithm in _sb3_classes():
-        try:
-            return algorithm.load(path, device="cpu")
-        except Exception:  # noqa: BLE001 - the wrong class for this zip: try the next
-            continue
-    raise PolicyError(f"cannot load checkpoint {path}: not a model zip that Stable-Baselines3 (or sb3-contrib) can load")
-
-
-def _check_spaces(label: str, model_space: Any, env_space: Any, modalities: Sequence[str] | None) -> None:
-    def describe(space: Any) -> str:
-        if hasattr(space, "spaces"):
-            return "{" + ", ".join(f"{key}: {tuple(sub.shape)}" for key, sub in space.spaces.items()) + "}"
-        return f"{type(space).__name__}{tuple(getattr(space, 'shape', ()) or ())}"
-
-    if describe(model_space) != describe(env_space):
-        raise PolicyError(f"{label} expects observations {describe(model_space)}, but the scenario with modalities "
-                          f"{list(modalities or [])} gives {describe(env_space)}; pass the --modalities it was trained on")
+    env = CrowdNavEnv(**options)
+    try:
+        act, shapes = zip_policy(path, env.observation_space, env.action_space)
+    except ModelZipError as error:
+        raise PolicyError(str(error)) from None
+    finally:
+        env.close()
+    if act is None:
+        scenario = describe_shapes({key: tuple(space.shape) for key, space in env.observation_space.spaces.items()})
+        raise PolicyError(f"{path} expects observations {describe_shapes(shapes)}, but the scenario with modalities "
+                          f"{list(options.get('modalities') or [])} gives {scenario}; pass the --modalities it was trained on")
+    return act
 
 
 def resolve_policy(spec: str, env_options: Mapping[str, Any]) -> tuple[str, str, Callable, bool, dict[str, Any]]:
@@ -84,14 +74,13 @@ def resolve_policy(spec: str, env_options: Mapping[str, Any]) -> tuple[str, str,
             raise PolicyError(f"unknown baseline {name!r}; expected one of: {', '.join(f'baseline:{n}' for n in BASELINES)}")
         return f"{BASELINE_PREFIX}{name}", BASELINES[name], scripted_policy(name), True, options
     path = Path(spec)
-    if path.suffix == ".zip" and path.is_file():
-        model = _load_sb3_zip(path)
-        from crowdnav.envs import CrowdNavEnv
+    from crowdnav.agents.run_folder import POLICY_FILE
 
-        env = CrowdNavEnv(**options)
-        _check_spaces(str(path), model.observation_space, env.observation_space, options.get("modalities"))
-        env.close()
-        return _safe(path.stem), path.stem, lambda batch: model.predict(batch, deterministic=True)[0], False, options
+    if path.suffix == ".zip" and path.is_file() and (path.parent / POLICY_FILE).is_file():
+        path = path.parent  # a crowdnav checkpoint's own model.zip: its folder's config rebuilds the network
+        spec = str(path)
+    elif path.suffix == ".zip" and path.is_file():
+        return _safe(path.stem), path.stem, _load_sb3_zip(path, options), False, options
     if path.exists():
         from crowdnav.agents import load_policy
 

@@ -10,7 +10,7 @@ crowdnav must be importable by the cluster's workers (installed on every node).
   (:mod:`evaluation.transfer`; default root: the results folder, so on a local Ray or a shared
   file system the run writes straight into the results). A run done elsewhere comes back as
   bytes that the driver unpacks into the results: the results never rely on a shared file system.
-  Such a run arrives without its replay buffer (train/checkpoint/replay_buffer.pkl), which only
+  Such a run arrives without its replay buffer (train/checkpoint/replay_buffer.npz), which only
   serves to resume training and can weigh hundreds of MB; everything else is as a local run's.
 * A task whose worker dies (killed, out of memory, node lost) is retried up to ``retries``
   times by Ray and resumes from its last checkpoint when it can reach it. A run that raises is
@@ -292,10 +292,13 @@ def _run_task(unit: Any, out_dir: str, storage: str, storage_id: str, encoder: b
     finally:
         reporter.stop()
     if work_dir != Path(out_dir):
+        from crowdnav.agents.resume_state import REPLAY_ARRAYS
         from crowdnav.agents.run_folder import replay_buffer_file
 
-        # The replay buffer only serves to resume training, which a finished run never does, and can weigh hundreds of MB.
-        base["files"] = pack_folder(work_dir, skip=(replay_buffer_file(TRAIN_DIR).as_posix(),))
+        # The replay buffer only serves to resume training, which a finished run never does, and can weigh hundreds of MB
+        # (replay_buffer.npz; replay_buffer.pkl from an older crowdnav).
+        old = replay_buffer_file(TRAIN_DIR)
+        base["files"] = pack_folder(work_dir, skip=(old.as_posix(), (old.parent / REPLAY_ARRAYS).as_posix()))
         if not shared:  # a node-local copy: nobody else can reach it, and the driver now gets the run
             remove_work_folder(work_dir)
     return {**summary, **base}

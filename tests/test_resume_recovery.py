@@ -72,13 +72,14 @@ def test_a_checkpoint_carries_the_random_streams_and_a_resume_restores_them(tmp_
 
     import numpy as np
     import torch
-    from crowdnav.agents.checkpoint import load_model, restore_rng_state
+    from crowdnav.agents.checkpoint import load_policy
+    from crowdnav.agents.resume_state import STATE_FILE, restore_training_state
 
     train(tiny_config(tmp_path, episodes=2, checkpoint_every=2))
-    path = tmp_path / "checkpoint" / "rng_state.pkl"
-    assert path.is_file()
-    model = load_model(tmp_path / "checkpoint")  # loading re-seeds every stream ...
-    assert restore_rng_state(model, path)       # ... and these are the ones the run had reached
+    path = tmp_path / "checkpoint" / STATE_FILE
+    assert path.is_file() and not (tmp_path / "checkpoint" / "rng_state.pkl").exists()  # JSON, no pickle
+    model = load_policy(tmp_path).model  # building a model re-seeds every stream ...
+    assert restore_training_state(model, path)  # ... and these are the ones the run had reached
     draws = (torch.rand(3).tolist(), np.random.rand(3).tolist(), random.random(), model.action_space.sample().tolist())
-    restore_rng_state(model, path)
+    restore_training_state(model, path)
     assert draws == (torch.rand(3).tolist(), np.random.rand(3).tolist(), random.random(), model.action_space.sample().tolist())

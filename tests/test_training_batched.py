@@ -5,7 +5,6 @@ reward scaling for the algorithm only, and the frozen encoder's latents computed
 from __future__ import annotations
 
 import json
-import pickle
 
 import numpy as np
 import pandas as pd
@@ -13,7 +12,8 @@ import pytest
 from agents_tiny import SMALL_LEOG, TINY_EXTRACTOR, tiny_config
 from crowdnav.agents import ConfigError, train
 from crowdnav.agents.config import config_from_mapping
-from crowdnav.agents.run_folder import ROLLOUT_FILE, checkpoint_dir, checkpoint_info, policy_snapshots
+from crowdnav.agents.resume_state import ROLLOUT_ARRAYS
+from crowdnav.agents.run_folder import checkpoint_dir, checkpoint_info, policy_snapshots
 from crowdnav.agents.seeding import TRAIN_SEED_BASE, EpisodeSeedCounter, train_seed
 from crowdnav.agents.vec_env import CrowdNavSB3VecEnv
 
@@ -137,7 +137,7 @@ def test_each_episode_is_logged_once_with_its_own_seed_and_the_budget_is_exact(t
 @pytest.mark.parametrize("algo", ["sac", "ppo"])
 def test_a_finished_batched_run_resumed_with_a_larger_budget_logs_new_episodes_with_new_seeds(tmp_path, algo):
     first = train(batched_config(tmp_path, algo, episodes=6))
-    assert not (checkpoint_dir(tmp_path) / ROLLOUT_FILE).exists()  # it ended inside a step: its worlds are not continued
+    assert not (checkpoint_dir(tmp_path) / ROLLOUT_ARRAYS).exists()  # it ended inside a step: its worlds are not continued
     started = checkpoint_info(tmp_path)["next_episode"]
     assert started > 6  # episodes still running (or ended past the budget) when it stopped
     more = train(batched_config(tmp_path, algo, episodes=12), resume=True)
@@ -166,8 +166,9 @@ def test_a_batched_run_stopped_after_a_checkpoint_and_resumed_trains_bit_for_bit
 
     def stop(episodes):
         # the first checkpoint that leaves worlds mid-episode (often all 4 time out together): the resume must continue them
-        saved = pickle.loads((checkpoint_dir(tmp_path / "stopped") / ROLLOUT_FILE).read_bytes())
-        if (saved["env"]._lengths > 0).any():
+        with np.load(checkpoint_dir(tmp_path / "stopped") / ROLLOUT_ARRAYS, allow_pickle=False) as saved:
+            mid_episode = (saved["worlds/lengths"] > 0).any()
+        if mid_episode:
             stopped_at.append(episodes)
             raise Stopped
 

@@ -76,6 +76,9 @@ def register_train(groups: argparse._SubParsersAction) -> None:
     add_override_option(parser)  # --set PATH=VALUE: scenario overrides, merged into the config's own
     add_reward_options(parser)  # --reward PRESET, --reward-weight TERM=VALUE: into reward_weights
     parser.add_argument("--resume", action="store_true", help="continue the run in --out from its checkpoint")
+    parser.add_argument("--trust-pickle", action="store_true",
+                        help="with --resume: accept a checkpoint of an older crowdnav, whose pickled state can run code "
+                             "(only for runs you trust; docs/security.md)")
     parser.add_argument("--no-progress", action="store_true", help="no progress bar")
     parser.add_argument("--print-config", action="store_true", help="print the resolved config (YAML) and exit")
     parser.add_argument("--list-options", action="store_true", help="list every config field with its default and meaning, and exit")
@@ -164,7 +167,7 @@ def train_command(args: argparse.Namespace) -> int:
     from crowdnav.scenario import ScenarioError
 
     try:
-        result = train(config, resume=args.resume)
+        result = train(config, resume=args.resume, trust_pickle=args.trust_pickle)
     except (ConfigError, ScenarioError, FileNotFoundError) as error:
         raise CliError(str(error)) from None
     print(describe_run(result))

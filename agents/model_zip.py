@@ -1,0 +1,210 @@
+"""An SB3 ``model.zip`` read without running any of its code: parameters and plain JSON only.
+
+SB3's own ``<Algo>.load`` unpickles (cloudpickle) the zip's ``data`` entry, so a zip from
+elsewhere can run code. Here the zip is opened with :mod:`zipfile`, every ``*.pth`` member is
+read with ``torch.load(..., weights_only=True)`` (tensors only), and ``data`` is parsed as JSON:
+its entries SB3 could not write as JSON are base64 pickles (``{":type:": ..., ":serialized:":
+...}``), which are never decoded; only the plain JSON values beside them are read.
+
+:func:`read_model_zip` is used by every parameter-only load (crowdnav checkpoints, resumes);
+:func:`zip_policy` rebuilds the policy network of a zip saved by Stable-Baselines3 itself
+(SAC, TD3, DDPG, PPO, A2C on a Dict observation) from that JSON, with every network size
+bounded before anything is allocated.
+"""
+
+from __future__ import annotations
+
+import io
+import json
+import re
+import zipfile
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+MAX_MEMBERS = 64
+"""SB3 writes 5-8 members."""
+MAX_MEMBER_BYTES = 1 << 30
+"""A member's uncompressed size (the parameters of the biggest network the bounds below allow fit easily)."""
+MAX_DATA_BYTES = 16 << 20
+MAX_UNITS = 4096
+"""Widest hidden layer a loaded network may declare."""
+MAX_LAYERS = 16
+MAX_CRITICS = 16
+
+
+class ModelZipError(ValueError):
+    """A model zip that cannot be read as parameters and JSON, or whose network cannot be rebuilt; one line."""
+
+
+@dataclass
+class ModelZip:
+    """What :func:`read_model_zip` reads: ``data`` (JSON, pickled values left encoded) and tensors."""
+
+    path: Path
+    data: dict[str, Any]
+    parameters: dict[str, dict[str, Any]]
+    """Object name (``policy``, ``actor.optimizer``, ...) -> its state dict, as SB3's ``set_parameters`` takes it."""
+    variables: dict[str, Any]
+    """``pytorch_variables.pth``: e.g. SAC's ``log_ent_coef``."""
+
+    def plain(self, key: str, default: Any = None) -> Any:
+        """``data[key]`` when SB3 wrote it as plain JSON; ``default`` when absent or pickled."""
+        value = self.data.get(key, default)
+        return default if _pickled(value) else value
+
+
+def _pickled(value: Any) -> bool:
+    return isinstance(value, dict) and ":serialized:" in value
+
+
+def read_model_zip(path: str | Path, device: str = "cpu") -> ModelZip:
+    """The zip's JSON ``data`` and its ``.pth`` tensors; nothing pickled is decoded. ModelZipError on a bad file."""
+    import torch
+
+    path = Path(path)
+    try:
+        with zipfile.ZipFile(path) as archive:
+            members = archive.infolist()
+            if len(members) > MAX_MEMBERS:
+                raise ModelZipError(f"{path}: {len(members)} entries, more than an SB3 model zip holds ({MAX_MEMBERS})")
+            for member in members:
+                limit = MAX_DATA_BYTES if member.filename == "data" else MAX_MEMBER_BYTES
+                if member.file_size > limit:
+                    raise ModelZipError(f"{path}: entry {member.filename} is {member.file_size:,} bytes (at most {limit:,})")
+            names = archive.namelist()
+            if "data" not in names or "policy.pth" not in names:
+                raise ModelZipError(f"{path}: not an SB3 model zip (no data or policy.pth entry)")
+            try:
+                data = json.loads(archive.read("data").decode("utf-8"))
+            except (UnicodeDecodeError, json.JSONDecodeError, RecursionError) as error:
+                raise ModelZipError(f"{path}: its data entry is not JSON ({str(error).splitlines()[0]})") from None
+            if not isinstance(data, dict):
+                raise ModelZipError(f"{path}: its data entry is not a JSON object")
+            parameters, variables = {}, {}
+            for name in names:
+                if not name.endswith(".pth"):
+                    continue
+                try:
+                    tensors = torch.load(io.BytesIO(archive.read(name)), map_location=device, weights_only=True)
+                except Exception as error:  # noqa: BLE001 - whatever torch's restricted unpickler refuses: one line
+                    raise ModelZipError(f"{path}: {name} holds more than tensors ({str(error).splitlines()[0][:200]})") from None
+                if name in ("pytorch_variables.pth", "tensors.pth"):
+                    variables = dict(tensors)
+                else:
+                    parameters[name[: -len(".pth")]] = tensors
+    except (zipfile.BadZipFile, zipfile.LargeZipFile, OSError, EOFError, NotImplementedError) as error:
+        raise ModelZipError(f"{path}: cannot read it as a zip ({str(error).splitlines()[0]})") from None
+    return ModelZip(path, data, parameters, variables)
+
+
+def check_layers(label: str, layers: Any) -> None:
+    """ModelZipError unless ``layers`` (a list of widths, or a dict of such lists) is within the bounds."""
+    lists = layers.values() if isinstance(layers, Mapping) else [layers]
+    for widths in lists:
+        if not isinstance(widths, (list, tuple)) or len(widths) > MAX_LAYERS or not all(
+                isinstance(width, int) and not isinstance(width, bool) and 1 <= width <= MAX_UNITS for width in widths):
+            raise ModelZipError(f"{label}: expected at most {MAX_LAYERS} layers of 1..{MAX_UNITS} units, got {str(widths)[:80]}")
+
+
+# ------------------------------------------------------------------ a zip saved by SB3 itself
+
+_POLICIES = {("stable_baselines3.common.policies", "MultiInputActorCriticPolicy"),
+             ("stable_baselines3.sac.policies", "MultiInputPolicy"), ("stable_baselines3.td3.policies", "MultiInputPolicy")}
+"""(module, class) a zip's JSON may name: SB3's own policies for Dict observations (DDPG's is TD3's)."""
+
+_ACTIVATIONS = ("ReLU", "Tanh", "ELU", "LeakyReLU", "GELU", "SiLU", "Sigmoid", "Softplus", "Identity")
+_FLAGS = {"use_sde": bool, "ortho_init": bool, "share_features_extractor": bool, "squash_output": bool, "full_std": bool,
+          "use_expln": bool, "normalize_images": bool, "log_std_init": (int, float), "clip_mean": (int, float)}
+_IGNORED = {"optimizer_class", "optimizer_kwargs"}
+"""Only training uses them; a loaded policy does not."""
+
+
+def zip_policy(path: str | Path, observation_space: Any, action_space: Any) -> tuple[Callable, dict[str, tuple[int, ...]] | None]:
+    """(act, observation shapes the zip was trained on) for a zip saved by Stable-Baselines3.
+
+    The policy class, ``net_arch``, activation and flags come from the JSON ``data``; the
+    network is built on ``observation_space`` (the scenario's, which the caller checks against
+    the returned shapes) and gets the zip's tensors. Custom classes (a features extractor,
+    sb3-contrib's policies) would need the zip's code: refused with one line.
+    """
+    model = read_model_zip(path)
+    cls = _policy_class(model)
+    kwargs = _policy_kwargs(model)
+    shapes = observation_shapes(model)
+    if shapes is not None and shapes != {key: tuple(space.shape) for key, space in observation_space.spaces.items()}:
+        return None, shapes  # the caller says which modalities differ before anything is built
+    try:
+        policy = cls(observation_space, action_space, lambda _: 0.0, **kwargs)
+    except (TypeError, ValueError) as error:
+        raise ModelZipError(f"{path}: cannot rebuild its policy ({str(error).splitlines()[0]})") from None
+    try:
+        policy.load_state_dict(model.parameters["policy"])
+    except (RuntimeError, KeyError, TypeError) as error:
+        raise ModelZipError(f"{path}: its parameters do not fit the network its data describes ({str(error).splitlines()[0][:200]})") from None
+    policy.set_training_mode(False)
+    return lambda batch: policy.predict(batch, deterministic=True)[0], shapes
+
+
+def _policy_class(model: ModelZip) -> type:
+    import importlib
+
+    entry = model.data.get("policy_class")
+    module = entry.get("__module__") if isinstance(entry, dict) else None
+    match = re.match(r"<function (\w+)\.__init__", str(entry.get("__init__", ""))) if isinstance(entry, dict) else None
+    key = (module, match.group(1) if match else None)
+    if key not in _POLICIES:
+        raise ModelZipError(f"{model.path}: policy class {key[1] or '?'} from {key[0] or '?'} cannot be rebuilt from parameters "
+                            "(supported: SB3's SAC, TD3, DDPG, PPO and A2C MultiInputPolicy); loading it would run the zip's code")
+    return getattr(importlib.import_module(key[0]), key[1])
+
+
+def _policy_kwargs(model: ModelZip) -> dict[str, Any]:
+    import torch
+
+    raw = model.data.get("policy_kwargs") or {}
+    if not isinstance(raw, dict):
+        raise ModelZipError(f"{model.path}: policy_kwargs is not a JSON object")
+    kwargs: dict[str, Any] = {}
+    for key, value in raw.items():
+        if key.startswith(":") or key in _IGNORED:
+            continue
+        if key == "net_arch":
+            check_layers(f"{model.path}: net_arch", value)
+            kwargs[key] = value
+        elif key == "n_critics":
+            if not isinstance(value, int) or not 1 <= value <= MAX_CRITICS:
+                raise ModelZipError(f"{model.path}: n_critics must be 1..{MAX_CRITICS}, got {str(value)[:40]}")
+            kwargs[key] = value
+        elif key == "activation_fn":
+            match = re.fullmatch(r"<class 'torch\.nn\.modules\.activation\.(\w+)'>", str(value))
+            if match is None or match.group(1) not in _ACTIVATIONS:
+                raise ModelZipError(f"{model.path}: activation {str(value)[:80]} cannot be rebuilt from parameters")
+            kwargs[key] = getattr(torch.nn, match.group(1))
+        elif key == "features_extractor_class":
+            if "CombinedExtractor" not in str(value):
+                raise ModelZipError(f"{model.path}: features extractor {str(value)[:80]} is custom code; only SB3's "
+                                    "CombinedExtractor can be rebuilt from parameters")
+        elif key in _FLAGS and isinstance(value, _FLAGS[key]):
+            kwargs[key] = value
+        else:
+            raise ModelZipError(f"{model.path}: policy_kwargs {key!r} cannot be rebuilt from parameters")
+    return kwargs
+
+
+_BOX = re.compile(r"'([^']+)': Box\(.*?, \(([0-9, ]*)\), \w+\)")
+
+
+def observation_shapes(model: ModelZip) -> dict[str, tuple[int, ...]] | None:
+    """The Dict observation's key -> shape, read from the text SB3 writes beside the pickled space (None if absent)."""
+    entry = model.data.get("observation_space")
+    text = entry.get("spaces") if isinstance(entry, dict) else None
+    if not isinstance(text, str):
+        return None
+    found = {key: tuple(int(n) for n in shape.replace(" ", "").split(",") if n) for key, shape in _BOX.findall(text)}
+    return found or None
+
+
+def describe_shapes(shapes: Mapping[str, tuple[int, ...]]) -> str:
+    return "{" + ", ".join(f"{key}: {tuple(shape)}" for key, shape in shapes.items()) + "}"

@@ -1,0 +1,158 @@
+"""``rollout_state.npz``: an interrupted rollout and the worlds mid-episode, as arrays (see :mod:`agents.resume_state`).
+
+A world is stored as the index of the episode it plays and the actions it took since that
+episode's reset (recorded by :class:`~crowdnav.agents.resume_state.ActionLog`). A resume resets
+it with the episode's seed and replays the actions: the simulator's generator, seeded at reset,
+is the episode's only randomness, so this rebuilds the world bit for bit. The observation the
+replay ends on must equal the stored last observation, or the resume is refused.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from crowdnav.agents.resume_state import _ROLLOUT, ActionLog, ResumeStateError, _fill, _position, _read_npz, _write_npz
+from crowdnav.agents.seeding import train_seed
+from crowdnav.agents.vec_env import CrowdNavSB3VecEnv
+from crowdnav.agents.wrappers import EpisodeSeeds
+from stable_baselines3.common.vec_env import DummyVecEnv
+
+
+def save_rollout(path: Path, state: Mapping[str, Any]) -> None:
+    """Write :meth:`ResumePoint.rollout_state`'s dict: the rollout buffer (on-policy), last observation, worlds."""
+    arrays: dict[str, np.ndarray] = {f"last_obs/{key}": value for key, value in _as_dict(state["last_obs"]).items()}
+    arrays["last_episode_starts"] = np.asarray(state["last_episode_starts"])
+    meta: dict[str, Any] = {"episode_num": int(state.get("episode_num") or 0), "dict_obs": isinstance(state["last_obs"], dict)}
+    if state.get("last_original_obs") is not None:  # off-policy: the observation stored in the replay buffer
+        arrays.update({f"last_original_obs/{key}": value for key, value in _as_dict(state["last_original_obs"]).items()})
+    buffer = state.get("rollout_buffer")
+    if buffer is not None:
+        arrays.update({f"rollout/observations/{key}": value for key, value in buffer.observations.items()})
+        arrays.update({f"rollout/{name}": getattr(buffer, name) for name in _ROLLOUT})
+        meta["rollout"] = {"pos": int(buffer.pos), "full": bool(buffer.full)}
+    world_arrays, meta["worlds"] = _world_state(state["env"])
+    arrays.update(world_arrays)
+    _write_npz(path, arrays, meta)
+
+
+def load_rollout(path: Path, model: Any) -> dict[str, Any]:
+    """Fill the model's rollout buffer (if stored), rebuild its env's worlds; returns the state for ``restore_rollout``."""
+    arrays, meta = _read_npz(path)
+    env = model.get_env()
+    if not isinstance(env, ActionLog):
+        raise ResumeStateError(f"{path}: the run's environment does not record its worlds (an ActionLog is needed)")
+    try:
+        last_obs, original = (_observation(arrays, prefix, meta["dict_obs"]) for prefix in ("last_obs/", "last_original_obs/"))
+        state = {"last_obs": last_obs, "last_original_obs": original, "last_episode_starts": arrays["last_episode_starts"],
+                 "episode_num": int(meta["episode_num"])}
+        if "rollout" in meta:
+            buffer = model.rollout_buffer
+            for key in buffer.observations:
+                _fill(path, buffer.observations, key, arrays, f"rollout/observations/{key}")
+            for name in _ROLLOUT:
+                _fill(path, buffer, name, arrays, f"rollout/{name}")
+            buffer.pos, buffer.full = _position(path, meta["rollout"], buffer.buffer_size)
+            buffer.generator_ready = False
+            state["rollout_buffer"] = True
+        _restore_worlds(path, env, arrays, meta["worlds"], state["last_obs"])
+    except (KeyError, TypeError, ValueError, IndexError) as error:
+        if isinstance(error, ResumeStateError):
+            raise
+        raise ResumeStateError(f"{path}: cannot resume from it ({str(error).splitlines()[0][:200]})") from None
+    return state
+
+
+def _observation(arrays: Mapping[str, np.ndarray], prefix: str, is_dict: bool) -> Any:
+    found = {key.removeprefix(prefix): value for key, value in arrays.items() if key.startswith(prefix)}
+    return (found if is_dict else found[""]) if found else None
+
+
+def _as_dict(observation: Any) -> dict[str, np.ndarray]:
+    return dict(observation) if isinstance(observation, dict) else {"": np.asarray(observation)}
+
+
+def _world_state(env: Any) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
+    if not isinstance(env, ActionLog):
+        raise ResumeStateError("the run's environment does not record its worlds (an ActionLog is needed)")
+    longest = int(env.lengths.max(initial=0))
+    arrays = {"worlds/actions": env.actions[:, :longest], "worlds/lengths": env.lengths.copy()}
+    inner = env.venv
+    if isinstance(inner, CrowdNavSB3VecEnv):
+        counter = inner.episode_seeds
+        arrays.update({"worlds/returns": inner._returns.copy(), "worlds/episode_lengths": inner._lengths.copy()})
+        return arrays, {"kind": "vector", "run_seed": counter.run_seed, "next_episode": counter.next_episode,
+                        "episode_of": [counter.episode_of[i] for i in range(inner.num_envs)],
+                        "ended_of": {str(k): v for k, v in counter.ended_of.items()}}
+    seeds = _episode_seeds(inner)
+    return arrays, {"kind": "single", "run_seed": seeds.run_seed, "episode": seeds.episode}
+
+
+def _episode_seeds(inner: Any) -> EpisodeSeeds:
+    if isinstance(inner, DummyVecEnv) and inner.num_envs == 1:
+        wrapper = inner.envs[0]
+        while hasattr(wrapper, "env"):
+            if isinstance(wrapper, EpisodeSeeds):
+                return wrapper
+            wrapper = wrapper.env
+    raise ResumeStateError(f"cannot store the worlds of {type(inner).__name__}: expected crowdnav's training environments")
+
+
+def _restore_worlds(path: Path, env: ActionLog, arrays: Mapping[str, np.ndarray], meta: Mapping[str, Any], last_obs: Any) -> None:
+    actions, lengths = arrays["worlds/actions"], arrays["worlds/lengths"]
+    n = env.num_envs
+    if lengths.shape != (n,) or lengths.dtype != np.int64 or actions.shape[:1] != (n,) or actions.shape[2:] != env.action_space.shape \
+            or (lengths < 0).any() or lengths.max(initial=0) > actions.shape[1] or not np.isfinite(actions).all():
+        raise ResumeStateError(f"{path}: its worlds' actions do not fit the run's {n} worlds")
+    inner = env.venv
+    if meta["kind"] == "vector" and isinstance(inner, CrowdNavSB3VecEnv):
+        observation = _replay_vector(inner, actions, lengths, meta)
+        for name, key in (("_returns", "worlds/returns"), ("_lengths", "worlds/episode_lengths")):
+            _fill(path, inner, name, arrays, key)
+    elif meta["kind"] == "single" and not isinstance(inner, CrowdNavSB3VecEnv):
+        observation = _replay_single(inner, actions, lengths, meta)
+    else:
+        raise ResumeStateError(f"{path}: its worlds are {meta['kind']}, the run's config builds {type(inner).__name__}")
+    expected = _as_dict(last_obs)
+    replayed = _as_dict(observation)
+    if expected.keys() != replayed.keys() or not all(np.array_equal(expected[key], replayed[key]) for key in expected):
+        raise ResumeStateError(f"{path}: replaying its worlds' episodes does not give the observation it holds "
+                               "(written by another crowdnav version, or damaged); start the run afresh")
+    env.actions = np.concatenate([actions, np.zeros((n, max(64, actions.shape[1]), *actions.shape[2:]))], axis=1)
+    env.lengths = lengths.copy()
+
+
+def _replay_vector(inner: CrowdNavSB3VecEnv, actions: np.ndarray, lengths: np.ndarray, meta: Mapping[str, Any]) -> dict[str, np.ndarray]:
+    counter, vector = inner.episode_seeds, inner.env
+    if counter is None or int(meta["run_seed"]) != counter.run_seed:
+        raise ValueError(f"the worlds were seeded by run seed {meta['run_seed']}, the run's config has {getattr(counter, 'run_seed', None)}")
+    counter.next_episode = int(meta["next_episode"])
+    counter.episode_of = {i: int(episode) for i, episode in enumerate(meta["episode_of"])}
+    counter.ended_of = {int(k): int(v) for k, v in meta["ended_of"].items()}
+    vector.reset(seed=[train_seed(counter.run_seed, counter.episode_of[i]) for i in range(inner.num_envs)])
+    # each world steps only through its own episode's actions (the batch leaves inactive worlds exactly as they are)
+    for step in range(int(lengths.max(initial=0))):
+        active = lengths > step
+        vector.batch.step(vector._checked_actions(actions[:, step]), None if active.all() else active)
+    # what the vector env's reward code keeps after a step: the robot-goal distance it measured
+    vector._previous_distance[:] = vector._goal_distance(np.arange(inner.num_envs))
+    vector._observe_all()
+    inner._reset_seeds()  # SB3 seeded the new env; its worlds are seeded by the counter
+    inner._seed = None
+    return inner._observe(vector._copy_observations())
+
+
+def _replay_single(inner: DummyVecEnv, actions: np.ndarray, lengths: np.ndarray, meta: Mapping[str, Any]) -> Any:
+    seeds = _episode_seeds(inner)
+    if int(meta["run_seed"]) != seeds.run_seed:
+        raise ValueError(f"the world was seeded by run seed {meta['run_seed']}, the run's config has {seeds.run_seed}")
+    seeds.episode = int(meta["episode"]) - 1  # its reset starts the stored episode (the wrapper counts up first)
+    env = inner.envs[0]
+    observation, _ = env.reset()
+    for action in actions[0, : int(lengths[0])]:  # through every wrapper, so the Monitor's return counts these steps
+        observation, *_ = env.step(action)
+    inner._save_obs(0, observation)
+    inner._reset_seeds()
+    return inner._obs_from_buf()
