@@ -58,6 +58,8 @@ def test_build_modalities_names_unknown_keys_and_lists_available_ones(room):
     assert "'sonar'" in message and "'camera'" in message
     for key in ALL:
         assert key in message
+    with pytest.raises(ValueError, match=r"'lidr' \(did you mean 'lidar'\?\)"):
+        build_modalities(["lidr"], room.world, room.scenario.sensors)
 
 
 @pytest.mark.parametrize(

@@ -197,7 +197,11 @@ def build_modalities(names: Sequence[str], world: CompiledWorld, sensors: Sensor
         raise ValueError(f"expected at least one modality; available: {available}")
     unknown = [name for name in names if name not in MODALITIES]
     if unknown:
-        raise ValueError(f"unknown modality key(s): {', '.join(map(repr, unknown))}; available: {available}")
+        import difflib
+
+        close = difflib.get_close_matches(unknown[0], list(MODALITIES), n=1)
+        hint = f" (did you mean {close[0]!r}?)" if close else ""
+        raise ValueError(f"unknown modality key(s): {', '.join(map(repr, unknown))}{hint}; available: {available}")
     duplicates = sorted({name for name in names if names.count(name) > 1})
     if duplicates:
         raise ValueError(f"duplicate modality key(s): {', '.join(map(repr, duplicates))}")
