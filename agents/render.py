@@ -21,7 +21,10 @@ class PolicyLoadError(ValueError):
 def resolve_policy(policy: str, seed: int) -> tuple[Act, dict[str, Any]]:
     """A scripted policy name or a checkpoint path -> (act(env, observation), env options it needs)."""
     if policy in SCRIPTED_POLICIES:
-        return scripted_act(policy, seed), {}
+        try:
+            return scripted_act(policy, seed), {}
+        except ValueError as error:  # e.g. the ORCA robot without its optional package: one line
+            raise PolicyLoadError(str(error)) from None
     path = Path(policy)
     if not path.exists():
         raise PolicyLoadError(

@@ -14,6 +14,7 @@ from typing import Protocol
 import numpy as np
 
 from crowdnav import social_force as sf
+from crowdnav.orca import OrcaSolver, obstacle_rings, pyrvo_module, toward_goal
 from crowdnav.simulator import Simulator
 
 
@@ -83,5 +84,38 @@ class SocialForceRobot:
         return velocity_to_action(sim, velocity)
 
 
-SCRIPTED_POLICIES = {"social-force": SocialForceRobot, "straight": StraightToGoal, "random": RandomPolicy}
+class OrcaRobot:
+    """ORCA for the robot: the velocity nearest to full speed at the goal that stays collision-free.
+
+    Privileged like :class:`SocialForceRobot`: ORCA (:mod:`crowdnav.orca`, the scenario's
+    ``humans.orca`` parameters) sees every human's true position and velocity, each assumed to
+    keep it (its preferred velocity), and the static obstacles. As in ORCA everywhere, the robot
+    takes only half of the avoidance of each human, the other half being the human's: against
+    humans that do not see it (``humans.see_robot: false``) it can still be hit. Needs the
+    optional package pyrvo (``pip install 'crowdnav[orca]'``).
+    """
+
+    def __init__(self):
+        pyrvo_module("the ORCA robot (baseline:orca)")
+        self._worlds: dict[int, tuple] = {}
+        """id(world) -> (world, its obstacles as RVO2 rings, agent count -> solver): one policy may drive many envs."""
+
+    def __call__(self, sim: Simulator) -> np.ndarray:
+        world, rings, solvers = self._worlds.get(id(sim.world), (None, None, None))
+        if world is not sim.world:  # (the tuple holds the world, so its id is not reused while cached)
+            world, rings, solvers = self._worlds[id(sim.world)] = (sim.world, obstacle_rings(sim.obstacles), {})
+        robot, count = sim.scenario.robot, sim.n_humans + 1
+        solver = solvers.get(count)
+        if solver is None:
+            solver = solvers[count] = OrcaSolver(rings, sim.scenario.humans.orca, sim.dt, count, "the ORCA robot")
+        if solver.episode is not sim.human_max_speed:  # a new array at every reset: another episode (or env) than last time
+            solver.configure(sim.radii, np.concatenate([[robot.max_speed], sim.human_max_speed]))
+            solver.episode = sim.human_max_speed
+        preferred = sim.velocities.copy()  # the humans keep their velocity; the robot heads for its goal
+        preferred[0] = toward_goal(np.array([sim.robot_goal - sim.robot_position]), robot.max_speed, sim.dt)[0]
+        velocity = complex(solver.velocities(sim.positions, sim.velocities, preferred)[0])
+        return velocity_to_action(sim, velocity)
+
+
+SCRIPTED_POLICIES = {"social-force": SocialForceRobot, "straight": StraightToGoal, "random": RandomPolicy, "orca": OrcaRobot}
 """Names accepted by ``crowdnav render --policy``."""

@@ -1,4 +1,4 @@
-"""The crowd simulator: one robot and a crowd of social-force humans among static obstacles.
+"""The crowd simulator: one robot and a crowd of social-force (or ORCA) humans among static obstacles.
 
 State lives in numpy arrays indexed by agent, robot first: ``positions[0]`` is the robot,
 ``positions[1:]`` the active humans. Points and velocities are complex numbers
@@ -8,7 +8,10 @@ whatever the crowd size: there is no Python loop over humans, pairs or edges. Up
 human-human force's reach, found with a grid of cells (:mod:`crowdnav.crowd_grid`, the same model
 within a stated tolerance).
 
-Step order: humans' commands (social force, or given actions) and robot kinematics ->
+Humans of groups with ``model: orca`` take their velocity from ORCA (:mod:`crowdnav.orca`, the
+optional package pyrvo) instead of the social force; everything after the command is the same.
+
+Step order: humans' commands (social force or ORCA, or given actions) and robot kinematics ->
 integrate -> measure the new geometry once (pairwise distances, nearest obstacle points) ->
 keep humans out of walls and of each other -> robot collision, world-exit and goal checks ->
 humans at their goals follow the scenario's ``on_goal`` rule.
@@ -33,7 +36,9 @@ from crowdnav.crowd_grid import CrowdGrid
 from crowdnav.events import OUTCOMES, Collision, SimulationError, StepEvents  # noqa: F401  (re-exported: their public home)
 from crowdnav.groups import apply_goal_rules, first_goals, place_groups
 from crowdnav.obstacles import nearest_on_edges
+from crowdnav.orca import OrcaCrowd, OrcaUnavailableError
 from crowdnav.placement import JITTER
+from crowdnav.scenario.errors import ScenarioError, ScenarioIssue
 from crowdnav.scenario.loader import Overrides
 from crowdnav.world import CompiledWorld, WorldSource, load_world
 
@@ -80,7 +85,28 @@ class Simulator:
         self._bounds = None if world.boundary_walls else (*map(float, world.min), *map(float, world.max))
         self._rng = np.random.default_rng()
         self._constants: dict[int, tuple] = {}
+        self.orca = self._orca_crowd()
+        """The ORCA part of the crowd (None when every walking group follows the social force)."""
         self._ready = False
+
+    def _orca_crowd(self) -> OrcaCrowd | None:
+        """The crowd's ORCA humans, or None; a scenario asking for ORCA without pyrvo fails here, at load, in one line."""
+        humans = self.scenario.humans
+        if humans.groups:  # where the file asks for it: a group's own model, or the crowd's default
+            asked = [f"humans.groups.{i}.model" if group.model else "humans.model" for i, group in enumerate(humans.groups)
+                     if not group.standing and (group.model or humans.model) == "orca"]
+        else:
+            asked = ["humans.model"] if humans.model == "orca" else []
+        if not asked:
+            return None
+        field = asked[0]
+        orca = np.array([group.standing or group.model == "orca" for _, group in humans.crowd])  # standing members never move
+        try:
+            return OrcaCrowd(self.world, self.dt, orca)
+        except OrcaUnavailableError as error:  # "FILE:LINE: humans.model: orca needs the optional package pyrvo ..."
+            issue = ScenarioIssue(field, str(error))
+            source = self.world.source
+            raise (source.error([issue]) if source is not None else ScenarioError("scenario", [issue])) from None
 
     # ----------------------------------------------------------------- state views
 
@@ -163,6 +189,8 @@ class Simulator:
         """Humans that reached their goal in the last step (under ``on_goal: stop``, on arrival only)."""
         self.step_count = 0
         self._prepare_pair_constants(n)
+        if self.orca is not None:
+            self.orca.start_episode(self.human_group, self.radii, robot.max_speed, self.human_max_speed)
         self._ready = True
 
     def _prepare_pair_constants(self, n: int) -> None:
@@ -221,7 +249,7 @@ class Simulator:
             raise RuntimeError("call reset() before step()")
         robot_velocity = self._robot_velocity(robot_action)
         if human_actions is None:
-            commands = self.social_force_commands()
+            commands = self.crowd_commands()
         else:
             commands = self._scaled_commands(human_actions)
         if self._any_stopped:
@@ -253,6 +281,15 @@ class Simulator:
     def _any_stopped(self) -> bool:
         # humans stop at their goal (on_goal: stop) or when a multi-agent env lets them leave
         return bool(self.human_stopped.any())
+
+    def crowd_commands(self) -> np.ndarray:
+        """(n_humans,) complex velocity commands (m/s) of the crowd's models in the current state (stopped humans not zeroed)."""
+        if self.orca is None:
+            return self.social_force_commands()
+        commands = self.orca.velocities(self.positions, self.velocities, self.human_goals, self.human_preferred_speed)
+        if self.orca.all_orca:
+            return commands
+        return np.where(self.orca.mask, commands, self.social_force_commands())
 
     def social_force_commands(self) -> np.ndarray:
         """(n_humans,) complex velocity commands (m/s) of the social-force model in the current state."""

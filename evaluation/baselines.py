@@ -9,6 +9,10 @@ same held-out test episodes as its learned runs, with the same scenario, overrid
   repulsion from the true positions of the humans and obstacles): what a purely reactive,
   position-only policy with perfect perception reaches.
 
+A third, ``orca`` (ORCA with the true positions and velocities of everyone, the field's standard
+scripted baseline), needs the optional package pyrvo: ``crowdnav evaluate baseline:orca`` plays
+it on demand; experiments play only the two above, so their results never depend on an extra.
+
 Each baseline is stored like a run, ``<experiment>/baseline_<name>/<env>/`` with ``meta.json``
 and ``test_episodes.csv`` (the same per-episode columns as a learned run), so the leaderboard
 ranks it and the notebook reads it without special cases. A scripted policy is deterministic
@@ -34,8 +38,12 @@ BASELINE_PREFIX = "baseline_"
 BASELINES: dict[str, str] = {
     "straight": "straight to goal (scripted)",
     "social_force": "social force, privileged (scripted)",
+    "orca": "ORCA, privileged (scripted)",
 }
-"""Baseline name -> label in tables and figures."""
+"""Baseline name (``baseline:NAME``) -> label in tables and figures."""
+
+EXPERIMENT_BASELINES = ("straight", "social_force")
+"""The baselines every experiment plays (those the core install runs; ``orca`` needs pyrvo)."""
 
 
 def is_baseline(configuration: str) -> bool:
@@ -44,10 +52,11 @@ def is_baseline(configuration: str) -> bool:
 
 
 def scripted_policy(name: str) -> Any:
-    """The scripted robot policy of a baseline name (``straight``, ``social_force``)."""
-    from crowdnav.policies import SocialForceRobot, StraightToGoal
+    """The scripted robot policy of a baseline name (``straight``, ``social_force``, ``orca``; the last one
+    raises :class:`crowdnav.orca.OrcaUnavailableError`, one line, without pyrvo)."""
+    from crowdnav.policies import OrcaRobot, SocialForceRobot, StraightToGoal
 
-    return {"straight": StraightToGoal, "social_force": SocialForceRobot}[name]()
+    return {"straight": StraightToGoal, "social_force": SocialForceRobot, "orca": OrcaRobot}[name]()
 
 
 def baseline_env_options(train: Mapping[str, Any]) -> dict[str, Any]:
@@ -68,7 +77,7 @@ def experiment_baselines(experiment: Any) -> list[tuple[str, str, dict[str, Any]
         environments.setdefault(repr(sorted(options.items())), (configuration.name, options))
     several = len(environments) > 1
     return [(f"{BASELINE_PREFIX}{name}" + (f"_{first}" if several else ""), label + (f" [{first}]" if several else ""), options)
-            for first, options in environments.values() for name, label in BASELINES.items()]
+            for first, options in environments.values() for name, label in BASELINES.items() if name in EXPERIMENT_BASELINES]
 
 
 def evaluate_baseline(experiment: str, configuration: str, label: str, env_options: Mapping[str, Any], protocol: Protocol,

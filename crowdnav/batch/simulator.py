@@ -12,7 +12,9 @@ never over worlds, humans, pairs or edges.
 Resets, and the goal rules of worlds where a human reached its goal, draw from each world's own
 generator: they run per world, on each world's own :class:`crowdnav.Simulator` (its *slot*), and
 their results are copied into the stacks. Crowds large enough for the neighbour grid
-(``Simulator.grid_from`` humans) are not batched.
+(``Simulator.grid_from`` humans) are not batched. ORCA humans (``model: orca``) get their velocities
+from each world's own solver (its slot's :class:`crowdnav.orca.OrcaCrowd`), one world at a time:
+pyrvo steps one world per call.
 """
 
 from __future__ import annotations
@@ -134,6 +136,8 @@ class BatchSimulator:
         self._static_count = first._static_count
         self._polygons = first.obstacles.polygon_count
         self._force, self._relax, self._bounds = first._force, first._relax, first._bounds
+        self._orca = first.orca
+        """The first world's ORCA crowd, for what all worlds share (None: social force only)."""
         robot = self.scenario.robot
         self._unicycle = robot.kinematics != "holonomic"
         self.buckets: dict[int, Bucket] = {}
@@ -208,10 +212,14 @@ class BatchSimulator:
         robot_re, robot_im, heading = self._robot_velocity(actions, bucket.robot_heading[rows])
         force = self._force
         if n:
-            to_goal = bucket.human_goals[rows] - positions[:, 1:]
-            total = sf.goal_force(to_goal, force.goal_weight, force.goal_saturation_distance)
-            total += bucket.repulsion[rows, 1:]
-            commands = sf.velocity_command(total, velocities[:, 1:], bucket.human_preferred_speed[rows], bucket._command_cap[rows], self._relax)
+            commands = None
+            if self._orca is None or not self._orca.all_orca:
+                to_goal = bucket.human_goals[rows] - positions[:, 1:]
+                total = sf.goal_force(to_goal, force.goal_weight, force.goal_saturation_distance)
+                total += bucket.repulsion[rows, 1:]
+                commands = sf.velocity_command(total, velocities[:, 1:], bucket.human_preferred_speed[rows], bucket._command_cap[rows], self._relax)
+            if self._orca is not None:
+                commands = self._orca_commands(bucket, rows, positions, velocities, commands)
             stopped = bucket.human_stopped[rows]
             if stopped.any():  # np.where picks the command itself where not stopped: exact for the others
                 commands = np.where(stopped, 0.0, commands)
@@ -232,6 +240,17 @@ class BatchSimulator:
         if n:
             self._goal_rules(bucket, rows)
         result.truncated[bucket.world[rows]] = bucket.step_count[rows] >= self.scenario.max_steps
+
+    def _orca_commands(self, bucket: Bucket, rows: np.ndarray, positions: np.ndarray, velocities: np.ndarray,
+                       social: np.ndarray | None) -> np.ndarray:
+        """:meth:`Simulator.crowd_commands` with ORCA humans: ORCA's velocities where a world's human follows it, else ``social``."""
+        commands = np.empty((len(rows), bucket.n), dtype=complex)
+        goals, speeds = bucket.human_goals[rows], bucket.human_preferred_speed[rows]
+        for k, world in enumerate(bucket.world[rows]):  # per world: a pyrvo solver holds one world's agents
+            crowd = self.slots[world].orca
+            orca = crowd.velocities(positions[k], velocities[k], goals[k], speeds[k])
+            commands[k] = orca if social is None else np.where(crowd.mask, orca, social[k])
+        return commands
 
     def _robot_velocity(self, actions: np.ndarray, heading: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """:meth:`Simulator._robot_velocity` for every row: (velocity re, im, new heading), in CPython's scalar arithmetic."""

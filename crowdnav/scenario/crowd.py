@@ -7,6 +7,8 @@ population with ``humans.count`` / ``spawn`` / ``goal`` / ``goal_rule`` / ``on_g
 is read as a single group named ``crowd`` and gives the same episodes as before. A file with
 ``humans.groups`` lists named groups instead, each with its own count, regions, speeds, goal
 rule and colour; the body radius, ``see_robot`` and the social-force parameters stay shared.
+Walking humans move by a **model**: the social force (the default) or ORCA (``humans.model``, which
+a group's own ``model`` overrides; ORCA needs the optional package pyrvo).
 A group with ``behaviour: stand`` is a standing conversation circle: its members stand still
 all episode, evenly spaced on a circle whose centre is drawn from the group's ``spawn``.
 """
@@ -46,7 +48,7 @@ IMPLICIT_GROUP = "crowd"
 _COLOUR = re.compile(r"^#[0-9A-Fa-f]{6}$")
 _GROUP_ONLY = ("count", "spawn", "goal_rule", "goal", "mirror_center", "on_goal")
 """Top-level crowd fields that belong to each group once ``humans.groups`` is used."""
-_WALKING_ONLY = ("preferred_speed", "goal_rule", "goal", "mirror_center", "on_goal")
+_WALKING_ONLY = ("preferred_speed", "goal_rule", "goal", "mirror_center", "on_goal", "model")
 """A group's fields that a standing group must leave at their defaults."""
 
 
@@ -92,6 +94,26 @@ class SocialForce(StrictModel):
     goal_tolerance: PositiveFloat = Field(default=0.3, description="A human has reached its goal within this distance (m).")
 
 
+HumanModel = Literal["social_force", "orca"]
+"""How walking humans choose their velocity: the social force, or ORCA (optimal reciprocal collision avoidance)."""
+
+
+class Orca(StrictModel):
+    """Parameters of ORCA, for humans with ``model: orca`` and the ORCA robot baseline (docs/simulator.md)."""
+
+    neighbour_distance: PositiveFloat = Field(default=10.0, description="Other agents farther than this (m, centre to centre) are ignored.")
+    max_neighbours: Annotated[int, Field(ge=1, le=1000)] = Field(default=10, description="At most this many nearest agents are avoided.")
+    time_horizon: PositiveFloat = Field(
+        default=5.0, description="Velocities are chosen collision-free with other agents for this long (s)."
+    )
+    # 2 s, not RVO2's customary 5: in furnished rooms 5 s makes every edge within ~7 m a constraint,
+    # which halved the humans' goal arrivals and doubled the step's cost (benchmarks/bench_orca.py)
+    time_horizon_obstacles: PositiveFloat = Field(
+        default=2.0, description="Velocities are chosen collision-free with walls and furniture for this long (s)."
+    )
+    safety_margin: NonNegativeFloat = Field(default=0.01, description="Added to every body radius ORCA sees (m).")
+
+
 def _check_count(count: int | tuple[int, int]) -> int | tuple[int, int]:
     low, high = count if isinstance(count, tuple) else (count, count)
     if low < 0 or low > high or high > MAX_HUMANS:
@@ -121,7 +143,10 @@ class HumanGroup(StrictModel):
     name: str = Field(description="Group name, unique in the file (shown in legends and per-agent infos).")
     count: Count = Field(description="Group size: a number, or [min, max] sampled uniformly per episode.")
     behaviour: Literal["walk", "stand"] = Field(
-        default="walk", description="walk: members walk to goals by social force; stand: a standing circle that never moves."
+        default="walk", description="walk: members walk to goals (by the group's model); stand: a standing circle that never moves."
+    )
+    model: HumanModel | None = Field(
+        default=None, description="social_force or orca: how members choose their velocity (default: humans.model; walk only)."
     )
     preferred_speed: SpeedRange | None = Field(
         default=None, description="[min, max] preferred walking speed in m/s, per member (default: humans.preferred_speed; walk only)."
@@ -192,7 +217,7 @@ class HumanGroup(StrictModel):
 
 
 class Humans(StrictModel):
-    """The crowd: one population (count, spawn, goal, ...) or named ``groups``; radius and social force are shared."""
+    """The crowd: one population (count, spawn, goal, ...) or named ``groups``; radius and model parameters are shared."""
 
     count: Count = Field(default=0, description="Crowd size: a number, or [min, max] sampled uniformly per episode.")
     radius: PositiveFloat = Field(default=0.3, description="Body radius of every human in metres.")
@@ -214,8 +239,13 @@ class Humans(StrictModel):
         default_factory=list, max_length=64,
         description="Named groups (at most 64), instead of count/spawn/goal/goal_rule/mirror_center/on_goal above.",
     )
-    see_robot: bool = Field(default=False, description="Whether humans are repelled by the robot (off as in the paper).")
+    see_robot: bool = Field(default=False, description="Whether humans avoid the robot (off as in the paper).")
+    model: HumanModel = Field(
+        default="social_force",
+        description="How walking humans choose their velocity: social_force or orca (needs pip install 'crowdnav[orca]'); groups may override.",
+    )
     social_force: SocialForce = Field(default_factory=SocialForce, description="Social-force model parameters.")
+    orca: Orca = Field(default_factory=Orca, description="ORCA parameters (humans with model: orca, the ORCA robot baseline).")
 
     @model_validator(mode="after")
     def _one_way_to_describe_the_crowd(self) -> Humans:
@@ -236,19 +266,24 @@ class Humans(StrictModel):
     @property
     def crowd(self) -> list[tuple[str, HumanGroup]]:
         """Every group with the dotted path of its fields in the file (``humans.groups.1`` or, for a
-        file without groups, ``humans`` for the implicit group ``crowd``); walking groups' speeds filled in."""
+        file without groups, ``humans`` for the implicit group ``crowd``); walking groups' speeds and model filled in."""
         if not self.groups:
             implicit = HumanGroup.model_construct(
                 name=IMPLICIT_GROUP, count=self.count, behaviour="walk", preferred_speed=self.preferred_speed, spawn=self.spawn,
                 goal_rule=self.goal_rule, goal=self.goal, mirror_center=self.mirror_center, on_goal=self.on_goal,
-                circle_radius=None, colour=None,
+                circle_radius=None, colour=None, model=self.model,
             )
             return [("humans", implicit)]
-        return [
-            (f"humans.groups.{i}", group if group.preferred_speed is not None or group.standing
-             else group.model_copy(update={"preferred_speed": self.preferred_speed}))
-            for i, group in enumerate(self.groups)
-        ]
+        return [(f"humans.groups.{i}", self._filled_in(group)) for i, group in enumerate(self.groups)]
+
+    def _filled_in(self, group: HumanGroup) -> HumanGroup:
+        """A walking group with the crowd's defaults for what it leaves out (speeds, model)."""
+        if group.standing:
+            return group
+        missing = {"preferred_speed": self.preferred_speed} if group.preferred_speed is None else {}
+        if group.model is None:
+            missing["model"] = self.model
+        return group.model_copy(update=missing) if missing else group
 
     @property
     def min_count(self) -> int:

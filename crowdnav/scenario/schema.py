@@ -21,7 +21,9 @@ from crowdnav.scenario.crowd import (  # noqa: F401  (re-exported: the schema's 
     IMPLICIT_GROUP,
     MIN_FORCE_RANGE,
     HumanGroup,
+    HumanModel,
     Humans,
+    Orca,
     SocialForce,
 )
 from crowdnav.scenario.fields import (  # noqa: F401  (re-exported: the schema's public names)

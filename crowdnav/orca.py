@@ -1,0 +1,160 @@
+"""ORCA (optimal reciprocal collision avoidance) through the optional package pyrvo (RVO2's bindings).
+
+Used by the humans of groups with ``model: orca`` (:class:`OrcaCrowd`, owned by each
+:class:`crowdnav.Simulator`) and by the ORCA robot baseline (:class:`crowdnav.policies.OrcaRobot`).
+The core install does not need pyrvo: it is imported only when something asks for ORCA, and its
+absence is one line saying ``pip install 'crowdnav[orca]'``.
+
+ORCA chooses, for every agent, the velocity closest to its *preferred* velocity that stays
+collision-free for ``time_horizon`` seconds with the other agents (each assumed to take half of
+the avoidance) and ``time_horizon_obstacles`` with the static obstacles (the scenario's walls,
+furniture and boundary as RVO2 polygons; round furniture as a circumscribed 16-gon), never faster
+than the agent's max speed. Given the same positions, velocities and preferred velocities it
+returns the same velocities (RVO2 is single-threaded here and keeps no state between steps that
+:meth:`OrcaSolver.velocities` does not overwrite), so the same seed still gives the same episode.
+
+pyrvo's API is per agent (one call sets one agent's position), so a step costs a few calls per
+agent; they run through ``map`` (no Python bytecode per agent), see docs/simulator.md for the cost.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from typing import Any
+
+import numpy as np
+from shapely.geometry.polygon import orient
+
+from crowdnav.obstacles import StaticObstacles
+from crowdnav.scenario.schema import Orca
+
+INSTALL = "pip install 'crowdnav[orca]'"
+DISC_SIDES = 16
+"""Round furniture is given to ORCA as the regular polygon with this many sides around the disc."""
+
+
+class OrcaUnavailableError(ValueError):
+    """ORCA was asked for but pyrvo is not installed; ``str()`` is one line with the install command."""
+
+
+def pyrvo_module(who: str) -> Any:
+    """The pyrvo module, or :class:`OrcaUnavailableError` naming ``who`` needed it."""
+    try:
+        import pyrvo
+    except ImportError:
+        raise OrcaUnavailableError(f"{who} needs the optional package pyrvo, which the core install leaves out: {INSTALL}") from None
+    return pyrvo
+
+
+def obstacle_rings(obstacles: StaticObstacles) -> list[list[tuple[float, float]]]:
+    """Every static obstacle as RVO2 vertex lists: exteriors counter-clockwise, holes clockwise.
+
+    RVO2's obstacle edges are one-sided (an agent sees an edge only from its right), so a hole
+    listed clockwise is a "negative" obstacle that keeps agents inside it: the floor of a world
+    given as a polygon (``world.points``) is such a hole in the solid outside.
+    """
+    rings = []
+    for polygon in obstacles.polygons:
+        polygon = orient(polygon, sign=1.0)
+        for ring in (polygon.exterior, *polygon.interiors):
+            rings.append([(float(x), float(y)) for x, y in ring.coords[:-1]])
+    corner = 1.0 / math.cos(math.pi / DISC_SIDES)  # the polygon's edges touch the disc
+    angles = np.exp(2j * np.pi * np.arange(DISC_SIDES) / DISC_SIDES)
+    for center, radius in zip(obstacles.disc_center, obstacles.disc_radius, strict=True):
+        vertices = center + radius * corner * angles
+        rings.append(list(zip(vertices.real.tolist(), vertices.imag.tolist(), strict=True)))
+    return rings
+
+
+def _pairs(z: np.ndarray) -> Any:
+    """(x, y) tuples of a complex array, for pyrvo's per-agent setters."""
+    return zip(z.real.tolist(), z.imag.tolist(), strict=True)
+
+
+class OrcaSolver:
+    """An RVO2 simulator over fixed static obstacles with a fixed number of agents, reused step after step.
+
+    RVO2 cannot remove agents (its ``clear_agents`` leaves its k-d tree pointing at the freed
+    ones), so a solver serves one agent count; :meth:`configure` sets each agent's radius and max
+    speed for a new episode.
+    """
+
+    def __init__(self, rings: Sequence[Sequence[tuple[float, float]]], params: Orca, dt: float, count: int, who: str):
+        pyrvo = pyrvo_module(who)
+        self.count = count
+        self._sim = sim = pyrvo.RVOSimulator()
+        sim.set_time_step(dt)
+        sim.set_agent_defaults(params.neighbour_distance, params.max_neighbours, params.time_horizon, params.time_horizon_obstacles, 1.0, 1.0)
+        for ring in rings:  # once per solver, at reset: a handful of polygons
+            sim.add_obstacle(ring)
+        sim.process_obstacles()
+        self._ids = range(count)
+        self._margin = params.safety_margin
+        list(map(sim.add_agent, [(0.0, 0.0)] * count))
+        self._vector = pyrvo.Vector2.to_tuple
+        self.episode: object = None
+        """A caller's token for the episode the agents were last configured for."""
+
+    def configure(self, radii: np.ndarray, max_speeds: np.ndarray) -> None:
+        """Each agent's body radius (m, the safety margin added) and max speed (m/s) for the episode."""
+        sim = self._sim
+        list(map(sim.set_agent_radius, self._ids, (np.asarray(radii, dtype=float) + self._margin).tolist()))
+        list(map(sim.set_agent_max_speed, self._ids, np.asarray(max_speeds, dtype=float).tolist()))
+
+    def velocities(self, positions: np.ndarray, velocities: np.ndarray, preferred: np.ndarray) -> np.ndarray:
+        """(count,) complex: ORCA's new velocity of every agent (m/s) from their positions, velocities and preferred velocities."""
+        sim, ids = self._sim, self._ids
+        list(map(sim.set_agent_position, ids, _pairs(positions)))
+        list(map(sim.set_agent_velocity, ids, _pairs(velocities)))
+        list(map(sim.set_agent_pref_velocity, ids, _pairs(preferred)))
+        sim.do_step()
+        xy = np.array(list(map(self._vector, map(sim.get_agent_velocity, ids))), dtype=float).reshape(self.count, 2)
+        return xy[:, 0] + 1j * xy[:, 1]
+
+
+def toward_goal(to_goal: np.ndarray, speed: np.ndarray | float, dt: float) -> np.ndarray:
+    """Preferred velocity: ``speed`` towards the goal, slowed so as not to pass it within one step (complex, m/s)."""
+    distance = np.abs(to_goal)
+    return to_goal * (speed / np.maximum(np.maximum(distance, np.multiply(speed, dt)), 1e-12))
+
+
+class OrcaCrowd:
+    """The ORCA part of one simulator's crowd: which humans follow ORCA, and their solver this episode.
+
+    Every human is an ORCA agent (so ORCA humans also avoid social-force and standing ones), and
+    so is the robot when the humans see it (``humans.see_robot``), at its current velocity; only
+    the velocities of the ORCA humans are used.
+    """
+
+    def __init__(self, world: Any, dt: float, orca_groups: np.ndarray):
+        self._rings = obstacle_rings(world.obstacles)
+        self._params = world.scenario.humans.orca
+        self._dt = dt
+        self._see_robot = world.scenario.humans.see_robot
+        self._orca_groups = orca_groups
+        self.all_orca = bool(orca_groups.all())
+        """Whether every walking group follows ORCA (standing members are counted in: they never move)."""
+        self._solvers: dict[int, OrcaSolver] = {}
+        self.mask = np.zeros(0, dtype=bool)
+        pyrvo_module("orca")  # fail at load, not at the first step
+
+    def start_episode(self, human_group: np.ndarray, radii: np.ndarray, robot_max_speed: float, human_max_speed: np.ndarray) -> None:
+        """Pick (or build) the solver for this episode's agents and set their radii and max speeds (``radii``: robot first)."""
+        self.mask = self._orca_groups[human_group]
+        count = len(human_group) + self._see_robot
+        solver = self._solvers.get(count)
+        if solver is None:
+            solver = self._solvers[count] = OrcaSolver(self._rings, self._params, self._dt, count, "orca")
+        self._solver = solver
+        if self._see_robot:
+            solver.configure(radii, np.concatenate([[robot_max_speed], human_max_speed]))
+        else:
+            solver.configure(radii[1:], human_max_speed)
+
+    def velocities(self, positions: np.ndarray, velocities: np.ndarray, goals: np.ndarray, preferred_speed: np.ndarray) -> np.ndarray:
+        """(n,) complex: every human's ORCA velocity (robot first in ``positions`` / ``velocities``; goals and speeds per human)."""
+        preferred = toward_goal(goals - positions[1:], preferred_speed, self._dt)
+        if self._see_robot:  # the robot keeps its course, as far as ORCA's humans can tell
+            return self._solver.velocities(positions, velocities, np.concatenate([velocities[:1], preferred]))[1:]
+        return self._solver.velocities(positions[1:], velocities[1:], preferred)
