@@ -22,6 +22,7 @@ from pydantic import AfterValidator, BaseModel, BeforeValidator, ConfigDict, Fie
 
 from crowdnav.config_errors import ConfigIssue, FieldProblems, YamlProblem, format_issues, read_yaml, validation_issues, yaml_line
 from crowdnav.registry import ALGORITHM_NAMES, ENCODER_MODES, modality_names, unknown_name_message
+from crowdnav.yaml_input import MAX_DEPTH, YamlLimitError, check_value, read_text_file
 
 __all__ = ["ALGORITHM_NAMES", "ENCODER_MODES", "ConfigError", "DemonstrationConfig", "EncoderConfig", "ExtractorConfig", "TrainConfig",
            "config_from_mapping", "config_to_dict", "describe_fields", "load_config"]
@@ -59,8 +60,14 @@ Int = Annotated[int, Strict()]
 Float = Annotated[float, Strict(), Field(allow_inf_nan=False)]
 Bool = Annotated[bool, Strict()]
 Text = Annotated[str, BeforeValidator(_path_text), Strict()]
-Size = Annotated[int, Strict(), Field(ge=1)]
-"""A layer size, kernel or stride."""
+MAX_LAYER = 4_096
+"""Widest layer, kernel or stride: bounds what a config can make the networks allocate up front."""
+MAX_LAYERS = 16
+"""Most layers in one list of sizes."""
+Size = Annotated[int, Strict(), Field(ge=1, le=MAX_LAYER)]
+"""A layer size, kernel or stride (at most :data:`MAX_LAYER`)."""
+Sizes = Annotated[list[Size], Field(max_length=MAX_LAYERS)]
+"""Layer sizes, one per layer (at most :data:`MAX_LAYERS`)."""
 Algorithm = Literal[ALGORITHM_NAMES]  # type: ignore[valid-type]  # the registry's names: choices, schema enum and errors agree
 EncoderMode = Literal[tuple(ENCODER_MODES)]  # type: ignore[valid-type]
 ModalityName = Annotated[str, Strict(), AfterValidator(_known_modality)]
@@ -78,17 +85,17 @@ class _Section(BaseModel):
 class ExtractorConfig(_Section):
     """Sizes of the multi-modal encoder (one branch per observation key, concatenated into the latent)."""
 
-    leog_channels: list[Size] = option([8, 16, 16], "Output channels of each LEOG convolution (a few layers sized for 60x60 grids).")
-    leog_kernels: list[Size] = option([4, 3, 3], "Kernel size of each LEOG convolution.")
-    leog_strides: list[Size] = option([4, 2, 1], "Stride of each LEOG convolution.")
-    leog_latent: Int = option(64, "Size of the LEOG encoder's tanh output (the autoencoder's bottleneck).", ge=1)
-    leog_head: list[Size] = option([], "Trainable fully connected layers after the LEOG encoder (also trained in frozen mode).")
-    lidar_hidden: list[Size] = option([64], "Fully connected layers of the LIDAR branch.")
-    lidar_conv_channels: list[Size] = option([], "Circular 1-D convolutions (kernel 5, stride 2) before the LIDAR's layers; [] for none.")
+    leog_channels: Sizes = option([8, 16, 16], "Output channels of each LEOG convolution (a few layers sized for 60x60 grids).")
+    leog_kernels: Sizes = option([4, 3, 3], "Kernel size of each LEOG convolution.")
+    leog_strides: Sizes = option([4, 2, 1], "Stride of each LEOG convolution.")
+    leog_latent: Int = option(64, "Size of the LEOG encoder's tanh output (the autoencoder's bottleneck).", ge=1, le=MAX_LAYER)
+    leog_head: Sizes = option([], "Trainable fully connected layers after the LEOG encoder (also trained in frozen mode).")
+    lidar_hidden: Sizes = option([64], "Fully connected layers of the LIDAR branch.")
+    lidar_conv_channels: Sizes = option([], "Circular 1-D convolutions (kernel 5, stride 2) before the LIDAR's layers; [] for none.")
     rbf_centres: Int = option(16, "Gaussian RBF centres per low-dimensional input value (goal, closest_obstacle, velocity); 0: no RBF.", ge=0)
     rbf_trainable: Bool = option(False, "Learn the RBF centres and widths (otherwise fixed, evenly spread over the value's range).")
-    lowdim_hidden: list[Size] = option([32], "Fully connected layers after the RBF layer, per low-dimensional key.")
-    table_hidden: list[Size] = option([64], "Fully connected layers on a flattened table of rows (the humans modality's nearest humans).")
+    lowdim_hidden: Sizes = option([32], "Fully connected layers after the RBF layer, per low-dimensional key.")
+    table_hidden: Sizes = option([64], "Fully connected layers on a flattened table of rows (the humans modality's nearest humans).")
 
 
 class EncoderConfig(_Section):
@@ -106,7 +113,7 @@ class DemonstrationConfig(_Section):
 
     episodes: Int = option(0, "Episodes of the social-force robot cloned before training starts (0: off, pure RL).", ge=0)
     epochs: Int = option(30, "Passes of behaviour cloning over the demonstrations (each DAgger round too).", ge=1)
-    batch_size: Int = option(256, "Minibatch of behaviour cloning.", ge=1)
+    batch_size: Int = option(256, "Minibatch of behaviour cloning.", ge=1, le=1_000_000)
     learning_rate: Float = option(1e-3, "Adam learning rate of behaviour cloning (a fresh optimizer; the algorithm's own is untouched).", gt=0)
     action_std: Float = option(0.3, "Gaussian std after cloning: PPO/A2C's log_std is set to it, SAC's log-std head is cloned towards it.", gt=0)
     value_pretraining: Bool = option(True, "Also fit the value function (PPO/A2C) or the critics at the demonstrated actions "
@@ -133,15 +140,15 @@ class TrainConfig(_Section):
                                "1: one env, as the published single-env results were trained.", ge=1, le=4096)
     updates_per_step: Float | None = option(None, "Off-policy with num_envs > 1: gradient steps per env step, the update-to-data "
                                                   "ratio (None: per-algorithm default).", gt=0, le=16)
-    n_steps: Int | None = option(None, "On-policy: steps per world in each rollout (None: per-algorithm default).", ge=1)
+    n_steps: Int | None = option(None, "On-policy: steps per world in each rollout (None: per-algorithm default).", ge=1, le=1_000_000)
     seed: Int = option(0, "Seed of the networks and of the training episodes (episode i uses seed train_seed(seed, i)).")
     out: Text = option("runs/train", "Output folder: checkpoint, snapshots, episode log, resolved config.")
-    net_arch: list[Size] | None = option(None, "Hidden layers of the actor and critic heads on top of the latent (None: per-algorithm default).")
+    net_arch: Sizes | None = option(None, "Hidden layers of the actor and critic heads on top of the latent (None: per-algorithm default).")
     learning_rate: Float | None = option(None, "Optimizer learning rate (None: per-algorithm default).", gt=0)
     learning_rate_schedule: Literal["constant", "linear"] | None = option(
         None, "linear: the learning rate decays to 0 over the budget (timesteps, or an episodes bound); None: per-algorithm default.")
-    batch_size: Int | None = option(None, "Minibatch size (None: per-algorithm default; unused by A2C).", ge=1)
-    buffer_size: Int | None = option(None, "Replay buffer capacity in transitions (off-policy only; None: default).", ge=1)
+    batch_size: Int | None = option(None, "Minibatch size (None: per-algorithm default; unused by A2C).", ge=1, le=1_000_000)
+    buffer_size: Int | None = option(None, "Replay buffer capacity in transitions (off-policy only; None: default).", ge=1, le=10_000_000)
     learning_starts: Int | None = option(None, "Steps of random actions before gradient updates start (off-policy only; None: default).", ge=0)
     gamma: Float | None = option(None, "Discount factor (None: per-algorithm default).", gt=0, le=1)
     n_step_returns: Int | None = option(None, "Off-policy: rewards summed per replay sample before bootstrapping (None: per-algorithm default).",
@@ -218,9 +225,9 @@ def load_config(path: str | Path | None = None, overrides: Mapping[str, Any] | N
     label = "<defaults>" if path is None else str(path)
     if path is not None:
         try:
-            text = Path(path).read_text(encoding="utf-8")
-        except OSError as error:
-            raise ConfigError(f"{label}: cannot read the config file: {error.strerror or error}") from None
+            text = read_text_file(path)  # a regular UTF-8 file of bounded size
+        except YamlLimitError as error:
+            raise ConfigError(f"{label}: {error}") from None
         try:
             loaded, root = read_yaml(text)
         except YamlProblem as problem:
@@ -229,6 +236,12 @@ def load_config(path: str | Path | None = None, overrides: Mapping[str, Any] | N
             raise ConfigError(f"{label}: expected a mapping of training options at the top level, got {type(loaded).__name__}")
         document = loaded or {}
     for dotted, value in (overrides or {}).items():
+        try:  # the limits of a file: a deep path or value would otherwise recurse in validation
+            check_value(value, "the value")
+            if dotted.count(".") >= MAX_DEPTH:
+                raise YamlLimitError(f"a dotted path of {dotted.count('.') + 1:,} parts; expected at most {MAX_DEPTH}")
+        except YamlLimitError as error:
+            raise ConfigError(f"{label}: {dotted[:60]}: {error}") from None
         node = document
         *parents, last = dotted.split(".")
         for part in parents:

@@ -38,6 +38,7 @@ from crowdnav.evaluation.runner import PRETRAINED, PROTOCOL_FIELDS, UnitSpec
 from pydantic import AfterValidator, BaseModel, ConfigDict, Field, Strict, ValidationError, field_validator, model_validator
 
 from crowdnav.config_errors import ConfigIssue, FieldProblems, YamlProblem, format_issues, read_yaml, validation_issues, yaml_line
+from crowdnav.yaml_input import YamlLimitError, read_text_file
 
 EXPERIMENTS_DIR = Path(__file__).resolve().parent / "experiments"
 DEFAULT_EXPERIMENT = "default"
@@ -210,13 +211,13 @@ def load_experiment(source: str | Path | None = None) -> Experiment:
     """Read and check an experiment file (see the module docstring); None: the default experiment."""
     path = experiment_path(source)
     label = str(path)
-    if not path.is_file():
+    if not path.exists():  # a FIFO or device is refused by name when read
         shipped = ", ".join(shipped_experiments())
         raise ExperimentError(f"{label}: no such experiment file (shipped experiments: {shipped})")
     try:
-        document, root = read_yaml(path.read_text(encoding="utf-8"))
-    except (OSError, UnicodeDecodeError) as error:
-        raise ExperimentError(f"{label}: cannot read the file: {error}") from None
+        document, root = read_yaml(read_text_file(path))  # a regular UTF-8 file of bounded size
+    except YamlLimitError as error:
+        raise ExperimentError(f"{label}: {error}") from None
     except YamlProblem as problem:
         raise _error(label, [problem.issue]) from None
     return experiment_from_mapping(document, label, root, default_name=path.stem)

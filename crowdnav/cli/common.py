@@ -9,6 +9,8 @@ from typing import Any
 
 import yaml
 
+from crowdnav.yaml_input import YamlLimitError, parse_value
+
 
 class CliError(Exception):
     """A user mistake a command reports as one line on stderr (exit status 1), never as a traceback."""
@@ -27,18 +29,32 @@ def add_override_option(parser: argparse.ArgumentParser) -> None:
 
 
 def parse_overrides(items: Sequence[str]) -> dict[str, Any]:
-    """``["humans.count=20"]`` -> ``{"humans.count": 20}``; values are parsed as YAML."""
+    """``["humans.count=20"]`` -> ``{"humans.count": 20}``; values are parsed as YAML.
+
+    A value is read like a file (:mod:`crowdnav.yaml_input`): the same size, depth and alias
+    limits, and YAML 1.2 numbers (``1e-6`` is a number, ``010`` stays text). The path's own
+    limits are checked where it is applied (:func:`crowdnav.scenario.loader.read_scenario`).
+    """
     overrides = {}
     for item in items:
         path, sep, text = item.partition("=")
         if not sep or not path.strip():
-            raise CliError(f"--set expects PATH=VALUE, e.g. humans.count=20; got {item!r}")
+            raise CliError(f"--set expects PATH=VALUE, e.g. humans.count=20; got {_short(item)}")
+        path = path.strip()
         try:
-            overrides[path.strip()] = yaml.safe_load(text)
+            overrides[path] = parse_value(text)
+        except YamlLimitError as error:
+            raise CliError(f"--set {_short(path)}: the value {error}") from None
         except yaml.YAMLError as error:
-            problem = getattr(error, "problem", None) or error
-            raise CliError(f"--set {path.strip()}: value {text!r} is not valid YAML ({problem})") from None
+            problem = str(getattr(error, "problem", None) or error).splitlines()[0]  # one line, whatever PyYAML says
+            raise CliError(f"--set {_short(path)}: value {_short(text)} is not valid YAML ({problem})") from None
     return overrides
+
+
+def _short(text: str) -> str:
+    """``repr(text)``, cut to 80 characters: a long value must not flood the one-line error."""
+    shown = repr(text)
+    return shown if len(shown) <= 80 else shown[:77] + "..."
 
 
 def add_reward_options(parser: argparse.ArgumentParser) -> None:

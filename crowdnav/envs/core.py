@@ -22,6 +22,7 @@ from crowdnav.scenario import ScenarioIssue, library
 from crowdnav.sensors import Modality, build_modalities
 from crowdnav.simulator import Simulator, StepEvents
 from crowdnav.world import CompiledWorld, WorldSource, load_world
+from crowdnav.yaml_input import check_value
 
 ScenarioSource = WorldSource
 """A library name (``"room_furniture"``), a YAML path, a :class:`Scenario` or a parsed mapping."""
@@ -39,6 +40,8 @@ def option_overrides(
     ``reward.<term>``, modalities ``sensors.modalities``. Options win over the same path in
     ``overrides``.
     """
+    for option, value in (("modalities", modalities), ("sensors", sensors), ("reward_weights", reward_weights), ("overrides", overrides)):
+        check_value(value, option)  # the limits of a file, before anything walks the value (ValueError)
     merged: dict[str, Any] = dict(_mapping("overrides", overrides))
     if modalities is not None:
         if isinstance(modalities, str) or not isinstance(modalities, Sequence):

@@ -20,6 +20,11 @@ from crowdnav.batch.simulator import BatchSimulator, StepResult
 from crowdnav.envs.core import ScenarioSource, load_env_world, option_overrides, real_array
 from crowdnav.envs.reward import REWARD_TERMS
 
+MAX_WORLDS = 4_096
+"""Most worlds in one vector env (the training config's num_envs bound)."""
+MAX_AGENTS = 2_000_000
+"""Most agents (robots and humans at the crowd's largest) over all worlds: each costs about 1 kB of state."""
+
 
 class CrowdNavVectorEnv(VectorEnv):
     """``num_envs`` copies of :class:`crowdnav.envs.CrowdNavEnv` in one batch (a Gymnasium ``VectorEnv``).
@@ -83,6 +88,7 @@ class CrowdNavVectorEnv(VectorEnv):
     ):
         if render_mode is not None:
             raise ValueError("the vector env does not render; render a single env (gymnasium.make(..., render_mode=...))")
+        _check_num_envs(num_envs)  # before the world loads: a wrong count costs nothing
         try:
             self.autoreset_mode = AutoresetMode(autoreset_mode)
         except ValueError:
@@ -90,6 +96,7 @@ class CrowdNavVectorEnv(VectorEnv):
         world, self.modalities = load_env_world(scenario, option_overrides(modalities, sensors, reward_weights, overrides))
         self.scenario = world.scenario
         self.episode_seeds = episode_seeds
+        _check_agents(num_envs, world.scenario.humans.max_count)
         self.batch = BatchSimulator(world, num_envs)
         if keep_freed_memory:
             _keep_freed_memory()
@@ -311,6 +318,18 @@ class CrowdNavVectorEnv(VectorEnv):
     def simulator(self, world: int) -> Any:
         """``world``'s own :class:`crowdnav.Simulator` (its groups, radii, scenario; its state arrays are stale)."""
         return self.batch.slots[world]
+
+
+def _check_num_envs(num_envs: Any) -> None:
+    if isinstance(num_envs, bool) or not isinstance(num_envs, (int, np.integer)) or not 1 <= num_envs <= MAX_WORLDS:
+        raise ValueError(f"num_envs must be an integer from 1 to {MAX_WORLDS:,}, got {num_envs!r}")
+
+
+def _check_agents(num_envs: int, max_humans: int) -> None:
+    agents = int(num_envs) * (max_humans + 1)
+    if agents > MAX_AGENTS:
+        raise ValueError(f"num_envs={num_envs} worlds of up to {max_humans:,} humans make {agents:,} agents; "
+                         f"expected at most {MAX_AGENTS:,}: fewer worlds or a smaller crowd")
 
 
 def _restricted(infos: dict[str, Any], keep: np.ndarray) -> dict[str, Any]:

@@ -26,8 +26,11 @@ from crowdnav.scenario import library
 from crowdnav.scenario.errors import ScenarioError, ScenarioIssue, show
 from crowdnav.scenario.messages import schema_issues
 from crowdnav.scenario.schema import Scenario
+from crowdnav.yaml_input import MAX_DEPTH, MAX_VALUES, YamlLimitError, check_value, read_text_file
 
 Overrides = Mapping[str, Any]
+MAX_PATH_CHARACTERS = 1_000
+"""Longest dotted override path (a scenario's deepest field is a few dozen characters)."""
 
 
 @dataclass(frozen=True)
@@ -67,20 +70,24 @@ def read_scenario(source: str | Path | Mapping[str, Any] | Scenario, overrides: 
             return LoadedScenario(source, source.name or "<scenario>")
         source = source.model_dump()
     if isinstance(source, Mapping):
-        label, document, root = "<mapping>", copy.deepcopy(dict(source)), None
+        label = "<mapping>"
+        _check_bounded(label, "", source, "the scenario mapping")  # before copying: deepcopy recurses
+        document, root = copy.deepcopy(dict(source)), None
     else:
         path = library.resolve(source)
         label = str(path)
         if path.is_dir():
             expected = "is a directory; expected a scenario YAML file or a library scenario name"
             raise ScenarioError(label, [ScenarioIssue("", expected)])
-        if not path.is_file():
+        if not path.exists():  # a FIFO or device is refused by name when read
             raise _not_found(source, path)
         document, root = _read_yaml(path)
     override_paths = set()
-    for dotted, value in (overrides or {}).items():
+    for dotted, value in _checked_overrides(label, overrides).items():
         _apply_override(label, document, dotted, value)
         override_paths.add(dotted)
+    if override_paths:  # each override was within the limits; together they must be too
+        _check_bounded(label, "", document, "the scenario with its overrides")
     if isinstance(source, (str, Path)) and document.get("name") is None:
         document["name"] = safe_stem(library.resolve(source).stem)
     scenario = _validate_schema(label, document, root, override_paths)
@@ -101,12 +108,40 @@ def _not_found(source: str | Path, path: Path) -> ScenarioError:
     return ScenarioError(str(source), [ScenarioIssue("", message)])
 
 
+def _checked_overrides(label: str, overrides: Overrides | None) -> Overrides:
+    """``overrides`` within the limits a file has (:mod:`crowdnav.yaml_input`), whoever passed them:
+    ``--set``, a training config or experiment, an env's ``overrides=`` or options."""
+    if overrides is None:
+        return {}
+    if not isinstance(overrides, Mapping):
+        message = f"overrides must be a mapping of dotted paths to values, got {type(overrides).__name__}"
+        raise ScenarioError(label, [ScenarioIssue("", message)])
+    if len(overrides) > MAX_VALUES:
+        raise ScenarioError(label, [ScenarioIssue("", f"{len(overrides):,} overrides; expected at most {MAX_VALUES:,}")])
+    for dotted, value in overrides.items():
+        if not isinstance(dotted, str) or not dotted:
+            raise ScenarioError(label, [ScenarioIssue("", f"override paths must be dotted field names, got {show(dotted)}")])
+        if len(dotted) > MAX_PATH_CHARACTERS or dotted.count(".") >= MAX_DEPTH:
+            message = (f"override path of {len(dotted):,} characters and {dotted.count('.') + 1:,} parts; "
+                       f"expected at most {MAX_PATH_CHARACTERS:,} characters and {MAX_DEPTH} parts")
+            raise ScenarioError(label, [ScenarioIssue(dotted[:60] + "...", message)])
+        _check_bounded(label, dotted, value, "the override value")
+    return overrides
+
+
+def _check_bounded(label: str, path: str, value: Any, what: str) -> None:
+    try:
+        check_value(value, what)
+    except YamlLimitError as error:
+        raise ScenarioError(label, [ScenarioIssue(path, str(error))]) from None
+
+
 def _read_yaml(path: Path) -> tuple[dict[str, Any], yaml.Node | None]:
     label = str(path)
     try:
-        text = path.read_text(encoding="utf-8")
-    except (OSError, UnicodeDecodeError) as error:
-        raise ScenarioError(label, [ScenarioIssue("", f"cannot read file: {error}")]) from None
+        text = read_text_file(path)  # a regular UTF-8 file of bounded size
+    except YamlLimitError as error:
+        raise ScenarioError(label, [ScenarioIssue("", str(error), error.line)]) from None
     try:
         document, root = read_yaml(text)  # bounded cost, one error style
     except YamlProblem as problem:
