@@ -17,15 +17,25 @@
 
 The episodes are the test seeds ``test_seed_base``, ``test_seed_base + 1``, ... (default 0-19,
 the protocol's held-out episodes; use e.g. 500 for final rankings): the same for every policy.
-Each policy's rows land in ``OUT/evaluate/<name>/eval/`` (``test_episodes.csv`` and ``meta.json``,
-the columns of every protocol run), so ``crowdnav leaderboard OUT`` ranks them together and with
-any ``crowdnav benchmark`` results.
+Results are keyed by what they measured, (policy, scenario, test set): the rows land in
+``OUT/evaluate/<name>--<scenario>/seeds_<first>-<last>/`` (``test_episodes.csv`` and
+``meta.json``, the columns of every protocol run), ``<scenario>`` the scenario's name (a file's
+stem) with a short hash of its path and overrides when there are any. A folder that already
+holds results is never replaced unless ``force=True`` (``--force``). ``crowdnav leaderboard OUT``
+ranks them with any ``crowdnav benchmark`` results, one table per scenario and test set.
+
+A policy that raises (or exits) while acting is one :class:`PolicyError` line naming it and the
+exception; ``--traceback`` shows where.
 """
 
 from __future__ import annotations
 
+import hashlib
 import importlib
+import json
+import os
 import re
+import sys
 import time
 from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
@@ -37,7 +47,11 @@ EXPERIMENT = "evaluate"
 
 
 class PolicyError(ValueError):
-    """A POLICY that cannot be loaded, or whose spaces do not fit the scenario; one line."""
+    """A POLICY that cannot be loaded, whose spaces do not fit the scenario, or that raised while acting; one line."""
+
+
+class ResultsExistError(FileExistsError):
+    """The results folder of this (policy, scenario, test set) is already there and ``force`` was not given."""
 
 
 def _load_sb3_zip(path: Path, options: Mapping[str, Any]) -> Callable:
@@ -69,7 +83,7 @@ def resolve_policy(spec: str, env_options: Mapping[str, Any]) -> tuple[str, str,
     if spec.startswith("baseline:"):
         from crowdnav.evaluation.baselines import BASELINE_PREFIX, BASELINES, scripted_policy
 
-        name = spec.removeprefix("baseline:")
+        name = spec.removeprefix("baseline:").replace("-", "_")  # the render spelling (social-force) is accepted
         if name not in BASELINES:
             raise PolicyError(f"unknown baseline {name!r}; expected one of: {', '.join(f'baseline:{n}' for n in BASELINES)}")
         return f"{BASELINE_PREFIX}{name}", BASELINES[name], scripted_policy(name), True, options
@@ -80,6 +94,8 @@ def resolve_policy(spec: str, env_options: Mapping[str, Any]) -> tuple[str, str,
         path = path.parent  # a crowdnav checkpoint's own model.zip: its folder's config rebuilds the network
         spec = str(path)
     elif path.suffix == ".zip" and path.is_file():
+        if not options.get("modalities"):  # the zip knows its observation keys: no --modalities needed
+            options["modalities"] = _zip_modalities(path)
         return _safe(path.stem), path.stem, _load_sb3_zip(path, options), False, options
     if path.exists():
         from crowdnav.agents import load_policy
@@ -98,6 +114,8 @@ def resolve_policy(spec: str, env_options: Mapping[str, Any]) -> tuple[str, str,
         return _safe(_run_name(Path(spec))), _run_name(Path(spec)), policy, False, trained
     if re.fullmatch(r"[A-Za-z_][\w.]*:[A-Za-z_]\w*", spec):
         module_name, function_name = spec.split(":")
+        if os.getcwd() not in sys.path and "" not in sys.path:
+            sys.path.insert(0, os.getcwd())  # as `python -m` does: a module next to where the command runs imports
         try:
             function = getattr(importlib.import_module(module_name), function_name)
         except (ImportError, AttributeError) as error:
@@ -118,6 +136,41 @@ def resolve_policy(spec: str, env_options: Mapping[str, Any]) -> tuple[str, str,
                       "(baseline:straight, baseline:social_force)")
 
 
+def _zip_modalities(path: Path) -> list[str] | None:
+    """The observation keys an SB3 zip was trained on, read from its JSON (None when it does not say)."""
+    from crowdnav.agents.model_zip import ModelZipError, observation_shapes, read_model_zip
+
+    try:
+        shapes = observation_shapes(read_model_zip(path))
+    except ModelZipError as error:
+        raise PolicyError(str(error)) from None
+    return list(shapes) if shapes else None
+
+
+def scenario_key(scenario: str, overrides: Mapping[str, Any]) -> str:
+    """A folder-safe key of the environment: the library name, or a file's stem plus a hash of its path and overrides."""
+    path = Path(scenario)
+    library = not path.suffix and os.sep not in scenario
+    if library and not overrides:
+        return _safe(scenario)
+    identity = json.dumps({"scenario": scenario if library else str(path.resolve()), "overrides": overrides}, sort_keys=True, default=str)
+    return f"{_safe(path.stem)}-{hashlib.sha256(identity.encode()).hexdigest()[:8]}"
+
+
+def _guarded(act: Callable, spec: str) -> Callable:
+    """``act`` whose exceptions (and exits) become one PolicyError line naming the policy."""
+    def guarded(batch: Any) -> Any:
+        try:
+            return act(batch)
+        except PolicyError:
+            raise
+        except (Exception, SystemExit) as error:  # any failure of the user's policy is reported, not a crash
+            message = str(error).splitlines()[0] if str(error) else ""
+            raise PolicyError(f"{spec} raised {type(error).__name__}{': ' + message if message else ''} while acting "
+                              "(--traceback shows where)") from error
+    return guarded
+
+
 def _run_name(path: Path) -> str:
     """``lidar_seed_2`` for EXPERIMENT/lidar/seed_2, ``sac`` for runs/sac/checkpoint."""
     parts = [part for part in path.resolve().parts if part not in ("checkpoint", "policy.json", "train")]
@@ -131,8 +184,12 @@ def _safe(name: str) -> str:
 
 def evaluate_policy(spec: str, scenario: str, out: str | Path, *, modalities: Sequence[str] | None = None,
                     episodes: int = 20, test_seed_base: int = 0, overrides: Mapping[str, Any] | None = None,
-                    name: str | None = None) -> Path:
-    """Play POLICY on ``episodes`` fixed test episodes of ``scenario``; returns the run folder written."""
+                    name: str | None = None, force: bool = False, progress: bool = False) -> Path:
+    """Play POLICY on ``episodes`` fixed test episodes of ``scenario``; returns the run folder written.
+
+    Raises :class:`ResultsExistError` when this (policy, scenario, test set) has results in
+    ``out`` already and ``force`` is False; ``progress`` shows a bar over the episodes.
+    """
     import pandas as pd
     from crowdnav.evaluation.protocol import Protocol
     from crowdnav.evaluation.rollout import HeldOutEpisodes
@@ -145,26 +202,39 @@ def evaluate_policy(spec: str, scenario: str, out: str | Path, *, modalities: Se
                                "overrides": dict(overrides or {})}
     options = {key: value for key, value in options.items() if value is not None}
     configuration, label, act, privileged, env_options = resolve_policy(spec, options)
-    configuration = _safe(name) if name else configuration
+    configuration = f"{_safe(name) if name else configuration}--{scenario_key(scenario, options.get('overrides', {}))}"
+    folder = inside(out, f"{EXPERIMENT}/{configuration}/seeds_{test_seed_base}-{test_seed_base + episodes - 1}")
+    if not force and ((folder / META_FILE).exists() or (folder / TEST_FILE).exists()):
+        raise ResultsExistError(f"{folder} already holds this policy's results on this scenario and test set; "
+                                "pass --force (force=True) to replace them, or --out another folder")
     protocol = Protocol(train_episodes=1, eval_every=1, test_episodes=episodes, seeds=1, test_seed_base=test_seed_base, final_evaluations=1)
     started = time.perf_counter()
     held_out = HeldOutEpisodes(env_options, protocol.test_seeds)
+    bar = None
+    if progress:
+        from tqdm import tqdm
+
+        bar = tqdm(total=episodes, unit="ep", desc=f"evaluate {label}", leave=False)
     try:
-        rows = held_out.run(act, privileged=privileged)
+        rows = held_out.run(_guarded(act, spec), privileged=privileged, on_end=bar.update if bar is not None else None)
+    except PolicyError:
+        raise
     except (ValueError, TypeError) as error:  # an action of the wrong shape or type, from the user's policy
-        raise PolicyError(f"{spec}: {str(error).splitlines()[0]}") from None
+        raise PolicyError(f"{spec}: {str(error).splitlines()[0]}") from error
     finally:
         held_out.close()
+        if bar is not None:
+            bar.close()
     frame = pd.DataFrame(rows)
     for position, (column, value) in enumerate(zip((*RUN_COLUMNS, "training_episodes", "evaluation"),
                                                    (EXPERIMENT, configuration, label, 0, 0, 0), strict=True)):
         frame.insert(position, column, value)
-    folder = inside(out, f"{EXPERIMENT}/{configuration}/eval")
     atomic_write_csv(frame, folder / TEST_FILE)
     steps = int(frame["steps"].sum())
     meta = {
         "experiment": EXPERIMENT, "configuration": configuration, "label": label, "seed": 0, "status": "complete",
-        "kind": "evaluated", "policy": spec, "env": env_options, "protocol": protocol.to_dict(), "versions": package_versions(),
+        "kind": "evaluated", "policy": spec, "scenario": scenario, "env": env_options, "protocol": protocol.to_dict(),
+        "versions": package_versions(),
         "git_commit": git_commit(), "wall_time_s": round(time.perf_counter() - started, 3),
         "env_steps": {"train": 0, "test": steps, "total": steps}, "training_episodes": 0, "test_episodes": len(frame),
         "resumed": False, "final": {outcome: round(float((frame["outcome"] == outcome).mean()), 6) for outcome in OUTCOMES},

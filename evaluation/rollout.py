@@ -46,17 +46,19 @@ class HeldOutEpisodes:
         return self._envs
 
     def run(self, policy: BatchPolicy | ScriptedPolicy, *, privileged: bool = False, record: bool = False,
-            batched: bool = True) -> list[dict[str, Any]]:
+            batched: bool = True, on_end: Callable[[], None] | None = None) -> list[dict[str, Any]]:
         """Play one episode per seed with ``policy``; one dict per episode (seed order): outcome, return, metrics.
 
         ``privileged``: ``policy`` is a scripted robot policy (:mod:`crowdnav.policies`) called
         with each running episode's simulator instead of the stacked observations. ``record``:
         each dict also holds ``frames``, the episode's states step by step (see
         :mod:`crowdnav.evaluation.trajectories`). ``batched=False`` plays a learned policy's
-        episodes on single envs too (the reference the batched run is tested against).
+        episodes on single envs too (the reference the batched run is tested against). ``on_end`` is
+        called once per episode as it ends (a progress bar).
         """
+        ended = on_end or (lambda: None)
         if batched and not privileged:
-            return self._run_batched(policy, record)
+            return self._run_batched(policy, record, ended)
         envs = self.envs
         observations = [env.reset(seed=seed)[0] for env, seed in zip(envs, self.seeds, strict=True)]
         log = _Log([env.simulator.positions.copy() for env in envs], [_state(env.simulator) for env in envs] if record else None)
@@ -74,12 +76,13 @@ class HeldOutEpisodes:
                 log.step(i, sim.positions.copy(), lambda sim=sim: _state(sim), complex(sim.robot_social_force), reward)
                 if terminated or truncated:
                     log.ends[i] = info
+                    ended()
                 else:
                     still.append(i)
             running = still
         return log.episodes(self, [env.simulator for env in envs])
 
-    def _run_batched(self, policy: BatchPolicy, record: bool) -> list[dict[str, Any]]:
+    def _run_batched(self, policy: BatchPolicy, record: bool, ended: Callable[[], None]) -> list[dict[str, Any]]:
         """:meth:`run` for a learned policy, the episodes stepped as one batch (ended worlds wait)."""
         if self._vector is None:
             from crowdnav.envs.vector import CrowdNavVectorEnv
@@ -102,6 +105,7 @@ class HeldOutEpisodes:
                     if infos.get("_collision_kind", np.zeros(count, dtype=bool))[i]:
                         log.ends[i]["collision_kind"] = infos["collision_kind"][i]
                     running[i] = False
+                    ended()
         return log.episodes(self, [env.simulator(i) for i in range(count)])
 
     def _episode(self, i: int, sim: Any, positions: list[np.ndarray], forces: list[float], total: float,

@@ -7,7 +7,7 @@ import textwrap
 
 import numpy as np
 import pytest
-from crowdnav.evaluation.evaluate import PolicyError, evaluate_policy
+from crowdnav.evaluation.evaluate import PolicyError, ResultsExistError, evaluate_policy
 from crowdnav.evaluation.leaderboard import write_leaderboard
 
 from crowdnav.cli import main
@@ -21,6 +21,12 @@ TOWARD_GOAL = textwrap.dedent('''
 
     def broken(observation):
         return "forward"
+
+    def raising(observation):
+        return observation["lidar"]
+
+    def exiting(observation):
+        raise SystemExit(0)
 ''')
 
 
@@ -37,8 +43,23 @@ def test_a_callable_that_drives_at_the_goal_scores_exactly_the_straight_baseline
     baseline = evaluate_policy("baseline:straight", "open_space", tmp_path, episodes=6)
     table, _ = write_leaderboard([tmp_path], tmp_path / "board")
     rows = table.set_index("configuration")
-    assert rows.loc["my_policies_toward_goal", "final_success_mean"] == rows.loc["baseline_straight", "final_success_mean"]
-    assert ours.name == baseline.name == "eval" and (ours / "test_episodes.csv").is_file()
+    assert rows.loc["my_policies_toward_goal--open_space", "final_success_mean"] == rows.loc["baseline_straight--open_space", "final_success_mean"]
+    assert ours.name == baseline.name == "seeds_0-5" and (ours / "test_episodes.csv").is_file()
+
+
+def test_results_are_keyed_by_policy_scenario_and_test_set_and_never_overwritten_without_force(tmp_path):
+    first = evaluate_policy("baseline:straight", "open_space", tmp_path, episodes=3)
+    other_scenario = evaluate_policy("baseline:straight", "empty_room", tmp_path, episodes=3)
+    other_seeds = evaluate_policy("baseline:straight", "open_space", tmp_path, episodes=3, test_seed_base=100)
+    overridden = evaluate_policy("baseline:straight", "open_space", tmp_path, episodes=3, overrides={"humans.count": 2})
+    assert len({first, other_scenario, other_seeds, overridden}) == 4
+    assert first.relative_to(tmp_path).as_posix() == "evaluate/baseline_straight--open_space/seeds_0-2"
+    assert other_seeds.name == "seeds_100-102" and overridden.parent.name.startswith("baseline_straight--open_space-")
+    written = (first / "test_episodes.csv").read_bytes()
+    with pytest.raises(ResultsExistError, match="already holds .* pass --force"):
+        evaluate_policy("baseline:straight", "open_space", tmp_path, episodes=3)
+    assert (first / "test_episodes.csv").read_bytes() == written
+    assert evaluate_policy("baseline:straight", "open_space", tmp_path, episodes=3, force=True) == first
 
 
 def test_an_sb3_zip_is_evaluated_and_a_space_mismatch_is_one_clear_line(tmp_path):
@@ -49,7 +70,9 @@ def test_an_sb3_zip_is_evaluated_and_a_space_mismatch_is_one_clear_line(tmp_path
     model = PPO("MultiInputPolicy", CrowdNavEnv("open_space", modalities=["goal"]), n_steps=32, batch_size=16, seed=0)
     model.save(tmp_path / "my_ppo.zip")
     folder = evaluate_policy(str(tmp_path / "my_ppo.zip"), "open_space", tmp_path / "results", modalities=["goal"], episodes=3)
-    assert folder.parent.name == "my_ppo"
+    assert folder.parent.name == "my_ppo--open_space"
+    again = evaluate_policy(str(tmp_path / "my_ppo.zip"), "open_space", tmp_path / "again", episodes=3)  # keys read from the zip
+    assert (again / "test_episodes.csv").read_bytes() == (folder / "test_episodes.csv").read_bytes()
     with pytest.raises(PolicyError, match=r"expects observations \{goal: \(3,\)\}, but the scenario with modalities \['lidar'\] gives"):
         evaluate_policy(str(tmp_path / "my_ppo.zip"), "open_space", tmp_path / "results", modalities=["lidar"], episodes=3)
 
@@ -62,6 +85,32 @@ def test_bad_policies_are_one_line_errors(tmp_path, module_on_path, capsys):
     assert main(["evaluate", f"{module_on_path}:broken", "--scenario", "open_space", "--modalities", "goal", "--out", str(tmp_path)]) == 1
     err = capsys.readouterr().err.strip()
     assert err.count("\n") == 0 and "must be 2 numbers" in err
+    assert main(["evaluate", f"{module_on_path}:raising", "--scenario", "open_space", "--modalities", "goal", "--out", str(tmp_path)]) == 1
+    err = capsys.readouterr().err.strip()
+    assert err.count("\n") == 0 and "my_policies:raising raised KeyError: 'lidar' while acting" in err
+    assert main(["evaluate", f"{module_on_path}:exiting", "--scenario", "open_space", "--modalities", "goal", "--out", str(tmp_path)]) == 1
+    assert "raised SystemExit" in capsys.readouterr().err
+    assert main(["evaluate", f"{module_on_path}:raising", "--scenario", "open_space", "--modalities", "goal", "--out", str(tmp_path),
+                 "--traceback", "--no-progress"]) == 1
+    assert "Traceback" in capsys.readouterr().err and not (tmp_path / "evaluate" / "my_policies_raising--open_space").exists()
+
+
+def test_a_module_next_to_where_the_command_runs_imports_without_pythonpath(tmp_path, monkeypatch, capsys):
+    (tmp_path / "beside_me.py").write_text(TOWARD_GOAL)
+    monkeypatch.chdir(tmp_path)
+    monkeypatch.setattr(sys, "path", [entry for entry in sys.path if entry not in ("", str(tmp_path))])
+    try:
+        assert main(["evaluate", "beside_me:toward_goal", "--scenario", "open_space", "--modalities", "goal", "--episodes", "2",
+                     "--out", "results", "--no-progress"]) == 0
+    finally:
+        sys.modules.pop("beside_me", None)
+    assert (tmp_path / "results" / "evaluate" / "beside_me_toward_goal--open_space" / "seeds_0-1" / "test_episodes.csv").is_file()
+
+
+def test_both_spellings_of_a_baseline_name_the_same_policy(tmp_path):
+    dashed = evaluate_policy("baseline:social-force", "open_space", tmp_path / "a", episodes=2)
+    underscored = evaluate_policy("baseline:social_force", "open_space", tmp_path / "b", episodes=2)
+    assert (dashed / "test_episodes.csv").read_bytes() == (underscored / "test_episodes.csv").read_bytes()
 
 
 def test_a_crowdnav_run_is_evaluated_by_its_parameters_with_its_own_modalities(tmp_path):
@@ -70,7 +119,7 @@ def test_a_crowdnav_run_is_evaluated_by_its_parameters_with_its_own_modalities(t
 
     train(tiny_config(tmp_path / "runs" / "sac", modalities=["goal", "closest_obstacle"], episodes=2))
     folder = evaluate_policy(str(tmp_path / "runs" / "sac"), "open_space", tmp_path / "results", episodes=3)
-    assert folder.parent.name == "sac"
+    assert folder.parent.name == "sac--open_space"
     import json
 
     meta = json.loads((folder / "meta.json").read_text())

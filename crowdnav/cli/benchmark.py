@@ -79,8 +79,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "evaluate", help="evaluate any policy on a scenario's fixed test episodes, ranked by `crowdnav leaderboard`",
         description="POLICY: a crowdnav run folder or checkpoint, an SB3 model .zip, module:function (one observation dict "
                     "-> 2 numbers), or baseline:straight / baseline:social_force. Plays the test episodes with seeds "
-                    "--test-seed-base, +1, ... and writes OUT/evaluate/<name>/eval/ in the protocol's format "
-                    "(docs/evaluate.md).",
+                    "--test-seed-base, +1, ... and writes OUT/evaluate/<name>--<scenario>/seeds_<first>-<last>/ in the "
+                    "protocol's format (docs/evaluate.md); existing results are kept unless --force.",
     )
     evaluate.add_argument("policy", metavar="POLICY")
     evaluate.add_argument("--scenario", required=True, metavar="NAME_OR_PATH", help="library scenario name or YAML file")
@@ -89,6 +89,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     evaluate.add_argument("--test-seed-base", type=int, default=0, metavar="S", help="seed of the first test episode (default: %(default)s)")
     evaluate.add_argument("--name", metavar="NAME", help="configuration name in the results (default: from POLICY)")
     evaluate.add_argument("--out", default="results", metavar="DIR", help="results folder (default: %(default)s)")
+    evaluate.add_argument("--force", action="store_true", help="replace this policy's results on this scenario and test set")
+    evaluate.add_argument("--traceback", action="store_true", help="show the full traceback when the policy raises")
+    evaluate.add_argument("--no-progress", action="store_true", help="hide the progress bar")
     add_override_option(evaluate)
     evaluate.set_defaults(handler=evaluate_command)
 
@@ -208,7 +211,7 @@ def trajectories_command(args: argparse.Namespace) -> int:
 
 
 def evaluate_command(args: argparse.Namespace) -> int:
-    from crowdnav.evaluation.evaluate import PolicyError, evaluate_policy
+    from crowdnav.evaluation.evaluate import PolicyError, ResultsExistError, evaluate_policy
     from crowdnav.scenario import ScenarioError
 
     modalities = [key.strip() for key in args.modalities.split(",") if key.strip()] if args.modalities else None
@@ -216,8 +219,15 @@ def evaluate_command(args: argparse.Namespace) -> int:
         raise CliError(f"--episodes must be at least 1, got {args.episodes}")
     try:
         folder = evaluate_policy(args.policy, args.scenario, args.out, modalities=modalities, episodes=args.episodes,
-                                 test_seed_base=args.test_seed_base, overrides=parse_overrides(args.overrides), name=args.name)
-    except (PolicyError, ScenarioError, ValueError) as error:
+                                 test_seed_base=args.test_seed_base, overrides=parse_overrides(args.overrides), name=args.name,
+                                 force=args.force, progress=not args.no_progress)
+    except PolicyError as error:
+        if args.traceback and error.__cause__ is not None:
+            import traceback
+
+            traceback.print_exception(error.__cause__)
+        raise CliError(str(error).splitlines()[0]) from None
+    except (ResultsExistError, ScenarioError, ValueError) as error:
         raise CliError(str(error).splitlines()[0]) from None
     import json
 
