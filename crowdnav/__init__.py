@@ -1,6 +1,6 @@
 """crowdnav: a multi-modal training environment for human-aware social robot navigation."""
 
-from crowdnav.envs import CrowdNavEnv, CrowdNavParallelEnv, SocialForcePolicy, parallel_env  # registers the Gymnasium ids
+from crowdnav.envs import CrowdNavEnv, CrowdNavParallelEnv, SocialForcePolicy, env, parallel_env  # registers the Gymnasium ids
 from crowdnav.scenario import Scenario, ScenarioError, load_scenario
 from crowdnav.simulator import Collision, SimulationError, Simulator, StepEvents
 
@@ -14,6 +14,7 @@ __all__ = [
     "Simulator",
     "SocialForcePolicy",
     "StepEvents",
+    "env",
     "load_scenario",
     "parallel_env",
 ]

@@ -97,7 +97,7 @@ def test_goal_reached_pays_once_and_reports_success():
         _, reward, terminated, truncated, info = env.step(np.array([1.0, 0.0]))
         if terminated:
             break
-        assert info["reward_terms"]["goal_reached"] == 0.0 and "outcome" not in info
+        assert info["reward_terms"]["goal_reached"] == 0.0 and info["outcome"] == "truncated" and info["is_success"] is False
     assert terminated and not truncated
     assert info["outcome"] == "success" and info["is_success"] is True
     assert info["reward_terms"]["goal_reached"] == 500.0 and info["reward_terms"]["collision"] == 0.0

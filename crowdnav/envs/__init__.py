@@ -40,6 +40,15 @@ def parallel_env(
     )
 
 
+def env(scenario: ScenarioSource, **options: Any) -> Any:
+    """The PettingZoo AEC env for ``scenario``: :func:`parallel_env` (same options) through
+    PettingZoo's ``parallel_to_aec``, so agents act one after the other and the world steps
+    once every agent alive has acted (the robot first, then the humans in order)."""
+    from pettingzoo.utils.conversions import parallel_to_aec
+
+    return parallel_to_aec(parallel_env(scenario, **options))
+
+
 ENV_IDS = register_envs()
 """The Gymnasium ids of the library scenarios."""
 
@@ -52,6 +61,7 @@ __all__ = [
     "EnvCore",
     "Reward",
     "SocialForcePolicy",
+    "env",
     "env_id",
     "parallel_env",
     "register_envs",

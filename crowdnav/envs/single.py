@@ -58,11 +58,13 @@ class CrowdNavEnv(gym.Env):
     either impossible (``world.boundary_walls``: the walls are obstacles, touching them is a
     collision) or ends the episode with outcome ``out_of_bounds`` (open space), a failure that
     pays the ``collision`` reward term. Precedence within one step: collision > out_of_bounds >
-    success > truncated. The last step's info holds ``outcome``
-    (``"success" | "collision" | "out_of_bounds" | "truncated"``, :data:`crowdnav.simulator.OUTCOMES`),
-    ``is_success`` (bool) and, after a collision, ``collision_kind`` (``"human" | "static"``) and
-    ``collision_partner`` (``human_<i>`` or the obstacle's scenario path). Calling step() after
-    the end raises RuntimeError.
+    success > truncated. Every step's info holds ``outcome``
+    (``"success" | "collision" | "out_of_bounds" | "truncated"``, :data:`crowdnav.simulator.OUTCOMES`)
+    and ``is_success`` (bool): on a terminating step how the episode ended, on any other step
+    ``"truncated"`` and False, the outcome of an episode cut there (at ``max_steps``, or by a
+    ``TimeLimit`` wrapper that the env cannot see); after a collision also ``collision_kind``
+    (``"human" | "static"``) and ``collision_partner`` (``human_<i>`` or the obstacle's scenario
+    path). Calling step() after the end raises RuntimeError.
 
     **Options.** ``scenario``: library name, YAML path or :class:`crowdnav.Scenario`;
     ``modalities``; ``sensors`` (``{"lidar": {"beams": 180}}``); ``reward_weights``
@@ -98,7 +100,14 @@ class CrowdNavEnv(gym.Env):
         events, reward, terms = self.core.step(action)
         terminated = events.terminated
         truncated = events.truncated and not terminated
-        return self.core.observe(), reward, terminated, truncated, step_info(events, terms)
+        info = step_info(events, terms)
+        if not terminated:
+            # Any step that does not terminate may be the last one: a TimeLimit wrapper
+            # (gymnasium.make(..., max_episode_steps=N)) truncates after this method returns, without
+            # asking the env, so the info names the outcome the episode has if it stops here.
+            info.setdefault("outcome", "truncated")
+            info.setdefault("is_success", False)
+        return self.core.observe(), reward, terminated, truncated, info
 
     def render(self) -> np.ndarray | None:
         """The current frame in ``rgb_array`` mode (None in ``human`` mode, which draws at each step)."""

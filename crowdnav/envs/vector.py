@@ -42,7 +42,8 @@ class CrowdNavVectorEnv(VectorEnv):
 
     **Infos** follow Gymnasium's vector convention (a key's values in an array, ``_key`` marking
     the worlds that have it): ``reward_terms`` (a dict of per-term arrays) for every world that
-    stepped; ``outcome``, ``is_success`` for worlds whose episode ended this step;
+    stepped; ``outcome``, ``is_success`` for every world that stepped (``"truncated"`` / False for
+    a world still running, as :class:`crowdnav.envs.single.CrowdNavEnv`);
     ``collision_kind`` and ``collision_partner`` after collisions.
 
     **Autoreset** (``autoreset_mode``, Gymnasium's :class:`AutoresetMode`):
@@ -187,7 +188,7 @@ class CrowdNavVectorEnv(VectorEnv):
             infos["reward_terms"][term], infos["reward_terms"][f"_{term}"] = values, stepping.copy()
         infos["_reward_terms"] = stepping.copy()
         ended = terminated | truncated
-        self._end_infos(infos, result, terminated, truncated, ended)
+        self._end_infos(infos, result, terminated, stepping)
         self._observe_all()
         if self.autoreset_mode is AutoresetMode.DISABLED:
             waiting = self._ended.copy()
@@ -235,12 +236,11 @@ class CrowdNavVectorEnv(VectorEnv):
         reward = terms["step"] + terms["goal_progress"] + terms["social"] + terms["goal_reached"] + terms["collision"]
         return reward, terms
 
-    def _end_infos(self, infos: dict[str, Any], result: StepResult, terminated: np.ndarray, truncated: np.ndarray, ended: np.ndarray) -> None:
-        if not ended.any():
-            return
+    def _end_infos(self, infos: dict[str, Any], result: StepResult, terminated: np.ndarray, stepping: np.ndarray) -> None:
+        """``outcome`` / ``is_success`` of every world that stepped, as CrowdNavEnv's info: "truncated" / False unless it terminated."""
         b = self.num_envs
         outcome = np.full(b, None, dtype=object)
-        outcome[truncated] = "truncated"
+        outcome[stepping & ~terminated] = "truncated"
         outcome[terminated & result.goal_reached] = "success"
         outcome[terminated & result.left_world] = "out_of_bounds"
         collided = np.zeros(b, dtype=bool)
@@ -248,8 +248,8 @@ class CrowdNavVectorEnv(VectorEnv):
         for i, hit in result.collisions.items():  # per collision event
             if terminated[i]:
                 outcome[i], kind[i], partner[i], collided[i] = "collision", hit.kind, hit.partner, True
-        infos["outcome"], infos["_outcome"] = outcome, ended.copy()
-        infos["is_success"], infos["_is_success"] = outcome == "success", ended.copy()
+        infos["outcome"], infos["_outcome"] = outcome, stepping.copy()
+        infos["is_success"], infos["_is_success"] = outcome == "success", stepping.copy()
         if collided.any():
             infos["collision_kind"], infos["_collision_kind"] = kind, collided
             infos["collision_partner"], infos["_collision_partner"] = partner, collided.copy()
