@@ -96,6 +96,7 @@ def _respawn(sim: Any, index: np.ndarray, group: Any, places: Any) -> np.ndarray
         moved = index[:count]
         sim.positions[moved + 1] = new
         sim.velocities[moved + 1] = 0.0
+        sim.human_respawns[moved] += 1
         if group.goal_rule == "mirror":
             # the mirror rule flips the goal below, so store the spawn's mirror image twice-flipped
             sim.human_goals[moved] = new

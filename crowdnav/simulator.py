@@ -187,6 +187,8 @@ class Simulator:
         """Humans that do not move: standing groups, arrivals under ``on_goal: stop``, humans a multi-agent env let leave."""
         self.human_arrived = np.zeros(n, dtype=bool)
         """Humans that reached their goal in the last step (under ``on_goal: stop``, on arrival only)."""
+        self.human_respawns = np.zeros(n, dtype=np.int64)
+        """Times each human respawned this episode (``on_goal: respawn``): after one it is a new pedestrian (a new track)."""
         self.step_count = 0
         self._prepare_pair_constants(n)
         if self.orca is not None:

@@ -162,10 +162,10 @@ class _Log:
 def _world_state(env: Any, i: int) -> dict[str, np.ndarray]:
     """:func:`_state` of world ``i`` of a vector env."""
     return {"positions": env.positions(i), "velocities": env.velocities(i),
-            "goals": np.concatenate([[env.robot_goal(i)], env.human_goals(i)])}
+            "goals": np.concatenate([[env.robot_goal(i)], env.human_goals(i)]), "respawns": env.human_respawns(i)}
 
 
 def _state(sim: Any) -> dict[str, np.ndarray]:
-    """Positions, velocities and goals of the robot (index 0) and the humans, copied (complex, (n + 1,))."""
+    """Positions, velocities and goals of the robot (index 0) and the humans, copied (complex, (n + 1,)); each human's respawns (n,)."""
     return {"positions": sim.positions.copy(), "velocities": sim.velocities.copy(),
-            "goals": np.concatenate([[sim.robot_goal], sim.human_goals])}
+            "goals": np.concatenate([[sim.robot_goal], sim.human_goals]), "respawns": sim.human_respawns.copy()}

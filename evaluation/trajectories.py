@@ -2,9 +2,20 @@
 
 Episodes come from :meth:`crowdnav.evaluation.rollout.HeldOutEpisodes.run` with ``record=True``
 (``frames``: positions, velocities and goals of the robot and every human at each step, the
-reset state first). :func:`replay_evaluation` plays an evaluation of a finished run again from
-its saved policy snapshot (test episodes are deterministic) and checks that every outcome
-matches the one the run recorded, so an exported trajectory is the episode that was scored.
+reset state first, and how often each human respawned so far). Two ways to get them:
+
+* :func:`replay_evaluation` plays the test episodes of a finished result again: a benchmark run
+  (from its saved policy snapshot for that evaluation), a scripted baseline, or a
+  ``crowdnav evaluate`` result (its POLICY loaded again). Test episodes are deterministic, and
+  every replayed outcome is checked against the recorded one, so an exported trajectory is the
+  episode that was scored;
+* :func:`record_policy` plays any POLICY (every form ``crowdnav evaluate`` takes) on a
+  scenario's test episodes.
+
+**Tracks.** A human of a group with ``on_goal: respawn`` that reaches its goal reappears at a
+spawn point: for a trajectory predictor that is a new pedestrian, not a jump. Each life of a
+human is its own track (TrajNet++'s convention): no track moves further in one step than its
+agent's speed allows.
 
 **Tidy table**, one row per agent and step, world frame, metres, m/s and seconds:
 
@@ -14,30 +25,38 @@ column            meaning
 ``test_episode``  index of the held-out episode; ``test_seed`` its reset seed
 ``outcome``       how the episode ended (success, collision, out_of_bounds, truncated)
 ``step``          0 for the reset state, then one per env step; ``time_s`` = step * dt
-``agent``         ``robot`` or ``human_<i>``
+``agent``         ``robot`` or ``human_<i>`` (the simulator's slot: one slot holds every life of a respawning human)
+``track``         the track id, the ``p`` of the TrajNet++ file: one per robot, per human and per respawn
+``respawned``     True on the first row of a track that starts with a respawn (its previous row of
+                  the same ``agent`` is the other track's last)
 ``group``         the human's group (``crowd`` for a file without ``humans.groups``); ``robot`` for the robot
 ``x, y``          centre
-``vx, vy``        velocity
+``vx, vy``        velocity (0 on the respawn row)
 ``goal_x, goal_y`` current goal (a human's goal changes when it reaches one)
 ================  =============================================================
 
 **TrajNet++ ndjson** (https://github.com/vita-epfl/trajnetplusplusdataset, "scene" and "track"
 lines): one scene per test episode with the robot as its primary agent. Track ids are
-``1000 * test_episode + agent`` (robot 0, human i as i + 1) and frames run on across episodes,
-so one file holds every episode without id clashes. Positions in metres.
+``stride * test_episode + k``: the robot k = 0, human i's first life k = i + 1, then each respawn
+(in order of time, then human) the next k; ``stride`` is 1000, or the next power of ten when an
+episode has more tracks. Frames run on across episodes, so one file holds every episode without
+id clashes. Positions in metres.
 """
 
 from __future__ import annotations
 
 import json
-from collections.abc import Iterable, Mapping
+import math
+from collections.abc import Iterable, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-TIDY_COLUMNS = ("test_episode", "test_seed", "outcome", "step", "time_s", "agent", "group", "x", "y", "vx", "vy", "goal_x", "goal_y")
+TIDY_COLUMNS = ("test_episode", "test_seed", "outcome", "step", "time_s", "agent", "track", "respawned", "group",
+                "x", "y", "vx", "vy", "goal_x", "goal_y")
 TRACK_ID_STRIDE = 1000
+"""The smallest track id stride: ids of test episode k start at ``stride * k``."""
 
 
 def agent_names(count: int) -> list[str]:
@@ -45,19 +64,51 @@ def agent_names(count: int) -> list[str]:
     return ["robot", *(f"human_{i}" for i in range(count - 1))]
 
 
+def _respawn_steps(states: Mapping[str, Any]) -> np.ndarray:
+    """(steps, agents) bool: True where an agent's new life starts by a respawn (the robot never respawns)."""
+    steps, agents = states["positions"].shape
+    counts = np.asarray(states.get("respawns", np.zeros((steps, agents - 1), dtype=np.int64)))
+    out = np.zeros((steps, agents), dtype=bool)
+    out[1:, 1:] = np.diff(counts, axis=0) > 0  # at most one respawn per human and step
+    return out
+
+
+def track_stride(episodes: Sequence[Mapping[str, Any]]) -> int:
+    """:data:`TRACK_ID_STRIDE`, or the next power of ten when an episode has more tracks than that."""
+    most = max((episode["frames"]["positions"].shape[1] + int(_respawn_steps(episode["frames"]).sum()) for episode in episodes), default=0)
+    return TRACK_ID_STRIDE if most <= TRACK_ID_STRIDE else 10 ** math.ceil(math.log10(most))
+
+
+def track_ids(states: Mapping[str, Any], test_episode: int, stride: int) -> tuple[np.ndarray, np.ndarray]:
+    """(steps, agents) track ids of one recorded episode, and where a track starts by a respawn (see the module doc)."""
+    respawned = _respawn_steps(states)
+    steps, agents = respawned.shape
+    base = stride * int(test_episode)
+    new_ids = np.zeros((steps, agents), dtype=np.int64)
+    new_ids[0] = base + np.arange(agents)
+    new_ids[respawned] = base + agents + np.arange(int(respawned.sum()))  # row-major: by step, then agent
+    # every row takes the id of its agent's latest start (step 0 or a respawn)
+    start = np.where(respawned, np.arange(steps)[:, None], 0)
+    latest = np.maximum.accumulate(start, axis=0)
+    return new_ids[latest, np.arange(agents)], respawned
+
+
 def tidy_table(episodes: Iterable[Mapping[str, Any]]) -> Any:
     """The per-step table of recorded episodes (pandas DataFrame with :data:`TIDY_COLUMNS`)."""
     import pandas as pd
 
+    episodes = list(episodes)
+    stride = track_stride(episodes)
     frames = []
     for episode in episodes:
         states = episode["frames"]
         positions, velocities, goals = states["positions"], states["velocities"], states["goals"]
         steps, agents = positions.shape
+        tracks, respawned = track_ids(states, episode["test_episode"], stride)
         frames.append(pd.DataFrame({
             "test_episode": episode["test_episode"], "test_seed": episode["test_seed"], "outcome": episode["outcome"],
             "step": np.repeat(np.arange(steps), agents), "time_s": np.repeat(np.arange(steps) * states["dt"], agents),
-            "agent": np.tile(agent_names(agents), steps),
+            "agent": np.tile(agent_names(agents), steps), "track": tracks.ravel(), "respawned": respawned.ravel(),
             "group": np.tile(states.get("groups", ["robot", *["crowd"] * (agents - 1)]), steps),
             "x": positions.real.ravel(), "y": positions.imag.ravel(), "vx": velocities.real.ravel(), "vy": velocities.imag.ravel(),
             "goal_x": goals.real.ravel(), "goal_y": goals.imag.ravel(),
@@ -67,19 +118,22 @@ def tidy_table(episodes: Iterable[Mapping[str, Any]]) -> Any:
 
 def trajnet_lines(episodes: Iterable[Mapping[str, Any]]) -> list[str]:
     """TrajNet++ ndjson lines: per episode its scene line, then its track lines frame by frame."""
+    episodes = list(episodes)
+    stride = track_stride(episodes)
     lines, first_frame = [], 0
     for episode in episodes:
         states = episode["frames"]
         positions = states["positions"]
         steps, agents = positions.shape
         k = int(episode["test_episode"])
-        scene = {"id": k, "p": TRACK_ID_STRIDE * k, "s": first_frame, "e": first_frame + steps - 1, "fps": round(1.0 / states["dt"], 6)}
+        tracks, _ = track_ids(states, k, stride)
+        scene = {"id": k, "p": stride * k, "s": first_frame, "e": first_frame + steps - 1, "fps": round(1.0 / states["dt"], 6)}
         lines.append(json.dumps({"scene": scene}))
-        for step in range(steps):
-            for agent in range(agents):
-                z = positions[step, agent]
-                track = {"f": first_frame + step, "p": TRACK_ID_STRIDE * k + agent, "x": round(float(z.real), 4), "y": round(float(z.imag), 4)}
-                lines.append(json.dumps({"track": track}))
+        xs, ys = np.round(positions.real, 4).tolist(), np.round(positions.imag, 4).tolist()
+        ids = tracks.tolist()
+        for step in range(steps):  # text output: one line per agent and frame
+            lines.extend(json.dumps({"track": {"f": first_frame + step, "p": ids[step][a], "x": xs[step][a], "y": ys[step][a]}})
+                         for a in range(agents))
         first_frame += steps
     return lines
 
@@ -99,18 +153,57 @@ class ReplayMismatchError(RuntimeError):
     """A replayed test episode ended differently from the one the run recorded."""
 
 
-def replay_evaluation(run_dir: str | Path, evaluation: int | None = None) -> list[dict[str, Any]]:
-    """The test episodes of evaluation ``evaluation`` (default: the last) of a finished run, recorded.
+def record_policy(policy: str, scenario: str | None = None, *, modalities: Sequence[str] | None = None, episodes: int = 20,
+                  test_seed_base: int = 0, overrides: Mapping[str, Any] | None = None) -> list[dict[str, Any]]:
+    """The test episodes (seeds ``test_seed_base`` ...) of ``policy`` on ``scenario``, recorded.
 
-    ``run_dir``: ``<experiment>/<configuration>/seed_<n>`` (a learned run: its policy snapshot for
-    that evaluation is played) or ``<experiment>/baseline_<name>/baseline`` (a scripted baseline,
-    the same at every evaluation). Raises :class:`ReplayMismatchError` unless every episode's
-    outcome matches the run's recorded one.
+    ``policy``: any POLICY string of ``crowdnav evaluate`` (``baseline:NAME``, ``module:function``,
+    an SB3 ``.zip``, a crowdnav run folder or checkpoint), loaded by
+    :func:`crowdnav.evaluation.evaluate.resolve_policy`; ``scenario`` may be left out for a crowdnav
+    run or checkpoint (its own scenario). The episodes are those ``crowdnav evaluate`` scores with
+    the same arguments. Raises :class:`crowdnav.evaluation.evaluate.PolicyError` (one line) for a
+    policy that cannot be loaded or returns a malformed action.
+    """
+    from crowdnav.evaluation.evaluate import PolicyError, resolve_policy
+    from crowdnav.evaluation.protocol import Protocol
+
+    if episodes < 1:
+        raise ValueError(f"episodes must be at least 1, got {episodes}")
+    options: dict[str, Any] = {"scenario": scenario, "modalities": list(modalities) if modalities else None,
+                               "overrides": dict(overrides) if overrides else None}
+    options = {key: value for key, value in options.items() if value is not None}
+    _, _, act, privileged, env_options = resolve_policy(policy, options)
+    if "scenario" not in env_options:
+        raise PolicyError(f"{policy}: no scenario to play it on; name one (--scenario)")
+    protocol = Protocol(train_episodes=1, eval_every=1, test_episodes=episodes, seeds=1, test_seed_base=test_seed_base, final_evaluations=1)
+    return _play(env_options, protocol.test_seeds, act, privileged, policy)
+
+
+def _play(env_options: Mapping[str, Any], seeds: Sequence[int], act: Any, privileged: bool, label: str) -> list[dict[str, Any]]:
+    from crowdnav.evaluation.evaluate import PolicyError
+    from crowdnav.evaluation.rollout import HeldOutEpisodes
+
+    held_out = HeldOutEpisodes(env_options, seeds)
+    try:
+        return held_out.run(act, privileged=privileged, record=True)
+    except (ValueError, TypeError) as error:  # an action of the wrong shape or type, from the user's policy
+        raise PolicyError(f"{label}: {str(error).splitlines()[0]}") from None
+    finally:
+        held_out.close()
+
+
+def replay_evaluation(run_dir: str | Path, evaluation: int | None = None) -> list[dict[str, Any]]:
+    """The test episodes of evaluation ``evaluation`` (default: the last) of a finished result, recorded.
+
+    ``run_dir``: a folder with ``meta.json`` and ``test_episodes.csv``: a benchmark run
+    ``<experiment>/<configuration>/seed_<n>`` (its policy snapshot for that evaluation is played),
+    a scripted baseline ``<experiment>/baseline_<name>/baseline`` (the same at every evaluation),
+    or a ``crowdnav evaluate`` result (its POLICY, as meta.json names it, loaded again: a relative
+    path is read from the current folder). Raises :class:`ReplayMismatchError` unless every
+    episode's outcome matches the recorded one.
     """
     import pandas as pd
-    from crowdnav.evaluation.baselines import scripted_policy
     from crowdnav.evaluation.protocol import Protocol
-    from crowdnav.evaluation.rollout import HeldOutEpisodes
     from crowdnav.evaluation.storage import ResultsError, read_json
 
     run_dir = Path(run_dir)
@@ -119,9 +212,20 @@ def replay_evaluation(run_dir: str | Path, evaluation: int | None = None) -> lis
         raise ResultsError(f"{run_dir}: not a finished run (no meta.json)")
     protocol = Protocol(**meta["protocol"])
     recorded = pd.read_csv(run_dir / "test_episodes.csv", keep_default_na=False, na_values=["nan"])
-    if meta.get("kind") == "baseline":
-        episodes = HeldOutEpisodes(meta["env"], protocol.test_seeds)
-        rows = episodes.run(scripted_policy(meta["policy"]), privileged=True, record=True)
+    kind = meta.get("kind")
+    if kind == "baseline":  # the same at every evaluation: ``evaluation`` changes nothing
+        from crowdnav.evaluation.baselines import scripted_policy
+
+        rows = _play(meta["env"], protocol.test_seeds, scripted_policy(meta["policy"]), True, meta["policy"])
+        expected = recorded.drop_duplicates("test_episode").set_index("test_episode")["outcome"]
+    elif kind == "evaluated":  # one evaluation only
+        from crowdnav.evaluation.evaluate import PolicyError, resolve_policy
+
+        try:
+            _, _, act, privileged, env_options = resolve_policy(meta["policy"], meta["env"])
+        except PolicyError as error:
+            raise ResultsError(f"{run_dir}: cannot load the policy it scored ({error})") from None
+        rows = _play(env_options, protocol.test_seeds, act, privileged, meta["policy"])
         expected = recorded.drop_duplicates("test_episode").set_index("test_episode")["outcome"]
     else:
         from crowdnav.agents import load_policy
@@ -137,12 +241,43 @@ def replay_evaluation(run_dir: str | Path, evaluation: int | None = None) -> lis
         if folder is None:
             raise ResultsError(f"{run_dir}: no policy snapshot after {point} {'env steps' if unit == 'steps' else 'episodes'} to replay")
         policy = load_policy(folder)
-        episodes = HeldOutEpisodes(policy.env_options, protocol.test_seeds)
-        rows = episodes.run(policy, record=True)
+        rows = _play(policy.env_options, protocol.test_seeds, policy, False, str(folder))
         expected = this.set_index("test_episode")["outcome"]
-    episodes.close()
     replayed = {row["test_episode"]: row["outcome"] for row in rows}
     differ = {k: (expected[k], replayed[k]) for k in expected.index if replayed.get(k) != expected[k]}
     if differ:
         raise ReplayMismatchError(f"{run_dir}: replayed outcomes differ from the recorded ones (episode: recorded, replayed): {differ}")
     return rows
+
+
+def result_label(run_dir: str | Path, evaluation: int | None = None) -> str:
+    """The file stem :func:`replay_evaluation`'s episodes are written under in ``RUN/trajectories/``.
+
+    ``evaluation_K`` (K the evaluation, zero-padded to 3 digits, the last by default) for a
+    benchmark run, ``baseline`` for a scripted baseline, ``evaluate`` for a ``crowdnav evaluate`` result.
+    """
+    from crowdnav.evaluation.protocol import Protocol
+    from crowdnav.evaluation.storage import read_json
+
+    meta = read_json(Path(run_dir) / "meta.json")
+    if meta.get("kind") in ("baseline", "evaluated"):
+        return "baseline" if meta["kind"] == "baseline" else "evaluate"
+    k = Protocol(**meta["protocol"]).evaluations - 1 if evaluation is None else evaluation
+    return f"evaluation_{k:03d}"
+
+
+def finished_results(root: str | Path) -> list[Path]:
+    """Every finished result under ``root`` (``root`` itself when it is one): folders whose meta.json is complete."""
+    from crowdnav.evaluation.storage import ResultsError, read_json
+
+    root = Path(root)
+    candidates = [root / "meta.json"] if (root / "meta.json").is_file() else sorted(root.rglob("meta.json"))
+    found = []
+    for path in candidates:
+        try:
+            meta = read_json(path)
+        except (ResultsError, OSError, ValueError):
+            continue
+        if isinstance(meta, dict) and meta.get("status") == "complete" and "protocol" in meta and (path.parent / "test_episodes.csv").is_file():
+            found.append(path.parent)
+    return found

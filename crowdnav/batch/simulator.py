@@ -33,7 +33,8 @@ from crowdnav.obstacles import nearest_on_edges
 from crowdnav.simulator import _OBSTACLE_PASSES, _SELF_DISTANCE, Simulator
 from crowdnav.world import CompiledWorld
 
-_PER_WORLD = ("positions", "velocities", "human_goals", "human_preferred_speed", "_command_cap", "human_stopped", "human_arrived", "human_group")
+_PER_WORLD = ("positions", "velocities", "human_goals", "human_preferred_speed", "_command_cap", "human_stopped", "human_arrived", "human_group",
+              "human_respawns")
 """Simulator arrays with one row per world in a bucket (robot first where the robot has an entry)."""
 _SCALARS = ("robot_goal", "robot_heading", "step_count")
 """Simulator scalars, one entry per world in a bucket."""
@@ -380,7 +381,7 @@ class BatchSimulator:
             row = rows[k]
             slot = self.slots[bucket.world[row]]
             # the slot works on the stacks' rows in place (views; rebound at its next event or reset)
-            views = {name: getattr(bucket, name)[row] for name in ("positions", "velocities", "human_goals", "human_stopped")}
+            views = {name: getattr(bucket, name)[row] for name in ("positions", "velocities", "human_goals", "human_stopped", "human_respawns")}
             before = views["positions"].copy()
             for name, view in views.items():
                 setattr(slot, name, view)

@@ -16,7 +16,7 @@ import os
 import sys
 from collections.abc import Sequence
 
-from crowdnav.cli import benchmark, render, scenario, schema, train
+from crowdnav.cli import benchmark, render, scenario, schema, train, trajectories
 from crowdnav.cli.common import CliError
 
 # Packages that only an extra installs (pyproject.toml), so a command run on the core install
@@ -41,7 +41,7 @@ def _require(modules: Sequence[str]) -> None:
 
 def command_groups() -> tuple:
     """Registration functions of the command groups, in the order ``--help`` lists them."""
-    return (scenario.register, train.register, render.register, benchmark.register, schema.register)
+    return (scenario.register, train.register, render.register, benchmark.register, trajectories.register, schema.register)
 
 
 def build_parser() -> argparse.ArgumentParser:

@@ -95,17 +95,6 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     add_override_option(evaluate)
     evaluate.set_defaults(handler=evaluate_command)
 
-    traj = subparsers.add_parser(
-        "trajectories", help="export the test episodes of finished runs: per-step CSV and TrajNet++ ndjson",
-        description="Replays an evaluation's held-out test episodes from the run's saved policy (test episodes are "
-                    "deterministic; a replay whose outcomes differ from the recorded ones is an error) and writes, per run, "
-                    "RUN/trajectories/evaluation_K.csv (robot and humans: position, velocity, goal per step) and .ndjson "
-                    "(TrajNet++). RESULTS may be one run folder or an experiment folder (every run in it).",
-    )
-    traj.add_argument("results", metavar="RESULTS", help="a run folder (EXPERIMENT/CONFIGURATION/seed_N) or an experiment folder")
-    traj.add_argument("--evaluation", type=int, metavar="K", help="which evaluation, 0-based (default: the last)")
-    traj.set_defaults(handler=trajectories_command)
-
 
 def benchmark(args: argparse.Namespace) -> int:
     from crowdnav.evaluation.executors import ExecutorError, make_executor
@@ -188,25 +177,6 @@ def leaderboard_command(args: argparse.Namespace) -> int:
         raise CliError(str(error)) from None
     for path in paths:
         print(f"wrote {path}")
-    return 0
-
-
-def trajectories_command(args: argparse.Namespace) -> int:
-    from crowdnav.evaluation.storage import ResultsError
-    from crowdnav.evaluation.trajectories import ReplayMismatchError, replay_evaluation, write_trajectories
-
-    root = Path(args.results)
-    runs = [root] if (root / "meta.json").is_file() else sorted(path.parent for path in root.glob("*/*/meta.json"))
-    if not runs:
-        raise CliError(f"{root}: no finished run here (expected RUN/meta.json or EXPERIMENT/*/*/meta.json)")
-    for run in runs:
-        try:
-            episodes = replay_evaluation(run, args.evaluation)
-        except (ResultsError, ReplayMismatchError) as error:
-            raise CliError(str(error)) from None
-        label = "baseline" if run.name == "baseline" else f"evaluation_{args.evaluation if args.evaluation is not None else 'last'}"
-        for path in write_trajectories(episodes, run / "trajectories" / label):
-            print(f"wrote {path}")
     return 0
 
 

@@ -307,6 +307,10 @@ class CrowdNavVectorEnv(VectorEnv):
         """(n,) complex: the humans' current goals in ``world`` (a copy)."""
         return self._row("human_goals", world)
 
+    def human_respawns(self, world: int) -> np.ndarray:
+        """(n,) int: how many times each human of ``world`` respawned this episode (a copy; ``Simulator.human_respawns``)."""
+        return self._row("human_respawns", world)
+
     def _row(self, name: str, world: int) -> np.ndarray:
         bucket, row = self.batch.locate(world)
         return getattr(bucket, name)[row].copy()

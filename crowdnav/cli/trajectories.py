@@ -1,0 +1,92 @@
+"""``crowdnav trajectories``: the test episodes of results or of any policy, as a tidy CSV and TrajNet++ ndjson."""
+
+from __future__ import annotations
+
+import argparse
+import re
+from pathlib import Path
+
+from crowdnav.cli.common import CliError, add_override_option, parse_overrides
+
+
+def register(subparsers: argparse._SubParsersAction) -> None:
+    """Add ``trajectories``."""
+    traj = subparsers.add_parser(
+        "trajectories", help="export test episodes (of results or of any policy): per-step CSV and TrajNet++ ndjson",
+        description="SOURCE is a results folder or a POLICY. A results folder (one run, an experiment, or a whole "
+                    "results folder of `crowdnav benchmark` and `crowdnav evaluate`): each finished result's test episodes "
+                    "are played again from what it scored (test episodes are deterministic; a replay whose outcomes differ "
+                    "from the recorded ones is an error) and written to RUN/trajectories/evaluation_K (benchmark runs), "
+                    "baseline or evaluate (.csv and .ndjson). A POLICY (any form `crowdnav evaluate` takes) plays the "
+                    "--scenario's test episodes, written to OUT/<policy>__<scenario>__seeds<A>-<B>. Every respawned human "
+                    "starts a new track (docs/evaluation.md#trajectories).",
+    )
+    traj.add_argument("source", metavar="SOURCE", help="a results folder, or a POLICY (run folder or checkpoint, SB3 .zip, "
+                                                       "module:function, baseline:NAME)")
+    traj.add_argument("--evaluation", type=int, metavar="K", help="results: which evaluation of a benchmark run, 0-based (default: the last)")
+    traj.add_argument("--scenario", metavar="NAME_OR_PATH", help="POLICY: library scenario name or YAML file (default: a crowdnav run's own)")
+    traj.add_argument("--modalities", metavar="KEYS", help="POLICY: comma-separated observation keys (default: the scenario's)")
+    traj.add_argument("--episodes", type=int, default=20, metavar="N", help="POLICY: test episodes (default: %(default)s)")
+    traj.add_argument("--test-seed-base", type=int, default=0, metavar="S", help="POLICY: seed of the first test episode (default: %(default)s)")
+    traj.add_argument("--out", default="trajectories", metavar="DIR", help="POLICY: output folder (default: %(default)s)")
+    add_override_option(traj)
+    traj.set_defaults(handler=trajectories_command)
+
+
+def trajectories_command(args: argparse.Namespace) -> int:
+    from crowdnav.evaluation.trajectories import finished_results
+
+    source = Path(args.source)
+    results = finished_results(source) if source.is_dir() else []
+    policy_options = [f"--{name.replace('_', '-')}" for name in ("scenario", "modalities") if getattr(args, name)]
+    if results:
+        if policy_options or args.overrides:
+            raise CliError(f"{source} is a results folder: its results replay with their own settings "
+                           f"({', '.join(policy_options or ['--override'])} is for a POLICY)")
+        return _replay(results, args.evaluation)
+    if source.is_dir() and (source / "meta.json").is_file():
+        raise CliError(f"{source}: an unfinished run (meta.json without a complete status or test_episodes.csv); finish it first")
+    if args.evaluation is not None:
+        raise CliError(f"--evaluation is for results folders; {args.source} is not one (no finished run in it)")
+    return _record(args)
+
+
+def _replay(results: list[Path], evaluation: int | None) -> int:
+    from crowdnav.evaluation.storage import ResultsError
+    from crowdnav.evaluation.trajectories import ReplayMismatchError, replay_evaluation, result_label, write_trajectories
+
+    for run in results:
+        try:
+            episodes = replay_evaluation(run, evaluation)
+        except (ResultsError, ReplayMismatchError) as error:
+            raise CliError(str(error)) from None
+        for path in write_trajectories(episodes, run / "trajectories" / result_label(run, evaluation)):
+            print(f"wrote {path}")
+    return 0
+
+
+def _record(args: argparse.Namespace) -> int:
+    from crowdnav.evaluation.evaluate import PolicyError
+    from crowdnav.evaluation.trajectories import record_policy, write_trajectories
+    from crowdnav.scenario import ScenarioError
+
+    if args.episodes < 1:
+        raise CliError(f"--episodes must be at least 1, got {args.episodes}")
+    modalities = [key.strip() for key in args.modalities.split(",") if key.strip()] if args.modalities else None
+    try:
+        episodes = record_policy(args.source, args.scenario, modalities=modalities, episodes=args.episodes,
+                                 test_seed_base=args.test_seed_base, overrides=parse_overrides(args.overrides))
+    except (PolicyError, ScenarioError, ValueError) as error:
+        raise CliError(str(error).splitlines()[0]) from None
+    last = args.test_seed_base + args.episodes - 1
+    scenario = f"__{_name(Path(args.scenario).stem)}" if args.scenario else ""  # none: a crowdnav run's own scenario
+    stem = f"{_name(args.source)}{scenario}__seeds{args.test_seed_base}-{last}"
+    for path in write_trajectories(episodes, Path(args.out) / stem):
+        print(f"wrote {path}")
+    return 0
+
+
+def _name(text: str) -> str:
+    """A file-name-safe form of a POLICY or scenario (``runs/sac`` -> ``runs_sac``)."""
+    text = text.removesuffix(".zip").rstrip("/")
+    return re.sub(r"[^A-Za-z0-9_.-]", "_", text).strip("._-")[:80] or "policy"
