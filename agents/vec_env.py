@@ -117,14 +117,29 @@ class CrowdNavSB3VecEnv(VecEnv):
     def close(self) -> None:
         self.env.close()
 
+    # The worlds are one batched env: attributes are shared and a method runs for all worlds at once,
+    # so a call aimed at some worlds only is refused rather than silently applied to every world.
+
     def get_attr(self, attr_name: str, indices: Any = None) -> list[Any]:
         return [getattr(self.env, attr_name) for _ in self._get_indices(indices)]
 
     def set_attr(self, attr_name: str, value: Any, indices: Any = None) -> None:
+        self._all_worlds("set_attr", attr_name, indices)
+        if attr_name == "autoreset_mode" or not hasattr(self.env, attr_name):
+            reason = "SB3 needs the same-step autoreset" if attr_name == "autoreset_mode" else "the env has no such attribute"
+            raise ValueError(f"set_attr({attr_name!r}): refused, {reason}")
         setattr(self.env, attr_name, value)
 
     def env_method(self, method_name: str, *method_args: Any, indices: Any = None, **method_kwargs: Any) -> list[Any]:
-        return [getattr(self.env, method_name)(*method_args, **method_kwargs) for _ in self._get_indices(indices)]
+        self._all_worlds("env_method", method_name, indices)
+        result = getattr(self.env, method_name)(*method_args, **method_kwargs)  # once: it acts on every world
+        return [result] * self.num_envs
+
+    def _all_worlds(self, call: str, name: str, indices: Any) -> None:
+        chosen = self._get_indices(indices)
+        if sorted(int(i) for i in chosen) != list(range(self.num_envs)):
+            raise ValueError(f"{call}({name!r}, indices={list(chosen)}): the {self.num_envs} worlds are one batched env, so it "
+                             "applies to all of them; call it with indices=None")
 
     def env_is_wrapped(self, wrapper_class: type, indices: Any = None) -> list[bool]:
         return [False for _ in self._get_indices(indices)]

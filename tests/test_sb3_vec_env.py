@@ -51,3 +51,21 @@ def test_sb3_sac_and_ppo_train_on_the_native_vector_env_with_normalised_observat
     assert env.observation_space["goal"].high[0] <= 2.0  # the normalised Box, not metres
     SAC("MultiInputPolicy", env, learning_starts=50, batch_size=32, policy_kwargs={"net_arch": [16]}, seed=0).learn(120)
     PPO("MultiInputPolicy", env, n_steps=16, batch_size=32, n_epochs=1, policy_kwargs={"net_arch": [16]}, seed=0).learn(64)
+
+
+def test_calls_aimed_at_some_worlds_or_at_the_autoreset_mode_are_refused_and_whole_calls_run_once():
+    import pytest
+
+    env = CrowdNavSB3VecEnv.make("open_space", 3, **OPTIONS)
+    env.reset()
+    calls = []
+    env.env.probe = lambda: calls.append(1) or "done"
+    with pytest.raises(ValueError, match=r"indices=\[1\]\): the 3 worlds are one batched env"):
+        env.env_method("reset", indices=[1])
+    with pytest.raises(ValueError, match="same-step autoreset"):
+        env.set_attr("autoreset_mode", "bogus")
+    with pytest.raises(ValueError, match="no such attribute"):
+        env.set_attr("autoreset_mod", 1)
+    assert env.env_method("probe") == ["done"] * 3 and calls == [1]  # one call acts on every world
+    assert env.get_attr("num_envs", indices=[0, 2]) == [3, 3]
+    env.close()
