@@ -101,7 +101,99 @@ OUTSIDE_LABEL = "world.outside"
 """Label of the solid parts of a polygon world's bounding box (drawn as outside, not as walls)."""
 
 
+MAX_GEOMETRY_VERTICES = 5_000
+"""Most vertices over the floor, the walls and the polygonal furniture together (library: under 100)."""
+MAX_CLOSE_PAIRS = 10_000
+"""Most pairs of those edges closer than :func:`_pair_reach` (library: under 300).
+
+Loading buffers the obstacles by the agents' clearance and unions them; GEOS's cost grows with
+the edges whose buffers meet (a fine zigzag floor, crossing walls), not with the vertex count, so
+both are bounded before anything is built. Any accepted file then loads in about a second."""
+MAX_EDGE_TABLE = 100_000
+"""Most entries of the padded (obstacles x edges) table every distance query scans (library: under 200)."""
+
+
+def check_complexity(scenario: Scenario) -> None:
+    """Refuse geometry whose loading would cost more than its few vertices suggest; GeometryError names the field.
+
+    Counts the input's own edges (wall centre lines, floor and furniture outlines: nothing is
+    built yet), then pairs of edges from anywhere within reach of each other (a spatial index
+    query in blocks that stops at the budget), so the check itself costs milliseconds.
+    """
+    chains = _input_chains(scenario)
+    written = [chain for chain in chains if chain[0].endswith(".points")]  # rectangles and discs: 4 corners each
+    vertices = sum(len(points) for _, points, _ in written)
+    if vertices > MAX_GEOMETRY_VERTICES:
+        per_field: dict[str, int] = {}
+        for path, points, _ in written:
+            field = "world.points" if path == "world.points" else path.split(".")[0]
+            per_field[field] = per_field.get(field, 0) + len(points)
+        field = max(per_field, key=per_field.__getitem__)
+        raise GeometryError(field, f"the geometry has {vertices:,} vertices over the floor, walls and furniture ({per_field[field]:,} "
+                            f"here); expected at most {MAX_GEOMETRY_VERTICES:,}: simplify the outlines")
+    if not chains:
+        return
+    starts, ends, owner = [], [], []
+    for k, (_, points, closed) in enumerate(chains):
+        xy = np.asarray(points, dtype=float)
+        if closed:
+            xy = np.concatenate([xy, xy[:1]])
+        starts.append(xy[:-1])
+        ends.append(xy[1:])
+        owner.append(np.full(len(xy) - 1, k))
+    segments = shapely.linestrings(np.stack([np.concatenate(starts), np.concatenate(ends)], axis=1))
+    owners = np.concatenate(owner)
+    tree, reach = shapely.STRtree(segments), _pair_reach(scenario)
+    pairs_of = np.zeros(len(chains), dtype=np.int64)
+    for lo in range(0, len(segments), 256):  # blocks: stop as soon as the budget is spent
+        left, right = tree.query(segments[lo : lo + 256], predicate="dwithin", distance=reach)
+        later = right > left + lo
+        np.add.at(pairs_of, owners[left[later] + lo], 1)
+        if pairs_of.sum() > MAX_CLOSE_PAIRS:
+            path = chains[int(pairs_of.argmax())][0]
+            raise GeometryError(path, f"more than {MAX_CLOSE_PAIRS:,} pairs of edges lie within {reach:.2f} m of each other (a fine "
+                                "zigzag, crossing walls or dense outlines), which loading must resolve; expected coarser or fewer "
+                                "outlines: simplify the most detailed ones, starting here")
+
+
+def check_edge_table(polygons: list[Polygon], labels: list[str]) -> None:
+    """The padded (obstacles x edges) table stays within :data:`MAX_EDGE_TABLE` (one polygon with many edges pads all others)."""
+    edges = [sum(len(ring.coords) - 1 for ring in (poly.exterior, *poly.interiors)) for poly in polygons]
+    if edges and len(edges) * max(edges) > MAX_EDGE_TABLE:
+        widest = int(np.argmax(edges))
+        label = labels[widest].split(" (")[0]
+        path = "world.points" if label == OUTSIDE_LABEL else f"{label}.points" if label.startswith(("walls", "furniture")) else label
+        raise GeometryError(path, f"{len(edges):,} obstacles padded to this one's {edges[widest]:,} edges make a table of "
+                            f"{len(edges) * max(edges):,} edges that every distance query scans; expected at most {MAX_EDGE_TABLE:,}: "
+                            "fewer vertices here or fewer obstacles")
+
+
+def _input_chains(scenario: Scenario) -> list[tuple[str, list, bool]]:
+    """(field path, vertices, closed) of every outline the obstacles are built from (discs: their bounding square)."""
+    chains: list[tuple[str, list, bool]] = []
+    if scenario.world.points is not None:
+        chains.append(("world.points", list(scenario.world.points), True))
+    chains.extend((f"walls.{i}.points", list(wall.points), False) for i, wall in enumerate(scenario.walls))
+    for i, item in enumerate(scenario.furniture):
+        if isinstance(item, CircleFurniture):  # its bounding square: overlapping discs make the union work too
+            (x, y), r = item.center, item.radius
+            chains.append((f"furniture.{i}.center", [(x - r, y - r), (x + r, y - r), (x + r, y + r), (x - r, y + r)], True))
+        elif isinstance(item, RectangleFurniture):
+            chains.append((f"furniture.{i}.center", list(_rotated_rectangle(item.center, item.size, item.angle).exterior.coords)[:4], True))
+        else:
+            chains.append((f"furniture.{i}.points", list(item.points), True))
+    return chains
+
+
+def _pair_reach(scenario: Scenario) -> float:
+    """Edges closer than this have buffers that meet: twice the largest agent clearance, plus the thickest wall."""
+    radius = max(scenario.robot.radius, scenario.humans.radius)
+    thickness = max((wall.thickness for wall in scenario.walls), default=0.0)
+    return 2 * (radius + 0.05 + math.sqrt(2) * 0.05) + thickness  # placement's GAP and jitter
+
+
 def build_obstacles(scenario: Scenario) -> StaticObstacles:
+    check_complexity(scenario)
     polygons: list[Polygon] = []
     labels: list[str] = []
     discs: list[tuple[complex, float, str]] = []
@@ -149,6 +241,7 @@ def build_obstacles(scenario: Scenario) -> StaticObstacles:
         _check_inside(shape, world_box, f"{path}.points" if not isinstance(item, RectangleFurniture) else f"{path}.center", "furniture")
         polygons.append(shape)
         labels.append(_label(path, item.name))
+    check_edge_table(polygons, labels)
     return _as_arrays(polygons, labels, discs)
 
 

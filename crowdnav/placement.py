@@ -116,7 +116,8 @@ def build_placement(scenario: Scenario, obstacles: StaticObstacles) -> Placement
     slack = 2 * math.sqrt(2) * JITTER
     start_goal_ok, largest = _far_pairs(robot_start.points, robot_goal.points, robot.min_start_goal_distance + slack)
     if robot_start.ring_center is not None or robot_goal.ring_center is not None:
-        start_goal_ok = np.ones_like(start_goal_ok)  # rotated rings: checked at draw time instead
+        start_goal_ok = np.ones_like(start_goal_ok)  # rotated rings: any start, checked for every rotation below
+        _check_ring_start_goal(robot_start, robot_goal, robot.min_start_goal_distance)
     if not start_goal_ok.any():
         if largest < 1e-9:
             message = "robot.start and robot.goal only offer the same position; expected a goal away from the start"
@@ -173,8 +174,13 @@ def _group_placement(scenario: Scenario, path: str, group, world_box, occupied) 
     goal = None
     if group.goal_rule == "mirror":
         center = complex(*(group.mirror_center or scenario.world_center))
+        clearance = humans.radius + GAP + slack / 2
+        if spawn.ring_center is not None and not _ring_mirror_free(spawn, center, clearance, world_box, occupied):
+            # some rotations of the ring would mirror onto goals outside the floor or in an obstacle:
+            # the ring stays still, so that the mirrored points dropped below stay dropped
+            spawn = CandidateSet(spawn.points, spawn.jitter)
         mirrored = 2 * center - spawn.points
-        free = _free(mirrored, humans.radius + GAP + slack / 2, occupied) & shapely.contains_xy(world_box, mirrored.real, mirrored.imag)
+        free = _free(mirrored, clearance, occupied) & _inside_floor(mirrored, world_box, spawn.jitter)
         if not free.any():
             where = f"{path}.mirror_center" if group.mirror_center is not None else f"{path}.goal_rule"
             raise GeometryError(
@@ -203,14 +209,14 @@ def _check_capacity(scenario: Scenario, robot_start: CandidateSet, robot_goal: C
         if group.max_count == 0:
             continue
         points, ring = placement.spawn.points, placement.circle_radius
-        capacity = len(points) - _max_blocked(points, robot_start.points, robot.radius + ring + humans.radius + GAP + slack)
+        capacity = len(points) - _blocked(placement.spawn, robot_start, robot.radius + ring + humans.radius + GAP + slack)
         if group.standing:
-            capacity -= _max_blocked(points, robot_goal.points, robot.radius + ring + humans.radius + GAP + slack)
+            capacity -= _blocked(placement.spawn, robot_goal, robot.radius + ring + humans.radius + GAP + slack)
         for earlier, other in zip(groups[:k], crowd[:k], strict=False):
             if other.max_count == 0:
                 continue
             reach = ring + earlier.circle_radius + 2 * humans.radius + GAP + slack
-            capacity -= (1 if other.standing else other.max_count) * _max_blocked(points, earlier.spawn.points, reach)
+            capacity -= (1 if other.standing else other.max_count) * _blocked(placement.spawn, earlier.spawn, reach)
         needed = 1 if group.standing else group.max_count
         if capacity < needed:
             path = placement.path
@@ -387,6 +393,66 @@ def _require_inside(points: np.ndarray, path: str, world_box) -> None:
 def _outside_message(world_box) -> str:
     minx, miny, maxx, maxy = world_box.bounds
     return f"region extends outside the world; expected it inside x in [{minx:g}, {maxx:g}], y in [{miny:g}, {maxy:g}]"
+
+
+_RING_STEP = 0.02
+"""Arc length (m) between the samples that stand for every rotation of a ring (a circle perimeter) in load-time checks."""
+
+
+def _ring_samples(candidates: CandidateSet) -> tuple[np.ndarray, float]:
+    """Positions a draw from ``candidates`` can give, and how far a real one can be from the nearest of them.
+
+    A ring rotates by any angle at each draw, so it is sampled densely (at most 20,000 samples);
+    lattice points are themselves (their jitter is the callers' to add, as their reaches do).
+    """
+    if candidates.ring_center is None or len(candidates.points) == 0:
+        return candidates.points, 0.0
+    center = candidates.ring_center
+    radius = float(np.abs(candidates.points[0] - center))
+    count = int(min(20_000, max(64, math.ceil(2 * math.pi * radius / _RING_STEP))))
+    samples = center + radius * np.exp(2j * math.pi * np.arange(count) / count)
+    return samples, radius * math.pi / count
+
+
+def _blocked(spawn: CandidateSet, blockers: CandidateSet, reach: float) -> int:
+    """The most ``spawn`` candidates one agent drawn from ``blockers`` can block, whatever the rings' rotations."""
+    positions, margin = _ring_samples(blockers)
+    # a rotating spawn ring meets a disc in one arc, which holds at most one candidate more than at any fixed rotation
+    extra = 1 if spawn.ring_center is not None and len(spawn.points) else 0
+    return _max_blocked(spawn.points, positions, reach + margin) + extra
+
+
+def _check_ring_start_goal(start: CandidateSet, goal: CandidateSet, min_distance: float) -> None:
+    """Every start a rotating ring can give has a goal at least ``min_distance`` away (as the draw asks), for every rotation."""
+    starts, margin = _ring_samples(start)
+    needed = min_distance + math.sqrt(2) * (JITTER + start.jitter) + margin  # the draw's margin, and the start's own jitter
+    if goal.ring_center is not None:
+        # the farthest of K evenly spaced ring points is within pi/K of the opposite direction
+        radius = float(np.abs(goal.points[0] - goal.ring_center))
+        rho = np.abs(starts - goal.ring_center)
+        farthest = np.sqrt(np.maximum(rho**2 + radius**2 + 2 * rho * radius * math.cos(math.pi / len(goal.points)), 0.0))
+    else:
+        farthest = np.array([float(np.abs(starts[lo : lo + _CHUNK, None] - goal.points[None, :]).max(1).min())
+                             for lo in range(0, len(starts), _CHUNK)])
+    worst = float(farthest.min())
+    if worst < needed:
+        raise GeometryError("robot.min_start_goal_distance", (
+            f"a start drawn from robot.start can be only {worst:.2f} m from the farthest goal in robot.goal (a circle perimeter "
+            f"turns to any angle); expected robot.min_start_goal_distance at most {max(worst - needed + min_distance, 0):.2f} m, "
+            "or regions further apart"))
+
+
+def _ring_mirror_free(ring: CandidateSet, center: complex, clearance: float, world_box, occupied) -> bool:
+    """Whether every rotation of ``ring`` mirrors through ``center`` onto free floor (then it may keep rotating)."""
+    samples, margin = _ring_samples(ring)
+    mirrored = 2 * center - samples
+    return bool((_free(mirrored, clearance + margin, occupied) & _inside_floor(mirrored, world_box, margin)).all())
+
+
+def _inside_floor(points: np.ndarray, world_box, margin: float) -> np.ndarray:
+    """Points at least ``margin`` inside the world's box (a goal jittered by up to ``margin`` stays inside)."""
+    inner = world_box.buffer(-margin, join_style="mitre") if margin > 0 else world_box
+    return shapely.contains_xy(inner, points.real, points.imag)
 
 
 def _max_blocked(spawn: np.ndarray, starts: np.ndarray, reach: float) -> int:
