@@ -202,3 +202,42 @@ def test_fuzzed_set_values_fail_in_one_line_or_give_a_world_that_resets(items):
             simulator.reset(seed)
         except PlacementError as error:  # validate said OK, so reset must place
             pytest.fail(f"{items}: validated, then reset failed: {error}")
+
+
+# ------------------------------------------------------------------ geometry cost
+
+def _zigzag_floor(n: int) -> dict:
+    xs = [1 + 98 * i / (n - 3) for i in range(n - 2)]
+    points = [[x, 1.0 if i % 2 == 0 else 2.0] for i, x in enumerate(xs)] + [[99.0, 9.0], [1.0, 9.0]]
+    return {"world.min": [0, 0], "world.max": [100, 10], "world.points": points,
+            "robot.start": {"type": "rectangle", "min": [5, 5], "max": [6, 6]}, "robot.goal": {"type": "rectangle", "min": [90, 5], "max": [91, 6]},
+            "humans.count": 0}
+
+
+def _crossing_walls(n: int) -> dict:
+    import numpy as np
+
+    rng = np.random.default_rng(0)
+    walls = [{"points": np.clip(rng.uniform(2, 98, 2) + rng.uniform(-15, 15, (6, 2)), 1, 99).tolist(), "thickness": 0.1} for _ in range(n)]
+    return {"world.min": [0, 0], "world.max": [100, 100], "walls": walls, "humans.count": 0,
+            "robot.start": {"type": "points", "points": [[0.5, 0.5]]}, "robot.goal": {"type": "points", "points": [[99.5, 99.5]]}}
+
+
+@pytest.mark.parametrize("overrides, expected", [
+    (_zigzag_floor(10_000), "world.points: the geometry has 10,000 vertices"),  # took 413 s and 7.6 GB
+    (_crossing_walls(2_000), "walls: the geometry has 12,000 vertices"),  # took 338 s and 3.1 GB
+    (_zigzag_floor(2_000), "world.points: more than 10,000 pairs of edges lie within"),
+    (_crossing_walls(300), "more than 10,000 pairs of edges lie within"),
+])
+def test_costly_geometry_is_refused_up_front_naming_the_field(overrides, expected):
+    started = time.perf_counter()
+    with pytest.raises(ScenarioError, match=expected) as caught:
+        load_env_world("open_space", overrides)
+    assert len(str(caught.value).splitlines()) == 1 and time.perf_counter() - started < 5
+
+
+def test_one_detailed_outline_padding_every_obstacle_is_refused():
+    overrides = _zigzag_floor(900)
+    overrides["furniture"] = [{"type": "rectangle", "center": [5.0 + i, y], "size": [0.1, 0.1]} for i in range(90) for y in (6, 8)]
+    with pytest.raises(ScenarioError, match=r"world.points: 18\d obstacles padded to this one's 9\d\d edges make a table of 1\d\d,\d\d\d"):
+        load_env_world("open_space", overrides)

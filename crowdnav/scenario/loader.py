@@ -121,6 +121,8 @@ def _checked_overrides(label: str, overrides: Overrides | None) -> Overrides:
     for dotted, value in overrides.items():
         if not isinstance(dotted, str) or not dotted:
             raise ScenarioError(label, [ScenarioIssue("", f"override paths must be dotted field names, got {show(dotted)}")])
+        if not dotted.isprintable():  # a newline in the path would break the one-line report
+            raise ScenarioError(label, [ScenarioIssue("", f"override path {show(dotted)} holds control characters; expected a dotted field name")])
         if len(dotted) > MAX_PATH_CHARACTERS or dotted.count(".") >= MAX_DEPTH:
             message = (f"override path of {len(dotted):,} characters and {dotted.count('.') + 1:,} parts; "
                        f"expected at most {MAX_PATH_CHARACTERS:,} characters and {MAX_DEPTH} parts")
