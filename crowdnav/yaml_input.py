@@ -86,7 +86,12 @@ def read_bounded_yaml(text: str) -> tuple[Any, yaml.Node | None]:
     if values > MAX_VALUES:
         raise YamlLimitError(f"holds more than {MAX_VALUES:,} values once its aliases are expanded; expected at most {MAX_VALUES:,}")
     # the tree is within bounds: building the document from it cannot blow up either
-    return yaml.load(text, Loader=_LOADER), root
+    try:
+        return yaml.load(text, Loader=_LOADER), root
+    except (ValueError, TypeError, OverflowError) as error:  # an explicit tag on a value it cannot read: !!int 1e-6
+        problem = str(error).splitlines()[0] if str(error) else type(error).__name__
+        raise YamlLimitError(f"holds a value its explicit tag (such as !!int) cannot read ({problem}); expected the value "
+                             "without the tag") from None
 
 
 def parse_value(text: str) -> Any:

@@ -43,11 +43,12 @@ def _one_line_error(capsys, *argv: str) -> str:
     (ALIAS_BOMB, "the value holds more than 100,000 values once its aliases are expanded"),
     ("[" * 5000, "not valid YAML"),
     ("[" * 100 + "]" * 100, "the value is nested 65 levels deep; expected at most 64"),
+    ("!!int 31e-6", "the value holds a value its explicit tag (such as !!int) cannot read"),  # found by the fuzzing below
 ])
 def test_set_value_bombs_and_deep_nesting_are_refused_in_one_line(capsys, value, expected):
     assert len(ALIAS_BOMB) < 500  # a few hundred bytes that expand to 387 million values
     err = _one_line_error(capsys, "scenario", "validate", "open_space", "--set", f"description={value}")
-    assert expected in err and err.startswith("crowdnav: error: --set 'description'")
+    assert expected in err and err.startswith("crowdnav: error: --set 'description'"), err
 
 
 def test_a_five_thousand_part_override_path_is_one_line_naming_the_limit(capsys):
@@ -171,7 +172,8 @@ def test_a_utf8_byte_order_mark_is_accepted(tmp_path):
 SCENARIO_PATHS = ["humans.count", "humans.radius", "time_step", "robot.max_speed", "robot.start", "world.max", "description",
                   "humans.spawn.0", "walls", "sensors.lidar.beams", "humans.preferred_speed", "robot.start.radius", "max_steps"]
 FRAGMENTS = ["1e-6", "010", "2:30", "0x10", ".inf", "-.nan", "&a [1, 2]", "*a", "[", "]", "{", "}", "!!python/object:os.system",
-             "!!int 3", "~", "yes", "- 1", ": ", "'", '"', "#", "|", "\\x00", "\n", "\t", ",", "[1, 2]", "{type: circle}", "3", "0.5"]
+             "!!int 3", "!!int ",
+             "!!float ", "~", "yes", "- 1", ": ", "'", '"', "#", "|", "\\x00", "\n", "\t", ",", "[1, 2]", "{type: circle}", "3", "0.5"]
 
 
 @st.composite
