@@ -16,20 +16,21 @@ import os
 import sys
 from collections.abc import Sequence
 
-from crowdnav.cli import benchmark, render, scenario, schema, train, trajectories
+from crowdnav.cli import benchmark, export, render, scenario, schema, train, trajectories
 from crowdnav.cli.common import CliError
 
 # Packages that only an extra installs (pyproject.toml), so a command run on the core install
 # names the extra to add instead of failing with a traceback.
-EXTRA_OF_MODULE = {"torch": "train", "stable_baselines3": "train", "matplotlib": "train", "pandas": "bench", "seaborn": "bench", "ray": "ray"}
+EXTRA_OF_MODULE = {"torch": "train", "stable_baselines3": "train", "matplotlib": "train", "pandas": "bench", "seaborn": "bench", "ray": "ray",
+                   "onnx": "onnx", "onnxruntime": "onnx"}
 EXTRA_OF_COMMAND = {"train": "train", "collect-dataset": "train", "pretrain-encoder": "train", "benchmark": "bench", "plot": "bench",
-                    "leaderboard": "bench", "trajectories": "bench", "evaluate": "bench"}
+                    "leaderboard": "bench", "trajectories": "bench", "evaluate": "bench", "export": "onnx"}
 # What each command's layer needs, checked before it starts: a benchmark's worker processes would
 # otherwise each fail on the missing import, after the command had already begun.
 NEEDS = {"train": ("torch", "stable_baselines3"), "collect-dataset": ("torch",), "pretrain-encoder": ("torch", "matplotlib"),
          "benchmark": ("torch", "stable_baselines3", "pandas", "seaborn", "matplotlib"), "plot": ("pandas", "seaborn", "matplotlib"),
          "leaderboard": ("pandas",), "trajectories": ("torch", "stable_baselines3", "pandas"),
-         "evaluate": ("torch", "stable_baselines3", "pandas")}
+         "evaluate": ("torch", "stable_baselines3", "pandas"), "export": ("torch", "stable_baselines3", "onnx")}
 
 
 def _require(modules: Sequence[str]) -> None:
@@ -41,7 +42,7 @@ def _require(modules: Sequence[str]) -> None:
 
 def command_groups() -> tuple:
     """Registration functions of the command groups, in the order ``--help`` lists them."""
-    return (scenario.register, train.register, render.register, benchmark.register, trajectories.register, schema.register)
+    return (scenario.register, train.register, render.register, benchmark.register, trajectories.register, export.register, schema.register)
 
 
 def build_parser() -> argparse.ArgumentParser:

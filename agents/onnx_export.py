@@ -1,0 +1,138 @@
+"""A trained policy as one ONNX file: the raw env observation in, the deterministic action out.
+
+:func:`export_onnx` writes what :class:`agents.AgentPolicy` computes, as a graph a robot can run
+with onnxruntime alone (no torch, no Stable-Baselines3, no crowdnav; docs/deploy.md):
+
+* **inputs**: one per observation key, named after it, with the raw
+  :class:`crowdnav.envs.CrowdNavEnv` dtype and shape plus a leading batch axis (float32 vectors,
+  the LEOG grid as uint8 ``(batch, 1, H, W)``);
+* **inside**: the observation normalisation stored with the checkpoint (``(x - offset) / scale``
+  per key), the frozen LEOG encoder when the model was trained on its latents, the features
+  extractor and the actor's deterministic action (SAC: ``tanh`` of the Gaussian's mean; TD3 /
+  DDPG: the actor; PPO / A2C: the mean, clipped to [-1, 1]), then SB3's mapping to the action
+  space's bounds;
+* **output** ``action``: float32 ``(batch, 2)`` in [-1, 1], what ``policy(observation)`` returns
+  (holonomic ``(vx, vy)`` in the robot frame, or unicycle ``(v, omega)``, times the max speeds).
+
+The file's metadata (``custom_metadata_map`` in onnxruntime) holds ``crowdnav.env_options`` (the
+CrowdNavEnv options, JSON), ``crowdnav.algo`` and ``crowdnav.observation`` (key -> shape and dtype).
+The TorchScript exporter (``dynamo=False``, still in torch 2.13 though no longer the default) is
+used: the ``torch.export``-based one needs the extra package onnxscript and (torch 2.13) stops at
+a data-dependent guard in SB3's Normal distribution for PPO / A2C. Tests check that onnxruntime
+matches the torch policy to 1e-5 on recorded observations, for SAC, TD3, PPO and the LEOG.
+"""
+
+from __future__ import annotations
+
+import json
+import warnings
+from collections.abc import Mapping
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+from torch import nn
+
+OPSET = 17
+ACTION_OUTPUT = "action"
+
+
+class ExportError(ValueError):
+    """A policy that cannot be exported, or an output that cannot be written; one line."""
+
+
+class DeployablePolicy(nn.Module):
+    """Raw observation tensors (in :attr:`keys` order) -> deterministic actions, as :class:`agents.AgentPolicy` computes them."""
+
+    def __init__(self, policy: Any, keys: list[str]):
+        super().__init__()
+        self.keys = list(keys)
+        self.network = policy.model.policy
+        self.network.set_training_mode(False)
+        for module in self.network.modules():  # the plain formulas: no per-batch caches in a traced graph
+            if hasattr(module, "reference"):
+                module.reference = True
+        scales = policy.scales or {}
+        self.scaled = [key in scales for key in self.keys]
+        for i, key in enumerate(self.keys):
+            if key in scales:
+                offset, scale = scales[key]
+                self.register_buffer(f"offset_{i}", torch.as_tensor(np.asarray(offset, dtype=np.float32)))
+                self.register_buffer(f"scale_{i}", torch.as_tensor(np.asarray(scale, dtype=np.float32)))
+        self.encoder = policy.encoder  # the frozen LEOG encoder whose latents the model was trained on, or None
+        space = policy.model.action_space
+        self.register_buffer("low", torch.as_tensor(space.low, dtype=torch.float32))
+        self.register_buffer("high", torch.as_tensor(space.high, dtype=torch.float32))
+        self.squash = bool(self.network.squash_output)
+
+    def forward(self, *inputs: torch.Tensor) -> torch.Tensor:
+        observation = {}
+        for i, (key, value) in enumerate(zip(self.keys, inputs, strict=True)):
+            if self.scaled[i]:  # agents.wrappers.normalize_observation, in float32
+                value = (value.float() - getattr(self, f"offset_{i}")) / getattr(self, f"scale_{i}")
+            elif key == "leog" and self.encoder is not None:  # agents.wrappers.encode_grids
+                value = self.encoder((value > 0).float())
+            observation[key] = value
+        actions = self.network._predict(observation, deterministic=True)
+        if self.squash:  # SB3's predict: unscale_action, else clip to the action space
+            return self.low + 0.5 * (actions + 1.0) * (self.high - self.low)
+        return torch.clamp(actions, self.low, self.high)
+
+
+def export_onnx(policy_path: str | Path, out: str | Path, *, opset: int = OPSET) -> Path:
+    """Write the policy at ``policy_path`` (a crowdnav run folder or checkpoint) to ``out`` as ONNX; returns ``out``.
+
+    Only the checkpoint's parameters are read (:func:`agents.load_policy`). Raises
+    :class:`ExportError` for a folder that holds no loadable policy.
+    """
+    from crowdnav.agents.checkpoint import load_policy
+
+    path = Path(policy_path)
+    if (path / "train" / "checkpoint").is_dir():  # a protocol run folder: its training run is in train/
+        path = path / "train"
+    try:
+        policy = load_policy(path)
+    except (FileNotFoundError, ValueError) as error:
+        raise ExportError(f"{policy_path}: {str(error).splitlines()[0]}") from None
+    env = policy.make_env()
+    try:
+        raw = env.observation_space
+        example, _ = env.reset(seed=0)
+    finally:
+        env.close()
+    keys = list(raw.spaces)
+    module = DeployablePolicy(policy, keys).eval()
+    inputs = tuple(torch.as_tensor(np.asarray(example[key])[None]) for key in keys)
+    out = Path(out)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    axes = {name: {0: "batch"} for name in (*keys, ACTION_OUTPUT)}
+    validate = torch.distributions.Distribution._validate_args
+    # PPO / A2C build a Normal to take its mean: its argument checks only test values, and traced they become constants
+    torch.distributions.Distribution.set_default_validate_args(False)
+    try:
+        with torch.no_grad(), warnings.catch_warnings():
+            warnings.filterwarnings("ignore", category=DeprecationWarning, module=r"torch\.onnx.*|crowdnav\.agents\.onnx_export")
+            warnings.filterwarnings("ignore", category=DeprecationWarning, message=".*legacy TorchScript-based ONNX export.*")
+            torch.onnx.export(module, inputs, str(out), input_names=keys, output_names=[ACTION_OUTPUT], dynamic_axes=axes,
+                              opset_version=opset, dynamo=False)
+    finally:
+        torch.distributions.Distribution.set_default_validate_args(validate)
+    _add_metadata(out, {
+        "crowdnav.env_options": json.dumps(policy.env_options, sort_keys=True),
+        "crowdnav.algo": policy.algo,
+        "crowdnav.observation": json.dumps({key: {"shape": list(space.shape), "dtype": str(space.dtype)} for key, space in raw.spaces.items()}),
+    })
+    return out
+
+
+def _add_metadata(path: Path, properties: Mapping[str, str]) -> None:
+    """Store ``properties`` in the ONNX file's ``metadata_props`` (and check the model)."""
+    import onnx
+
+    model = onnx.load(str(path))
+    for key, value in properties.items():
+        entry = model.metadata_props.add()
+        entry.key, entry.value = key, value
+    onnx.checker.check_model(model)
+    onnx.save(model, str(path))

@@ -1,0 +1,41 @@
+"""``crowdnav export``: a trained policy as an ONNX file a robot runs with onnxruntime alone."""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+from crowdnav.cli.common import CliError
+
+
+def register(subparsers: argparse._SubParsersAction) -> None:
+    """Add ``export``."""
+    parser = subparsers.add_parser(
+        "export", help="write a trained policy as ONNX (raw observation dict in, deterministic action out)",
+        description="POLICY: a crowdnav training run folder or checkpoint (a benchmark run folder works too). The ONNX "
+                    "graph takes one input per observation key (the raw CrowdNavEnv observation, batch first) and "
+                    "returns `action` (batch, 2), what the policy does deterministically; the observation scaling and a "
+                    "frozen LEOG encoder are inside. Run it with numpy and onnxruntime only (docs/deploy.md).",
+    )
+    parser.add_argument("policy", metavar="POLICY")
+    parser.add_argument("--out", default="policy.onnx", metavar="FILE", help="the ONNX file (default: %(default)s)")
+    parser.add_argument("--force", action="store_true", help="replace FILE if it exists")
+    parser.set_defaults(handler=export_command)
+
+
+def export_command(args: argparse.Namespace) -> int:
+    out = Path(args.out)
+    if out.suffix != ".onnx":
+        raise CliError(f"--out {args.out}: expected a file name ending in .onnx")
+    if out.exists() and not args.force:
+        raise CliError(f"{out} exists; pass --force to replace it")
+    if not Path(args.policy).exists():
+        raise CliError(f"{args.policy}: no such run folder or checkpoint (export takes a crowdnav training run or checkpoint)")
+    from crowdnav.agents.onnx_export import ExportError, export_onnx
+
+    try:
+        path = export_onnx(args.policy, out)
+    except ExportError as error:
+        raise CliError(str(error)) from None
+    print(f"wrote {path}")
+    return 0
