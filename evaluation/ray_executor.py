@@ -26,6 +26,7 @@ import os
 import platform
 import socket
 import threading
+import time
 import traceback
 from collections.abc import Iterator, Sequence
 from pathlib import Path
@@ -254,6 +255,10 @@ class _Board:
         events, self.events = self.events, []
         return dict(self.episodes), dict(self.attempts), events
 
+    def alive(self) -> bool:
+        """The tasks' heartbeat: the board lives as long as the driver that created it."""
+        return True
+
 
 @ray.remote
 def _run_task(unit: Any, out_dir: str, storage: str, storage_id: str, encoder: bytes | None, board: Any) -> dict[str, Any]:
@@ -276,7 +281,7 @@ def _run_task(unit: Any, out_dir: str, storage: str, storage_id: str, encoder: b
     work_dir, shared = work_folder(storage, storage_id, relative)
     if encoder is not None:
         unpack_folder(encoder, pretrained_encoder_path(work_dir.parent.parent).parent, "encoder.pt")
-    reporter = _ProgressReporter(board, name, work_dir, job.protocol)
+    reporter = _ProgressReporter(board, name, work_dir, job.protocol, on_driver_lost=_exit_with_driver)
 
     def on_event(event: str, data: dict[str, Any]) -> None:
         if event == "evaluated":
@@ -304,11 +309,27 @@ def _run_task(unit: Any, out_dir: str, storage: str, storage_id: str, encoder: b
     return {**summary, **base}
 
 
-class _ProgressReporter:
-    """A thread of the task that sends the run's episode count to the board whenever it changes."""
+DRIVER_CHECK_SECONDS = 2.0
+"""How often a task asks whether its driver (through the board actor) still lives."""
 
-    def __init__(self, board: Any, name: str, folder: Path, protocol: Protocol):
+
+def _exit_with_driver() -> None:
+    """The driver is gone (killed, preempted): stop this task now, as a kill would; its checkpoint resumes it later.
+
+    Ray itself reaps a dead job's tasks only after its health checks time out (about 90 s
+    measured), training all the while for nobody and holding the CPUs.
+    """
+    os._exit(75)
+
+
+class _ProgressReporter:
+    """A thread of the task that sends the run's episode count to the board whenever it changes, and
+    calls ``on_driver_lost`` once the board (which dies with the driver) is gone."""
+
+    def __init__(self, board: Any, name: str, folder: Path, protocol: Protocol, on_driver_lost: Any = None):
         self.board, self.name, self.folder, self.protocol = board, name, folder, protocol
+        self.on_driver_lost = on_driver_lost
+        self._checked = time.monotonic()
         self.last = -1
         self._stop = threading.Event()
         self._thread = threading.Thread(target=self._loop, daemon=True)
@@ -326,6 +347,20 @@ class _ProgressReporter:
     def _loop(self) -> None:
         while not self._stop.wait(POLL_SECONDS):
             self._send()
+            if self.on_driver_lost is not None and time.monotonic() - self._checked >= DRIVER_CHECK_SECONDS:
+                self._checked = time.monotonic()
+                if not self.driver_alive():
+                    self.on_driver_lost()
+
+    def driver_alive(self) -> bool:
+        """False only when the board actor is dead (its driver gone); a slow answer is not a death."""
+        try:
+            ray.get(self.board.alive.remote(), timeout=DRIVER_CHECK_SECONDS)
+        except ray.exceptions.RayActorError:
+            return False
+        except ray.exceptions.GetTimeoutError:
+            return True
+        return True
 
     def stop(self) -> None:
         self._stop.set()
