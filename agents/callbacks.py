@@ -8,13 +8,13 @@ import time
 from collections.abc import Callable
 from dataclasses import asdict, dataclass
 from pathlib import Path
-from typing import TextIO
 
+from crowdnav.agents.episode_log import DISCARDED_SUFFIX, HEADER, EpisodeLogWriter, prepare_log
 from crowdnav.agents.resume_point import ResumePoint
 from stable_baselines3.common.callbacks import BaseCallback
 
-EPISODE_LOG_HEADER = "episode,seed,outcome,return,length,timesteps,seconds"
-DISCARDED_LOG_SUFFIX = ".discarded"
+EPISODE_LOG_HEADER = HEADER
+DISCARDED_LOG_SUFFIX = DISCARDED_SUFFIX
 """``episodes.csv.discarded`` keeps the rows of episodes that a resume trained again."""
 
 
@@ -102,7 +102,7 @@ class EpisodeCallback(BaseCallback):
         self.resume_point = resume_point
         self.records: list[EpisodeRecord] = []
         self._log_path = Path(log_file) if log_file is not None else None
-        self._log: TextIO | None = None
+        self._log: EpisodeLogWriter | None = None
         self._progress = progress
         self._bar = None
         self._save_due = False
@@ -118,15 +118,9 @@ class EpisodeCallback(BaseCallback):
             self.on_start()
         self._start_time = time.perf_counter()
         self._start_steps = self.model.num_timesteps
-        if self._log_path is not None:
-            # empty: a kill before the first row (a step budget checkpoints before any episode ends)
-            new = not self._log_path.exists() or self._log_path.stat().st_size == 0
-            if not new:
-                set_aside_episodes_from(self._log_path, self.done)
-            self._log = open(self._log_path, "a", encoding="utf-8")  # noqa: SIM115 (closed in _on_training_end)
-            if new:
-                self._log.write(EPISODE_LOG_HEADER + "\n")
-                self._log.flush()
+        if self._log_path is not None:  # training prepared it already; a callback used on its own prepares it here
+            prepare_log(self._log_path, self.done)
+            self._log = EpisodeLogWriter(self._log_path)
         if self._progress:
             from tqdm import tqdm
 
@@ -175,8 +169,7 @@ class EpisodeCallback(BaseCallback):
         self.done += 1
         self.successes += record.outcome == "success"
         if self._log is not None:
-            self._log.write(record.csv() + "\n")
-            self._log.flush()
+            self._log.write(record.csv())
         self.logger.record("episode/success_rate", self.success_rate)
         self.logger.record("episode/return", record.reward)
         self.logger.record("episode/length", record.length)
@@ -204,6 +197,8 @@ class EpisodeCallback(BaseCallback):
             self.resume_point.rollout_ended()
         if self._save_due and self.save is not None:
             self._save_due = False
+            if self._log is not None:  # the checkpoint about to claim these episodes: their rows on disk first
+                self._log.sync()
             self.save(self.done)
 
     def _on_training_end(self) -> None:

@@ -25,6 +25,7 @@ from __future__ import annotations
 import base64
 import json
 import random
+import zipfile
 from collections import deque
 from collections.abc import Mapping
 from pathlib import Path
@@ -110,7 +111,7 @@ def _read_npz(path: Path) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
         with np.load(path, allow_pickle=False) as archive:
             arrays = {name: archive[name] for name in archive.files}
         meta = json.loads(str(arrays.pop("meta.json")))
-    except (OSError, ValueError, KeyError, EOFError) as error:
+    except (OSError, ValueError, KeyError, EOFError, zipfile.BadZipFile) as error:  # BadZipFile: a file cut short
         raise ResumeStateError(f"{path}: cannot read it as arrays ({str(error).splitlines()[0][:200]})") from None
     return arrays, meta
 

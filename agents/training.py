@@ -46,6 +46,7 @@ from crowdnav.agents.checkpoint import (
     save_checkpoint,
 )
 from crowdnav.agents.config import ConfigError, TrainConfig, config_from_mapping, config_to_dict, load_config
+from crowdnav.agents.episode_log import EpisodeLogError, prepare_log
 from crowdnav.agents.factory import (
     OFF_POLICY,
     env_options,
@@ -133,6 +134,7 @@ def _train(config: TrainConfig, resume: bool, on_checkpoint: Callable[[int], Non
         raise ConfigError(f"{out} already holds a run (checkpoint/); resume it with --resume or choose another --out")
     out.mkdir(parents=True, exist_ok=True)
     (out / "config.yaml").write_text(yaml.safe_dump(config_to_dict(config), sort_keys=False), encoding="utf-8")
+    _prepare_episode_log(out, state["episodes"] if state else 0)  # header on disk before anything can be killed mid-episode
 
     encoder, saved_encoder = load_leog_weights(config)
     precompute = precomputes_leog(config)
@@ -160,9 +162,10 @@ def _train(config: TrainConfig, resume: bool, on_checkpoint: Callable[[int], Non
             model.load_replay_buffer(checkpoint / REPLAY_FILE)
         saved_streams = restore_pickled_rng_state(model, checkpoint / RNG_FILE)
     elif state:  # tensors, JSON and arrays only
-        model = resume_model(checkpoint, config, collecting, saved_encoder, tensorboard_log)
+        with _resume_errors(_restart_hint(out)):
+            model = resume_model(checkpoint, config, collecting, saved_encoder, tensorboard_log)
         if config.algo in OFF_POLICY and (checkpoint / REPLAY_ARRAYS).is_file():
-            with _resume_errors():
+            with _resume_errors(f"; remove {checkpoint / REPLAY_ARRAYS} to resume with an empty replay buffer"):
                 load_replay_buffer(model.replay_buffer, checkpoint / REPLAY_ARRAYS)
     else:
         model = make_model(config, collecting, saved_encoder, tensorboard_log)
@@ -177,12 +180,12 @@ def _train(config: TrainConfig, resume: bool, on_checkpoint: Callable[[int], Non
     if worlds:
         from crowdnav.agents.resume_worlds import load_rollout
 
-        with _resume_errors():
+        with _resume_errors(f"; remove {checkpoint / ROLLOUT_ARRAYS} to resume with new episodes in every world"):
             resume_point.restore_rollout(load_rollout(checkpoint / ROLLOUT_ARRAYS, model))
     elif state and batched and config.algo in OFF_POLICY:
         end_open_episodes(getattr(model, "replay_buffer", None))  # the worlds start new episodes
     if state and not state["legacy"]:  # building the model re-seeded every stream: continue the saved ones (last: nothing draws after)
-        with _resume_errors():
+        with _resume_errors(_restart_hint(out)):
             saved_streams = restore_training_state(model, checkpoint / STATE_FILE)
     exact = bool(state) and saved_streams is not None and (rewinds or worlds)
     if state and saved_streams is not None:
@@ -287,7 +290,7 @@ def _resume_state(checkpoint: Path, config: TrainConfig, trust_pickle: bool = Fa
     try:
         info = read_policy_info(folder)
     except ValueError as error:
-        raise ConfigError(f"cannot resume: {error}") from None
+        raise ConfigError(f"cannot resume: {error}{_restart_hint(checkpoint.parent)}") from None
     if not (folder / MODEL_FILE).is_file():
         raise ConfigError(f"cannot resume: {folder / MODEL_FILE} is missing")
     legacy = not (folder / STATE_FILE).is_file()  # written before resume state was stored without pickle
@@ -315,13 +318,30 @@ def _resume_state(checkpoint: Path, config: TrainConfig, trust_pickle: bool = Fa
             "normalization": normalization, "next_episode": info.get("next_episode"), "legacy": legacy}
 
 
+def _prepare_episode_log(out: Path, first_episode: int) -> None:
+    """Create or repair ``episodes.csv`` (:func:`agents.episode_log.prepare_log`), saying what a kill had left damaged."""
+    try:
+        repairs = prepare_log(episode_log(out), first_episode)
+    except EpisodeLogError as error:
+        raise ConfigError(str(error)) from None
+    for note in repairs:
+        warnings.warn(f"{out}: {note}", stacklevel=3)
+
+
 @contextmanager
-def _resume_errors() -> Iterator[None]:
-    """A damaged or foreign resume file: the CLI's one-line ConfigError."""
+def _resume_errors(hint: str = "") -> Iterator[None]:
+    """A damaged or foreign resume file: the CLI's one-line ConfigError, ending with ``hint`` (how to go on)."""
     try:
         yield
     except ResumeStateError as error:
-        raise ConfigError(f"cannot resume: {error}") from None
+        raise ConfigError(f"cannot resume: {error}{hint}") from None
+    except ConfigError as error:
+        raise ConfigError(f"{error}{hint}") from None
+
+
+def _restart_hint(out: Path) -> str:
+    """How to go on from a checkpoint that cannot be resumed (cut short, damaged, foreign)."""
+    return f"; this checkpoint cannot be resumed: move {out} away (its snapshots still load as policies) and train again"
 
 
 def _encoder_path(config: TrainConfig) -> Path:

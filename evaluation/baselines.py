@@ -30,7 +30,7 @@ from pathlib import Path
 from typing import Any
 
 from crowdnav.evaluation.protocol import Protocol
-from crowdnav.evaluation.storage import META_FILE, TEST_FILE, atomic_write_csv, atomic_write_json, read_json
+from crowdnav.evaluation.storage import META_FILE, TEST_FILE, atomic_write_csv, atomic_write_json, read_json, run_damage
 
 BASELINE_PREFIX = "baseline_"
 """Configuration names of baselines start with this; experiment configurations may not."""
@@ -90,7 +90,8 @@ def evaluate_baseline(experiment: str, configuration: str, label: str, env_optio
     out_dir = Path(out_dir)
     if (out_dir / META_FILE).is_file():
         meta = read_json(out_dir / META_FILE)
-        if meta.get("env") == dict(env_options) and _episodes_of(Protocol(**meta["protocol"])) == _episodes_of(protocol):
+        if meta.get("env") == dict(env_options) and _episodes_of(Protocol(**meta["protocol"])) == _episodes_of(protocol) \
+                and not run_damage(out_dir, meta):  # a missing or damaged table: played again (it is deterministic)
             return out_dir  # deterministic: the same episodes give the same rows
     started = time.perf_counter()
     name = _baseline_name(configuration)

@@ -66,7 +66,7 @@ class BenchmarkReport:
         lines = [f"{len(self.summaries)} runs finished ({skipped} already done), {len(self.retried)} retried, "
                  f"{len(self.failures)} failed, in {self.seconds:.0f} s"]
         for title, outcomes, detail in (
-            ("finished", self.summaries, lambda o: " (already done)" if o["status"] == "skipped" else ""),
+            ("finished", self.summaries, lambda o: {"skipped": " (already done)", "repaired": " (repaired)"}.get(o["status"], "")),
             ("retried", self.retried, lambda o: f" ({o['attempts']} attempts{', failed' if o['status'] == 'failed' else ''})"),
             ("failed", self.failures, lambda o: f" ({o['error']}; traceback: {o['log']})"),
         ):
@@ -116,7 +116,8 @@ def describe_outcome(outcome: dict[str, Any]) -> str:
         return f"{run} failed: {outcome['error']} (traceback: {outcome['log']})"
     # a run finished before out_of_bounds existed has no final_out_of_bounds: it had none
     rates = ", ".join(f"{name} {outcome.get(f'final_{name}', 0.0):.0%}" for name in OUTCOMES)
-    return f"{run} {outcome['status']}: final {rates}; {outcome['env_steps']} env steps, {outcome['wall_time_s']:.0f} s"
+    repairs = f" (found {'; '.join(outcome['repairs'])})" if outcome.get("repairs") else ""
+    return f"{run} {outcome['status']}{repairs}: final {rates}; {outcome['env_steps']} env steps, {outcome['wall_time_s']:.0f} s"
 
 
 def describe_baseline(folder: Path) -> str:
@@ -192,6 +193,8 @@ def write_report(folder: Path, *, video: bool = True, log: Callable[[str], None]
     outputs = plot_curves([folder], folder / "curves")
     table, written = write_leaderboard([folder], folder / "leaderboard")
     outputs += written
+    for gap in table.attrs.get("missing", []):  # named in leaderboard.md too
+        log(f"not in the leaderboard: {gap.describe()}")
     if video:
         best = table[table["kind"] == "learned"].iloc[0]  # rows are sorted by final success
         try:

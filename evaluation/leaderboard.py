@@ -14,6 +14,9 @@ Columns (definitions in docs/evaluation.md):
 * social metrics: over the final test episodes of all seeds: mean SPL, path length, time to goal
   (successful episodes), minimum human distance, intimate and personal zone shares, mean jerk
   and cumulative social force; median minimum time to collision;
+* seeds: the runs ranked; ``seeds_expected`` (CSV) also counts the runs the experiment plans that
+  are not finished or whose tables are missing or damaged (the markdown says ``1 of 2`` and names
+  each such run under the table: a missing seed is never left out silently);
 * env steps and wall time: mean per run;
 * budget: the learned runs' training budget in their protocol's unit, ``700 episodes`` or
   ``2,000,000 env steps`` (``-`` for the scripted baselines and untrained policies). The markdown
@@ -28,13 +31,15 @@ Regenerating from the same results writes the same bytes: rows sorted by final s
 
 from __future__ import annotations
 
-from collections.abc import Iterable
+from collections import Counter
+from collections.abc import Iterable, Sequence
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 from crowdnav.evaluation.baselines import is_baseline
 from crowdnav.evaluation.protocol import describe_budget
+from crowdnav.evaluation.storage import MissingRun
 
 from crowdnav.simulator import OUTCOMES
 
@@ -72,9 +77,15 @@ def _std(values: np.ndarray) -> float:
     return float(np.std(values, ddof=1)) if len(values) > 1 else 0.0
 
 
-def leaderboard_table(tests: Any, metas: list[dict[str, Any]]) -> Any:
-    """The leaderboard as a DataFrame (numbers unformatted), one row per (experiment, configuration)."""
+def leaderboard_table(tests: Any, metas: list[dict[str, Any]], missing: Sequence[MissingRun] = ()) -> Any:
+    """The leaderboard as a DataFrame (numbers unformatted), one row per (experiment, configuration).
+
+    ``missing``: the runs left out (:func:`evaluation.storage.load_results`); ``seeds_expected``
+    counts them with the ranked ones, and the table's ``attrs["missing"]`` keeps them for the notes.
+    """
     import pandas as pd
+
+    absent = Counter((gap.experiment, gap.configuration) for gap in missing)
 
     final_count = {meta["experiment"]: meta["protocol"]["final_evaluations"] for meta in metas}
     run_meta = {(meta["experiment"], meta["configuration"], meta["seed"]): meta for meta in metas}
@@ -85,6 +96,7 @@ def leaderboard_table(tests: Any, metas: list[dict[str, Any]]) -> Any:
         per_run = final.groupby("seed")["outcome"]
         row: dict[str, Any] = {"experiment": experiment, "configuration": configuration, "label": frame["label"].iloc[0],
                                "kind": "baseline" if is_baseline(configuration) else "learned", "seeds": int(frame["seed"].nunique())}
+        row["seeds_expected"] = row["seeds"] + absent[(experiment, configuration)]
         for outcome in OUTCOMES:
             rates = per_run.apply(lambda outcomes, o=outcome: float((outcomes == o).mean())).to_numpy()
             row[f"final_{outcome}_mean"], row[f"final_{outcome}_std"] = float(rates.mean()), _std(rates)
@@ -103,9 +115,10 @@ def leaderboard_table(tests: Any, metas: list[dict[str, Any]]) -> Any:
         trained = [m for m in metas_here if m.get("kind") not in ("baseline", "evaluated") and not is_baseline(configuration)]
         row["budget"] = ", ".join(sorted({describe_budget(m["protocol"]) for m in trained})) or "-"
         rows.append(row)
-    table = pd.DataFrame(rows)
-    return table.sort_values(["final_success_mean", "experiment", "configuration"], ascending=[False, True, True],
-                             ignore_index=True)
+    table = pd.DataFrame(rows).sort_values(["final_success_mean", "experiment", "configuration"], ascending=[False, True, True],
+                                           ignore_index=True)
+    table.attrs["missing"] = list(missing)
+    return table
 
 
 def _number(value: float, digits: int = 3) -> str:
@@ -132,7 +145,7 @@ def to_markdown(table: Any) -> str:
     lines = ["| " + " | ".join(header) + " |", "|" + "|".join(["---"] * len(header)) + "|"]
     for row in table.to_dict("records"):
         cells = ([row["experiment"]] if several else []) + [
-            row["label"], str(row["seeds"]), *([row["budget"]] if column else []),
+            row["label"], _seeds(row), *([row["budget"]] if column else []),
             *(f"{_number(row[f'final_{o}_mean'])} ± {_number(row[f'final_{o}_std'])}" for o in OUTCOMES),
             f"{_number(row['success_iqm'])} [{_number(row['success_iqm_low'])}, {_number(row['success_iqm_high'])}]",
             f"{_number(row['success_auc_mean'])} ± {_number(row['success_auc_std'])}",
@@ -142,7 +155,17 @@ def to_markdown(table: Any) -> str:
         lines.append("| " + " | ".join(cells) + " |")
     if len(budgets) == 1:
         lines += ["", f"budget: {budgets[0]} per run"]
+    missing = table.attrs.get("missing", [])
+    if missing:
+        lines += ["", f"{len(missing)} run(s) missing, not ranked (run `crowdnav benchmark` on the experiment again: it resumes "
+                      "unfinished runs and rebuilds damaged ones from what they kept):", ""]
+        lines += [f"- {gap.describe()}" for gap in missing]
     return "\n".join(lines) + "\n"
+
+
+def _seeds(row: dict[str, Any]) -> str:
+    expected = row.get("seeds_expected", row["seeds"])
+    return str(row["seeds"]) if expected == row["seeds"] else f"{row['seeds']} of {expected}"
 
 
 def to_csv(table: Any) -> str:
@@ -163,8 +186,9 @@ def write_leaderboard(paths: Iterable[str | Path], out: str | Path) -> tuple[Any
     per-evaluation rates of every run next to them (``evaluation_rates.csv``)."""
     from crowdnav.evaluation.storage import atomic_write_text, load_results
 
-    tests, _, metas = load_results(paths)
-    table = leaderboard_table(tests, metas)
+    missing: list[MissingRun] = []
+    tests, _, metas = load_results(paths, missing)
+    table = leaderboard_table(tests, metas, missing)
     out = Path(out)
     written = [atomic_write_text(out.with_name(out.name + ".md"), to_markdown(table)),
                atomic_write_text(out.with_name(out.name + ".csv"), to_csv(table)),

@@ -46,6 +46,8 @@ from crowdnav.evaluation.storage import (
     atomic_write_json,
     clean_temporaries,
     read_json,
+    run_damage,
+    table_damage,
 )
 
 from crowdnav.simulator import OUTCOMES
@@ -146,15 +148,30 @@ def run_unit(spec: UnitSpec | Mapping[str, Any], out_dir: str | Path, *, on_even
     out_dir = Path(out_dir)
     hook = on_event or (lambda event, data: None)
     _claim(out_dir, spec)
-    if (out_dir / META_FILE).is_file():
-        return _summary(spec, out_dir, read_json(out_dir / META_FILE), "skipped")
+    meta = out_dir / META_FILE
+    if meta.is_file() and not _damage(out_dir):
+        return _summary(spec, out_dir, read_json(meta), "skipped")
     with writing(out_dir):  # one process per run: a second one (an orphaned worker, another sweep) is refused
-        if (out_dir / META_FILE).is_file():  # finished by the process that held the lock before
-            return _summary(spec, out_dir, read_json(out_dir / META_FILE), "skipped")
-        return _train_and_evaluate(spec, out_dir, hook)
+        damage = _damage(out_dir) if meta.is_file() else []
+        if meta.is_file() and not damage:  # finished (or repaired) by the process that held the lock before
+            return _summary(spec, out_dir, read_json(meta), "skipped")
+        try:
+            return _train_and_evaluate(spec, out_dir, hook, [f"{problem}: rebuilt" for problem in damage])
+        except Exception:
+            if meta.is_file():  # damaged beyond repair: no longer a finished run anywhere (the document is kept aside)
+                meta.replace(meta.with_name(META_FILE + ".damaged"))
+            raise
 
 
-def _train_and_evaluate(spec: UnitSpec, out_dir: Path, hook: EventHook) -> dict[str, Any]:
+def _damage(out_dir: Path) -> list[str]:
+    """What is missing or damaged in a finished run's tables (:func:`evaluation.storage.run_damage`)."""
+    try:
+        return run_damage(out_dir, read_json(out_dir / META_FILE))
+    except (OSError, ValueError, KeyError, TypeError):
+        return [f"{META_FILE} is unreadable"]
+
+
+def _train_and_evaluate(spec: UnitSpec, out_dir: Path, hook: EventHook, repairs: list[str] | None = None) -> dict[str, Any]:
     from crowdnav.agents import load_policy, train
 
     clean_temporaries(out_dir)  # files a kill left half-written before their rename
@@ -165,7 +182,7 @@ def _train_and_evaluate(spec: UnitSpec, out_dir: Path, hook: EventHook) -> dict[
     trained = _trained(train_dir, recover_checkpoint(train_dir), protocol)
     resumed = trained > 0 or (out_dir / EVALUATIONS_DIR).is_dir()
     # the run's own TrainConfig rebuilds each snapshot's network: validated once, at experiment load
-    evaluator = _Evaluator(spec, out_dir, protocol, lambda folder: load_policy(folder, config=config), clock, hook)
+    evaluator = _Evaluator(spec, out_dir, protocol, lambda folder: load_policy(folder, config=config), clock, hook, repairs)
     if trained < protocol.budget:
         evaluator.evaluate_available(train_dir)  # before resuming replaces the checkpoint
         result = train(config, resume=checkpoint_dir(train_dir).exists(), on_checkpoint=lambda episodes: clock.save())
@@ -177,8 +194,9 @@ def _train_and_evaluate(spec: UnitSpec, out_dir: Path, hook: EventHook) -> dict[
     missing = [k for k in range(protocol.evaluations) if not evaluator.done(k)]
     if missing:
         raise ResultsError(f"{train_dir}: no policy snapshot for evaluation(s) {missing} "
-                           f"(after {[protocol.evaluation_points[k] for k in missing]} {AXIS_LABELS[protocol.unit]})")
-    return _finish(spec, out_dir, protocol, config, clock, resumed)
+                           f"(after {[protocol.evaluation_points[k] for k in missing]} {AXIS_LABELS[protocol.unit]})"
+                           + "".join(f"; {note}" for note in evaluator.repairs if "evaluated again" not in note))
+    return _finish(spec, out_dir, protocol, config, clock, resumed, evaluator.repairs)
 
 
 def _trained(train_dir: Path, episodes: int, protocol: Protocol) -> int:
@@ -217,10 +235,26 @@ def _claim(out_dir: Path, spec: UnitSpec) -> None:
 class _Evaluator:
     """Evaluates the policies of the scheduled points, one CSV per evaluation."""
 
-    def __init__(self, spec: UnitSpec, out_dir: Path, protocol: Protocol, load_policy: Callable, clock: _Clock, hook: EventHook):
+    def __init__(self, spec: UnitSpec, out_dir: Path, protocol: Protocol, load_policy: Callable, clock: _Clock, hook: EventHook,
+                 repairs: list[str] | None = None):
         self.spec, self.protocol, self.load_policy, self.clock, self.hook = spec, protocol, load_policy, clock, hook
         self.folder = out_dir / EVALUATIONS_DIR
         self.episodes = None  # the test environments, built on first use
+        self.repairs = list(repairs or [])
+        """What was found missing or damaged in the run's files, and what was done about it."""
+        self._checked: set[int] = set()
+
+    def _set_aside_if_damaged(self, k: int) -> None:
+        """A damaged evaluation file (cut or garbage rows, a wrong count) moves to ``<name>.damaged``, to be evaluated again."""
+        path = self.path(k)
+        if k in self._checked or not path.is_file():
+            return
+        self._checked.add(k)
+        fixed = {"experiment": self.spec.experiment, "configuration": self.spec.configuration, "seed": self.spec.seed, "evaluation": k}
+        damage = table_damage(path, self.protocol.test_episodes, fixed)
+        if damage is not None:
+            path.replace(path.with_name(path.name + ".damaged"))
+            self.repairs.append(f"{EVALUATIONS_DIR}/{damage}: evaluated again from its snapshot (kept as {path.name}.damaged)")
 
     def path(self, k: int) -> Path:
         return self.folder / f"evaluation_{k:03d}.csv"
@@ -233,6 +267,7 @@ class _Evaluator:
         folders = policy_snapshots(train_dir, self.protocol.unit)  # a step run's snapshots are steps_<N>, named by the point
         points = self.protocol.evaluation_points
         for k, point in enumerate(points):
+            self._set_aside_if_damaged(k)
             if self.done(k):
                 continue
             # The policy saved at the point (a snapshot can land a few episodes late: it is taken at a rollout's end).
@@ -270,7 +305,8 @@ class _Evaluator:
             self.episodes.close()
 
 
-def _finish(spec: UnitSpec, out_dir: Path, protocol: Protocol, config: Any, clock: _Clock, resumed: bool) -> dict[str, Any]:
+def _finish(spec: UnitSpec, out_dir: Path, protocol: Protocol, config: Any, clock: _Clock, resumed: bool,
+            repairs: list[str]) -> dict[str, Any]:
     """Assemble the run's tables and write meta.json (last: it marks the run complete)."""
     import pandas as pd
 
@@ -278,11 +314,11 @@ def _finish(spec: UnitSpec, out_dir: Path, protocol: Protocol, config: Any, cloc
                    for k in range(protocol.evaluations)]
     tests = pd.concat(evaluations, ignore_index=True)
     atomic_write_csv(tests, out_dir / TEST_FILE)
-    training = _training_episodes(spec, episode_log(out_dir / TRAIN_DIR))
+    train_info = checkpoint_info(out_dir / TRAIN_DIR)
+    training = _training_episodes(spec, episode_log(out_dir / TRAIN_DIR), int(train_info["episodes"]), repairs)
     atomic_write_csv(training, out_dir / TRAINING_FILE)
     timing = clock.save()
     final = tests[tests["evaluation"] >= protocol.evaluations - protocol.final_evaluations]
-    train_info = checkpoint_info(out_dir / TRAIN_DIR)
     train_steps, test_steps = int(train_info["timesteps"]), int(tests["steps"].sum())
     meta = {
         **{name: value for name, value in zip(RUN_COLUMNS, (spec.experiment, spec.configuration, spec.display_label, spec.seed),
@@ -303,15 +339,26 @@ def _finish(spec: UnitSpec, out_dir: Path, protocol: Protocol, config: Any, cloc
         "final": {outcome: round(float((final["outcome"] == outcome).mean()), 6) for outcome in OUTCOMES},
     }
     atomic_write_json(out_dir / META_FILE, meta)
-    return _summary(spec, out_dir, meta, "done")
+    return {**_summary(spec, out_dir, meta, "repaired" if repairs else "done"), **({"repairs": repairs} if repairs else {})}
 
 
-def _training_episodes(spec: UnitSpec, log: Path) -> Any:
-    """agents' episodes.csv, one row per episode (runs resumed by earlier versions logged some twice: keep the last)."""
+def _training_episodes(spec: UnitSpec, log: Path, episodes: int, repairs: list[str]) -> Any:
+    """agents' episodes.csv, exactly one whole row per training episode (:func:`agents.episode_log.read_log`), as a table.
+
+    A cut last row a kill left is set aside first (noted in ``repairs``); a missing, damaged or
+    short log is a ResultsError that names the file and line (those episodes cannot be replayed).
+    """
     import pandas as pd
+    from crowdnav.agents.episode_log import COLUMNS, EpisodeLogError, prepare_log, read_log
 
-    frame = pd.read_csv(log).drop_duplicates("episode", keep="last").sort_values("episode", ignore_index=True)
-    frame = frame.rename(columns={"seed": "episode_seed"})
+    notes: list[str] = []
+    try:
+        notes = prepare_log(log, episodes) if log.is_file() else []
+        rows = read_log(log, episodes)
+    except EpisodeLogError as error:
+        raise ResultsError(f"{error}{''.join(f' (found: {note})' for note in notes)}") from None
+    repairs += [f"train/{note}" for note in notes]
+    frame = pd.DataFrame(rows, columns=list(COLUMNS)).rename(columns={"seed": "episode_seed"})
     for position, (name, value) in enumerate(zip(
         RUN_COLUMNS, (spec.experiment, spec.configuration, spec.display_label, spec.seed), strict=True,
     )):

@@ -22,6 +22,7 @@ import json
 import os
 import uuid
 from collections.abc import Iterable
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -33,6 +34,13 @@ TRAINING_FILE = "training_episodes.csv"
 EVALUATIONS_DIR = "evaluations"
 TRAIN_DIR = "train"
 ENCODER_DIR = "encoder"
+
+
+STRING_COLUMNS = frozenset({"experiment", "configuration", "label", "outcome", "collision_kind"})
+"""The text columns of the result tables; every other column holds numbers (``nan`` and ``inf`` included)."""
+INTEGER_COLUMNS = frozenset({"seed", "training_episodes", "training_steps", "evaluation", "test_episode", "test_seed", "steps",
+                             "episode", "episode_seed", "length", "timesteps"})
+REBUILD = "run `crowdnav benchmark` on its experiment again: it rebuilds the run's tables from what the run kept"
 
 
 class ResultsError(ValueError):
@@ -81,10 +89,89 @@ def read_json(path: str | Path) -> Any:
     return json.loads(Path(path).read_text(encoding="utf-8"))
 
 
+def table_damage(path: str | Path, rows: int, fixed: dict[str, Any] | None = None) -> str | None:
+    """What is wrong with the result table ``path`` (None: nothing): missing, unreadable, a cut or garbage row, a wrong count.
+
+    Every row must have the header's number of cells, a known ``outcome``, whole numbers in
+    :data:`INTEGER_COLUMNS`, numbers in every column not in :data:`STRING_COLUMNS`, and the values
+    of ``fixed`` (``{"seed": 1}``: the run's own); the table must hold exactly ``rows`` rows.
+    """
+    import csv
+    import math
+
+    from crowdnav.simulator import OUTCOMES
+
+    path = Path(path)
+    if not path.is_file():
+        return f"{path.name} is missing"
+    try:
+        with open(path, encoding="utf-8", newline="") as file:
+            table = list(csv.reader(file))
+    except (OSError, UnicodeDecodeError, csv.Error) as error:
+        return f"{path.name} is unreadable ({type(error).__name__})"
+    if not table:
+        return f"{path.name} is empty"
+    header, body = table[0], table[1:]
+    fixed = {column: str(value) for column, value in (fixed or {}).items()}
+    absent = [column for column in ("outcome", *fixed) if column not in header]
+    if absent:
+        return f"{path.name} has no column {absent[0]!r}"
+    for number, cells in enumerate(body, start=2):
+        if len(cells) != len(header):
+            return f"{path.name}: line {number} has {len(cells)} of {len(header)} cells (cut short or garbage)"
+        for column, cell in zip(header, cells, strict=True):
+            if column == "outcome" and cell not in OUTCOMES:
+                return f"{path.name}: line {number} has outcome {cell[:30]!r}"
+            if column in fixed and cell != fixed[column]:
+                return f"{path.name}: line {number} has {column} {cell[:30]!r}, not this run's {fixed[column]}"
+            if column in STRING_COLUMNS:
+                continue
+            try:
+                value = float(cell)
+            except ValueError:
+                return f"{path.name}: line {number} has {column} {cell[:30]!r}, not a number"
+            if column in INTEGER_COLUMNS and math.isfinite(value) and value != int(value):
+                return f"{path.name}: line {number} has {column} {cell[:30]!r}, not a whole number"
+    if len(body) != rows:
+        return f"{path.name} holds {len(body)} rows, {rows} expected"
+    return None
+
+
+def run_damage(run: str | Path, meta: dict[str, Any]) -> list[str]:
+    """What is wrong with the tables of the finished run ``run`` whose meta.json is ``meta`` (empty: nothing)."""
+    run = Path(run)
+    fixed = {"experiment": meta["experiment"], "configuration": meta["configuration"], "seed": meta["seed"]}
+    rows = int(meta["test_episodes"])
+    if meta.get("kind") == "baseline":  # one deterministic play, its rows repeated at every evaluation point
+        from crowdnav.evaluation.protocol import Protocol
+
+        rows *= Protocol(**meta["protocol"]).evaluations
+    damage = [table_damage(run / TEST_FILE, rows, fixed)]
+    if int(meta.get("training_episodes", 0)) > 0:  # learned runs; baselines and evaluated policies do not train
+        damage.append(table_damage(run / TRAINING_FILE, int(meta["training_episodes"]), fixed))
+    return [problem for problem in damage if problem is not None]
+
+
+@dataclass(frozen=True)
+class MissingRun:
+    """A run the results should hold and do not, or hold damaged: named in the leaderboard's notes."""
+
+    experiment: str
+    configuration: str
+    seed: int
+    folder: Path
+    reason: str
+
+    def describe(self) -> str:
+        return f"{self.configuration}/seed_{self.seed} ({self.folder}): {self.reason}"
+
+
 def finished_runs(paths: Iterable[str | Path]) -> list[Path]:
     """Folders of the complete runs (those with meta.json) below each path, sorted; ResultsError if a path is missing.
 
     Runs set aside when their configuration was edited (``<run>.replaced-N``) are not results.
+    A complete run whose tables are missing or damaged is listed too: :func:`load_results`
+    refuses it by name (or reports it, with ``missing``).
     """
     runs: set[Path] = set()
     for path in map(Path, paths):
@@ -92,17 +179,40 @@ def finished_runs(paths: Iterable[str | Path]) -> list[Path]:
             raise ResultsError(f"{path}: no such results folder")
         if not path.is_dir():
             raise ResultsError(f"{path}: not a folder (expected a results folder written by `crowdnav benchmark`)")
-        runs.update(meta.parent for meta in path.rglob(META_FILE)
-                    if (meta.parent / TEST_FILE).is_file() and not any(".replaced-" in part for part in meta.parent.parts))
+        runs.update(meta.parent for meta in path.rglob(META_FILE) if not any(".replaced-" in part for part in meta.parent.parts))
     return sorted(runs)
 
 
-def load_results(paths: Iterable[str | Path]) -> tuple[Any, Any, list[dict[str, Any]]]:
+def expected_runs(paths: Iterable[str | Path]) -> dict[tuple[str, str, int], Path]:
+    """(experiment, configuration, seed) -> folder of every run the experiments below ``paths`` plan (their experiment.yaml)."""
+    import yaml
+
+    planned: dict[tuple[str, str, int], Path] = {}
+    for path in map(Path, paths):
+        records = [path / EXPERIMENT_FILE] if (path / EXPERIMENT_FILE).is_file() else []
+        for record in records + sorted(path.rglob(f"*/{EXPERIMENT_FILE}")):
+            try:
+                experiment = yaml.safe_load(record.read_text(encoding="utf-8"))
+                name, seeds = experiment["name"], int(experiment["protocol"]["seeds"])
+                names = [configuration["name"] for configuration in experiment["configurations"]]
+            except (OSError, UnicodeDecodeError, yaml.YAMLError, KeyError, TypeError, ValueError):
+                raise ResultsError(f"{record}: unreadable experiment record; restore it or run the benchmark again") from None
+            for configuration in names:
+                for seed in range(seeds):
+                    planned[(name, configuration, seed)] = record.parent / configuration / f"seed_{seed}"
+    return planned
+
+
+def load_results(paths: Iterable[str | Path], missing: list[MissingRun] | None = None) -> tuple[Any, Any, list[dict[str, Any]]]:
     """(test episodes, training episodes, metas) of every finished run below ``paths``.
 
     The two tables are pandas DataFrames with one row per episode and the columns
     ``experiment``, ``configuration``, ``label``, ``seed`` first; ``metas`` are the runs'
     meta.json documents. ResultsError when no finished run is found.
+
+    A finished run whose tables are missing or damaged (:func:`run_damage`) is never read in
+    part: ResultsError names it, or, with a ``missing`` list, it is left out and added to the
+    list together with every run an experiment below ``paths`` plans and has not finished.
     """
     import pandas as pd
 
@@ -111,15 +221,34 @@ def load_results(paths: Iterable[str | Path]) -> tuple[Any, Any, list[dict[str, 
     if not runs:
         shown = ", ".join(str(p) for p in paths)
         raise ResultsError(f"{shown}: no finished run here (no */{META_FILE} next to a {TEST_FILE}); run `crowdnav benchmark` first")
-    tests, trainings, metas = [], [], []
+    tests, trainings, metas, found = [], [], [], set()
     for run in runs:
         try:
-            metas.append(read_json(run / META_FILE))
-            tests.append(pd.read_csv(run / TEST_FILE, keep_default_na=False, na_values=["nan", "NaN"]))
-            if (run / TRAINING_FILE).is_file():
-                trainings.append(pd.read_csv(run / TRAINING_FILE))
-        except (OSError, ValueError) as error:
-            raise ResultsError(f"{run}: unreadable results: {error}") from None
+            meta = read_json(run / META_FILE)
+            key = (meta["experiment"], meta["configuration"], int(meta["seed"]))
+            damage = run_damage(run, meta)
+        except (OSError, ValueError, KeyError, TypeError) as error:
+            raise ResultsError(f"{run}: unreadable {META_FILE} ({type(error).__name__}); {REBUILD}") from None
+        found.add(key)
+        if damage:
+            if missing is None:
+                raise ResultsError(f"{run}: {damage[0]}; {REBUILD}")
+            missing.append(MissingRun(*key, run, "; ".join(damage)))
+            continue
+        metas.append(meta)
+        tests.append(pd.read_csv(run / TEST_FILE, keep_default_na=False, na_values=["nan", "NaN"]))
+        if (run / TRAINING_FILE).is_file():
+            trainings.append(pd.read_csv(run / TRAINING_FILE))
+    if missing is not None:
+        for (experiment, configuration, seed), folder in sorted(expected_runs(paths).items()):
+            if (experiment, configuration, seed) not in found:
+                reason = "not finished (no meta.json)" if folder.is_dir() else "not started"
+                if (folder / f"{META_FILE}.damaged").is_file():  # set aside by a benchmark that could not rebuild it
+                    reason = f"damaged beyond repair ({META_FILE}.damaged; the benchmark's log says why): remove the folder to run it again"
+                missing.append(MissingRun(experiment, configuration, seed, folder, reason))
+    if not tests:
+        raise ResultsError(f"{', '.join(str(p) for p in paths)}: no intact finished run here: "
+                           + "; ".join(gap.describe() for gap in (missing or [])[:3]))
     test_frame = pd.concat(tests, ignore_index=True)
     training_frame = pd.concat(trainings, ignore_index=True) if trainings else pd.DataFrame()
     return test_frame, training_frame, metas

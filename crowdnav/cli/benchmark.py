@@ -134,14 +134,19 @@ def benchmark(args: argparse.Namespace) -> int:
     print(f"experiment {experiment.name}: {len(experiment.configurations)} configurations x {protocol.seeds} seeds, "
           f"{protocol.describe_budget()} of training, {protocol.evaluations} evaluations of {protocol.test_episodes} "
           f"test episodes; executor {executor.describe()}", flush=True)
-    try:
-        report = run_experiment(experiment, args.out, executor=executor, progress=not args.no_progress,
-                                video=not args.no_video, log=lambda line: print(line, flush=True))
-    except (ResultsError, ExperimentError, ExecutorError) as error:
-        raise CliError(str(error)) from None
-    except KeyboardInterrupt:
-        print(f"crowdnav: interrupted; run the same command again to resume from {Path(args.out) / experiment.name}", file=sys.stderr)
-        return 130
+    from crowdnav.cli.signals import interrupt_on_sigterm
+
+    # SIGTERM (kill, timeout, a cluster's preemption) stops the sweep as Ctrl-C does, its workers included
+    with interrupt_on_sigterm(children=True) as stopped:
+        try:
+            report = run_experiment(experiment, args.out, executor=executor, progress=not args.no_progress,
+                                    video=not args.no_video, log=lambda line: print(line, flush=True))
+        except (ResultsError, ExperimentError, ExecutorError) as error:
+            raise CliError(str(error)) from None
+        except KeyboardInterrupt:
+            print(f"crowdnav: interrupted; run the same command again to resume from {Path(args.out) / experiment.name}",
+                  file=sys.stderr)
+            return stopped.exit_status
     for line in report.summary_lines():
         print(line)
     for path in report.outputs:
@@ -172,11 +177,13 @@ def leaderboard_command(args: argparse.Namespace) -> int:
 
     out = Path(args.out) if args.out else Path(args.results[0]) / "leaderboard"
     try:
-        _, paths = write_leaderboard([Path(path) for path in args.results], out)
+        table, paths = write_leaderboard([Path(path) for path in args.results], out)
     except (ResultsError, OSError) as error:
         raise CliError(str(error)) from None
     for path in paths:
         print(f"wrote {path}")
+    for gap in table.attrs.get("missing", []):  # named under the markdown table too
+        print(f"crowdnav: not in the leaderboard: {gap.describe()}", file=sys.stderr)
     return 0
 
 

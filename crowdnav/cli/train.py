@@ -164,14 +164,29 @@ def train_command(args: argparse.Namespace) -> int:
         sys.stdout.write(yaml.safe_dump(config_to_dict(config), sort_keys=False))
         return 0
     from crowdnav.agents.training import describe_run, train
+    from crowdnav.cli.signals import interrupt_on_sigterm
     from crowdnav.scenario import ScenarioError
 
-    try:
-        result = train(config, resume=args.resume, trust_pickle=args.trust_pickle)
-    except (ConfigError, ScenarioError, FileNotFoundError) as error:
-        raise CliError(str(error)) from None
+    with interrupt_on_sigterm() as stopped:  # SIGTERM (kill, timeout, preemption) stops the run as Ctrl-C does
+        try:
+            result = train(config, resume=args.resume, trust_pickle=args.trust_pickle)
+        except (ConfigError, ScenarioError, FileNotFoundError) as error:
+            raise CliError(str(error)) from None
+        except KeyboardInterrupt:
+            print(f"crowdnav: interrupted; {_how_to_continue(Path(config.out))}", file=sys.stderr)
+            return stopped.exit_status
     print(describe_run(result))
     return 0
+
+
+def _how_to_continue(out: Path) -> str:
+    """What the user runs after a stopped training: resume from the checkpoint a kill keeps, or start again."""
+    from crowdnav.agents.run_folder import checkpoint_dir
+
+    current = checkpoint_dir(out)
+    if any(folder.is_dir() for folder in (current, current.with_name(current.name + ".partial"), current.with_name(current.name + ".old"))):
+        return f"the last checkpoint in {out} is kept: add --resume to the same command to continue from it"
+    return f"{out} has no checkpoint yet: run the same command again to start over"
 
 
 def collect_dataset_command(args: argparse.Namespace) -> int:
