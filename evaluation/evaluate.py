@@ -234,6 +234,8 @@ def evaluate_policy(spec: str, scenario: str, out: str | Path, *, modalities: Se
     meta = {
         "experiment": EXPERIMENT, "configuration": configuration, "label": label, "seed": 0, "status": "complete",
         "kind": "evaluated", "policy": spec, "scenario": scenario, "env": env_options, "protocol": protocol.to_dict(),
+        # where it came from, so a replay (crowdnav trajectories) finds it from any folder
+        "policy_source": str(Path(spec).resolve()) if Path(spec).exists() else spec, "cwd": os.getcwd(),
         "versions": package_versions(),
         "git_commit": git_commit(), "wall_time_s": round(time.perf_counter() - started, 3),
         "env_steps": {"train": 0, "test": steps, "total": steps}, "training_episodes": 0, "test_episodes": len(frame),

@@ -47,6 +47,7 @@ from __future__ import annotations
 
 import json
 import math
+import sys
 from collections.abc import Iterable, Mapping, Sequence
 from pathlib import Path
 from typing import Any
@@ -221,8 +222,11 @@ def replay_evaluation(run_dir: str | Path, evaluation: int | None = None) -> lis
     elif kind == "evaluated":  # one evaluation only
         from crowdnav.evaluation.evaluate import PolicyError, resolve_policy
 
+        source = meta.get("policy_source", meta["policy"])
+        if meta.get("cwd") and ":" in source and not Path(source).exists() and meta["cwd"] not in sys.path:
+            sys.path.append(meta["cwd"])  # a module:function next to where `crowdnav evaluate` ran
         try:
-            _, _, act, privileged, env_options = resolve_policy(meta["policy"], meta["env"])
+            _, _, act, privileged, env_options = resolve_policy(source, meta["env"])
         except PolicyError as error:
             raise ResultsError(f"{run_dir}: cannot load the policy it scored ({error})") from None
         rows = _play(env_options, protocol.test_seeds, act, privileged, meta["policy"])

@@ -136,13 +136,16 @@ def test_trajectories_of_evaluate_results_replay_what_was_scored(tmp_path, modul
 
     from crowdnav import CrowdNavEnv
 
-    monkeypatch.chdir(tmp_path)  # evaluate records the POLICY as given: a relative zip path, read from here again
+    monkeypatch.chdir(tmp_path)  # evaluate records where the POLICY came from: a replay finds it from any folder
     PPO("MultiInputPolicy", CrowdNavEnv("corridor", modalities=["goal"]), n_steps=32, batch_size=16, seed=0).save("my_ppo.zip")
     for policy in ("baseline:straight", f"{module_on_path}:toward_goal", "my_ppo.zip"):
         assert main(["evaluate", policy, "--scenario", "corridor", "--modalities", "goal", "--episodes", "2", "--out", "results"]) == 0
     runs = finished_results(tmp_path / "results")
     assert len(runs) == 3
-    assert main(["trajectories", "results"]) == 0
+    (tmp_path / "elsewhere").mkdir()
+    monkeypatch.chdir(tmp_path / "elsewhere")  # the relative zip path resolves where evaluate ran, not here
+    assert main(["trajectories", str(tmp_path / "results")]) == 0
+    monkeypatch.chdir(tmp_path)
     for run in runs:
         table = pd.read_csv(run / "trajectories" / "evaluate.csv")
         scored = pd.read_csv(run / "test_episodes.csv")
