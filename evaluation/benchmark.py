@@ -194,7 +194,7 @@ def write_report(folder: Path, *, video: bool = True, log: Callable[[str], None]
     table, written = write_leaderboard([folder], folder / "leaderboard")
     outputs += written
     for gap in table.attrs.get("missing", []):  # named in leaderboard.md too
-        log(f"not in the leaderboard: {gap.describe()}")
+        log(f"not in the leaderboard: {gap.describe(folder=True)}")
     if video:
         best = table[table["kind"] == "learned"].iloc[0]  # rows are sorted by final success
         try:

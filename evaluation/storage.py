@@ -162,8 +162,9 @@ class MissingRun:
     folder: Path
     reason: str
 
-    def describe(self) -> str:
-        return f"{self.configuration}/seed_{self.seed} ({self.folder}): {self.reason}"
+    def describe(self, folder: bool = False) -> str:
+        """``experiment/configuration/seed_N: reason`` (the same for the same results: no paths), or with the run's ``folder``."""
+        return f"{self.folder if folder else f'{self.experiment}/{self.configuration}/seed_{self.seed}'}: {self.reason}"
 
 
 def finished_runs(paths: Iterable[str | Path]) -> list[Path]:
@@ -248,7 +249,7 @@ def load_results(paths: Iterable[str | Path], missing: list[MissingRun] | None =
                 missing.append(MissingRun(experiment, configuration, seed, folder, reason))
     if not tests:
         raise ResultsError(f"{', '.join(str(p) for p in paths)}: no intact finished run here: "
-                           + "; ".join(gap.describe() for gap in (missing or [])[:3]))
+                           + "; ".join(gap.describe(folder=True) for gap in (missing or [])[:3]))
     test_frame = pd.concat(tests, ignore_index=True)
     training_frame = pd.concat(trainings, ignore_index=True) if trainings else pd.DataFrame()
     return test_frame, training_frame, metas

@@ -40,9 +40,9 @@ def test_a_deleted_test_table_is_named_in_the_leaderboard_and_rebuilt_by_the_ben
     with pytest.raises(ResultsError, match=r"lidar/seed_1: test_episodes.csv is missing; run `crowdnav benchmark`"):
         load_results([results])  # never read in part
     assert main(["leaderboard", str(results)]) == 0
-    assert "crowdnav: not in the leaderboard: lidar/seed_1" in capsys.readouterr().err
+    assert f"crowdnav: not in the leaderboard: {results / 'lidar' / 'seed_1'}: test_episodes.csv is missing" in capsys.readouterr().err
     board = (results / "leaderboard.md").read_text()
-    assert "| LIDAR | 1 of 2 |" in board and "- lidar/seed_1 (" in board and "test_episodes.csv is missing" in board
+    assert "| LIDAR | 1 of 2 |" in board and "- tiny/lidar/seed_1: test_episodes.csv is missing" in board and str(results) not in board
     report, runs = _rerun(results)
     assert runs["lidar/seed_1"]["status"] == "repaired" and "test_episodes.csv is missing" in runs["lidar/seed_1"]["repairs"][0]
     assert runs["lidar/seed_0"]["status"] == "skipped" and not report.failures

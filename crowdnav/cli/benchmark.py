@@ -183,7 +183,7 @@ def leaderboard_command(args: argparse.Namespace) -> int:
     for path in paths:
         print(f"wrote {path}")
     for gap in table.attrs.get("missing", []):  # named under the markdown table too
-        print(f"crowdnav: not in the leaderboard: {gap.describe()}", file=sys.stderr)
+        print(f"crowdnav: not in the leaderboard: {gap.describe(folder=True)}", file=sys.stderr)
     return 0
 
 
@@ -194,18 +194,24 @@ def evaluate_command(args: argparse.Namespace) -> int:
     modalities = [key.strip() for key in args.modalities.split(",") if key.strip()] if args.modalities else None
     if args.episodes < 1:
         raise CliError(f"--episodes must be at least 1, got {args.episodes}")
-    try:
-        folder = evaluate_policy(args.policy, args.scenario, args.out, modalities=modalities, episodes=args.episodes,
-                                 test_seed_base=args.test_seed_base, overrides=parse_overrides(args.overrides), name=args.name,
-                                 force=args.force, progress=not args.no_progress)
-    except PolicyError as error:
-        if args.traceback and error.__cause__ is not None:
-            import traceback
+    from crowdnav.cli.signals import interrupt_on_sigterm
 
-            traceback.print_exception(error.__cause__)
-        raise CliError(str(error).splitlines()[0]) from None
-    except (ResultsExistError, ScenarioError, ValueError) as error:
-        raise CliError(str(error).splitlines()[0]) from None
+    with interrupt_on_sigterm() as stopped:  # SIGTERM stops it as Ctrl-C does: one line, nothing half-written
+        try:
+            folder = evaluate_policy(args.policy, args.scenario, args.out, modalities=modalities, episodes=args.episodes,
+                                     test_seed_base=args.test_seed_base, overrides=parse_overrides(args.overrides), name=args.name,
+                                     force=args.force, progress=not args.no_progress)
+        except PolicyError as error:
+            if args.traceback and error.__cause__ is not None:
+                import traceback
+
+                traceback.print_exception(error.__cause__)
+            raise CliError(str(error).splitlines()[0]) from None
+        except (ResultsExistError, ScenarioError, ValueError) as error:
+            raise CliError(str(error).splitlines()[0]) from None
+        except KeyboardInterrupt:
+            print("crowdnav: interrupted before the results were written; run the same command again", file=sys.stderr)
+            return stopped.exit_status
     import json
 
     final = json.loads((folder / "meta.json").read_text())["final"]
