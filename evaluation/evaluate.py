@@ -204,7 +204,7 @@ def evaluate_policy(spec: str, scenario: str, out: str | Path, *, modalities: Se
     configuration, label, act, privileged, env_options = resolve_policy(spec, options)
     configuration = f"{_safe(name) if name else configuration}--{scenario_key(scenario, options.get('overrides', {}))}"
     folder = inside(out, f"{EXPERIMENT}/{configuration}/seeds_{test_seed_base}-{test_seed_base + episodes - 1}")
-    if not force and ((folder / META_FILE).exists() or (folder / TEST_FILE).exists()):
+    if not force and (folder / META_FILE).exists():  # meta.json is written last: without it, a stopped evaluation's leftovers
         raise ResultsExistError(f"{folder} already holds this policy's results on this scenario and test set; "
                                 "pass --force (force=True) to replace them, or --out another folder")
     protocol = Protocol(train_episodes=1, eval_every=1, test_episodes=episodes, seeds=1, test_seed_base=test_seed_base, final_evaluations=1)

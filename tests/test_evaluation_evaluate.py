@@ -60,6 +60,10 @@ def test_results_are_keyed_by_policy_scenario_and_test_set_and_never_overwritten
         evaluate_policy("baseline:straight", "open_space", tmp_path, episodes=3)
     assert (first / "test_episodes.csv").read_bytes() == written
     assert evaluate_policy("baseline:straight", "open_space", tmp_path, episodes=3, force=True) == first
+    (first / "meta.json").unlink()  # an evaluation stopped before its last write: not a result, replaced without --force
+    (first / "test_episodes.csv").write_text("cut")
+    assert evaluate_policy("baseline:straight", "open_space", tmp_path, episodes=3) == first
+    assert (first / "test_episodes.csv").read_bytes() == written
 
 
 def test_an_sb3_zip_is_evaluated_and_a_space_mismatch_is_one_clear_line(tmp_path):
