@@ -2,18 +2,25 @@
 
 Columns (definitions in docs/evaluation.md):
 
+* scenario and test set: the environment the rows were measured in (the scenario's name, with a
+  short hash when it had overrides) and its held-out episodes (count and seeds). Rows measured on
+  different test sets are never ranked together: the markdown has one table per test set;
 * final success / collision / out_of_bounds / truncated (:data:`crowdnav.simulator.OUTCOMES`):
   per run, the rate over the test episodes of the last ``final_evaluations`` evaluations; mean
-  and standard deviation (ddof 1; 0 with one seed) over seeds. Rates are counted from the
-  episodes' ``outcome`` column, so results written before ``out_of_bounds`` existed rank with 0;
+  and standard deviation (ddof 1; 0 with one seed) over seeds, and a 95% interval
+  (:mod:`evaluation.intervals`: Wilson for one run, a two-stage bootstrap over runs and episodes
+  for several). Rates are counted from the episodes' ``outcome`` column, so results written
+  before ``out_of_bounds`` existed rank with 0; collisions are also split by what was hit
+  (``collision_human``, ``collision_static``);
 * IQM of final success: interquartile mean over runs, with a 95% percentile confidence
   interval from a stratified bootstrap (Agarwal et al. 2021; one stratum per configuration,
-  2000 resamples, seeded);
+  2000 resamples, seeded); shown for two runs or more;
 * success AUC: per run, the mean of the success rate of each evaluation (area under the
   success curve divided by its length: sample efficiency); mean and std over seeds;
-* social metrics: over the final test episodes of all seeds: mean SPL, path length, time to goal
-  (successful episodes), minimum human distance, intimate and personal zone shares, mean jerk
-  and cumulative social force; median minimum time to collision;
+* social metrics: over the final test episodes of all seeds: mean SPL, STL, path length, time to
+  goal (successful episodes), minimum human distance, intimate and personal zone shares,
+  personal-space compliance, mean jerk and cumulative social force; median minimum time to
+  collision (results written before STL and PSC existed show ``-`` there);
 * seeds: the runs ranked; ``seeds_expected`` (CSV) also counts the runs the experiment plans that
   are not finished or whose tables are missing or damaged (the markdown says ``1 of 2`` and names
   each such run under the table: a missing seed is never left out silently);
@@ -38,14 +45,17 @@ from typing import Any
 
 import numpy as np
 from crowdnav.evaluation.baselines import is_baseline
-from crowdnav.evaluation.protocol import describe_budget
+from crowdnav.evaluation.evaluate import scenario_key
+from crowdnav.evaluation.intervals import rate_interval
+from crowdnav.evaluation.protocol import Protocol, describe_budget
 from crowdnav.evaluation.storage import MissingRun
 
 from crowdnav.simulator import OUTCOMES
 
 BOOTSTRAP_RESAMPLES = 2000
 BOOTSTRAP_SEED = 0
-SOCIAL_MEANS = ("spl", "path_length", "time_to_goal", "min_human_distance", "intimate_share", "personal_share", "mean_jerk", "social_force")
+SOCIAL_MEANS = ("spl", "stl", "path_length", "time_to_goal", "min_human_distance", "intimate_share", "personal_share", "psc",
+                "mean_jerk", "social_force")
 """Metrics averaged over the final test episodes (time_to_goal over the successful ones)."""
 
 
@@ -77,6 +87,15 @@ def _std(values: np.ndarray) -> float:
     return float(np.std(values, ddof=1)) if len(values) > 1 else 0.0
 
 
+def measured_on(meta: dict[str, Any]) -> tuple[str, str]:
+    """(scenario key, held-out episodes) a run was measured on, e.g. ``("room_furniture-1a2b3c4d", "20 episodes, seeds 0-19")``."""
+    env = meta.get("env") or meta.get("config") or {}
+    scenario = str(env.get("scenario", "?"))
+    protocol = Protocol(**meta["protocol"])  # older files leave defaults out
+    first, count = protocol.test_seed_base, protocol.test_episodes
+    return scenario_key(scenario, dict(env.get("overrides") or {})), f"{count} episodes, seeds {first}-{first + count - 1}"
+
+
 def leaderboard_table(tests: Any, metas: list[dict[str, Any]], missing: Sequence[MissingRun] = ()) -> Any:
     """The leaderboard as a DataFrame (numbers unformatted), one row per (experiment, configuration).
 
@@ -93,20 +112,28 @@ def leaderboard_table(tests: Any, metas: list[dict[str, Any]], missing: Sequence
     for (experiment, configuration), frame in tests.groupby(["experiment", "configuration"], sort=True):
         last = frame.groupby("seed")["evaluation"].transform("max")
         final = frame[frame["evaluation"] > last - final_count[experiment]]
-        per_run = final.groupby("seed")["outcome"]
         row: dict[str, Any] = {"experiment": experiment, "configuration": configuration, "label": frame["label"].iloc[0],
                                "kind": "baseline" if is_baseline(configuration) else "learned", "seeds": int(frame["seed"].nunique())}
         row["seeds_expected"] = row["seeds"] + absent[(experiment, configuration)]
-        for outcome in OUTCOMES:
-            rates = per_run.apply(lambda outcomes, o=outcome: float((outcomes == o).mean())).to_numpy()
+        sets = {measured_on(run_meta[(experiment, configuration, seed)]) for seed in frame["seed"].unique()
+                if (experiment, configuration, seed) in run_meta}
+        row["scenario"], row["test_set"] = sorted(sets)[0] if len(sets) == 1 else ("mixed", "mixed")
+        row["test_episodes"] = int(final.groupby("seed").size().iloc[0])  # per run, over the final evaluations
+        kinds = final["collision_kind"].fillna("") if "collision_kind" in final else None
+        for outcome in (*OUTCOMES, "collision_human", "collision_static"):
+            hits = final["outcome"] == outcome if outcome in OUTCOMES else (final["outcome"] == "collision") & (kinds == outcome[10:])
+            runs = [group.to_numpy(dtype=float) for _, group in hits.groupby(final["seed"])]
+            rates = np.array([run.mean() for run in runs])
             row[f"final_{outcome}_mean"], row[f"final_{outcome}_std"] = float(rates.mean()), _std(rates)
+            row[f"final_{outcome}_low"], row[f"final_{outcome}_high"], row["interval"] = rate_interval(runs)
             if outcome == "success":
                 row["success_iqm"], row["success_iqm_low"], row["success_iqm_high"] = bootstrap_iqm(rates)
         auc = (frame.assign(hit=frame["outcome"] == "success").groupby(["seed", "evaluation"])["hit"].mean()
                .groupby("seed").mean().to_numpy())
         row["success_auc_mean"], row["success_auc_std"] = float(auc.mean()), _std(auc)
         for metric in SOCIAL_MEANS:
-            row[metric] = float(np.nanmean(final[metric])) if final[metric].notna().any() else float("nan")
+            present = metric in final and final[metric].notna().any()
+            row[metric] = float(np.nanmean(final[metric])) if present else float("nan")
         row["min_time_to_collision"] = float(np.median(final["min_time_to_collision"]))
         metas_here = [run_meta[(experiment, configuration, seed)] for seed in sorted(frame["seed"].unique())
                       if (experiment, configuration, seed) in run_meta]
@@ -130,36 +157,62 @@ def _number(value: float, digits: int = 3) -> str:
 
 
 def to_markdown(table: Any) -> str:
-    """A GitHub markdown table with the main columns (all of them are in the CSV), and the training budget.
+    """GitHub markdown with the main columns (all of them are in the CSV): one table per test set.
 
-    The budget is one line under the table when the learned rows share it (``budget: 700
-    episodes per run``), a column when they differ (experiments in other units or lengths).
+    Rows measured on different scenarios or held-out episodes are not comparable, so each test set
+    gets its own table under a line naming it. The budget is one line under a table when its
+    learned rows share it (``budget: 700 episodes per run``), a column when they differ.
     """
+    groups = list(table.groupby(["scenario", "test_set"], sort=True)) if len(table) else []
+    parts = []
+    if len(groups) > 1:
+        parts.append(f"{len(groups)} test sets: rows measured on different scenarios or test episodes are ranked in separate tables.\n")
+    for (scenario, episodes), rows in groups:
+        if len(groups) > 1:
+            parts.append(f"### {scenario}: {episodes}\n")
+        parts.append(_one_table(rows))
+    missing = table.attrs.get("missing", [])
+    if missing:
+        lines = [f"{len(missing)} run(s) missing, not ranked (run `crowdnav benchmark` on the experiment again: it resumes "
+                 "unfinished runs and rebuilds damaged ones from what they kept):", ""]
+        lines += [f"- {gap.describe()}" for gap in missing]
+        parts.append("\n".join(lines) + "\n")
+    return "\n".join(parts)
+
+
+def _rate(row: dict[str, Any], outcome: str) -> str:
+    """``0.900 [0.699, 0.972]``: the mean rate and its 95% interval (Wilson for one run, bootstrap for several)."""
+    return f"{_number(row[f'final_{outcome}_mean'])} [{_number(row[f'final_{outcome}_low'])}, {_number(row[f'final_{outcome}_high'])}]"
+
+
+def _one_table(table: Any) -> str:
     several = table["experiment"].nunique() > 1
     budgets = sorted({budget for budget in table["budget"] if budget != "-"}) if "budget" in table else []
     column = len(budgets) > 1
     header = (["experiment"] if several else []) + [
-        "configuration", "seeds", *(["budget"] if column else []), *OUTCOMES, "success IQM [95% CI]", "success AUC",
-        "SPL", "min human dist. (m)", "intimate share", "social force", "env steps", "wall time (s)",
+        "configuration", "seeds", *(["budget"] if column else []), *(f"{o} [95% CI]" for o in OUTCOMES),
+        "hit a human / an obstacle", "success IQM [95% CI]", "success AUC", "SPL", "STL", "PSC", "min human dist. (m)",
+        "social force", "env steps", "wall time (s)",
     ]
     lines = ["| " + " | ".join(header) + " |", "|" + "|".join(["---"] * len(header)) + "|"]
     for row in table.to_dict("records"):
+        runs = row["seeds"] > 1  # a spread over runs and an IQM interval need two runs at least
         cells = ([row["experiment"]] if several else []) + [
             row["label"], _seeds(row), *([row["budget"]] if column else []),
-            *(f"{_number(row[f'final_{o}_mean'])} ± {_number(row[f'final_{o}_std'])}" for o in OUTCOMES),
-            f"{_number(row['success_iqm'])} [{_number(row['success_iqm_low'])}, {_number(row['success_iqm_high'])}]",
-            f"{_number(row['success_auc_mean'])} ± {_number(row['success_auc_std'])}",
-            _number(row["spl"]), _number(row["min_human_distance"]), _number(row["intimate_share"]), _number(row["social_force"]),
-            _number(row["env_steps"], 0), _number(row["wall_time_s"], 0),
+            *(_rate(row, o) for o in OUTCOMES),
+            f"{_number(row['final_collision_human_mean'])} / {_number(row['final_collision_static_mean'])}",
+            f"{_number(row['success_iqm'])} [{_number(row['success_iqm_low'])}, {_number(row['success_iqm_high'])}]" if runs else "-",
+            f"{_number(row['success_auc_mean'])} ± {_number(row['success_auc_std'])}" if runs else _number(row["success_auc_mean"]),
+            _number(row["spl"]), _number(row["stl"]), _number(row["psc"]), _number(row["min_human_distance"]),
+            _number(row["social_force"]), _number(row["env_steps"], 0), _number(row["wall_time_s"], 0),
         ]
         lines.append("| " + " | ".join(cells) + " |")
+    intervals = sorted(set(table["interval"]))
+    lines += ["", "95% CI: " + "; ".join({"wilson": "Wilson score interval of the one run's final test episodes",
+                                          "bootstrap": "two-stage bootstrap over runs, then their final test episodes",
+                                          "none": "none (no episodes)"}[kind] for kind in intervals)]
     if len(budgets) == 1:
         lines += ["", f"budget: {budgets[0]} per run"]
-    missing = table.attrs.get("missing", [])
-    if missing:
-        lines += ["", f"{len(missing)} run(s) missing, not ranked (run `crowdnav benchmark` on the experiment again: it resumes "
-                      "unfinished runs and rebuilds damaged ones from what they kept):", ""]
-        lines += [f"- {gap.describe()}" for gap in missing]
     return "\n".join(lines) + "\n"
 
 

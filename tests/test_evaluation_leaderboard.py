@@ -58,8 +58,31 @@ def test_leaderboard_values_on_hand_made_results():
     b = table.iloc[1]
     assert b["final_collision_mean"] == 1.0 and b["final_success_std"] == 0.0 and math.isnan(b["time_to_goal"])
     markdown = to_markdown(table)
-    assert markdown.splitlines()[0].startswith("| configuration | seeds | success | collision | out_of_bounds | truncated |")
-    assert markdown.splitlines()[2].startswith("| A | 3 | 0.667 ± 0.577 | 0.000 ± 0.000 | 0.000 ± 0.000 | 0.333 ± 0.577 |")
+    assert markdown.splitlines()[0].startswith("| configuration | seeds | success [95% CI] | collision [95% CI] | out_of_bounds [95% CI] |")
+    low, high = a["final_success_low"], a["final_success_high"]
+    assert a["interval"] == "bootstrap" and 0.0 <= low < 2 / 3 < high <= 1.0  # runs and episodes resampled: wide with 3 runs
+    assert markdown.splitlines()[2].startswith(f"| A | 3 | 0.667 [{low:.3f}, {high:.3f}] | 0.000 [0.000, 0.000] |")
+    assert "95% CI: two-stage bootstrap over runs, then their final test episodes; Wilson score interval" in markdown
+
+
+def test_one_run_shows_a_wilson_interval_and_no_spread_that_one_run_cannot_have():
+    tests, metas = synthetic_results()
+    table = leaderboard_table(tests, metas).set_index("configuration")
+    b = table.loc["b"]
+    assert b["interval"] == "wilson" and (b["final_success_low"], b["final_success_high"]) == (0.0, pytest.approx(0.3244, abs=1e-4))
+    row = next(line for line in to_markdown(table.reset_index()).splitlines() if line.startswith("| B |"))
+    assert "±" not in row and "| B | 1 | 0.000 [0.000, 0.324] | 1.000 [0.676, 1.000] |" in row
+    assert row.split(" | ")[7] == "-"  # no IQM interval from one run
+
+
+def test_rows_measured_on_different_test_sets_are_ranked_in_separate_tables():
+    tests, metas = synthetic_results()
+    for meta in metas:
+        meta["env"] = {"scenario": "open_space" if meta["configuration"] == "a" else "room_furniture", "overrides": {}}
+    markdown = to_markdown(leaderboard_table(tests, metas))
+    assert markdown.startswith("2 test sets: rows measured on different scenarios or test episodes are ranked in separate tables.")
+    assert "### open_space: 20 episodes, seeds 0-19" in markdown and "### room_furniture: 20 episodes, seeds 0-19" in markdown
+    assert markdown.count("| configuration |") == 2
 
 
 def test_leaderboard_and_curves_count_out_of_bounds_episodes():
@@ -71,7 +94,7 @@ def test_leaderboard_and_curves_count_out_of_bounds_episodes():
     assert table.loc["a", "final_out_of_bounds_mean"] == 0.0
     for name in OUTCOMES:  # every outcome's mean and std, in the CSV and the markdown
         assert f"final_{name}_mean" in to_csv(table.reset_index()).splitlines()[0]
-    assert "| B | 1 | 0.000 ± 0.000 | 0.000 ± 0.000 | 1.000 ± 0.000 | 0.000 ± 0.000 |" in to_markdown(table.reset_index())
+    assert "| B | 1 | 0.000 [0.000, 0.324] | 0.000 [0.000, 0.324] | 1.000 [0.676, 1.000] | 0.000 [0.000, 0.324] |" in to_markdown(table.reset_index())
     curves = rate_curves(tests, window=2)
     assert set(curves["metric"]) == set(OUTCOMES)
     b = curves[(curves["configuration"] == "b") & (curves["metric"] == "out_of_bounds")]

@@ -19,6 +19,8 @@ from crowdnav.evaluation.runner import UnitSpec, run_unit
 from crowdnav.evaluation.storage import ResultsError, load_results
 from evaluation_tiny import tiny_experiment_document, tiny_unit_spec
 
+from crowdnav.simulator import OUTCOMES
+
 STEPS = {"train_steps": 400, "eval_every_steps": 200}
 """Two evaluations of a run of 4 worlds: about 10 tiny episodes, a second or two."""
 PAPER_DICT = {"train_episodes": 700, "eval_every": 50, "test_episodes": 20, "seeds": 5, "test_seed_base": 0, "window": 10,
@@ -245,10 +247,11 @@ def test_results_without_a_unit_read_as_episodes():
     figure = curves_figure(pd.DataFrame(rows), window=1)
     assert figure.axes[0].get_xlabel() == "training episodes"
     assert describe_budget({"train_episodes": 700, "eval_every": 50}) == "700 episodes" and describe_budget({"window": 3}) == "-"
-    table = pd.DataFrame([{"experiment": "x", "label": "A", "seeds": 1, "budget": "700 episodes", **{k: 0.0 for k in (
-        "final_success_mean", "final_success_std", "final_collision_mean", "final_collision_std", "final_out_of_bounds_mean",
-        "final_out_of_bounds_std", "final_truncated_mean", "final_truncated_std", "success_iqm", "success_iqm_low", "success_iqm_high",
-        "success_auc_mean", "success_auc_std", "spl", "min_human_distance", "intimate_share", "social_force", "env_steps", "wall_time_s")}}])
+    rates = [f"final_{o}_{k}" for o in (*OUTCOMES, "collision_human", "collision_static") for k in ("mean", "std", "low", "high")]
+    table = pd.DataFrame([{"experiment": "x", "label": "A", "seeds": 1, "budget": "700 episodes", "scenario": "s", "test_set": "t",
+                           "interval": "wilson", **{k: 0.0 for k in (
+        *rates, "success_iqm", "success_iqm_low", "success_iqm_high", "success_auc_mean", "success_auc_std", "spl", "stl", "psc",
+        "min_human_distance", "intimate_share", "social_force", "env_steps", "wall_time_s")}}])
     assert to_markdown(table).splitlines()[-1] == "budget: 700 episodes per run"
     several = pd.concat([table, table.assign(experiment="y", budget="2,000,000 env steps")], ignore_index=True)
     markdown = to_markdown(several)
