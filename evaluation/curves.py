@@ -107,7 +107,9 @@ def curves_figure(tests: Any, window: int, title: str | None = None, band: str =
     untrained = tests[column].fillna(0).groupby(tests["configuration"]).transform("max") == 0
     scripted = tests["configuration"].map(is_baseline) | untrained
     baselines, tests = tests[scripted], tests[~scripted]
-    curves = rate_curves(tests, window, unit) if len(tests) else None
+    if not len(tests):  # nothing was trained: no training axis to draw lines along, one bar per policy instead
+        return _bars_figure(baselines, title)
+    curves = rate_curves(tests, window, unit)
     labels = list(dict.fromkeys(tests.sort_values(["configuration"])["label"]))
     evaluation_points = set(tests[column].unique())
     figure = Figure(figsize=(4.2 * len(OUTCOMES), 4.2), layout="constrained")
@@ -124,8 +126,10 @@ def curves_figure(tests: Any, window: int, title: str | None = None, band: str =
             axis.plot(x, mean, color=palette[label], linestyle=linestyle, marker=marker, markevery=marks, markersize=4, linewidth=1.4, label=label)
             axis.fill_between(x, low, high, color=palette[label], alpha=0.18, linewidth=0)
         # a scripted baseline plays the same test episodes at every evaluation: one rate, a horizontal line
+        evaluated = [label for label, frame in baselines.groupby("label", sort=True) if not is_baseline(frame["configuration"].iloc[0])]
         for label, frame in baselines.groupby("label", sort=True):
-            axis.axhline(float((frame["outcome"] == outcome).mean()), label=label, linewidth=1.2, **_baseline_style(frame, tests, palette))
+            style = _baseline_style(frame, tests, palette, evaluated.index(label) if label in evaluated else 0)
+            axis.axhline(float((frame["outcome"] == outcome).mean()), label=label, linewidth=1.2, **style)
         axis.set_title(f"{outcome.replace('_', ' ')} rate")
         axis.set_xlabel(AXIS_LABELS[unit])
         axis.set_ylabel(f"rate (sliding window of {window} test episodes)" if axis is axes[0] else "")
@@ -141,20 +145,56 @@ def curves_figure(tests: Any, window: int, title: str | None = None, band: str =
     return figure
 
 
-def _baseline_style(baseline: Any, tests: Any, palette: dict) -> dict[str, Any]:
+EVALUATED_STYLES = [("-.", "C3"), ((0, (5, 1, 1, 1, 1, 1)), "C4"), ((0, (1, 1)), "C5"), ((0, (8, 2)), "C6"), ("-.", "C8"), ((0, (3, 1, 1, 1)), "C9")]
+"""Line style and colour of the k-th policy evaluated without training: each its own."""
+HATCHES = ["", "//", "..", "xx", "\\\\", "oo", "--", "++"]
+
+
+def _baseline_style(baseline: Any, tests: Any, palette: dict, k: int = 0) -> dict[str, Any]:
     """Dashed for straight-to-goal, dotted for social force; grey, or the colour of the configuration whose
-    environment it shares when an experiment has several (``baseline_<name>_<configuration>``); dash-dot
-    for a policy evaluated without training."""
+    environment it shares when an experiment has several (``baseline_<name>_<configuration>``); the k-th
+    policy evaluated without training gets the k-th of :data:`EVALUATED_STYLES`."""
     from crowdnav.evaluation.baselines import is_baseline
 
     configuration = str(baseline["configuration"].iloc[0])
-    if not is_baseline(configuration):  # an evaluated policy: dash-dot, a colour of its own
-        return {"linestyle": "-.", "color": "C3"}
+    if not is_baseline(configuration):  # an evaluated policy: a style of its own
+        linestyle, color = EVALUATED_STYLES[k % len(EVALUATED_STYLES)]
+        return {"linestyle": linestyle, "color": color}
     linestyle = ":" if "social_force" in configuration else "--"
     for name, label in tests[["configuration", "label"]].drop_duplicates().itertuples(index=False):
         if configuration.endswith(f"_{name}") and label in palette:
             return {"linestyle": linestyle, "color": palette[label]}
     return {"linestyle": linestyle, "color": "0.35"}
+
+
+def _bars_figure(results: Any, title: str | None) -> Any:
+    """Policies without training (scripted baselines, crowdnav evaluate): per outcome, one bar per policy with
+    its 95% interval (:func:`evaluation.intervals.rate_interval`), each policy its own colour and hatch."""
+    import seaborn as sns
+    from crowdnav.evaluation.intervals import rate_interval
+    from matplotlib.figure import Figure
+
+    groups = list(results.groupby("label", sort=True))
+    colours = sns.color_palette("colorblind", len(groups))
+    figure = Figure(figsize=(max(4.2, 0.9 * len(groups) + 1.5) * len(OUTCOMES) / 1.6, 4.6), layout="constrained")
+    axes = figure.subplots(1, len(OUTCOMES), sharey=True)
+    for axis, outcome in zip(axes, OUTCOMES, strict=True):
+        for k, (label, frame) in enumerate(groups):
+            runs = [(group["outcome"] == outcome).to_numpy(dtype=float) for _, group in frame.groupby("seed")]
+            rate = float(np.mean([run.mean() for run in runs]))
+            low, high, _ = rate_interval(runs)
+            axis.bar(k, rate, color=colours[k], hatch=HATCHES[k % len(HATCHES)], edgecolor="0.2", label=label,
+                     yerr=[[rate - low], [high - rate]], capsize=3)
+        axis.set_xticks(range(len(groups)), [label for label, _ in groups], rotation=30, ha="right", fontsize="small")
+        axis.set_title(f"{outcome.replace('_', ' ')} rate")
+        axis.set_ylabel("rate over the test episodes" if axis is axes[0] else "")
+        axis.set_ylim(0.0, 1.02)
+        axis.grid(alpha=0.3, axis="y")
+    figure.legend(*axes[0].get_legend_handles_labels(), loc="outside lower center", ncols=min(len(groups), 5), fontsize="small",
+                  frameon=False, title="no training: one bar per policy, 95% interval (Wilson for one run)", title_fontsize="small")
+    if title:
+        figure.suptitle(title)
+    return figure
 
 
 def plot_curves(paths: Iterable[str | Path], out: str | Path | None = None, band: str = "std") -> list[Path]:

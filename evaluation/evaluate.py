@@ -203,6 +203,7 @@ def evaluate_policy(spec: str, scenario: str, out: str | Path, *, modalities: Se
     options = {key: value for key, value in options.items() if value is not None}
     configuration, label, act, privileged, env_options = resolve_policy(spec, options)
     configuration = f"{_safe(name) if name else configuration}--{scenario_key(scenario, options.get('overrides', {}))}"
+    label = name or label  # --name names the row in tables and figures too
     folder = inside(out, f"{EXPERIMENT}/{configuration}/seeds_{test_seed_base}-{test_seed_base + episodes - 1}")
     if not force and (folder / META_FILE).exists():  # meta.json is written last: without it, a stopped evaluation's leftovers
         raise ResultsExistError(f"{folder} already holds this policy's results on this scenario and test set; "

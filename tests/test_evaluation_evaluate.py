@@ -151,8 +151,25 @@ def test_evaluated_policies_are_reference_lines_in_the_curves_next_to_trained_ru
     results = tmp_path / "results"
     shutil.copytree(tiny_results(tmp_path_factory), results)
     evaluate_policy(f"{module_on_path}:toward_goal", "open_space", results, modalities=["goal"], episodes=3)
+    evaluate_policy(f"{module_on_path}:toward_goal", "open_space", results, modalities=["goal"], episodes=3, name="second")
     tests, _, _ = load_results([results])
     figure = curves_figure(tests, window=2)
     lines = figure.axes[0].get_lines()
-    assert any(line.get_linestyle() == "-." and len(set(line.get_ydata())) == 1 for line in lines)
+    flat = [line for line in lines if len(set(line.get_ydata())) == 1 and line.get_label() in ("my_policies:toward_goal", "second")]
+    assert len(flat) == 2 and len({(line.get_linestyle(), line.get_color()) for line in flat}) == 2  # each its own style
     assert main(["plot", str(results / "evaluate"), "--out", str(tmp_path / "curves")]) == 0
+
+
+def test_a_plot_of_policies_without_training_draws_one_bar_per_policy_each_its_own_style(tmp_path, module_on_path):
+    from crowdnav.evaluation.curves import curves_figure
+    from crowdnav.evaluation.storage import load_results
+
+    evaluate_policy(f"{module_on_path}:toward_goal", "open_space", tmp_path, modalities=["goal"], episodes=3)
+    evaluate_policy("baseline:social_force", "open_space", tmp_path, episodes=3)
+    tests, _, _ = load_results([tmp_path])
+    figure = curves_figure(tests, window=2)
+    axis = figure.axes[0]
+    bars = axis.patches
+    assert len(bars) == 2 and len({bar.get_hatch() for bar in bars}) == 2 and len({bar.get_facecolor() for bar in bars}) == 2
+    assert "training" not in axis.get_xlabel() and [tick.get_text() for tick in axis.get_xticklabels()] == sorted(set(tests["label"]))
+    assert main(["plot", str(tmp_path / "evaluate"), "--out", str(tmp_path / "bars")]) == 0
