@@ -353,7 +353,7 @@ def _tensorboard_folder(config: TrainConfig, out: Path) -> str | None:
     if not config.tensorboard:
         return None
     if importlib.util.find_spec("tensorboard") is None:
-        raise ConfigError("tensorboard: true needs the tensorboard package (pip install tensorboard), which is not installed")
+        raise ConfigError("tensorboard: true needs the tensorboard package, which is not installed: pip install 'crowdnav[tensorboard]'")
     return str(out / "tensorboard")
 
 

@@ -80,19 +80,24 @@ def test_policy_and_algorithm_options_reach_sb3_and_clashes_are_errors(tmp_path)
         train(tiny_config(tmp_path / "b", algo_kwargs={"taus": 1}))
 
 
-def test_progress_bar_and_tensorboard_option(tmp_path, capsys):
+def test_progress_bar_and_tensorboard_option(tmp_path, capsys, monkeypatch):
     import importlib.util
 
     from crowdnav.agents import ConfigError
 
+    from crowdnav.cli import main
+
     train(tiny_config(tmp_path, episodes=2, max_steps=10, progress=True))
     assert "2/2" in capsys.readouterr().err  # tqdm's bar on stderr: episodes done / total
-    if importlib.util.find_spec("tensorboard") is None:
-        with pytest.raises(ConfigError, match="pip install tensorboard"):
-            train(tiny_config(tmp_path / "tb", episodes=1, tensorboard=True))
-    else:
+    assert main(["train", "--tensorboard", "--print-config"]) == 0 and "tensorboard: true" in capsys.readouterr().out
+    if importlib.util.find_spec("tensorboard") is not None:  # the dev extra installs it
         train(tiny_config(tmp_path / "tb", episodes=1, max_steps=10, tensorboard=True))
         assert any((tmp_path / "tb" / "tensorboard").iterdir())
+    real = importlib.util.find_spec
+    monkeypatch.setattr(importlib.util, "find_spec", lambda name, *args: None if name == "tensorboard" else real(name, *args))
+    with pytest.raises(ConfigError, match=r"pip install 'crowdnav\[tensorboard\]'"):
+        train(tiny_config(tmp_path / "tb2", episodes=1, tensorboard=True))
+
 
 
 def test_n_step_returns_reach_the_replay_buffer_and_are_refused_for_on_policy_algorithms(tmp_path):

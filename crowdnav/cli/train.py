@@ -76,6 +76,8 @@ def register_train(groups: argparse._SubParsersAction) -> None:
     add_override_option(parser)  # --set PATH=VALUE: scenario overrides, merged into the config's own
     add_reward_options(parser)  # --reward PRESET, --reward-weight TERM=VALUE: into reward_weights
     parser.add_argument("--resume", action="store_true", help="continue the run in --out from its checkpoint")
+    parser.add_argument("--tensorboard", action="store_true",
+                        help="write TensorBoard logs to OUT/tensorboard (pip install 'crowdnav[tensorboard]')")
     parser.add_argument("--trust-pickle", action="store_true",
                         help="with --resume: accept a checkpoint of an older crowdnav, whose pickled state can run code "
                              "(only for runs you trust; docs/security.md)")
@@ -137,6 +139,8 @@ def train_overrides(args: argparse.Namespace) -> dict[str, Any]:
         overrides["modalities"] = [key.strip() for key in args.modalities.split(",") if key.strip()]
     if args.no_progress:
         overrides["progress"] = False
+    if args.tensorboard:
+        overrides["tensorboard"] = True
     for term, weight in reward_options(args).items():  # merged into the config file's reward_weights
         overrides[f"reward_weights.{term}"] = weight
     return overrides
