@@ -218,3 +218,16 @@ def test_benchmark_help_lists_every_shipped_experiment(capsys):
     assert main(["benchmark", "--help"]) == 0
     text = " ".join(capsys.readouterr().out.split())
     assert all(name in text for name in shipped_experiments()) and len(shipped_experiments()) >= 9
+
+
+def test_scenario_describe_summarises_every_library_scenario_and_refuses_a_bad_one_in_one_line(capsys):
+    from crowdnav.scenario.library import library_names
+
+    for name in library_names():
+        assert main(["scenario", "describe", name]) == 0
+        out = capsys.readouterr().out
+        assert out.startswith(f"{name}: ") and "world: " in out and "robot: " in out and "humans: up to " in out
+    assert main(["scenario", "describe", "station_hall", "--set", "humans.groups.0.count=3"]) == 0
+    assert "group commuters: 3 walk" in capsys.readouterr().out
+    assert main(["scenario", "describe", "no_such_room"]) == 1
+    assert len(capsys.readouterr().err.strip().splitlines()) == 1

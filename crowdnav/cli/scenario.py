@@ -1,4 +1,4 @@
-"""``crowdnav scenario``: list the library, validate files, print the JSON Schema."""
+"""``crowdnav scenario``: list the library, validate and describe files, print the JSON Schema."""
 
 from __future__ import annotations
 
@@ -26,6 +26,12 @@ def register(groups: argparse._SubParsersAction) -> None:
     validate.add_argument("scenarios", nargs="+", metavar="FILE_OR_NAME", help="a YAML file or a library scenario name")
     add_override_option(validate)
     validate.set_defaults(handler=validate_command)
+
+    describe = commands.add_parser("describe", help="summarise a scenario: world, obstacles, robot, crowd groups, sensors",
+                                   description="Load the scenario as an environment would and print what an episode holds.")
+    describe.add_argument("scenario", metavar="FILE_OR_NAME", help="a YAML file or a library scenario name")
+    add_override_option(describe)
+    describe.set_defaults(handler=describe_command)
 
     schema = commands.add_parser("schema", help="print the JSON Schema of scenario files (for editors)")
     schema.add_argument("--output", "-o", type=Path, metavar="FILE", help="write the schema to FILE instead of stdout")
@@ -58,6 +64,58 @@ def validate_command(args: argparse.Namespace) -> int:
     if invalid and len(args.scenarios) > 1:
         print(f"{invalid} of {len(args.scenarios)} scenarios are invalid", file=sys.stderr)
     return 1 if invalid else 0
+
+
+def _region(region: object) -> str:
+    kind = getattr(region, "type", "?")
+    if kind == "rectangle":
+        return f"rectangle {tuple(region.min)}-{tuple(region.max)}"  # type: ignore[attr-defined]
+    if kind == "circle":
+        return f"circle at {tuple(region.center)} r {region.radius}" + (" (perimeter)" if getattr(region, "perimeter", False) else "")  # type: ignore[attr-defined]
+    return str(kind)
+
+
+def _regions(regions: object) -> str:
+    items = regions if isinstance(regions, list | tuple) else [regions]
+    return ", ".join(_region(region) for region in items) or "-"
+
+
+def describe_lines(world: object) -> list[str]:
+    """The summary ``crowdnav scenario describe`` prints, one fact per line."""
+    scenario = world.scenario  # type: ignore[attr-defined]
+    obstacles = world.obstacles  # type: ignore[attr-defined]
+    area, robot, humans = scenario.world, scenario.robot, scenario.humans
+    low, high = tuple(area.min), tuple(area.max)
+    lines = [f"{scenario.name}: {scenario.description}".rstrip(": "),
+             f"world: {high[0] - low[0]:g} m x {high[1] - low[1]:g} m from {low} to {high}, "
+             + ("boundary walls" if area.boundary_walls else "open (leaving it ends the episode)")
+             + (f", floor polygon of {len(area.points)} points" if area.points else ""),
+             f"obstacles: {len(scenario.walls)} walls, {len(scenario.furniture)} pieces of furniture "
+             f"({obstacles.polygon_count} polygons, {obstacles.disc_count} discs once compiled)",
+             f"robot: {robot.kinematics}, radius {robot.radius:g} m, max speed {robot.max_speed:g} m/s; "
+             f"start {_regions(robot.start)}; goal {_regions(robot.goal)} (radius {robot.goal_radius:g} m)",
+             f"time: step {scenario.time_step:g} s, at most {scenario.max_steps} steps ({scenario.max_steps * scenario.time_step:g} s)",
+             f"humans: up to {humans.max_count}, model {humans.model}, {'see' if humans.see_robot else 'do not see'} the robot"]
+    for _, group in humans.crowd:
+        speed = group.preferred_speed if group.behaviour != "stand" else None
+        count = f"{group.count[0]}-{group.count[1]}" if isinstance(group.count, list | tuple) else str(group.count)
+        lines.append(f"  group {group.name}: {count} {group.behaviour}"
+                     + (f" at {speed[0]:g}-{speed[1]:g} m/s" if speed else "")
+                     + (f", goal rule {group.goal_rule}, on goal {group.on_goal}" if group.behaviour != "stand" else ""))
+    lines.append(f"modalities: {', '.join(scenario.sensors.modalities)}")
+    return lines
+
+
+def describe_command(args: argparse.Namespace) -> int:
+    from crowdnav.envs.core import load_env_world
+    from crowdnav.scenario import ScenarioError
+
+    try:
+        world, _ = load_env_world(args.scenario, parse_overrides(args.overrides))
+    except ScenarioError as error:
+        raise CliError(str(error).splitlines()[0]) from None
+    print("\n".join(describe_lines(world)))
+    return 0
 
 
 def schema_command(args: argparse.Namespace) -> int:
