@@ -339,6 +339,8 @@ def _finish(spec: UnitSpec, out_dir: Path, protocol: Protocol, config: Any, cloc
         "final": {outcome: round(float((final["outcome"] == outcome).mean()), 6) for outcome in OUTCOMES},
     }
     atomic_write_json(out_dir / META_FILE, meta)
+    # an earlier session's failure, now resumed and finished: its traceback no longer describes the run
+    (out_dir / "error.log").unlink(missing_ok=True)
     return {**_summary(spec, out_dir, meta, "repaired" if repairs else "done"), **({"repairs": repairs} if repairs else {})}
 
 

@@ -57,6 +57,7 @@ def test_crash_during_evaluation_resumes_without_redoing_or_losing_evaluations(t
     first = tmp_path / "evaluations" / "evaluation_000.csv"
     written = first.stat().st_mtime_ns
     assert not (tmp_path / "meta.json").exists() and not (tmp_path / "evaluations" / "evaluation_001.csv").exists()
+    (tmp_path / "error.log").write_text("Traceback of the crash\n")  # what an executor leaves after a failed run
 
     events = []
     summary = run_unit(spec, tmp_path, on_event=lambda event, data: events.append((event, data["evaluation"], data["training_episodes"])))
@@ -65,6 +66,7 @@ def test_crash_during_evaluation_resumes_without_redoing_or_losing_evaluations(t
     assert summary["status"] == "done" and summary["resumed"]
     check_complete(tmp_path, spec)
     assert json.loads((tmp_path / "meta.json").read_text())["sessions"] == 2
+    assert not (tmp_path / "error.log").exists()  # the finished run keeps no stale traceback
 
 
 def test_meta_names_the_commit_the_run_started_with_and_those_of_its_resumes(tmp_path, monkeypatch):
