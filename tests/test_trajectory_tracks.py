@@ -186,3 +186,14 @@ def test_bad_trajectories_arguments_are_one_line_errors(argv, message, capsys, t
     assert main(["trajectories", *argv, "--out", str(tmp_path)]) == 1
     err = capsys.readouterr().err
     assert message in err and len(err.strip().splitlines()) == 1
+
+
+def test_a_planted_trajectories_symlink_is_refused_and_nothing_is_written_through_it(tmp_path, capsys):
+    from crowdnav.evaluation.evaluate import evaluate_policy
+
+    run = evaluate_policy("baseline:straight", "open_space", tmp_path / "results", episodes=1)
+    elsewhere = tmp_path / "elsewhere"
+    elsewhere.mkdir()
+    (run / "trajectories").symlink_to(elsewhere, target_is_directory=True)
+    assert main(["trajectories", str(run)]) == 1
+    assert "outside the output folder" in capsys.readouterr().err and not any(elsewhere.iterdir())

@@ -54,13 +54,16 @@ def trajectories_command(args: argparse.Namespace) -> int:
 def _replay(results: list[Path], evaluation: int | None) -> int:
     from crowdnav.evaluation.storage import ResultsError
     from crowdnav.evaluation.trajectories import ReplayMismatchError, replay_evaluation, result_label, write_trajectories
+    from crowdnav.paths import OutputPathError, inside
 
     for run in results:
         try:
+            # inside the run folder for real: a planted trajectories/ symlink must not send the files elsewhere
+            stem = inside(run, f"trajectories/{result_label(run, evaluation)}")
             episodes = replay_evaluation(run, evaluation)
-        except (ResultsError, ReplayMismatchError) as error:
+        except (ResultsError, ReplayMismatchError, OutputPathError) as error:
             raise CliError(str(error)) from None
-        for path in write_trajectories(episodes, run / "trajectories" / result_label(run, evaluation)):
+        for path in write_trajectories(episodes, stem):
             print(f"wrote {path}")
     return 0
 
