@@ -15,7 +15,7 @@ from gymnasium import spaces
 
 from crowdnav.batch.scalar_math import cmul
 from crowdnav.scenario.schema import ClosestObstacleSensor
-from crowdnav.sensors.base import Modality, register_modality
+from crowdnav.sensors.base import Modality, RadiiConstants, register_modality
 from crowdnav.sensors.frames import encode_vector, encode_vectors, to_robot_frame, to_robot_frame_batch, vector_space
 
 if TYPE_CHECKING:
@@ -51,6 +51,8 @@ class ClosestObstacleModality(Modality):
         self._has_polygons = obstacles.polygon_count > 0
         self._has_discs = obstacles.disc_count > 0
         self._disc_radius = obstacles.disc_radius
+        self._columns = RadiiConstants(self._column_constants)
+        """radii -> per column of :meth:`nearest`: the radius (0 for polygons) and whether it is a disc."""
 
     def make_space(self) -> spaces.Box:
         return vector_space(self.frame, self.max_range)
@@ -65,30 +67,16 @@ class ClosestObstacleModality(Modality):
 
     def nearest_offset(self, sim: Simulator) -> complex | None:
         """World-frame vector from the robot's centre to the nearest obstacle point (None: no obstacle)."""
-        best_distance, best = np.inf, None
-        if sim.n_humans:
-            surface = np.abs(sim.robot_distance[1:] - sim.radii[1:])
-            j = int(surface.argmin())
-            if surface[j] < best_distance:
-                best_distance, best = surface[j], ("disc", sim.robot_offset[j + 1], sim.radii[j + 1])
-        if self._has_polygons:
-            distances = sim.polygon_distance[0]
-            k = int(distances.argmin())
-            if distances[k] < best_distance:
-                best_distance, best = distances[k], ("point", sim.polygon_offset[0, k], 0.0)
-        if self._has_discs:
-            surface = np.abs(sim.disc_distance[0] - self._disc_radius)
-            k = int(surface.argmin())
-            if surface[k] < best_distance:
-                best_distance, best = surface[k], ("disc", sim.disc_offset[0, k], self._disc_radius[k])
-        if best is None:
+        if not self._has_polygons and not self._has_discs and not sim.n_humans:
             return None
-        kind, offset, radius = best
+        column, offset = self.nearest(sim.robot_distance, sim.robot_offset, sim.polygon_distance[0], sim.polygon_offset[0],
+                                      sim.disc_distance[0], sim.disc_offset[0], sim.radii)
+        radius, is_disc = self._columns(sim.radii)
         offset = complex(offset)
-        if kind == "disc":
-            centre_distance = abs(offset)
+        if is_disc[column]:
             # from the robot to the centre, minus one radius along that line
-            offset = offset * (1.0 - radius / centre_distance) if centre_distance > 0.0 else complex(radius, 0.0)
+            centre_distance = abs(offset)
+            offset = offset * (1.0 - radius[column] / centre_distance) if centre_distance > 0.0 else complex(radius[column], 0.0)
         return offset
 
     @np.errstate(invalid="ignore")  # rotating the no-obstacle fill (inf) may give NaN; it is replaced
@@ -100,36 +88,51 @@ class ClosestObstacleModality(Modality):
         re, im = np.where(far, self.max_range, re), np.where(far, 0.0, im)
         return encode_vectors(re, im, self.frame, self.max_range)
 
-    @np.errstate(invalid="ignore")  # the no-obstacle fill (inf) makes NaN products, replaced in observe_batch
     def nearest_offset_batch(self, state: BatchState) -> tuple[np.ndarray, np.ndarray]:
         """(K,) real and imaginary parts of :meth:`nearest_offset` per world (inf where there is no obstacle)."""
-        worlds = np.arange(state.worlds)
-        best_distance = np.full(state.worlds, np.inf)
-        offset = np.full(state.worlds, np.inf + 0j)
-        radius = np.zeros(state.worlds)
-        is_disc = np.zeros(state.worlds, dtype=bool)
-        # (kind is a disc, surface distances, offsets, radii per column) in the order nearest_offset
-        # tries them; strict '<' keeps the earlier kind on a tie, as there
-        candidates = []
-        if state.n_humans:
-            candidates.append((True, np.abs(state.robot_distance[:, 1:] - state.radii[1:]), state.robot_offset[:, 1:], state.radii[1:]))
-        if self._has_polygons:
-            candidates.append((False, state.polygon_distance, state.polygon_offset, None))
-        if self._has_discs:
-            candidates.append((True, np.abs(state.disc_distance - self._disc_radius), state.disc_offset, self._disc_radius))
-        for disc, distances, offsets, radii in candidates:  # at most three kinds, not a loop over obstacles
-            column = distances.argmin(axis=1)
-            better = distances[worlds, column] < best_distance
-            best_distance = np.where(better, distances[worlds, column], best_distance)
-            offset = np.where(better, offsets[worlds, column], offset)
-            radius = np.where(better, radii[column] if disc else 0.0, radius)
-            is_disc = np.where(better, disc, is_disc)
+        if not self._has_polygons and not self._has_discs and not state.n_humans:
+            return np.full(state.worlds, np.inf), np.full(state.worlds, np.inf)
+        column, offset = self.nearest(state.robot_distance, state.robot_offset, state.polygon_distance, state.polygon_offset,
+                                      state.disc_distance, state.disc_offset, state.radii)
+        radius, is_disc = self._columns(state.radii)
+        radius, is_disc = radius[column], is_disc[column]
         re, im = offset.real, offset.imag
         # discs: offset * (1 - r / |offset|), a Python complex times a float; complex(r, 0) at the centre
         centre_distance = np.hypot(re, im)
-        with np.errstate(divide="ignore"):
+        with np.errstate(divide="ignore", invalid="ignore"):
             shrunk_re, shrunk_im = cmul(re, im, 1.0 - radius / centre_distance, 0.0)
         at_centre = is_disc & ~(centre_distance > 0.0)
         re = np.where(is_disc, np.where(at_centre, radius, shrunk_re), re)
         im = np.where(is_disc, np.where(at_centre, 0.0, shrunk_im), im)
         return re, im
+
+    def nearest(
+        self,
+        robot_distance: np.ndarray,
+        robot_offset: np.ndarray,
+        polygon_distance: np.ndarray,
+        polygon_offset: np.ndarray,
+        disc_distance: np.ndarray,
+        disc_offset: np.ndarray,
+        radii: np.ndarray,
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """The kernel: the nearest obstacle's column and the world-frame offset to its centre (discs) or point (polygons).
+
+        Arrays of the simulator's cached geometry, ``(*W, columns)``: ``W = (K,)`` for K worlds or
+        ``()`` for one (no world axis: no numpy overhead for it). Columns are [humans | static
+        polygons | round obstacles] (see :meth:`_columns`); the nearest is the smallest surface
+        distance (polygons: to their nearest point; discs: ``|centre distance - radius|``, so a
+        disc containing the robot's centre measures to its outline), the first column on a tie.
+        Needs at least one column.
+        """
+        surface = np.concatenate((np.abs(robot_distance[..., 1:] - radii[1:]), polygon_distance, np.abs(disc_distance - self._disc_radius)), axis=-1)
+        offsets = np.concatenate((robot_offset[..., 1:], polygon_offset, disc_offset), axis=-1)
+        column = surface.argmin(axis=-1)
+        if surface.ndim == 1:
+            return column, offsets[column]
+        return column, offsets[np.arange(len(offsets)), column]
+
+    def _column_constants(self, radii: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        polygons = np.zeros(self.world.obstacles.polygon_count)
+        radius = np.concatenate((radii[1:], polygons, self._disc_radius))
+        return radius, np.concatenate((np.ones(len(radii) - 1, dtype=bool), polygons.astype(bool), np.ones(len(self._disc_radius), dtype=bool)))

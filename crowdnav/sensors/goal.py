@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, TypeVar
 
 import numpy as np
 from gymnasium import spaces
@@ -16,6 +16,9 @@ if TYPE_CHECKING:
     from crowdnav.batch.state import BatchState
     from crowdnav.simulator import Simulator
     from crowdnav.world import CompiledWorld
+
+F = TypeVar("F", float, np.ndarray)
+"""A Python float (one world) or a (K,) float array (K worlds)."""
 
 GOAL_RANGE_FACTOR = 2.0
 """Goal distances are clipped to this many world diagonals (reached only far outside an open world)."""
@@ -49,12 +52,19 @@ class GoalModality(Modality):
         return np.zeros(shape, dtype=np.float32), scale
 
     def observe(self, sim: Simulator) -> np.ndarray:
-        relative = (sim.robot_goal - complex(sim.positions[0])) * to_robot_frame(sim)
-        return encode_vector(relative, self.frame, self.bound)
+        rotation, robot = to_robot_frame(sim), complex(sim.positions[0])
+        re, im = goal_in_robot_frame(sim.robot_goal.real, sim.robot_goal.imag, robot.real, robot.imag, rotation.real, rotation.imag)
+        return encode_vector(complex(re, im), self.frame, self.bound)
 
     def observe_batch(self, state: BatchState) -> np.ndarray:
         robot = state.positions[:, 0]
-        # (goal - robot) * to_robot_frame: Python complex math, emulated with real arrays
-        rotation = to_robot_frame_batch(state)
-        relative = cmul(state.robot_goal.real - robot.real, state.robot_goal.imag - robot.imag, *rotation)
+        relative = goal_in_robot_frame(state.robot_goal.real, state.robot_goal.imag, robot.real, robot.imag, *to_robot_frame_batch(state))
         return encode_vectors(*relative, self.frame, self.bound)
+
+
+def goal_in_robot_frame(goal_re: F, goal_im: F, robot_re: F, robot_im: F, rotation_re: F, rotation_im: F) -> tuple[F, F]:
+    """The kernel: ``(goal - robot) * to_robot_frame`` as (re, im), for Python floats (one world) or (K,) arrays.
+
+    Python's complex product, written as separately rounded real operations, so both give the same bits.
+    """
+    return cmul(goal_re - robot_re, goal_im - robot_im, rotation_re, rotation_im)

@@ -75,32 +75,50 @@ class HumansModality(Modality):
         return np.zeros((self.count, 6), dtype=np.float32), scale
 
     def observe(self, sim: Simulator) -> np.ndarray:
-        out = np.zeros((self.count, 6), dtype=np.float32)
-        if sim.n_humans:
-            surface = sim.robot_distance[1:] - sim.radii[1:]
-            order = np.argsort(surface, kind="stable")[: self.count]
-            rotation = to_robot_frame(sim)
-            robot_velocity = complex(sim.velocities[0])
-            out[: len(order)] = self._rows(
-                surface[order], sim.robot_offset[1:][order], sim.velocities[1:][order], sim.radii[1:][order],
-                robot_velocity.real, robot_velocity.imag, rotation.real, rotation.imag,
-            )
-        return out
+        rotation = to_robot_frame(sim)
+        return self.nearest(sim.robot_distance, sim.robot_offset, sim.velocities, sim.radii, rotation.real, rotation.imag)
 
     def observe_batch(self, state: BatchState) -> np.ndarray:
-        out = np.zeros((state.worlds, self.count, 6), dtype=np.float32)
-        if state.n_humans and state.worlds:
-            surface = state.robot_distance[:, 1:] - state.radii[1:]
-            order = np.argsort(surface, axis=1, kind="stable")[:, : self.count]
-            cos, minus_sin = to_robot_frame_batch(state)
-            robot_velocity = state.velocities[:, :1]
-            out[:, : order.shape[1]] = self._rows(
-                np.take_along_axis(surface, order, axis=1),
-                np.take_along_axis(state.robot_offset[:, 1:], order, axis=1),
-                np.take_along_axis(state.velocities[:, 1:], order, axis=1),
-                state.radii[1:][order],
-                robot_velocity.real, robot_velocity.imag, cos[:, None], minus_sin[:, None],
-            )
+        cos, minus_sin = to_robot_frame_batch(state)
+        return self.nearest(state.robot_distance, state.robot_offset, state.velocities, state.radii, cos[:, None], minus_sin[:, None])
+
+    def nearest(
+        self,
+        robot_distance: np.ndarray,
+        robot_offset: np.ndarray,
+        velocities: np.ndarray,
+        radii: np.ndarray,
+        rotation_re: float | np.ndarray,
+        rotation_im: float | np.ndarray,
+    ) -> np.ndarray:
+        """The kernel: ``(*W, count, 6)`` float32 rows of the nearest humans of every world.
+
+        ``robot_distance`` / ``robot_offset`` / ``velocities``: ``(*W, n+1)``, the simulator's cached
+        geometry and velocities (robot first); ``radii``: (n+1,), shared by the worlds; the robot
+        frame's rotation ``to_robot_frame``: Python floats for one world (``W = ()``, no world
+        axis: no numpy overhead for it) or (K, 1) arrays for K worlds. Only a sort along the human
+        axis and elementwise real operations, so world k's rows depend on world k alone, bit for bit.
+        """
+        batched = robot_distance.ndim == 2
+        out = np.zeros((*robot_distance.shape[:-1], self.count, 6), dtype=np.float32)
+        if robot_distance.shape[-1] == 1 or not out.size:  # no humans (or no worlds)
+            return out
+        surface = robot_distance[..., 1:] - radii[1:]
+        order = np.argsort(surface, axis=-1, kind="stable")[..., : self.count]
+        if batched:
+            def gather(values: np.ndarray) -> np.ndarray:
+                return np.take_along_axis(values, order, axis=-1)
+
+            robot_velocity = velocities[:, :1]
+        else:
+            def gather(values: np.ndarray) -> np.ndarray:
+                return values[order]
+
+            robot_velocity = complex(velocities[0])
+        out[..., : order.shape[-1], :] = self._rows(
+            gather(surface), gather(robot_offset[..., 1:]), gather(velocities[..., 1:]), radii[1:][order],
+            robot_velocity.real, robot_velocity.imag, rotation_re, rotation_im,
+        )
         return out
 
     def _rows(
@@ -116,8 +134,8 @@ class HumansModality(Modality):
     ) -> np.ndarray:
         """(..., m, 6) float32 rows of the m nearest humans, given sorted (..., m) arrays.
 
-        Only elementwise real operations, so the single path (Python-float rotation and robot
-        velocity) and the batched one ((K, 1) arrays of them) give the same bits.
+        Only elementwise real operations, so Python-float rotation and robot velocity (one world)
+        and (K, 1) arrays of them (K worlds) give the same bits.
         """
         p, v = self.position_bound, self.speed_bound
         x, y = cmul(offset.real, offset.imag, rotation_re, rotation_im)

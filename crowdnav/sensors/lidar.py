@@ -70,9 +70,9 @@ class LidarModality(Modality):
         self._static_disc_count = obstacles.disc_count
         self._static_disc_center = obstacles.disc_center
         self._static_disc_radius = obstacles.disc_radius
+        self._no_hit = np.full(self.beams, 1.0 / self.max_range)
         self._primitive_constants = RadiiConstants(self._constants_for)
         """radii -> (P,) per primitive: numerator of the bearing half-width and squared radius (both 0 for edges)."""
-        self._no_hit = np.full(self.beams, 1.0 / self.max_range)
 
     def make_space(self) -> spaces.Box:
         return spaces.Box(low=0.0, high=1.0, shape=(self.beams,), dtype=np.float32)
@@ -80,80 +80,127 @@ class LidarModality(Modality):
     def observe(self, sim: Simulator) -> np.ndarray:
         out = np.empty(self.beams, dtype=np.float32)
         # (1 / max_range) / inverse <= 1: the inverse ranges start at 1 / max_range
-        np.divide(1.0 / self.max_range, self._inverse_ranges(sim), out=out)
+        np.divide(1.0 / self.max_range, self.inverse_ranges(sim.positions, sim.robot_heading, sim.radii), out=out)
         return out
 
     def observe_batch(self, state: BatchState) -> np.ndarray:
         out = np.empty((state.worlds, self.beams), dtype=np.float32)
-        np.divide(1.0 / self.max_range, self._inverse_ranges_batch(state), out=out)
+        np.divide(1.0 / self.max_range, self.inverse_ranges(state.positions, state.robot_heading, state.radii), out=out)
         return out
 
     def ranges(self, sim: Simulator) -> np.ndarray:
         """(B,) float64 distances in metres from the robot's centre, ``max_range`` where nothing is hit."""
-        return 1.0 / self._inverse_ranges(sim)
+        return 1.0 / self.inverse_ranges(sim.positions, sim.robot_heading, sim.radii)
 
     # ------------------------------------------------------------------ raycast
 
     @np.errstate(divide="ignore", invalid="ignore")  # misses may be inf/NaN by design, see the module doc
-    def _inverse_ranges(self, sim: Simulator) -> np.ndarray:
-        """(B,) per beam: max(1 / max_range, 1 / range of the nearest hit)."""
-        heading = math.remainder(sim.robot_heading, TWO_PI)
-        edges = self._edge_count
-        primitives = edges + sim.n_humans + self._static_disc_count
-        half_width_numerator, radius2 = self._primitive_constants(sim.radii)
-        humans = sim.positions[1:]
+    def inverse_ranges(self, positions: np.ndarray, heading: float | np.ndarray, radii: np.ndarray) -> np.ndarray:
+        """The scan kernel: ``(*W, B)`` per world and beam, max(1 / max_range, 1 / range of the nearest hit).
+
+        ``positions``: ``(*W, n+1)`` complex, robot first; ``heading``: ``W``-shaped, the robots'
+        headings; ``radii``: (n+1,), shared by the worlds. ``W`` is ``(K,)`` for K worlds
+        (``observe_batch``) or ``()`` for one (``observe``: no world axis, so one world pays no
+        numpy overhead for it); row k depends on world k alone, bit for bit. The (world,
+        primitive, beam) pairs of all worlds form one flat list, every world's edges before every
+        world's discs, so one scatter maximum fills every scan.
+        """
+        batched, beams, edges = positions.ndim == 2, self.beams, self._edge_count
+        worlds = len(positions) if batched else 1
+        primitives = edges + positions.shape[-1] - 1 + self._static_disc_count
+        shift, rotation = self._heading_terms(heading, batched)
+        half_width_numerator, radius2 = self._primitive_constants(radii)
         # World-frame offsets from the robot, laid out so that one arctan2 gives every bearing
         # interval: [edge ends, disc centres | edge starts, disc centres]. Per-primitive arrays
         # below have length P = edges + discs, discs after edges.
-        z = np.concatenate((self._edge_end, humans, self._static_disc_center, self._edge_start, humans, self._static_disc_center))
-        z -= sim.positions[0]
+        z = self._primitive_points(positions)
+        z -= positions[:, :1] if batched else positions[0]
         bearing = np.arctan2(z.imag, z.real)
         bearing *= 1.0 / self.step
-        # beam units: beam k sits at k; whole turns are added so the values stay positive
-        bearing += (self.fov / 2 - heading) / self.step - 0.5 + 3 * self._beams_per_turn
-        near = z[:primitives]  # edges: their end; discs: their centre
+        bearing += shift  # beam units: beam k sits at k; whole turns are added so the values stay positive
+        near = z[..., :primitives]  # edges: their end; discs: their centre
         distance = np.abs(near)
         half_width = half_width_numerator / distance
-        low = bearing[:primitives] - half_width
-        high = bearing[primitives:] + half_width
+        low = bearing[..., :primitives] - half_width
+        high = bearing[..., primitives:] + half_width
 
         # Per-primitive scale, positive exactly for the primitives the robot can see: edges
         # -1 / cross(start, vector) (the robot on the edge's outer side), discs 1 / (d^2 - r^2)
         # (the robot outside the disc). Scaling the hit formulas by it makes them give 1 / range.
-        start_conj = z[primitives : primitives + edges].conj()
-        scale = np.empty(primitives)
-        np.divide(-1.0, (start_conj * self._edge_vector).imag, out=scale[:edges])
-        gap2 = distance[edges:]
+        start_conj = z[..., primitives : primitives + edges].conj()
+        scale = np.empty(positions.shape[:-1] + (primitives,))
+        np.divide(-1.0, (start_conj * self._edge_vector).imag, out=scale[..., :edges])
+        gap2 = distance[..., edges:]
         gap2 *= gap2
         gap2 -= radius2[edges:]
-        np.divide(1.0, gap2, out=scale[edges:])
-        factor = np.empty(primitives, dtype=complex)  # multiplies a beam direction in every hit formula
-        np.multiply(self._edge_vector_conj, scale[:edges], out=factor[:edges])
-        np.multiply(near[edges:].conj(), scale[edges:], out=factor[edges:])
-        start_factor = start_conj * scale[:edges]
+        np.divide(1.0, gap2, out=scale[..., edges:])
+        factor = np.empty(positions.shape[:-1] + (primitives,), dtype=complex)  # multiplies a beam direction in every hit formula
+        np.multiply(self._edge_vector_conj, scale[..., :edges], out=factor[..., :edges])
+        np.multiply(near[..., edges:].conj(), scale[..., edges:], out=factor[..., edges:])
+        start_factor = start_conj * scale[..., :edges]
         radius2 = radius2 * (scale * scale)
 
-        beam, count, edge_pairs = self._beam_runs(low, high, scale > 0.0, edges)
-        direction = self._directions.take(beam) * complex(math.cos(heading), math.sin(heading))
-        local = factor.repeat(count) * direction
+        def by_kind(values: np.ndarray) -> np.ndarray:  # (K, P) -> every world's edges, then every world's discs
+            if not batched:
+                return values
+            return np.concatenate((values[..., :edges].ravel(), values[..., edges:].ravel()))
+
+        edge_count = worlds * edges
+        beam, count, edge_pairs = self._beam_runs(by_kind(low), by_kind(high), by_kind(scale > 0.0), edge_count)
+        if not batched:  # numpy's complex multiply gives each element the same bits whatever the layout
+            world_beam = beam
+            direction = self._directions.take(beam) * rotation
+        else:  # (world, beam) of every pair as one index into (K, B) tables: the directions and the scan
+            world_beam = by_kind(np.broadcast_to(np.arange(0, worlds * beams, beams)[:, None], (worlds, primitives))).repeat(count)
+            world_beam += beam
+            direction = (self._directions * rotation).take(world_beam)
+        local = by_kind(factor).repeat(count) * direction
         inverse = np.empty(len(beam))
         # Edge a + s * e, ray t * d (robot at the origin): t = cross(a, e) / cross(d, e) and
         # s = cross(a, d) / cross(d, e). With the scale k = -1 / cross(a, e), 1 / t = k * cross(e, d)
         # = Im(k conj(e) d), and 0 <= s <= 1 reads -k cross(e, d) <= k cross(a, d) <= 0.
         hit = local.imag[:edge_pairs]
-        along = (start_factor.repeat(count[:edges]) * direction[:edge_pairs]).imag
+        along = (start_factor.ravel().repeat(count[:edge_count]) * direction[:edge_pairs]).imag
         np.multiply(hit, along * (along + hit) <= 0.0, out=inverse[:edge_pairs])
         # Disc: with b the centre's distance along the ray and h its distance off it, the near
         # root b - sqrt(r^2 - h^2) equals (d^2 - r^2) / (b + sqrt(r^2 - h^2)); scaled by
         # k = 1 / (d^2 - r^2), its inverse is k b + sqrt(k^2 r^2 - k^2 h^2): NaN on a miss,
         # negative for a disc behind the robot.
         disc_local = local[edge_pairs:]
-        root = radius2[edges:].repeat(count[edges:]) - disc_local.imag**2
+        root = radius2[..., edges:].ravel().repeat(count[edge_count:]) - disc_local.imag**2
         np.sqrt(root, out=root)
         np.add(root, disc_local.real, out=inverse[edge_pairs:])
-        out = self._no_hit.copy()
-        np.fmax.at(out, beam, inverse)
-        return out
+        out = np.full(worlds * beams, 1.0 / self.max_range) if batched else self._no_hit.copy()
+        np.fmax.at(out, world_beam, inverse)
+        return out.reshape(positions.shape[:-1] + (beams,))
+
+    def _heading_terms(self, heading: float | np.ndarray, batched: bool) -> tuple[float | np.ndarray, complex | np.ndarray]:
+        """The bearing shift (beam units) and the rotation ``exp(i heading)``, heading taken mod 2 pi.
+
+        One world: Python scalar math (cheaper than numpy for one number); K worlds: (K, 1) arrays
+        of the same bits (:mod:`crowdnav.batch.scalar_math`).
+        """
+        if not batched:
+            h = math.remainder(float(heading), TWO_PI)
+            return (self.fov / 2 - h) / self.step - 0.5 + 3 * self._beams_per_turn, complex(math.cos(h), math.sin(h))
+        h = remainder(heading, TWO_PI)[:, None]
+        rotation = np.empty(h.shape, dtype=complex)
+        rotation.real, rotation.imag = np.cos(h), np.sin(h)
+        return (self.fov / 2 - h) / self.step - 0.5 + 3 * self._beams_per_turn, rotation
+
+    def _primitive_points(self, positions: np.ndarray) -> np.ndarray:
+        """``(*W, 2P)`` complex: [edge ends, humans, round obstacles | edge starts, humans, round obstacles] per world."""
+        humans = positions[..., 1:]
+        if positions.ndim == 1:
+            return np.concatenate((self._edge_end, humans, self._static_disc_center, self._edge_start, humans, self._static_disc_center))
+        edges, discs = self._edge_count, self._static_disc_count
+        primitives = edges + humans.shape[1] + discs
+        z = np.empty((len(positions), 2 * primitives), dtype=complex)
+        for at, part in enumerate((self._edge_end, self._edge_start)):
+            z[:, at * primitives : at * primitives + edges] = part
+            z[:, at * primitives + edges : (at + 1) * primitives - discs] = humans
+            z[:, (at + 1) * primitives - discs : (at + 1) * primitives] = self._static_disc_center
+        return z
 
     def _beam_runs(self, low: np.ndarray, high: np.ndarray, visible: np.ndarray, edges: int) -> tuple[np.ndarray, np.ndarray, int]:
         """Expand bearing intervals ``[low, high]`` (beam units, wrapping) into (beam, primitive) pairs.
@@ -185,75 +232,3 @@ class LidarModality(Modality):
         # arcsin(x) <= x * pi / 2 on [0, 1]: (r * pi / 2) / d bounds a disc's bearing half-width
         radius = np.concatenate((np.zeros(self._edge_count), radii[1:], self._static_disc_radius))
         return radius * (math.pi / 2) / self.step, radius**2
-
-    # ------------------------------------------------------------- K worlds at once
-
-    @np.errstate(divide="ignore", invalid="ignore")  # as _inverse_ranges
-    def _inverse_ranges_batch(self, state: BatchState) -> np.ndarray:
-        """(K, B): :meth:`_inverse_ranges` of every world, bit for bit.
-
-        The same elementwise operations on (K, ...) arrays, in the same order; per-world scalars
-        (the heading's shift and rotation) are computed elementwise first, as the single code
-        computes them before broadcasting. The (world, primitive, beam) pairs of all worlds form
-        one flat list, all worlds' edges before all worlds' discs, so one scatter maximum fills
-        every scan.
-        """
-        worlds, beams, edges = state.worlds, self.beams, self._edge_count
-        discs = state.n_humans + self._static_disc_count
-        primitives = edges + discs
-        heading = remainder(state.robot_heading, TWO_PI)
-        half_width_numerator, radius2 = self._primitive_constants(state.radii)
-        humans = state.positions[:, 1:]
-        z = np.empty((worlds, 2 * primitives), dtype=complex)
-        for at, part in enumerate((self._edge_end, self._edge_start)):  # [ends, discs | starts, discs], as the single code
-            z[:, at * primitives : at * primitives + edges] = part
-            z[:, at * primitives + edges : (at + 1) * primitives - self._static_disc_count] = humans
-            z[:, (at + 1) * primitives - self._static_disc_count : (at + 1) * primitives] = self._static_disc_center
-        z -= state.positions[:, :1]
-        bearing = np.arctan2(z.imag, z.real)
-        bearing *= 1.0 / self.step
-        bearing += ((self.fov / 2 - heading) / self.step - 0.5 + 3 * self._beams_per_turn)[:, None]
-        near = z[:, :primitives]
-        distance = np.abs(near)
-        half_width = half_width_numerator / distance
-        low = bearing[:, :primitives] - half_width
-        high = bearing[:, primitives:] + half_width
-
-        start_conj = z[:, primitives : primitives + edges].conj()
-        scale = np.empty((worlds, primitives))
-        np.divide(-1.0, (start_conj * self._edge_vector).imag, out=scale[:, :edges])
-        gap2 = distance[:, edges:]
-        gap2 *= gap2
-        gap2 -= radius2[edges:]
-        np.divide(1.0, gap2, out=scale[:, edges:])
-        factor = np.empty((worlds, primitives), dtype=complex)
-        np.multiply(self._edge_vector_conj, scale[:, :edges], out=factor[:, :edges])
-        np.multiply(near[:, edges:].conj(), scale[:, edges:], out=factor[:, edges:])
-        start_factor = start_conj * scale[:, :edges]
-        radius2 = radius2 * (scale * scale)
-
-        def by_kind(values: np.ndarray) -> np.ndarray:  # (K, P) -> every world's edges, then every world's discs
-            return np.concatenate((values[:, :edges].ravel(), values[:, edges:].ravel()))
-
-        edge_count = worlds * edges
-        beam, count, edge_pairs = self._beam_runs(by_kind(low), by_kind(high), by_kind(scale > 0.0), edge_count)
-        # (world, beam) of every pair as one index into (K, B) tables: the directions and the scan
-        world_beam = by_kind(np.broadcast_to(np.arange(0, worlds * beams, beams)[:, None], (worlds, primitives))).repeat(count)
-        world_beam += beam
-        rotation = np.empty(worlds, dtype=complex)
-        rotation.real, rotation.imag = np.cos(heading), np.sin(heading)
-        # numpy's complex multiply gives each element the same bits whatever the layout, so one
-        # (K, B) product looked up per pair equals the single code's per-pair product
-        direction = (self._directions * rotation[:, None]).take(world_beam)
-        local = by_kind(factor).repeat(count) * direction
-        inverse = np.empty(len(beam))
-        hit = local.imag[:edge_pairs]
-        along = (start_factor.ravel().repeat(count[:edge_count]) * direction[:edge_pairs]).imag
-        np.multiply(hit, along * (along + hit) <= 0.0, out=inverse[:edge_pairs])
-        disc_local = local[edge_pairs:]
-        root = radius2[:, edges:].ravel().repeat(count[edge_count:]) - disc_local.imag**2
-        np.sqrt(root, out=root)
-        np.add(root, disc_local.real, out=inverse[edge_pairs:])
-        out = np.full(worlds * beams, 1.0 / self.max_range)
-        np.fmax.at(out, world_beam, inverse)
-        return out.reshape(worlds, beams)

@@ -35,10 +35,9 @@ class VelocityModality(Modality):
         return vector_space("cartesian", self.bound)
 
     def observe(self, sim: Simulator) -> np.ndarray:
-        velocity = complex(sim.velocities[0]) * to_robot_frame(sim)
-        return encode_vector(velocity, "cartesian", self.bound)
+        rotation, robot = to_robot_frame(sim), complex(sim.velocities[0])
+        return encode_vector(complex(*cmul(robot.real, robot.imag, rotation.real, rotation.imag)), "cartesian", self.bound)
 
     def observe_batch(self, state: BatchState) -> np.ndarray:
         robot = state.velocities[:, 0]
-        velocity = cmul(robot.real, robot.imag, *to_robot_frame_batch(state))
-        return encode_vectors(*velocity, "cartesian", self.bound)
+        return encode_vectors(*cmul(robot.real, robot.imag, *to_robot_frame_batch(state)), "cartesian", self.bound)
