@@ -4,6 +4,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+import numpy as np
+
 
 @dataclass(frozen=True)
 class Collision:
@@ -21,6 +23,29 @@ OUTCOMES = ("success", "collision", "out_of_bounds", "truncated")
 """Every way an episode ends (:attr:`StepEvents.outcome` of its last step, ``info["outcome"]``
 of the envs): the one success, the two failures, the time limit. Evaluation, training logs and
 benchmarks count the outcomes in this order."""
+
+
+OUTCOME_PRECEDENCE = ("collision", "out_of_bounds", "success", "truncated")
+"""Which outcome a step has when several of its events happen at once: the first that happened.
+A failure wins over a goal reached in the same step, and any event over the time limit."""
+
+
+def outcome_of(collided: bool, left_world: bool, goal_reached: bool, truncated: bool) -> str | None:
+    """The outcome of one step (:data:`OUTCOME_PRECEDENCE` applied to its events), or None while it runs.
+
+    The one world case of :func:`outcomes`, in Python scalars: a step of the single env pays no
+    numpy call for it. The events are given in the precedence's order.
+    """
+    for outcome, happened in zip(OUTCOME_PRECEDENCE, (collided, left_world, goal_reached, truncated), strict=True):
+        if happened:
+            return outcome
+    return None
+
+
+def outcomes(collided: np.ndarray, left_world: np.ndarray, goal_reached: np.ndarray, truncated: np.ndarray) -> np.ndarray:
+    """(K,) object array: :func:`outcome_of` of every world (None where it runs), from (K,) bool arrays of its events."""
+    names = np.array([*OUTCOME_PRECEDENCE, None], dtype=object)
+    return names[np.select([collided, left_world, goal_reached, truncated], range(len(OUTCOME_PRECEDENCE)), len(OUTCOME_PRECEDENCE))]
 
 
 @dataclass(frozen=True)
@@ -42,17 +67,10 @@ class StepEvents:
     def outcome(self) -> str | None:
         """How the step ends the episode, one of :data:`OUTCOMES`, or None (running).
 
-        Precedence when several events happen in the same step: ``collision`` > ``out_of_bounds``
-        > ``success`` > ``truncated`` (a failure wins over a goal reached in the same step, and
-        any event over the time limit).
+        Precedence when several events happen in the same step: :data:`OUTCOME_PRECEDENCE`
+        (``collision`` > ``out_of_bounds`` > ``success`` > ``truncated``).
         """
-        if self.collision is not None:
-            return "collision"
-        if self.left_world:
-            return "out_of_bounds"
-        if self.goal_reached:
-            return "success"
-        return "truncated" if self.truncated else None
+        return outcome_of(self.collision is not None, self.left_world, self.goal_reached, self.truncated)
 
 
 class SimulationError(RuntimeError):

@@ -22,11 +22,49 @@ The reward is the sum of the terms, in the order above.
 
 from __future__ import annotations
 
+from collections.abc import Mapping
+from typing import TypeVar
+
+import numpy as np
+
 from crowdnav.scenario.reward_presets import REWARD_TERMS
 from crowdnav.scenario.schema import RewardWeights
 from crowdnav.simulator import Simulator, StepEvents
 
-__all__ = ["REWARD_TERMS", "Reward"]  # REWARD_TERMS: names in summation order, keys of info["reward_terms"]
+__all__ = ["REWARD_TERMS", "Reward", "reward_terms"]  # REWARD_TERMS: names in summation order, keys of info["reward_terms"]
+
+F = TypeVar("F", float, np.ndarray)
+"""A Python float (one world) or a (K,) array (K worlds)."""
+
+PAID_ON = {"goal_reached": ("success",), "collision": ("collision", "out_of_bounds")}
+"""The event terms and the outcomes (:data:`crowdnav.events.OUTCOMES`) whose step pays them."""
+
+
+def reward_terms(
+    weights: Mapping[str, float], previous_distance: F, distance: F, social_force: F, outcome: str | None | np.ndarray
+) -> tuple[F, dict[str, F]]:
+    """The kernel: (reward, terms) of one step, for one world (Python floats) or K worlds ((K,) arrays).
+
+    ``weights``: term -> weight; ``previous_distance`` / ``distance``: the robot-goal centre
+    distance before and after the step; ``social_force``: ``|F_social|`` after it; ``outcome``:
+    the step's outcome (:func:`crowdnav.events.outcome_of`, None while running; K worlds: the
+    (K,) object array of :func:`crowdnav.events.outcomes`). Only elementwise float operations, in
+    the order of the module doc, so a world's terms have the same bits either way.
+    """
+    batched = isinstance(distance, np.ndarray)
+    terms = {
+        "step": np.full(np.shape(distance), weights["step"]) if batched else weights["step"],
+        "goal_progress": weights["goal_progress"] * (previous_distance - distance),
+        "social": weights["social"] * social_force,
+    }
+    for term, paid_on in PAID_ON.items():
+        if batched:
+            paid = np.logical_or.reduce([outcome == name for name in paid_on])
+            terms[term] = np.where(paid, weights[term], 0.0)
+        else:
+            terms[term] = weights[term] if outcome in paid_on else 0.0
+    reward = terms["step"] + terms["goal_progress"] + terms["social"] + terms["goal_reached"] + terms["collision"]
+    return reward, terms
 
 
 class Reward:
@@ -34,11 +72,7 @@ class Reward:
 
     def __init__(self, weights: RewardWeights):
         self.weights = weights
-        self._step = float(weights.step)
-        self._progress = float(weights.goal_progress)
-        self._social = float(weights.social)
-        self._goal = float(weights.goal_reached)
-        self._collision = float(weights.collision)
+        self._weights = {term: float(getattr(weights, term)) for term in REWARD_TERMS}
         self._previous_distance = 0.0
 
     def reset(self, sim: Simulator) -> None:
@@ -48,15 +82,5 @@ class Reward:
     def __call__(self, sim: Simulator, events: StepEvents) -> tuple[float, dict[str, float]]:
         """(reward, terms) for the step the simulator just took; ``terms`` is a new dict."""
         distance = float(sim.robot_goal_distance)
-        progress = self._previous_distance - distance
-        self._previous_distance = distance
-        outcome = events.outcome
-        terms = {
-            "step": self._step,
-            "goal_progress": self._progress * progress,
-            "social": self._social * abs(complex(sim.robot_social_force)),
-            "goal_reached": self._goal if outcome == "success" else 0.0,
-            "collision": self._collision if outcome == "collision" or outcome == "out_of_bounds" else 0.0,
-        }
-        reward = terms["step"] + terms["goal_progress"] + terms["social"] + terms["goal_reached"] + terms["collision"]
-        return reward, terms
+        previous, self._previous_distance = self._previous_distance, distance
+        return reward_terms(self._weights, previous, distance, abs(complex(sim.robot_social_force)), events.outcome)

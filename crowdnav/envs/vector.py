@@ -18,7 +18,8 @@ from gymnasium.vector.utils import batch_space
 from crowdnav.batch.memory import keep_freed_memory as _keep_freed_memory
 from crowdnav.batch.simulator import BatchSimulator, StepResult
 from crowdnav.envs.core import ScenarioSource, load_env_world, option_overrides, real_array
-from crowdnav.envs.reward import REWARD_TERMS
+from crowdnav.envs.reward import REWARD_TERMS, reward_terms
+from crowdnav.events import outcomes
 
 MAX_WORLDS = 4_096
 """Most worlds in one vector env (the training config's num_envs bound)."""
@@ -180,7 +181,9 @@ class CrowdNavVectorEnv(VectorEnv):
         result = self.batch.step(actions, None if stepping.all() else stepping)
         terminated = result.terminated & stepping
         truncated = result.truncated & stepping & ~terminated
-        rewards[stepping], terms = self._rewards(result, stepping)
+        # every stepping world's outcome, "truncated" where it runs on (the infos' convention, see _end_infos)
+        outcome = outcomes(result.collided & stepping, result.left_world & stepping, result.goal_reached & stepping, stepping)
+        rewards[stepping], terms = self._rewards(outcome, stepping)
         infos["reward_terms"] = {}
         for term in REWARD_TERMS:
             values = np.zeros(b)
@@ -188,7 +191,7 @@ class CrowdNavVectorEnv(VectorEnv):
             infos["reward_terms"][term], infos["reward_terms"][f"_{term}"] = values, stepping.copy()
         infos["_reward_terms"] = stepping.copy()
         ended = terminated | truncated
-        self._end_infos(infos, result, terminated, stepping)
+        self._end_infos(infos, result, outcome, stepping)
         self._observe_all()
         if self.autoreset_mode is AutoresetMode.DISABLED:
             waiting = self._ended.copy()
@@ -216,38 +219,23 @@ class CrowdNavVectorEnv(VectorEnv):
             raise ValueError(f"the robot action of world {i} must be finite (no NaN or inf), got {values[i].tolist()}")
         return values
 
-    def _rewards(self, result: StepResult, stepping: np.ndarray) -> tuple[np.ndarray, dict[str, np.ndarray]]:
-        """:class:`crowdnav.envs.reward.Reward` for the stepping worlds, in the same float operations and order."""
+    def _rewards(self, outcome: np.ndarray, stepping: np.ndarray) -> tuple[np.ndarray, dict[str, np.ndarray]]:
+        """:func:`crowdnav.envs.reward.reward_terms` (the single env's kernel) for the stepping worlds."""
         worlds = np.flatnonzero(stepping)
         distance = self._goal_distance(worlds)
-        progress = self._previous_distance[worlds] - distance
+        previous = self._previous_distance[worlds]
         self._previous_distance[worlds] = distance
         force = self.robot_social_force()[worlds]
-        w = self._weights
-        failed = result.collided[worlds] | result.left_world[worlds]
-        success = result.goal_reached[worlds] & ~failed
-        terms = {
-            "step": np.full(len(worlds), w["step"]),
-            "goal_progress": w["goal_progress"] * progress,
-            "social": w["social"] * np.hypot(force.real, force.imag),
-            "goal_reached": np.where(success, w["goal_reached"], 0.0),
-            "collision": np.where(failed, w["collision"], 0.0),
-        }
-        reward = terms["step"] + terms["goal_progress"] + terms["social"] + terms["goal_reached"] + terms["collision"]
-        return reward, terms
+        return reward_terms(self._weights, previous, distance, np.hypot(force.real, force.imag), outcome[worlds])
 
-    def _end_infos(self, infos: dict[str, Any], result: StepResult, terminated: np.ndarray, stepping: np.ndarray) -> None:
+    def _end_infos(self, infos: dict[str, Any], result: StepResult, outcome: np.ndarray, stepping: np.ndarray) -> None:
         """``outcome`` / ``is_success`` of every world that stepped, as CrowdNavEnv's info: "truncated" / False unless it terminated."""
         b = self.num_envs
-        outcome = np.full(b, None, dtype=object)
-        outcome[stepping & ~terminated] = "truncated"
-        outcome[terminated & result.goal_reached] = "success"
-        outcome[terminated & result.left_world] = "out_of_bounds"
-        collided = np.zeros(b, dtype=bool)
+        collided = outcome == "collision"
         kind, partner = np.full(b, None, dtype=object), np.full(b, None, dtype=object)
-        for i, hit in result.collisions.items():  # per collision event
-            if terminated[i]:
-                outcome[i], kind[i], partner[i], collided[i] = "collision", hit.kind, hit.partner, True
+        for i in np.flatnonzero(collided):  # per collision event
+            hit = result.collisions[i]
+            kind[i], partner[i] = hit.kind, hit.partner
         infos["outcome"], infos["_outcome"] = outcome, stepping.copy()
         infos["is_success"], infos["_is_success"] = outcome == "success", stepping.copy()
         if collided.any():
