@@ -112,6 +112,8 @@ def leaderboard_table(tests: Any, metas: list[dict[str, Any]], missing: Sequence
     for (experiment, configuration), frame in tests.groupby(["experiment", "configuration"], sort=True):
         last = frame.groupby("seed")["evaluation"].transform("max")
         final = frame[frame["evaluation"] > last - final_count[experiment]]
+        if is_baseline(configuration):  # one deterministic play, its rows repeated per evaluation: count each episode once
+            final = final.drop_duplicates(["seed", "test_episode"])
         row: dict[str, Any] = {"experiment": experiment, "configuration": configuration, "label": frame["label"].iloc[0],
                                "kind": "baseline" if is_baseline(configuration) else "learned", "seeds": int(frame["seed"].nunique())}
         row["seeds_expected"] = row["seeds"] + absent[(experiment, configuration)]

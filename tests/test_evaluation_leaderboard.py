@@ -11,6 +11,7 @@ import pandas as pd
 import pytest
 from crowdnav.evaluation.benchmark import describe_outcome
 from crowdnav.evaluation.curves import curves_figure, rate_curves
+from crowdnav.evaluation.intervals import wilson
 from crowdnav.evaluation.leaderboard import bootstrap_iqm, interquartile_mean, leaderboard_table, to_csv, to_markdown, write_leaderboard
 from crowdnav.evaluation.metrics import METRIC_COLUMNS
 from evaluation_tiny import tiny_results
@@ -157,6 +158,12 @@ def test_leaderboard_regenerates_byte_for_byte(tmp_path_factory, tmp_path):
     learned = table[table["kind"] == "learned"]
     assert sorted(learned["configuration"]) == ["closest", "lidar"] and (learned["seeds"] == 2).all()
     assert sorted(table.loc[table["kind"] == "baseline", "configuration"]) == ["baseline_social_force", "baseline_straight"]
+    # a baseline's one play is repeated at every evaluation: its interval counts each test episode once
+    baseline = table[table["configuration"] == "baseline_straight"].iloc[0]
+    played = pd.read_csv(next(results.rglob("baseline_straight/*/test_episodes.csv")))
+    assert played["evaluation"].nunique() > 1 and baseline["test_episodes"] == played["test_episode"].nunique()
+    wins = round(baseline["final_success_mean"] * baseline["test_episodes"])
+    assert (baseline["final_success_low"], baseline["final_success_high"]) == pytest.approx(wilson(wins, baseline["test_episodes"]))
 
 
 def test_plot_and_leaderboard_commands_write_their_files(tmp_path_factory, capsys):
