@@ -323,6 +323,7 @@ def test_a_task_learns_within_seconds_that_its_driver_is_gone(cluster, tmp_path)
     from crowdnav.evaluation.protocol import Protocol
     from crowdnav.evaluation.ray_executor import _Board, _ProgressReporter
 
+    handler = signal.getsignal(signal.SIGTERM)
     ray.init(address=cluster.address, include_dashboard=False, log_to_driver=False)
     try:
         board = _Board.options(num_cpus=0).remote()
@@ -335,3 +336,4 @@ def test_a_task_learns_within_seconds_that_its_driver_is_gone(cluster, tmp_path)
         reporter.stop()
     finally:
         ray.shutdown()
+        signal.signal(signal.SIGTERM, handler)  # ray.init installs its own and leaves it behind

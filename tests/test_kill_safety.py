@@ -195,10 +195,11 @@ def test_a_benchmark_killed_as_its_first_run_starts_resumes_to_whole_results(tmp
 
 def test_evaluate_stopped_by_sigterm_writes_nothing_and_says_so_in_one_line(tmp_path, capsys, monkeypatch):
     monkeypatch.chdir(tmp_path)
+    before = signal.getsignal(signal.SIGTERM)
     (tmp_path / "stopper.py").write_text(
         "import os, signal\n\ndef act(observation):\n    os.kill(os.getpid(), signal.SIGTERM)\n    return [0.0, 0.0]\n")
     status = main(["evaluate", "stopper:act", "--scenario", "open_space", "--episodes", "2", "--out", "out", "--no-progress"])
     err = capsys.readouterr().err
     assert status == 128 + signal.SIGTERM and err == "crowdnav: interrupted before the results were written; run the same command again\n"
     assert not list(tmp_path.glob("out/**/meta.json")) and not list(tmp_path.glob("out/**/test_episodes.csv"))
-    assert signal.getsignal(signal.SIGTERM) == signal.SIG_DFL  # the handler is the command's own, not left behind
+    assert signal.getsignal(signal.SIGTERM) == before  # the handler is the command's own, not left behind
