@@ -153,6 +153,15 @@ def improvement(x: np.ndarray, y: np.ndarray, seed: int = 0) -> tuple[float, flo
     return float(p(x, y)), float(low), float(high)
 
 
+def span_text(r: dict[str, Runs], span: tuple[int, int]) -> str:
+    """``evaluations 50-300`` (episodes of 700), or the same fraction in env steps (``evaluations at 142,857-857,143 env steps``)."""
+    runs = next(iter(r.values()))
+    if runs.budget == PAPER_BUDGET:
+        return f"evaluations {span[0]}-{span[1]}"
+    low, high = runs.scaled(*span)
+    return f"evaluations at {low:,.0f}-{high:,.0f} env steps"
+
+
 def pct(value: float) -> str:
     return f"{100 * value:.0f}%"
 
@@ -195,7 +204,7 @@ def encoders(r: dict[str, Runs]) -> list[tuple[str, Verdict]]:
           "std of success over evaluations " + ", ".join(f"{k} {v:.3f}" for k, v in stds.items()))),
         (CLAIM_TEXTS["encoders"][2],
          ("reproduced" if early_best and min(p_t, p_s) > 0.5 else "partly" if early_best or max(p_t, p_s) > 0.5 else "not reproduced",
-          "success over evaluations 50-300: " + ", ".join(f"{k} {score(v, early[k])}" for k, v in r.items())
+          f"success over {span_text(r, EARLY)}: " + ", ".join(f"{k} {score(v, early[k])}" for k, v in r.items())
           + "; " + pi("frozen", "finetune", early["frozen"], early["finetune"])
           + "; " + pi("frozen", "scratch", early["frozen"], early["scratch"]))),
     ]
@@ -214,7 +223,7 @@ def modalities(r: dict[str, Runs]) -> list[tuple[str, Verdict]]:
           "final success " + ", ".join(f"{k} {score(v, finals[k])}" for k, v in r.items())
           + f"; spread {pct(gap)} ('similar' = within {pct(SIMILAR)})")),
         (CLAIM_TEXTS["modalities"][1],
-         (_grade(better, 2), "success over evaluations 50-300: " + ", ".join(f"{k} {score(v, early[k])}" for k, v in r.items())
+         (_grade(better, 2), f"success over {span_text(r, EARLY)}: " + ", ".join(f"{k} {score(v, early[k])}" for k, v in r.items())
           + "; " + pi("lidar", "leog", early["lidar"], early["leog"])
           + "; " + pi("closest_obstacle", "leog", early["closest_obstacle"], early["leog"]))),
         (CLAIM_TEXTS["modalities"][2],
@@ -232,7 +241,7 @@ def fusion(r: dict[str, Runs]) -> list[tuple[str, Verdict]]:
     calm = spikes["leog_lidar"] == 0 or spikes["leog_lidar"] < min(spikes["leog"], spikes["lidar"])
     return [
         (CLAIM_TEXTS["fusion"][0],
-         (_grade(better, 2), "success over evaluations 50-350: " + ", ".join(f"{k} {score(v, first[k])}" for k, v in r.items())
+         (_grade(better, 2), f"success over {span_text(r, half)}: " + ", ".join(f"{k} {score(v, first[k])}" for k, v in r.items())
           + "; " + pi("leog_lidar", "leog", first["leog_lidar"], first["leog"])
           + "; " + pi("leog_lidar", "lidar", first["leog_lidar"], first["lidar"]))),
         (CLAIM_TEXTS["fusion"][1],
@@ -264,7 +273,7 @@ def paradigms(r: dict[str, Runs]) -> list[tuple[str, Verdict]]:
          ("reproduced" if max(noise, key=noise.get) == "td3" else "not reproduced",
           "mean |change of success| between consecutive evaluations " + ", ".join(f"{k} {v:.3f}" for k, v in noise.items()))),
         (CLAIM_TEXTS["paradigms"][3],
-         (_grade(drift_hits, 3), "truncated rate early (50-300) -> final: "
+         (_grade(drift_hits, 3), f"truncated rate early ({span_text(r, EARLY).removeprefix('evaluations ')}) -> final: "
           + ", ".join(f"{k} {pct(a)} -> {pct(b)}" for k, (a, b) in drift.items()))),
     ]
 
