@@ -19,7 +19,14 @@ class PolicyLoadError(ValueError):
 
 
 def resolve_policy(policy: str, seed: int) -> tuple[Act, dict[str, Any]]:
-    """A scripted policy name or a checkpoint path -> (act(env, observation), env options it needs)."""
+    """A scripted policy name or a checkpoint path -> (act(env, observation), env options it needs).
+
+    Scripted names take either spelling, ``social-force`` or ``social_force`` (as ``baseline:social_force``
+    reads in ``crowdnav evaluate``).
+    """
+    dashed = policy.replace("_", "-")
+    if dashed in SCRIPTED_POLICIES and not Path(policy).exists():
+        policy = dashed
     if policy in SCRIPTED_POLICIES:
         try:
             return scripted_act(policy, seed), {}

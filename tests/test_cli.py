@@ -231,3 +231,25 @@ def test_scenario_describe_summarises_every_library_scenario_and_refuses_a_bad_o
     assert "group commuters: 3 walk" in capsys.readouterr().out
     assert main(["scenario", "describe", "no_such_room"]) == 1
     assert len(capsys.readouterr().err.strip().splitlines()) == 1
+
+
+def test_an_output_location_the_file_system_refuses_is_one_line_for_every_writing_command(tmp_path, capsys, monkeypatch):
+    import errno
+    import pathlib
+
+    blocker = tmp_path / "a_file"
+    blocker.write_text("")
+    for argv in (["train", "--scenario", "open_space", "--modalities", "goal", "--episodes", "1", "--out", str(blocker / "run"),
+                  "--no-progress"],
+                 ["evaluate", "baseline:straight", "--scenario", "open_space", "--episodes", "1", "--out", str(blocker), "--no-progress"]):
+        assert main(argv) == 1
+        err = capsys.readouterr().err.strip()
+        assert err.startswith("crowdnav: error: cannot write ") and "Not a directory" in err and err.count("\n") == 0
+
+    def read_only(self, *args, **kwargs):  # what a read-only mount answers (root ignores permission bits, so simulate it)
+        raise OSError(errno.EROFS, "Read-only file system", str(self))
+
+    monkeypatch.setattr(pathlib.Path, "mkdir", read_only)
+    assert main(["evaluate", "baseline:straight", "--scenario", "open_space", "--episodes", "1", "--out", str(tmp_path / "ro"),
+                 "--no-progress"]) == 1
+    assert "Read-only file system" in capsys.readouterr().err

@@ -116,3 +116,12 @@ def test_crowdnav_render_hides_the_named_overlays_and_names_an_unknown_one(tmp_p
     assert len(list(tmp_path.glob("*.mp4"))) == 1
     assert main(["render", "empty_room", "--hide", "lidr", "--out", str(tmp_path)]) == 1
     assert "did you mean 'lidar'" in capsys.readouterr().err
+
+
+def test_render_takes_either_spelling_of_a_scripted_policy(tmp_path):
+    from crowdnav.cli import main
+
+    for spelling in ("social-force", "social_force"):
+        assert main(["render", "open_space", "--policy", spelling, "--episodes", "1", "--format", "gif",
+                     "--out", str(tmp_path / spelling), "--no-progress"]) == 0
+    assert [p.name.endswith("_success.gif") for p in tmp_path.rglob("*.gif")] == [True, True]

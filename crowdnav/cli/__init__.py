@@ -11,6 +11,7 @@ so that ``crowdnav --help`` and the scenario tools load neither torch nor pygame
 from __future__ import annotations
 
 import argparse
+import errno
 import importlib.util
 import os
 import sys
@@ -59,6 +60,11 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+_FILE_SYSTEM_ERRORS = {errno.EACCES, errno.EPERM, errno.EROFS, errno.ENOTDIR, errno.EISDIR, errno.EEXIST, errno.ENOSPC, errno.EDQUOT,
+                       errno.ENAMETOOLONG}
+"""Errors of the output location rather than of crowdnav: reported in one line by every command."""
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """Run the command line; returns the exit status (0 ok, 1 failure, 2 usage error)."""
     parser = build_parser()
@@ -84,4 +90,11 @@ def main(argv: Sequence[str] | None = None) -> int:
     except BrokenPipeError:  # output piped into `head` and the like, which stopped reading
         # Python flushes stdout again at exit; send that flush to devnull so it cannot fail too.
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        return 1
+    except OSError as error:  # the file system said no (read-only, a file where a folder goes, full disk): one line
+        if error.errno not in _FILE_SYSTEM_ERRORS:
+            raise
+        where = f" {error.filename}" if error.filename else ""
+        print(f"crowdnav: error: cannot write{where}: {error.strerror or error}; choose another --out or free the path",
+              file=sys.stderr)
         return 1
