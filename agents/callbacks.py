@@ -9,11 +9,10 @@ from collections.abc import Callable
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
-from crowdnav.agents.episode_log import DISCARDED_SUFFIX, HEADER, EpisodeLogWriter, prepare_log
+from crowdnav.agents.episode_log import DISCARDED_SUFFIX, EpisodeLogWriter, prepare_log
 from crowdnav.agents.resume_point import ResumePoint
 from stable_baselines3.common.callbacks import BaseCallback
 
-EPISODE_LOG_HEADER = HEADER
 DISCARDED_LOG_SUFFIX = DISCARDED_SUFFIX
 """``episodes.csv.discarded`` keeps the rows of episodes that a resume trained again."""
 

@@ -190,11 +190,6 @@ class TrainConfig(_Section):
             raise FieldProblems(problems)
         return self
 
-    def validate(self, source: str = "<config>") -> TrainConfig:  # type: ignore[override]
-        """Kept for callers of the dataclass version: a TrainConfig is checked when built, so this returns self."""
-        return self
-
-
 def cross_field_problems(config: TrainConfig) -> list[tuple[str, str]]:
     """``(dotted field, problem)`` for the rules that involve several fields (run on every validation)."""
     problems = []

@@ -60,7 +60,6 @@ class PackedGridReplayBuffer(DictReplayBuffer):
             stored[key] = spaces.Box(0, 255, shape=((int(np.prod(shape)) + 7) // 8,), dtype=np.uint8)
         super().__init__(buffer_size, spaces.Dict(stored), action_space, device, n_envs, optimize_memory_usage,
                          handle_timeout_termination)
-        self.original_observation_space = observation_space
 
     def _pack(self, observation: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
         packed = dict(observation)
@@ -139,8 +138,3 @@ class PackedGridReplayBuffer(DictReplayBuffer):
         last_inds = rows[np.arange(len(batch_inds)), count - 1]
         discounts = (self.gamma ** count).astype(np.float32).reshape(-1, 1)
         return last_inds, rewards.sum(axis=1, dtype=np.float32).reshape(-1, 1), discounts
-
-    def bytes_per_transition(self) -> int:
-        """Bytes held per stored transition (observation, next observation, action, reward, done, timeout)."""
-        arrays = [*self.observations.values(), *self.next_observations.values(), self.actions, self.rewards, self.dones, self.timeouts]
-        return sum(array.nbytes for array in arrays) // self.buffer_size

@@ -118,7 +118,7 @@ def build(algo: str, case: str, encoder_file: Path, warmup: int, pack_grids: boo
     encoder = EncoderConfig(mode=mode, weights=None if mode == "scratch" else str(encoder_file), precompute=precompute)
     fields = {"learning_starts": warmup // 2} if algo in OFF_POLICY else {}
     config = TrainConfig(scenario="open_space", modalities=modalities, algo=algo, encoder=encoder, pack_grids=pack_grids,
-                         **fields).validate()
+                         **fields)
     frozen, saved = load_leog_weights(config)
     env = make_env(config, frozen if precomputes_leog(config) else None)
     return make_model(config, env, saved, reference=baseline)

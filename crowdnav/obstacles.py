@@ -43,8 +43,6 @@ class StaticObstacles:
     """(P, E) complex: start vertex of each edge; padding edges sit at FAR."""
     edge_vector: np.ndarray
     """(P, E) complex: end minus start."""
-    edge_projector: np.ndarray
-    """(P, E) complex: conj(edge) / |edge|^2, so Re((p - a) * projector) is p's position along the edge."""
     disc_center: np.ndarray
     """(C,) complex: centres of round obstacles."""
     disc_radius: np.ndarray
@@ -277,7 +275,6 @@ def _as_arrays(polygons: list[Polygon], labels: list[str], discs: list[tuple[com
         labels=labels,
         edge_start=start,
         edge_vector=vector,
-        edge_projector=vector.conj() * inv_len2,
         disc_center=centers,
         disc_radius=np.array([r for _, r, _ in discs], dtype=float),
         disc_labels=[label for _, _, label in discs],

@@ -9,19 +9,12 @@ from __future__ import annotations
 
 import cmath
 import math
-from typing import Protocol
 
 import numpy as np
 
 from crowdnav import social_force as sf
 from crowdnav.orca import OrcaSolver, obstacle_rings, pyrvo_module, toward_goal
 from crowdnav.simulator import Simulator
-
-
-class RobotPolicy(Protocol):
-    """Anything that maps the simulator's current state to a robot action."""
-
-    def __call__(self, sim: Simulator) -> np.ndarray: ...
 
 
 def velocity_to_action(sim: Simulator, velocity: complex) -> np.ndarray:

@@ -126,7 +126,7 @@ def _init_worker(parent: int | None = None) -> None:
     signal.signal(signal.SIGINT, on_interrupt)
 
 
-PR_SET_PDEATHSIG, PR_GET_PDEATHSIG = 1, 2
+PR_SET_PDEATHSIG = 1
 """Linux prctl options: the signal a process gets when its parent dies, and reading it back."""
 
 

@@ -93,10 +93,6 @@ class PretrainEncoder(_Strict):
     every: Int = Field(2, ge=1, description="Keep every this many steps' grid.")
 
 
-PRETRAIN_DEFAULTS = PretrainEncoder().model_dump()
-"""``pretrain_encoder`` fields and defaults."""
-
-
 class ConfigurationEntry(_Strict):
     """One entry of ``configurations``: trained with every seed of the protocol."""
 

@@ -207,10 +207,5 @@ def describe_budget(protocol: Any) -> str:
     return f"{protocol['train_episodes']:,} episodes" if "train_episodes" in protocol else "-"
 
 
-def protocol_fields() -> dict[str, str]:
-    """Field name -> one-line doc, for error messages and documentation."""
-    return {name: info.description or "" for name, info in Protocol.model_fields.items()}
-
-
 def _is_int(value: Any) -> bool:
     return isinstance(value, int) and not isinstance(value, bool)

@@ -109,7 +109,7 @@ def test_models_saved_by_sb3s_own_classes_load_into_crowdnavs_and_the_other_way_
     from crowdnav.agents.factory import make_env, make_model
     from stable_baselines3 import SAC
 
-    config = config_from_mapping(tiny_config(tmp_path, modalities=["leog", "goal"])).validate()
+    config = config_from_mapping(tiny_config(tmp_path, modalities=["leog", "goal"]))
     sb3_model = make_model(config, make_env(config), reference=True)  # as crowdnav built models before its speed-ups
     sb3_model.learn(60)
     save_checkpoint(sb3_model, tmp_path / "old", {"algo": "sac", "env": {}}, replay_buffer=True)

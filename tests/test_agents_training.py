@@ -125,7 +125,7 @@ def test_fast_training_gives_the_networks_sb3s_own_classes_give_to_the_last_bit(
 
     states, classes = [], []
     for reference in (True, False):
-        config = config_from_mapping(tiny_config(tmp_path, algo=algo, modalities=modalities, max_steps=40)).validate()
+        config = config_from_mapping(tiny_config(tmp_path, algo=algo, modalities=modalities, max_steps=40))
         model = make_model(config, make_env(config), reference=reference)
         model.learn(160)
         assert model._n_updates > 20
@@ -158,7 +158,7 @@ def test_fast_training_mode_sets_the_flags_sb3s_set_training_mode_sets(tmp_path)
     from crowdnav.agents.factory import make_env, make_model
     from stable_baselines3.sac.policies import SACPolicy
 
-    config = config_from_mapping(tiny_config(tmp_path)).validate()
+    config = config_from_mapping(tiny_config(tmp_path))
     model = make_model(config, make_env(config))
     policy = model.policy
     for mode in (True, False, True):
@@ -179,7 +179,7 @@ def test_sac_actor_written_out_gaussian_matches_sb3s_distribution(tmp_path):
     from crowdnav.agents.factory import make_env, make_model
     from stable_baselines3.sac.policies import Actor
 
-    config = config_from_mapping(tiny_config(tmp_path, modalities=["leog", "goal"])).validate()
+    config = config_from_mapping(tiny_config(tmp_path, modalities=["leog", "goal"]))
     model = make_model(config, make_env(config))
     model.learn(60)
     observations = model.replay_buffer.sample(32).observations

@@ -6,11 +6,8 @@ this module applies it to the :class:`~crowdnav.scenario.schema.Scenario` model.
 
 from __future__ import annotations
 
-from typing import Any
-
 from pydantic import ValidationError
 
-from crowdnav.config_errors import describe as _describe
 from crowdnav.config_errors import validation_issues
 from crowdnav.scenario.errors import ScenarioIssue
 from crowdnav.scenario.schema import Scenario
@@ -20,7 +17,3 @@ def schema_issues(error: ValidationError, document: dict) -> list[ScenarioIssue]
     """One issue per document path; alternatives for the same path are joined with '; or'."""
     return validation_issues(error, document, Scenario)
 
-
-def describe(item: dict[str, Any], document: dict) -> tuple[str, str]:
-    """Turn one pydantic error of a scenario into (dotted path, message)."""
-    return _describe(item, document, Scenario)

@@ -83,13 +83,6 @@ REWARD_PRESETS: Mapping[str, RewardPreset] = MappingProxyType({preset.name: pres
 """Every preset by name; :data:`DEFAULT_PRESET` first."""
 
 
-def preset_weights(name: str) -> dict[str, float]:
-    """A copy of preset ``name``'s weights; ValueError (listing the presets) for an unknown name."""
-    if not isinstance(name, str) or name not in REWARD_PRESETS:
-        raise ValueError(unknown_preset_message(name))
-    return dict(REWARD_PRESETS[name].weights)
-
-
 def unknown_preset_message(name: object) -> str:
     """E.g. ``unknown reward preset 'papr'; did you mean 'paper'? expected one of: default, paper``."""
     return _unknown("reward preset", name, tuple(REWARD_PRESETS))

@@ -54,11 +54,6 @@ class LeogModality(Modality):
         self.resolution = float(self.settings.resolution)
         self.cells = round(self.settings.size / self.resolution)
         """Cells per side (H = W)."""
-        n, res = self.cells, self.resolution
-        self.row_x = (n / 2 - np.arange(n) - 0.5) * res
-        """(H,) forward coordinate (m) of each row's cell centres."""
-        self.column_y = (n / 2 - np.arange(n) - 0.5) * res
-        """(W,) leftward coordinate (m) of each column's cell centres."""
         edges = oriented_edges(world.obstacles.polygons)
         self._edge_count = edges.count
         self._edge_start, self._edge_end = edges.start, edges.start + edges.vector
@@ -69,7 +64,7 @@ class LeogModality(Modality):
         """+1 and -1 chord marks, grown on demand."""
         self._disc_constants = RadiiConstants(self._constants_for)
         """radii -> (2, n + C) disc radii in cells as [-r, +r], and (n + C,) their squares; humans first."""
-        self._grid_origin = complex(n / 2 + 0.5, n / 2 + 0.5)
+        self._grid_origin = complex(self.cells / 2 + 0.5, self.cells / 2 + 0.5)
         self._marks = np.zeros(0, dtype=np.int32)  # scratch of running_counts, grown on demand
 
     def make_space(self) -> spaces.Box:
