@@ -22,7 +22,7 @@ crowdnav's small networks on a CPU (measured in docs/agents.md#performance):
 * the networks read the sampled tensors as they are (:class:`SampledObservations`): no
   ``float() / 255`` copy of the grid per network call.
 
-:data:`agents.factory.ALGORITHMS` maps ``sac``, ``td3`` and ``ddpg`` to these classes. Models saved
+:data:`crowdnav.agents.factory.ALGORITHMS` maps ``sac``, ``td3`` and ``ddpg`` to these classes. Models saved
 with SB3's own classes load into them (and the other way round).
 """
 
@@ -106,11 +106,11 @@ class FastTrainingMode:
 
 
 class SampledObservations:
-    """Network mixin: a :class:`~agents.extractor.MultiModalExtractor` gets the sampled tensors as they are.
+    """Network mixin: a :class:`~crowdnav.agents.extractor.MultiModalExtractor` gets the sampled tensors as they are.
 
     SB3's ``extract_features`` first runs ``preprocess_obs``, which copies a uint8 grid into floats
     divided by 255 (on every network call: five times per SAC gradient step); the LEOG branch only
-    asks which cells are non-zero, so :meth:`~agents.extractor.MultiModalExtractor.prepare` skips
+    asks which cells are non-zero, so :meth:`~crowdnav.agents.extractor.MultiModalExtractor.prepare` skips
     that copy, and the branches share one binarized grid per batch. Same features, to the last bit.
     """
 

@@ -3,7 +3,7 @@
 A checkpoint folder holds:
 
 * ``model.zip``: the SB3 model (parameters and optimizers as tensors; read without unpickling,
-  :mod:`agents.model_zip`);
+  :mod:`crowdnav.agents.model_zip`);
 * ``policy.json``: ``format``, ``algo``, ``env`` (the :class:`crowdnav.envs.CrowdNavEnv`
   keyword arguments the model needs: scenario, modalities, sensors, overrides,
   reward_weights), ``observation_normalization`` (``{key: {"offset": [...], "scale": [...]}}``,
@@ -13,7 +13,7 @@ A checkpoint folder holds:
   ``episodes``, ``timesteps``, ``config``;
 * ``encoder.pt``: that frozen encoder, when the model was trained on precomputed latents;
 * resumable checkpoints: ``training_state.json``, ``replay_buffer.npz`` (off-policy runs with
-  ``save_replay_buffer``) and ``rollout_state.npz`` (:mod:`agents.resume_state`): JSON and
+  ``save_replay_buffer``) and ``rollout_state.npz`` (:mod:`crowdnav.agents.resume_state`): JSON and
   arrays, no pickle. Checkpoints of older crowdnav versions hold pickles instead
   (``rng_state.pkl``, ``replay_buffer.pkl``, ``rollout_state.pkl``), read only on request.
 
@@ -257,7 +257,7 @@ def model_from_parameters(folder: Path, info: Mapping[str, Any], encoder: Any = 
 
 
 def check_network_size(config: Any, label: str) -> None:
-    """UntrustedCheckpointError unless every layer the config asks for is within :data:`agents.model_zip.MAX_UNITS`.
+    """UntrustedCheckpointError unless every layer the config asks for is within :data:`crowdnav.agents.model_zip.MAX_UNITS`.
 
     Checked before the network is built: ``net_arch: [20000, 20000]`` would otherwise allocate
     gigabytes before the parameters are found not to fit.
@@ -283,7 +283,7 @@ def load_parameters(model: BaseAlgorithm, path: Path, device: str = "cpu") -> No
     """The zip's tensors into ``model`` (built from the run's config): networks, optimizers, SB3's variables.
 
     The same tensors SB3's ``load`` restores (SAC's entropy coefficient is such a variable),
-    read by :func:`agents.model_zip.read_model_zip`: nothing in the zip is unpickled.
+    read by :func:`crowdnav.agents.model_zip.read_model_zip`: nothing in the zip is unpickled.
     """
     import torch
     from stable_baselines3.common.utils import get_device

@@ -1,6 +1,6 @@
-"""Demonstrations (the transitions) and behaviour cloning of an SB3 model on them (:mod:`agents.demonstrations` collects them).
+"""Demonstrations (the transitions) and behaviour cloning of an SB3 model on them (:mod:`crowdnav.agents.demonstrations` collects them).
 
-What is trained, per algorithm (see :mod:`agents.demonstrations` for the whole warm start): PPO / A2C
+What is trained, per algorithm (see :mod:`crowdnav.agents.demonstrations` for the whole warm start): PPO / A2C
 the Gaussian's mean (then ``log_std`` set to ``log(action_std)``), SAC ``tanh(mean)`` and its log-std
 head, TD3 / DDPG the actor's action; with ``value_pretraining`` the value function or both critics
 on the demonstrations' discounted returns-to-go. A fresh Adam; the minibatch order is the only

@@ -9,7 +9,7 @@ A :class:`TrainConfig` is checked once, when it is built; pass the object along 
 ``model_copy(update=...)``) rather than its dict, which would be checked again.
 
 Algorithm hyperparameters left at ``None`` take crowdnav's per-algorithm default (see
-:data:`agents.factory.ALGORITHM_DEFAULTS`); anything else SB3 accepts goes in ``algo_kwargs``.
+:data:`crowdnav.agents.factory.ALGORITHM_DEFAULTS`); anything else SB3 accepts goes in ``algo_kwargs``.
 """
 
 from __future__ import annotations

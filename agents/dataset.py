@@ -95,7 +95,7 @@ def collect_grids(
     The random policy draws a uniform action in [-1, 1]^2 and holds it for a geometric number
     of steps (mean ``hold``), so the robot travels across the room instead of jittering in
     place; episodes that end (collision, goal, time limit) are restarted. Everything is seeded
-    from ``seed``: episode ``i`` uses seed ``agents.seeding.dataset_seed(seed, i)``, never a
+    from ``seed``: episode ``i`` uses seed ``crowdnav.agents.seeding.dataset_seed(seed, i)``, never a
     test or training episode's seed.
     """
     from crowdnav.agents.seeding import dataset_seed

@@ -170,7 +170,7 @@ class LidarEncoder(nn.Module):
     reference = False  # True: the proximities computed on every call, for the benchmark's baseline
 
     def proximity(self, scan: torch.Tensor) -> torch.Tensor:
-        """``(high - scan) / (high - low)`` per beam, once per sampled batch (:mod:`agents.batch_cache`)."""
+        """``(high - scan) / (high - low)`` per beam, once per sampled batch (:mod:`crowdnav.agents.batch_cache`)."""
         if self.reference:
             return self._proximity(scan)
         versions = ((id(self._high), self._high._version), (id(self._scale), self._scale._version))

@@ -3,13 +3,13 @@
 Branch per key (in the observation space's key order):
 
 * a key registered with :func:`register_encoder` -> the user's module;
-* ``(C, H, W)`` grids (the LEOG) -> :class:`~agents.encoders.LeogEncoder` CNN, then the
+* ``(C, H, W)`` grids (the LEOG) -> :class:`~crowdnav.agents.encoders.LeogEncoder` CNN, then the
   ``leog_head`` fully connected layers; with ``leog_precomputed`` the key already holds the
-  frozen encoder's latent (see :class:`agents.wrappers.LeogLatentWrapper`) and only the head runs;
-* vectors longer than :data:`LOWDIM_MAX` values (the LIDAR) -> :class:`~agents.encoders.LidarEncoder`;
-* short vectors (goal, closest_obstacle, velocity) -> :class:`~agents.encoders.LowDimEncoder`
+  frozen encoder's latent (see :class:`crowdnav.agents.wrappers.LeogLatentWrapper`) and only the head runs;
+* vectors longer than :data:`LOWDIM_MAX` values (the LIDAR) -> :class:`~crowdnav.agents.encoders.LidarEncoder`;
+* short vectors (goal, closest_obstacle, velocity) -> :class:`~crowdnav.agents.encoders.LowDimEncoder`
   (Gaussian RBF, then fully connected layers);
-* tables ``(rows, features)`` (the ``humans`` modality) -> :class:`~agents.encoders.TableEncoder`
+* tables ``(rows, features)`` (the ``humans`` modality) -> :class:`~crowdnav.agents.encoders.TableEncoder`
   (flattened, then the ``table_hidden`` fully connected layers).
 
 **Grid scaling.** SB3's ``preprocess_obs`` divides a uint8 observation by 255 only when
@@ -18,11 +18,11 @@ otherwise the extractor receives 0/255 floats. The LEOG branch therefore binariz
 with ``grid > 0``: it sees exactly 0/1 floats in every case (also for 0/1 grids from another
 simulator), the same values the autoencoder is pre-trained on.
 
-**Speed** (docs/agents.md#performance). crowdnav's SAC/TD3/DDPG policies (:mod:`agents.algorithms`)
+**Speed** (docs/agents.md#performance). crowdnav's SAC/TD3/DDPG policies (:mod:`crowdnav.agents.algorithms`)
 hand the extractor the observation tensors as sampled (:meth:`MultiModalExtractor.prepare`), without
 SB3's ``float() / 255`` copy of the grid, which the binarization makes irrelevant. The grid is
 binarized once per sampled batch, not once per network (the actor, critic and target networks all
-read the same batch: :mod:`agents.batch_cache`, which also serves the LIDAR proximities and the
+read the same batch: :mod:`crowdnav.agents.batch_cache`, which also serves the LIDAR proximities and the
 RBF expansions), straight into float32 (:func:`binarize`; ``(grid > 0).float()`` converts through
 a bool tensor, ~10x slower on CPU). ``reference=True`` keeps the plain formulas (the
 benchmark's baseline; the tests check both give the same values).
@@ -64,7 +64,7 @@ def _binarize(grid: torch.Tensor) -> torch.Tensor:
 
 
 def binarize(grid: torch.Tensor) -> torch.Tensor:
-    """``(grid > 0).float()``, once per sampled batch (:func:`agents.batch_cache.cached`).
+    """``(grid > 0).float()``, once per sampled batch (:func:`crowdnav.agents.batch_cache.cached`).
 
     The result is written straight as float32 (``torch.gt(..., out=)``): ``(grid > 0).float()``
     goes through a bool tensor whose conversion costs ~10x more on CPU.
@@ -95,7 +95,7 @@ class _LeogBranch(nn.Module):
 class MultiModalExtractor(BaseFeaturesExtractor):
     """SB3 features extractor: ``{key: (B, ...)}`` -> latent ``(B, features_dim)``.
 
-    ``config``: the fields of :class:`agents.config.ExtractorConfig` as a dict.
+    ``config``: the fields of :class:`crowdnav.agents.config.ExtractorConfig` as a dict.
     ``leog_mode``: ``scratch`` / ``finetune`` (the CNN is trained) or ``frozen`` (its parameters
     never get gradients). ``leog_architecture``: the CNN's architecture dict, when it comes from
     pre-trained weights (then ``config``'s LEOG sizes are not used). ``leog_precomputed``: the
@@ -139,7 +139,7 @@ class MultiModalExtractor(BaseFeaturesExtractor):
                 branch = TableEncoder(space.shape, settings["table_hidden"])
                 branches[key], sizes[key] = branch, branch.out_features
             else:
-                raise ValueError(f"observation {key!r} has shape {space.shape}: register an encoder for it with agents.register_encoder")
+                raise ValueError(f"observation {key!r} has shape {space.shape}: register an encoder for it with crowdnav.agents.register_encoder")
         super().__init__(observation_space, features_dim=sum(sizes.values()))
         self.branches = nn.ModuleDict(branches)
         self.branch_sizes = sizes

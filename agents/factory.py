@@ -1,6 +1,6 @@
-"""The agent factory: a :class:`~agents.config.TrainConfig` -> wrapped environment + SB3 model.
+"""The agent factory: a :class:`~crowdnav.agents.config.TrainConfig` -> wrapped environment + SB3 model.
 
-Every algorithm gets the same :class:`~agents.extractor.MultiModalExtractor` (the shared
+Every algorithm gets the same :class:`~crowdnav.agents.extractor.MultiModalExtractor` (the shared
 latent), then SB3's own actor/critic heads (``net_arch``) on top of it. To plug in another
 algorithm, add it to :data:`ALGORITHMS` (and its defaults to :data:`ALGORITHM_DEFAULTS`).
 """
@@ -28,7 +28,7 @@ from crowdnav.registry import OFF_POLICY_ALGORITHMS
 
 ALGORITHMS: dict[str, type[BaseAlgorithm]] = {"sac": CrowdNavSAC, "td3": CrowdNavTD3, "ddpg": CrowdNavDDPG, "a2c": A2C, "ppo": PPO}
 """Config name (those of :data:`crowdnav.registry.ALGORITHMS`) -> algorithm class: SB3's,
-with the same updates at less cost per step for SAC/TD3/DDPG (agents.algorithms)."""
+with the same updates at less cost per step for SAC/TD3/DDPG (crowdnav.agents.algorithms)."""
 
 SB3_ALGORITHMS: dict[str, type[BaseAlgorithm]] = {"sac": SAC, "td3": TD3, "ddpg": DDPG, "a2c": A2C, "ppo": PPO}
 """Config name -> Stable-Baselines3's own class (``make_model(..., reference=True)``: the benchmark's baseline)."""

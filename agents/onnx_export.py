@@ -1,6 +1,6 @@
 """A trained policy as one ONNX file: the raw env observation in, the deterministic action out.
 
-:func:`export_onnx` writes what :class:`agents.AgentPolicy` computes, as a graph a robot can run
+:func:`export_onnx` writes what :class:`crowdnav.agents.AgentPolicy` computes, as a graph a robot can run
 with onnxruntime alone (no torch, no Stable-Baselines3, no crowdnav; docs/deploy.md):
 
 * **inputs**: one per observation key, named after it, with the raw
@@ -43,7 +43,7 @@ class ExportError(ValueError):
 
 
 class DeployablePolicy(nn.Module):
-    """Raw observation tensors (in :attr:`keys` order) -> deterministic actions, as :class:`agents.AgentPolicy` computes them."""
+    """Raw observation tensors (in :attr:`keys` order) -> deterministic actions, as :class:`crowdnav.agents.AgentPolicy` computes them."""
 
     def __init__(self, policy: Any, keys: list[str]):
         super().__init__()
@@ -69,9 +69,9 @@ class DeployablePolicy(nn.Module):
     def forward(self, *inputs: torch.Tensor) -> torch.Tensor:
         observation = {}
         for i, (key, value) in enumerate(zip(self.keys, inputs, strict=True)):
-            if self.scaled[i]:  # agents.wrappers.normalize_observation, in float32
+            if self.scaled[i]:  # crowdnav.agents.wrappers.normalize_observation, in float32
                 value = (value.float() - getattr(self, f"offset_{i}")) / getattr(self, f"scale_{i}")
-            elif key == "leog" and self.encoder is not None:  # agents.wrappers.encode_grids
+            elif key == "leog" and self.encoder is not None:  # crowdnav.agents.wrappers.encode_grids
                 value = self.encoder((value > 0).float())
             observation[key] = value
         actions = self.network._predict(observation, deterministic=True)
@@ -83,7 +83,7 @@ class DeployablePolicy(nn.Module):
 def export_onnx(policy_path: str | Path, out: str | Path, *, opset: int = OPSET) -> Path:
     """Write the policy at ``policy_path`` (a crowdnav run folder or checkpoint) to ``out`` as ONNX; returns ``out``.
 
-    Only the checkpoint's parameters are read (:func:`agents.load_policy`). Raises
+    Only the checkpoint's parameters are read (:func:`crowdnav.agents.load_policy`). Raises
     :class:`ExportError` for a folder that holds no loadable policy.
     """
     from crowdnav.agents.checkpoint import load_policy

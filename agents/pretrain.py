@@ -1,6 +1,6 @@
 """Pre-training the LEOG encoder as the encoder half of a convolutional autoencoder.
 
-The autoencoder (:class:`agents.encoders.LeogAutoencoder`) reconstructs each binary grid
+The autoencoder (:class:`crowdnav.agents.encoders.LeogAutoencoder`) reconstructs each binary grid
 from its latent, trained with binary cross-entropy on the cell logits. A held-out fraction of
 the grids measures the reconstruction loss before training and after every epoch.
 
@@ -71,7 +71,7 @@ def pretrain_encoder(
     """Train an autoencoder on ``dataset`` and save its encoder to ``out`` (if given).
 
     ``decoder_width`` multiplies the decoder's channels (it is dropped after pre-training, so
-    its size costs the agent nothing). The default architecture is :class:`agents.config.ExtractorConfig`'s, so the result plugs
+    its size costs the agent nothing). The default architecture is :class:`crowdnav.agents.config.ExtractorConfig`'s, so the result plugs
     into an agent with default settings (``encoder.mode: frozen`` or ``finetune``).
     """
     if isinstance(dataset, np.ndarray):

@@ -20,7 +20,7 @@ thing a resumed run does is the gradient update the checkpoint preceded.
 On-policy algorithms (A2C, PPO) cannot be rewound: their rollout spans episodes and is trained
 on as a whole. Their checkpoint (written when the rollout is complete, before SB3 trains on it)
 keeps the rollout buffer, the environments mid-episode and the last observation
-(:meth:`ResumePoint.rollout_state`, stored as arrays by :mod:`agents.resume_worlds`: each world
+(:meth:`ResumePoint.rollout_state`, stored as arrays by :mod:`crowdnav.agents.resume_worlds`: each world
 as its episode's seed and the actions taken since); a resumed run puts them back and takes
 that update first.
 
@@ -111,7 +111,7 @@ class ResumePoint:
                 "last_episode_starts": model._last_episode_starts}
 
     def restore_rollout(self, state: dict[str, Any]) -> None:
-        """Take up what :func:`agents.resume_worlds.load_rollout` read back (after loading the model, before ``learn``).
+        """Take up what :func:`crowdnav.agents.resume_worlds.load_rollout` read back (after loading the model, before ``learn``).
 
         The worlds and the rollout buffer are already in place; this sets the last observation
         and marks the update the checkpoint preceded as pending.

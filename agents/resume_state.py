@@ -1,8 +1,8 @@
 """A resumable checkpoint's training state, stored without pickle: JSON, ``.npz`` arrays and SB3's tensors.
 
 Resuming a run someone else wrote is then as safe as evaluating it: nothing read here can run
-code. The checkpoint folder (:mod:`agents.checkpoint`) holds, next to ``model.zip`` (whose
-tensors, optimizers included, are read as in :mod:`agents.model_zip`):
+code. The checkpoint folder (:mod:`crowdnav.agents.checkpoint`) holds, next to ``model.zip`` (whose
+tensors, optimizers included, are read as in :mod:`crowdnav.agents.model_zip`):
 
 * ``training_state.json``: the algorithm's counters (steps, updates, episodes, progress, the
   recent episode statistics SB3 logs) and every random stream: torch (its state tensor in

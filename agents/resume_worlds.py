@@ -1,4 +1,4 @@
-"""``rollout_state.npz``: an interrupted rollout and the worlds mid-episode, as arrays (see :mod:`agents.resume_state`).
+"""``rollout_state.npz``: an interrupted rollout and the worlds mid-episode, as arrays (see :mod:`crowdnav.agents.resume_state`).
 
 A world is stored as the index of the episode it plays and the actions it took since that
 episode's reset (recorded by :class:`~crowdnav.agents.resume_state.ActionLog`). A resume resets

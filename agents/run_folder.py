@@ -1,4 +1,4 @@
-"""The layout of a training run's folder (``agents.train``'s ``out``), as a small public API.
+"""The layout of a training run's folder (``crowdnav.agents.train``'s ``out``), as a small public API.
 
 ::
 

@@ -77,7 +77,7 @@ class EpisodeSeedCounter:
         for world in worlds:
             if self.next_episode >= MAX_TRAIN_EPISODES:  # 10+ M env steps of short episodes; the next band is the grids'
                 raise RuntimeError(f"a run may start at most {MAX_TRAIN_EPISODES:,} training episodes (their seeds would reach "
-                                   "the grid-collection band, agents.seeding); split the budget over run seeds")
+                                   "the grid-collection band, crowdnav.agents.seeding); split the budget over run seeds")
             if int(world) in self.episode_of:
                 self.ended_of[int(world)] = self.episode_of[int(world)]
             self.episode_of[int(world)] = self.next_episode

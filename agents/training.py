@@ -4,7 +4,7 @@ Output folder (``config.out``):
 
 * ``config.yaml``: the resolved configuration;
 * ``episodes.csv``: one row per training episode (index, seed, outcome, return, length, ...);
-* ``checkpoint/``: the latest resumable checkpoint (see :mod:`agents.checkpoint`), rewritten
+* ``checkpoint/``: the latest resumable checkpoint (see :mod:`crowdnav.agents.checkpoint`), rewritten
   every ``checkpoint_every`` episodes and at the end;
 * ``snapshots/episode_<N>/``: the policy after N episodes (no replay buffer), for evaluation
   along training; ``snapshots/steps_<N>/`` after N env steps with ``checkpoint_every_steps``;
@@ -106,7 +106,7 @@ def train(config: TrainConfig | Mapping[str, Any] | str | Path, *, resume: bool 
 
     ``on_checkpoint(episodes)`` is called after each checkpoint is saved (the evaluation runner
     saves its timing there, so a kill loses no recorded time). A resume reads no pickle
-    (:mod:`agents.resume_state`); a checkpoint of an older crowdnav, whose state is pickled, is
+    (:mod:`crowdnav.agents.resume_state`); a checkpoint of an older crowdnav, whose state is pickled, is
     refused unless ``trust_pickle`` (its worlds mid-episode are then not continued).
     """
     if isinstance(config, (str, Path)):
@@ -147,7 +147,7 @@ def _train(config: TrainConfig, resume: bool, on_checkpoint: Callable[[int], Non
     env = (make_vec_env if batched else make_env)(config, encoder if precompute else None, first_started,
                                                   scales_from_json(stored) if stored is not None else None)
     scales = observation_normalization(env)
-    collecting = env  # what the model steps: on-policy and batched checkpoints store its worlds mid-episode (agents.resume_worlds)
+    collecting = env  # what the model steps: on-policy and batched checkpoints store its worlds mid-episode (crowdnav.agents.resume_worlds)
     if batched or config.algo not in OFF_POLICY:
         collecting = ActionLog(env if batched else DummyVecEnv([lambda: env]))
     unit = "steps" if config.checkpoint_every_steps is not None else "episodes"  # what snapshots and checkpoints count
@@ -319,7 +319,7 @@ def _resume_state(checkpoint: Path, config: TrainConfig, trust_pickle: bool = Fa
 
 
 def _prepare_episode_log(out: Path, first_episode: int) -> None:
-    """Create or repair ``episodes.csv`` (:func:`agents.episode_log.prepare_log`), saying what a kill had left damaged."""
+    """Create or repair ``episodes.csv`` (:func:`crowdnav.agents.episode_log.prepare_log`), saying what a kill had left damaged."""
     try:
         repairs = prepare_log(episode_log(out), first_episode)
     except EpisodeLogError as error:

@@ -129,7 +129,7 @@ class NormalizeObservation(gym.ObservationWrapper):
 class LeogLatentWrapper(gym.ObservationWrapper):
     """Replace ``leog`` (uint8 grid) by the frozen encoder's latent (float32 in [-1, 1]).
 
-    The grid is binarized with ``grid > 0`` exactly as in :class:`agents.extractor.MultiModalExtractor`,
+    The grid is binarized with ``grid > 0`` exactly as in :class:`crowdnav.agents.extractor.MultiModalExtractor`,
     so a policy sees the same latent whether the encoder runs here or inside the extractor.
     """
 
@@ -160,7 +160,7 @@ def agent_observation(observation: Mapping[str, np.ndarray], scales: Observation
 
     Each key of ``scales`` normalised (:func:`normalize_observation`), then, with ``encoder``, the
     ``leog`` grid replaced by the frozen encoder's latent: the one mapping training
-    (:class:`~agents.vec_env.CrowdNavSB3VecEnv`), a loaded policy and the demonstrations apply.
+    (:class:`~crowdnav.agents.vec_env.CrowdNavSB3VecEnv`), a loaded policy and the demonstrations apply.
     """
     observation = dict(observation) if scales is None else normalize_observation(observation, scales)
     if encoder is not None:

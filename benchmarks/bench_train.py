@@ -6,14 +6,14 @@
 
 **Batched training** (``--batched``): every algorithm in the Figure-4 setting (room_furniture,
 5 humans at 0.5-1.2 m/s, closest obstacle + goal) with crowdnav's batched defaults
-(``num_envs`` worlds of the native vector env, :data:`agents.factory.BATCHED_DEFAULTS`), timed
+(``num_envs`` worlds of the native vector env, :data:`crowdnav.agents.factory.BATCHED_DEFAULTS`), timed
 over ``--batched-steps`` env steps after a warm-up past ``learning_starts``, next to the
 single-env path in the same run (one env, the defaults ``crowdnav train`` had before batching:
 SAC at one gradient step per env step); the ``vs single SAC`` column is the ratio of wall-clock
 rates. ``--processes N`` also runs N independent trainings of each batched case at once (a
 process per core) and reports their summed rate.
 
-Each case builds a fresh agent with crowdnav's defaults (``agents.make_model``) on
+Each case builds a fresh agent with crowdnav's defaults (``crowdnav.agents.make_model``) on
 ``open_space``, runs ``--warmup`` steps (past ``learning_starts``, so every timed step
 includes its gradient update), then times ``--steps`` more; the median over ``--repeats``
 fresh agents is reported, per wall-clock second and per CPU second of the process (the latter

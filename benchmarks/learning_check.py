@@ -9,7 +9,7 @@ hand-driven relative: for each seed, trains SAC (``open_space``, closest obstacl
 training-config overrides (YAML value, dotted key), saving a snapshot every ``--eval-every``
 episodes, and evaluates each snapshot on ``--test-episodes`` held-out episodes with the
 deterministic policy. Test episodes use seeds 0, 1, ...; training episodes use seeds >=
-1,000,000 (``agents.train_seed``), so the two sets are disjoint. docs/agents.md#how-the-recipe-was-found
+1,000,000 (``crowdnav.agents.train_seed``), so the two sets are disjoint. docs/agents.md#how-the-recipe-was-found
 lists the runs made with it.
 
 Resumable: an interrupted training resumes from its checkpoint, and evaluations already in

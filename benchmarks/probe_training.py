@@ -4,7 +4,7 @@
         "scenario": "room_furniture", "overrides": {"humans.count": 5, "humans.preferred_speed": [0.5, 1.2]},
         "timesteps": 1500000, "checkpoint_every_steps": 300000, "out": "/tmp/probe/co"}' [--tests 100] [--baselines]
 
-The JSON is a training config (``agents.TrainConfig`` fields; ``progress`` off unless given). After
+The JSON is a training config (``crowdnav.agents.TrainConfig`` fields; ``progress`` off unless given). After
 training, each ``snapshots/steps_<N>`` policy plays the held-out test episodes with seeds
 0..tests-1 (deterministic actions, batched); one line per snapshot: env steps, success rate and
 the other outcomes. ``--baselines`` also plays the two scripted robots on the same episodes.

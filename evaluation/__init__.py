@@ -1,14 +1,14 @@
 """crowdnav's evaluation: the paper's protocol as reproducible runs, per-episode metrics,
 learning curves and a leaderboard.
 
-* :class:`Protocol` (evaluation.protocol): when and on which held-out episodes a policy is tested;
-* experiments (evaluation.experiment): YAML lists of configurations x seeds, shipped in
+* :class:`Protocol` (crowdnav.evaluation.protocol): when and on which held-out episodes a policy is tested;
+* experiments (crowdnav.evaluation.experiment): YAML lists of configurations x seeds, shipped in
   ``evaluation/experiments/`` (:func:`load_experiment`);
-* :func:`run_unit` (evaluation.runner): one (configuration, seed) run, idempotent and resumable;
-  :func:`run_experiment` (evaluation.benchmark): all of them through an executor, then the report;
-* :func:`make_executor` (evaluation.executors): ``serial``, ``local`` (process pool) or ``ray``
-  (evaluation.ray_executor, needs ``crowdnav[ray]``);
-* :mod:`evaluation.metrics`: per-episode metrics from a trajectory (pure functions);
+* :func:`run_unit` (crowdnav.evaluation.runner): one (configuration, seed) run, idempotent and resumable;
+  :func:`run_experiment` (crowdnav.evaluation.benchmark): all of them through an executor, then the report;
+* :func:`make_executor` (crowdnav.evaluation.executors): ``serial``, ``local`` (process pool) or ``ray``
+  (crowdnav.evaluation.ray_executor, needs ``crowdnav[ray]``);
+* :mod:`crowdnav.evaluation.metrics`: per-episode metrics from a trajectory (pure functions);
 * :func:`plot_curves`, :func:`write_leaderboard`, :func:`load_results`: any results folder.
 
 Names are imported on first use, so ``import evaluation`` stays cheap (no torch, pandas or

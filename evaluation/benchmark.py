@@ -2,12 +2,12 @@
 
 ``run_experiment`` writes into ``RESULTS/<experiment name>/``: experiment.yaml (the resolved
 experiment; a folder holding another experiment's results is refused), the pre-trained
-encoder if the experiment needs one, one folder per run (see :mod:`evaluation.storage`),
+encoder if the experiment needs one, one folder per run (see :mod:`crowdnav.evaluation.storage`),
 and, once runs have finished, the curves (curves.png/.pdf), the leaderboard
 (leaderboard.md/.csv) and a video of the best configuration's final policy (videos/).
 
-Each run is :func:`evaluation.runner.run_unit`, carried out by an executor
-(:mod:`evaluation.executors`: in this process, in a local process pool, or as Ray tasks). A run
+Each run is :func:`crowdnav.evaluation.runner.run_unit`, carried out by an executor
+(:mod:`crowdnav.evaluation.executors`: in this process, in a local process pool, or as Ray tasks). A run
 that fails is reported and leaves the others alone; running the same command again skips the
 finished runs and resumes the others from their checkpoints.
 """
@@ -79,7 +79,7 @@ def run_experiment(experiment: Experiment, results: str | Path = "results", *, w
                    progress: bool = True, video: bool = True, log: Callable[[str], None] = print) -> BenchmarkReport:
     """Run (or resume) every unit of ``experiment`` under ``results/<name>`` and write the report files.
 
-    ``executor``: where the runs happen (:func:`evaluation.executors.make_executor`); default:
+    ``executor``: where the runs happen (:func:`crowdnav.evaluation.executors.make_executor`); default:
     this process when ``workers`` is 1, else a local pool of ``workers`` processes.
     """
     started = time.perf_counter()
@@ -135,7 +135,7 @@ def claim_folder(folder: Path, experiment: Experiment) -> None:
     Only what every run shares must match: the protocol (more seeds may be added; a budget in
     another unit, episodes or env steps, is another protocol) and the encoder pre-training. A
     new description or label, an added or edited configuration leaves the finished runs alone:
-    each run checks its own spec (:func:`evaluation.runner.run_unit` starts an edited
+    each run checks its own spec (:func:`crowdnav.evaluation.runner.run_unit` starts an edited
     configuration's runs afresh and keeps the old ones aside).
     """
     path = folder / EXPERIMENT_FILE

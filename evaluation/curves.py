@@ -7,7 +7,7 @@ episodes is placed at ``x = N_{k-1} + (j + 1) / m * (N_k - N_{k-1})`` (``N_{-1} 
 curve advances one test episode at a time and reaches ``N_k`` with that evaluation's last
 episode. The figure shows the mean over seeds and a band, clipped to [0, 1]: one standard
 deviation (the paper's style, the default) or a 95% bootstrap interval of the mean. Scripted
-baselines (:mod:`evaluation.baselines`) are grey horizontal lines at their rate on the same
+baselines (:mod:`crowdnav.evaluation.baselines`) are grey horizontal lines at their rate on the same
 test episodes. One panel per outcome of :data:`crowdnav.simulator.OUTCOMES`; results written
 before ``out_of_bounds`` existed draw a zero rate there. With a protocol in env steps the x axis
 is ``training_steps`` (training env steps) instead of ``training_episodes``, the same way.
@@ -169,7 +169,7 @@ def _baseline_style(baseline: Any, tests: Any, palette: dict, k: int = 0) -> dic
 
 def _bars_figure(results: Any, title: str | None) -> Any:
     """Policies without training (scripted baselines, crowdnav evaluate): per outcome, one bar per policy with
-    its 95% interval (:func:`evaluation.intervals.rate_interval`), each policy its own colour and hatch."""
+    its 95% interval (:func:`crowdnav.evaluation.intervals.rate_interval`), each policy its own colour and hatch."""
     import seaborn as sns
     from crowdnav.evaluation.intervals import rate_interval
     from matplotlib.figure import Figure

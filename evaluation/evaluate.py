@@ -9,7 +9,7 @@
   This imports and runs that module: code by request (docs/security.md);
 * a ``.zip`` saved by Stable-Baselines3 (SAC, TD3, DDPG, A2C, PPO with ``MultiInputPolicy``),
   trained on the scenario's observation ``Dict`` (``--modalities``). Only its parameters and
-  plain JSON are read, never its pickled objects (:mod:`agents.model_zip`), so custom policy
+  plain JSON are read, never its pickled objects (:mod:`crowdnav.agents.model_zip`), so custom policy
   classes and sb3-contrib's algorithms are refused; a crowdnav checkpoint's own ``model.zip``
   loads as its checkpoint folder;
 * a crowdnav training run folder or checkpoint (its own modalities and scenario settings unless

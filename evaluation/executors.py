@@ -6,14 +6,14 @@ one outcome per job as the runs finish, in any order:
 * ``serial``: one run after the other in this process (for debugging: breakpoints, tracebacks);
 * ``local`` (the default): a pool of ``workers`` spawned processes on this machine;
 * ``ray``: one Ray task per run, on a local Ray or an existing cluster
-  (:mod:`evaluation.ray_executor`, needs ``pip install "crowdnav[ray]"``).
+  (:mod:`crowdnav.evaluation.ray_executor`, needs ``pip install "crowdnav[ray]"``).
 
-An outcome is :func:`evaluation.runner.run_unit`'s summary (``status`` ``"done"`` or
+An outcome is :func:`crowdnav.evaluation.runner.run_unit`'s summary (``status`` ``"done"`` or
 ``"skipped"``) or a failure record (``status`` ``"failed"``, ``error``: one line, ``log``: the
 traceback's file). Both carry ``attempts``: how many times this sweep started the run (0 when it
 was finished before; more than 1 when the Ray executor retried it after its worker died).
 A failing run never stops the others. The jobs, the executor interface and the guarded run
-live in :mod:`evaluation.jobs`, which the Ray executor shares.
+live in :mod:`crowdnav.evaluation.jobs`, which the Ray executor shares.
 """
 
 from __future__ import annotations
@@ -87,7 +87,7 @@ def make_executor(kind: str = "local", *, workers: int | None = None, address: s
     ``workers``: parallel runs (local: processes, default 1; ray: at most this many runs at a
     time, default: as many as the cluster's CPUs allow). ``address``, ``storage``,
     ``gpus_per_run`` (default 0) and ``retries`` (default 3) are the Ray executor's
-    (see :class:`evaluation.ray_executor.RayExecutor`); giving them to another executor is an error.
+    (see :class:`crowdnav.evaluation.ray_executor.RayExecutor`); giving them to another executor is an error.
     """
     if kind not in EXECUTORS:
         raise ExecutorError(f"unknown executor {kind!r} (expected one of: {', '.join(EXECUTORS)})")

@@ -14,7 +14,7 @@ An experiment file (YAML; examples in ``evaluation/experiments/``)::
         train: {modalities: [leog, goal]}                # TrainConfig fields of this one
 
 ``train`` is merged over ``defaults`` (mappings key by key) and checked as an
-:class:`agents.TrainConfig`; the protocol sets ``seed``, ``out``, ``episodes``,
+:class:`crowdnav.agents.TrainConfig`; the protocol sets ``seed``, ``out``, ``episodes``,
 ``checkpoint_every`` (or ``timesteps`` and ``checkpoint_every_steps``), ``progress``,
 ``torch_threads`` and ``save_replay_buffer`` itself.
 With a ``pretrain_encoder`` section, a LEOG encoder is pre-trained once per experiment and
@@ -89,7 +89,7 @@ class PretrainEncoder(_Strict):
     scenario: Text = Field("room_furniture", description="Scenario the grids are collected in (library name or path).")
     grids: Int = Field(5000, ge=1, description="Occupancy grids to collect.")
     epochs: Int = Field(20, ge=1, description="Autoencoder training epochs.")
-    seed: Int = Field(99, ge=0, description="Collection seed (never meets test or training seeds: agents.wrappers.dataset_seed).")
+    seed: Int = Field(99, ge=0, description="Collection seed (never meets test or training seeds: crowdnav.agents.seeding.dataset_seed).")
     every: Int = Field(2, ge=1, description="Keep every this many steps' grid.")
 
 

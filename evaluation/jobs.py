@@ -1,7 +1,7 @@
 """Jobs and what every executor shares: one run per job, guarded so that a failing run never stops the others.
 
-:mod:`evaluation.executors` (serial, local process pool, :func:`make_executor`) and
-:mod:`evaluation.ray_executor` (one Ray task per run) both build on this module, so neither
+:mod:`crowdnav.evaluation.executors` (serial, local process pool, :func:`make_executor`) and
+:mod:`crowdnav.evaluation.ray_executor` (one Ray task per run) both build on this module, so neither
 imports the other at module level except the factory's lazy import of Ray's.
 """
 
@@ -24,12 +24,12 @@ class ExecutorError(ValueError):
 
 @dataclass(frozen=True)
 class Job:
-    """One run to carry out: its :class:`evaluation.runner.UnitSpec` as a dict, and its folder in the results."""
+    """One run to carry out: its :class:`crowdnav.evaluation.runner.UnitSpec` as a dict, and its folder in the results."""
 
     spec: dict[str, Any]
     out_dir: str
     unit: Any = field(default=None, compare=False, repr=False)
-    """The :class:`~evaluation.runner.UnitSpec` itself, carrying its validated TrainConfig (None: run_unit validates ``spec``)."""
+    """The :class:`~crowdnav.evaluation.runner.UnitSpec` itself, carrying its validated TrainConfig (None: run_unit validates ``spec``)."""
 
     @property
     def name(self) -> str:

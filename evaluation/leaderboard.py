@@ -8,7 +8,7 @@ Columns (definitions in docs/evaluation.md):
 * final success / collision / out_of_bounds / truncated (:data:`crowdnav.simulator.OUTCOMES`):
   per run, the rate over the test episodes of the last ``final_evaluations`` evaluations; mean
   and standard deviation (ddof 1; 0 with one seed) over seeds, and a 95% interval
-  (:mod:`evaluation.intervals`: Wilson for one run, a two-stage bootstrap over runs and episodes
+  (:mod:`crowdnav.evaluation.intervals`: Wilson for one run, a two-stage bootstrap over runs and episodes
   for several). Rates are counted from the episodes' ``outcome`` column, so results written
   before ``out_of_bounds`` existed rank with 0; collisions are also split by what was hit
   (``collision_human``, ``collision_static``);
@@ -29,7 +29,7 @@ Columns (definitions in docs/evaluation.md):
   ``2,000,000 env steps`` (``-`` for the scripted baselines and untrained policies). The markdown
   says it once under the table (``budget: 700 episodes per run``) when every learned row shares it, else in a column.
 
-Scripted baselines (:mod:`evaluation.baselines`, ``kind`` baseline) are ranked with the learned
+Scripted baselines (:mod:`crowdnav.evaluation.baselines`, ``kind`` baseline) are ranked with the learned
 configurations, on the same test episodes; their one deterministic run counts as one seed.
 
 Regenerating from the same results writes the same bytes: rows sorted by final success
@@ -99,7 +99,7 @@ def measured_on(meta: dict[str, Any]) -> tuple[str, str]:
 def leaderboard_table(tests: Any, metas: list[dict[str, Any]], missing: Sequence[MissingRun] = ()) -> Any:
     """The leaderboard as a DataFrame (numbers unformatted), one row per (experiment, configuration).
 
-    ``missing``: the runs left out (:func:`evaluation.storage.load_results`); ``seeds_expected``
+    ``missing``: the runs left out (:func:`crowdnav.evaluation.storage.load_results`); ``seeds_expected``
     counts them with the ranked ones, and the table's ``attrs["missing"]`` keeps them for the notes.
     """
     import pandas as pd

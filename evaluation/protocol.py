@@ -4,7 +4,7 @@ The paper's protocol (the defaults of :class:`Protocol`): every 50 training epis
 policy is evaluated on 20 test episodes, until 700 training episodes (14 evaluations, 280 test
 episodes), 5 seeds per configuration. The test episodes are a fixed, held-out set of episode
 seeds: the same at every evaluation and for every configuration, disjoint from the seeds of
-the training episodes (:func:`agents.train_seed`), and never seen by the learner (they run on
+the training episodes (:func:`crowdnav.agents.train_seed`), and never seen by the learner (they run on
 their own environment with the deterministic policy, so no transition enters a replay buffer).
 
 A protocol can instead state its budget in env steps (``train_steps``, evaluations every
@@ -146,7 +146,7 @@ class Protocol(BaseModel):
         return list(range(self.seeds))
 
     def training_seeds(self, run_seed: int) -> range | list[int]:
-        """Seeds of the training episodes of run ``run_seed`` (as :func:`agents.train_seed` assigns them).
+        """Seeds of the training episodes of run ``run_seed`` (as :func:`crowdnav.agents.train_seed` assigns them).
 
         With a step budget the number of episodes is not known in advance: this is a superset,
         every seed the run can use. Episodes are numbered as they start; the first reset starts
@@ -167,7 +167,7 @@ class Protocol(BaseModel):
             shared = sorted(seed for seed in test if seed in self.training_seeds(run_seed))
             if shared:
                 raise ValueError(f"test_seed_base: test seeds {shared[:5]} are also training seeds of run seed {run_seed}; "
-                                 "choose a test_seed_base below the training seeds (agents.train_seed)")
+                                 "choose a test_seed_base below the training seeds (crowdnav.agents.train_seed)")
 
     def describe_budget(self) -> str:
         """``700 episodes`` or ``2,000,000 env steps``."""

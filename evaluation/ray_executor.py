@@ -6,8 +6,8 @@ with one (``HOST:PORT`` of a head started by ``ray start --head``) it joins that
 crowdnav must be importable by the cluster's workers (installed on every node).
 
 * A task declares ``num_cpus=1`` and ``gpus_per_run`` GPUs, runs with one torch thread, and does
-  :func:`evaluation.runner.run_unit` in its working folder under the storage root
-  (:mod:`evaluation.transfer`; default root: the results folder, so on a local Ray or a shared
+  :func:`crowdnav.evaluation.runner.run_unit` in its working folder under the storage root
+  (:mod:`crowdnav.evaluation.transfer`; default root: the results folder, so on a local Ray or a shared
   file system the run writes straight into the results). A run done elsewhere comes back as
   bytes that the driver unpacks into the results: the results never rely on a shared file system.
   Such a run arrives without its replay buffer (train/checkpoint/replay_buffer.npz), which only

@@ -18,7 +18,7 @@ import numpy as np
 from crowdnav.evaluation.metrics import Trajectory, episode_metrics
 
 BatchPolicy = Callable[[Mapping[str, np.ndarray]], np.ndarray]
-"""Observations stacked per key, shape (N, ...) -> actions (N, 2); :class:`agents.AgentPolicy` is one."""
+"""Observations stacked per key, shape (N, ...) -> actions (N, 2); :class:`crowdnav.agents.AgentPolicy` is one."""
 ScriptedPolicy = Callable[[Any], np.ndarray]
 """A privileged robot policy: simulator -> action (2,), e.g. :class:`crowdnav.policies.StraightToGoal`."""
 
@@ -27,7 +27,7 @@ class HeldOutEpisodes:
     """The environments of the test episodes, built once and reused at every evaluation.
 
     ``env_options``: keyword arguments of :class:`crowdnav.envs.CrowdNavEnv` (the policy's
-    :attr:`agents.AgentPolicy.env_options`); ``seeds``: the held-out episode seeds.
+    :attr:`crowdnav.agents.AgentPolicy.env_options`); ``seeds``: the held-out episode seeds.
     """
 
     def __init__(self, env_options: Mapping[str, Any], seeds: Sequence[int]):

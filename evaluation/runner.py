@@ -6,7 +6,7 @@ It is idempotent: a finished run is skipped; an interrupted one resumes training
 last checkpoint and evaluates only the evaluation points not yet on disk; nothing already
 written is overwritten.
 
-How the protocol maps onto training: ``agents.train`` saves a policy snapshot every
+How the protocol maps onto training: ``crowdnav.agents.train`` saves a policy snapshot every
 ``eval_every`` episodes (``checkpoint_every``), or every ``eval_every_steps`` env steps
 (``checkpoint_every_steps``) for a protocol in env steps, and each snapshot is evaluated on the
 held-out test episodes with the deterministic policy. Evaluating a saved snapshot is the
@@ -164,7 +164,7 @@ def run_unit(spec: UnitSpec | Mapping[str, Any], out_dir: str | Path, *, on_even
 
 
 def _damage(out_dir: Path) -> list[str]:
-    """What is missing or damaged in a finished run's tables (:func:`evaluation.storage.run_damage`)."""
+    """What is missing or damaged in a finished run's tables (:func:`crowdnav.evaluation.storage.run_damage`)."""
     try:
         return run_damage(out_dir, read_json(out_dir / META_FILE))
     except (OSError, ValueError, KeyError, TypeError):
@@ -345,7 +345,7 @@ def _finish(spec: UnitSpec, out_dir: Path, protocol: Protocol, config: Any, cloc
 
 
 def _training_episodes(spec: UnitSpec, log: Path, episodes: int, repairs: list[str]) -> Any:
-    """agents' episodes.csv, exactly one whole row per training episode (:func:`agents.episode_log.read_log`), as a table.
+    """agents' episodes.csv, exactly one whole row per training episode (:func:`crowdnav.agents.episode_log.read_log`), as a table.
 
     A cut last row a kill left is set aside first (noted in ``repairs``); a missing, damaged or
     short log is a ResultsError that names the file and line (those episodes cannot be replayed).

@@ -5,7 +5,7 @@ Layout (``RESULTS/<experiment>/<configuration>/<seed>/``, one folder per run)::
     experiment.yaml              the resolved experiment (protocol included), per experiment
     encoder/encoder.pt           the experiment's pre-trained LEOG encoder, if it has one
     <config>/<seed>/spec.json    what the run is (configuration, seed, training config, protocol)
-    <config>/<seed>/train/       the training run (agents.train: checkpoint/, snapshots/, episodes.csv)
+    <config>/<seed>/train/       the training run (crowdnav.agents.train: checkpoint/, snapshots/, episodes.csv)
     <config>/<seed>/evaluations/evaluation_<k>.csv   the test episodes of evaluation k, as they finish
     <config>/<seed>/test_episodes.csv       all test episodes, one row each (written when the run is done)
     <config>/<seed>/training_episodes.csv   the training episodes' outcomes, one row each
