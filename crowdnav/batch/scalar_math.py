@@ -6,7 +6,8 @@ absolute value are vectorized differently and can differ in the last bit, so the
 writes every such operation as separately rounded real operations, in CPython's order:
 
 * ``complex * complex``: ``(ar*br - ai*bi) + (ar*bi + ai*br)j`` (CPython's ``_Py_c_prod``; a float
-  operand is first made ``complex(f, 0.0)``, as in Python 3.11-3.13);
+  operand is first made ``complex(f, 0.0)``, as CPython 3.10-3.13 do, signed zeros included; 3.14
+  multiplies a float into each part directly (C99 Annex G), which can differ in the sign of a zero);
 * ``abs(complex)``: ``hypot(re, im)`` (``np.hypot`` calls the same libm function);
 * ``math.remainder(x, 2 pi)``: exact, from ``np.fmod`` (exact) and one exact subtraction;
 * ``math.cos`` / ``math.sin`` equal ``np.cos`` / ``np.sin`` here (tested in tests/test_vector_env.py).
