@@ -35,6 +35,7 @@ from crowdnav.agents.resume_state import (
     REPLAY_ARRAYS,
     ROLLOUT_ARRAYS,
     STATE_FILE,
+    check_format,
     save_replay_buffer,
     save_training_state,
 )
@@ -44,6 +45,7 @@ from crowdnav.agents.wrappers import ObservationScales, agent_observation, scale
 from stable_baselines3.common.base_class import BaseAlgorithm
 
 POLICY_FORMAT = "crowdnav-policy/1"
+"""``policy.json``'s ``format``: a name and a version, raised when the checkpoint layout changes incompatibly."""
 MODEL_FILE = "model.zip"
 ENCODER_FILE = "encoder.pt"
 MAX_POLICY_BYTES = 16 << 20
@@ -117,9 +119,10 @@ def read_policy_info(path: str | Path) -> dict[str, Any]:
         info = json.loads(file.read_text(encoding="utf-8"))
     except (UnicodeDecodeError, json.JSONDecodeError, RecursionError) as error:
         raise ValueError(f"{file}: not JSON ({str(error).splitlines()[0]})") from None
-    if not isinstance(info, dict) or info.get("format") != POLICY_FORMAT:
-        info = info if isinstance(info, dict) else {}
-        raise ValueError(f"{file}: unsupported policy format {info.get('format')!r} (expected {POLICY_FORMAT!r})")
+    try:
+        check_format(info.get("format") if isinstance(info, dict) else None, POLICY_FORMAT)
+    except ValueError as error:
+        raise ValueError(f"{file}: unsupported policy {error}") from None
     return info
 
 

@@ -35,6 +35,7 @@ import numpy as np
 from stable_baselines3.common.vec_env import VecEnv, VecEnvWrapper
 
 RESUME_FORMAT = "crowdnav-resume/1"
+"""Format of ``training_state.json`` and of the ``.npz`` files' ``meta.json``: a name and a version, raised on a change."""
 STATE_FILE = "training_state.json"
 REPLAY_ARRAYS = "replay_buffer.npz"
 ROLLOUT_ARRAYS = "rollout_state.npz"
@@ -43,6 +44,21 @@ _COUNTERS = ("num_timesteps", "_episode_num", "_n_updates", "_current_progress_r
 
 class ResumeStateError(ValueError):
     """A checkpoint's resume files that are missing, damaged or do not fit the run's config; one line."""
+
+
+def check_format(found: object, expected: str) -> None:
+    """ValueError (one line) unless ``found`` is the ``expected`` format ("name/version").
+
+    A newer version of the same format is named as such: the file was written by a newer crowdnav.
+    """
+    name, _, version = expected.rpartition("/")
+    if found == expected:
+        return
+    if isinstance(found, str) and found.startswith(name + "/"):
+        written = found.removeprefix(name + "/")
+        if written.isdigit() and int(written) > int(version):
+            raise ValueError(f"format {found!r} is a newer crowdnav's (this one reads {expected!r}): upgrade crowdnav to read it")
+    raise ValueError(f"format {str(found)[:80]!r}, expected {expected!r}")
 
 
 # ------------------------------------------------------------------ random streams and counters
@@ -86,8 +102,7 @@ def restore_training_state(model: Any, path: Path) -> dict[str, Any]:
     """Set the counters and random streams :func:`save_training_state` wrote; returns the rng dict (extra keys included)."""
     try:
         document = json.loads(path.read_text(encoding="utf-8"))
-        if document.get("format") != RESUME_FORMAT:
-            raise ValueError(f"format {document.get('format')!r}, expected {RESUME_FORMAT!r}")
+        check_format(document.get("format"), RESUME_FORMAT)
         counters, rng = document["algorithm"], document["rng"]
         for name in _COUNTERS:
             setattr(model, name, type(getattr(model, name))(counters[name]))
@@ -103,7 +118,7 @@ def restore_training_state(model: Any, path: Path) -> dict[str, Any]:
 # ------------------------------------------------------------------ arrays
 
 def _write_npz(path: Path, arrays: Mapping[str, np.ndarray], meta: Mapping[str, Any]) -> None:
-    np.savez(path, **arrays, **{"meta.json": np.array(json.dumps(meta))})
+    np.savez(path, **arrays, **{"meta.json": np.array(json.dumps({"format": RESUME_FORMAT, **meta}))})
 
 
 def _read_npz(path: Path) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
@@ -113,6 +128,12 @@ def _read_npz(path: Path) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
         meta = json.loads(str(arrays.pop("meta.json")))
     except (OSError, ValueError, KeyError, EOFError, zipfile.BadZipFile) as error:  # BadZipFile: a file cut short
         raise ResumeStateError(f"{path}: cannot read it as arrays ({str(error).splitlines()[0][:200]})") from None
+    if not isinstance(meta, dict):
+        raise ResumeStateError(f"{path}: its meta.json is not an object")
+    try:  # files written before the field existed have none: the first version
+        check_format(meta.pop("format", RESUME_FORMAT), RESUME_FORMAT)
+    except ValueError as error:
+        raise ResumeStateError(f"{path}: cannot resume from it ({error})") from None
     return arrays, meta
 
 
