@@ -44,6 +44,8 @@ from crowdnav.agents.run_folder import CHECKPOINT_DIR, POLICY_FILE, REPLAY_FILE,
 from crowdnav.agents.wrappers import ObservationScales, agent_observation, scales_from_json
 from stable_baselines3.common.base_class import BaseAlgorithm
 
+from crowdnav.errors import CrowdNavError
+
 POLICY_FORMAT = "crowdnav-policy/1"
 """``policy.json``'s ``format``: a name and a version, raised when the checkpoint layout changes incompatibly."""
 MODEL_FILE = "model.zip"
@@ -210,7 +212,7 @@ def load_policy(path: str | Path, device: str = "cpu", *, trusted: bool = False,
     return AgentPolicy(model, info, encoder)
 
 
-class UntrustedCheckpointError(ValueError):
+class UntrustedCheckpointError(CrowdNavError, ValueError):
     """A checkpoint that cannot be rebuilt from its config alone; only a trusted full load would read it."""
 
 

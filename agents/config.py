@@ -21,6 +21,7 @@ from typing import Annotated, Any, Literal
 from pydantic import AfterValidator, BaseModel, BeforeValidator, ConfigDict, Field, Strict, ValidationError, field_validator, model_validator
 
 from crowdnav.config_errors import ConfigIssue, FieldProblems, YamlProblem, format_issues, read_yaml, validation_issues, yaml_line
+from crowdnav.errors import CrowdNavError
 from crowdnav.registry import ALGORITHM_NAMES, ENCODER_MODES, modality_names, unknown_name_message
 from crowdnav.yaml_input import MAX_DEPTH, YamlLimitError, check_value, read_text_file
 
@@ -28,7 +29,7 @@ __all__ = ["ALGORITHM_NAMES", "ENCODER_MODES", "ConfigError", "DemonstrationConf
            "config_from_mapping", "config_to_dict", "describe_fields", "load_config"]
 
 
-class ConfigError(ValueError):
+class ConfigError(CrowdNavError, ValueError):
     """A training configuration is invalid; ``str()`` names the file, line and key (``issues``: each problem)."""
 
     def __init__(self, message: str, issues: list[ConfigIssue] | None = None):

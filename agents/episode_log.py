@@ -24,6 +24,7 @@ import math
 import os
 from pathlib import Path
 
+from crowdnav.errors import CrowdNavError
 from crowdnav.simulator import OUTCOMES
 
 COLUMNS = ("episode", "seed", "outcome", "return", "length", "timesteps", "seconds")
@@ -34,7 +35,7 @@ DISCARDED_SUFFIX = ".discarded"
 Row = tuple[int, int, str, float, int, int, float]
 
 
-class EpisodeLogError(ValueError):
+class EpisodeLogError(CrowdNavError, ValueError):
     """An episode log that cannot be read as one row per training episode; the message names the file and the fix."""
 
 

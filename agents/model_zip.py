@@ -23,6 +23,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from crowdnav.errors import CrowdNavError
+
 MAX_MEMBERS = 64
 """SB3 writes 5-8 members."""
 MAX_MEMBER_BYTES = 1 << 30
@@ -34,7 +36,7 @@ MAX_LAYERS = 16
 MAX_CRITICS = 16
 
 
-class ModelZipError(ValueError):
+class ModelZipError(CrowdNavError, ValueError):
     """A model zip that cannot be read as parameters and JSON, or whose network cannot be rebuilt; one line."""
 
 

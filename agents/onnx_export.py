@@ -34,11 +34,13 @@ import numpy as np
 import torch
 from torch import nn
 
+from crowdnav.errors import CrowdNavError
+
 OPSET = 17
 ACTION_OUTPUT = "action"
 
 
-class ExportError(ValueError):
+class ExportError(CrowdNavError, ValueError):
     """A policy that cannot be exported, or an output that cannot be written; one line."""
 
 

@@ -10,11 +10,12 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any
 
+from crowdnav.errors import CrowdNavError
 from crowdnav.policies import SCRIPTED_POLICIES
 from crowdnav.rendering.episodes import Act, render_episodes, scripted_act
 
 
-class PolicyLoadError(ValueError):
+class PolicyLoadError(CrowdNavError, ValueError):
     """A ``--policy`` value that is neither a scripted policy nor a loadable checkpoint."""
 
 

@@ -34,6 +34,8 @@ from typing import Any
 import numpy as np
 from stable_baselines3.common.vec_env import VecEnv, VecEnvWrapper
 
+from crowdnav.errors import CrowdNavError
+
 RESUME_FORMAT = "crowdnav-resume/1"
 """Format of ``training_state.json`` and of the ``.npz`` files' ``meta.json``: a name and a version, raised on a change."""
 STATE_FILE = "training_state.json"
@@ -42,7 +44,7 @@ ROLLOUT_ARRAYS = "rollout_state.npz"
 _COUNTERS = ("num_timesteps", "_episode_num", "_n_updates", "_current_progress_remaining")
 
 
-class ResumeStateError(ValueError):
+class ResumeStateError(CrowdNavError, ValueError):
     """A checkpoint's resume files that are missing, damaged or do not fit the run's config; one line."""
 
 

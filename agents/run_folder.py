@@ -22,6 +22,8 @@ from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
+from crowdnav.errors import CrowdNavError
+
 CHECKPOINT_DIR = "checkpoint"
 SNAPSHOTS_DIR = "snapshots"
 EPISODE_LOG = "episodes.csv"
@@ -172,7 +174,7 @@ def recover_checkpoint(train_dir: str | Path) -> int:
     return best_episodes
 
 
-class RunBusyError(RuntimeError):
+class RunBusyError(CrowdNavError, RuntimeError):
     """Another process is writing this run folder."""
 
 

@@ -25,6 +25,7 @@ import yaml
 from pydantic import BaseModel, ValidationError
 from pydantic.fields import FieldInfo
 
+from crowdnav.errors import CrowdNavError
 from crowdnav.suggest import did_you_mean
 from crowdnav.yaml_input import YamlLimitError, read_bounded_yaml
 
@@ -58,7 +59,7 @@ def format_issues(source: str, issues: Iterable[ConfigIssue], separator: str = "
     return separator.join(format_issue(source, issue) for issue in issues)
 
 
-class FieldProblems(ValueError):
+class FieldProblems(CrowdNavError, ValueError):
     """Raised by a model validator for cross-field rules: ``(dotted path, message)`` pairs.
 
     Pydantic reports a model validator's error at the model itself; :func:`validation_issues`
@@ -103,7 +104,7 @@ def read_yaml(text: str) -> tuple[Any, yaml.Node | None]:
         raise YamlProblem(ConfigIssue("", f"malformed YAML: {getattr(error, 'problem', None) or error}", line)) from None
 
 
-class YamlProblem(ValueError):
+class YamlProblem(CrowdNavError, ValueError):
     """A text that is not YAML; ``issue`` says where."""
 
     def __init__(self, issue: ConfigIssue):

@@ -6,6 +6,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from crowdnav.errors import CrowdNavError
+
 
 @dataclass(frozen=True)
 class Collision:
@@ -73,5 +75,5 @@ class StepEvents:
         return outcome_of(self.collision is not None, self.left_world, self.goal_reached, self.truncated)
 
 
-class SimulationError(RuntimeError):
+class SimulationError(CrowdNavError, RuntimeError):
     """The simulated state became non-finite; the message names the agent and the step."""

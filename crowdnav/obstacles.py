@@ -17,13 +17,14 @@ import shapely
 from shapely.geometry import LineString, Point, Polygon, box
 from shapely.validation import explain_validity
 
+from crowdnav.errors import CrowdNavError
 from crowdnav.scenario.schema import CircleFurniture, RectangleFurniture, Scenario
 
 FAR = 1.0e6
 """Coordinate of padding edges: far enough never to be the nearest edge."""
 
 
-class GeometryError(ValueError):
+class GeometryError(CrowdNavError, ValueError):
     """A geometric problem at a dotted scenario path (turned into a ScenarioError by :func:`crowdnav.world.load_world`)."""
 
     def __init__(self, path: str, message: str):

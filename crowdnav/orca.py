@@ -26,6 +26,7 @@ from typing import Any
 import numpy as np
 from shapely.geometry.polygon import orient
 
+from crowdnav.errors import CrowdNavError
 from crowdnav.obstacles import StaticObstacles
 from crowdnav.scenario.schema import Orca
 
@@ -34,7 +35,7 @@ DISC_SIDES = 16
 """Round furniture is given to ORCA as the regular polygon with this many sides around the disc."""
 
 
-class OrcaUnavailableError(ValueError):
+class OrcaUnavailableError(CrowdNavError, ValueError):
     """ORCA was asked for but pyrvo is not installed; ``str()`` is one line with the install command."""
 
 

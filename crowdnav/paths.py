@@ -10,11 +10,13 @@ from __future__ import annotations
 import re
 from pathlib import Path
 
+from crowdnav.errors import CrowdNavError
+
 SAFE_NAME = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.-]{0,127}$")
 SAFE_NAME_EXPECTATION = "a name of 1-128 letters, digits, '_', '.' or '-' starting with a letter or digit (it becomes part of file names)"
 
 
-class OutputPathError(ValueError):
+class OutputPathError(CrowdNavError, ValueError):
     """A path built under an output folder would land outside it."""
 
 

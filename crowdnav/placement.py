@@ -17,6 +17,7 @@ import shapely
 from shapely.geometry import Point, box
 from shapely.geometry import Polygon as ShapelyPolygon
 
+from crowdnav.errors import CrowdNavError
 from crowdnav.obstacles import GeometryError, StaticObstacles
 from crowdnav.scenario.schema import CircleRegion, PointsRegion, PolygonRegion, RectangleRegion, Scenario
 
@@ -72,7 +73,7 @@ class CandidateSet:
         return out
 
 
-class PlacementError(RuntimeError):
+class PlacementError(CrowdNavError, RuntimeError):
     """A reset could not place every agent (only possible with dynamic exclusions)."""
 
 

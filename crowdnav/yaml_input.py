@@ -33,6 +33,8 @@ from typing import Any
 
 import yaml
 
+from crowdnav.errors import CrowdNavError
+
 MAX_CHARACTERS = 262_144  # 256 KiB: library files are a few kB; libyaml composes this in ~0.5 s
 MAX_DEPTH = 64
 MAX_VALUES = 100_000
@@ -58,7 +60,7 @@ _Loader.add_implicit_resolver(_FLOAT, re.compile(
 _LOADER = _Loader
 
 
-class YamlLimitError(ValueError):
+class YamlLimitError(CrowdNavError, ValueError):
     """A YAML text over one of the limits; ``line`` is where the problem shows, if known."""
 
     def __init__(self, message: str, line: int | None = None):

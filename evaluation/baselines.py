@@ -30,7 +30,15 @@ from pathlib import Path
 from typing import Any
 
 from crowdnav.evaluation.protocol import Protocol
-from crowdnav.evaluation.storage import META_FILE, TEST_FILE, atomic_write_csv, atomic_write_json, read_json, run_damage
+from crowdnav.evaluation.storage import (
+    META_FILE,
+    TEST_FILE,
+    atomic_write_csv,
+    atomic_write_json,
+    baseline_folder,
+    read_json,
+    run_damage,
+)
 
 BASELINE_PREFIX = "baseline_"
 """Configuration names of baselines start with this; experiment configurations may not."""
@@ -146,7 +154,7 @@ def evaluate_experiment_baselines(experiment: Any, folder: str | Path) -> list[P
     for configuration, label, options in experiment_baselines(experiment):
         try:
             done.append(evaluate_baseline(experiment.name, configuration, label, options, experiment.protocol,
-                                          Path(folder) / configuration / "baseline"))
+                                          baseline_folder(folder, configuration)))
         except Exception as error:  # noqa: BLE001 - reported, and the experiment's own runs go on
             done.append(f"baseline {label} skipped: {type(error).__name__}: {str(error).splitlines()[0]}")
     return done

@@ -35,6 +35,9 @@ from crowdnav.evaluation.storage import (
     TRAIN_DIR,
     ResultsError,
     atomic_write_text,
+    encoder_folder,
+    experiment_folder,
+    pretrained_encoder_path,
 )
 
 from crowdnav.simulator import OUTCOMES
@@ -85,7 +88,7 @@ def run_experiment(experiment: Experiment, results: str | Path = "results", *, w
     started = time.perf_counter()
     if executor is None:
         executor = make_executor("serial" if workers <= 1 else "local", workers=workers)
-    folder = Path(results) / experiment.name
+    folder = experiment_folder(results, experiment.name)
     claim_folder(folder, experiment)
     if experiment.needs_encoder():
         pretrain(experiment, folder, log)
@@ -160,8 +163,6 @@ def claim_folder(folder: Path, experiment: Experiment) -> None:
 
 def pretrain(experiment: Experiment, folder: Path, log: Callable[[str], None]) -> Path:
     """The experiment's pre-trained LEOG encoder (trained once, then reused)."""
-    from crowdnav.evaluation.runner import pretrained_encoder_path
-
     target = pretrained_encoder_path(folder)
     if target.is_file():
         return target
@@ -174,13 +175,13 @@ def pretrain(experiment: Experiment, folder: Path, log: Callable[[str], None]) -
     log(f"pre-training the LEOG encoder on {settings['grids']} grids of {settings['scenario']} ...")
     torch.set_num_threads(max(1, min(4, os.cpu_count() or 1)))
     grids = collect_grids(settings["scenario"], settings["grids"], seed=settings["seed"], every=settings["every"], sensors=sensors)
-    staging = target.parent.with_name(target.parent.name + ".partial")
+    staging = encoder_folder(folder).with_name(encoder_folder(folder).name + ".partial")
     shutil.rmtree(staging, ignore_errors=True)
     # the encoder must have the agents' LEOG architecture: leog_channels -> channels, ...
     architecture = {key.removeprefix("leog_"): extractor[key] for key in ("leog_channels", "leog_kernels", "leog_strides", "leog_latent")
                     if key in extractor}
     result = pretrain_encoder(grids, staging, epochs=settings["epochs"], seed=settings["seed"], **architecture)
-    staging.rename(target.parent)
+    staging.rename(encoder_folder(folder))
     log(f"encoder: held-out loss {result.initial_val_loss:.4f} -> {result.final_val_loss:.4f}, saved to {target}")
     return target
 

@@ -203,13 +203,13 @@ def plot_curves(paths: Iterable[str | Path], out: str | Path | None = None, band
     Written to ``out`` + ``.png``/``.pdf`` if given (one experiment only), else to
     ``<experiment folder>/curves.png`` and ``.pdf``.
     """
-    from crowdnav.evaluation.storage import ResultsError, finished_runs, load_results
+    from crowdnav.evaluation.storage import ResultsError, experiment_of, finished_runs, load_results
 
     paths = list(paths)
     tests, _, metas = load_results(paths)
     folders = {}
-    for run, meta in zip(finished_runs(paths), metas, strict=True):  # runs live in <experiment>/<configuration>/<seed>
-        folders.setdefault(meta["experiment"], run.parent.parent)
+    for run, meta in zip(finished_runs(paths), metas, strict=True):
+        folders.setdefault(meta["experiment"], experiment_of(run))
     windows = {meta["experiment"]: meta["protocol"]["window"] for meta in metas}
     # every run of an experiment shares its protocol (the results folder refuses another); older ones: episodes
     units = {meta["experiment"]: protocol_unit(meta["protocol"]) for meta in metas if meta.get("kind") != "evaluated"}

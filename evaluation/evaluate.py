@@ -43,14 +43,16 @@ from typing import Any
 
 import numpy as np
 
+from crowdnav.errors import CrowdNavError
+
 EXPERIMENT = "evaluate"
 
 
-class PolicyError(ValueError):
+class PolicyError(CrowdNavError, ValueError):
     """A POLICY that cannot be loaded, whose spaces do not fit the scenario, or that raised while acting; one line."""
 
 
-class ResultsExistError(FileExistsError):
+class ResultsExistError(CrowdNavError, FileExistsError):
     """The results folder of this (policy, scenario, test set) is already there and ``force`` was not given."""
 
 
@@ -173,8 +175,11 @@ def _guarded(act: Callable, spec: str) -> Callable:
 
 def _run_name(path: Path) -> str:
     """``lidar_seed_2`` for EXPERIMENT/lidar/seed_2, ``sac`` for runs/sac/checkpoint."""
-    parts = [part for part in path.resolve().parts if part not in ("checkpoint", "policy.json", "train")]
-    return f"{parts[-2]}_{parts[-1]}" if parts[-1].startswith("seed_") and len(parts) > 1 else parts[-1]
+    from crowdnav.agents.run_folder import CHECKPOINT_DIR, POLICY_FILE
+    from crowdnav.evaluation.storage import SEED_PREFIX, TRAIN_DIR
+
+    parts = [part for part in path.resolve().parts if part not in (CHECKPOINT_DIR, POLICY_FILE, TRAIN_DIR)]
+    return f"{parts[-2]}_{parts[-1]}" if parts[-1].startswith(SEED_PREFIX) and len(parts) > 1 else parts[-1]
 
 
 def _safe(name: str) -> str:
@@ -194,7 +199,7 @@ def evaluate_policy(spec: str, scenario: str, out: str | Path, *, modalities: Se
     from crowdnav.evaluation.protocol import Protocol
     from crowdnav.evaluation.rollout import HeldOutEpisodes
     from crowdnav.evaluation.runner import OUTCOMES, RUN_COLUMNS, git_commit, package_versions
-    from crowdnav.evaluation.storage import META_FILE, TEST_FILE, atomic_write_csv, atomic_write_json
+    from crowdnav.evaluation.storage import META_FILE, TEST_FILE, atomic_write_csv, atomic_write_json, evaluated_run_name
 
     from crowdnav.paths import inside
 
@@ -204,7 +209,7 @@ def evaluate_policy(spec: str, scenario: str, out: str | Path, *, modalities: Se
     configuration, label, act, privileged, env_options = resolve_policy(spec, options)
     configuration = f"{_safe(name) if name else configuration}--{scenario_key(scenario, options.get('overrides', {}))}"
     label = name or label  # --name names the row in tables and figures too
-    folder = inside(out, f"{EXPERIMENT}/{configuration}/seeds_{test_seed_base}-{test_seed_base + episodes - 1}")
+    folder = inside(out, f"{EXPERIMENT}/{evaluated_run_name(configuration, test_seed_base, test_seed_base + episodes - 1)}")
     if not force and (folder / META_FILE).exists():  # meta.json is written last: without it, a stopped evaluation's leftovers
         raise ResultsExistError(f"{folder} already holds this policy's results on this scenario and test set; "
                                 "pass --force (force=True) to replace them, or --out another folder")

@@ -35,9 +35,11 @@ from typing import Annotated, Any
 from crowdnav.evaluation.baselines import BASELINE_PREFIX
 from crowdnav.evaluation.protocol import Protocol, quick
 from crowdnav.evaluation.runner import PRETRAINED, PROTOCOL_FIELDS, UnitSpec
+from crowdnav.evaluation.storage import run_folder
 from pydantic import AfterValidator, BaseModel, ConfigDict, Field, Strict, ValidationError, field_validator, model_validator
 
 from crowdnav.config_errors import ConfigIssue, FieldProblems, YamlProblem, format_issues, read_yaml, validation_issues, yaml_line
+from crowdnav.errors import CrowdNavError
 from crowdnav.yaml_input import YamlLimitError, read_text_file
 
 EXPERIMENTS_DIR = Path(__file__).resolve().parent / "experiments"
@@ -45,7 +47,7 @@ DEFAULT_EXPERIMENT = "default"
 _NAME = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.-]*$")
 
 
-class ExperimentError(ValueError):
+class ExperimentError(CrowdNavError, ValueError):
     """An invalid experiment file; ``str()`` is ``FILE:LINE: field: problem`` (several joined with `` / `` on one line)."""
 
     def __init__(self, message: str, issues: list[ConfigIssue] | None = None):
@@ -173,7 +175,7 @@ class Experiment:
         return [
             (UnitSpec(self.name, configuration.name, seed, copy.deepcopy(configuration.train), self.protocol.to_dict(),
                       configuration.label, config=configuration.config),
-             folder / configuration.name / f"seed_{seed}")
+             run_folder(folder, configuration.name, seed))
             for seed in self.protocol.run_seeds for configuration in self.configurations
         ]
 

@@ -16,9 +16,12 @@ from typing import Any
 from crowdnav.evaluation.progress import episodes_on_disk
 from crowdnav.evaluation.protocol import Protocol
 from crowdnav.evaluation.runner import OUTCOMES, run_unit
+from crowdnav.evaluation.storage import run_name as storage_run_name
+
+from crowdnav.errors import CrowdNavError
 
 
-class ExecutorError(ValueError):
+class ExecutorError(CrowdNavError, ValueError):
     """An executor that cannot start: Ray missing, a cluster that cannot be reached, bad options."""
 
 
@@ -42,7 +45,7 @@ class Job:
 
 def run_name(record: dict[str, Any]) -> str:
     """``configuration/seed_N``, as runs are named in messages (``record``: a run's spec or outcome)."""
-    return f"{record['configuration']}/seed_{record['seed']}"
+    return storage_run_name(record["configuration"], record["seed"])
 
 
 class Executor:

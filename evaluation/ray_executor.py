@@ -45,8 +45,19 @@ from crowdnav.evaluation.jobs import (
 )
 from crowdnav.evaluation.progress import episodes_on_disk, run_episodes
 from crowdnav.evaluation.protocol import Protocol
-from crowdnav.evaluation.runner import PRETRAINED, pretrained_encoder_path, run_unit
-from crowdnav.evaluation.storage import META_FILE, SPEC_FILE, TRAIN_DIR, ResultsError, read_json
+from crowdnav.evaluation.runner import PRETRAINED, run_unit
+from crowdnav.evaluation.storage import (
+    ENCODER_FILE,
+    META_FILE,
+    SPEC_FILE,
+    TRAIN_DIR,
+    ResultsError,
+    encoder_folder,
+    experiment_of,
+    read_json,
+    relative_run_path,
+    results_root_of,
+)
 from crowdnav.evaluation.transfer import claim_storage, pack_folder, remove_work_folder, unpack_folder, work_folder
 
 THREADS_ENV = {"OMP_NUM_THREADS": "1", "MKL_NUM_THREADS": "1"}
@@ -121,7 +132,7 @@ class RayExecutor(Executor):
         return True
 
     def _run(self, jobs: list[Job], verbose: bool) -> Iterator[dict[str, Any]]:
-        root = self.storage or Path(jobs[0].out_dir).parents[2]  # default: the results folder itself
+        root = self.storage or results_root_of(jobs[0].out_dir)  # default: the results folder itself
         storage_id = claim_storage(root)
         board = _Board.options(num_cpus=0).remote()
         encoders = _encoder_files(jobs)
@@ -217,7 +228,7 @@ def _holds_other_run(job: Job) -> bool:
 
 
 def _experiment_dir(job: Job) -> str:
-    return str(Path(job.out_dir).parents[1])
+    return str(experiment_of(job.out_dir))
 
 
 def _encoder_files(jobs: Sequence[Job]) -> dict[str, Any]:
@@ -227,7 +238,7 @@ def _encoder_files(jobs: Sequence[Job]) -> dict[str, Any]:
         weights = job.spec["train"].get("encoder", {}).get("weights")
         folder = _experiment_dir(job)
         if weights == PRETRAINED and folder not in refs:
-            refs[folder] = ray.put(pack_folder(pretrained_encoder_path(folder).parent))
+            refs[folder] = ray.put(pack_folder(encoder_folder(folder)))
     return refs
 
 
@@ -277,10 +288,9 @@ def _run_task(unit: Any, out_dir: str, storage: str, storage_id: str, encoder: b
         attempt = ray.get(board.started.remote(name))
     except ray.exceptions.RayError:  # the board is lost: the run matters more than its attempt count
         attempt = 0
-    relative = Path(*Path(out_dir).parts[-3:])  # <experiment>/<configuration>/seed_<s>
-    work_dir, shared = work_folder(storage, storage_id, relative)
+    work_dir, shared = work_folder(storage, storage_id, relative_run_path(out_dir))
     if encoder is not None:
-        unpack_folder(encoder, pretrained_encoder_path(work_dir.parent.parent).parent, "encoder.pt")
+        unpack_folder(encoder, encoder_folder(experiment_of(work_dir)), ENCODER_FILE)
     reporter = _ProgressReporter(board, name, work_dir, job.protocol, on_driver_lost=_exit_with_driver)
 
     def on_event(event: str, data: dict[str, Any]) -> None:

@@ -34,7 +34,6 @@ from crowdnav.agents.run_folder import (
 )
 from crowdnav.evaluation.protocol import AXIS_LABELS, Protocol
 from crowdnav.evaluation.storage import (
-    ENCODER_DIR,
     EVALUATIONS_DIR,
     META_FILE,
     SPEC_FILE,
@@ -45,6 +44,8 @@ from crowdnav.evaluation.storage import (
     atomic_write_csv,
     atomic_write_json,
     clean_temporaries,
+    experiment_of,
+    pretrained_encoder_path,
     read_json,
     run_damage,
     table_damage,
@@ -128,12 +129,7 @@ class UnitSpec:
 
     @staticmethod
     def _encoder_weights(out_dir: Path) -> str:
-        return str(pretrained_encoder_path(out_dir.parent.parent))  # runs live in <experiment>/<configuration>/<seed>
-
-
-def pretrained_encoder_path(experiment_dir: str | Path) -> Path:
-    """Where an experiment's pre-trained LEOG encoder is kept."""
-    return Path(experiment_dir) / ENCODER_DIR / "encoder.pt"
+        return str(pretrained_encoder_path(experiment_of(out_dir)))
 
 
 def run_unit(spec: UnitSpec | Mapping[str, Any], out_dir: str | Path, *, on_event: EventHook | None = None) -> dict[str, Any]:

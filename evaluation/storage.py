@@ -1,6 +1,8 @@
-"""The results folder on disk: atomic writes, and loading every finished run below a folder.
+"""The results folder on disk: its layout, atomic writes, and loading every finished run below a folder.
 
-Layout (``RESULTS/<experiment>/<configuration>/<seed>/``, one folder per run)::
+Layout (``RESULTS/<experiment>/<configuration>/<run>/``, one folder per run; ``<run>`` is
+``seed_<s>`` for a benchmark run, ``baseline`` for a scripted baseline and ``seeds_<a>-<b>``
+for ``crowdnav evaluate``)::
 
     experiment.yaml              the resolved experiment (protocol included), per experiment
     encoder/encoder.pt           the experiment's pre-trained LEOG encoder, if it has one
@@ -11,6 +13,10 @@ Layout (``RESULTS/<experiment>/<configuration>/<seed>/``, one folder per run)::
     <config>/<seed>/training_episodes.csv   the training episodes' outcomes, one row each
     <config>/<seed>/meta.json    versions, git commit, resolved config, wall time, env steps; last
                                  file written, so its presence means the run is complete
+
+This module is the one place that knows the layout: code elsewhere builds and reads folders
+through :func:`run_folder`, :func:`experiment_of`, :func:`relative_run_path` and the names below,
+never by position (``parents[2]``).
 
 Every file is written to a temporary name and renamed into place, so a file is either absent
 or complete, whatever kills the process.
@@ -26,6 +32,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from crowdnav.errors import CrowdNavError
+
 EXPERIMENT_FILE = "experiment.yaml"
 SPEC_FILE = "spec.json"
 META_FILE = "meta.json"
@@ -34,6 +42,61 @@ TRAINING_FILE = "training_episodes.csv"
 EVALUATIONS_DIR = "evaluations"
 TRAIN_DIR = "train"
 ENCODER_DIR = "encoder"
+ENCODER_FILE = "encoder.pt"
+SEED_PREFIX = "seed_"
+"""A benchmark run's folder is ``seed_<s>`` in its configuration's folder."""
+BASELINE_RUN = "baseline"
+"""A scripted baseline's one run folder in its configuration's folder."""
+
+
+def experiment_folder(results_dir: str | Path, experiment: str) -> Path:
+    """``RESULTS/<experiment>``: where an experiment's runs, experiment.yaml and encoder live."""
+    return Path(results_dir) / experiment
+
+
+def run_name(configuration: str, seed: int) -> str:
+    """``<configuration>/seed_<s>``: a benchmark run's folder relative to its experiment's, as messages name runs."""
+    return f"{configuration}/{SEED_PREFIX}{seed}"
+
+
+def run_folder(experiment_dir: str | Path, configuration: str, seed: int) -> Path:
+    """The folder of run ``seed`` of ``configuration`` in the experiment folder ``experiment_dir``."""
+    return Path(experiment_dir) / run_name(configuration, seed)
+
+
+def baseline_folder(experiment_dir: str | Path, configuration: str) -> Path:
+    """The folder of scripted baseline ``configuration``'s one run in the experiment folder ``experiment_dir``."""
+    return Path(experiment_dir) / configuration / BASELINE_RUN
+
+
+def evaluated_run_name(configuration: str, first_seed: int, last_seed: int) -> str:
+    """``<configuration>/seeds_<first>-<last>``: a ``crowdnav evaluate`` result relative to its experiment folder."""
+    return f"{configuration}/seeds_{first_seed}-{last_seed}"
+
+
+def experiment_of(run_dir: str | Path) -> Path:
+    """The experiment folder a run folder (``<experiment>/<configuration>/<run>``) lies in."""
+    return Path(run_dir).parent.parent
+
+
+def results_root_of(run_dir: str | Path) -> Path:
+    """The results folder a run folder lies in (the parent of its experiment folder)."""
+    return experiment_of(run_dir).parent
+
+
+def relative_run_path(run_dir: str | Path) -> Path:
+    """``<experiment>/<configuration>/<run>``: a run folder relative to its results folder."""
+    return Path(*Path(run_dir).parts[-3:])
+
+
+def encoder_folder(experiment_dir: str | Path) -> Path:
+    """The folder of an experiment's pre-trained LEOG encoder (written whole, through a rename)."""
+    return Path(experiment_dir) / ENCODER_DIR
+
+
+def pretrained_encoder_path(experiment_dir: str | Path) -> Path:
+    """Where an experiment's pre-trained LEOG encoder is kept."""
+    return encoder_folder(experiment_dir) / ENCODER_FILE
 
 
 STRING_COLUMNS = frozenset({"experiment", "configuration", "label", "outcome", "collision_kind"})
@@ -43,7 +106,7 @@ INTEGER_COLUMNS = frozenset({"seed", "training_episodes", "training_steps", "eva
 REBUILD = "run `crowdnav benchmark` on its experiment again: it rebuilds the run's tables from what the run kept"
 
 
-class ResultsError(ValueError):
+class ResultsError(CrowdNavError, ValueError):
     """A results folder that cannot be read or does not match what is asked of it."""
 
 
@@ -164,7 +227,7 @@ class MissingRun:
 
     def describe(self, folder: bool = False) -> str:
         """``experiment/configuration/seed_N: reason`` (the same for the same results: no paths), or with the run's ``folder``."""
-        return f"{self.folder if folder else f'{self.experiment}/{self.configuration}/seed_{self.seed}'}: {self.reason}"
+        return f"{self.folder if folder else f'{self.experiment}/{run_name(self.configuration, self.seed)}'}: {self.reason}"
 
 
 def finished_runs(paths: Iterable[str | Path]) -> list[Path]:
@@ -200,7 +263,7 @@ def expected_runs(paths: Iterable[str | Path]) -> dict[tuple[str, str, int], Pat
                 raise ResultsError(f"{record}: unreadable experiment record; restore it or run the benchmark again") from None
             for configuration in names:
                 for seed in range(seeds):
-                    planned[(name, configuration, seed)] = record.parent / configuration / f"seed_{seed}"
+                    planned[(name, configuration, seed)] = run_folder(record.parent, configuration, seed)
     return planned
 
 

@@ -54,6 +54,8 @@ from typing import Any
 
 import numpy as np
 
+from crowdnav.errors import CrowdNavError
+
 TIDY_COLUMNS = ("test_episode", "test_seed", "outcome", "step", "time_s", "agent", "track", "respawned", "group",
                 "x", "y", "vx", "vy", "goal_x", "goal_y")
 TRACK_ID_STRIDE = 1000
@@ -150,7 +152,7 @@ def write_trajectories(episodes: list[Mapping[str, Any]], stem: str | Path) -> l
     return [csv, ndjson]
 
 
-class ReplayMismatchError(RuntimeError):
+class ReplayMismatchError(CrowdNavError, RuntimeError):
     """A replayed test episode ended differently from the one the run recorded."""
 
 
@@ -205,10 +207,10 @@ def replay_evaluation(run_dir: str | Path, evaluation: int | None = None) -> lis
     """
     import pandas as pd
     from crowdnav.evaluation.protocol import Protocol
-    from crowdnav.evaluation.storage import ResultsError, read_json
+    from crowdnav.evaluation.storage import META_FILE, ResultsError, read_json
 
     run_dir = Path(run_dir)
-    meta = read_json(run_dir / "meta.json") if (run_dir / "meta.json").is_file() else None
+    meta = read_json(run_dir / META_FILE) if (run_dir / META_FILE).is_file() else None
     if meta is None:
         raise ResultsError(f"{run_dir}: not a finished run (no meta.json)")
     protocol = Protocol(**meta["protocol"])
@@ -261,9 +263,9 @@ def result_label(run_dir: str | Path, evaluation: int | None = None) -> str:
     benchmark run, ``baseline`` for a scripted baseline, ``evaluate`` for a ``crowdnav evaluate`` result.
     """
     from crowdnav.evaluation.protocol import Protocol
-    from crowdnav.evaluation.storage import read_json
+    from crowdnav.evaluation.storage import META_FILE, read_json
 
-    meta = read_json(Path(run_dir) / "meta.json")
+    meta = read_json(Path(run_dir) / META_FILE)
     if meta.get("kind") in ("baseline", "evaluated"):
         return "baseline" if meta["kind"] == "baseline" else "evaluate"
     k = Protocol(**meta["protocol"]).evaluations - 1 if evaluation is None else evaluation
@@ -272,16 +274,16 @@ def result_label(run_dir: str | Path, evaluation: int | None = None) -> str:
 
 def finished_results(root: str | Path) -> list[Path]:
     """Every finished result under ``root`` (``root`` itself when it is one): folders whose meta.json is complete."""
-    from crowdnav.evaluation.storage import ResultsError, read_json
+    from crowdnav.evaluation.storage import META_FILE, TEST_FILE, ResultsError, read_json
 
     root = Path(root)
-    candidates = [root / "meta.json"] if (root / "meta.json").is_file() else sorted(root.rglob("meta.json"))
+    candidates = [root / META_FILE] if (root / META_FILE).is_file() else sorted(root.rglob(META_FILE))
     found = []
     for path in candidates:
         try:
             meta = read_json(path)
         except (ResultsError, OSError, ValueError):
             continue
-        if isinstance(meta, dict) and meta.get("status") == "complete" and "protocol" in meta and (path.parent / "test_episodes.csv").is_file():
+        if isinstance(meta, dict) and meta.get("status") == "complete" and "protocol" in meta and (path.parent / TEST_FILE).is_file():
             found.append(path.parent)
     return found

@@ -25,7 +25,7 @@ import tempfile
 import uuid
 from pathlib import Path
 
-from crowdnav.evaluation.storage import ResultsError, atomic_write_text
+from crowdnav.evaluation.storage import ResultsError, atomic_write_text, experiment_of
 
 STORAGE_ID_FILE = ".crowdnav-storage"
 """The storage root's id file (one random id, written once, kept)."""
@@ -61,7 +61,7 @@ def remove_work_folder(work_dir: str | Path) -> None:
     """Delete a run's working folder once the results have it, and its configuration and experiment folders if now empty."""
     work_dir = Path(work_dir)
     shutil.rmtree(work_dir, ignore_errors=True)
-    for parent in (work_dir.parent, work_dir.parent.parent):
+    for parent in (work_dir.parent, experiment_of(work_dir)):  # the configuration's folder, then the experiment's
         try:
             parent.rmdir()
         except OSError:  # not empty (other runs, the experiment's encoder): keep

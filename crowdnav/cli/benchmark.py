@@ -129,6 +129,7 @@ def benchmark(args: argparse.Namespace) -> int:
 
         experiment = replace(experiment, name=f"{experiment.name}-quick")
     from crowdnav.evaluation.benchmark import run_experiment
+    from crowdnav.evaluation.storage import experiment_folder
 
     protocol = experiment.protocol
     print(f"experiment {experiment.name}: {len(experiment.configurations)} configurations x {protocol.seeds} seeds, "
@@ -144,7 +145,7 @@ def benchmark(args: argparse.Namespace) -> int:
         except (ResultsError, ExperimentError, ExecutorError) as error:
             raise CliError(str(error)) from None
         except KeyboardInterrupt:
-            print(f"crowdnav: interrupted; run the same command again to resume from {Path(args.out) / experiment.name}",
+            print(f"crowdnav: interrupted; run the same command again to resume from {experiment_folder(args.out, experiment.name)}",
                   file=sys.stderr)
             return stopped.exit_status
     for line in report.summary_lines():
@@ -212,9 +213,9 @@ def evaluate_command(args: argparse.Namespace) -> int:
         except KeyboardInterrupt:
             print("crowdnav: interrupted before the results were written; run the same command again", file=sys.stderr)
             return stopped.exit_status
-    import json
+    from crowdnav.evaluation.storage import META_FILE, read_json
 
-    final = json.loads((folder / "meta.json").read_text())["final"]
+    final = read_json(folder / META_FILE)["final"]
     print(f"{args.policy}: " + ", ".join(f"{outcome} {rate:.0%}" for outcome, rate in final.items()) + f" on {args.episodes} test episodes")
     print(f"wrote {folder}; rank with: crowdnav leaderboard {args.out}")
     return 0

@@ -9,10 +9,11 @@ from typing import Any
 
 import yaml
 
+from crowdnav.errors import CrowdNavError
 from crowdnav.yaml_input import YamlLimitError, parse_value
 
 
-class CliError(Exception):
+class CliError(CrowdNavError, Exception):
     """A user mistake a command reports as one line on stderr (exit status 1), never as a traceback."""
 
 

@@ -34,6 +34,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 
 def trajectories_command(args: argparse.Namespace) -> int:
+    from crowdnav.evaluation.storage import META_FILE
     from crowdnav.evaluation.trajectories import finished_results
 
     source = Path(args.source)
@@ -44,7 +45,7 @@ def trajectories_command(args: argparse.Namespace) -> int:
             raise CliError(f"{source} is a results folder: its results replay with their own settings "
                            f"({', '.join(policy_options or ['--override'])} is for a POLICY)")
         return _replay(results, args.evaluation)
-    if source.is_dir() and (source / "meta.json").is_file():
+    if source.is_dir() and (source / META_FILE).is_file():
         raise CliError(f"{source}: an unfinished run (meta.json without a complete status or test_episodes.csv); finish it first")
     if args.evaluation is not None:
         raise CliError(f"--evaluation is for results folders; {args.source} is not one (no finished run in it)")

@@ -7,6 +7,7 @@ Issues and their formatting are shared with the training and experiment configs
 from __future__ import annotations
 
 from crowdnav.config_errors import ConfigIssue, format_issues, show
+from crowdnav.errors import CrowdNavError
 
 __all__ = ["ScenarioError", "ScenarioIssue", "show"]
 
@@ -14,7 +15,7 @@ ScenarioIssue = ConfigIssue
 """One problem found in a scenario document (the shared :class:`~crowdnav.config_errors.ConfigIssue`)."""
 
 
-class ScenarioError(ValueError):
+class ScenarioError(CrowdNavError, ValueError):
     """A scenario file (or an override) is invalid; ``str()`` is the user-facing report."""
 
     def __init__(self, source: str, issues: list[ScenarioIssue]):
