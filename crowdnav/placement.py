@@ -25,6 +25,9 @@ GAP = 0.05
 """Minimum free space (m) between two freshly placed agents, and between an agent and an obstacle."""
 JITTER = 0.05
 """Half-width (m) of the uniform jitter added to lattice points so episodes do not look gridded."""
+JITTER_REACH = math.sqrt(2) * JITTER
+"""Farthest (m) a jittered point lands from its lattice point (the jitter square's half-diagonal): the slack
+a distance checked on lattice points leaves for each jittered end."""
 
 
 @dataclass
@@ -114,7 +117,7 @@ def build_placement(scenario: Scenario, obstacles: StaticObstacles) -> Placement
     occupied = obstacles.union
     robot_start = _candidates(robot.start, "robot.start", robot.radius, world_box, occupied)
     robot_goal = _candidates(robot.goal, "robot.goal", robot.radius, world_box, occupied)
-    slack = 2 * math.sqrt(2) * JITTER
+    slack = 2 * JITTER_REACH
     start_goal_ok, largest = _far_pairs(robot_start.points, robot_goal.points, robot.min_start_goal_distance + slack)
     if robot_start.ring_center is not None or robot_goal.ring_center is not None:
         start_goal_ok = np.ones_like(start_goal_ok)  # rotated rings: any start, checked for every rotation below
@@ -156,7 +159,7 @@ def build_placement(scenario: Scenario, obstacles: StaticObstacles) -> Placement
 
 def _group_placement(scenario: Scenario, path: str, group, world_box, occupied) -> GroupPlacement:
     """Candidate sets of one group: member spawns and goals (walking) or circle centres (standing)."""
-    humans, slack = scenario.humans, 2 * math.sqrt(2) * JITTER
+    humans, slack = scenario.humans, 2 * JITTER_REACH
     empty = CandidateSet(np.zeros(0, dtype=complex), 0.0)
     if group.max_count == 0:
         return GroupPlacement(path, empty, None)
@@ -165,7 +168,7 @@ def _group_placement(scenario: Scenario, path: str, group, world_box, occupied) 
         # the circle is one disc of radius ring + radius for obstacles; its members stay in the world too
         sets = [_candidates(r, f"{path}.spawn.{i}", ring + humans.radius, world_box, occupied) for i, r in enumerate(group.spawn)]
         centres = _merge(sets, spacing=0.0)
-        inside = shapely.contains_xy(world_box.buffer(-ring - math.sqrt(2) * JITTER), centres.points.real, centres.points.imag)
+        inside = shapely.contains_xy(world_box.buffer(-ring - JITTER_REACH), centres.points.real, centres.points.imag)
         if not inside.any():
             raise GeometryError(f"{path}.spawn", f"no centre leaves the standing circle (radius {ring:.2f} m) inside the world; "
                                 "expected a region further from the world's edge")
@@ -204,7 +207,7 @@ def _check_capacity(scenario: Scenario, robot_start: CandidateSet, robot_goal: C
     of a group's candidates, so subtracting the worst case of all of them is a sufficient bound
     (for one group it is the robot start's block only).
     """
-    robot, humans, slack = scenario.robot, scenario.humans, 2 * math.sqrt(2) * JITTER
+    robot, humans, slack = scenario.robot, scenario.humans, 2 * JITTER_REACH
     crowd = [group for _, group in humans.crowd]
     for k, (placement, group) in enumerate(zip(groups, crowd, strict=True)):
         if group.max_count == 0:
@@ -235,8 +238,8 @@ def _check_capacity(scenario: Scenario, robot_start: CandidateSet, robot_goal: C
 
 def _candidates(region, path: str, radius: float, world_box, occupied) -> CandidateSet:
     """Lattice of obstacle-free positions for an agent of ``radius`` inside ``region``."""
-    spacing = 2 * radius + GAP + 2 * math.sqrt(2) * JITTER
-    clearance = radius + GAP + math.sqrt(2) * JITTER
+    spacing = 2 * radius + GAP + 2 * JITTER_REACH
+    clearance = radius + GAP + JITTER_REACH
     if isinstance(region, PointsRegion):
         points = np.array([complex(x, y) for x, y in region.points])
         _require_inside(points, path, world_box)
@@ -426,7 +429,7 @@ def _blocked(spawn: CandidateSet, blockers: CandidateSet, reach: float) -> int:
 def _check_ring_start_goal(start: CandidateSet, goal: CandidateSet, min_distance: float) -> None:
     """Every start a rotating ring can give has a goal at least ``min_distance`` away (as the draw asks), for every rotation."""
     starts, margin = _ring_samples(start)
-    needed = min_distance + math.sqrt(2) * (JITTER + start.jitter) + margin  # the draw's margin, and the start's own jitter
+    needed = min_distance + JITTER_REACH + math.sqrt(2) * start.jitter + margin  # the draw's margin, and the start's own jitter
     if goal.ring_center is not None:
         # the farthest of K evenly spaced ring points is within pi/K of the opposite direction
         radius = float(np.abs(goal.points[0] - goal.ring_center))
