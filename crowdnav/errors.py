@@ -1,0 +1,12 @@
+"""``CrowdNavError``: the one base of every exception crowdnav defines.
+
+``except crowdnav.CrowdNavError`` catches whatever crowdnav raises on purpose (a bad scenario or
+config file, a damaged checkpoint or results folder, a run that cannot go on), as opposed to a bug.
+Each crowdnav exception also keeps the builtin base it always had (``ValueError``,
+``RuntimeError``, ``FileExistsError``, ...), so code catching that still catches it. Its message
+is one line meant for the person running crowdnav (the command line prints it without a traceback).
+"""
+
+
+class CrowdNavError(Exception):
+    """Base of every crowdnav exception (see the module docstring)."""
