@@ -1,7 +1,9 @@
 """What the crowd's groups do: where members start, their first goals, and what they do at a goal.
 
-The simulator calls these with itself (``sim``): :func:`place_groups` and :func:`first_goals` at
-reset, :func:`apply_goal_rules` after each step. Groups are visited in file order, and a file
+The simulator calls these with itself (``sim``: its scenario, groups, placements and generator):
+:func:`place_groups` and :func:`first_goals` at reset, :func:`apply_goal_rules` after each step,
+on the state it is given (the simulator's own, or one world's row of a batch: a
+:class:`crowdnav.sim_state.SimState`, changed in place). Groups are visited in file order, and a file
 without ``humans.groups`` is one group: it draws the same random numbers in the same order as
 before groups existed, so its episodes did not change. Loops run over groups (a scenario's
 constant), never over humans.
@@ -10,11 +12,14 @@ constant), never over humans.
 from __future__ import annotations
 
 import math
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from crowdnav.placement import GAP, JITTER, PlacementError
+
+if TYPE_CHECKING:
+    from crowdnav.sim_state import SimState
 
 
 def place_groups(sim: Any, start: np.ndarray, goal: complex, counts: list[int]) -> list[np.ndarray]:
@@ -57,36 +62,43 @@ def first_goals(sim: Any, spawn: list[np.ndarray]) -> list[np.ndarray]:
     return goals
 
 
-def apply_goal_rules(sim: Any) -> None:
-    """After a step: humans at their goals follow their group's ``on_goal`` and ``goal_rule``."""
-    arrived = np.abs(sim.human_goals - sim.positions[1:]) <= sim.scenario.humans.social_force.goal_tolerance
-    sim.human_arrived = arrived & ~sim.human_stopped
-    single = len(sim.groups) == 1
+def apply_goal_rules(state: SimState, sim: Any) -> bool:
+    """After a step: humans of ``state`` at their goals follow their group's ``on_goal`` and ``goal_rule``.
+
+    ``state`` is changed in place (``human_arrived``, ``human_stopped``, ``human_goals``, and for
+    respawns ``positions``, ``velocities``, ``human_respawns``); draws come from ``sim.rng``.
+    Returns whether anyone respawned (moved): the caller then measures the new geometry.
+    """
+    arrived = np.abs(state.human_goals - state.positions[1:]) <= sim.scenario.humans.social_force.goal_tolerance
+    state.human_arrived[:] = arrived & ~state.human_stopped
+    single, moved = len(sim.groups) == 1, False
     for g, (group, places) in enumerate(zip(sim.groups, sim.placement.groups, strict=True)):
         if group.standing or group.max_count == 0:
             continue
-        mine = arrived if single else arrived & (sim.human_group == g)
+        mine = arrived if single else arrived & (state.human_group == g)
         if group.on_goal == "stop":
-            sim.human_stopped |= mine
-            sim.velocities[1:][sim.human_stopped] = 0.0
+            state.human_stopped |= mine
+            state.velocities[1:][state.human_stopped] = 0.0
             continue
         if not mine.any():
             continue
         index = np.flatnonzero(mine)
         if group.on_goal == "respawn":
-            index = _respawn(sim, index, group, places)
+            index = _respawn(state, sim, index, group, places)
             if len(index) == 0:
                 continue
+            moved = True
         if group.goal_rule == "mirror":
-            sim.human_goals[index] = 2 * mirror_center(group, sim.scenario) - sim.human_goals[index]
+            state.human_goals[index] = 2 * mirror_center(group, sim.scenario) - state.human_goals[index]
         else:
-            sim.human_goals[index] = places.goal.draw(sim.rng, len(index), replace=True)
+            state.human_goals[index] = places.goal.draw(sim.rng, len(index), replace=True)
+    return moved
 
 
-def _respawn(sim: Any, index: np.ndarray, group: Any, places: Any) -> np.ndarray:
+def _respawn(state: SimState, sim: Any, index: np.ndarray, group: Any, places: Any) -> np.ndarray:
     """Move arrived members to free spawn points of their group; returns those that moved (the rest wait)."""
     radius, robot = sim.scenario.humans.radius, sim.scenario.robot
-    others = np.delete(sim.positions, index + 1)
+    others = np.delete(state.positions, index + 1)
     reach = max(robot.radius, radius) + radius + GAP + math.sqrt(2) * JITTER
     for count in range(len(index), 0, -1):  # at most len(index) tries, usually one
         try:
@@ -94,13 +106,12 @@ def _respawn(sim: Any, index: np.ndarray, group: Any, places: Any) -> np.ndarray
         except PlacementError:
             continue
         moved = index[:count]
-        sim.positions[moved + 1] = new
-        sim.velocities[moved + 1] = 0.0
-        sim.human_respawns[moved] += 1
+        state.positions[moved + 1] = new
+        state.velocities[moved + 1] = 0.0
+        state.human_respawns[moved] += 1
         if group.goal_rule == "mirror":
             # the mirror rule flips the goal below, so store the spawn's mirror image twice-flipped
-            sim.human_goals[moved] = new
-        sim.refresh()
+            state.human_goals[moved] = new
         return moved
     return index[:0]
 

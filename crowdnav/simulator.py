@@ -21,18 +21,24 @@ The robot cannot escape the task: leaving the world (its centre outside the scen
 walls are obstacles, touching them is a collision) or ends the episode with the outcome
 ``out_of_bounds`` (open space).
 
+The episode's state is one declared :class:`crowdnav.sim_state.SimState` the simulator owns
+(:attr:`Simulator.state`); its fields read as the simulator's attributes (``sim.positions``,
+``sim.human_goals``, ...). Only the simulator's methods change it (:meth:`Simulator.step`,
+:meth:`Simulator.stop_humans`, the goal rules it runs); staging a scene by hand (tests, scripted
+set-ups) writes those arrays and then calls :meth:`Simulator.refresh`.
+
 Randomness comes only from the generator seeded by :meth:`Simulator.reset`.
 """
 
 from __future__ import annotations
 
 import cmath
+import copy
 import math
 
 import numpy as np
 
 from crowdnav import social_force as sf
-from crowdnav.crowd_grid import CrowdGrid
 from crowdnav.events import OUTCOMES, Collision, SimulationError, StepEvents  # noqa: F401  (re-exported: their public home)
 from crowdnav.groups import apply_goal_rules, first_goals, place_groups
 from crowdnav.obstacles import nearest_on_edges
@@ -40,11 +46,8 @@ from crowdnav.orca import OrcaCrowd, OrcaUnavailableError
 from crowdnav.placement import JITTER
 from crowdnav.scenario.errors import ScenarioError, ScenarioIssue
 from crowdnav.scenario.loader import Overrides
+from crowdnav.sim_state import OBSTACLE_PASSES, SELF_DISTANCE, PairConstants, SimState, pair_constants
 from crowdnav.world import CompiledWorld, WorldSource, load_world
-
-_OBSTACLE_PASSES = 3  # obstacle pushes per overlapping step (corners between two obstacles need more than one)
-_SELF_DISTANCE = 1.0e9
-"""Stand-in for an agent's distance to itself, so it neither repels nor overlaps itself."""
 
 
 class Simulator:
@@ -78,13 +81,15 @@ class Simulator:
         self.max_humans = scenario.humans.max_count
         force = scenario.humans.social_force
         self._force = force
-        self._relax = min(1.0, self.dt / force.relaxation_time)
+        self.relaxation = min(1.0, self.dt / force.relaxation_time)
+        """``min(1, dt / relaxation_time)``: the share of the way to its desired velocity a human goes in one step."""
         self._static_count = self.obstacles.polygon_count + self.obstacles.disc_count
         world = scenario.world
-        # Open space: the rectangle the robot's centre must stay in (None: boundary walls keep it in).
-        self._bounds = None if world.boundary_walls else (*map(float, world.min), *map(float, world.max))
+        self.bounds = None if world.boundary_walls else (*map(float, world.min), *map(float, world.max))
+        """Open space: ``(x0, y0, x1, y1)`` (m), the rectangle the robot's centre must stay in (None: boundary walls keep it in)."""
         self._rng = np.random.default_rng()
-        self._constants: dict[int, tuple] = {}
+        self._constants: dict[tuple[int, bool], PairConstants] = {}
+        self._state: SimState | None = None
         self.orca = self._orca_crowd()
         """The ORCA part of the crowd (None when every walking group follows the social force)."""
         self._ready = False
@@ -111,25 +116,54 @@ class Simulator:
     # ----------------------------------------------------------------- state views
 
     @property
+    def state(self) -> SimState:
+        """The episode's state (the simulator's own: read it; it changes through the simulator's methods)."""
+        if self._state is None:
+            raise RuntimeError("call reset() before reading the simulator's state")
+        return self._state
+
+    @property
     def n_humans(self) -> int:
         """Active humans this episode."""
-        return len(self.positions) - 1
+        return len(self._state.positions) - 1
+
+    # The state's fields, read as attributes (``SimState`` says what each holds). The four with a
+    # setter may be replaced to stage a scene by hand (then call refresh()).
+    positions = property(lambda self: self._state.positions, lambda self, value: self._stage("positions", value),
+                         doc="(n+1,) complex (m): :attr:`SimState.positions` (robot, then humans).")
+    velocities = property(lambda self: self._state.velocities, lambda self, value: self._stage("velocities", value),
+                          doc="(n+1,) complex (m/s): :attr:`SimState.velocities`.")
+    robot_goal = property(lambda self: self._state.robot_goal, lambda self, value: self._stage("robot_goal", complex(value)),
+                          doc="complex (m): :attr:`SimState.robot_goal`.")
+    robot_heading = property(lambda self: self._state.robot_heading, lambda self, value: self._stage("robot_heading", float(value)),
+                             doc="float (rad): :attr:`SimState.robot_heading`.")
+    step_count = property(lambda self: self._state.step_count, doc=":attr:`SimState.step_count`.")
+    human_group = property(lambda self: self._state.human_group, doc="(n,): :attr:`SimState.human_group`, indices into :attr:`groups`.")
+    human_goals = property(lambda self: self._state.human_goals, doc="(n,) complex (m): :attr:`SimState.human_goals`.")
+    human_preferred_speed = property(lambda self: self._state.human_preferred_speed, doc="(n,) m/s: :attr:`SimState.human_preferred_speed`.")
+    human_max_speed = property(lambda self: self._state.human_max_speed, doc="(n,) m/s: :attr:`SimState.human_max_speed`.")
+    human_stopped = property(lambda self: self._state.human_stopped, doc="(n,) bool: :attr:`SimState.human_stopped`.")
+    human_arrived = property(lambda self: self._state.human_arrived, doc="(n,) bool: :attr:`SimState.human_arrived`.")
+    human_respawns = property(lambda self: self._state.human_respawns, doc="(n,) int: :attr:`SimState.human_respawns`.")
+
+    def _stage(self, name: str, value: object) -> None:
+        setattr(self.state, name, value)
 
     @property
     def robot_position(self) -> complex:
-        return complex(self.positions[0])
+        return complex(self._state.positions[0])
 
     @property
     def human_positions(self) -> np.ndarray:
-        return self.positions[1:]
+        return self._state.positions[1:]
 
     @property
     def human_velocities(self) -> np.ndarray:
-        return self.velocities[1:]
+        return self._state.velocities[1:]
 
     @property
     def robot_goal_distance(self) -> float:
-        return abs(self.robot_goal - self.positions[0])
+        return abs(self._state.robot_goal - self._state.positions[0])
 
     @property
     def rng(self) -> np.random.Generator:
@@ -169,73 +203,70 @@ class Simulator:
         # groups in file order, each away from the robot and the groups before it; then goals, then speeds
         # (one group draws exactly what the crowd drew before groups existed: same seed, same episode)
         spawn = place_groups(self, start, complex(goal), counts)
-        self.positions = np.concatenate([start, *spawn])
-        self.velocities = np.zeros(n + 1, dtype=complex)
-        self.robot_goal = complex(goal)
-        self.robot_heading = heading
-        self.human_group = np.repeat(np.arange(len(counts)), counts)
-        """Index into :attr:`groups` of every human."""
         standing = np.repeat([group.standing for group in self.groups], counts).astype(bool)
-        self.human_goals = np.concatenate([np.zeros(0, dtype=complex), *first_goals(self, spawn)])
-        self.human_preferred_speed = np.concatenate([np.zeros(0), *(
+        human_goals = np.concatenate([np.zeros(0, dtype=complex), *first_goals(self, spawn)])
+        preferred_speed = np.concatenate([np.zeros(0), *(
             np.zeros(count) if group.standing else rng.uniform(*group.preferred_speed, size=count)
             for group, count in zip(self.groups, counts, strict=True))])
-        self.human_max_speed = self.human_preferred_speed * self._force.max_speed_factor
-        # standing members have no speed; a cap of 1 keeps the shared command formula free of 0 / 0
-        self._command_cap = np.where(standing, 1.0, self.human_max_speed) if standing.any() else self.human_max_speed
-        self.human_stopped = standing.copy()
-        """Humans that do not move: standing groups, arrivals under ``on_goal: stop``, humans a multi-agent env let leave."""
-        self.human_arrived = np.zeros(n, dtype=bool)
-        """Humans that reached their goal in the last step (under ``on_goal: stop``, on arrival only)."""
-        self.human_respawns = np.zeros(n, dtype=np.int64)
-        """Times each human respawned this episode (``on_goal: respawn``): after one it is a new pedestrian (a new track)."""
-        self.step_count = 0
-        self._prepare_pair_constants(n)
+        max_speed = preferred_speed * self._force.max_speed_factor
+        self._state = SimState(
+            positions=np.concatenate([start, *spawn]),
+            velocities=np.zeros(n + 1, dtype=complex),
+            robot_goal=complex(goal),
+            robot_heading=heading,
+            step_count=0,
+            human_group=np.repeat(np.arange(len(counts)), counts),
+            human_goals=human_goals,
+            human_preferred_speed=preferred_speed,
+            human_max_speed=max_speed,
+            # standing members have no speed; a cap of 1 keeps the shared command formula free of 0 / 0
+            command_cap=np.where(standing, 1.0, max_speed) if standing.any() else max_speed,
+            human_stopped=standing.copy(),
+            human_arrived=np.zeros(n, dtype=bool),
+            human_respawns=np.zeros(n, dtype=np.int64),
+        )
+        self._use_pair_constants(n)
         if self.orca is not None:
-            self.orca.start_episode(self.human_group, self.radii, robot.max_speed, self.human_max_speed)
+            self.orca.start_episode(self._state.human_group, self.radii, robot.max_speed, max_speed)
         self._ready = True
 
-    def _prepare_pair_constants(self, n: int) -> None:
-        """Constants of the pairwise and obstacle repulsion for a crowd of ``n`` (cached per ``n``)."""
+    def pair_constants(self, n: int) -> PairConstants:
+        """The repulsion constants of a crowd of ``n`` humans (:func:`crowdnav.sim_state.pair_constants`, cached per ``n``)."""
         key = (n, n >= self.grid_from)
         cached = self._constants.get(key)
         if cached is None:
-            self._compute_pair_constants(n, grid=key[1])
-            self._constants[key] = (self.radii, self._contact, self._gain, self._decay, self._contact_all, self._grid)
-        else:
-            self.radii, self._contact, self._gain, self._decay, self._contact_all, self._grid = cached
+            cached = self._constants[key] = pair_constants(self.scenario, self.obstacles, n, grid=key[1])
+        return cached
 
-    def _compute_pair_constants(self, n: int, grid: bool = False) -> None:
-        robot, humans, force = self.scenario.robot, self.scenario.humans, self._force
-        radii = np.full(n + 1, humans.radius)
-        radii[0] = robot.radius
-        self.radii = radii
-        # Obstacle columns (both geometries): polygons by surface distance, discs by centre distance
-        # with their radius folded into the gain (same force, one array op less per step).
-        static_strength = np.full((n + 1, 1), force.obstacle_strength)
-        static_strength[0] = 0.0  # the robot does not follow the social force
-        static_contact = radii[:, None] + self.obstacles.surface_radius[None, :]
-        static_gain = sf.repulsion_gain(static_strength, static_contact, force.obstacle_range)
-        self._grid = None
-        if grid:  # no (n+1)^2 tables: the robot's row and column, the obstacles' columns, one human-human gain
-            self._grid = CrowdGrid(n, robot.radius, humans.radius, force, humans.see_robot, static_gain, -1.0 / force.obstacle_range,
-                                   static_contact, _SELF_DISTANCE)
-            self._contact = self._gain = self._decay = self._contact_all = None
-            return
-        self._contact = radii[:, None] + radii[None, :]
-        strength = np.full((n + 1, n + 1), force.human_strength)
-        decay = np.full((n + 1, n + 1), force.human_range)
-        # Column 0 is the robot: it pushes humans only when they see it. Row 0 (the humans'
-        # force on the robot) keeps the human parameters: it is the reward's social term.
-        strength[1:, 0] = force.robot_strength if humans.see_robot else 0.0
-        decay[1:, 0] = force.robot_range
-        np.fill_diagonal(strength, 0.0)
-        pair_gain = sf.repulsion_gain(strength, self._contact, decay)
-        self._gain = np.concatenate([pair_gain, static_gain], axis=1)
-        self._decay = np.concatenate([-1.0 / decay, np.full((n + 1, self._static_count), -1.0 / force.obstacle_range)], axis=1)
-        # Surface contact distance for every column of the fused distance matrix: touching
-        # agents or obstacles have distance - contact <= 0.
-        self._contact_all = np.concatenate([self._contact, static_contact], axis=1)
+    def _use_pair_constants(self, n: int) -> None:
+        constants = self.pair_constants(n)
+        self.radii = constants.radii
+        """(n+1,) body radii (m), robot first."""
+        self._contact, self._gain, self._decay = constants.contact, constants.gain, constants.decay
+        self._contact_all, self._grid = constants.contact_all, constants.grid
+
+    def load_state(self, state: SimState) -> None:
+        """Make ``state`` (one world's, owned by this simulator from now on) the episode's state and measure its geometry.
+
+        For a state of the episode this simulator drew last (:meth:`draw_episode`): its groups'
+        ORCA solver and its generator stay this simulator's.
+        """
+        self._state = state
+        self._use_pair_constants(state.n_humans)
+        self._ready = True
+        self.refresh()
+
+    def clone(self, state: SimState | None = None) -> Simulator:
+        """An independent copy holding a copy of ``state`` (default: this simulator's), the geometry measured.
+
+        It shares the compiled world and the constants (never written) and gets its own copy of the
+        generator: stepping one leaves the other as it is (an ORCA solver is shared, but it is set
+        from the state at every step). ``state``: one world's, of the episode this simulator drew.
+        """
+        twin = copy.copy(self)
+        twin._rng = copy.deepcopy(self._rng)
+        twin.load_state((self.state if state is None else state).copy())
+        return twin
 
     # ------------------------------------------------------------------------ step
 
@@ -249,57 +280,62 @@ class Simulator:
         """
         if not self._ready:
             raise RuntimeError("call reset() before step()")
+        state = self._state
         robot_velocity = self._robot_velocity(robot_action)
         if human_actions is None:
             commands = self.crowd_commands()
         else:
             commands = self._scaled_commands(human_actions)
-        if self._any_stopped:
-            commands = np.where(self.human_stopped, 0.0, commands)
-        self.velocities[0] = robot_velocity
-        self.velocities[1:] = commands
-        self.positions += self.velocities * self.dt
-        self.step_count += 1
+        if state.human_stopped.any():  # standing groups, arrivals under on_goal: stop, humans a multi-agent env let leave
+            commands = np.where(state.human_stopped, 0.0, commands)
+        velocities, positions = state.velocities, state.positions
+        velocities[0] = robot_velocity
+        velocities[1:] = commands
+        positions += velocities * self.dt
+        state.step_count += 1
         # one cheap check per step, so a non-finite state stops the episode with its name
         # instead of leaking NaN into rewards while the observations stay finite
-        if not np.isfinite(self.positions).all():
-            bad = np.flatnonzero(~np.isfinite(self.positions))
+        if not np.isfinite(positions).all():
+            bad = np.flatnonzero(~np.isfinite(positions))
             who = "the robot" if bad[0] == 0 else f"human {bad[0] - 1}"
-            raise SimulationError(f"step {self.step_count}: the position of {who} became non-finite (its velocity: {self.velocities[bad[0]]}); "
+            raise SimulationError(f"step {state.step_count}: the position of {who} became non-finite (its velocity: {velocities[bad[0]]}); "
                                   "check the scenario's social_force parameters")
         self.refresh()
-        if self.n_humans and self._humans_touch:  # a human touches someone or something
+        n = len(positions) - 1
+        if n and self._humans_touch:  # a human touches someone or something
             self._resolve_human_overlaps()
             self.refresh()
         collision = self.robot_collision()
         left_world = self.robot_left_world()
-        goal_reached = abs(self.robot_goal - self.positions[0]) <= self.scenario.robot.goal_radius
-        if self.n_humans:
-            apply_goal_rules(self)
-        truncated = self.step_count >= self.scenario.max_steps
+        goal_reached = abs(state.robot_goal - positions[0]) <= self.scenario.robot.goal_radius
+        if n and apply_goal_rules(state, self):  # someone respawned: the geometry of the new positions
+            self.refresh()
+        truncated = state.step_count >= self.scenario.max_steps
         return StepEvents(goal_reached=bool(goal_reached), collision=collision, truncated=truncated, left_world=left_world)
 
-    @property
-    def _any_stopped(self) -> bool:
-        # humans stop at their goal (on_goal: stop) or when a multi-agent env lets them leave
-        return bool(self.human_stopped.any())
+    def stop_humans(self, index: np.ndarray) -> None:
+        """Humans ``index`` (0-based) stop where they are for the rest of the episode (a multi-agent env lets them leave)."""
+        state = self.state
+        state.human_stopped[index] = True
+        state.velocities[1:][index] = 0.0
 
     def crowd_commands(self) -> np.ndarray:
         """(n_humans,) complex velocity commands (m/s) of the crowd's models in the current state (stopped humans not zeroed)."""
         if self.orca is None:
             return self.social_force_commands()
-        commands = self.orca.velocities(self.positions, self.velocities, self.human_goals, self.human_preferred_speed)
+        state = self._state
+        commands = self.orca.velocities(state.positions, state.velocities, state.human_goals, state.human_preferred_speed)
         if self.orca.all_orca:
             return commands
         return np.where(self.orca.mask, commands, self.social_force_commands())
 
     def social_force_commands(self) -> np.ndarray:
         """(n_humans,) complex velocity commands (m/s) of the social-force model in the current state."""
-        force = self._force
-        to_goal = self.human_goals - self.positions[1:]
+        force, state = self._force, self._state
+        to_goal = state.human_goals - state.positions[1:]
         total = sf.goal_force(to_goal, force.goal_weight, force.goal_saturation_distance)
         total += self._repulsion[1:]
-        return sf.velocity_command(total, self.velocities[1:], self.human_preferred_speed, self._command_cap, self._relax)
+        return sf.velocity_command(total, state.velocities[1:], state.human_preferred_speed, state.command_cap, self.relaxation)
 
     @property
     def robot_social_force(self) -> complex:
@@ -320,15 +356,15 @@ class Simulator:
             norm = abs(command)
             if norm > 1.0:  # the max speed bounds the norm, not each axis
                 command /= norm
-            return command * robot.max_speed * cmath.exp(1j * self.robot_heading)
+            return command * robot.max_speed * cmath.exp(1j * self._state.robot_heading)
         speed, turn = a0 * robot.max_speed, a1 * robot.max_angular_speed
-        heading = self.robot_heading
+        heading = self._state.robot_heading
         new_heading = heading + turn * self.dt
         if abs(turn) > 1e-9:  # exact arc of the unicycle over the step
             displacement = (speed / turn) * -1j * (cmath.exp(1j * new_heading) - cmath.exp(1j * heading))
         else:
             displacement = speed * self.dt * cmath.exp(1j * heading)
-        self.robot_heading = math.remainder(new_heading, 2 * math.pi)
+        self._state.robot_heading = math.remainder(new_heading, 2 * math.pi)
         return displacement / self.dt
 
     def _scaled_commands(self, actions: np.ndarray) -> np.ndarray:
@@ -339,7 +375,7 @@ class Simulator:
             raise ValueError("human_actions must be finite")
         command = np.clip(actions[:, 0], -1, 1) + 1j * np.clip(actions[:, 1], -1, 1)
         command /= np.maximum(np.abs(command), 1.0)
-        return command * self.human_max_speed
+        return command * self._state.human_max_speed
 
     # ------------------------------------------------------------------- geometry
 
@@ -355,13 +391,13 @@ class Simulator:
         Also the repulsion on every agent from humans (and the robot if seen) and obstacles.
         Call it after editing ``positions`` by hand (tests, scripted set-ups).
         """
-        z = self.positions
+        z = self._state.positions
         if self._grid is not None:
             self._refresh_grid(z)
             return
         offset = z[None, :] - z[:, None]  # row i, column j: from agent i to agent j
         distance = np.abs(offset)
-        distance.flat[:: len(z) + 1] = _SELF_DISTANCE
+        distance.flat[:: len(z) + 1] = SELF_DISTANCE
         self._pair_offset, self._pair_distance = offset, distance
         self.robot_offset, self.robot_distance = offset[0], distance[0]
         static_offset, static_distance = self._measure_obstacles(z)
@@ -412,10 +448,10 @@ class Simulator:
         return self._pair_distance
 
     def _dense_pairs(self) -> None:
-        z = self.positions
+        z = self._state.positions
         offset = z[None, :] - z[:, None]
         distance = np.abs(offset)
-        distance.flat[:: len(z) + 1] = _SELF_DISTANCE
+        distance.flat[:: len(z) + 1] = SELF_DISTANCE
         self._pair_offset, self._pair_distance = offset, distance
 
     def _resolve_human_overlaps(self) -> None:
@@ -426,23 +462,23 @@ class Simulator:
         pass out of one obstacle lands in another. Repulsion keeps all of this rare; it is what
         holds humans out of walls and furniture (penetration under 1 cm, docs/simulator.md).
         """
-        n = self.n_humans
+        n, positions = self.n_humans, self._state.positions
         if self._grid is not None:
-            self.positions += self._grid.push_apart(self._geometry)
+            positions += self._grid.push_apart(self._geometry)
             contact = self._grid.static_contact[1:]
         else:
             pair_gap = self._gap[1:, 1 : n + 1]
-            self.positions[1:] += ((self._pair_offset[1:, 1:] / self._pair_distance[1:, 1:]) * (np.minimum(pair_gap, 0.0) / 2)).sum(1)
+            positions[1:] += ((self._pair_offset[1:, 1:] / self._pair_distance[1:, 1:]) * (np.minimum(pair_gap, 0.0) / 2)).sum(1)
             contact = self._contact_all[1:, n + 1 :]
         if not self._static_count:
             return
-        for _ in range(_OBSTACLE_PASSES):
-            offset, distance = nearest_on_edges(self.positions[1:], self.obstacles.surface)
+        for _ in range(OBSTACLE_PASSES):
+            offset, distance = nearest_on_edges(positions[1:], self.obstacles.surface)
             gap = distance - contact
             if gap.min() >= 0.0:
                 break
             direction = offset / np.maximum(distance, 1e-12)
-            self.positions[1:] += (direction * np.minimum(gap, 0.0)).sum(1)
+            positions[1:] += (direction * np.minimum(gap, 0.0)).sum(1)
 
     def robot_collision(self) -> Collision | None:
         """The robot's deepest contact in the current state (touching counts), or None."""
@@ -461,8 +497,8 @@ class Simulator:
 
         Four scalar comparisons: the robot is one point, whatever the crowd size.
         """
-        if self._bounds is None:
+        if self.bounds is None:
             return False
-        x0, y0, x1, y1 = self._bounds
-        robot = complex(self.positions[0])
+        x0, y0, x1, y1 = self.bounds
+        robot = complex(self._state.positions[0])
         return not (x0 <= robot.real <= x1 and y0 <= robot.imag <= y1)

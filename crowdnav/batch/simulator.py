@@ -9,9 +9,12 @@ summation rounds differently for another length, so a padded world would drift f
 simulator in the last bits. A step loops over the crowd sizes present (a scenario's count range),
 never over worlds, humans, pairs or edges.
 
-Resets, and the goal rules of worlds where a human reached its goal, draw from each world's own
-generator: they run per world, on each world's own :class:`crowdnav.Simulator` (its *slot*), and
-their results are copied into the stacks. Crowds large enough for the neighbour grid
+A bucket's episode state is one :class:`crowdnav.sim_state.SimState` with a leading world axis,
+its geometry the same arrays a :class:`crowdnav.Simulator` measures, stacked. Resets, and the
+goal rules of worlds where a human reached its goal, draw from each world's own generator: they
+run per world. A reset draws on the world's own :class:`crowdnav.Simulator` (its *slot*) and its
+state is copied into the stack; the goal rules (:func:`crowdnav.groups.apply_goal_rules`) change
+the world's row of the stack in place, drawing from the slot's generator. Crowds large enough for the neighbour grid
 (``Simulator.grid_from`` humans) are not batched. ORCA humans (``model: orca``) get their velocities
 from each world's own solver (its slot's :class:`crowdnav.orca.OrcaCrowd`), one world at a time:
 pyrvo steps one world per call.
@@ -30,14 +33,10 @@ from crowdnav.batch.state import BatchState
 from crowdnav.events import Collision, SimulationError
 from crowdnav.groups import apply_goal_rules
 from crowdnav.obstacles import nearest_on_edges
-from crowdnav.simulator import _OBSTACLE_PASSES, _SELF_DISTANCE, Simulator
+from crowdnav.sim_state import OBSTACLE_PASSES, SELF_DISTANCE, PairConstants, SimState
+from crowdnav.simulator import Simulator
 from crowdnav.world import CompiledWorld
 
-_PER_WORLD = ("positions", "velocities", "human_goals", "human_preferred_speed", "_command_cap", "human_stopped", "human_arrived", "human_group",
-              "human_respawns")
-"""Simulator arrays with one row per world in a bucket (robot first where the robot has an entry)."""
-_SCALARS = ("robot_goal", "robot_heading", "step_count")
-"""Simulator scalars, one entry per world in a bucket."""
 _GEOMETRY = ("pair_offset", "pair_distance", "gap", "repulsion", "humans_touch", "polygon_offset", "polygon_distance", "disc_offset", "disc_distance")
 """What a refresh measures, one row per world in a bucket (created by the first refresh)."""
 CHUNK_ELEMENTS = 65_536
@@ -67,49 +66,53 @@ class StepResult:
         return self.goal_reached | self.left_world | self.collided
 
 
-class Bucket:
-    """The worlds of a batch that have ``n`` humans this episode, stacked row by row."""
+def _state_field(name: str) -> property:
+    return property(lambda self: getattr(self.state, name), doc=f"(K, ...) :attr:`SimState.{name}` of every row (``state.{name}``).")
 
-    def __init__(self, n: int, slot: Simulator):
+
+class Bucket:
+    """The worlds of a batch that have ``n`` humans this episode, stacked row by row.
+
+    ``state``: their :class:`SimState` with a leading world axis (its fields also read as the
+    bucket's attributes: ``bucket.positions`` is ``bucket.state.positions``); the geometry arrays
+    (``pair_offset``, ``gap``, ``repulsion``, ...) are created by the first refresh.
+    """
+
+    def __init__(self, n: int, constants: PairConstants, world: int, state: SimState):
         self.n = n
-        self.radii = slot.radii
-        self.contact_all = slot._contact_all
-        self.gain, self.decay = slot._gain, slot._decay
-        self.world = np.zeros(0, dtype=np.intp)
+        self.radii = constants.radii
+        self.contact_all = constants.contact_all
+        self.gain, self.decay = constants.gain, constants.decay
+        self.world = np.array([world], dtype=np.intp)
         """(K,) the batch index of each row's world."""
-        for name in _PER_WORLD:
-            template = getattr(slot, name)
-            setattr(self, name, np.zeros((0, *template.shape), dtype=template.dtype))
-        self.robot_goal = np.zeros(0, dtype=complex)
-        self.robot_heading = np.zeros(0)
-        self.step_count = np.zeros(0, dtype=np.intp)
+        self.state = SimState.stack([state])
 
     def __len__(self) -> int:
         return len(self.world)
 
-    def add(self, world: int, slot: Simulator) -> None:
-        """Append ``world`` with the state its slot holds after a reset."""
+    def add(self, world: int, state: SimState) -> None:
+        """Append ``world`` with its ``state`` after a reset."""
         self.world = np.append(self.world, world)
-        for name in _PER_WORLD:
-            setattr(self, name, np.concatenate([getattr(self, name), getattr(slot, name)[None]]))
-        for name in _SCALARS:
-            setattr(self, name, np.append(getattr(self, name), getattr(slot, name)))
+        self.state = self.state.append(state)
         for name in _GEOMETRY:  # a row for the newcomer, filled by the refresh that follows its reset
             stack = getattr(self, name, None)
             if stack is not None:
                 setattr(self, name, np.concatenate([stack, np.zeros((1, *stack.shape[1:]), dtype=stack.dtype)]))
 
-    def replace(self, row: int, slot: Simulator) -> None:
-        """Overwrite ``row`` with the state its slot holds after a reset (same crowd size)."""
-        for name in (*_PER_WORLD, *_SCALARS):
-            getattr(self, name)[row] = getattr(slot, name)
+    def replace(self, row: int, state: SimState) -> None:
+        """Overwrite ``row`` with its world's ``state`` after a reset (same crowd size)."""
+        self.state.set_row(row, state)
 
     def remove(self, row: int) -> None:
         keep = np.arange(len(self)) != row
         self.world = self.world[keep]
-        for name in (*_PER_WORLD, *_SCALARS, *(g for g in _GEOMETRY if hasattr(self, g))):
+        self.state = self.state.take(keep)
+        for name in (g for g in _GEOMETRY if hasattr(self, g)):
             setattr(self, name, getattr(self, name)[keep])
 
+
+for _name in SimState.__dataclass_fields__:  # bucket.positions is bucket.state.positions, and so on
+    setattr(Bucket, _name, _state_field(_name))
 
 
 class BatchSimulator:
@@ -133,10 +136,12 @@ class BatchSimulator:
         if first.max_humans >= first.grid_from:
             raise ValueError(f"the batched simulator handles crowds below {first.grid_from} humans (all pairs); "
                              f"this scenario allows {first.max_humans}: use gymnasium.make_vec(..., vectorization_mode='sync')")
-        self._surface = first.obstacles.surface
-        self._static_count = first._static_count
-        self._polygons = first.obstacles.polygon_count
-        self._force, self._relax, self._bounds = first._force, first._relax, first._bounds
+        obstacles = world.obstacles
+        self._surface = obstacles.surface
+        self._polygons = obstacles.polygon_count
+        self._static_count = obstacles.polygon_count + obstacles.disc_count
+        self._labels = obstacles.labels + obstacles.disc_labels
+        self._force, self._relax, self._bounds = self.scenario.humans.social_force, first.relaxation, first.bounds
         self._orca = first.orca
         """The first world's ORCA crowd, for what all worlds share (None: social force only)."""
         robot = self.scenario.robot
@@ -152,17 +157,19 @@ class BatchSimulator:
         for world, seed in zip(worlds, seeds, strict=True):  # per reset event: placement draws from each world's generator
             slot = self.slots[world]
             slot.draw_episode(seed)
-            n = slot.n_humans
+            state = slot.state
+            n = state.n_humans
             size, row = self._where[world]
             if size == n:
-                self.buckets[n].replace(row, slot)
+                self.buckets[n].replace(row, state)
             else:
                 if size >= 0:
                     self._drop(world, size, row)
                 bucket = self.buckets.get(n)
                 if bucket is None:
-                    bucket = self.buckets[n] = Bucket(n, slot)
-                bucket.add(world, slot)
+                    bucket = self.buckets[n] = Bucket(n, slot.pair_constants(n), world, state)
+                else:
+                    bucket.add(world, state)
                 self._where[world] = n, len(bucket) - 1
             fresh.setdefault(n, []).append(int(world))
         for n, fresh_worlds in fresh.items():  # one geometry pass per crowd size for all the new episodes
@@ -175,15 +182,21 @@ class BatchSimulator:
         if not len(bucket):
             del self.buckets[size]
 
-    def crowd_size(self, world: int) -> int:
-        return int(self._where[world, 0])
-
     def locate(self, world: int) -> tuple[Bucket, int]:
         """The bucket holding ``world`` and its row there."""
         size, row = self._where[world]
         if size < 0:
             raise RuntimeError(f"world {world} has not been reset")
         return self.buckets[int(size)], int(row)
+
+    def simulator(self, world: int) -> Simulator:
+        """A snapshot of ``world`` now: a :class:`Simulator` holding a copy of its current state, geometry measured.
+
+        Built on each call (the world's slot cloned with its row of the stack): later steps of the
+        batch do not change it, and stepping it does not change the batch (its own generator copy).
+        """
+        bucket, row = self.locate(world)
+        return self.slots[world].clone(bucket.state.row(row))
 
     # ------------------------------------------------------------------- step
 
@@ -207,30 +220,30 @@ class BatchSimulator:
         return max(1, CHUNK_ELEMENTS // ((n + 1) * (n + 1 + self._static_count)))
 
     def _advance(self, bucket: Bucket, rows: np.ndarray, actions: np.ndarray, result: StepResult) -> None:
-        n, dt = bucket.n, self.dt
-        positions = bucket.positions[rows]
-        velocities = bucket.velocities[rows]
-        robot_re, robot_im, heading = self._robot_velocity(actions, bucket.robot_heading[rows])
+        n, dt, state = bucket.n, self.dt, bucket.state
+        positions = state.positions[rows]
+        velocities = state.velocities[rows]
+        robot_re, robot_im, heading = self._robot_velocity(actions, state.robot_heading[rows])
         force = self._force
         if n:
             commands = None
             if self._orca is None or not self._orca.all_orca:
-                to_goal = bucket.human_goals[rows] - positions[:, 1:]
+                to_goal = state.human_goals[rows] - positions[:, 1:]
                 total = sf.goal_force(to_goal, force.goal_weight, force.goal_saturation_distance)
                 total += bucket.repulsion[rows, 1:]
-                commands = sf.velocity_command(total, velocities[:, 1:], bucket.human_preferred_speed[rows], bucket._command_cap[rows], self._relax)
+                commands = sf.velocity_command(total, velocities[:, 1:], state.human_preferred_speed[rows], state.command_cap[rows], self._relax)
             if self._orca is not None:
                 commands = self._orca_commands(bucket, rows, positions, velocities, commands)
-            stopped = bucket.human_stopped[rows]
+            stopped = state.human_stopped[rows]
             if stopped.any():  # np.where picks the command itself where not stopped: exact for the others
                 commands = np.where(stopped, 0.0, commands)
             velocities[:, 1:] = commands
         velocities.real[:, 0], velocities.imag[:, 0] = robot_re, robot_im  # exactly the scalar's parts
         positions += velocities * dt
-        bucket.robot_heading[rows] = heading
-        bucket.step_count[rows] += 1
+        state.robot_heading[rows] = heading
+        state.step_count[rows] += 1
         self._check_finite(bucket, rows, positions, velocities)
-        bucket.positions[rows], bucket.velocities[rows] = positions, velocities
+        state.positions[rows], state.velocities[rows] = positions, velocities
         self._refresh(bucket, rows)
         if n:
             touch = rows[bucket.humans_touch[rows]]
@@ -240,13 +253,13 @@ class BatchSimulator:
         self._robot_events(bucket, rows, result)
         if n:
             self._goal_rules(bucket, rows)
-        result.truncated[bucket.world[rows]] = bucket.step_count[rows] >= self.scenario.max_steps
+        result.truncated[bucket.world[rows]] = state.step_count[rows] >= self.scenario.max_steps
 
     def _orca_commands(self, bucket: Bucket, rows: np.ndarray, positions: np.ndarray, velocities: np.ndarray,
                        social: np.ndarray | None) -> np.ndarray:
         """:meth:`Simulator.crowd_commands` with ORCA humans: ORCA's velocities where a world's human follows it, else ``social``."""
         commands = np.empty((len(rows), bucket.n), dtype=complex)
-        goals, speeds = bucket.human_goals[rows], bucket.human_preferred_speed[rows]
+        goals, speeds = bucket.state.human_goals[rows], bucket.state.human_preferred_speed[rows]
         for k, world in enumerate(bucket.world[rows]):  # per world: a pyrvo solver holds one world's agents
             crowd = self.slots[world].orca
             orca = crowd.velocities(positions[k], velocities[k], goals[k], speeds[k])
@@ -289,18 +302,18 @@ class BatchSimulator:
             return
         k, agent = np.argwhere(~finite)[0]
         who = "the robot" if agent == 0 else f"human {agent - 1}"
-        raise SimulationError(f"world {bucket.world[rows[k]]}, step {bucket.step_count[rows[k]]}: the position of {who} became "
+        raise SimulationError(f"world {bucket.world[rows[k]]}, step {bucket.state.step_count[rows[k]]}: the position of {who} became "
                               f"non-finite (its velocity: {velocities[k, agent]}); check the scenario's social_force parameters")
 
     # --------------------------------------------------------------- geometry
 
     def _refresh(self, bucket: Bucket, rows: np.ndarray) -> None:
         """:meth:`Simulator.refresh` for ``rows`` of ``bucket`` (the stacks are filled on first use)."""
-        z = bucket.positions[rows]
+        z = bucket.state.positions[rows]
         k, m = z.shape
         offset = z[:, None, :] - z[:, :, None]  # [world, i, j]: from agent i to agent j
         distance = np.abs(offset)
-        distance.reshape(k, m * m)[:, :: m + 1] = _SELF_DISTANCE
+        distance.reshape(k, m * m)[:, :: m + 1] = SELF_DISTANCE
         geometry = {"pair_offset": offset, "pair_distance": distance}
         if self._static_count:
             static_offset, static_distance = nearest_on_edges(z.reshape(-1), self._surface)
@@ -327,17 +340,17 @@ class BatchSimulator:
 
     def _resolve_overlaps(self, bucket: Bucket, rows: np.ndarray) -> None:
         """:meth:`Simulator._resolve_human_overlaps` for ``rows`` (worlds where a human touches someone or something)."""
-        n = bucket.n
-        positions = bucket.positions[rows]
+        n, state = bucket.n, bucket.state
+        positions = state.positions[rows]
         pair_gap = bucket.gap[rows, 1:, 1 : n + 1]
         push = (bucket.pair_offset[rows, 1:, 1:] / bucket.pair_distance[rows, 1:, 1:]) * (np.minimum(pair_gap, 0.0) / 2)
         positions[:, 1:] += push.sum(-1)
-        bucket.positions[rows] = positions
+        state.positions[rows] = positions
         if not self._static_count:
             return
         contact = bucket.contact_all[1:, n + 1 :]
-        for _ in range(_OBSTACLE_PASSES):
-            humans = bucket.positions[rows, 1:]
+        for _ in range(OBSTACLE_PASSES):
+            humans = state.positions[rows, 1:]
             offset, distance = nearest_on_edges(humans.reshape(-1), self._surface)
             offset, distance = offset.reshape(len(rows), n, -1), distance.reshape(len(rows), n, -1)
             gap = distance - contact
@@ -347,7 +360,7 @@ class BatchSimulator:
             rows, humans, offset, distance, gap = rows[overlapping], humans[overlapping], offset[overlapping], distance[overlapping], gap[overlapping]
             direction = offset / np.maximum(distance, 1e-12)
             humans += (direction * np.minimum(gap, 0.0)).sum(-1)
-            bucket.positions[rows, 1:] = humans
+            state.positions[rows, 1:] = humans
 
     # ----------------------------------------------------------------- events
 
@@ -360,33 +373,26 @@ class BatchSimulator:
                 if j <= n:
                     hit = Collision("human", f"human_{j - 1}", float(robot_gap[k, j]))
                 else:
-                    labels = self.slots[0].obstacles.labels + self.slots[0].obstacles.disc_labels
-                    hit = Collision("static", labels[j - n - 1], float(robot_gap[k, j]))
+                    hit = Collision("static", self._labels[j - n - 1], float(robot_gap[k, j]))
                 result.collisions[int(worlds[k])] = hit
-        robot = bucket.positions[rows, 0]
+        robot = bucket.state.positions[rows, 0]
         if self._bounds is not None:
             x0, y0, x1, y1 = self._bounds
             result.left_world[worlds] = ~((x0 <= robot.real) & (robot.real <= x1) & (y0 <= robot.imag) & (robot.imag <= y1))
-        goal = bucket.robot_goal[rows]
+        goal = bucket.state.robot_goal[rows]
         result.goal_reached[worlds] = np.hypot(goal.real - robot.real, goal.imag - robot.imag) <= self.scenario.robot.goal_radius
 
     def _goal_rules(self, bucket: Bucket, rows: np.ndarray) -> None:
         """:func:`crowdnav.groups.apply_goal_rules`: vectorized where nobody arrived, per world where someone did."""
-        tolerance = self.scenario.humans.social_force.goal_tolerance
-        arrived = np.abs(bucket.human_goals[rows] - bucket.positions[rows, 1:]) <= tolerance
-        stopped = bucket.human_stopped[rows]
-        bucket.human_arrived[rows] = arrived & ~stopped
+        tolerance, state = self.scenario.humans.social_force.goal_tolerance, bucket.state
+        arrived = np.abs(state.human_goals[rows] - state.positions[rows, 1:]) <= tolerance
+        arrived &= ~state.human_stopped[rows]
+        state.human_arrived[rows] = arrived
         moved = []
-        for k in np.flatnonzero((arrived & ~stopped).any(1)):  # per arrival event: the rules draw from the world's generator
+        for k in np.flatnonzero(arrived.any(1)):  # per arrival event: the rules draw from the world's generator
             row = rows[k]
-            slot = self.slots[bucket.world[row]]
-            # the slot works on the stacks' rows in place (views; rebound at its next event or reset)
-            views = {name: getattr(bucket, name)[row] for name in ("positions", "velocities", "human_goals", "human_stopped", "human_respawns")}
-            before = views["positions"].copy()
-            for name, view in views.items():
-                setattr(slot, name, view)
-            apply_goal_rules(slot)
-            if not np.array_equal(before, views["positions"]):
+            # on the world's row of the stack, in place (views), with its slot's groups and generator
+            if apply_goal_rules(state.row(row), self.slots[bucket.world[row]]):
                 moved.append(row)
         if moved:  # respawned humans: the geometry of the new positions, as the single simulator's refresh
             self._refresh(bucket, np.array(moved))
@@ -396,9 +402,10 @@ class BatchSimulator:
     def state(self, bucket: Bucket, rows: np.ndarray | None = None) -> BatchState:
         """What the sensors read, for ``rows`` of ``bucket`` (default: all)."""
         rows = np.arange(len(bucket)) if rows is None else rows
+        state = bucket.state
         return BatchState(
-            positions=bucket.positions[rows], velocities=bucket.velocities[rows], robot_heading=bucket.robot_heading[rows],
-            robot_goal=bucket.robot_goal[rows], radii=bucket.radii, robot_offset=bucket.pair_offset[rows, 0],
+            positions=state.positions[rows], velocities=state.velocities[rows], robot_heading=state.robot_heading[rows],
+            robot_goal=state.robot_goal[rows], radii=bucket.radii, robot_offset=bucket.pair_offset[rows, 0],
             robot_distance=bucket.pair_distance[rows, 0], polygon_offset=bucket.polygon_offset[rows],
             polygon_distance=bucket.polygon_distance[rows], disc_offset=bucket.disc_offset[rows], disc_distance=bucket.disc_distance[rows],
         )

@@ -167,8 +167,7 @@ class CrowdNavParallelEnv(ParallelEnv):
                 else:
                     terminations[name] = terminated or bool(leaving[k])
             if leaving.any() and not (terminated or truncated):
-                sim.human_stopped[index[leaving]] = True  # it stays in the world, standing
-                sim.velocities[1:][index[leaving]] = 0.0
+                sim.stop_humans(index[leaving])  # it stays in the world, standing
                 self._active_humans = [name for name, gone in zip(self._active_humans, leaving, strict=True) if not gone]
                 if not fixed:  # under fixed_agents it stays an agent, inactive from the next step on
                     self.agents = [ROBOT, *self._active_humans]

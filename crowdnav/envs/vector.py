@@ -308,8 +308,12 @@ class CrowdNavVectorEnv(VectorEnv):
         return complex(bucket.robot_goal[row])
 
     def simulator(self, world: int) -> Any:
-        """``world``'s own :class:`crowdnav.Simulator` (its groups, radii, scenario; its state arrays are stale)."""
-        return self.batch.slots[world]
+        """A snapshot of ``world`` as a :class:`crowdnav.Simulator`, built on each call: a copy of its current state.
+
+        Its state and geometry are the world's at the moment of the call (call again after a step);
+        it shares nothing writable with the vector env, so stepping it leaves the world as it is.
+        """
+        return self.batch.simulator(world)
 
 
 def _check_num_envs(num_envs: Any) -> None:

@@ -1,0 +1,160 @@
+"""What a simulated world is made of: its episode state (:class:`SimState`) and the constants of its crowd size.
+
+One declared structure for both simulators. :class:`crowdnav.Simulator` owns one
+:class:`SimState` of one world; :class:`crowdnav.batch.simulator.BatchSimulator` keeps the
+worlds that have the same number of humans as one :class:`SimState` whose every field has a
+leading world axis (K,) and moves rows between the two with :meth:`SimState.row`,
+:meth:`SimState.set_row`, :meth:`SimState.append` and :meth:`SimState.take`. Nothing outside the
+simulators writes into a state: the simulator's methods (:meth:`crowdnav.Simulator.stop_humans`)
+and the goal rules (:func:`crowdnav.groups.apply_goal_rules`, on the state they are given) do.
+
+The geometry a simulator measures from a state (distances, gaps, repulsion) is not state: it is
+recomputed from the positions by ``refresh`` and never written by anyone else.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass, fields
+from typing import Any
+
+import numpy as np
+
+from crowdnav import social_force as sf
+from crowdnav.crowd_grid import CrowdGrid
+
+OBSTACLE_PASSES = 3
+"""Obstacle pushes per overlapping step (corners between two obstacles need more than one)."""
+SELF_DISTANCE = 1.0e9
+"""Stand-in for an agent's distance to itself (m), so it neither repels nor overlaps itself."""
+
+
+@dataclass(eq=False)
+class SimState:
+    """One world's episode state (or K worlds', each field with a leading (K,) axis); agent 0 is the robot.
+
+    Points and velocities are complex ``x + 1j*y`` (m, m/s, world frame); ``n`` is the episode's
+    number of humans, human ``i`` is agent ``i + 1``. For one world the scalar fields are Python
+    numbers (the robot's kinematics is Python float math, ~10x faster than numpy on 2-3 numbers).
+    """
+
+    positions: np.ndarray
+    """(n+1,) complex128, m: the robot's centre, then every human's."""
+    velocities: np.ndarray
+    """(n+1,) complex128, m/s: every agent's velocity over the last step (0 after a reset)."""
+    robot_goal: complex
+    """complex, m: the centre of the robot's goal disc."""
+    robot_heading: float
+    """float, rad, counter-clockwise from +x, in [-pi, pi]: the robot's heading."""
+    step_count: int
+    """int: steps taken this episode."""
+    human_group: np.ndarray
+    """(n,) int64: each human's group, an index into the scenario's groups (file order)."""
+    human_goals: np.ndarray
+    """(n,) complex128, m: each human's current goal (standing members: where they stand)."""
+    human_preferred_speed: np.ndarray
+    """(n,) float64, m/s: each human's preferred walking speed, drawn at reset (standing: 0)."""
+    human_max_speed: np.ndarray
+    """(n,) float64, m/s: each human's speed cap, ``max_speed_factor`` times its preferred speed."""
+    command_cap: np.ndarray
+    """(n,) float64, m/s: the cap in the velocity command formula: ``human_max_speed``, 1 for standing members (no 0 / 0)."""
+    human_stopped: np.ndarray
+    """(n,) bool: humans that do not move: standing groups, arrivals under ``on_goal: stop``, humans a multi-agent env let leave."""
+    human_arrived: np.ndarray
+    """(n,) bool: humans that reached their goal in the last step (under ``on_goal: stop``: on arrival only)."""
+    human_respawns: np.ndarray
+    """(n,) int64: times each human respawned this episode (``on_goal: respawn``); after one it is a new pedestrian."""
+
+    @property
+    def n_humans(self) -> int:
+        return self.positions.shape[-1] - 1
+
+    def copy(self) -> SimState:
+        """A deep copy (arrays copied; scalars are immutable)."""
+        return SimState(**{name: value.copy() if isinstance(value, np.ndarray) else value for name, value in self._items()})
+
+    # ------------------------------------------------- K worlds, one per row
+
+    @classmethod
+    def stack(cls, states: Sequence[SimState]) -> SimState:
+        """Worlds with the same number of humans as one state with a leading world axis, in the given order."""
+        return cls(**{f.name: np.stack([np.asarray(getattr(state, f.name)) for state in states]) for f in fields(cls)})
+
+    def row(self, k: int) -> SimState:
+        """World ``k`` of a stacked state: its arrays are views (writing them writes the stack), its scalars Python numbers."""
+        out = {name: value[k] for name, value in self._items()}
+        return SimState(**{**out, "robot_goal": complex(out["robot_goal"]), "robot_heading": float(out["robot_heading"]),
+                           "step_count": int(out["step_count"])})
+
+    def set_row(self, k: int, state: SimState) -> None:
+        """Overwrite world ``k`` of a stacked state with one world's ``state`` (same number of humans)."""
+        for name, value in self._items():
+            value[k] = getattr(state, name)
+
+    def append(self, state: SimState) -> SimState:
+        """A stacked state with one world's ``state`` added as its last row (new arrays)."""
+        return SimState(**{name: np.concatenate([value, np.asarray(getattr(state, name))[None]]) for name, value in self._items()})
+
+    def take(self, rows: np.ndarray) -> SimState:
+        """The worlds ``rows`` (indices or a bool mask) of a stacked state (new arrays)."""
+        return SimState(**{name: value[rows] for name, value in self._items()})
+
+    def _items(self) -> list[tuple[str, Any]]:
+        return [(f.name, getattr(self, f.name)) for f in fields(self)]
+
+
+@dataclass(frozen=True, eq=False)
+class PairConstants:
+    """What the pairwise and obstacle repulsion of a crowd of n humans need, shared by every world of that size.
+
+    S = P + C static obstacles (polygons, then discs). All-pairs crowds fill the tables; crowds of
+    ``Simulator.grid_from`` or more have ``grid`` instead (no (n+1)^2 tables).
+    """
+
+    radii: np.ndarray
+    """(n+1,) float64, m: body radii, robot first."""
+    contact: np.ndarray | None
+    """(n+1, n+1) float64, m: ``radii[i] + radii[j]``, the centre distance at which two agents touch."""
+    gain: np.ndarray | None
+    """(n+1, n+1+S) float64: repulsion gain of column j on agent i (agents, then obstacles); 0 where nothing pushes."""
+    decay: np.ndarray | None
+    """(n+1, n+1+S) float64, 1/m: ``-1 / range`` of each column's repulsion."""
+    contact_all: np.ndarray | None
+    """(n+1, n+1+S) float64, m: surface contact distance of each column: touching where distance - contact <= 0."""
+    grid: CrowdGrid | None
+    """The neighbour-grid constants of a large crowd (None: all pairs)."""
+
+
+def pair_constants(scenario: Any, obstacles: Any, n: int, grid: bool = False) -> PairConstants:
+    """The :class:`PairConstants` of ``n`` humans in ``scenario`` among ``obstacles`` (a pure function of them)."""
+    robot, humans, force = scenario.robot, scenario.humans, scenario.humans.social_force
+    radii = np.full(n + 1, humans.radius)
+    radii[0] = robot.radius
+    # Obstacle columns (both geometries): polygons by surface distance, discs by centre distance
+    # with their radius folded into the gain (same force, one array op less per step).
+    static_strength = np.full((n + 1, 1), force.obstacle_strength)
+    static_strength[0] = 0.0  # the robot does not follow the social force
+    static_contact = radii[:, None] + obstacles.surface_radius[None, :]
+    static_gain = sf.repulsion_gain(static_strength, static_contact, force.obstacle_range)
+    if grid:  # no (n+1)^2 tables: the robot's row and column, the obstacles' columns, one human-human gain
+        crowd = CrowdGrid(n, robot.radius, humans.radius, force, humans.see_robot, static_gain, -1.0 / force.obstacle_range,
+                          static_contact, SELF_DISTANCE)
+        return PairConstants(radii, None, None, None, None, crowd)
+    contact = radii[:, None] + radii[None, :]
+    strength = np.full((n + 1, n + 1), force.human_strength)
+    decay = np.full((n + 1, n + 1), force.human_range)
+    # Column 0 is the robot: it pushes humans only when they see it. Row 0 (the humans'
+    # force on the robot) keeps the human parameters: it is the reward's social term.
+    strength[1:, 0] = force.robot_strength if humans.see_robot else 0.0
+    decay[1:, 0] = force.robot_range
+    np.fill_diagonal(strength, 0.0)
+    pair_gain = sf.repulsion_gain(strength, contact, decay)
+    static_count = obstacles.polygon_count + obstacles.disc_count
+    return PairConstants(
+        radii=radii,
+        contact=contact,
+        gain=np.concatenate([pair_gain, static_gain], axis=1),
+        decay=np.concatenate([-1.0 / decay, np.full((n + 1, static_count), -1.0 / force.obstacle_range)], axis=1),
+        contact_all=np.concatenate([contact, static_contact], axis=1),
+        grid=None,
+    )
