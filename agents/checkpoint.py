@@ -100,8 +100,12 @@ def save_checkpoint(
     return folder
 
 
-def checkpoint_folder(path: str | Path) -> Path:
-    """The checkpoint folder meant by ``path`` (a checkpoint folder, its policy.json, or a run folder)."""
+def find_checkpoint(path: str | Path) -> Path:
+    """The existing checkpoint folder meant by ``path`` (a checkpoint folder, its policy.json, or a run folder).
+
+    It looks on disk; :func:`crowdnav.agents.run_folder.checkpoint_dir` only names where a run's
+    checkpoint goes.
+    """
     path = Path(path)
     if path.is_file() and path.name == POLICY_FILE:
         return path.parent
@@ -114,7 +118,7 @@ def checkpoint_folder(path: str | Path) -> Path:
 
 def read_policy_info(path: str | Path) -> dict[str, Any]:
     """The ``policy.json`` of a checkpoint, checked."""
-    file = checkpoint_folder(path) / POLICY_FILE
+    file = find_checkpoint(path) / POLICY_FILE
     if file.stat().st_size > MAX_POLICY_BYTES:
         raise ValueError(f"{file}: {file.stat().st_size:,} bytes, more than a policy.json holds ({MAX_POLICY_BYTES:,})")
     try:
@@ -136,7 +140,7 @@ def load_model(path: str | Path, env: Any = None, device: str = "cpu") -> BaseAl
     """
     from crowdnav.agents.factory import ALGORITHMS
 
-    folder = checkpoint_folder(path)
+    folder = find_checkpoint(path)
     info = read_policy_info(folder)
     algo = ALGORITHMS.get(info["algo"])
     if algo is None:
@@ -201,7 +205,7 @@ def load_policy(path: str | Path, device: str = "cpu", *, trusted: bool = False,
     (docs/security.md). ``config``: the run's TrainConfig when the caller holds it already (the
     evaluation runner), so the checkpoint's copy is not validated again.
     """
-    folder = checkpoint_folder(path)
+    folder = find_checkpoint(path)
     info = read_policy_info(folder)
     encoder = None
     if info.get("leog_encoder"):

@@ -167,7 +167,7 @@ class LidarEncoder(nn.Module):
         self.fc, self.out_features = mlp(in_channels * length, hidden)
         self._key: tuple | None = None
 
-    reference = False  # True: the proximities computed on every call, for the benchmark's baseline
+    reference = False  # True: the proximities computed on every call, for benchmarks/bench_train.py's reference timing
 
     def proximity(self, scan: torch.Tensor) -> torch.Tensor:
         """``(high - scan) / (high - low)`` per beam, once per sampled batch (:mod:`crowdnav.agents.batch_cache`)."""

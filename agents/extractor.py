@@ -24,8 +24,8 @@ SB3's ``float() / 255`` copy of the grid, which the binarization makes irrelevan
 binarized once per sampled batch, not once per network (the actor, critic and target networks all
 read the same batch: :mod:`crowdnav.agents.batch_cache`, which also serves the LIDAR proximities and the
 RBF expansions), straight into float32 (:func:`binarize`; ``(grid > 0).float()`` converts through
-a bool tensor, ~10x slower on CPU). ``reference=True`` keeps the plain formulas (the
-benchmark's baseline; the tests check both give the same values).
+a bool tensor, ~10x slower on CPU). ``reference=True`` keeps the plain formulas (what
+benchmarks/bench_train.py times the fast path against; the tests check both give the same values).
 """
 
 from __future__ import annotations
@@ -75,7 +75,7 @@ def binarize(grid: torch.Tensor) -> torch.Tensor:
 class _LeogBranch(nn.Module):
     """Binarize, encode (unless precomputed), head."""
 
-    reference = False  # True: the plain (slower) binarization, for the benchmark's baseline
+    reference = False  # True: the plain (slower) binarization, for benchmarks/bench_train.py's reference timing
 
     def __init__(self, encoder: LeogEncoder | None, head: nn.Module):
         super().__init__()

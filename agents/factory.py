@@ -31,7 +31,7 @@ ALGORITHMS: dict[str, type[BaseAlgorithm]] = {"sac": CrowdNavSAC, "td3": CrowdNa
 with the same updates at less cost per step for SAC/TD3/DDPG (crowdnav.agents.algorithms)."""
 
 SB3_ALGORITHMS: dict[str, type[BaseAlgorithm]] = {"sac": SAC, "td3": TD3, "ddpg": DDPG, "a2c": A2C, "ppo": PPO}
-"""Config name -> Stable-Baselines3's own class (``make_model(..., reference=True)``: the benchmark's baseline)."""
+"""Config name -> Stable-Baselines3's own class (``make_model(..., reference=True)``: benchmarks/bench_train.py's reference)."""
 
 OFF_POLICY = OFF_POLICY_ALGORITHMS
 

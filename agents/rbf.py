@@ -25,7 +25,7 @@ class GaussianRBF(nn.Module):
     (per value) are learned, starting from that layout.
     """
 
-    reference = False  # True: always the plain formula (reference_forward), for the benchmark's baseline
+    reference = False  # True: always the plain formula (reference_forward), for benchmarks/bench_train.py's reference timing
 
     def __init__(self, low: np.ndarray, high: np.ndarray, centres: int = 16, trainable: bool = False, keep_input: bool = True):
         super().__init__()

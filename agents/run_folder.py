@@ -44,7 +44,7 @@ UNITS = tuple(_SNAPSHOT)
 
 
 def checkpoint_dir(train_dir: str | Path) -> Path:
-    """The folder of the run's latest checkpoint (it may not exist yet)."""
+    """The folder of the run's latest checkpoint (it may not exist yet; :func:`crowdnav.agents.checkpoint.find_checkpoint` looks)."""
     return Path(train_dir) / CHECKPOINT_DIR
 
 

@@ -38,7 +38,7 @@ from crowdnav.agents.checkpoint import (
     MODEL_FILE,
     REPLAY_FILE,
     RNG_FILE,
-    checkpoint_folder,
+    find_checkpoint,
     load_model,
     read_policy_info,
     restore_pickled_rng_state,
@@ -284,7 +284,7 @@ def _set_aside_snapshots_after(out: Path, point: int, unit: str) -> None:
 
 def _resume_state(checkpoint: Path, config: TrainConfig, trust_pickle: bool = False) -> dict[str, Any]:
     try:
-        folder = checkpoint_folder(checkpoint)
+        folder = find_checkpoint(checkpoint)
     except FileNotFoundError:
         raise ConfigError(f"cannot resume: {checkpoint} holds no checkpoint (start the run without --resume)") from None
     try:

@@ -28,7 +28,7 @@ from pathlib import Path
 
 import numpy as np
 from crowdnav.agents import load_policy, train
-from crowdnav.agents.checkpoint import checkpoint_folder
+from crowdnav.agents.checkpoint import find_checkpoint
 from crowdnav.agents.config import load_config
 
 from crowdnav.cli.common import CliError, parse_overrides
@@ -60,7 +60,7 @@ def run_seed(seed: int, args: argparse.Namespace, results: dict, save) -> None:
                                 "save_replay_buffer": True, **args.settings})
     done = False
     try:
-        done = int(json.loads((checkpoint_folder(out) / "policy.json").read_text())["episodes"]) >= args.episodes
+        done = int(json.loads((find_checkpoint(out) / "policy.json").read_text())["episodes"]) >= args.episodes
     except FileNotFoundError:
         pass
     if not done:

@@ -6,6 +6,11 @@ validates the file (:mod:`crowdnav.scenario.loader`, no geometry), then the stat
 (:mod:`crowdnav.obstacles`) and the placement candidates (:mod:`crowdnav.placement`) are
 built, which checks the geometry. A geometry problem is a ScenarioError naming the file and
 line like any other.
+
+"World" names three things in crowdnav, kept apart by their type: the scenario file's ``world:``
+section (its bounds, :class:`crowdnav.scenario.fields.World`), the compiled scenario here
+(:class:`CompiledWorld`, what a sensor is built with: a public name) and one of the K
+simulations a batch steps together (an ``int`` index in :mod:`crowdnav.batch` and the vector env).
 """
 
 from __future__ import annotations

@@ -62,7 +62,7 @@ class Executor:
         return episodes_on_disk(job.out_dir, job.protocol)
 
     def describe(self) -> str:
-        """Where the runs go, for the benchmark's first line."""
+        """Where the runs go, for the first line of ``crowdnav benchmark``."""
         return self.name
 
 
