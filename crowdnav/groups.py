@@ -16,7 +16,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from crowdnav.placement import GAP, JITTER, PlacementError
+from crowdnav.placement import GAP, JITTER_REACH, PlacementError
 
 if TYPE_CHECKING:
     from crowdnav.sim_state import SimState
@@ -25,7 +25,7 @@ if TYPE_CHECKING:
 def place_groups(sim: Any, start: np.ndarray, goal: complex, counts: list[int]) -> list[np.ndarray]:
     """Member positions of every group (complex arrays, file order), each away from the robot and the groups before it."""
     robot, radius, rng = sim.scenario.robot, sim.scenario.humans.radius, sim.rng
-    margin = GAP + math.sqrt(2) * JITTER  # the new point's jitter; placed agents are where they are
+    margin = GAP + JITTER_REACH  # the new point's jitter; placed agents are where they are
     placed, out = [start], []
     for group, places, count in zip(sim.groups, sim.placement.groups, counts, strict=True):
         if count == 0:
@@ -99,7 +99,7 @@ def _respawn(state: SimState, sim: Any, index: np.ndarray, group: Any, places: A
     """Move arrived members to free spawn points of their group; returns those that moved (the rest wait)."""
     radius, robot = sim.scenario.humans.radius, sim.scenario.robot
     others = np.delete(state.positions, index + 1)
-    reach = max(robot.radius, radius) + radius + GAP + math.sqrt(2) * JITTER
+    reach = max(robot.radius, radius) + radius + GAP + JITTER_REACH
     for count in range(len(index), 0, -1):  # at most len(index) tries, usually one
         try:
             new = places.spawn.draw(sim.rng, count, away_from=others, min_distance=reach)
