@@ -47,7 +47,8 @@ def outcome_of(collided: bool, left_world: bool, goal_reached: bool, truncated: 
 def outcomes(collided: np.ndarray, left_world: np.ndarray, goal_reached: np.ndarray, truncated: np.ndarray) -> np.ndarray:
     """(K,) object array: :func:`outcome_of` of every world (None where it runs), from (K,) bool arrays of its events."""
     names = np.array([*OUTCOME_PRECEDENCE, None], dtype=object)
-    return names[np.select([collided, left_world, goal_reached, truncated], range(len(OUTCOME_PRECEDENCE)), len(OUTCOME_PRECEDENCE))]
+    chosen: np.ndarray = names[np.select([collided, left_world, goal_reached, truncated], range(len(OUTCOME_PRECEDENCE)), len(OUTCOME_PRECEDENCE))]
+    return chosen
 
 
 @dataclass(frozen=True)

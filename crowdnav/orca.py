@@ -117,7 +117,8 @@ class OrcaSolver:
 def toward_goal(to_goal: np.ndarray, speed: np.ndarray | float, dt: float) -> np.ndarray:
     """Preferred velocity: ``speed`` towards the goal, slowed so as not to pass it within one step (complex, m/s)."""
     distance = np.abs(to_goal)
-    return to_goal * (speed / np.maximum(np.maximum(distance, np.multiply(speed, dt)), 1e-12))
+    velocity: np.ndarray = to_goal * (speed / np.maximum(np.maximum(distance, np.multiply(speed, dt)), 1e-12))
+    return velocity
 
 
 class OrcaCrowd:

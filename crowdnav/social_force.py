@@ -24,7 +24,8 @@ MAX_EXPONENT = 700.0
 
 def goal_force(to_goal: np.ndarray, weight: float, saturation_distance: float) -> np.ndarray:
     """(N,) complex: pull towards the goal, ``to_goal`` = goal minus position."""
-    return to_goal * (weight / np.maximum(np.abs(to_goal), saturation_distance))
+    force: np.ndarray = to_goal * (weight / np.maximum(np.abs(to_goal), saturation_distance))
+    return force
 
 
 def repulsion(offset: np.ndarray, distance: np.ndarray, gain: np.ndarray, neg_inv_range: np.ndarray | float) -> np.ndarray:
@@ -40,7 +41,8 @@ def repulsion(offset: np.ndarray, distance: np.ndarray, gain: np.ndarray, neg_in
     # array op at high density; 1e-7 relative error on a force is far below the model's fidelity.
     magnitude = gain * np.exp(np.multiply(distance, neg_inv_range, dtype=np.float32))
     magnitude /= distance
-    return (offset * magnitude).sum(axis=-1)  # the last axis: one world (N, M) or a batch (K, N, M)
+    force: np.ndarray = (offset * magnitude).sum(axis=-1)  # the last axis: one world (N, M) or a batch (K, N, M)
+    return force
 
 
 def repulsion_gain(strength: np.ndarray | float, contact: np.ndarray | float, decay_range: np.ndarray | float) -> np.ndarray:
@@ -66,4 +68,5 @@ def velocity_command(
     """
     command = velocity + (force * preferred_speed - velocity) * relax
     # max_speed / max(speed, max_speed) is 1 below the cap and never divides by zero.
-    return command * (max_speed / np.maximum(np.abs(command), max_speed))
+    capped: np.ndarray = command * (max_speed / np.maximum(np.abs(command), max_speed))
+    return capped

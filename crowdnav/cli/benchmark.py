@@ -18,7 +18,7 @@ def _shipped() -> list[str]:
                   if entry.name.endswith(".yaml"))
 
 
-def register(subparsers: argparse._SubParsersAction) -> None:
+def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     """Add ``benchmark``, ``plot`` and ``leaderboard``."""
     parser = subparsers.add_parser(
         "benchmark", help="train and evaluate every configuration x seed of an experiment (resumable)",

@@ -8,7 +8,7 @@ from pathlib import Path
 from crowdnav.cli.common import CliError
 
 
-def register(subparsers: argparse._SubParsersAction) -> None:
+def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     """Add ``export``."""
     parser = subparsers.add_parser(
         "export", help="write a trained policy as ONNX (raw observation dict in, deterministic action out)",

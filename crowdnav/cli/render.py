@@ -8,7 +8,7 @@ from crowdnav.cli.common import CliError, add_override_option, add_reward_option
 from crowdnav.suggest import unknown_name_message
 
 
-def register(subparsers: argparse._SubParsersAction) -> None:
+def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     parser = subparsers.add_parser(
         "render",
         help="render episodes of a policy to MP4 or GIF files",

@@ -10,7 +10,7 @@ from pathlib import Path
 from crowdnav.cli.common import CliError, add_override_option, format_table, parse_overrides
 
 
-def register(groups: argparse._SubParsersAction) -> None:
+def register(groups: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     parser = groups.add_parser("scenario", help="list, validate and describe scenario files")
     commands = parser.add_subparsers(dest="scenario_command", metavar="SUBCOMMAND", required=True)
 

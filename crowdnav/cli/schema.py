@@ -24,7 +24,7 @@ KINDS = {
 }
 
 
-def register(groups: argparse._SubParsersAction) -> None:
+def register(groups: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     parser = groups.add_parser(
         "schema", help="print the JSON Schema of a scenario, training config or experiment file",
         description="Print the JSON Schema of one configuration file kind: "

@@ -43,14 +43,14 @@ def _flatten(document: dict[str, Any], prefix: str = "") -> dict[str, Any]:
     return flat
 
 
-def register(groups: argparse._SubParsersAction) -> None:
+def register(groups: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     """Add ``train``, ``collect-dataset`` and ``pretrain-encoder``."""
     register_train(groups)
     register_collect_dataset(groups)
     register_pretrain_encoder(groups)
 
 
-def register_train(groups: argparse._SubParsersAction) -> None:
+def register_train(groups: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     parser = groups.add_parser(
         "train", help=f"train an RL agent ({', '.join(name.upper() for name in ALGOS)}) on a scenario",
         description="Train an agent from a YAML config; the flags override the config's fields. "
@@ -87,7 +87,7 @@ def register_train(groups: argparse._SubParsersAction) -> None:
     parser.set_defaults(handler=train_command)
 
 
-def register_collect_dataset(groups: argparse._SubParsersAction) -> None:
+def register_collect_dataset(groups: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     parser = groups.add_parser(
         "collect-dataset", help="record occupancy grids of a randomly wandering robot into a .npz dataset",
         description="Let the robot wander with a random policy and save its LEOG observations "
@@ -101,7 +101,7 @@ def register_collect_dataset(groups: argparse._SubParsersAction) -> None:
     parser.set_defaults(handler=collect_dataset_command)
 
 
-def register_pretrain_encoder(groups: argparse._SubParsersAction) -> None:
+def register_pretrain_encoder(groups: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     parser = groups.add_parser(
         "pretrain-encoder", help="pre-train the LEOG encoder as a convolutional autoencoder",
         description="Train an autoencoder on occupancy grids, from a dataset file or collected online "

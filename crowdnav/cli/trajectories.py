@@ -9,7 +9,7 @@ from pathlib import Path
 from crowdnav.cli.common import CliError, add_override_option, parse_overrides
 
 
-def register(subparsers: argparse._SubParsersAction) -> None:
+def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     """Add ``trajectories``."""
     traj = subparsers.add_parser(
         "trajectories", help="export test episodes (of results or of any policy): per-step CSV and TrajNet++ ndjson",

@@ -23,6 +23,7 @@ from pydantic import ValidationError
 from crowdnav.config_errors import YamlProblem, read_yaml, yaml_line
 from crowdnav.paths import safe_stem
 from crowdnav.scenario import library
+from crowdnav.scenario.crowd import Humans
 from crowdnav.scenario.errors import ScenarioError, ScenarioIssue, show
 from crowdnav.scenario.messages import schema_issues
 from crowdnav.scenario.schema import Scenario
@@ -212,7 +213,7 @@ def _apply_override(label: str, document: dict[str, Any], dotted: str, value: An
         raise ScenarioError(label, [ScenarioIssue(dotted, message)])
 
 
-def _validate_schema(label: str, document: dict, root: yaml.Node | None, override_paths: set[str]) -> Scenario:
+def _validate_schema(label: str, document: dict[str, Any], root: yaml.Node | None, override_paths: set[str]) -> Scenario:
     try:
         return Scenario.model_validate(document)
     except ValidationError as error:
@@ -275,7 +276,7 @@ def consistency_issues(scenario: Scenario) -> list[ScenarioIssue]:
     return issues
 
 
-def _fastest_speed_field(humans) -> str:
+def _fastest_speed_field(humans: Humans) -> str:
     """Where the fastest walking speed is written: a group's own preferred_speed, or the shared one."""
     for i, group in enumerate(humans.groups):
         own = group.preferred_speed

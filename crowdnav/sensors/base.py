@@ -129,7 +129,8 @@ def checked_scale(key: str, space: spaces.Box, offset: Any, scale: Any) -> tuple
 
 def normalize_values(values: np.ndarray, offset: np.ndarray, scale: np.ndarray) -> np.ndarray:
     """``(values - offset) / scale`` in float32; ``values`` may carry leading batch axes."""
-    return (np.asarray(values, dtype=np.float32) - offset) / scale
+    scaled: np.ndarray = (np.asarray(values, dtype=np.float32) - offset) / scale
+    return scaled
 
 
 def normalized_box(space: spaces.Box, offset: np.ndarray, scale: np.ndarray) -> spaces.Box:
