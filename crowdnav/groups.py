@@ -70,7 +70,7 @@ def apply_goal_rules(state: SimState, sim: Any) -> bool:
     Returns whether anyone respawned (moved): the caller then measures the new geometry.
     """
     arrived = np.abs(state.human_goals - state.positions[1:]) <= sim.scenario.humans.social_force.goal_tolerance
-    state.human_arrived[:] = arrived & ~state.human_stopped
+    np.logical_and(arrived, ~state.human_stopped, out=state.human_arrived)
     single, moved = len(sim.groups) == 1, False
     for g, (group, places) in enumerate(zip(sim.groups, sim.placement.groups, strict=True)):
         if group.standing or group.max_count == 0:

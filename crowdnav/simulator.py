@@ -39,6 +39,7 @@ import math
 import numpy as np
 
 from crowdnav import social_force as sf
+from crowdnav.contacts import deepest_contact, goal_distance, outside, push_humans_apart, push_out_of_obstacles, touching
 from crowdnav.events import OUTCOMES, Collision, SimulationError, StepEvents  # noqa: F401  (re-exported: their public home)
 from crowdnav.groups import apply_goal_rules, first_goals, place_groups
 from crowdnav.obstacles import nearest_on_edges
@@ -46,7 +47,7 @@ from crowdnav.orca import OrcaCrowd, OrcaUnavailableError
 from crowdnav.placement import JITTER
 from crowdnav.scenario.errors import ScenarioError, ScenarioIssue
 from crowdnav.scenario.loader import Overrides
-from crowdnav.sim_state import OBSTACLE_PASSES, SELF_DISTANCE, PairConstants, SimState, pair_constants
+from crowdnav.sim_state import SELF_DISTANCE, PairConstants, SimState, pair_constants
 from crowdnav.world import CompiledWorld, WorldSource, load_world
 
 
@@ -307,7 +308,7 @@ class Simulator:
             self.refresh()
         collision = self.robot_collision()
         left_world = self.robot_left_world()
-        goal_reached = abs(state.robot_goal - positions[0]) <= self.scenario.robot.goal_radius
+        goal_reached = goal_distance(state.robot_goal, positions[0]) <= self.scenario.robot.goal_radius
         if n and apply_goal_rules(state, self):  # someone respawned: the geometry of the new positions
             self.refresh()
         truncated = state.step_count >= self.scenario.max_steps
@@ -466,31 +467,18 @@ class Simulator:
         if self._grid is not None:
             positions += self._grid.push_apart(self._geometry)
             contact = self._grid.static_contact[1:]
-        else:
-            pair_gap = self._gap[1:, 1 : n + 1]
-            positions[1:] += ((self._pair_offset[1:, 1:] / self._pair_distance[1:, 1:]) * (np.minimum(pair_gap, 0.0) / 2)).sum(1)
+        else:  # the batch's kernels, on this one world (views with a world axis of one)
+            push_humans_apart(positions[None], self._pair_offset[None, 1:, 1:], self._pair_distance[None, 1:, 1:], self._gap[None, 1:, 1 : n + 1])
             contact = self._contact_all[1:, n + 1 :]
-        if not self._static_count:
-            return
-        for _ in range(OBSTACLE_PASSES):
-            offset, distance = nearest_on_edges(positions[1:], self.obstacles.surface)
-            gap = distance - contact
-            if gap.min() >= 0.0:
-                break
-            direction = offset / np.maximum(distance, 1e-12)
-            positions[1:] += (direction * np.minimum(gap, 0.0)).sum(1)
+        if self._static_count:
+            push_out_of_obstacles(positions[None], self.obstacles.surface, contact)
 
     def robot_collision(self) -> Collision | None:
         """The robot's deepest contact in the current state (touching counts), or None."""
         gaps = self._robot_gap
-        if not len(gaps) or gaps.min() > 0.0:
+        if not len(gaps) or not touching(gaps):
             return None  # the common case, decided with one reduction
-        k = int(gaps.argmin())
-        n = self.n_humans
-        if k <= n:
-            return Collision("human", f"human_{k - 1}", float(gaps[k]))
-        labels = self.obstacles.labels + self.obstacles.disc_labels
-        return Collision("static", labels[k - n - 1], float(gaps[k]))
+        return deepest_contact(gaps, self.n_humans, self.obstacles.labels + self.obstacles.disc_labels)
 
     def robot_left_world(self) -> bool:
         """Whether the robot's centre is outside the world rectangle (always False with boundary walls).
@@ -499,6 +487,5 @@ class Simulator:
         """
         if self.bounds is None:
             return False
-        x0, y0, x1, y1 = self.bounds
         robot = complex(self._state.positions[0])
-        return not (x0 <= robot.real <= x1 and y0 <= robot.imag <= y1)
+        return outside(robot.real, robot.imag, self.bounds)

@@ -30,10 +30,11 @@ import numpy as np
 from crowdnav import social_force as sf
 from crowdnav.batch.scalar_math import TWO_PI, cmul, remainder
 from crowdnav.batch.state import BatchState
+from crowdnav.contacts import deepest_contact, goal_distance, outside, push_humans_apart, push_out_of_obstacles, touching
 from crowdnav.events import Collision, SimulationError
 from crowdnav.groups import apply_goal_rules
 from crowdnav.obstacles import nearest_on_edges
-from crowdnav.sim_state import OBSTACLE_PASSES, SELF_DISTANCE, PairConstants, SimState
+from crowdnav.sim_state import SELF_DISTANCE, PairConstants, SimState
 from crowdnav.simulator import Simulator
 from crowdnav.world import CompiledWorld
 
@@ -340,27 +341,12 @@ class BatchSimulator:
 
     def _resolve_overlaps(self, bucket: Bucket, rows: np.ndarray) -> None:
         """:meth:`Simulator._resolve_human_overlaps` for ``rows`` (worlds where a human touches someone or something)."""
-        n, state = bucket.n, bucket.state
-        positions = state.positions[rows]
-        pair_gap = bucket.gap[rows, 1:, 1 : n + 1]
-        push = (bucket.pair_offset[rows, 1:, 1:] / bucket.pair_distance[rows, 1:, 1:]) * (np.minimum(pair_gap, 0.0) / 2)
-        positions[:, 1:] += push.sum(-1)
-        state.positions[rows] = positions
-        if not self._static_count:
-            return
-        contact = bucket.contact_all[1:, n + 1 :]
-        for _ in range(OBSTACLE_PASSES):
-            humans = state.positions[rows, 1:]
-            offset, distance = nearest_on_edges(humans.reshape(-1), self._surface)
-            offset, distance = offset.reshape(len(rows), n, -1), distance.reshape(len(rows), n, -1)
-            gap = distance - contact
-            overlapping = gap.reshape(len(rows), -1).min(1) < 0.0  # a world whose humans are clear stops here
-            if not overlapping.any():
-                return
-            rows, humans, offset, distance, gap = rows[overlapping], humans[overlapping], offset[overlapping], distance[overlapping], gap[overlapping]
-            direction = offset / np.maximum(distance, 1e-12)
-            humans += (direction * np.minimum(gap, 0.0)).sum(-1)
-            state.positions[rows, 1:] = humans
+        n = bucket.n
+        positions = bucket.state.positions[rows]
+        push_humans_apart(positions, bucket.pair_offset[rows, 1:, 1:], bucket.pair_distance[rows, 1:, 1:], bucket.gap[rows, 1:, 1 : n + 1])
+        if self._static_count:
+            push_out_of_obstacles(positions, self._surface, bucket.contact_all[1:, n + 1 :])
+        bucket.state.positions[rows] = positions
 
     # ----------------------------------------------------------------- events
 
@@ -368,19 +354,12 @@ class BatchSimulator:
         n, worlds = bucket.n, bucket.world[rows]
         robot_gap = bucket.gap[rows, 0]
         if robot_gap.shape[1]:
-            for k in np.flatnonzero(robot_gap.min(1) <= 0.0):  # per collision event
-                j = int(robot_gap[k].argmin())
-                if j <= n:
-                    hit = Collision("human", f"human_{j - 1}", float(robot_gap[k, j]))
-                else:
-                    hit = Collision("static", self._labels[j - n - 1], float(robot_gap[k, j]))
-                result.collisions[int(worlds[k])] = hit
+            for k in np.flatnonzero(touching(robot_gap)):  # per collision event
+                result.collisions[int(worlds[k])] = deepest_contact(robot_gap[k], n, self._labels)
         robot = bucket.state.positions[rows, 0]
         if self._bounds is not None:
-            x0, y0, x1, y1 = self._bounds
-            result.left_world[worlds] = ~((x0 <= robot.real) & (robot.real <= x1) & (y0 <= robot.imag) & (robot.imag <= y1))
-        goal = bucket.state.robot_goal[rows]
-        result.goal_reached[worlds] = np.hypot(goal.real - robot.real, goal.imag - robot.imag) <= self.scenario.robot.goal_radius
+            result.left_world[worlds] = outside(robot.real, robot.imag, self._bounds)
+        result.goal_reached[worlds] = goal_distance(bucket.state.robot_goal[rows], robot) <= self.scenario.robot.goal_radius
 
     def _goal_rules(self, bucket: Bucket, rows: np.ndarray) -> None:
         """:func:`crowdnav.groups.apply_goal_rules`: vectorized where nobody arrived, per world where someone did."""
