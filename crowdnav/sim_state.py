@@ -103,6 +103,92 @@ class SimState:
         return [(f.name, getattr(self, f.name)) for f in fields(self)]
 
 
+class StateFields:
+    """A :class:`SimState`'s fields read as the owner's attributes (``sim.positions``): the mixin of :class:`crowdnav.Simulator`.
+
+    Each returns the state's own array (read it; the simulator's methods change it). The four with
+    a setter may be replaced to stage a scene by hand (tests, scripted set-ups; then ``refresh()``).
+    """
+
+    _state: SimState
+
+    @property
+    def positions(self) -> np.ndarray:
+        """(n+1,) complex (m): :attr:`SimState.positions`, robot then humans."""
+        return self._state.positions
+
+    @positions.setter
+    def positions(self, value: np.ndarray) -> None:
+        self._state.positions = value
+
+    @property
+    def velocities(self) -> np.ndarray:
+        """(n+1,) complex (m/s): :attr:`SimState.velocities`."""
+        return self._state.velocities
+
+    @velocities.setter
+    def velocities(self, value: np.ndarray) -> None:
+        self._state.velocities = value
+
+    @property
+    def robot_goal(self) -> complex:
+        """complex (m): :attr:`SimState.robot_goal`."""
+        return self._state.robot_goal
+
+    @robot_goal.setter
+    def robot_goal(self, value: complex) -> None:
+        self._state.robot_goal = complex(value)
+
+    @property
+    def robot_heading(self) -> float:
+        """float (rad): :attr:`SimState.robot_heading`."""
+        return self._state.robot_heading
+
+    @robot_heading.setter
+    def robot_heading(self, value: float) -> None:
+        self._state.robot_heading = float(value)
+
+    @property
+    def step_count(self) -> int:
+        """:attr:`SimState.step_count`."""
+        return self._state.step_count
+
+    @property
+    def human_group(self) -> np.ndarray:
+        """(n,) int: :attr:`SimState.human_group`, indices into the simulator's ``groups``."""
+        return self._state.human_group
+
+    @property
+    def human_goals(self) -> np.ndarray:
+        """(n,) complex (m): :attr:`SimState.human_goals`."""
+        return self._state.human_goals
+
+    @property
+    def human_preferred_speed(self) -> np.ndarray:
+        """(n,) float (m/s): :attr:`SimState.human_preferred_speed`."""
+        return self._state.human_preferred_speed
+
+    @property
+    def human_max_speed(self) -> np.ndarray:
+        """(n,) float (m/s): :attr:`SimState.human_max_speed`."""
+        return self._state.human_max_speed
+
+    @property
+    def human_stopped(self) -> np.ndarray:
+        """(n,) bool: :attr:`SimState.human_stopped`."""
+        return self._state.human_stopped
+
+    @property
+    def human_arrived(self) -> np.ndarray:
+        """(n,) bool: :attr:`SimState.human_arrived`."""
+        return self._state.human_arrived
+
+    @property
+    def human_respawns(self) -> np.ndarray:
+        """(n,) int: :attr:`SimState.human_respawns`."""
+        return self._state.human_respawns
+
+
 @dataclass(frozen=True, eq=False)
 class PairConstants:
     """What the pairwise and obstacle repulsion of a crowd of n humans need, shared by every world of that size.

@@ -23,9 +23,10 @@ walls are obstacles, touching them is a collision) or ends the episode with the 
 
 The episode's state is one declared :class:`crowdnav.sim_state.SimState` the simulator owns
 (:attr:`Simulator.state`); its fields read as the simulator's attributes (``sim.positions``,
-``sim.human_goals``, ...). Only the simulator's methods change it (:meth:`Simulator.step`,
-:meth:`Simulator.stop_humans`, the goal rules it runs); staging a scene by hand (tests, scripted
-set-ups) writes those arrays and then calls :meth:`Simulator.refresh`.
+``sim.human_goals``, ...: :class:`crowdnav.sim_state.StateFields`). Only the simulator's
+methods change it (:meth:`Simulator.step`, :meth:`Simulator.stop_humans`, the goal rules it
+runs); staging a scene by hand (tests, scripted set-ups) writes those arrays and then calls
+:meth:`Simulator.refresh`.
 
 Randomness comes only from the generator seeded by :meth:`Simulator.reset`.
 """
@@ -47,11 +48,11 @@ from crowdnav.orca import OrcaCrowd, OrcaUnavailableError
 from crowdnav.placement import JITTER
 from crowdnav.scenario.errors import ScenarioError, ScenarioIssue
 from crowdnav.scenario.loader import Overrides
-from crowdnav.sim_state import SELF_DISTANCE, PairConstants, SimState, pair_constants
+from crowdnav.sim_state import SELF_DISTANCE, PairConstants, SimState, StateFields, pair_constants
 from crowdnav.world import CompiledWorld, WorldSource, load_world
 
 
-class Simulator:
+class Simulator(StateFields):
     """Vectorized crowd simulator for one scenario.
 
     >>> sim = Simulator("room_furniture")
@@ -127,28 +128,6 @@ class Simulator:
     def n_humans(self) -> int:
         """Active humans this episode."""
         return len(self._state.positions) - 1
-
-    # The state's fields, read as attributes (``SimState`` says what each holds). The four with a
-    # setter may be replaced to stage a scene by hand (then call refresh()).
-    positions = property(lambda self: self._state.positions, lambda self, value: self._stage("positions", value),
-                         doc="(n+1,) complex (m): :attr:`SimState.positions` (robot, then humans).")
-    velocities = property(lambda self: self._state.velocities, lambda self, value: self._stage("velocities", value),
-                          doc="(n+1,) complex (m/s): :attr:`SimState.velocities`.")
-    robot_goal = property(lambda self: self._state.robot_goal, lambda self, value: self._stage("robot_goal", complex(value)),
-                          doc="complex (m): :attr:`SimState.robot_goal`.")
-    robot_heading = property(lambda self: self._state.robot_heading, lambda self, value: self._stage("robot_heading", float(value)),
-                             doc="float (rad): :attr:`SimState.robot_heading`.")
-    step_count = property(lambda self: self._state.step_count, doc=":attr:`SimState.step_count`.")
-    human_group = property(lambda self: self._state.human_group, doc="(n,): :attr:`SimState.human_group`, indices into :attr:`groups`.")
-    human_goals = property(lambda self: self._state.human_goals, doc="(n,) complex (m): :attr:`SimState.human_goals`.")
-    human_preferred_speed = property(lambda self: self._state.human_preferred_speed, doc="(n,) m/s: :attr:`SimState.human_preferred_speed`.")
-    human_max_speed = property(lambda self: self._state.human_max_speed, doc="(n,) m/s: :attr:`SimState.human_max_speed`.")
-    human_stopped = property(lambda self: self._state.human_stopped, doc="(n,) bool: :attr:`SimState.human_stopped`.")
-    human_arrived = property(lambda self: self._state.human_arrived, doc="(n,) bool: :attr:`SimState.human_arrived`.")
-    human_respawns = property(lambda self: self._state.human_respawns, doc="(n,) int: :attr:`SimState.human_respawns`.")
-
-    def _stage(self, name: str, value: object) -> None:
-        setattr(self.state, name, value)
 
     @property
     def robot_position(self) -> complex:
