@@ -7,9 +7,10 @@ import shutil
 
 import numpy as np
 import pytest
-from agents_tiny import tiny_config
 from crowdnav.agents import ConfigError, load_policy, train, train_seed
 from crowdnav.agents.callbacks import set_aside_episodes_from
+
+from tests.agents_tiny import tiny_config
 
 
 def test_saved_checkpoint_loads_as_a_deterministic_policy_that_acts(tmp_path):

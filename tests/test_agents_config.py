@@ -7,11 +7,11 @@ import json
 import numpy as np
 import pytest
 import yaml
-from agents_tiny import tiny_config
 from crowdnav.agents import ConfigError, TrainConfig, load_config, load_dataset
 from crowdnav.agents.config import describe_fields
 
 from crowdnav.cli import main
+from tests.agents_tiny import tiny_config
 
 
 def write(tmp_path, text: str):

@@ -7,7 +7,6 @@ import json
 import numpy as np
 import pytest
 import torch
-from agents_tiny import tiny_config
 from crowdnav.agents import demonstrations as demos
 from crowdnav.agents.config import config_from_mapping
 from crowdnav.agents.demonstrations import (
@@ -32,14 +31,9 @@ from crowdnav.agents.seeding import (
 from crowdnav.agents.training import train
 from crowdnav.agents.vec_env import CrowdNavSB3VecEnv
 
+from tests.agents_tiny import tiny_config
 
-@pytest.fixture(autouse=True)
-def one_torch_thread():
-    """Networks this small gain nothing from threads; on a busy 2-core machine torch's spinning threads cost 10x."""
-    threads = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(threads)
+pytestmark = pytest.mark.usefixtures("one_torch_thread")  # tests/conftest.py
 
 
 def config(tmp_path, algo="sac", **fields):

@@ -5,20 +5,11 @@ from __future__ import annotations
 import numpy as np
 import pytest
 import torch
-from agents_tiny import SMALL_LEOG, TINY_EXTRACTOR, tiny_config
-from crowdnav.agents import collect_grids, load_policy, pretrain_encoder, train
+from crowdnav.agents import load_policy, train
 from crowdnav.agents.factory import extractors
 from crowdnav.agents.wrappers import LeogLatentWrapper, NormalizeObservation
 
-
-@pytest.fixture(scope="module")
-def encoder_file(tmp_path_factory):
-    """A quickly pre-trained encoder with the tiny architecture, for 30x30 grids."""
-    grids = collect_grids("room_furniture", 64, seed=0, sensors=SMALL_LEOG)
-    folder = tmp_path_factory.mktemp("encoder")
-    result = pretrain_encoder(grids, folder, channels=TINY_EXTRACTOR["leog_channels"], kernels=TINY_EXTRACTOR["leog_kernels"],
-                              strides=TINY_EXTRACTOR["leog_strides"], latent=TINY_EXTRACTOR["leog_latent"], epochs=1)
-    return result.encoder_path
+from tests.agents_tiny import TINY_EXTRACTOR, tiny_config
 
 
 def saved_encoder_state(path) -> dict[str, torch.Tensor]:

@@ -7,7 +7,6 @@ import warnings
 
 import numpy as np
 import pytest
-from agents_tiny import tiny_config
 from crowdnav.agents import ConfigError, load_policy, train
 from crowdnav.agents.config import config_from_mapping
 from crowdnav.agents.factory import make_env, observation_normalization
@@ -15,6 +14,7 @@ from crowdnav.agents.wrappers import NormalizeObservation, normalize_observation
 
 from crowdnav.envs import CrowdNavEnv
 from crowdnav.simulator import OUTCOMES
+from tests.agents_tiny import tiny_config
 
 FLOAT_KEYS = ["goal", "closest_obstacle", "lidar", "velocity"]
 ALL_KEYS = ["goal", "closest_obstacle", "lidar", "leog", "velocity"]

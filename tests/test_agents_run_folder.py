@@ -5,7 +5,6 @@ from __future__ import annotations
 import json
 import shutil
 
-from agents_tiny import tiny_config
 from crowdnav.agents import load_policy, train
 from crowdnav.agents.run_folder import (
     checkpoint_dir,
@@ -17,6 +16,8 @@ from crowdnav.agents.run_folder import (
     replay_buffer_file,
     snapshot_dir,
 )
+
+from tests.agents_tiny import tiny_config
 
 
 def test_a_snapshot_newer_than_the_checkpoint_is_not_evaluated(tmp_path):

@@ -4,11 +4,11 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from agents_tiny import tiny_config
 from crowdnav.agents import train
 from crowdnav.agents.extractor import MultiModalExtractor
 
 from crowdnav.simulator import OUTCOMES
+from tests.agents_tiny import tiny_config
 
 MODALITY_SETS = {"lidar+goal": ["lidar", "goal"], "leog+goal": ["leog", "goal"], "leog+lidar+goal": ["leog", "lidar", "goal"]}
 

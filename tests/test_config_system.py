@@ -6,10 +6,10 @@ import json
 
 import pytest
 import yaml
-from evaluation_tiny import tiny_experiment_document
 
 from crowdnav.cli import build_parser, main
 from crowdnav.registry import ALGORITHM_NAMES, ALGORITHMS, ENCODER_MODES, modality_names, reward_preset_names
+from tests.evaluation_tiny import tiny_experiment_document
 
 
 def _write(tmp_path, name, document):

@@ -5,13 +5,12 @@ from __future__ import annotations
 import contextlib
 import io
 import math
-import runpy
-from pathlib import Path
 
 import numpy as np
 import pytest
 
 import crowdnav.envs  # noqa: F401  (registers the environments until crowdnav/__init__ imports them)
+from benchmarks import reward_calibration
 from crowdnav.envs import REWARD_TERMS, CrowdNavEnv
 from crowdnav.scenario import ScenarioError, load_scenario, reward_presets
 from crowdnav.scenario.reward_presets import DEFAULT_PRESET, REWARD_PRESETS
@@ -216,10 +215,9 @@ def test_unknown_preset_or_term_in_an_env_option_names_the_valid_ones():
 
 
 def test_reward_calibration_script_prints_both_tables_for_every_preset():
-    script = runpy.run_path(str(Path(__file__).parents[1] / "benchmarks" / "reward_calibration.py"))
     out = io.StringIO()
     with contextlib.redirect_stdout(out):
-        assert script["main"](["--gammas", "0.99", "--reward", "paper", "--reward-weight", "social=0"]) == 0
+        assert reward_calibration.main(["--gammas", "0.99", "--reward", "paper", "--reward-weight", "social=0"]) == 0
     text = out.getvalue()
     assert "(a) Social term" in text and "(b) Discounted return" in text
     for name in (*REWARD_PRESETS, "custom"):

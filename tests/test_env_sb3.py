@@ -12,14 +12,7 @@ sb3 = pytest.importorskip("stable_baselines3")
 torch = pytest.importorskip("torch")
 
 
-@pytest.fixture(autouse=True)
-def one_torch_thread():
-    """Networks this small gain nothing from threads, and on a busy 2-core machine torch's
-    spinning worker threads made these runs 10-25x slower (5 s -> 140 s)."""
-    threads = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(threads)
+pytestmark = pytest.mark.usefixtures("one_torch_thread")  # tests/conftest.py
 
 
 def small() -> dict:

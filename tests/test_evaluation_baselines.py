@@ -10,10 +10,10 @@ from crowdnav.evaluation.experiment import ExperimentError, experiment_from_mapp
 from crowdnav.evaluation.leaderboard import leaderboard_table
 from crowdnav.evaluation.protocol import Protocol
 from crowdnav.evaluation.storage import META_FILE, TEST_FILE, load_results, read_json
-from evaluation_tiny import tiny_experiment_document, tiny_results
 
 from crowdnav.envs import CrowdNavEnv
 from crowdnav.policies import SocialForceRobot, StraightToGoal
+from tests.evaluation_tiny import tiny_experiment_document, tiny_results
 
 
 def _outcome(policy, env_options, seed):

@@ -31,11 +31,8 @@ TOWARD_GOAL = textwrap.dedent('''
 
 
 @pytest.fixture
-def module_on_path(tmp_path, monkeypatch):
-    (tmp_path / "my_policies.py").write_text(TOWARD_GOAL)
-    monkeypatch.syspath_prepend(str(tmp_path))
-    yield "my_policies"
-    sys.modules.pop("my_policies", None)
+def module_on_path(importable_module):
+    return importable_module("my_policies", TOWARD_GOAL)
 
 
 def test_a_callable_that_drives_at_the_goal_scores_exactly_the_straight_baseline(tmp_path, module_on_path):
@@ -118,8 +115,9 @@ def test_both_spellings_of_a_baseline_name_the_same_policy(tmp_path):
 
 
 def test_a_crowdnav_run_is_evaluated_by_its_parameters_with_its_own_modalities(tmp_path):
-    from agents_tiny import tiny_config
     from crowdnav.agents import train
+
+    from tests.agents_tiny import tiny_config
 
     train(tiny_config(tmp_path / "runs" / "sac", modalities=["goal", "closest_obstacle"], episodes=2))
     folder = evaluate_policy(str(tmp_path / "runs" / "sac"), "open_space", tmp_path / "results", episodes=3)
@@ -146,7 +144,8 @@ def test_evaluated_policies_are_reference_lines_in_the_curves_next_to_trained_ru
 
     from crowdnav.evaluation.curves import curves_figure
     from crowdnav.evaluation.storage import load_results
-    from evaluation_tiny import tiny_results
+
+    from tests.evaluation_tiny import tiny_results
 
     results = tmp_path / "results"
     shutil.copytree(tiny_results(tmp_path_factory), results)

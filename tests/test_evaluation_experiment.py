@@ -9,9 +9,9 @@ import yaml
 from crowdnav.evaluation.benchmark import claim_folder
 from crowdnav.evaluation.experiment import PRETRAINED, ExperimentError, experiment_from_mapping, load_experiment, shipped_experiments
 from crowdnav.evaluation.storage import ResultsError
-from evaluation_tiny import tiny_experiment_document, tiny_frozen_encoder_document
 
 from crowdnav.cli import main
+from tests.evaluation_tiny import tiny_experiment_document, tiny_frozen_encoder_document
 
 
 def write(tmp_path, document, name="experiment.yaml"):

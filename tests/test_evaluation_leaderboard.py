@@ -14,10 +14,10 @@ from crowdnav.evaluation.curves import curves_figure, rate_curves
 from crowdnav.evaluation.intervals import wilson
 from crowdnav.evaluation.leaderboard import bootstrap_iqm, interquartile_mean, leaderboard_table, to_csv, to_markdown, write_leaderboard
 from crowdnav.evaluation.metrics import METRIC_COLUMNS
-from evaluation_tiny import tiny_results
 
 from crowdnav.cli import main
 from crowdnav.simulator import OUTCOMES
+from tests.evaluation_tiny import tiny_results
 
 # configuration a: seed 0 always succeeds; seed 1 collides in evaluations 0-1 then succeeds; seed 2 is always truncated.
 # configuration b: always collides.

@@ -6,8 +6,9 @@ import shutil
 from pathlib import Path
 
 import nbformat
-from evaluation_tiny import tiny_results
 from nbclient import NotebookClient
+
+from tests.evaluation_tiny import tiny_results
 
 NOTEBOOK = Path(__file__).resolve().parent.parent / "notebooks" / "plot_results.ipynb"
 

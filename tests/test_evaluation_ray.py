@@ -24,11 +24,11 @@ from crowdnav.evaluation.executors import ExecutorError, make_executor
 from crowdnav.evaluation.experiment import experiment_from_mapping
 from crowdnav.evaluation.storage import ResultsError
 from crowdnav.evaluation.transfer import claim_storage, node_local_root, pack_folder, unpack_folder, work_folder
-from evaluation_tiny import tiny_experiment_document, tiny_frozen_encoder_document, write_tiny_experiment
-from test_evaluation_resume import check_complete
 
 from crowdnav.cli import main
 from crowdnav.scenario.library import library_dir
+from tests.evaluation_tiny import tiny_experiment_document, tiny_frozen_encoder_document, write_tiny_experiment
+from tests.test_evaluation_resume import check_complete
 
 WALL_TIME_COLUMNS = ("seconds", "wall_time_s")
 

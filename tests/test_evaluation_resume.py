@@ -18,7 +18,8 @@ from crowdnav.evaluation.benchmark import run_experiment
 from crowdnav.evaluation.experiment import experiment_from_mapping
 from crowdnav.evaluation.runner import run_unit
 from crowdnav.evaluation.storage import ResultsError
-from evaluation_tiny import tiny_experiment_document, tiny_unit_spec
+
+from tests.evaluation_tiny import tiny_experiment_document, tiny_unit_spec
 
 
 def check_complete(out: Path, spec: dict) -> tuple[pd.DataFrame, pd.DataFrame]:

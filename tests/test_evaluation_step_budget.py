@@ -17,9 +17,9 @@ from crowdnav.evaluation.progress import episodes_on_disk, logged_steps, run_epi
 from crowdnav.evaluation.protocol import MAX_WORLDS, QUICK_STEPS, UNITS, Protocol, describe_budget, protocol_unit, quick
 from crowdnav.evaluation.runner import UnitSpec, run_unit
 from crowdnav.evaluation.storage import ResultsError, load_results
-from evaluation_tiny import tiny_experiment_document, tiny_unit_spec
 
 from crowdnav.simulator import OUTCOMES
+from tests.evaluation_tiny import tiny_experiment_document, tiny_unit_spec
 
 STEPS = {"train_steps": 400, "eval_every_steps": 200}
 """Two evaluations of a run of 4 worlds: about 10 tiny episodes, a second or two."""

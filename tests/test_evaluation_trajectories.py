@@ -66,9 +66,8 @@ def test_trajnet_lines_hold_one_scene_per_episode_and_unique_ids_and_frames(tmp_
 def test_trajectories_command_replays_every_run_of_an_experiment_and_checks_the_outcomes(tmp_path_factory, tmp_path, capsys):
     import shutil
 
-    from evaluation_tiny import tiny_results
-
     from crowdnav.cli import main
+    from tests.evaluation_tiny import tiny_results
 
     results = tmp_path / "results"
     shutil.copytree(tiny_results(tmp_path_factory), results)

@@ -2,16 +2,9 @@
 
 from __future__ import annotations
 
-import importlib.util
-import sys
-from pathlib import Path
-
 import numpy as np
 
-SPEC = importlib.util.spec_from_file_location("figure4_claims", Path(__file__).parent.parent / "benchmarks" / "figure4_claims.py")
-claims = importlib.util.module_from_spec(SPEC)
-sys.modules["figure4_claims"] = claims  # dataclasses look their module up there
-SPEC.loader.exec_module(claims)
+from benchmarks import figure4_claims as claims
 
 
 def runs(success: list[list[float]], truncated: list[list[float]] | None = None) -> object:

@@ -16,12 +16,12 @@ import numpy as np
 import pytest
 import yaml
 from crowdnav.agents.config import ConfigError, load_config
-from evaluation_tiny import tiny_results, write_tiny_experiment
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from crowdnav import CrowdNavEnv, ScenarioError
 from crowdnav.cli import main
+from tests.evaluation_tiny import tiny_results, write_tiny_experiment
 
 TARGETS = ("*/seed_0/test_episodes.csv", "*/seed_1/training_episodes.csv", "*/seed_0/meta.json", "*/seed_1/evaluations/evaluation_000.csv",
            "*/seed_0/train/episodes.csv", "baseline_straight/baseline/test_episodes.csv", "*/seed_1/train/checkpoint/policy.json")

@@ -13,10 +13,10 @@ from pathlib import Path
 
 import pytest
 import yaml
-from agents_tiny import tiny_config
 from crowdnav.agents.episode_log import DISCARDED_SUFFIX, HEADER, EpisodeLogError, prepare_log, read_log
 
 from crowdnav.cli import main
+from tests.agents_tiny import tiny_config
 
 ROOT = Path(__file__).resolve().parent.parent
 
@@ -177,7 +177,7 @@ def test_a_cut_checkpoint_file_is_recovered_or_refused_in_one_line(tmp_path, cap
 @pytest.mark.slow
 @pytest.mark.parametrize("signum", [signal.SIGKILL, signal.SIGTERM], ids=["SIGKILL", "SIGTERM"])
 def test_a_benchmark_killed_as_its_first_run_starts_resumes_to_whole_results(tmp_path, signum):
-    from evaluation_tiny import write_tiny_experiment
+    from tests.evaluation_tiny import write_tiny_experiment
 
     experiment = write_tiny_experiment(tmp_path / "tiny.yaml")
     command = ["benchmark", str(experiment), "--out", "results", "--workers", "1", "--no-video", "--no-progress"]

@@ -13,13 +13,13 @@ from pathlib import Path
 import numpy as np
 import pytest
 import torch
-from agents_tiny import tiny_config
 from crowdnav.agents import ConfigError, load_policy, train
 from crowdnav.agents.checkpoint import UntrustedCheckpointError
 from crowdnav.agents.resume_state import ROLLOUT_ARRAYS, STATE_FILE
 from crowdnav.evaluation.evaluate import PolicyError, evaluate_policy
 
 from crowdnav.cli import main
+from tests.agents_tiny import tiny_config
 
 
 class Stopped(Exception):

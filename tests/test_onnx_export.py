@@ -6,22 +6,12 @@ import json
 
 import numpy as np
 import pytest
-from agents_tiny import SMALL_LEOG, TINY_EXTRACTOR, tiny_config
-from crowdnav.agents import collect_grids, load_policy, pretrain_encoder, train
+from crowdnav.agents import load_policy, train
 
 from crowdnav.cli import main
+from tests.agents_tiny import tiny_config
 
 ort = pytest.importorskip("onnxruntime", reason="the onnx extra (pip install 'crowdnav[onnx]') runs the exported policies")
-
-
-@pytest.fixture(scope="module")
-def encoder_file(tmp_path_factory):
-    """A quickly pre-trained LEOG encoder for the tiny 30x30 grids."""
-    grids = collect_grids("room_furniture", 64, seed=0, sensors=SMALL_LEOG)
-    result = pretrain_encoder(grids, tmp_path_factory.mktemp("encoder"), channels=TINY_EXTRACTOR["leog_channels"],
-                              kernels=TINY_EXTRACTOR["leog_kernels"], strides=TINY_EXTRACTOR["leog_strides"],
-                              latent=TINY_EXTRACTOR["leog_latent"], epochs=1)
-    return result.encoder_path
 
 
 def _recorded_observations(policy, steps: int = 40) -> dict[str, np.ndarray]:

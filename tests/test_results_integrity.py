@@ -11,9 +11,9 @@ from crowdnav.evaluation.benchmark import run_experiment
 from crowdnav.evaluation.experiment import experiment_from_mapping
 from crowdnav.evaluation.leaderboard import write_leaderboard
 from crowdnav.evaluation.storage import ResultsError, load_results, table_damage
-from evaluation_tiny import tiny_experiment_document, tiny_results
 
 from crowdnav.cli import main
+from tests.evaluation_tiny import tiny_experiment_document, tiny_results
 
 
 @pytest.fixture

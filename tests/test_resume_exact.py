@@ -13,9 +13,10 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 import pytest
-from agents_tiny import tiny_config
 from crowdnav.agents import train
 from crowdnav.agents.run_folder import RunBusyError, writing
+
+from tests.agents_tiny import tiny_config
 
 
 class Stopped(Exception):

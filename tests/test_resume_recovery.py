@@ -6,10 +6,11 @@ import json
 import shutil
 
 import pytest
-from agents_tiny import tiny_config
 from crowdnav.agents import train
 from crowdnav.agents.run_folder import checkpoint_episodes, recover_checkpoint
 from crowdnav.evaluation.storage import clean_temporaries
+
+from tests.agents_tiny import tiny_config
 
 
 def _fake_checkpoint(folder, episodes, complete=True):

@@ -9,8 +9,6 @@ import numpy as np
 import pytest
 from gymnasium.utils.env_checker import check_env
 from gymnasium.vector import AutoresetMode
-from test_sensors_batch import assert_batch_matches, run_worlds
-from test_vector_env import _compare_with_sync
 
 import crowdnav  # noqa: F401  (registers the ids)
 from crowdnav import Simulator, load_scenario
@@ -20,6 +18,8 @@ from crowdnav.envs.vector import CrowdNavVectorEnv
 from crowdnav.scenario import ScenarioError
 from crowdnav.scenario.schema import HumansSensor, Sensors
 from crowdnav.sensors import MODALITIES, HumansModality, build_modalities
+from tests.test_sensors_batch import assert_batch_matches, run_worlds
+from tests.test_vector_env import _compare_with_sync
 
 RADIUS = 0.25  # a dyadic radius: centre distances max_range + RADIUS give surface distances of exactly max_range
 

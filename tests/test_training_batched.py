@@ -9,7 +9,6 @@ import json
 import numpy as np
 import pandas as pd
 import pytest
-from agents_tiny import SMALL_LEOG, TINY_EXTRACTOR, tiny_config
 from crowdnav.agents import ConfigError, train
 from crowdnav.agents.config import config_from_mapping
 from crowdnav.agents.resume_state import ROLLOUT_ARRAYS
@@ -18,6 +17,7 @@ from crowdnav.agents.seeding import TRAIN_SEED_BASE, EpisodeSeedCounter, train_s
 from crowdnav.agents.vec_env import CrowdNavSB3VecEnv
 
 from crowdnav.scenario.library import library_names
+from tests.agents_tiny import TINY_EXTRACTOR, tiny_config
 
 WORLDS = 4
 
@@ -230,18 +230,6 @@ def test_reward_scale_multiplies_what_the_algorithm_learns_from_and_not_the_logg
     rewards = plain.model.replay_buffer.rewards[:stored]
     assert np.abs(rewards).max() > 0
     np.testing.assert_allclose(scaled.model.replay_buffer.rewards[:stored], 3.0 * rewards, rtol=1e-6)
-
-
-@pytest.fixture(scope="module")
-def encoder_file(tmp_path_factory):
-    """A quickly pre-trained encoder with the tiny architecture, for 30x30 grids (as test_agents_encoder_modes.py)."""
-    from crowdnav.agents import collect_grids, pretrain_encoder
-
-    grids = collect_grids("room_furniture", 64, seed=0, sensors=SMALL_LEOG)
-    result = pretrain_encoder(grids, tmp_path_factory.mktemp("encoder"), channels=TINY_EXTRACTOR["leog_channels"],
-                              kernels=TINY_EXTRACTOR["leog_kernels"], strides=TINY_EXTRACTOR["leog_strides"],
-                              latent=TINY_EXTRACTOR["leog_latent"], epochs=1)
-    return result.encoder_path
 
 
 def test_frozen_precomputed_encoder_gives_the_worlds_the_single_envs_latents_and_trains(tmp_path, encoder_file):

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import json
-import sys
 import textwrap
 
 import numpy as np
@@ -124,11 +123,8 @@ TOWARD_GOAL = textwrap.dedent('''
 
 
 @pytest.fixture
-def module_on_path(tmp_path, monkeypatch):
-    (tmp_path / "traj_policies.py").write_text(TOWARD_GOAL)
-    monkeypatch.syspath_prepend(str(tmp_path))
-    yield "traj_policies"
-    sys.modules.pop("traj_policies", None)
+def module_on_path(importable_module):
+    return importable_module("traj_policies", TOWARD_GOAL)
 
 
 def test_trajectories_of_evaluate_results_replay_what_was_scored(tmp_path, module_on_path, capsys, monkeypatch):
