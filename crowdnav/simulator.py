@@ -45,7 +45,7 @@ from crowdnav.events import OUTCOMES, Collision, SimulationError, StepEvents  # 
 from crowdnav.groups import apply_goal_rules, first_goals, place_groups
 from crowdnav.obstacles import nearest_on_edges
 from crowdnav.orca import OrcaCrowd, OrcaUnavailableError
-from crowdnav.placement import JITTER
+from crowdnav.placement import JITTER_REACH
 from crowdnav.scenario.errors import ScenarioError, ScenarioIssue
 from crowdnav.scenario.loader import Overrides
 from crowdnav.sim_state import SELF_DISTANCE, PairConstants, SimState, StateFields, pair_constants
@@ -172,7 +172,7 @@ class Simulator(StateFields):
             nearest = int(np.argmin(np.abs(placement.robot_start.points - start[0])))
             reachable = placement.goal_component == placement.start_component[nearest]
         goal = placement.robot_goal.draw(
-            rng, 1, allowed=reachable, away_from=start, min_distance=robot.min_start_goal_distance + math.sqrt(2) * JITTER
+            rng, 1, allowed=reachable, away_from=start, min_distance=robot.min_start_goal_distance + JITTER_REACH
         )[0]
         if robot.start_heading == "random":
             heading = float(rng.uniform(-math.pi, math.pi))
