@@ -89,10 +89,9 @@ def export_onnx(policy_path: str | Path, out: str | Path, *, opset: int = OPSET)
     :class:`ExportError` for a folder that holds no loadable policy.
     """
     from crowdnav.agents.checkpoint import load_policy
+    from crowdnav.agents.run_folder import training_run
 
-    path = Path(policy_path)
-    if (path / "train" / "checkpoint").is_dir():  # a protocol run folder: its training run is in train/
-        path = path / "train"
+    path = training_run(policy_path)
     try:
         policy = load_policy(path)
     except (FileNotFoundError, ValueError) as error:

@@ -207,3 +207,9 @@ def writing(folder: str | Path) -> Iterator[None]:
         handle.write(f"{os.getpid()}\n")
         handle.flush()
         yield
+
+
+def training_run(path: str | Path) -> Path:
+    """The training run a policy path names: a protocol run folder's ``train/`` (it holds the checkpoint), else the path."""
+    path = Path(path)
+    return path / "train" if (path / "train" / "checkpoint").is_dir() else path

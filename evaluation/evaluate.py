@@ -101,10 +101,9 @@ def resolve_policy(spec: str, env_options: Mapping[str, Any]) -> tuple[str, str,
         return _safe(path.stem), path.stem, _load_sb3_zip(path, options), False, options
     if path.exists():
         from crowdnav.agents import load_policy
+        from crowdnav.agents.run_folder import training_run
 
-        if (path / "train" / "checkpoint").is_dir():  # a protocol run folder: its training run is in train/
-            path = path / "train"
-
+        path = training_run(path)
         try:
             policy = load_policy(path)
         except (FileNotFoundError, ValueError) as error:

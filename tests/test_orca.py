@@ -14,13 +14,13 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from crowdnav.batch.simulator import BatchSimulator
 from crowdnav.cli import main
 from crowdnav.orca import OrcaUnavailableError
 from crowdnav.scenario import ScenarioError
 from crowdnav.scenario.library import library_names
 from crowdnav.simulator import Simulator
 from crowdnav.world import load_world
+from tests.test_vector_env import check_batch_equals_singles
 
 ROOT = Path(__file__).resolve().parents[1]
 ORCA = {"humans.model": "orca"}
@@ -169,24 +169,7 @@ def test_a_group_with_model_orca_mixes_with_social_force_and_standing_groups():
 ])
 def test_batched_orca_worlds_equal_single_simulators_bit_for_bit(scenario, overrides):
     pytest.importorskip("pyrvo")
-    world = load_world(scenario, overrides)
-    batch, singles = BatchSimulator(world, 4), [Simulator(world) for _ in range(4)]
-    batch.reset(range(4), [30 + i for i in range(4)])
-    for i, sim in enumerate(singles):
-        sim.reset(seed=30 + i)
-    rng = np.random.default_rng(2)
-    for _ in range(100):
-        actions = rng.uniform(-1, 1, (4, 2))
-        result = batch.step(actions)
-        for i, sim in enumerate(singles):
-            events = sim.step(actions[i])
-            bucket, row = batch.locate(i)
-            assert bucket.positions[row].tobytes() == sim.positions.tobytes()
-            assert bucket.velocities[row].tobytes() == sim.velocities.tobytes()
-            assert result.collisions.get(i) == events.collision and result.goal_reached[i] == events.goal_reached
-            if events.terminated or events.truncated:
-                batch.reset([i], [None])
-                sim.reset()
+    check_batch_equals_singles(load_world(scenario, overrides), worlds=4, first_seed=30, steps=100, rng_seed=2, scale=1.0)
 
 
 def test_the_native_vector_env_with_orca_humans_equals_the_sync_one():

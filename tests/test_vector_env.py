@@ -49,14 +49,19 @@ def test_scalar_math_reproduces_python_remainder_cos_sin_and_complex_products():
     ("open_space", {"humans.count": [0, 6]}),  # crowd sizes differ across worlds, including none
 ])
 def test_batched_simulator_worlds_equal_single_simulators_bit_for_bit(scenario, overrides):
-    world = load_world(scenario, overrides)
-    batch, singles = BatchSimulator(world, 5), [Simulator(world) for _ in range(5)]
-    batch.reset(range(5), [20 + i for i in range(5)])
+    check_batch_equals_singles(load_world(scenario, overrides), worlds=5, first_seed=20, steps=120, rng_seed=1, scale=1.2)
+
+
+def check_batch_equals_singles(world, worlds: int, first_seed: int, steps: int, rng_seed: int, scale: float) -> None:
+    """Step a BatchSimulator and one Simulator per world with the same random actions: every world's state and
+    events equal its single simulator's, bit for bit, across episode ends (also used by tests/test_orca.py)."""
+    batch, singles = BatchSimulator(world, worlds), [Simulator(world) for _ in range(worlds)]
+    batch.reset(range(worlds), [first_seed + i for i in range(worlds)])
     for i, sim in enumerate(singles):
-        sim.reset(seed=20 + i)
-    rng = np.random.default_rng(1)
-    for _ in range(120):
-        actions = rng.uniform(-1.2, 1.2, (5, 2))
+        sim.reset(seed=first_seed + i)
+    rng = np.random.default_rng(rng_seed)
+    for _ in range(steps):
+        actions = rng.uniform(-scale, scale, (worlds, 2))
         result = batch.step(actions)
         for i, sim in enumerate(singles):
             events = sim.step(actions[i])
