@@ -60,7 +60,8 @@ def touching(robot_gap: np.ndarray) -> np.ndarray:
 
     Columns: the robot itself (a huge gap), every human, every obstacle (polygons, then discs).
     """
-    return robot_gap.min(-1) <= 0.0
+    touches: np.ndarray = robot_gap.min(-1) <= 0.0
+    return touches
 
 
 def deepest_contact(robot_gap: np.ndarray, n: int, obstacle_labels: Sequence[str]) -> Collision:
