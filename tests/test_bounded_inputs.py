@@ -44,6 +44,8 @@ def _one_line_error(capsys, *argv: str) -> str:
     ("[" * 5000, "not valid YAML"),
     ("[" * 100 + "]" * 100, "the value is nested 65 levels deep; expected at most 64"),
     ("!!int 31e-6", "the value holds a value its explicit tag (such as !!int) cannot read"),  # found by the fuzzing below
+    ("!!int ", "the value holds a value its explicit tag (such as !!int) cannot read"),  # an empty tagged value (PyYAML IndexError)
+    ("!!float ", "the value holds a value its explicit tag (such as !!int) cannot read"),
 ])
 def test_set_value_bombs_and_deep_nesting_are_refused_in_one_line(capsys, value, expected):
     assert len(ALIAS_BOMB) < 500  # a few hundred bytes that expand to 387 million values
