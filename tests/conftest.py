@@ -6,13 +6,20 @@ Heavy imports (torch) happen inside the fixtures, so the core tests run without 
 
 from __future__ import annotations
 
+import os
 import sys
 from collections.abc import Callable, Iterator
 from pathlib import Path
 
 import pytest
+from hypothesis import settings
 
 from tests.agents_tiny import SMALL_LEOG, TINY_EXTRACTOR
+
+# CI (.ci/run sets CI=true) replays the same fuzzing examples every run, so a red build names a change, not a draw;
+# elsewhere every run draws new examples (and `-m slow` draws thousands), which is where the fuzzing finds bugs.
+settings.register_profile("ci", derandomize=True, print_blob=True)
+settings.load_profile("ci" if os.environ.get("CI") else "default")
 
 
 @pytest.fixture(scope="session")
