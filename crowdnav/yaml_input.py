@@ -90,7 +90,7 @@ def read_bounded_yaml(text: str) -> tuple[Any, yaml.Node | None]:
     # the tree is within bounds: building the document from it cannot blow up either
     try:
         return yaml.load(text, Loader=_LOADER), root
-    except (ValueError, TypeError, OverflowError, IndexError) as error:  # an explicit tag on a value it cannot read: !!int 1e-6, !!int 
+    except (ValueError, TypeError, OverflowError, IndexError) as error:  # a tag its value cannot fill: !!int 1e-6, a bare !!int
         problem = str(error).splitlines()[0] if str(error) else type(error).__name__
         raise YamlLimitError(f"holds a value its explicit tag (such as !!int) cannot read ({problem}); expected the value "
                              "without the tag") from None
