@@ -17,6 +17,7 @@ from gymnasium.vector.utils import batch_space
 
 from crowdnav.batch.memory import keep_freed_memory as _keep_freed_memory
 from crowdnav.batch.simulator import BatchSimulator, StepResult
+from crowdnav.contacts import goal_distance
 from crowdnav.envs.core import ScenarioSource, load_env_world, option_overrides, real_array
 from crowdnav.envs.reward import REWARD_TERMS, reward_terms
 from crowdnav.events import outcomes
@@ -155,11 +156,10 @@ class CrowdNavVectorEnv(VectorEnv):
         self._reset_worlds(worlds, seeds)
 
     def _goal_distance(self, worlds: np.ndarray) -> np.ndarray:
-        """The robot-goal distance of ``worlds`` (as the single simulator's ``abs(goal - position)``: libm hypot)."""
+        """The robot-goal distance of ``worlds``: :func:`crowdnav.contacts.goal_distance`, the single simulator's kernel."""
         out = np.zeros(self.num_envs)
         for bucket in self.batch.buckets.values():
-            gap = bucket.robot_goal - bucket.positions[:, 0]
-            out[bucket.world] = np.hypot(gap.real, gap.imag)
+            out[bucket.world] = goal_distance(bucket.robot_goal, bucket.positions[:, 0])
         return out[worlds]
 
     # ------------------------------------------------------------------- step
