@@ -27,7 +27,7 @@ _EXPORTS = {
     "ExperimentError": "crowdnav.evaluation.experiment",
     "load_experiment": "crowdnav.evaluation.experiment",
     "shipped_experiments": "crowdnav.evaluation.experiment",
-    "UnitSpec": "crowdnav.evaluation.runner",
+    "UnitSpec": "crowdnav.evaluation.unit_spec",
     "run_unit": "crowdnav.evaluation.runner",
     "make_executor": "crowdnav.evaluation.executors",
     "run_experiment": "crowdnav.evaluation.benchmark",

@@ -92,8 +92,11 @@ def evaluate_baseline(experiment: str, configuration: str, label: str, env_optio
                       out_dir: str | Path) -> Path:
     """Play the baseline on the protocol's test episodes into ``out_dir`` (skipped when already there); returns the folder."""
     import pandas as pd
+    from crowdnav.evaluation.provenance import git_commit, package_versions
     from crowdnav.evaluation.rollout import HeldOutEpisodes
-    from crowdnav.evaluation.runner import OUTCOMES, RUN_COLUMNS, git_commit, package_versions
+    from crowdnav.evaluation.unit_spec import RUN_COLUMNS
+
+    from crowdnav.simulator import OUTCOMES
 
     out_dir = Path(out_dir)
     if (out_dir / META_FILE).is_file():

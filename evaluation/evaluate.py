@@ -196,11 +196,13 @@ def evaluate_policy(spec: str, scenario: str, out: str | Path, *, modalities: Se
     """
     import pandas as pd
     from crowdnav.evaluation.protocol import Protocol
+    from crowdnav.evaluation.provenance import git_commit, package_versions
     from crowdnav.evaluation.rollout import HeldOutEpisodes
-    from crowdnav.evaluation.runner import OUTCOMES, RUN_COLUMNS, git_commit, package_versions
     from crowdnav.evaluation.storage import META_FILE, TEST_FILE, atomic_write_csv, atomic_write_json, evaluated_run_name
+    from crowdnav.evaluation.unit_spec import RUN_COLUMNS
 
     from crowdnav.paths import inside
+    from crowdnav.simulator import OUTCOMES
 
     options: dict[str, Any] = {"scenario": scenario, "modalities": list(modalities) if modalities else None,
                                "overrides": dict(overrides or {})}

@@ -34,8 +34,8 @@ from typing import Annotated, Any
 
 from crowdnav.evaluation.baselines import BASELINE_PREFIX
 from crowdnav.evaluation.protocol import Protocol, quick
-from crowdnav.evaluation.runner import PRETRAINED, PROTOCOL_FIELDS, UnitSpec
 from crowdnav.evaluation.storage import run_folder
+from crowdnav.evaluation.unit_spec import PRETRAINED, PROTOCOL_FIELDS, UnitSpec
 from pydantic import AfterValidator, BaseModel, ConfigDict, Field, Strict, ValidationError, field_validator, model_validator
 
 from crowdnav.config_errors import ConfigIssue, FieldProblems, YamlProblem, format_issues, read_yaml, validation_issues, yaml_line

@@ -12,16 +12,18 @@ How the protocol maps onto training: ``crowdnav.agents.train`` saves a policy sn
 held-out test episodes with the deterministic policy. Evaluating a saved snapshot is the
 same as evaluating during training (the test episodes touch neither the model nor its replay
 buffer), and it lets a resumed run evaluate what the interrupted one had trained.
+
+What a run is (:class:`UnitSpec`, :data:`PROTOCOL_FIELDS`, :data:`PRETRAINED`, :data:`RUN_COLUMNS`) lives
+in :mod:`crowdnav.evaluation.unit_spec`, and the provenance every result records (:func:`git_commit`,
+:func:`package_versions`) in :mod:`crowdnav.evaluation.provenance`; both are importable from here too.
 """
 
 from __future__ import annotations
 
-import dataclasses
 import time
 from collections.abc import Callable, Mapping
-from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from crowdnav.agents.run_folder import (
     POLICY_FILE,
@@ -33,6 +35,8 @@ from crowdnav.agents.run_folder import (
     writing,
 )
 from crowdnav.evaluation.protocol import AXIS_LABELS, Protocol
+from crowdnav.evaluation.provenance import git_commit as git_commit
+from crowdnav.evaluation.provenance import package_versions as package_versions
 from crowdnav.evaluation.storage import (
     EVALUATIONS_DIR,
     META_FILE,
@@ -44,92 +48,26 @@ from crowdnav.evaluation.storage import (
     atomic_write_csv,
     atomic_write_json,
     clean_temporaries,
-    experiment_of,
-    pretrained_encoder_path,
     read_json,
     run_damage,
     table_damage,
 )
+from crowdnav.evaluation.unit_spec import PRETRAINED as PRETRAINED
+from crowdnav.evaluation.unit_spec import PROTOCOL_FIELDS as PROTOCOL_FIELDS
+from crowdnav.evaluation.unit_spec import RUN_COLUMNS as RUN_COLUMNS
+from crowdnav.evaluation.unit_spec import UnitSpec as UnitSpec
 
-from crowdnav.simulator import OUTCOMES
+from crowdnav.simulator import OUTCOMES as OUTCOMES
 
-PROTOCOL_FIELDS = ("seed", "out", "episodes", "checkpoint_every", "timesteps", "checkpoint_every_steps", "progress", "torch_threads",
-                   "save_replay_buffer")
-"""TrainConfig fields the protocol sets for every run (an experiment may not set them)."""
-
-PRETRAINED = "<pretrained>"
-"""``encoder.weights`` placeholder: the experiment's pre-trained encoder, ``<experiment folder>/encoder/encoder.pt``."""
-
-RUN_COLUMNS = ("experiment", "configuration", "label", "seed")
-"""The columns that name the run, first in every table."""
+if TYPE_CHECKING:
+    from crowdnav.agents.checkpoint import AgentPolicy
+    from crowdnav.agents.config import TrainConfig
+    from crowdnav.evaluation.rollout import HeldOutEpisodes
 
 EventHook = Callable[[str, dict[str, Any]], None]
 """``hook(event, data)``: ``"trained"`` ({episodes}, and {steps} for a protocol in env steps) and ``"evaluated"``
 ({evaluation, training_episodes}, {training_steps} for a protocol in env steps, and the rate of each of
 :data:`OUTCOMES`: success, collision, out_of_bounds, truncated)."""
-
-
-@dataclass(frozen=True)
-class UnitSpec:
-    """Everything that defines one run; two runs with equal specs are the same run."""
-
-    experiment: str
-    configuration: str
-    seed: int
-    train: dict[str, Any]
-    """TrainConfig fields of the configuration (without those of :data:`PROTOCOL_FIELDS`)."""
-    protocol: dict[str, int]
-    """The :class:`Protocol` fields."""
-    label: str = ""
-    """Name of the configuration in figures and tables (default: the configuration name)."""
-    torch_threads: int = field(default=1, compare=False)
-    """torch threads of the process (not part of the run's identity)."""
-    config: Any = field(default=None, compare=False, repr=False)
-    """``train`` already validated as a TrainConfig (by the experiment file's loader), or None: :func:`run_unit` validates it."""
-
-    def to_dict(self) -> dict[str, Any]:
-        return {item.name: getattr(self, item.name) for item in dataclasses.fields(self) if item.name not in ("torch_threads", "config")}
-
-    @classmethod
-    def from_dict(cls, document: Mapping[str, Any]) -> UnitSpec:
-        return cls(**document)
-
-    @property
-    def display_label(self) -> str:
-        return self.label or self.configuration
-
-    def train_config(self, out_dir: Path) -> dict[str, Any]:
-        """The full TrainConfig mapping of this run, writing into ``out_dir/train``."""
-        train = dict(self.train)
-        if train.get("encoder", {}).get("weights") == PRETRAINED:
-            train["encoder"] = {**train["encoder"], "weights": self._encoder_weights(out_dir)}
-        return {**train, **self._protocol_fields(out_dir)}
-
-    def config_for(self, out_dir: Path) -> Any:
-        """This run's :class:`~crowdnav.agents.config.TrainConfig`: :attr:`config` completed (no second validation),
-        or ``train`` validated here when the spec came without it (a dict from a worker process, a test)."""
-        if self.config is None:
-            from crowdnav.agents.config import config_from_mapping
-
-            return config_from_mapping(self.train_config(out_dir), f"{out_dir / SPEC_FILE}")
-        update = self._protocol_fields(out_dir)
-        if self.config.encoder.weights == PRETRAINED:
-            update["encoder"] = self.config.encoder.model_copy(update={"weights": self._encoder_weights(out_dir)})
-        # the protocol's values were checked by Protocol, the rest when the config was built
-        return self.config.model_copy(update=update)
-
-    def _protocol_fields(self, out_dir: Path) -> dict[str, Any]:
-        protocol = Protocol(**self.protocol)
-        if protocol.unit == "steps":  # episodes and checkpoint_every stay at their defaults: training ignores them then
-            budget = {"timesteps": protocol.train_steps, "checkpoint_every_steps": protocol.eval_every_steps}
-        else:
-            budget = {"episodes": protocol.train_episodes, "checkpoint_every": protocol.eval_every}
-        return {"seed": self.seed, "out": str(out_dir / TRAIN_DIR), **budget, "progress": False, "torch_threads": self.torch_threads,
-                "save_replay_buffer": True}
-
-    @staticmethod
-    def _encoder_weights(out_dir: Path) -> str:
-        return str(pretrained_encoder_path(experiment_of(out_dir)))
 
 
 def run_unit(spec: UnitSpec | Mapping[str, Any], out_dir: str | Path, *, on_event: EventHook | None = None) -> dict[str, Any]:
@@ -231,11 +169,11 @@ def _claim(out_dir: Path, spec: UnitSpec) -> None:
 class _Evaluator:
     """Evaluates the policies of the scheduled points, one CSV per evaluation."""
 
-    def __init__(self, spec: UnitSpec, out_dir: Path, protocol: Protocol, load_policy: Callable, clock: _Clock, hook: EventHook,
-                 repairs: list[str] | None = None):
+    def __init__(self, spec: UnitSpec, out_dir: Path, protocol: Protocol, load_policy: Callable[[Path], AgentPolicy], clock: _Clock,
+                 hook: EventHook, repairs: list[str] | None = None):
         self.spec, self.protocol, self.load_policy, self.clock, self.hook = spec, protocol, load_policy, clock, hook
         self.folder = out_dir / EVALUATIONS_DIR
-        self.episodes = None  # the test environments, built on first use
+        self.episodes: HeldOutEpisodes | None = None  # the test environments, built on first use
         self.repairs = list(repairs or [])
         """What was found missing or damaged in the run's files, and what was done about it."""
         self._checked: set[int] = set()
@@ -301,7 +239,7 @@ class _Evaluator:
             self.episodes.close()
 
 
-def _finish(spec: UnitSpec, out_dir: Path, protocol: Protocol, config: Any, clock: _Clock, resumed: bool,
+def _finish(spec: UnitSpec, out_dir: Path, protocol: Protocol, config: TrainConfig, clock: _Clock, resumed: bool,
             repairs: list[str]) -> dict[str, Any]:
     """Assemble the run's tables and write meta.json (last: it marks the run complete)."""
     import pandas as pd
@@ -311,6 +249,8 @@ def _finish(spec: UnitSpec, out_dir: Path, protocol: Protocol, config: Any, cloc
     tests = pd.concat(evaluations, ignore_index=True)
     atomic_write_csv(tests, out_dir / TEST_FILE)
     train_info = checkpoint_info(out_dir / TRAIN_DIR)
+    if train_info is None:  # training returned without saving one: nothing to describe the run with
+        raise ResultsError(f"{out_dir / TRAIN_DIR}: no checkpoint after training")
     training = _training_episodes(spec, episode_log(out_dir / TRAIN_DIR), int(train_info["episodes"]), repairs)
     atomic_write_csv(training, out_dir / TRAINING_FILE)
     timing = clock.save()
@@ -380,7 +320,7 @@ class _Clock:
 
     def save(self) -> dict[str, Any]:
         now = time.perf_counter()
-        timing = read_json(self.path) if self.path.is_file() else {"seconds": 0.0, "sessions": 0}
+        timing: dict[str, Any] = read_json(self.path) if self.path.is_file() else {"seconds": 0.0, "sessions": 0}
         commits = list(timing.get("commits", []))
         if self.first_save and (not commits or commits[-1] != self.commit):
             commits.append(self.commit)
@@ -397,30 +337,3 @@ def _summary(spec: UnitSpec, out_dir: Path, meta: Mapping[str, Any], status: str
         "wall_time_s": meta["wall_time_s"], "env_steps": meta["env_steps"]["total"], "out": str(out_dir),
     }
 
-
-def package_versions() -> dict[str, str]:
-    """Versions of Python and of the packages a result depends on."""
-    import platform
-    from importlib import metadata
-
-    versions = {"python": platform.python_version()}
-    for name in ("crowdnav", "numpy", "torch", "stable-baselines3", "gymnasium", "shapely", "pandas"):
-        try:
-            versions[name] = metadata.version(name)
-        except metadata.PackageNotFoundError:
-            versions[name] = "not installed"
-    return versions
-
-
-def git_commit() -> str | None:
-    """The commit of the crowdnav checkout (``+dirty`` with uncommitted changes), or None outside a git checkout."""
-    import subprocess
-
-    root = Path(__file__).resolve().parent.parent
-    try:
-        commit = subprocess.run(["git", "rev-parse", "HEAD"], cwd=root, capture_output=True, text=True, timeout=10, check=True)
-        status = subprocess.run(["git", "status", "--porcelain", "--untracked-files=no"], cwd=root, capture_output=True,
-                                text=True, timeout=10, check=True)
-    except (OSError, subprocess.SubprocessError):
-        return None
-    return commit.stdout.strip() + ("+dirty" if status.stdout.strip() else "")
