@@ -10,7 +10,8 @@ hold the requested crowd is reported when the scenario loads instead of looping 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 import shapely
@@ -108,29 +109,41 @@ class Placement:
     """Free-space component of each robot start candidate (None: all starts and goals share one)."""
     goal_component: np.ndarray | None = None
     """Free-space component of each robot goal candidate (None: all starts and goals share one)."""
+    other_robots: list[Placement] = field(default_factory=list)
+    """Scenarios with ``robots:``: the robot sets (start, goal, pairs, components) of robots 1, 2, ... (their ``groups`` empty)."""
 
 
 def build_placement(scenario: Scenario, obstacles: StaticObstacles) -> Placement:
-    robot, humans = scenario.robot, scenario.humans
-    world = scenario.world
+    humans, world = scenario.humans, scenario.world
     world_box = box(world.min[0], world.min[1], world.max[0], world.max[1])
     occupied = obstacles.union
-    robot_start = _candidates(robot.start, "robot.start", robot.radius, world_box, occupied)
-    robot_goal = _candidates(robot.goal, "robot.goal", robot.radius, world_box, occupied)
+    robots = [_robot_placement(robot, path, world_box, occupied)
+              for robot, path in zip(scenario.robot_specs, scenario.robot_paths, strict=True)]
+    groups = [_group_placement(scenario, path, group, world_box, occupied) for path, group in humans.crowd]
+    first = robots[0]
+    _check_capacity(scenario, first.robot_start, first.robot_goal, groups)
+    first.groups, first.other_robots = groups, robots[1:]
+    return first
+
+
+def _robot_placement(robot: Any, path: str, world_box: Any, occupied: Any) -> Placement:
+    """One robot's candidate sets (``groups`` left empty), its errors named at ``path`` (``robot`` or ``robots.<i>``)."""
+    robot_start = _candidates(robot.start, f"{path}.start", robot.radius, world_box, occupied)
+    robot_goal = _candidates(robot.goal, f"{path}.goal", robot.radius, world_box, occupied)
     slack = 2 * JITTER_REACH
     start_goal_ok, largest = _far_pairs(robot_start.points, robot_goal.points, robot.min_start_goal_distance + slack)
     if robot_start.ring_center is not None or robot_goal.ring_center is not None:
         start_goal_ok = np.ones_like(start_goal_ok)  # rotated rings: any start, checked for every rotation below
-        _check_ring_start_goal(robot_start, robot_goal, robot.min_start_goal_distance)
+        _check_ring_start_goal(robot_start, robot_goal, robot.min_start_goal_distance, path)
     if not start_goal_ok.any():
         if largest < 1e-9:
-            message = "robot.start and robot.goal only offer the same position; expected a goal away from the start"
+            message = f"{path}.start and {path}.goal only offer the same position; expected a goal away from the start"
         else:
             message = (
-                f"no start in robot.start is {robot.min_start_goal_distance:g} m from a goal in robot.goal "
+                f"no start in {path}.start is {robot.min_start_goal_distance:g} m from a goal in {path}.goal "
                 f"(largest distance available: {largest:.2f} m); expected a smaller distance or regions further apart"
             )
-        raise GeometryError("robot.min_start_goal_distance", message)
+        raise GeometryError(f"{path}.min_start_goal_distance", message)
     start_component = goal_component = None
     if robot_start.ring_center is None and robot_goal.ring_center is None:
         # only pairs the robot's disc can travel between: walls and furniture may close the way
@@ -138,23 +151,21 @@ def build_placement(scenario: Scenario, obstacles: StaticObstacles) -> Placement
         start_component, goal_component = _component_of(robot_start.points, components), _component_of(robot_goal.points, components)
         same = start_component[:, None] == goal_component[None, :]
         if start_goal_ok.any() and not (start_goal_ok & same).any():
-            raise GeometryError("robot.goal", f"no goal in robot.goal can be reached from a start in robot.start: walls or furniture "
+            raise GeometryError(f"{path}.goal", f"no goal in {path}.goal can be reached from a start in {path}.start: walls or furniture "
                                 f"close the way for a robot of radius {robot.radius:g} m; expected start and goal regions in one "
                                 "connected free space")
         start_goal_ok &= same
         beyond_goal, _ = _far_pairs(robot_start.points, robot_goal.points, robot.goal_radius + slack)
         if (start_goal_ok & ~beyond_goal).any():  # an episode could start inside its goal
             raise GeometryError(
-                "robot.goal_radius",
-                f"a start in robot.start can lie within the goal radius ({robot.goal_radius:g} m) of a goal in robot.goal, so an "
-                "episode could end as a success before the robot moves; expected robot.min_start_goal_distance above the goal "
+                f"{path}.goal_radius",
+                f"a start in {path}.start can lie within the goal radius ({robot.goal_radius:g} m) of a goal in {path}.goal, so an "
+                f"episode could end as a success before the robot moves; expected {path}.min_start_goal_distance above the goal "
                 "radius, or a smaller goal radius",
             )
     split = start_component is not None and len(set(start_component.tolist()) | set(goal_component.tolist())) > 1
     components_kept = (start_component, goal_component) if split else (None, None)
-    groups = [_group_placement(scenario, path, group, world_box, occupied) for path, group in humans.crowd]
-    _check_capacity(scenario, robot_start, robot_goal, groups)
-    return Placement(robot_start, robot_goal, groups, start_goal_ok, *components_kept)
+    return Placement(robot_start, robot_goal, [], start_goal_ok, *components_kept)
 
 
 def _group_placement(scenario: Scenario, path: str, group, world_box, occupied) -> GroupPlacement:
@@ -426,7 +437,7 @@ def _blocked(spawn: CandidateSet, blockers: CandidateSet, reach: float) -> int:
     return _max_blocked(spawn.points, positions, reach + margin) + extra
 
 
-def _check_ring_start_goal(start: CandidateSet, goal: CandidateSet, min_distance: float) -> None:
+def _check_ring_start_goal(start: CandidateSet, goal: CandidateSet, min_distance: float, path: str = "robot") -> None:
     """Every start a rotating ring can give has a goal at least ``min_distance`` away (as the draw asks), for every rotation."""
     starts, margin = _ring_samples(start)
     needed = min_distance + JITTER_REACH + math.sqrt(2) * start.jitter + margin  # the draw's margin, and the start's own jitter
@@ -440,9 +451,9 @@ def _check_ring_start_goal(start: CandidateSet, goal: CandidateSet, min_distance
                              for lo in range(0, len(starts), _CHUNK)])
     worst = float(farthest.min())
     if worst < needed:
-        raise GeometryError("robot.min_start_goal_distance", (
-            f"a start drawn from robot.start can be only {worst:.2f} m from the farthest goal in robot.goal (a circle perimeter "
-            f"turns to any angle); expected robot.min_start_goal_distance at most {max(worst - needed + min_distance, 0):.2f} m, "
+        raise GeometryError(f"{path}.min_start_goal_distance", (
+            f"a start drawn from {path}.start can be only {worst:.2f} m from the farthest goal in {path}.goal (a circle perimeter "
+            f"turns to any angle); expected {path}.min_start_goal_distance at most {max(worst - needed + min_distance, 0):.2f} m, "
             "or regions further apart"))
 
 

@@ -42,7 +42,8 @@ def test_scenario_schema_is_json_schema_of_the_scenario_model(capsys):
     top_level = {"description", "world", "walls", "furniture", "robot", "humans", "time_step", "max_steps", "sensors", "reward"}
     assert top_level <= set(schema["properties"])
     assert schema["additionalProperties"] is False
-    assert schema["required"] == ["description", "robot"]
+    assert schema["required"] == ["description"]
+    assert schema["oneOf"] == [{"required": ["robot"]}, {"required": ["robots"]}]  # one robot or several, exactly one way
 
 
 def test_scenario_schema_output_option_writes_the_same_schema(tmp_path, capsys):

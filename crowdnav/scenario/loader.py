@@ -233,15 +233,9 @@ def _with_line(issue: ScenarioIssue, root: yaml.Node | None, override_paths: set
 def consistency_issues(scenario: Scenario) -> list[ScenarioIssue]:
     """Cross-field rules that the per-field schema cannot express (modality names: when the sensors are built)."""
     issues = []
-    robot, humans = scenario.robot, scenario.humans
-    if robot.kinematics == "unicycle" and robot.max_angular_speed is None:
-        issues.append(
-            ScenarioIssue("robot.max_angular_speed", "expected a maximum angular speed (rad/s) for unicycle kinematics")
-        )
-    if robot.kinematics == "holonomic" and robot.max_angular_speed is not None:
-        issues.append(
-            ScenarioIssue("robot.max_angular_speed", "only applies to unicycle kinematics; remove it or set kinematics: unicycle")
-        )
+    humans = scenario.humans
+    for path, robot in zip(scenario.robot_paths, scenario.robot_specs, strict=True):
+        issues += _robot_issues(scenario, path, robot)
     for path, group in humans.crowd:
         if group.max_count > 0 and not group.spawn:
             issues.append(ScenarioIssue(f"{path}.spawn", f"expected at least one spawn region when {path}.count > 0"))
@@ -253,15 +247,6 @@ def consistency_issues(scenario: Scenario) -> list[ScenarioIssue]:
                 issues.append(ScenarioIssue(f"{path}.circle_radius", (
                     f"{group.max_count} humans of radius {humans.radius:g} m overlap on a circle of radius {group.circle_radius:g} m; "
                     f"expected at least {humans.radius / math.sin(math.pi / group.max_count):.2f} m")))
-    # A body moving less than its diameter per step cannot jump across an edge unnoticed,
-    # which keeps collision checks at step ends exact.
-    robot_step = robot.max_speed * scenario.time_step
-    if robot_step >= 2 * robot.radius:
-        issues.append(ScenarioIssue(
-            "robot.max_speed",
-            f"robot moves up to {robot_step:g} m per step (max_speed * time_step); expected less than its diameter "
-            f"{2 * robot.radius:g} m: lower max_speed or time_step",
-        ))
     # Humans are pushed back out of walls after each step; moving less than their radius
     # per step guarantees their centre never crosses a wall before that happens.
     human_step = humans.max_preferred_speed * humans.social_force.max_speed_factor * scenario.time_step
@@ -271,8 +256,28 @@ def consistency_issues(scenario: Scenario) -> list[ScenarioIssue]:
             f"humans move up to {human_step:g} m per step (preferred_speed max * max_speed_factor * time_step); "
             f"expected less than their radius {humans.radius:g} m: lower preferred_speed or time_step",
         ))
+    return issues
+
+
+def _robot_issues(scenario: Scenario, path: str, robot: Any) -> list[ScenarioIssue]:
+    """The cross-field rules of one robot written at ``path`` (``robot`` or ``robots.<i>``)."""
+    issues = []
+    if robot.kinematics == "unicycle" and robot.max_angular_speed is None:
+        issues.append(ScenarioIssue(f"{path}.max_angular_speed", "expected a maximum angular speed (rad/s) for unicycle kinematics"))
+    if robot.kinematics == "holonomic" and robot.max_angular_speed is not None:
+        issues.append(ScenarioIssue(
+            f"{path}.max_angular_speed", "only applies to unicycle kinematics; remove it or set kinematics: unicycle"))
+    # A body moving less than its diameter per step cannot jump across an edge unnoticed,
+    # which keeps collision checks at step ends exact.
+    robot_step = robot.max_speed * scenario.time_step
+    if robot_step >= 2 * robot.radius:
+        issues.append(ScenarioIssue(
+            f"{path}.max_speed",
+            f"robot moves up to {robot_step:g} m per step (max_speed * time_step); expected less than its diameter "
+            f"{2 * robot.radius:g} m: lower max_speed or time_step",
+        ))
     if robot.start_heading not in ("random", "toward_goal") and not math.isfinite(float(robot.start_heading)):
-        issues.append(ScenarioIssue("robot.start_heading", "expected 'random', 'toward_goal' or a finite angle in degrees"))
+        issues.append(ScenarioIssue(f"{path}.start_heading", "expected 'random', 'toward_goal' or a finite angle in degrees"))
     return issues
 
 

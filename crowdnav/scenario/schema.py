@@ -11,10 +11,12 @@ is checked when the scenario is compiled into a world, see :mod:`crowdnav.world`
 from __future__ import annotations
 
 import math
+import re
 from typing import Annotated, Any, Literal
 
 from pydantic import BeforeValidator, Field, field_validator, model_serializer, model_validator
 
+from crowdnav.config_errors import FieldProblems
 from crowdnav.paths import SAFE_NAME_EXPECTATION, is_safe_name
 from crowdnav.scenario.crowd import (  # noqa: F401  (re-exported: the schema's public names)
     CIRCLE_SPACING,
@@ -81,6 +83,30 @@ class Robot(StrictModel):
     start_heading: Annotated[Literal["random", "toward_goal"] | FiniteFloat, BeforeValidator(_heading_shape)] = Field(
         default="random", description="Initial heading: 'random', 'toward_goal', or a fixed angle in degrees."
     )
+
+
+MAX_ROBOTS = 8
+"""Most robots one scenario may declare under ``robots:``."""
+ROBOT_NAME = re.compile(r"^[a-z][a-z0-9_]{0,31}$")
+"""What a robot's name may be: it becomes a PettingZoo agent name and part of file names."""
+
+
+class TeamRobot(Robot):
+    """One of several robots (``robots:``): a robot's fields, plus a name and its own modalities."""
+
+    name: str | None = Field(
+        default=None, description="Agent name (lowercase letters, digits, _; default robot_<i>, i its place in the list)."
+    )
+    modalities: list[str] | None = Field(
+        default=None, description="This robot's observation keys (default: sensors.modalities); settings stay in sensors."
+    )
+
+    @field_validator("name")
+    @classmethod
+    def _agent_name(cls, name: str | None) -> str | None:
+        if name is not None and (not ROBOT_NAME.match(name) or name == "robot" or name.startswith("human_")):
+            raise ValueError(f"expected lowercase letters, digits and _ (at most 32, not 'robot' nor human_<i>), got {name!r}")
+        return name
 
 
 # ---------------------------------------------------------------- sensors and reward
@@ -216,7 +242,14 @@ class Scenario(StrictModel):
     world: World = Field(default_factory=World, description="World extent and boundary.")
     walls: list[Wall] = Field(default_factory=list, max_length=MAX_OBSTACLES, description="Interior walls (at most 2,000).")
     furniture: list[Furniture] = Field(default_factory=list, max_length=MAX_OBSTACLES, description="Static furniture (at most 2,000 pieces).")
-    robot: Robot = Field(description="The robot.")
+    robot: Robot = Field(  # type: ignore[assignment]  # None only until _one_robot_field fills it
+        default=None, description="The robot (give either robot or robots; with robots, the first of them).",
+        json_schema_extra=_no_default,
+    )
+    robots: list[TeamRobot] | None = Field(
+        default=None, min_length=2, max_length=MAX_ROBOTS,
+        description="Several robots sharing the world (2 to 8; one robot: use robot), each an agent (docs/environments.md#several-robots).",
+    )
     humans: Humans = Field(default_factory=Humans, description="The crowd.")
     time_step: PositiveFloat = Field(default=0.2, description="Simulation time step in seconds.")
     max_steps: Annotated[int, Field(ge=1, le=100_000)] = Field(default=150, description="Steps before an episode is truncated (at most 100,000).")
@@ -224,6 +257,48 @@ class Scenario(StrictModel):
     reward: RewardWeights = Field(
         default_factory=RewardWeights, description="Reward weights: a preset (default: 'default') and terms overriding it."
     )
+
+    @model_validator(mode="after")
+    def _one_robot_field(self) -> Scenario:
+        # `robot` stays the first (ego) robot's spec either way, so one-robot code reads it unchanged
+        if self.robots is None:
+            if self.robot is None:
+                raise FieldProblems([("robot", "required field is missing (one robot; or several under robots:)")])
+            return self
+        if "robot" in self.model_fields_set and self.robot is not None:
+            raise FieldProblems([("robots", "give either robot (one robot) or robots (several), not both")])
+        names = self.robot_names
+        repeated = sorted({name for name in names if names.count(name) > 1})
+        if repeated:
+            raise FieldProblems([("robots", f"expected unique robot names, got {', '.join(map(repr, repeated))} more than once")])
+        self.__dict__["robot"] = self.robots[0]  # not setattr: that would validate (and call this) again
+        return self
+
+    @model_serializer(mode="wrap")
+    def _dump_as_written(self, handler: Any) -> dict[str, Any]:
+        dumped: dict[str, Any] = handler(self)
+        if self.robots is None:
+            dumped.pop("robots", None)
+        else:
+            dumped.pop("robot", None)  # filled from robots: writing it would declare both
+        return dumped
+
+    @property
+    def robot_specs(self) -> list[Robot]:
+        """Every robot, the ego robot (``robot``) first: ``robots`` or ``[robot]``."""
+        return list(self.robots) if self.robots is not None else [self.robot]
+
+    @property
+    def robot_names(self) -> list[str]:
+        """Every robot's agent name: ``["robot"]`` for one robot, each ``name`` or ``robot_<i>`` for several."""
+        if self.robots is None:
+            return ["robot"]
+        return [robot.name or f"robot_{i}" for i, robot in enumerate(self.robots)]
+
+    @property
+    def robot_paths(self) -> list[str]:
+        """Where each robot is written in the file: ``robot``, or ``robots.<i>``."""
+        return ["robot"] if self.robots is None else [f"robots.{i}" for i in range(len(self.robots))]
 
     @field_validator("name")
     @classmethod
@@ -250,4 +325,5 @@ def scenario_json_schema() -> dict[str, Any]:
     """JSON Schema of a scenario file, for editors (yaml-language-server) and other tools."""
     schema = Scenario.model_json_schema()
     schema.pop("title", None)
+    schema["oneOf"] = [{"required": ["robot"]}, {"required": ["robots"]}]  # exactly one way to declare the robots
     return {"$schema": JSON_SCHEMA_DIALECT, "title": "crowdnav scenario", **schema}
