@@ -25,7 +25,7 @@ from typing import Any
 import yaml
 from crowdnav.evaluation.baselines import evaluate_experiment_baselines
 from crowdnav.evaluation.executors import make_executor
-from crowdnav.evaluation.experiment import Experiment
+from crowdnav.evaluation.experiment import Experiment, ExperimentError
 from crowdnav.evaluation.jobs import Executor, Job, run_name
 from crowdnav.evaluation.progress import ProgressBar
 from crowdnav.evaluation.protocol import UNIT_NAMES, protocol_unit
@@ -39,6 +39,7 @@ from crowdnav.evaluation.storage import (
     experiment_folder,
     pretrained_encoder_path,
 )
+from crowdnav.evaluation.unit_spec import PRETRAINED
 
 from crowdnav.simulator import OUTCOMES
 
@@ -170,6 +171,8 @@ def pretrain(experiment: Experiment, folder: Path, log: Callable[[str], None]) -
     from crowdnav.agents import collect_grids, pretrain_encoder
 
     settings = experiment.pretrain_encoder
+    if settings is None:  # a configuration names the pre-trained encoder by hand, and no section says how to train it
+        raise ExperimentError(f"experiment '{experiment.name}': encoder.weights is {PRETRAINED} but there is no pretrain_encoder section")
     extractor = experiment.configurations[0].train.get("extractor", {})
     sensors = next((c.train.get("sensors") for c in experiment.configurations if c.train.get("sensors")), None)
     log(f"pre-training the LEOG encoder on {settings['grids']} grids of {settings['scenario']} ...")

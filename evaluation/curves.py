@@ -207,7 +207,7 @@ def plot_curves(paths: Iterable[str | Path], out: str | Path | None = None, band
 
     paths = list(paths)
     tests, _, metas = load_results(paths)
-    folders = {}
+    folders: dict[str, Path] = {}
     for run, meta in zip(finished_runs(paths), metas, strict=True):
         folders.setdefault(meta["experiment"], experiment_of(run))
     windows = {meta["experiment"]: meta["protocol"]["window"] for meta in metas}

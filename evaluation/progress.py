@@ -25,7 +25,7 @@ from crowdnav.evaluation.storage import EVALUATIONS_DIR, META_FILE, TRAIN_DIR
 def run_episodes(protocol: Protocol) -> int:
     """Training plus test episodes of one complete run (a protocol in env steps: its training env steps)."""
     if protocol.unit == "steps":
-        return protocol.train_steps
+        return protocol.budget  # train_steps
     return protocol.train_episodes + protocol.evaluations * protocol.test_episodes
 
 
@@ -36,7 +36,7 @@ def episodes_on_disk(folder: str | Path, protocol: Protocol) -> int:
     if (folder / META_FILE).is_file():
         return run_episodes(protocol)
     if protocol.unit == "steps":
-        return min(logged_steps(folder / TRAIN_DIR), protocol.train_steps)
+        return min(logged_steps(folder / TRAIN_DIR), protocol.budget)
     trained = logged_episodes(folder / TRAIN_DIR)
     evaluations = len(list((folder / EVALUATIONS_DIR).glob("evaluation_*.csv"))) if (folder / EVALUATIONS_DIR).is_dir() else 0
     return min(trained, protocol.train_episodes) + evaluations * protocol.test_episodes

@@ -93,7 +93,7 @@ class Protocol(BaseModel):
             missing, other = ("eval_every_steps", "train_steps") if given == ["train_steps"] else ("train_steps", "eval_every_steps")
             raise FieldProblems([(missing, f"a budget in env steps needs both train_steps and eval_every_steps; {other} is set, "
                                            f"{missing} is not")])
-        if given:
+        if self.train_steps is not None and self.eval_every_steps is not None:  # both given (one alone was refused above)
             # one budget: an episode field next to a step budget would be ignored, so it is refused
             mixed = [name for name in ("train_episodes", "eval_every") if name in self.model_fields_set]
             if mixed:

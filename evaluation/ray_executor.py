@@ -134,10 +134,12 @@ class RayExecutor(Executor):
     def _run(self, jobs: list[Job], verbose: bool) -> Iterator[dict[str, Any]]:
         root = self.storage or results_root_of(jobs[0].out_dir)  # default: the results folder itself
         storage_id = claim_storage(root)
-        board = _Board.options(num_cpus=0).remote()
+        # mypy ignores a class decorator's type: it sees _Board, not the ActorClass @ray.remote made of it
+        board = _Board.options(num_cpus=0).remote()  # type: ignore[attr-defined]
         encoders = _encoder_files(jobs)
         resources = {"num_cpus": 1, "num_gpus": self.gpus_per_run, "max_retries": self.retries, "retry_exceptions": False}
-        queue, pending = list(jobs), {}
+        queue = list(jobs)
+        pending: dict[ray.ObjectRef[dict[str, Any]], Job] = {}
         limit = self.workers if self.address and self.workers else len(jobs)
         try:
             while queue or pending:

@@ -12,6 +12,7 @@ learns: the transitions go nowhere but into the trajectories.
 from __future__ import annotations
 
 from collections.abc import Callable, Mapping, Sequence
+from functools import partial
 from typing import Any
 
 import numpy as np
@@ -73,7 +74,7 @@ class HeldOutEpisodes:
             for action, i in zip(actions, running, strict=True):
                 observations[i], reward, terminated, truncated, info = envs[i].step(action)
                 sim = envs[i].simulator  # it updates its arrays in place: the log copies them
-                log.step(i, sim.positions.copy(), lambda sim=sim: _state(sim), complex(sim.robot_social_force), reward)
+                log.step(i, sim.positions.copy(), partial(_state, sim), complex(sim.robot_social_force), reward)
                 if terminated or truncated:
                     log.ends[i] = info
                     ended()
@@ -99,7 +100,7 @@ class HeldOutEpisodes:
             observations, rewards, terminated, truncated, infos = env.step(actions)
             force = env.robot_social_force()
             for i in live.tolist():  # bookkeeping of the trajectories, per running episode
-                log.step(i, env.positions(i), lambda i=i: _world_state(env, i), force[i], rewards[i])
+                log.step(i, env.positions(i), partial(_world_state, env, i), force[i], rewards[i])
                 if terminated[i] or truncated[i]:
                     log.ends[i] = {"outcome": infos["outcome"][i]}
                     if infos.get("_collision_kind", np.zeros(count, dtype=bool))[i]:
@@ -150,7 +151,10 @@ class _Log:
 
     def episodes(self, owner: HeldOutEpisodes, sims: Sequence[Any]) -> list[dict[str, Any]]:
         """One dict per episode (see :meth:`HeldOutEpisodes.run`); ``sims``: each episode's simulator (radii, goal, groups)."""
-        out = [owner._episode(i, sim, self.positions[i], self.forces[i], self.returns[i], self.ends[i]) for i, sim in enumerate(sims)]
+        ends = [end for end in self.ends if end is not None]
+        if len(ends) < len(self.ends):  # run() steps until every episode has ended: a bug, not a result
+            raise RuntimeError(f"episodes {[i for i, end in enumerate(self.ends) if end is None]} have not ended")
+        out = [owner._episode(i, sim, self.positions[i], self.forces[i], self.returns[i], ends[i]) for i, sim in enumerate(sims)]
         if self.frames is not None:
             for episode, states, sim in zip(out, self.frames, sims, strict=True):
                 # each agent's group, for the whole episode (the robot is its own)

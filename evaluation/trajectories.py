@@ -141,7 +141,7 @@ def trajnet_lines(episodes: Iterable[Mapping[str, Any]]) -> list[str]:
     return lines
 
 
-def write_trajectories(episodes: list[Mapping[str, Any]], stem: str | Path) -> list[Path]:
+def write_trajectories(episodes: Sequence[Mapping[str, Any]], stem: str | Path) -> list[Path]:
     """``stem``.csv (tidy table) and ``stem``.ndjson (TrajNet++); returns both paths."""
     from crowdnav.evaluation.storage import atomic_write_csv, atomic_write_text
 

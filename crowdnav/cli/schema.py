@@ -12,9 +12,12 @@ import argparse
 import json
 import sys
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from crowdnav.cli.common import CliError
+
+if TYPE_CHECKING:
+    from pydantic import BaseModel
 
 JSON_SCHEMA_DIALECT = "https://json-schema.org/draft/2020-12/schema"
 KINDS = {
@@ -41,6 +44,7 @@ def json_schema(kind: str) -> dict[str, Any]:
         from crowdnav.scenario.schema import scenario_json_schema
 
         return scenario_json_schema()
+    model: type[BaseModel]
     if kind == "train":
         from crowdnav.agents.config import TrainConfig
 
