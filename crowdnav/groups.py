@@ -22,9 +22,15 @@ if TYPE_CHECKING:
     from crowdnav.sim_state import SimState
 
 
-def place_groups(sim: Any, start: np.ndarray, goal: complex, counts: list[int]) -> list[np.ndarray]:
-    """Member positions of every group (complex arrays, file order), each away from the robot and the groups before it."""
+def place_groups(sim: Any, start: np.ndarray, goal: complex | np.ndarray, counts: list[int]) -> list[np.ndarray]:
+    """Member positions of every group (complex arrays, file order), each away from the robots and the groups before it.
+
+    ``start``: (R,) every robot's start; ``goal``: the robot's goal, or (R,) every robot's (``robots:``).
+    """
     robot, radius, rng = sim.scenario.robot, sim.scenario.humans.radius, sim.rng
+    team = sim.team
+    # one robot: the float radius and the (1,) goal it always had (same bits); several: (R,) radii, near each start and goal
+    robot_radius, robots = (robot.radius, 1) if team is None else (team.all_radii, team.count)
     margin = GAP + JITTER_REACH  # the new point's jitter; placed agents are where they are
     placed, out = [start], []
     for group, places, count in zip(sim.groups, sim.placement.groups, counts, strict=True):
@@ -34,16 +40,19 @@ def place_groups(sim: Any, start: np.ndarray, goal: complex, counts: list[int]) 
         humans_placed = np.concatenate(placed[1:]) if len(placed) > 1 else np.zeros(0, dtype=complex)
         ring = places.circle_radius
         if group.standing:  # keep the robot's goal reachable: no circle around it
-            away = np.concatenate([start, [goal], humans_placed])
+            away = np.concatenate([start, [goal] if team is None else goal, humans_placed])
             near = np.full(len(away), ring + 2 * radius + margin)
-            near[:2] = robot.radius + ring + radius + margin
+            near[: 2 * robots] = robot_radius + ring + radius + margin if team is None else np.tile(robot_radius + ring + radius + margin, 2)
             centre = places.spawn.draw(rng, 1, away_from=away, min_distance=near)[0]
             phase = rng.uniform(0, 2 * math.pi)
             members = centre + ring * np.exp(1j * (phase + 2 * math.pi * np.arange(count) / count))
         else:
             away = np.concatenate([start, humans_placed])
             near = np.full(len(away), 2 * radius + margin)
-            near[0] = robot.radius + radius + margin
+            if team is None:
+                near[0] = robot_radius + radius + margin
+            else:
+                near[:robots] = robot_radius + radius + margin
             members = places.spawn.draw(rng, count, away_from=away, min_distance=near)
         placed.append(members)
         out.append(members)
@@ -99,7 +108,11 @@ def _respawn(state: SimState, sim: Any, index: np.ndarray, group: Any, places: A
     """Move arrived members to free spawn points of their group; returns those that moved (the rest wait)."""
     radius, robot = sim.scenario.humans.radius, sim.scenario.robot
     others = np.delete(state.positions, index + 1)
-    reach = max(robot.radius, radius) + radius + GAP + JITTER_REACH
+    robot_radius = robot.radius
+    team = getattr(sim, "team", None)
+    if team is not None:  # keep clear of every robot
+        others, robot_radius = np.concatenate([others, team.state.positions]), float(team.all_radii.max())
+    reach = max(robot_radius, radius) + radius + GAP + JITTER_REACH
     for count in range(len(index), 0, -1):  # at most len(index) tries, usually one
         try:
             new = places.spawn.draw(sim.rng, count, away_from=others, min_distance=reach)

@@ -138,25 +138,32 @@ class OrcaCrowd:
         self.all_orca = bool(orca_groups.all())
         """Whether every walking group follows ORCA (standing members are counted in: they never move)."""
         self._solvers: dict[int, OrcaSolver] = {}
+        self._robots = 1
         self.mask = np.zeros(0, dtype=bool)
         pyrvo_module("orca")  # fail at load, not at the first step
 
-    def start_episode(self, human_group: np.ndarray, radii: np.ndarray, robot_max_speed: float, human_max_speed: np.ndarray) -> None:
-        """Pick (or build) the solver for this episode's agents and set their radii and max speeds (``radii``: robot first)."""
+    def start_episode(self, human_group: np.ndarray, radii: np.ndarray, robot_max_speed: float | np.ndarray, human_max_speed: np.ndarray) -> None:
+        """Pick (or build) the solver for this episode's agents and set their radii and max speeds.
+
+        ``radii``: the robots first, then the humans; ``robot_max_speed``: the robot's, or (R,) every robot's (``robots:``).
+        """
         self.mask = self._orca_groups[human_group]
-        count = len(human_group) + self._see_robot
+        robot_speeds = np.atleast_1d(robot_max_speed)
+        self._robots = len(robot_speeds)
+        count = len(human_group) + self._see_robot * self._robots
         solver = self._solvers.get(count)
         if solver is None:
             solver = self._solvers[count] = OrcaSolver(self._rings, self._params, self._dt, count, "orca")
         self._solver = solver
         if self._see_robot:
-            solver.configure(radii, np.concatenate([[robot_max_speed], human_max_speed]))
+            solver.configure(radii, np.concatenate([robot_speeds, human_max_speed]))
         else:
-            solver.configure(radii[1:], human_max_speed)
+            solver.configure(radii[self._robots :], human_max_speed)
 
     def velocities(self, positions: np.ndarray, velocities: np.ndarray, goals: np.ndarray, preferred_speed: np.ndarray) -> np.ndarray:
-        """(n,) complex: every human's ORCA velocity (robot first in ``positions`` / ``velocities``; goals and speeds per human)."""
-        preferred = toward_goal(goals - positions[1:], preferred_speed, self._dt)
-        if self._see_robot:  # the robot keeps its course, as far as ORCA's humans can tell
-            return self._solver.velocities(positions, velocities, np.concatenate([velocities[:1], preferred]))[1:]
-        return self._solver.velocities(positions[1:], velocities[1:], preferred)
+        """(n,) complex: every human's ORCA velocity (the robots first in ``positions`` / ``velocities``; goals and speeds per human)."""
+        robots = self._robots
+        preferred = toward_goal(goals - positions[robots:], preferred_speed, self._dt)
+        if self._see_robot:  # the robots keep their course, as far as ORCA's humans can tell
+            return self._solver.velocities(positions, velocities, np.concatenate([velocities[:robots], preferred]))[robots:]
+        return self._solver.velocities(positions[robots:], velocities[robots:], preferred)

@@ -33,7 +33,6 @@ Randomness comes only from the generator seeded by :meth:`Simulator.reset`.
 
 from __future__ import annotations
 
-import cmath
 import copy
 import math
 
@@ -46,6 +45,7 @@ from crowdnav.groups import apply_goal_rules, first_goals, place_groups
 from crowdnav.obstacles import nearest_on_edges
 from crowdnav.orca import OrcaCrowd, OrcaUnavailableError
 from crowdnav.placement import JITTER_REACH
+from crowdnav.robots import PARKED, RobotView, Team, first_heading, robot_kinematics, robot_scenario
 from crowdnav.scenario.errors import ScenarioError, ScenarioIssue
 from crowdnav.scenario.loader import Overrides
 from crowdnav.sim_state import SELF_DISTANCE, PairConstants, SimState, StateFields, pair_constants
@@ -92,6 +92,11 @@ class Simulator(StateFields):
         self._rng = np.random.default_rng()
         self._constants: dict[tuple[int, bool], PairConstants] = {}
         self._state: SimState | None = None
+        self.team = Team(scenario, self.obstacles, self.placement) if scenario.robots is not None else None
+        """The robots after the first (:mod:`crowdnav.robots`) of a scenario with ``robots:``; None for one robot."""
+        self._robot_scenarios = [robot_scenario(scenario, k) for k in range(len(scenario.robot_specs))]
+        self.robot_events: list[StepEvents | None] = []
+        """Every robot's events of the last step, the ego robot first (None: it had left); one robot: ``[events]``."""
         self.orca = self._orca_crowd()
         """The ORCA part of the crowd (None when every walking group follows the social force)."""
         self._ready = False
@@ -174,15 +179,12 @@ class Simulator(StateFields):
         goal = placement.robot_goal.draw(
             rng, 1, allowed=reachable, away_from=start, min_distance=robot.min_start_goal_distance + JITTER_REACH
         )[0]
-        if robot.start_heading == "random":
-            heading = float(rng.uniform(-math.pi, math.pi))
-        elif robot.start_heading == "toward_goal":
-            heading = cmath.phase(goal - start[0])
-        else:
-            heading = math.radians(float(robot.start_heading))
-        # groups in file order, each away from the robot and the groups before it; then goals, then speeds
+        heading = first_heading(robot, rng, complex(start[0]), complex(goal))
+        # the other robots after the ego robot's draws, so a one-robot scenario draws what it always drew
+        starts, goals = self.team.draw(rng, complex(start[0]), complex(goal)) if self.team is not None else (start, goal)
+        # groups in file order, each away from the robots and the groups before it; then goals, then speeds
         # (one group draws exactly what the crowd drew before groups existed: same seed, same episode)
-        spawn = place_groups(self, start, complex(goal), counts)
+        spawn = place_groups(self, starts, goals, counts)
         standing = np.repeat([group.standing for group in self.groups], counts).astype(bool)
         human_goals = np.concatenate([np.zeros(0, dtype=complex), *first_goals(self, spawn)])
         preferred_speed = np.concatenate([np.zeros(0), *(
@@ -207,7 +209,11 @@ class Simulator(StateFields):
         )
         self._use_pair_constants(n)
         if self.orca is not None:
-            self.orca.start_episode(self._state.human_group, self.radii, robot.max_speed, max_speed)
+            if self.team is None:
+                self.orca.start_episode(self._state.human_group, self.radii, robot.max_speed, max_speed)
+            else:  # every robot an ORCA agent, the robots first
+                speeds = np.concatenate([[robot.max_speed], self.team.max_speeds])
+                self.orca.start_episode(self._state.human_group, np.concatenate([self.team.all_radii, self.radii[1:]]), speeds, max_speed)
         self._ready = True
 
     def pair_constants(self, n: int) -> PairConstants:
@@ -245,18 +251,22 @@ class Simulator(StateFields):
         """
         twin = copy.copy(self)
         twin._rng = copy.deepcopy(self._rng)
+        if self.team is not None:  # its own robots (the constants stay shared)
+            twin.team = copy.copy(self.team)
+            twin.team.state = self.team.state.copy()
         twin.load_state((self.state if state is None else state).copy())
         return twin
 
     # ------------------------------------------------------------------------ step
 
-    def step(self, robot_action: np.ndarray, human_actions: np.ndarray | None = None) -> StepEvents:
-        """Advance one time step.
+    def step(self, robot_action: np.ndarray, human_actions: np.ndarray | None = None, other_robot_actions: np.ndarray | None = None) -> StepEvents:
+        """Advance one time step; returns the ego robot's events (every robot's: :attr:`robot_events`).
 
         ``robot_action``: 2 values in [-1, 1] (holonomic: vx, vy in the robot frame; unicycle:
         v, omega), scaled by the max speeds. ``human_actions``: optional (n_humans, 2) velocity
         commands in [-1, 1] times each human's max speed (world frame); by default the humans
-        follow the social-force model.
+        follow the social-force model. ``other_robot_actions``: with ``robots:``, the (R-1, 2)
+        actions of the robots after the first, like ``robot_action`` (None: they stand still).
         """
         if not self._ready:
             raise RuntimeError("call reset() before step()")
@@ -272,6 +282,8 @@ class Simulator(StateFields):
         velocities[0] = robot_velocity
         velocities[1:] = commands
         positions += velocities * self.dt
+        if self.team is not None:
+            self.team.move(other_robot_actions, self.dt)
         state.step_count += 1
         # one cheap check per step, so a non-finite state stops the episode with its name
         # instead of leaking NaN into rewards while the observations stay finite
@@ -285,13 +297,21 @@ class Simulator(StateFields):
         if n and self._humans_touch:  # a human touches someone or something
             self._resolve_human_overlaps()
             self.refresh()
+        truncated = state.step_count >= self.scenario.max_steps
+        if self.team is not None:
+            self.robot_events = self.team.outcomes(self, self._robot_gap, truncated)
+            if n and apply_goal_rules(state, self):
+                self.refresh()
+            ego = self.robot_events[0]  # a robot that left has no events: report a quiet step for it
+            return ego if ego is not None else StepEvents(goal_reached=False, collision=None, truncated=truncated)
         collision = self.robot_collision()
         left_world = self.robot_left_world()
         goal_reached = goal_distance(state.robot_goal, positions[0]) <= self.scenario.robot.goal_radius
         if n and apply_goal_rules(state, self):  # someone respawned: the geometry of the new positions
             self.refresh()
-        truncated = state.step_count >= self.scenario.max_steps
-        return StepEvents(goal_reached=bool(goal_reached), collision=collision, truncated=truncated, left_world=left_world)
+        events = StepEvents(goal_reached=bool(goal_reached), collision=collision, truncated=truncated, left_world=left_world)
+        self.robot_events = [events]
+        return events
 
     def stop_humans(self, index: np.ndarray) -> None:
         """Humans ``index`` (0-based) stop where they are for the rest of the episode (a multi-agent env lets them leave)."""
@@ -304,7 +324,11 @@ class Simulator(StateFields):
         if self.orca is None:
             return self.social_force_commands()
         state = self._state
-        commands = self.orca.velocities(state.positions, state.velocities, state.human_goals, state.human_preferred_speed)
+        positions, velocities = state.positions, state.velocities
+        if self.team is not None:  # the robots first: the ego robot, then the others
+            positions = np.concatenate([positions[:1], self.team.state.positions, positions[1:]])
+            velocities = np.concatenate([velocities[:1], self.team.state.velocities, velocities[1:]])
+        commands = self.orca.velocities(positions, velocities, state.human_goals, state.human_preferred_speed)
         if self.orca.all_orca:
             return commands
         return np.where(self.orca.mask, commands, self.social_force_commands())
@@ -330,22 +354,10 @@ class Simulator(StateFields):
         if not (math.isfinite(a0) and math.isfinite(a1)):
             raise ValueError(f"robot action must be finite, got {list(np.asarray(action).tolist())}")
         a0, a1 = min(1.0, max(-1.0, a0)), min(1.0, max(-1.0, a1))
-        robot = self.scenario.robot
-        if robot.kinematics == "holonomic":
-            command = complex(a0, a1)
-            norm = abs(command)
-            if norm > 1.0:  # the max speed bounds the norm, not each axis
-                command /= norm
-            return command * robot.max_speed * cmath.exp(1j * self._state.robot_heading)
-        speed, turn = a0 * robot.max_speed, a1 * robot.max_angular_speed
-        heading = self._state.robot_heading
-        new_heading = heading + turn * self.dt
-        if abs(turn) > 1e-9:  # exact arc of the unicycle over the step
-            displacement = (speed / turn) * -1j * (cmath.exp(1j * new_heading) - cmath.exp(1j * heading))
-        else:
-            displacement = speed * self.dt * cmath.exp(1j * heading)
-        self._state.robot_heading = math.remainder(new_heading, 2 * math.pi)
-        return displacement / self.dt
+        if self.team is not None and not self.team.state.active[0]:
+            return 0j  # the ego robot left the world: it stays parked
+        velocity, self._state.robot_heading = robot_kinematics(self.scenario.robot, self._state.robot_heading, a0, a1, self.dt)
+        return velocity
 
     def _scaled_commands(self, actions: np.ndarray) -> np.ndarray:
         actions = np.asarray(actions, dtype=float)
@@ -388,6 +400,8 @@ class Simulator(StateFields):
         self._robot_gap = self._gap[0]
         self._humans_touch = len(z) > 1 and bool(self._gap[1:].min() < 0.0)
         self._repulsion = sf.repulsion(offset, distance, self._gain, self._decay)
+        if self.team is not None:
+            self.team.refresh(z, self._repulsion)
 
     def _measure_obstacles(self, z: np.ndarray) -> tuple[np.ndarray | None, np.ndarray | None]:
         """Every agent's offset and distance to each static obstacle (polygons, then disc centres; None without any).
@@ -412,6 +426,9 @@ class Simulator(StateFields):
         self._pair_offset = self._pair_distance = None  # built from positions only if someone asks
         self.robot_offset, self.robot_distance = geometry.robot_offset, geometry.robot_distance
         self._robot_gap, self._humans_touch, self._repulsion = geometry.robot_gap, geometry.humans_touch, geometry.repulsion
+        if self.team is not None:
+            self._repulsion = self._repulsion.copy()  # the grid's own array: the team adds to a copy
+            self.team.refresh(z, self._repulsion)
 
     @property
     def pair_offset(self) -> np.ndarray:
@@ -468,3 +485,66 @@ class Simulator(StateFields):
             return False
         robot = complex(self._state.positions[0])
         return outside(robot.real, robot.imag, self.bounds)
+
+    # ----------------------------------------------------------------- several robots
+
+    @property
+    def robot_count(self) -> int:
+        """R: the scenario's robots (1 without ``robots:``)."""
+        return 1 if self.team is None else self.team.count
+
+    def robot_scenario(self, index: int) -> object:
+        """The scenario as robot ``index`` sees it: its own spec as ``robot`` (the scenario itself for the ego robot)."""
+        return self._robot_scenarios[index]
+
+    def robot_view(self, index: int) -> RobotView | Simulator:
+        """The world from robot ``index`` (:class:`crowdnav.robots.RobotView`), what its sensors, reward and scripted policy read.
+
+        One robot: the simulator itself (nothing else to see).
+        """
+        if self.team is None:
+            return self
+        return RobotView(self, index)
+
+    def retire_robots(self, index: np.ndarray | list[int]) -> None:
+        """Robots ``index`` (0: the ego robot) leave the world for the rest of the episode (:data:`crowdnav.robots.PARKED`)."""
+        if self.team is None:
+            raise ValueError("retire_robots needs a scenario with robots:; the one robot's episode ends with it")
+        state = self.team.state
+        for k in np.asarray(index, dtype=int).tolist():
+            if not state.active[k]:
+                continue
+            state.active[k] = False
+            if k == 0:
+                state.left_at[0] = self._state.positions[0]
+                self._state.positions[0], self._state.velocities[0] = PARKED, 0.0
+            else:
+                state.left_at[k] = state.positions[k - 1]
+                state.positions[k - 1], state.velocities[k - 1] = PARKED, 0.0
+        self.refresh()
+
+    @property
+    def robot_positions(self) -> np.ndarray:
+        """(R,) complex (m): every robot's centre, the ego robot first (:data:`crowdnav.robots.PARKED` once it left)."""
+        if self.team is None:
+            return self._state.positions[:1].copy()
+        return np.concatenate([self._state.positions[:1], self.team.state.positions])
+
+    @property
+    def robot_goals(self) -> np.ndarray:
+        """(R,) complex (m): every robot's goal, the ego robot first."""
+        if self.team is None:
+            return np.array([self._state.robot_goal])
+        return np.concatenate([[self._state.robot_goal], self.team.state.goals])
+
+    @property
+    def robot_headings(self) -> np.ndarray:
+        """(R,) float (rad): every robot's heading, the ego robot first."""
+        if self.team is None:
+            return np.array([self._state.robot_heading])
+        return np.concatenate([[self._state.robot_heading], self.team.state.headings])
+
+    @property
+    def robots_active(self) -> np.ndarray:
+        """(R,) bool: robots still in the world (one robot: always ``[True]``)."""
+        return np.ones(1, dtype=bool) if self.team is None else self.team.state.active.copy()

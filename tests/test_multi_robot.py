@@ -4,10 +4,12 @@ from __future__ import annotations
 
 import copy
 
+import numpy as np
 import pytest
 
 from crowdnav.scenario.errors import ScenarioError
 from crowdnav.scenario.loader import load_scenario
+from crowdnav.simulator import Simulator
 
 HALL = {
     "description": "Two robots swap sides of an empty hall.",
@@ -83,12 +85,103 @@ def test_file_errors_carry_the_line_of_the_robot(tmp_path):
     path.write_text(
         "description: two robots\n"
         "robots:\n"
-        "  - start: {type: point, position: [0, 0]}\n"
-        "    goal: {type: point, position: [3, 0]}\n"
-        "  - start: {type: point, position: [1, 1]}\n"
-        "    goal: {type: point, position: [3, 3]}\n"
+        "  - start: {type: points, points: [[0, 0]]}\n"
+        "    goal: {type: points, points: [[3, 0]]}\n"
+        "  - start: {type: points, points: [[1, 1]]}\n"
+        "    goal: {type: points, points: [[3, 3]]}\n"
         "    max_speed: -1\n",
         encoding="utf-8",
     )
     message = error_of(path)
     assert "two.yaml:7: robots.1.max_speed" in message, message
+
+
+# ----------------------------------------------------------------------------- simulator
+
+HEAD_ON = hall(
+    robots=[
+        {"name": "east", "start": {"type": "points", "points": [[-1.5, 0]]}, "goal": {"type": "points", "points": [[4, 0]]},
+         "start_heading": "toward_goal"},
+        {"name": "west", "start": {"type": "points", "points": [[1.5, 0]]}, "goal": {"type": "points", "points": [[-4, 0]]},
+         "start_heading": "toward_goal"},
+    ],
+    humans={"count": 0},
+)
+
+
+def test_robots_driving_head_on_both_collide_with_each_other():
+    sim = Simulator(HEAD_ON)
+    sim.reset(seed=0)
+    for _ in range(20):
+        events = sim.step(np.array([1.0, 0.0]), other_robot_actions=np.array([[1.0, 0.0]]))
+        if events.terminated:
+            break
+    east, west = sim.robot_events
+    assert east.collision.kind == "robot" and east.collision.partner == "west"
+    assert west.collision.kind == "robot" and west.collision.partner == "east"
+    assert east.outcome == west.outcome == "collision"
+
+
+def test_a_retired_robot_leaves_the_world_and_no_longer_collides():
+    sim = Simulator(HEAD_ON)
+    sim.reset(seed=0)
+    sim.retire_robots([1])
+    for _ in range(30):
+        events = sim.step(np.array([1.0, 0.0]), other_robot_actions=np.array([[1.0, 0.0]]))
+        assert sim.robot_events[1] is None
+        if events.terminated:
+            break
+    assert events.outcome == "success"
+    assert not sim.robots_active[1] and sim.team.state.left_at[1] == 1.5 + 0j
+
+
+def _human_pushed_by_other_robot(see_robot: bool, model: str = "social_force") -> complex:
+    document = hall(humans={"count": 1, "see_robot": see_robot, "model": model, "spawn": [{"type": "points", "points": [[1.5, 0.8]]}],
+                            "goal": [{"type": "points", "points": [[1.5, 4]]}]})
+    document["robots"] = copy.deepcopy(HEAD_ON["robots"])
+    document["robots"][1]["start"] = {"type": "points", "points": [[1.5, 1.6]]}  # right in the human's way
+    sim = Simulator(document)
+    sim.reset(seed=0)
+    return complex(sim.crowd_commands()[0])
+
+
+def test_humans_are_repelled_by_every_robot_they_see():
+    seen, unseen = _human_pushed_by_other_robot(True), _human_pushed_by_other_robot(False)
+    assert unseen.imag > 0.0  # toward its goal, up
+    assert seen.imag < unseen.imag  # the second robot above it pushes it back down
+
+
+def test_an_orca_crowd_avoids_every_robot_it_sees():
+    pytest.importorskip("pyrvo")
+    seen, unseen = _human_pushed_by_other_robot(True, "orca"), _human_pushed_by_other_robot(False, "orca")
+    assert seen != unseen
+
+
+def test_every_robot_is_drawn_clear_of_the_others_and_the_crowd():
+    sim = Simulator(hall(humans={**HALL["humans"], "count": 8}))
+    for seed in range(20):
+        sim.reset(seed=seed)
+        robots = sim.robot_positions
+        assert abs(robots[0] - robots[1]) > 0.6
+        assert (np.abs(sim.human_positions[:, None] - robots[None, :]) > 0.6).all()
+
+
+def test_same_seed_gives_the_same_multi_robot_episode_bit_for_bit():
+    def run():
+        sim = Simulator(hall(humans={**HALL["humans"], "count": 6, "see_robot": True}))
+        sim.reset(seed=5)
+        trace = []
+        for _ in range(40):
+            sim.step(np.array([0.8, 0.1]), other_robot_actions=np.array([[0.5, -0.2]]))
+            trace.append(np.concatenate([sim.positions, sim.robot_positions]))
+        return np.array(trace)
+
+    assert np.array_equal(run(), run())
+
+
+def test_one_robot_scenarios_have_no_team_and_see_themselves_as_the_view():
+    sim = Simulator("room_furniture")
+    sim.reset(seed=0)
+    assert sim.team is None and sim.robot_count == 1 and sim.robot_view(0) is sim
+    events = sim.step(np.zeros(2))
+    assert sim.robot_events == [events]

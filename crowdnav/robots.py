@@ -1,0 +1,309 @@
+"""Several robots in one world (a scenario's ``robots:``): the robots after the first, and what they add to a step.
+
+The simulator's :class:`crowdnav.sim_state.SimState` keeps its layout whatever the number of
+robots: agent 0 is the *ego* robot (``robots[0]``, the one the Gymnasium env learns), humans
+are agents 1..n. The other robots live in a :class:`Team` the simulator holds only for a
+scenario with ``robots:`` (``sim.team``; None otherwise), so the one-robot step is the same
+code and the same bits as before; the team's work is a few (n+1, m) array operations per step,
+m the number of other robots, and a loop over the robots only where each gets its own outcome.
+
+What the team adds to a step: the other robots' kinematics (each robot's own), their repulsion
+on the humans (``see_robot``: the robot parameters of the social force, as the ego robot's),
+their geometry (to the humans, the ego robot, each other and the static obstacles) and every
+robot's outcome, robot-robot contacts included (``Collision("robot", <name>)``).
+
+A robot that finished (success, collision, out of the world) leaves the world when its env
+says so (:meth:`crowdnav.Simulator.retire_robots`): it is moved to :data:`PARKED`, a point so
+far away that it no longer pushes, blocks or is seen by anyone (every repulsion is exactly 0
+there), and its ``active`` flag is cleared; :attr:`TeamState.left_at` keeps where it left.
+
+:class:`RobotView` shows the world from one robot: index 0 is that robot, then the humans, then
+the other active robots, with the attribute names the sensors, the reward and the scripted
+policies read from a simulator, so all of them work for any robot unchanged.
+"""
+
+from __future__ import annotations
+
+import cmath
+import math
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from crowdnav import social_force as sf
+from crowdnav.contacts import goal_distance, outside
+from crowdnav.events import Collision, StepEvents
+from crowdnav.obstacles import nearest_on_edges
+from crowdnav.placement import GAP, JITTER_REACH
+from crowdnav.sim_state import SELF_DISTANCE
+
+PARKED = complex(1.0e7, 1.0e7)
+"""Where a robot that left the world is kept (m): every exponential repulsion and contact test of it is exactly 0 / False."""
+
+
+def robot_kinematics(robot: Any, heading: float, a0: float, a1: float, dt: float) -> tuple[complex, float]:
+    """A robot's velocity over the step (m/s, world frame) and its new heading, from a clipped, finite action ``(a0, a1)``.
+
+    Holonomic: ``(vx, vy)`` in the robot frame, the norm capped at 1; unicycle: ``(v, omega)``, the exact arc.
+    """
+    if robot.kinematics == "holonomic":
+        command = complex(a0, a1)
+        norm = abs(command)
+        if norm > 1.0:  # the max speed bounds the norm, not each axis
+            command /= norm
+        return command * robot.max_speed * cmath.exp(1j * heading), heading
+    speed, turn = a0 * robot.max_speed, a1 * robot.max_angular_speed
+    new_heading = heading + turn * dt
+    if abs(turn) > 1e-9:  # exact arc of the unicycle over the step
+        displacement = (speed / turn) * -1j * (cmath.exp(1j * new_heading) - cmath.exp(1j * heading))
+    else:
+        displacement = speed * dt * cmath.exp(1j * heading)
+    return displacement / dt, math.remainder(new_heading, 2 * math.pi)
+
+
+def first_heading(robot: Any, rng: np.random.Generator, start: complex, goal: complex) -> float:
+    """A robot's heading at reset (``start_heading``: random, toward_goal or degrees)."""
+    if robot.start_heading == "random":
+        return float(rng.uniform(-math.pi, math.pi))
+    if robot.start_heading == "toward_goal":
+        return cmath.phase(goal - start)
+    return math.radians(float(robot.start_heading))
+
+
+@dataclass(eq=False)
+class TeamState:
+    """The episode state of the robots after the first (m of them; ``active`` and ``left_at`` cover all R robots)."""
+
+    positions: np.ndarray
+    """(m,) complex, m: centres (:data:`PARKED` once retired)."""
+    velocities: np.ndarray
+    """(m,) complex, m/s: velocities over the last step."""
+    goals: np.ndarray
+    """(m,) complex, m: goal centres."""
+    headings: np.ndarray
+    """(m,) float64, rad: headings."""
+    active: np.ndarray
+    """(R,) bool, the ego robot first: still in the world."""
+    left_at: np.ndarray
+    """(R,) complex, m: where each retired robot was when it left (NaN while active)."""
+
+    def copy(self) -> TeamState:
+        return TeamState(*(np.copy(value) for value in vars(self).values()))
+
+
+class Team:
+    """The robots after the first of a scenario with ``robots:``, their constants and their per-step work."""
+
+    def __init__(self, scenario: Any, obstacles: Any, placement: Any):
+        self.specs = scenario.robot_specs[1:]
+        self.names: list[str] = scenario.robot_names
+        """Every robot's agent name, the ego robot first."""
+        self.placements = placement.other_robots
+        humans, force = scenario.humans, scenario.humans.social_force
+        self.radii = np.array([robot.radius for robot in self.specs])
+        self.all_radii = np.concatenate([[scenario.robot.radius], self.radii])
+        """(R,) body radii (m), the ego robot first."""
+        self.max_speeds = np.array([robot.max_speed for robot in self.specs])
+        self.goal_radii = np.array([robot.goal_radius for robot in self.specs])
+        self._human_radius = humans.radius
+        # humans pushed by each robot (the ego robot's column of the pair tables, per robot radius)
+        self._push_gain = sf.repulsion_gain(force.robot_strength if humans.see_robot else 0.0, humans.radius + self.radii, force.robot_range)
+        self._push_decay = -1.0 / force.robot_range
+        # the humans' force on each robot: the reward's social term, with the human parameters (row 0 for the ego robot)
+        self._social_gain = sf.repulsion_gain(force.human_strength, humans.radius + self.radii, force.human_range)[:, None]
+        self._social_decay = -1.0 / force.human_range
+        self._obstacles = obstacles
+        self._static_count = obstacles.polygon_count + obstacles.disc_count
+        self._static_contact = self.radii[:, None] + obstacles.surface_radius[None, :]
+        self._static_labels = obstacles.labels + obstacles.disc_labels
+        self._pair_contact = self.radii[:, None] + self.radii[None, :]
+        count = len(self.specs)
+        self.state = TeamState(np.zeros(count, complex), np.zeros(count, complex), np.zeros(count, complex), np.zeros(count),
+                               np.ones(count + 1, bool), np.full(count + 1, complex(np.nan, np.nan)))
+        """The episode's robots (drawn by :meth:`draw`; a placeholder before the first reset)."""
+
+    @property
+    def count(self) -> int:
+        """R: every robot, the ego robot included."""
+        return len(self.names)
+
+    # ----------------------------------------------------------------- reset
+
+    def draw(self, rng: np.random.Generator, start: complex, goal: complex) -> tuple[np.ndarray, np.ndarray]:
+        """Draw the other robots' starts, goals and headings after the ego robot's; returns every robot's (R,) starts and goals.
+
+        Each start keeps clear of the robots drawn before it, each goal of their goals; both respect
+        the robot's own start-goal rules as the ego robot's draw does.
+        """
+        starts, goals, headings = [start], [goal], []
+        radii = self.all_radii
+        for j, (robot, places) in enumerate(zip(self.specs, self.placements, strict=True), start=1):
+            clear = radii[j] + radii[:j] + GAP + 2 * JITTER_REACH
+            begin = places.robot_start.draw(rng, 1, allowed=places.start_goal_ok.any(1), away_from=np.array(starts), min_distance=clear)[0]
+            reachable = None
+            if places.start_component is not None:
+                nearest = int(np.argmin(np.abs(places.robot_start.points - begin)))
+                reachable = places.goal_component == places.start_component[nearest]
+            away = np.array([begin, *goals])
+            near = np.concatenate([[robot.min_start_goal_distance + JITTER_REACH], clear])
+            end = places.robot_goal.draw(rng, 1, allowed=reachable, away_from=away, min_distance=near)[0]
+            headings.append(first_heading(robot, rng, begin, end))
+            starts.append(begin)
+            goals.append(end)
+        count = len(self.specs)
+        self.state = TeamState(
+            positions=np.array(starts[1:], dtype=complex), velocities=np.zeros(count, dtype=complex), goals=np.array(goals[1:], dtype=complex),
+            headings=np.array(headings, dtype=float), active=np.ones(count + 1, dtype=bool), left_at=np.full(count + 1, complex(np.nan, np.nan)),
+        )
+        return np.array(starts, dtype=complex), np.array(goals, dtype=complex)
+
+    # ------------------------------------------------------------------ step
+
+    def move(self, actions: np.ndarray | None, dt: float) -> None:
+        """Every active other robot's velocity from its action ((m, 2) in [-1, 1]; None: standing still), then its new position."""
+        state = self.state
+        state.velocities[:] = 0.0
+        if actions is not None:
+            actions = np.clip(np.asarray(actions, dtype=float), -1.0, 1.0)
+            for j, robot in enumerate(self.specs):  # 1 to 7 robots: each its own kinematics
+                if state.active[j + 1]:
+                    velocity, state.headings[j] = robot_kinematics(robot, float(state.headings[j]), float(actions[j, 0]),
+                                                                   float(actions[j, 1]), dt)
+                    state.velocities[j] = velocity
+        state.positions += state.velocities * dt
+
+    def refresh(self, positions: np.ndarray, repulsion: np.ndarray) -> None:
+        """Measure the team's geometry at the agents' ``positions`` and add the other robots' push to the humans' ``repulsion``."""
+        robots = self.state.positions
+        offset = robots[None, :] - positions[:, None]  # row i, column j: from agent i (ego robot, humans) to robot j
+        distance = np.abs(offset)
+        self.offset, self.distance = offset, distance
+        n = len(positions) - 1
+        if n:
+            gain = np.broadcast_to(self._push_gain, (n, len(robots)))
+            repulsion[1:] += sf.repulsion(offset[1:], distance[1:], gain, self._push_decay)
+            self.social = sf.repulsion(-offset[1:].T, distance[1:].T, np.broadcast_to(self._social_gain, (len(robots), n)), self._social_decay)
+        else:
+            self.social = np.zeros(len(robots), dtype=complex)
+        pair = robots[None, :] - robots[:, None]
+        self.pair_offset, self.pair_distance = pair, np.abs(pair)
+        self.pair_distance.flat[:: len(robots) + 1] = SELF_DISTANCE
+        if self._static_count:
+            self.static_offset, self.static_distance = nearest_on_edges(robots, self._obstacles.surface)
+        else:
+            self.static_offset = np.zeros((len(robots), 0), dtype=complex)
+            self.static_distance = np.zeros((len(robots), 0))
+
+    def outcomes(self, sim: Any, ego_gap: np.ndarray, truncated: bool) -> list[StepEvents | None]:
+        """Every robot's events of the step (None for a robot that already left), the ego robot first.
+
+        ``ego_gap``: the ego robot's surface gaps to itself, every human and every obstacle (the simulator's).
+        """
+        state, r0 = self.state, self.all_radii[0]
+        events: list[StepEvents | None] = []
+        n = sim.n_humans
+        if state.active[0]:
+            to_robots = self.distance[0] - r0 - self.radii
+            to_robots[~state.active[1:]] = np.inf
+            collision = _deepest(ego_gap, to_robots, n, self._static_labels, self.names[1:])
+            left = sim.robot_left_world()
+            reached = goal_distance(sim.robot_goal, complex(sim.positions[0])) <= sim.scenario.robot.goal_radius
+            events.append(StepEvents(goal_reached=bool(reached), collision=collision, truncated=truncated, left_world=left))
+        else:
+            events.append(None)
+        for j in range(len(self.specs)):
+            if not state.active[j + 1]:
+                events.append(None)
+                continue
+            gap = np.concatenate([[SELF_DISTANCE], self.distance[1:, j] - self._human_radius - self.radii[j],
+                                  self.static_distance[j] - self._static_contact[j]])
+            to_others = self.pair_distance[j] - self._pair_contact[j]  # itself: a huge gap
+            to_others[~state.active[1:]] = np.inf
+            to_ego = self.distance[0, j] - r0 - self.radii[j] if state.active[0] else np.inf
+            collision = _deepest(gap, np.concatenate([[to_ego], to_others]), n, self._static_labels, self.names)
+            point = complex(state.positions[j])
+            left = sim.bounds is not None and bool(outside(point.real, point.imag, sim.bounds))
+            reached = bool(goal_distance(complex(state.goals[j]), point) <= self.goal_radii[j])
+            events.append(StepEvents(goal_reached=reached, collision=collision, truncated=truncated, left_world=left))
+        return events
+
+
+def _deepest(gap: np.ndarray, to_robots: np.ndarray, n: int, labels: list[str], robot_names: list[str]) -> Collision | None:
+    """A robot's deepest contact: ``gap`` (1+n+S,) to itself, the humans and the obstacles; ``to_robots`` to the other robots."""
+    best = float(gap.min()) if len(gap) else math.inf
+    robot_best = float(to_robots.min()) if len(to_robots) else math.inf
+    if min(best, robot_best) > 0.0:
+        return None
+    if robot_best < best:
+        k = int(to_robots.argmin())
+        return Collision("robot", robot_names[k], robot_best)
+    k = int(gap.argmin())
+    if k <= n:
+        return Collision("human", f"human_{k - 1}", best)
+    return Collision("static", labels[k - n - 1], best)
+
+
+class RobotView:
+    """The world seen from robot ``index`` (0: the ego robot): the simulator's attributes, that robot first.
+
+    Agents are that robot, the humans, then the other active robots (``n_humans`` counts them
+    all: for a sensor, another robot is one more moving disc). Built fresh after each step
+    (:meth:`crowdnav.Simulator.robot_view`); reading it does not change the simulator.
+    """
+
+    def __init__(self, sim: Any, index: int):
+        team, state = sim.team, sim.team.state
+        self.world, self.obstacles, self.dt, self.bounds = sim.world, sim.obstacles, sim.dt, sim.bounds
+        self.scenario = sim.robot_scenario(index)
+        others = np.flatnonzero(state.active[1:])
+        if index:
+            others = others[others != index - 1]
+            j = index - 1
+            me, velocity, radius = state.positions[j], state.velocities[j], team.radii[j]
+            self.robot_heading, self.robot_goal = float(state.headings[j]), complex(state.goals[j])
+            self.robot_social_force = complex(team.social[j])
+            polygon_offset, polygon_distance = team.static_offset[j : j + 1], team.static_distance[j : j + 1]
+            ego = [sim.positions[0]] if state.active[0] else []
+            ego_velocity = [sim.velocities[0]] if state.active[0] else []
+            ego_radius = [team.all_radii[0]] if state.active[0] else []
+            ego_speed = [sim.scenario.robot.max_speed] if state.active[0] else []
+        else:
+            me, velocity, radius = sim.positions[0], sim.velocities[0], team.all_radii[0]
+            self.robot_heading, self.robot_goal = sim.robot_heading, sim.robot_goal
+            self.robot_social_force = sim.robot_social_force
+            static_count = sim.obstacles.polygon_count + sim.obstacles.disc_count
+            polygon_offset = np.concatenate([sim.polygon_offset[:1], sim.disc_offset[:1]], axis=1) if static_count else np.zeros((1, 0), complex)
+            polygon_distance = np.concatenate([sim.polygon_distance[:1], sim.disc_distance[:1]], axis=1) if static_count else np.zeros((1, 0))
+            ego, ego_velocity, ego_radius, ego_speed = [], [], [], []
+        humans = sim.positions[1:]
+        self.positions = np.concatenate([[me], humans, ego, state.positions[others]])
+        self.velocities = np.concatenate([[velocity], sim.velocities[1:], ego_velocity, state.velocities[others]])
+        self.radii = np.concatenate([[radius], sim.radii[1:], ego_radius, team.radii[others]])
+        self.human_max_speed = np.concatenate([sim.human_max_speed, ego_speed, team.max_speeds[others]])
+        self.robot_offset = self.positions - me
+        self.robot_distance = np.abs(self.robot_offset)
+        self.robot_distance[0] = SELF_DISTANCE
+        count = sim.obstacles.polygon_count
+        self.polygon_offset, self.polygon_distance = polygon_offset[:, :count], polygon_distance[:, :count]
+        self.disc_offset, self.disc_distance = polygon_offset[:, count:], polygon_distance[:, count:]
+
+    @property
+    def n_humans(self) -> int:
+        """Every disc this robot sees besides itself: the humans and the other active robots."""
+        return len(self.positions) - 1
+
+    @property
+    def robot_position(self) -> complex:
+        return complex(self.positions[0])
+
+    @property
+    def robot_goal_distance(self) -> float:
+        return abs(self.robot_goal - complex(self.positions[0]))
+
+
+def robot_scenario(scenario: Any, index: int) -> Any:
+    """``scenario`` as robot ``index`` sees it: its spec as ``robot`` (a shallow copy; the same scenario for the ego robot)."""
+    if index == 0:
+        return scenario
+    return scenario.model_copy(update={"robot": scenario.robot_specs[index]})  # no validation: robots stays as written
