@@ -248,15 +248,16 @@ class RobotView:
     """The world seen from robot ``index`` (0: the ego robot): the simulator's attributes, that robot first.
 
     Agents are that robot, the humans, then the other active robots (``n_humans`` counts them
-    all: for a sensor, another robot is one more moving disc). Built fresh after each step
+    all: for a sensor, another robot is one more moving disc; ``with_robots=False``: the humans
+    only, for the modalities that track people). Built fresh after each step
     (:meth:`crowdnav.Simulator.robot_view`); reading it does not change the simulator.
     """
 
-    def __init__(self, sim: Any, index: int):
+    def __init__(self, sim: Any, index: int, with_robots: bool = True):
         team, state = sim.team, sim.team.state
         self.world, self.obstacles, self.dt, self.bounds = sim.world, sim.obstacles, sim.dt, sim.bounds
         self.scenario = sim.robot_scenario(index)
-        others = np.flatnonzero(state.active[1:])
+        others = np.flatnonzero(state.active[1:]) if with_robots else np.zeros(0, dtype=int)
         if index:
             others = others[others != index - 1]
             j = index - 1
@@ -264,10 +265,11 @@ class RobotView:
             self.robot_heading, self.robot_goal = float(state.headings[j]), complex(state.goals[j])
             self.robot_social_force = complex(team.social[j])
             polygon_offset, polygon_distance = team.static_offset[j : j + 1], team.static_distance[j : j + 1]
-            ego = [sim.positions[0]] if state.active[0] else []
-            ego_velocity = [sim.velocities[0]] if state.active[0] else []
-            ego_radius = [team.all_radii[0]] if state.active[0] else []
-            ego_speed = [sim.scenario.robot.max_speed] if state.active[0] else []
+            seen = bool(state.active[0]) and with_robots
+            ego = [sim.positions[0]] if seen else []
+            ego_velocity = [sim.velocities[0]] if seen else []
+            ego_radius = [team.all_radii[0]] if seen else []
+            ego_speed = [sim.scenario.robot.max_speed] if seen else []
         else:
             me, velocity, radius = sim.positions[0], sim.velocities[0], team.all_radii[0]
             self.robot_heading, self.robot_goal = sim.robot_heading, sim.robot_goal

@@ -497,14 +497,14 @@ class Simulator(StateFields):
         """The scenario as robot ``index`` sees it: its own spec as ``robot`` (the scenario itself for the ego robot)."""
         return self._robot_scenarios[index]
 
-    def robot_view(self, index: int) -> RobotView | Simulator:
+    def robot_view(self, index: int, with_robots: bool = True) -> RobotView | Simulator:
         """The world from robot ``index`` (:class:`crowdnav.robots.RobotView`), what its sensors, reward and scripted policy read.
 
-        One robot: the simulator itself (nothing else to see).
+        ``with_robots=False``: the other robots left out (what a people tracker sees). One robot: the simulator itself.
         """
         if self.team is None:
             return self
-        return RobotView(self, index)
+        return RobotView(self, index, with_robots)
 
     def retire_robots(self, index: np.ndarray | list[int]) -> None:
         """Robots ``index`` (0: the ego robot) leave the world for the rest of the episode (:data:`crowdnav.robots.PARKED`)."""

@@ -28,21 +28,27 @@ ROBOTS = {"straight": StraightToGoal(), "still": still}
 
 
 def run_documented_loop(env, robot=still, seed: int = 0) -> tuple[int, dict]:
-    """The docs' loop for one episode: (steps, the robot's last info); checks every action on the way."""
+    """The docs' loop for one episode: (steps, each robot's last info); checks every action on the way.
+
+    Every robot (one, ``robot``, or several: docs/environments.md#several-robots) follows ``robot``.
+    """
     crowd = crowdnav.SocialForcePolicy(env.scenario)
     observations, infos = env.reset(seed=seed)
     steps, robot_info = 0, {}
+    robots = [agent for agent in env.possible_agents if not agent.startswith("human_")]
     while env.agents:
         actions = crowd(observations)
-        humans = [agent for agent in env.agents if agent != "robot"]
+        humans = [agent for agent in env.agents if agent.startswith("human_")]
         assert sorted(actions) == sorted(humans)
         stacked = np.stack([actions[name] for name in humans]) if humans else np.zeros((0, 2))
         assert np.isfinite(stacked).all(), {name: actions[name] for name in humans if not np.isfinite(actions[name]).all()}
         assert (np.abs(stacked) <= 1.0 + 1e-6).all()
-        actions["robot"] = robot(env.simulator)
+        for k, name in enumerate(robots):
+            if name in env.agents:
+                actions[name] = robot(env.simulator.robot_view(k))
         observations, rewards, terminations, truncations, infos = env.step(actions)
         steps += 1
-        robot_info = infos["robot"]
+        robot_info.update((name, infos[name]) for name in robots if name in infos)
         assert steps <= env.scenario.max_steps
     return steps, robot_info
 
@@ -51,10 +57,11 @@ def run_documented_loop(env, robot=still, seed: int = 0) -> tuple[int, dict]:
 @pytest.mark.parametrize("name", library_names())
 def test_documented_loop_runs_a_full_episode_in_every_library_scenario(name, robot):
     env = crowdnav.parallel_env(name, **FAST)
-    steps, info = run_documented_loop(env, ROBOTS[robot])
+    steps, infos = run_documented_loop(env, ROBOTS[robot])
     assert not env.agents and steps >= 1
-    assert info["outcome"] in OUTCOMES
-    assert (info["outcome"] == "truncated") == (steps == env.scenario.max_steps)
+    outcomes = [info["outcome"] for info in infos.values()]
+    assert set(outcomes) <= set(OUTCOMES) and len(outcomes) == len(env.scenario.robot_names)
+    assert ("truncated" in outcomes) == (steps == env.scenario.max_steps)
 
 
 @pytest.mark.parametrize("name", ["station_hall", "hotel_lobby"])

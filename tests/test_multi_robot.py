@@ -3,10 +3,12 @@
 from __future__ import annotations
 
 import copy
+import warnings
 
 import numpy as np
 import pytest
 
+from crowdnav.envs import CrowdNavEnv, parallel_env
 from crowdnav.scenario.errors import ScenarioError
 from crowdnav.scenario.loader import load_scenario
 from crowdnav.simulator import Simulator
@@ -185,3 +187,133 @@ def test_one_robot_scenarios_have_no_team_and_see_themselves_as_the_view():
     assert sim.team is None and sim.robot_count == 1 and sim.robot_view(0) is sim
     events = sim.step(np.zeros(2))
     assert sim.robot_events == [events]
+
+
+# ----------------------------------------------------------------------------- PettingZoo env
+
+with warnings.catch_warnings():
+    warnings.filterwarnings("ignore", message="The old environment creation API", category=DeprecationWarning)
+    from pettingzoo.test import parallel_api_test
+
+LANES = hall(
+    robots=[
+        {"name": "east", "start": {"type": "points", "points": [[-1, 2]]}, "goal": {"type": "points", "points": [[0.5, 2]]},
+         "start_heading": "toward_goal"},
+        {"name": "west", "start": {"type": "points", "points": [[3, -2]]}, "goal": {"type": "points", "points": [[-3, -2]]},
+         "start_heading": "toward_goal", "modalities": ["goal", "humans", "velocity"]},
+    ],
+    humans={"count": 0},
+)
+PARALLEL_MODES = {
+    "humans_as_agents": {},
+    "humans_as_agents_fixed": {"fixed_agents": True},
+    "robots_only": {"humans_as_agents": False},
+    "robots_only_fixed_flat": {"humans_as_agents": False, "fixed_agents": True, "flat_observations": True},
+}
+
+
+@pytest.mark.parametrize("mode", PARALLEL_MODES)
+def test_parallel_api_test_passes_with_several_robots_without_any_warning(mode):
+    env = parallel_env(HALL, modalities=["goal", "lidar"], sensors={"lidar": {"beams": 16}}, **PARALLEL_MODES[mode])
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        parallel_api_test(env, num_cycles=300)
+
+
+def test_each_robot_is_an_agent_with_its_own_modalities_and_the_humans_follow_the_crowd_model():
+    env = parallel_env(LANES, humans_as_agents=False)
+    assert env.possible_agents == ["east", "west"]
+    assert list(env.observation_space("east").spaces) == ["goal", "lidar"]
+    assert list(env.observation_space("west").spaces) == ["goal", "humans", "velocity"]
+    assert env.state_space.shape == (2 * 8,)
+
+
+def test_a_robot_that_reached_its_goal_leaves_and_the_other_goes_on():
+    env = parallel_env(LANES, humans_as_agents=False)
+    env.reset(seed=0)
+    forward = np.array([1.0, 0.0])
+    ended = {}
+    for _ in range(40):
+        observations, rewards, terminations, truncations, infos = env.step({agent: forward for agent in env.agents})
+        assert set(observations) == set(rewards) == set(terminations) == set(infos)
+        for agent, done in terminations.items():
+            if done:
+                ended[agent] = (infos[agent]["outcome"], len(ended))
+        if not env.agents:
+            break
+    assert ended == {"east": ("success", 0), "west": ("success", 1)}
+    assert infos["west"]["reward_terms"]["goal_reached"] > 0
+
+
+def test_under_fixed_agents_a_robot_that_ended_stays_an_inactive_agent():
+    env = parallel_env(LANES, humans_as_agents=False, fixed_agents=True)
+    env.reset(seed=0)
+    seen_inactive = False
+    while env.agents:
+        assert env.agents == ["east", "west"]
+        observations, rewards, terminations, truncations, infos = env.step({agent: np.array([1.0, 0.0]) for agent in env.agents})
+        if not infos["east"]["active"]:
+            seen_inactive = True
+            assert rewards["east"] == 0.0 and not any(value.any() for value in observations["east"].values())
+            assert env.agents == [] or not terminations["east"]
+    assert seen_inactive and terminations == {"east": True, "west": True}
+
+
+def test_robots_only_fixed_agents_go_through_supersuit_to_sb3_ppo():
+    ss = pytest.importorskip("supersuit")
+    sb3 = pytest.importorskip("stable_baselines3")
+    torch = pytest.importorskip("torch")
+    torch.set_num_threads(1)
+    env = parallel_env(hall(max_steps=30), modalities=["goal", "closest_obstacle"], humans_as_agents=False, fixed_agents=True,
+                       flat_observations=True)
+    vec = ss.pettingzoo_env_to_vec_env_v1(env)
+    vec = ss.concat_vec_envs_v1(vec, 2, num_cpus=0, base_class="stable_baselines3")
+    assert vec.num_envs == 2 * 2
+    vec.venv.reset(seed=0)
+    sb3.common.utils.set_random_seed(0)
+    model = sb3.PPO("MlpPolicy", vec, n_steps=16, batch_size=32, n_epochs=1, device="cpu")
+    model.learn(total_timesteps=200)
+    observations, ends = vec.reset(), 0
+    for _ in range(80):
+        actions, _ = model.predict(observations, deterministic=True)
+        observations, rewards, dones, infos = vec.step(actions)
+        assert np.isfinite(observations).all() and np.isfinite(rewards).all()
+        ends += int(dones.reshape(2, 2).all(axis=1).sum())
+    assert ends >= 2
+
+
+# ----------------------------------------------------------------------------- Gymnasium env
+
+
+@pytest.mark.parametrize("other_robots", ["social-force", "straight"])
+def test_gym_env_learns_the_first_robot_and_passes_check_env_with_scripted_others(other_robots):
+    from gymnasium.utils.env_checker import check_env
+
+    env = CrowdNavEnv(HALL, other_robots=other_robots)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        check_env(env, skip_render_check=True)
+
+
+def test_gym_env_reports_the_other_robots_outcomes_and_a_callable_drives_them():
+    calls = []
+
+    def forward(view):
+        calls.append(view.robot_position)
+        return np.array([1.0, 0.0])
+
+    env = CrowdNavEnv(LANES, other_robots=forward)
+    env.reset(seed=0)
+    for _ in range(40):
+        _, _, terminated, truncated, info = env.step(np.zeros(2))  # the first robot waits
+        if info["other_robots"]["west"] is not None:
+            break
+    assert info["other_robots"] == {"west": "success"} and not terminated
+    assert not env.simulator.robots_active[1] and len(calls) >= 1
+    env.step(np.zeros(2))
+    assert len(calls) == len(set(calls))  # no call after it left
+
+
+def test_an_unknown_other_robot_policy_is_a_one_line_error():
+    with pytest.raises(ValueError, match="other_robots='wander' is not a scripted robot policy"):
+        CrowdNavEnv(HALL, other_robots="wander")

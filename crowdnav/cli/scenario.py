@@ -84,7 +84,7 @@ def describe_lines(world: object) -> list[str]:
     """The summary ``crowdnav scenario describe`` prints, one fact per line."""
     scenario = world.scenario  # type: ignore[attr-defined]
     obstacles = world.obstacles  # type: ignore[attr-defined]
-    area, robot, humans = scenario.world, scenario.robot, scenario.humans
+    area, humans = scenario.world, scenario.humans
     low, high = tuple(area.min), tuple(area.max)
     lines = [f"{scenario.name}: {scenario.description}".rstrip(": "),
              f"world: {high[0] - low[0]:g} m x {high[1] - low[1]:g} m from {low} to {high}, "
@@ -92,8 +92,9 @@ def describe_lines(world: object) -> list[str]:
              + (f", floor polygon of {len(area.points)} points" if area.points else ""),
              f"obstacles: {len(scenario.walls)} walls, {len(scenario.furniture)} pieces of furniture "
              f"({obstacles.polygon_count} polygons, {obstacles.disc_count} discs once compiled)",
-             f"robot: {robot.kinematics}, radius {robot.radius:g} m, max speed {robot.max_speed:g} m/s; "
-             f"start {_regions(robot.start)}; goal {_regions(robot.goal)} (radius {robot.goal_radius:g} m)",
+             *(f"robot: {'' if scenario.robots is None else f'{name}, '}{robot.kinematics}, radius {robot.radius:g} m, "
+               f"max speed {robot.max_speed:g} m/s; start {_regions(robot.start)}; goal {_regions(robot.goal)} (radius {robot.goal_radius:g} m)"
+               for name, robot in zip(scenario.robot_names, scenario.robot_specs, strict=True)),
              f"time: step {scenario.time_step:g} s, at most {scenario.max_steps} steps ({scenario.max_steps * scenario.time_step:g} s)",
              f"humans: up to {humans.max_count}, model {humans.model}, {'see' if humans.see_robot else 'do not see'} the robot"]
     for _, group in humans.crowd:

@@ -30,13 +30,14 @@ def parallel_env(
     human_reward: HumanReward | None = None,
     human_exit: HumanExit | None = None,
     fixed_agents: bool = False,
+    humans_as_agents: bool = True,
 ) -> CrowdNavParallelEnv:
     """The PettingZoo ParallelEnv for ``scenario`` (library name or YAML path); options as in
     CrowdNavEnv, plus the multi-agent ones of :class:`CrowdNavParallelEnv`."""
     return CrowdNavParallelEnv(
         scenario, modalities=modalities, sensors=sensors, reward_weights=reward_weights,
         overrides=overrides, render_mode=render_mode, render_options=render_options, flat_observations=flat_observations,
-        human_reward=human_reward, human_exit=human_exit, fixed_agents=fixed_agents,
+        human_reward=human_reward, human_exit=human_exit, fixed_agents=fixed_agents, humans_as_agents=humans_as_agents,
     )
 
 

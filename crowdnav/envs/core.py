@@ -9,6 +9,7 @@ the ``human_<i>`` agents).
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from collections.abc import Mapping, Sequence
 from typing import Any
@@ -18,6 +19,7 @@ from gymnasium import spaces
 
 from crowdnav.envs.reward import Reward
 from crowdnav.rendering.episode_view import RENDER_MODES, EpisodeView, RenderOptions
+from crowdnav.robots import RobotView
 from crowdnav.scenario import ScenarioIssue, library
 from crowdnav.sensors import Modality, build_modalities
 from crowdnav.simulator import Simulator, StepEvents
@@ -156,14 +158,64 @@ class EnvCore:
         self.render_mode = render_mode
         self.view = EpisodeView(self.simulator, render_mode, render_options) if render_mode else None
         self._observation: dict[str, np.ndarray] = {}
+        self.robot_names: list[str] = self.scenario.robot_names
+        """Every robot's agent name, the ego robot first (``["robot"]`` for one robot)."""
+        self.robot_spaces: list[spaces.Dict] = [self.observation_space]
+        """Every robot's observation space, the ego robot first."""
+        self.robot_rewards = [self.reward]
+        """Every robot's reward, the ego robot first."""
+        if self.simulator.team is not None:
+            self._build_robot_sensors(world)
+
+    def _build_robot_sensors(self, world: CompiledWorld) -> None:
+        """Each robot's own modalities (``robots.<i>.modalities``, default ``sensors.modalities``), built with its own spec."""
+        scenario, sensors = self.scenario, self.scenario.sensors
+        self._robot_sensors = []
+        for k, robot in enumerate(scenario.robot_specs):
+            own = getattr(robot, "modalities", None)
+            keys = own if own is not None else sensors.modalities
+            try:
+                built = build_modalities(keys, dataclasses.replace(world, scenario=self.simulator.robot_scenario(k)), sensors)
+            except ValueError as error:
+                field = f"robots.{k}.modalities" if own is not None else "sensors.modalities"
+                raise world.source.error([ScenarioIssue(field, str(error))]) from None
+            space = spaces.Dict({key: modality.space() for key, modality in built.items()})
+            self._robot_sensors.append(tuple((key, built[key]) for key in space.spaces))
+            if k == 0:
+                self.modalities, self.observation_space = built, space
+            else:
+                self.robot_spaces.append(space)
+                self.robot_rewards.append(Reward(scenario.reward))
+        self.robot_spaces[0] = self.observation_space
+        self._sensors = self._robot_sensors[0]
 
     def reset(self, seed: int | None) -> dict[str, np.ndarray]:
         self.simulator.reset(seed=seed)
         self.reward.reset(self.simulator)
+        for k, reward in enumerate(self.robot_rewards[1:], start=1):
+            reward.reset(self.simulator.robot_view(k))  # type: ignore[arg-type]  # reads what a simulator offers
         self._running = True
         if self.view is not None:
             self.view.on_reset()
         return self.observe()
+
+    def observe_robot(self, index: int) -> dict[str, np.ndarray]:
+        """Robot ``index``'s observation of the current state (several robots; new arrays every call).
+
+        Its range sensors see the other robots among the humans; a modality that tracks people
+        (``sees_robots`` False, e.g. ``humans``) sees the humans only.
+        """
+        sim = self.simulator
+        view = sim.robot_view(index)
+        people: RobotView | Simulator | None = None
+        observation = {}
+        for key, modality in self._robot_sensors[index]:
+            if modality.sees_robots:
+                observation[key] = modality.observe(view)  # type: ignore[arg-type]
+            else:
+                people = people if people is not None else sim.robot_view(index, with_robots=False)
+                observation[key] = modality.observe(people)  # type: ignore[arg-type]
+        return observation
 
     def observe(self) -> dict[str, np.ndarray]:
         """The robot's observation of the current state (new arrays every call).
@@ -171,22 +223,56 @@ class EnvCore:
         The envs call it once per reset/step, which is when ``human`` mode draws its window.
         """
         sim = self.simulator
-        self._observation = {key: modality.observe(sim) for key, modality in self._sensors}
+        if sim.team is None:
+            self._observation = {key: modality.observe(sim) for key, modality in self._sensors}
+        else:
+            self._observation = self.observe_robot(0)
         if self.render_mode == "human":
             self.view.render(self._observation)
         return self._observation
 
-    def step(self, action: Any, human_actions: np.ndarray | None = None) -> tuple[StepEvents, float, dict[str, float]]:
-        """Advance the simulator; returns (events, reward, reward terms)."""
+    def step(self, action: Any, human_actions: np.ndarray | None = None,
+             other_robot_actions: np.ndarray | None = None) -> tuple[StepEvents, float, dict[str, float]]:
+        """Advance the simulator; returns the ego robot's (events, reward, reward terms).
+
+        ``other_robot_actions``: with several robots, the (R-1, 2) actions of the others (None: they stand still).
+        """
         if not self._running:
             raise RuntimeError("the episode is over or has not started: call reset() before step()")
-        events = self.simulator.step(checked_robot_action(action), human_actions)
+        events = self.simulator.step(checked_robot_action(action), human_actions, other_robot_actions)
         reward, terms = self.reward(self.simulator, events)
         if events.terminated or events.truncated:
             self._running = False
         if self.view is not None:
             self.view.on_step(reward, events)
         return events, reward, terms
+
+    def step_robots(
+        self, actions: Sequence[np.ndarray | None], human_actions: np.ndarray | None = None
+    ) -> list[tuple[StepEvents, float, dict[str, float]] | None]:
+        """Advance the simulator with every robot's action (None: a robot that left); each robot's (events, reward, terms).
+
+        A robot that had left gets None. The episode is over once every robot's is over (or at the time limit).
+        """
+        if not self._running:
+            raise RuntimeError("the episode is over or has not started: call reset() before step()")
+        sim = self.simulator
+        still = np.zeros(2)
+        ego = checked_robot_action(actions[0]) if actions[0] is not None else still
+        others = np.array([checked_robot_action(a) if a is not None else still for a in actions[1:]]).reshape(-1, 2)
+        sim.step(ego, human_actions, others)
+        results: list[tuple[StepEvents, float, dict[str, float]] | None] = []
+        for k, events in enumerate(sim.robot_events):
+            if events is None:
+                results.append(None)
+                continue
+            reward, terms = self.robot_rewards[k](sim.robot_view(k), events)  # type: ignore[arg-type]  # reads what a simulator offers
+            results.append((events, reward, terms))
+        if all(result is None or result[0].terminated or result[0].truncated for result in results):
+            self._running = False
+        if self.view is not None and results[0] is not None:
+            self.view.on_step(results[0][1], results[0][0])
+        return results
 
     def render(self) -> np.ndarray | None:
         """The current frame (``rgb_array``), a window update (``human``) or None without a render_mode."""

@@ -1,8 +1,9 @@
 """Multi-agent plumbing of the ParallelEnv: global state, flat observations, human rewards and exits.
 
-**Global state** (``env.state()``, for centralised critics): a float32 vector of ``(1 + N) * 8``
-values, N the scenario's maximum crowd size, read as a table of ``1 + N`` rows (row 0 the robot,
-row ``1 + i`` human ``i``; rows of humans absent this episode are zero) by the columns of
+**Global state** (``env.state()``, for centralised critics): a float32 vector of ``(R + N) * 8``
+values, R the scenario's robots (1 without ``robots:``) and N its maximum crowd size, read as a
+table of ``R + N`` rows (rows 0..R-1 the robots, row ``R + i`` human ``i``; rows of humans absent
+this episode and of robots that left are zero) by the columns of
 :data:`STATE_COLUMNS`, world frame, metres and m/s:
 
 ==========  ===============================================================
@@ -47,9 +48,9 @@ HumanExit = Callable[[Simulator], np.ndarray]
 """``(simulator) -> (n_humans,)`` booleans: True terminates that human (it stands still from then on)."""
 
 
-def state_space(max_humans: int) -> spaces.Box:
+def state_space(max_humans: int, robots: int = 1) -> spaces.Box:
     """The Box of :func:`global_state` (unbounded: an open world's robot may step past its edge)."""
-    low = np.full((1 + max_humans, len(STATE_COLUMNS)), -np.inf, dtype=np.float32)
+    low = np.full((robots + max_humans, len(STATE_COLUMNS)), -np.inf, dtype=np.float32)
     high = np.full_like(low, np.inf)
     low[:, 6:] = 0.0
     high[:, 7] = 1.0
@@ -59,6 +60,8 @@ def state_space(max_humans: int) -> spaces.Box:
 def global_state(sim: Simulator, max_humans: int) -> np.ndarray:
     """The state table of the module docstring, flattened row by row."""
     n = sim.n_humans
+    if sim.team is not None:
+        return _several_robots_state(sim, max_humans)
     table = np.zeros((1 + max_humans, len(STATE_COLUMNS)), dtype=np.float32)
     rows = table[: 1 + n]
     rows[:, 0], rows[:, 1] = sim.positions.real, sim.positions.imag
@@ -67,6 +70,25 @@ def global_state(sim: Simulator, max_humans: int) -> np.ndarray:
     rows[:, 4], rows[:, 5] = goals.real, goals.imag
     rows[:, 6] = sim.radii[: 1 + n]
     rows[:, 7] = 1.0
+    return table.reshape(-1)
+
+
+def _several_robots_state(sim: Simulator, max_humans: int) -> np.ndarray:
+    """:func:`global_state` with R robots: R robot rows first (a robot that left: all zero), then the humans."""
+    team, n = sim.team, sim.n_humans
+    robots = team.count
+    table = np.zeros((robots + max_humans, len(STATE_COLUMNS)), dtype=np.float32)
+    active = team.state.active
+    positions = np.concatenate([sim.robot_positions, sim.human_positions])
+    velocities = np.concatenate([sim.velocities[:1], team.state.velocities, sim.human_velocities])
+    goals = np.concatenate([sim.robot_goals, sim.human_goals])
+    rows = table[: robots + n]
+    rows[:, 0], rows[:, 1] = positions.real, positions.imag
+    rows[:, 2], rows[:, 3] = velocities.real, velocities.imag
+    rows[:, 4], rows[:, 5] = goals.real, goals.imag
+    rows[:, 6] = np.concatenate([team.all_radii, sim.radii[1:]])
+    rows[:, 7] = 1.0
+    table[:robots][~active] = 0.0
     return table.reshape(-1)
 
 

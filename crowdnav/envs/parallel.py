@@ -1,4 +1,4 @@
-"""The multi-agent environment (PettingZoo ParallelEnv): the robot and every human are agents."""
+"""The multi-agent environment (PettingZoo ParallelEnv): every robot, and (by default) every human, is an agent."""
 
 from __future__ import annotations
 
@@ -64,6 +64,25 @@ class CrowdNavParallelEnv(ParallelEnv):
     (``world.boundary_walls``: touching the walls is a collision) or ends the episode with
     ``infos["robot"]["outcome"] == "out_of_bounds"`` (open space), paying the ``collision`` term.
 
+    **Several robots** (a scenario with ``robots:``, docs/environments.md#several-robots): each
+    robot is an agent named after it (``robots.<i>.name``, default ``robot_<i>``; one robot keeps
+    the name ``robot``), listed first in ``possible_agents``, with its own observation (its own
+    modalities, in its own frame; its range sensors see the other robots, its ``humans``
+    modality the humans only), action space (its own kinematics), reward terms and ``infos``
+    (``outcome``, ``is_success``, ``collision_kind`` ``robot`` with the other robot's name as
+    ``collision_partner``). A robot whose step ends (success, collision, out of the world) is
+    terminated and leaves ``agents`` and the world (it no longer blocks or is seen); the others
+    go on. The episode ends when every robot has ended (the humans then terminate) or at the
+    time limit (everyone truncates). Under ``fixed_agents`` a robot that ended stays an agent,
+    inactive like an absent human: its step's infos carry its outcome, later steps give an
+    all-zero observation, reward 0 and ``infos[name]["active"]`` False (every robot's info has
+    ``active`` under ``fixed_agents``), and it terminates with everyone at the episode end.
+
+    **Robots only** (``humans_as_agents=False``): the agents are the robots; the humans are
+    moved by the scenario's crowd model (social force or ORCA), as in the Gymnasium env. With
+    ``fixed_agents=True`` and ``flat_observations=True`` this is the mode SuperSuit's
+    ``pettingzoo_env_to_vec_env_v1`` takes for shared-parameter training of the robots.
+
     **Multi-agent plumbing** (:mod:`crowdnav.envs.multi_agent`): ``state()`` / ``state_space``,
     the global state for centralised critics; ``flat_observations=True`` gives every agent a flat
     float32 Box observation (for SuperSuit and MARL libraries); ``human_reward`` and
@@ -84,33 +103,40 @@ class CrowdNavParallelEnv(ParallelEnv):
         human_reward: HumanReward | None = None,
         human_exit: HumanExit | None = None,
         fixed_agents: bool = False,
+        humans_as_agents: bool = True,
         **options: Any,
     ):
         # The engine both envs share (simulator, sensors, reward); it takes and checks the options.
         self.core = EnvCore(scenario, **options)
         self.flat_observations = bool(flat_observations)
         self.fixed_agents = bool(fixed_agents)
+        self.humans_as_agents = bool(humans_as_agents)
+        if not self.humans_as_agents and (human_reward is not None or human_exit is not None):
+            raise ValueError("human_reward and human_exit need the humans as agents; drop them or keep humans_as_agents=True")
         self.human_reward, self.human_exit = human_reward, human_exit
         self.render_mode = self.core.render_mode
         self.scenario = self.core.scenario
         self.simulator = self.core.simulator
         self.metadata = {**self.metadata, "render_fps": 1.0 / self.scenario.time_step}
         self._humans = HumanObservations(self.scenario, self.simulator.obstacles, active_flag=self.fixed_agents)
-        self._human_names = [f"human_{i}" for i in range(self.scenario.humans.max_count)]
-        self.possible_agents = [ROBOT, *self._human_names]
+        self._human_names = [f"human_{i}" for i in range(self.scenario.humans.max_count)] if self.humans_as_agents else []
+        self._robot_names = self.core.robot_names
+        self._several = self.simulator.team is not None
+        self.possible_agents = [*self._robot_names, *self._human_names]
         self.agents: list[str] = []
-        self.observation_spaces = {ROBOT: self.core.observation_space}
+        self.observation_spaces = dict(zip(self._robot_names, self.core.robot_spaces, strict=True))
         self.observation_spaces.update({name: self._humans.space() for name in self._human_names})
         self._dict_spaces = dict(self.observation_spaces)
         if self.flat_observations:
             self.observation_spaces = flat_spaces(self._dict_spaces)
-        self.state_space = state_space(self.scenario.humans.max_count)
-        self.action_spaces = {ROBOT: self.core.action_space}
+        self.state_space = state_space(self.scenario.humans.max_count, len(self._robot_names))
+        self.action_spaces = {name: spaces.Box(-1.0, 1.0, shape=(2,), dtype=np.float32) for name in self._robot_names}
         self.action_spaces.update({name: spaces.Box(-1.0, 1.0, shape=(2,), dtype=np.float32) for name in self._human_names})
         self._active_humans: list[str] = []
+        self._active_robots: list[str] = []
 
     def state(self) -> np.ndarray:
-        """The global state (:mod:`crowdnav.envs.multi_agent`): (1 + N) rows of x, y, vx, vy, gx, gy, radius, active."""
+        """The global state (:mod:`crowdnav.envs.multi_agent`): (R + N) rows of x, y, vx, vy, gx, gy, radius, active."""
         return global_state(self.simulator, self.scenario.humans.max_count)
 
     def observation_space(self, agent: str) -> spaces.Space:
@@ -124,15 +150,17 @@ class CrowdNavParallelEnv(ParallelEnv):
         robot_observation = self.core.reset(seed)
         self._humans.reset(self.simulator)
         self._active_humans = self._human_names[: self.simulator.n_humans]
-        self.agents = list(self.possible_agents) if self.fixed_agents else [ROBOT, *self._active_humans]
+        self._active_robots = list(self._robot_names)
+        self.agents = list(self.possible_agents) if self.fixed_agents else [*self._robot_names, *self._active_humans]
         observations = self._observations(robot_observation)
         sim = self.simulator  # a human's group is fixed for the episode: named once here
-        self._group_of = dict(zip(self._active_humans, (sim.groups[g].name for g in sim.human_group.tolist()), strict=True))
+        self._group_of = dict(zip(self._active_humans, (sim.groups[g].name for g in sim.human_group.tolist()), strict=self.humans_as_agents))
         if self.fixed_agents:
             infos = {name: {"group": self._group_of.get(name), "active": name in self._group_of} for name in self._human_names}
         else:
             infos = {name: {"group": group} for name, group in self._group_of.items()}
-        return observations, {ROBOT: {}, **infos}
+        robot_info: dict[str, Any] = {"active": True} if self.fixed_agents and self._several else {}
+        return observations, {**{name: dict(robot_info) for name in self._robot_names}, **infos}
 
     def step(self, actions: Mapping[str, Any]):
         """One action per agent in ``agents``; out-of-range values are clipped, NaN/inf raise ValueError."""
@@ -140,9 +168,13 @@ class CrowdNavParallelEnv(ParallelEnv):
             raise TypeError(f"step() takes a dict {{agent: action}} with one action per agent in env.agents, got {type(actions).__name__}")
         if not self.agents:
             raise RuntimeError("the episode is over or has not started: call reset() before step()")
-        human_actions = self._human_actions(actions)
+        human_actions = self._human_actions(actions)  # checks every agent's action, the robots' keys too
+        if not self.humans_as_agents:
+            human_actions = None  # the scenario's crowd model moves them
+        if self._several:
+            return self._step_robots(actions, human_actions)
         events, reward, terms = self.core.step(actions[ROBOT], human_actions)
-        agents, sim = self.agents, self.simulator
+        agents = self.agents
         observations = self._observations(self.core.observe())
         rewards = dict.fromkeys(agents, 0.0)
         rewards[ROBOT] = reward
@@ -151,7 +183,64 @@ class CrowdNavParallelEnv(ParallelEnv):
         terminations, truncations = dict.fromkeys(agents, terminated), dict.fromkeys(agents, truncated)
         infos: dict[str, dict[str, Any]] = {agent: {} for agent in agents}
         infos[ROBOT] = step_info(events, terms)
-        fixed = self.fixed_agents
+        self._step_humans(rewards, terminations, infos, terminated, truncated)
+        if terminated or truncated:
+            self.agents = []
+        return observations, rewards, terminations, truncations, infos
+
+    def _step_robots(self, actions: Mapping[str, Any], human_actions: np.ndarray | None):
+        """:meth:`step` with several robots: each its own outcome; the episode ends when every robot's has."""
+        robots, fixed = self._robot_names, self.fixed_agents
+        was_active = list(self._active_robots)
+        results = self.core.step_robots([actions[name] if name in was_active else None for name in robots], human_actions)
+        agents = self.agents
+        ended = [name for name, result in zip(robots, results, strict=True) if result is not None and result[0].terminated]
+        still = [name for name in was_active if name not in ended]
+        truncated = bool(still) and self.simulator.step_count >= self.scenario.max_steps  # time up while some robot runs
+        over = not still or truncated
+        observations = self._observations(None, was_active)
+        rewards = dict.fromkeys(agents, 0.0)
+        terminations, truncations = dict.fromkeys(agents, False), dict.fromkeys(agents, False)
+        for name in self._human_names:  # the humans end with the episode (or alone, by human_exit: below)
+            if name in terminations:
+                terminations[name], truncations[name] = over and not truncated, truncated
+        infos: dict[str, dict[str, Any]] = {agent: {} for agent in agents}
+        for name, result in zip(robots, results, strict=True):
+            if result is None:  # it left before this step: an agent still only under fixed_agents
+                if name in terminations:
+                    infos[name] = {"active": False}
+                    terminations[name], truncations[name] = over and not truncated, truncated
+                continue
+            events, reward, terms = result
+            rewards[name] = reward
+            infos[name] = step_info(events, terms)
+            if fixed:
+                infos[name]["active"] = True
+                terminations[name], truncations[name] = over and not truncated, truncated
+            else:
+                terminations[name] = events.terminated
+                truncations[name] = truncated and not events.terminated
+        if truncated:
+            for name in still:
+                infos[name].setdefault("outcome", "truncated")
+                infos[name].setdefault("is_success", False)
+        self._step_humans(rewards, terminations, infos, over and not truncated, truncated)
+        if over:
+            self.agents = []
+            return observations, rewards, terminations, truncations, infos
+        if ended:
+            self.simulator.retire_robots([robots.index(name) for name in ended])
+            self._active_robots = still
+            if not fixed:
+                self.agents = [agent for agent in self.agents if agent not in ended]
+        return observations, rewards, terminations, truncations, infos
+
+    def _step_humans(self, rewards: dict[str, float], terminations: dict[str, bool], infos: dict[str, dict[str, Any]],
+                     terminated: bool, truncated: bool) -> None:
+        """The humans' rewards, infos and exits of the step just taken (``terminated`` / ``truncated``: the episode's end)."""
+        sim, fixed = self.simulator, self.fixed_agents
+        if not self.humans_as_agents:
+            return
         if fixed:  # inactive humans' infos; the active ones' are overwritten below
             infos.update((name, {"group": self._group_of.get(name), "goal_reached": False, "active": False}) for name in self._human_names)
         if self._active_humans:
@@ -170,10 +259,7 @@ class CrowdNavParallelEnv(ParallelEnv):
                 sim.stop_humans(index[leaving])  # it stays in the world, standing
                 self._active_humans = [name for name, gone in zip(self._active_humans, leaving, strict=True) if not gone]
                 if not fixed:  # under fixed_agents it stays an agent, inactive from the next step on
-                    self.agents = [ROBOT, *self._active_humans]
-        if terminated or truncated:
-            self.agents = []
-        return observations, rewards, terminations, truncations, infos
+                    self.agents = [agent for agent in self.agents if not agent.startswith("human_") or agent in self._active_humans]
 
     def render(self) -> np.ndarray | None:
         """The current frame in ``rgb_array`` mode (None in ``human`` mode, which draws at each step)."""
@@ -187,10 +273,23 @@ class CrowdNavParallelEnv(ParallelEnv):
         """Simulator indices (0-based among humans) of the humans still in ``agents``."""
         return np.array([int(name[len("human_") :]) for name in self._active_humans], dtype=int)
 
-    def _observations(self, robot_observation: dict[str, np.ndarray]) -> dict[str, Any]:
+    def _observations(self, robot_observation: dict[str, np.ndarray] | None, robots: list[str] | None = None) -> dict[str, Any]:
+        """Every agent's observation: the one robot's ``robot_observation``, or (several robots) those of ``robots``
+        (default: every active robot), all-zero for the others under ``fixed_agents``."""
+        observations: dict[str, Any] = {}
+        if self._several:
+            robots = self._active_robots if robots is None else robots
+            for k, name in enumerate(self._robot_names):
+                if name in robots:
+                    observations[name] = self.core.observe_robot(k)
+                elif self.fixed_agents:
+                    observations[name] = {key: np.zeros(space.shape, space.dtype) for key, space in self._dict_spaces[name].spaces.items()}
+        else:
+            observations[ROBOT] = robot_observation
         if self.flat_observations:
-            robot_observation = spaces.flatten(self._dict_spaces[ROBOT], robot_observation).astype(np.float32, copy=False)
-        observations: dict[str, Any] = {ROBOT: robot_observation}
+            for name in self._robot_names:
+                if name in observations:
+                    observations[name] = spaces.flatten(self._dict_spaces[name], observations[name]).astype(np.float32, copy=False)
         if self.fixed_agents and self._human_names:
             batch = self._humans.fixed(self.simulator, self._active_index)
             if self.flat_observations:
@@ -215,8 +314,8 @@ class CrowdNavParallelEnv(ParallelEnv):
 
         Every human in ``agents`` must have a valid action; only the active ones' move anyone.
         """
-        humans = self.agents[1:]
-        if len(actions) != len(self.agents) or ROBOT not in actions or not all(name in actions for name in humans):
+        humans = [agent for agent in self.agents if agent.startswith("human_")]
+        if len(actions) != len(self.agents) or not all(name in actions for name in self.agents):
             missing = [agent for agent in self.agents if agent not in actions]
             unknown = [agent for agent in actions if agent not in self.agents]
             raise ValueError(

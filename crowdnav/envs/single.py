@@ -2,13 +2,18 @@
 
 from __future__ import annotations
 
-from typing import Any
+from collections.abc import Callable
+from typing import Any, cast
 
 import gymnasium as gym
 import numpy as np
 
 from crowdnav.envs.core import EnvCore, ScenarioSource, step_info
+from crowdnav.policies import SCRIPTED_POLICIES
 from crowdnav.rendering.episode_view import RENDER_MODES
+
+OTHER_ROBOT_POLICIES = tuple(name for name in SCRIPTED_POLICIES if name != "random")
+"""Names ``other_robots`` accepts (:data:`crowdnav.policies.SCRIPTED_POLICIES` but ``random``, which has no episode seed)."""
 
 
 class CrowdNavEnv(gym.Env):
@@ -74,13 +79,28 @@ class CrowdNavEnv(gym.Env):
     window updated at every reset and step, at ``metadata["render_fps"]`` = 1 / time_step);
     ``render_options`` (:class:`crowdnav.rendering.RenderOptions` or a mapping of its fields:
     overlays for the LIDAR, LEOG inset, closest obstacle, humans' goals, frame size).
+
+    **Several robots** (a scenario with ``robots:``): the agent is the first robot (its own
+    modalities; its range sensors see the other robots, its ``humans`` modality the humans only).
+    The others are driven by ``other_robots``: a name of :data:`OTHER_ROBOT_POLICIES`
+    (``"social-force"``, the default; ``"straight"``; ``"orca"`` with pyrvo) or a callable
+    ``policy(view) -> action`` called with :meth:`crowdnav.Simulator.robot_view` of each robot
+    (one policy object per robot: a class is instantiated per robot, another callable shared).
+    A robot that ends (success, collision, out of the world) leaves the world; the episode ends
+    with the first robot's end or the time limit. ``info["other_robots"]`` maps each other
+    robot's name to its outcome, None while it runs; a collision with another robot is
+    ``collision_kind`` ``"robot"`` with its name as ``collision_partner``.
     """
 
     metadata = {"render_modes": RENDER_MODES, "render_fps": 5.0}
 
-    def __init__(self, scenario: ScenarioSource | None = None, **options: Any):
+    def __init__(self, scenario: ScenarioSource | None = None, *, other_robots: str | Callable[..., Any] = "social-force",
+                 **options: Any):
         # The engine both envs share (simulator, sensors, reward); it takes and checks the options.
         self.core = EnvCore(scenario, **options)
+        self._other_names = self.core.robot_names[1:]
+        self._other_policies = [_other_robot_policy(other_robots) for _ in self._other_names]
+        self._other_outcomes: dict[str, str | None] = {}
         self.render_mode = self.core.render_mode
         self.scenario = self.core.scenario
         self.simulator = self.core.simulator
@@ -94,13 +114,19 @@ class CrowdNavEnv(gym.Env):
         observation = self.core.reset(seed)
         # The simulator's generator is the episode's only randomness: expose it as np_random.
         self._np_random = self.simulator.rng
+        self._other_outcomes = dict.fromkeys(self._other_names)
         return observation, {}
 
     def step(self, action: np.ndarray):
-        events, reward, terms = self.core.step(action)
+        if self._other_names:
+            events, reward, terms = self.core.step(action, other_robot_actions=self._other_actions())
+        else:
+            events, reward, terms = self.core.step(action)
         terminated = events.terminated
         truncated = events.truncated and not terminated
         info = step_info(events, terms)
+        if self._other_names:
+            info["other_robots"] = self._others_after_step(terminated or truncated)
         if not terminated:
             # Any step that does not terminate may be the last one: a TimeLimit wrapper
             # (gymnasium.make(..., max_episode_steps=N)) truncates after this method returns, without
@@ -109,9 +135,42 @@ class CrowdNavEnv(gym.Env):
             info.setdefault("is_success", False)
         return self.core.observe(), reward, terminated, truncated, info
 
+    def _other_actions(self) -> np.ndarray:
+        """(R-1, 2): each other robot's action from its policy (0 for a robot that left)."""
+        sim = self.simulator
+        active = sim.robots_active
+        return np.array([np.asarray(policy(sim.robot_view(k)), dtype=float) if active[k] else np.zeros(2)
+                         for k, policy in enumerate(self._other_policies, start=1)]).reshape(-1, 2)
+
+    def _others_after_step(self, over: bool) -> dict[str, str | None]:
+        """Record the other robots that ended this step and take them out of the world (unless the episode is over)."""
+        ended = []
+        for k, events in enumerate(self.simulator.robot_events[1:], start=1):
+            if events is not None and events.terminated:
+                self._other_outcomes[self._other_names[k - 1]] = events.outcome
+                ended.append(k)
+        if ended and not over:
+            self.simulator.retire_robots(ended)
+        return dict(self._other_outcomes)
+
     def render(self) -> np.ndarray | None:
         """The current frame in ``rgb_array`` mode (None in ``human`` mode, which draws at each step)."""
         return self.core.render() if self.render_mode == "rgb_array" else None
 
     def close(self) -> None:
         self.core.close()
+
+
+def _other_robot_policy(policy: str | Callable[..., Any]) -> Callable[..., Any]:
+    """One other robot's policy from the ``other_robots`` option (a clear ValueError for an unknown name)."""
+    if isinstance(policy, str):
+        if policy not in OTHER_ROBOT_POLICIES:
+            raise ValueError(f"other_robots={policy!r} is not a scripted robot policy; expected one of {OTHER_ROBOT_POLICIES} "
+                             "or a callable policy(view) -> action")
+        return cast(Callable[..., Any], SCRIPTED_POLICIES[policy]())
+    if isinstance(policy, type):
+        made: Callable[..., Any] = policy()
+        return made
+    if not callable(policy):
+        raise ValueError(f"other_robots must be a policy name {OTHER_ROBOT_POLICIES} or a callable policy(view) -> action, got {policy!r}")
+    return policy

@@ -34,6 +34,8 @@ class Modality(abc.ABC):
 
     key: ClassVar[str]
     """Observation key, e.g. ``lidar``; unique in :data:`MODALITIES`."""
+    sees_robots: ClassVar[bool] = True
+    """With several robots (``robots:``): whether the other robots appear in it (as discs among the humans)."""
     settings_type: ClassVar[type[BaseModel] | None] = None
     """Pydantic model of the settings (``None``: the modality takes no settings)."""
 

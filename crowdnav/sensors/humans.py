@@ -50,6 +50,7 @@ class HumansModality(Modality):
     """
 
     key = "humans"
+    sees_robots = False  # a tracker of people: the range sensors see the other robots
     settings_type = HumansSensor
 
     def __init__(self, world: CompiledWorld, settings: HumansSensor | None = None):
