@@ -1,0 +1,28 @@
+"""Every scripted baseline crowdnav ships plays a whole episode in every library scenario."""
+
+from __future__ import annotations
+
+import importlib.util
+
+import pytest
+from crowdnav.evaluation.baselines import BASELINES, scripted_policy
+from crowdnav.evaluation.rollout import HeldOutEpisodes
+
+from crowdnav.scenario.library import library_names
+
+OUTCOMES = {"success", "collision", "out_of_bounds", "truncated"}
+HAS_PYRVO = importlib.util.find_spec("pyrvo") is not None
+
+
+@pytest.mark.parametrize("baseline", [
+    name if name != "orca" or HAS_PYRVO else pytest.param(name, marks=pytest.mark.skip(reason="needs crowdnav[orca]"))
+    for name in BASELINES])
+@pytest.mark.parametrize("scenario", library_names())
+def test_the_baseline_plays_two_whole_episodes_of_the_library_scenario_with_defined_metrics(baseline, scenario):
+    episodes = HeldOutEpisodes({"scenario": scenario, "modalities": ["goal"]}, range(2))
+    rows = episodes.run(scripted_policy(baseline), privileged=True)
+    assert [row["outcome"] in OUTCOMES for row in rows] == [True, True]
+    for row in rows:  # NaN only where documented: no time to goal without reaching it, no jerk in a 1-2 step episode
+        allowed = {"time_to_goal"} if row["outcome"] != "success" else set()
+        allowed |= {"mean_jerk", "max_jerk", "mean_acceleration", "max_acceleration"} if row["steps"] < 3 else set()
+        assert [key for key, value in row.items() if isinstance(value, float) and value != value and key not in allowed] == []
