@@ -89,10 +89,9 @@ class FastTrainingMode:
         roots = self._training_mode_roots()
         cached = self.__dict__.get("_training_mode_cache")
         if cached is None or len(cached[0]) != len(roots) or any(a is not b for a, b in zip(cached[0], roots, strict=True)):
-            modules = [module for root in roots for module in root.modules()]
-            if any(type(module).train is not nn.Module.train for module in modules):
-                modules = None
-            cached = (roots, modules)
+            found = [module for root in roots for module in root.modules()]
+            # a module with its own train() needs SB3's call of it: None means "the plain way"
+            cached = (roots, found if all(type(module).train is nn.Module.train for module in found) else None)
             self.__dict__["_training_mode_cache"] = cached
         modules = cached[1]
         if modules is None:

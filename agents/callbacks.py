@@ -27,7 +27,9 @@ def set_aside_episodes_from(log_path: Path, first_episode: int) -> int:
     lines = log_path.read_text(encoding="utf-8").splitlines()
     if not lines:
         return 0
-    header, kept, moved = lines[0], [], []
+    header = lines[0]
+    kept: list[str] = []
+    moved: list[str] = []
     for row in lines[1:]:
         (kept if int(row.split(",", 1)[0]) < first_episode else moved).append(row)
     if not moved:

@@ -76,8 +76,9 @@ def save_checkpoint(
         shutil.rmtree(staging)
     staging.mkdir(parents=True)
     model.save(staging / MODEL_FILE)
-    if replay_buffer and getattr(model, "replay_buffer", None) is not None:
-        save_replay_buffer(model.replay_buffer, staging / REPLAY_ARRAYS)
+    buffer = getattr(model, "replay_buffer", None)  # off-policy models only
+    if replay_buffer and buffer is not None:
+        save_replay_buffer(buffer, staging / REPLAY_ARRAYS)
     if rng_state is not False:  # a resumable checkpoint: counters and random streams, so the resumed run is the same run
         save_training_state(model, staging / STATE_FILE, rng_state if isinstance(rng_state, Mapping) else streams_now(model))
     if rollout_state is not None:  # an on-policy or batched run's collected rollout and worlds, for an exact resume
@@ -237,7 +238,7 @@ def model_from_parameters(folder: Path, info: Mapping[str, Any], encoder: Any = 
         raise UntrustedCheckpointError(f"{folder}: the checkpoint holds no training config to rebuild its network from; "
                                        "load it with trusted=True only if you trust where it came from")
     try:
-        if config is None:
+        if config is None and isinstance(document, Mapping):  # (no config and no document was refused above)
             config = config_from_mapping({**document, "device": device})
         # one env to act in: the collection settings (worlds, rollout sizes) do not shape the network
         small = {key: value for key, value in config.algo_kwargs.items() if key not in ("n_steps", "buffer_size", "batch_size")}
@@ -298,7 +299,8 @@ def load_parameters(model: BaseAlgorithm, path: Path, device: str = "cpu") -> No
     from stable_baselines3.common.utils import get_device
 
     zipped = read_model_zip(path, str(get_device(device)))
-    model.set_parameters(zipped.parameters, exact_match=True, device=device)
+    # SB3 annotates a dict of tensors; it takes (and its own load passes) a dict of state dicts, one per object, as here
+    model.set_parameters(zipped.parameters, exact_match=True, device=device)  # type: ignore[arg-type]
     expected = set(model._get_torch_save_params()[1])
     if set(zipped.variables) != expected:
         raise ModelZipError(f"{path}: variables {sorted(zipped.variables)}, the network has {sorted(expected)}")

@@ -9,6 +9,7 @@ randomness, drawn from ``seed``.
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass, field
 from typing import Any
@@ -16,10 +17,11 @@ from typing import Any
 import numpy as np
 import torch
 from crowdnav.agents.config import ConfigError
-from stable_baselines3 import SAC
+from stable_baselines3 import SAC, TD3
 from stable_baselines3.common.base_class import BaseAlgorithm
 from stable_baselines3.common.distributions import DiagGaussianDistribution
 from stable_baselines3.common.off_policy_algorithm import OffPolicyAlgorithm
+from stable_baselines3.common.policies import ActorCriticPolicy
 
 
 @dataclass
@@ -95,36 +97,45 @@ class _Heads:
     def __init__(self, model: BaseAlgorithm, action_std: float):
         self.model = model
         self.log_std = math.log(action_std)
-        self.on_policy = not isinstance(model, OffPolicyAlgorithm)
-        self.sac = isinstance(model, SAC)
-        policy = model.policy
-        if self.on_policy:
-            if not isinstance(policy.action_dist, DiagGaussianDistribution) or getattr(policy, "use_sde", False):
+        # the model seen as what its kind is: an actor-critic policy (PPO, A2C) or an actor and critics (SAC, TD3, DDPG)
+        self.policy: ActorCriticPolicy | None = None
+        self.off_policy: SAC | TD3 | None = None
+        if not isinstance(model, OffPolicyAlgorithm):
+            policy = model.policy
+            if not isinstance(policy, ActorCriticPolicy) or not isinstance(policy.action_dist, DiagGaussianDistribution) \
+                    or getattr(policy, "use_sde", False):
                 raise ConfigError("demonstrations: on-policy cloning needs a diagonal Gaussian policy (no gSDE)")
+            self.policy = policy
             self.actor_parameters = [p for name, p in policy.named_parameters() if p.requires_grad and name != "log_std"]
             self.critic_parameters: list[torch.nn.Parameter] = []
         else:
+            if not isinstance(model, (SAC, TD3)):  # DDPG is a TD3
+                raise ConfigError(f"demonstrations: cloning an off-policy {type(model).__name__} is not supported (SAC, TD3, DDPG are)")
+            self.off_policy = model
             self.actor_parameters = [p for p in model.actor.parameters() if p.requires_grad]
-            shared = getattr(policy, "share_features_extractor", False)
+            shared = getattr(model.policy, "share_features_extractor", False)
             self.critic_parameters = [p for name, p in model.critic.named_parameters()
                                       if p.requires_grad and not (shared and name.startswith("features_extractor"))]
 
     def losses(self, obs: dict[str, torch.Tensor], targets: torch.Tensor, actions: torch.Tensor,
                returns: torch.Tensor | None) -> tuple[torch.Tensor, torch.Tensor | None]:
         """(action loss, value loss or None) on one minibatch."""
-        model, policy = self.model, self.model.policy
         value_loss = None
-        if self.on_policy:
+        if self.policy is not None:
+            policy = self.policy
             features = policy.extract_features(obs)
-            shared = policy.share_features_extractor
-            pi_features, vf_features = (features, features.detach()) if shared else features
+            if isinstance(features, torch.Tensor):  # a shared extractor (SB3 returns one tensor then, a pair otherwise)
+                pi_features, vf_features = features, features.detach()
+            else:
+                pi_features, vf_features = features
             mean = policy.action_net(policy.mlp_extractor.forward_actor(pi_features))
             action_loss = torch.nn.functional.mse_loss(mean, targets)
             if returns is not None:
                 values = policy.value_net(policy.mlp_extractor.forward_critic(vf_features)).flatten()
                 value_loss = torch.nn.functional.mse_loss(values, returns)
             return action_loss, value_loss
-        if self.sac:  # squashed Gaussian
+        model = self._off_policy()
+        if isinstance(model, SAC):  # squashed Gaussian
             mean, log_std, _ = model.actor.get_action_dist_params(obs)
             action_loss = torch.nn.functional.mse_loss(torch.tanh(mean), targets)
             action_loss = action_loss + torch.nn.functional.mse_loss(log_std, torch.full_like(log_std, self.log_std))
@@ -132,24 +143,30 @@ class _Heads:
             action_loss = torch.nn.functional.mse_loss(model.actor(obs), targets)
         if returns is not None:
             q_values = model.critic(obs, actions)
-            value_loss = sum(torch.nn.functional.mse_loss(q.flatten(), returns) for q in q_values) / len(q_values)
+            # (q1 + q2 + ...) / n: what sum() gives, without its leading 0
+            value_loss = functools.reduce(torch.add, [torch.nn.functional.mse_loss(q.flatten(), returns) for q in q_values]) / len(q_values)
         return action_loss, value_loss
+
+    def _off_policy(self) -> SAC | TD3:
+        if self.off_policy is None:
+            raise TypeError(f"{type(self.model).__name__} has no actor and critics")
+        return self.off_policy
 
     def predicted_actions(self, obs: dict[str, torch.Tensor]) -> torch.Tensor:
         """The deterministic action, before the env's clipping (PPO/A2C: the Gaussian's mean)."""
-        policy = self.model.policy
-        if self.on_policy:
-            return policy.get_distribution(obs).distribution.mean
-        return self.model.actor(obs, deterministic=True) if self.sac else self.model.actor(obs)
+        if self.policy is not None:
+            return self.policy.get_distribution(obs).mode()  # a diagonal Gaussian's (checked in __init__): its mean
+        model = self._off_policy()
+        return model.actor(obs, deterministic=True) if isinstance(model, SAC) else model.actor(obs)
 
     def finish(self) -> None:
         """Set the on-policy std, sync the target networks."""
-        model = self.model
-        if self.on_policy:
+        if self.policy is not None:
             with torch.no_grad():
-                model.policy.log_std.fill_(self.log_std)
+                self.policy.log_std.fill_(self.log_std)
             return
-        if getattr(model, "actor_target", None) is not None:
+        model = self._off_policy()
+        if isinstance(model, TD3):  # SAC has no actor target
             model.actor_target.load_state_dict(model.actor.state_dict())
         model.critic_target.load_state_dict(model.critic.state_dict())
 
@@ -176,6 +193,8 @@ def _evaluate(heads: _Heads, data: dict[str, Any], value: bool) -> tuple[float, 
             action_error += float(((predicted - data["targets"][rows]) ** 2).sum()) / 2
             if value:
                 _, loss = heads.losses(obs, data["targets"][rows], data["actions"][rows], data["returns"][rows])
+                if loss is None:  # losses() gives a value loss whenever it is given returns
+                    raise RuntimeError("no value loss with returns given")
                 value_error += float(loss) * len(data["targets"][rows])
     return action_error / n, (value_error / n if value else None)
 
@@ -208,7 +227,7 @@ def behaviour_cloning(model: BaseAlgorithm, demonstrations: Demonstrations, *, e
             optimizer.step()
     heads.finish()
     action_after, value_after = _evaluate(heads, data, value_pretraining)
-    report = {"transitions": n, "epochs": epochs, "action_mse_before": action_before, "action_mse_after": action_after}
+    report: dict[str, float | None] = {"transitions": n, "epochs": epochs, "action_mse_before": action_before, "action_mse_after": action_after}
     if value_pretraining:
         report.update(value_mse_before=value_before, value_mse_after=value_after)
     return report

@@ -16,7 +16,7 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 from pathlib import Path, PurePath
-from typing import Annotated, Any, Literal
+from typing import TYPE_CHECKING, Annotated, Any, Literal
 
 from pydantic import AfterValidator, BaseModel, BeforeValidator, ConfigDict, Field, Strict, ValidationError, field_validator, model_validator
 
@@ -69,8 +69,12 @@ Size = Annotated[int, Strict(), Field(ge=1, le=MAX_LAYER)]
 """A layer size, kernel or stride (at most :data:`MAX_LAYER`)."""
 Sizes = Annotated[list[Size], Field(max_length=MAX_LAYERS)]
 """Layer sizes, one per layer (at most :data:`MAX_LAYERS`)."""
-Algorithm = Literal[ALGORITHM_NAMES]  # type: ignore[valid-type]  # the registry's names: choices, schema enum and errors agree
-EncoderMode = Literal[tuple(ENCODER_MODES)]  # type: ignore[valid-type]
+if TYPE_CHECKING:  # a Literal built from the registry at run time is no static type: to mypy they are the strings they hold
+    Algorithm = str
+    EncoderMode = str
+else:  # the registry's names: choices, schema enum and errors agree
+    Algorithm = Literal[ALGORITHM_NAMES]
+    EncoderMode = Literal[tuple(ENCODER_MODES)]
 ModalityName = Annotated[str, Strict(), AfterValidator(_known_modality)]
 
 

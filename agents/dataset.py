@@ -99,6 +99,7 @@ def collect_grids(
     test or training episode's seed.
     """
     from crowdnav.agents.seeding import dataset_seed
+    from crowdnav.agents.space_checks import box_space
 
     from crowdnav import __version__
     from crowdnav.envs import CrowdNavEnv
@@ -106,7 +107,7 @@ def collect_grids(
     if count < 1 or every < 1 or hold < 1.0:
         raise ValueError(f"expected count >= 1, every >= 1 and hold >= 1, got {count}, {every}, {hold}")
     env = CrowdNavEnv(scenario, modalities=["leog"], overrides=overrides, sensors=sensors)
-    shape = env.observation_space["leog"].shape
+    shape = box_space(env.observation_space, "leog").shape
     grids = np.empty((count, *shape), dtype=np.uint8)
     rng = np.random.default_rng(seed)
     episode, kept, step = 0, 0, 0

@@ -58,6 +58,7 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 from crowdnav.agents import wrappers
+from crowdnav.agents.algorithm_kinds import replay_buffer
 from crowdnav.agents.cloning import Demonstrations, behaviour_cloning
 from crowdnav.agents.config import TrainConfig
 from crowdnav.agents.factory import OFF_POLICY, env_options, hyperparameters, load_leog_weights, precomputes_leog
@@ -65,6 +66,7 @@ from crowdnav.agents.seeding import demonstration_seed
 from crowdnav.agents.vec_env import CrowdNavSB3VecEnv
 from crowdnav.agents.wrappers import LeogLatentWrapper, NormalizeObservation, ObservationScales, agent_observation
 from stable_baselines3.common.base_class import BaseAlgorithm
+from stable_baselines3.common.buffers import DictReplayBuffer
 from stable_baselines3.common.vec_env import DummyVecEnv, VecEnvWrapper
 
 REPORT_FILE = "demonstrations.json"
@@ -137,7 +139,7 @@ def collect_demonstrations(config: TrainConfig | Mapping[str, Any], episodes: in
     steps: dict[int, list[tuple]] = {}
     outcomes: dict[int, str] = {}
     playing: list[int | None] = [None] * len(envs)
-    current: list[dict[str, np.ndarray] | None] = [None] * len(envs)
+    current: list[dict[str, np.ndarray]] = [{} for _ in envs]  # each world's last observation (set by its first reset)
     upcoming = iter(range(first_episode, first_episode + episodes))
 
     def start(w: int) -> None:
@@ -149,19 +151,19 @@ def collect_demonstrations(config: TrainConfig | Mapping[str, Any], episodes: in
 
     for w in range(len(envs)):
         start(w)
-    while live := [w for w in range(len(envs)) if playing[w] is not None]:
-        labels = np.stack([np.asarray(expert(envs[w].simulator), dtype=np.float32) for w in live])
+    while live := [(w, index) for w, index in enumerate(playing) if index is not None]:
+        labels = np.stack([np.asarray(expert(envs[w].simulator), dtype=np.float32) for w, _ in live])
         if learner is None:
             actions = labels
         else:
-            batch = agent_observation({key: np.stack([current[w][key] for w in live]) for key in current[live[0]]}, scales, encoder)
+            batch = agent_observation({key: np.stack([current[w][key] for w, _ in live]) for key in current[live[0][0]]}, scales, encoder)
             actions = np.clip(np.asarray(learner(batch), dtype=np.float32).reshape(len(live), -1), -1.0, 1.0)
-        for w, action, label in zip(live, actions, labels, strict=True):
+        for (w, index), action, label in zip(live, actions, labels, strict=True):
             observation, reward, terminated, truncated, info = envs[w].step(action)
-            steps[playing[w]].append((current[w], observation, action, label, reward, terminated, truncated))
+            steps[index].append((current[w], observation, action, label, reward, terminated, truncated))
             current[w] = observation
             if terminated or truncated:
-                outcomes[playing[w]] = str(info.get("outcome", "truncated"))
+                outcomes[index] = str(info.get("outcome", "truncated"))
                 start(w)
     for env in envs:
         env.close()
@@ -193,7 +195,9 @@ def add_to_replay_buffer(model: BaseAlgorithm, demonstrations: Demonstrations, r
     training transitions written after it). The remainder (fewer than ``n_envs``) is left out,
     and so are the oldest rows when they would not fit in the buffer.
     """
-    buffer = model.replay_buffer
+    buffer = replay_buffer(model)
+    if not isinstance(buffer, DictReplayBuffer):  # crowdnav's observations are dicts (make_model's PackedGridReplayBuffer)
+        raise TypeError(f"expected a buffer of dict observations, got {type(buffer).__name__}")
     columns = buffer.n_envs
     rows = min(len(demonstrations) // columns, buffer.buffer_size)
     if rows == 0:

@@ -9,7 +9,7 @@ plain dict (:func:`leog_architecture`) stored next to pre-trained weights.
 from __future__ import annotations
 
 from collections.abc import Sequence
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 import torch
@@ -33,7 +33,8 @@ class MLP(nn.Module):
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:
         for layer in self.layers:
-            x = torch.relu(F.linear(x, layer.weight, layer.bias))
+            linear = cast(nn.Linear, layer)  # a ModuleList yields Modules: these are the nn.Linear built above
+            x = torch.relu(F.linear(x, linear.weight, linear.bias))
         return x
 
 
@@ -112,13 +113,15 @@ class LeogDecoder(nn.Module):
             produced = [(sizes[index + 1][axis] - 1) * stride + kernel for axis in (0, 1)]
             # the encoder's floor division dropped up to stride - 1 rows/columns: add them back
             padding = tuple(target[axis] - produced[axis] for axis in (0, 1))
-            layers.append(nn.ConvTranspose2d(channels[index + 1], channels[index], kernel, stride, output_padding=padding))
+            deconv = nn.ConvTranspose2d(channels[index + 1], channels[index], kernel, stride, output_padding=padding)
+            layers.append(deconv)
             if index > 0:
                 layers.append(nn.ReLU())
-        # Zero last layer: the untrained decoder predicts p = 0.5 everywhere (loss ln 2 whatever
-        # the seed), and learning starts from that neutral guess.
-        nn.init.zeros_(layers[-1].weight)
-        nn.init.zeros_(layers[-1].bias)
+        # Zero last layer (the deconvolution of index 0): the untrained decoder predicts p = 0.5 everywhere
+        # (loss ln 2 whatever the seed), and learning starts from that neutral guess.
+        nn.init.zeros_(deconv.weight)
+        if deconv.bias is not None:  # always: built with the default bias=True
+            nn.init.zeros_(deconv.bias)
         self.deconv = nn.Sequential(*layers)
 
     def forward(self, latent: torch.Tensor) -> torch.Tensor:
@@ -148,6 +151,9 @@ class LidarEncoder(nn.Module):
     fails to learn in open space. The circular padding lets a 360-degree scan wrap around
     (the first and last beams are neighbours).
     """
+
+    _high: torch.Tensor  # buffers (register_buffer), declared for the type checker
+    _scale: torch.Tensor
 
     def __init__(self, low: np.ndarray, high: np.ndarray, hidden: Sequence[int], conv_channels: Sequence[int] = (),
                  kernel: int = 5, stride: int = 2):

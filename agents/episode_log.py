@@ -126,7 +126,8 @@ def prepare_log(path: str | Path, first_episode: int) -> list[str]:
     # the first row of the history a resume throws away: damaged lines after it belong to that history too
     cut_at = 0 if first_episode == 0 else next((k for k, row in enumerate(rows) if row is not None and row[0] >= first_episode),
                                                len(rows))
-    kept, moved = [], []
+    kept: list[str] = []
+    moved: list[str] = []
     for k, (line, row) in enumerate(zip(lines, rows, strict=True)):
         later = row[0] >= first_episode if row is not None else k >= cut_at
         (moved if later else kept).append(line)
@@ -175,6 +176,8 @@ class EpisodeLogWriter:
         self._fd: int | None = os.open(path, os.O_WRONLY | os.O_APPEND)
 
     def write(self, line: str) -> None:
+        if self._fd is None:
+            raise ValueError(f"{line!r}: the episode log is closed")
         data = (line + "\n").encode("utf-8")
         while data:  # a short write happens only on a full disk or a signal; the rest follows (or the error is raised)
             written = os.write(self._fd, data)
@@ -192,6 +195,7 @@ class EpisodeLogWriter:
             os.close(fd)
 
     def __del__(self) -> None:  # a run stopped by an exception: the descriptor is not left open
-        if getattr(self, "_fd", None) is not None:
-            os.close(self._fd)
+        fd = getattr(self, "_fd", None)
+        if fd is not None:
+            os.close(fd)
             self._fd = None

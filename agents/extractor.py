@@ -77,10 +77,11 @@ class _LeogBranch(nn.Module):
 
     reference = False  # True: the plain (slower) binarization, for benchmarks/bench_train.py's reference timing
 
-    def __init__(self, encoder: LeogEncoder | None, head: nn.Module):
+    def __init__(self, encoder: LeogEncoder | None, head: nn.Module, out_features: int):
         super().__init__()
         self.encoder = encoder
         self.head = head
+        self.out_features = out_features
 
     def forward(self, observation: torch.Tensor) -> torch.Tensor:
         if self.encoder is None:
@@ -118,31 +119,37 @@ class MultiModalExtractor(BaseFeaturesExtractor):
         if leog_mode not in ENCODER_MODES:
             raise ValueError(f"leog_mode must be one of {ENCODER_MODES}, got {leog_mode!r}")
         settings = {**ExtractorConfig().model_dump(), **(config or {})}
-        branches, sizes, leog_encoders = {}, {}, []
+        branches: dict[str, nn.Module] = {}
+        sizes: dict[str, int] = {}
+        leog_encoders: list[LeogEncoder] = []
+        boxes: dict[str, spaces.Box] = {}
         for key, space in observation_space.spaces.items():
             if not isinstance(space, spaces.Box):
                 raise TypeError(f"observation {key!r}: MultiModalExtractor handles Box spaces only, got {space}")
+            boxes[key] = space
             if key in ENCODERS:
                 branches[key], sizes[key] = ENCODERS[key](space, settings)
             elif len(space.shape) == 3 or (key == "leog" and leog_precomputed):
-                branch = self._leog_branch(space, settings, leog_architecture, precomputed=key == "leog" and leog_precomputed)
-                if branch.encoder is not None:
-                    leog_encoders.append(branch.encoder)
-                branches[key], sizes[key] = branch, branch.out_features
+                leog = self._leog_branch(space, settings, leog_architecture, precomputed=key == "leog" and leog_precomputed)
+                if leog.encoder is not None:
+                    leog_encoders.append(leog.encoder)
+                branches[key], sizes[key] = leog, leog.out_features
             elif len(space.shape) == 1 and space.shape[0] > LOWDIM_MAX:
-                branch = LidarEncoder(space.low, space.high, settings["lidar_hidden"], settings["lidar_conv_channels"])
-                branches[key], sizes[key] = branch, branch.out_features
+                lidar = LidarEncoder(space.low, space.high, settings["lidar_hidden"], settings["lidar_conv_channels"])
+                branches[key], sizes[key] = lidar, lidar.out_features
             elif len(space.shape) == 1:
-                branch = LowDimEncoder(space.low, space.high, settings["rbf_centres"], settings["lowdim_hidden"], settings["rbf_trainable"])
-                branches[key], sizes[key] = branch, branch.out_features
+                lowdim = LowDimEncoder(space.low, space.high, settings["rbf_centres"], settings["lowdim_hidden"], settings["rbf_trainable"])
+                branches[key], sizes[key] = lowdim, lowdim.out_features
             elif len(space.shape) == 2:
-                branch = TableEncoder(space.shape, settings["table_hidden"])
-                branches[key], sizes[key] = branch, branch.out_features
+                table = TableEncoder(space.shape, settings["table_hidden"])
+                branches[key], sizes[key] = table, table.out_features
             else:
                 raise ValueError(f"observation {key!r} has shape {space.shape}: register an encoder for it with crowdnav.agents.register_encoder")
         super().__init__(observation_space, features_dim=sum(sizes.values()))
         self.branches = nn.ModuleDict(branches)
         self.branch_sizes = sizes
+        self.boxes = boxes
+        """The observation space's entries, each a Box (checked above), in its order."""
         self.leog_mode = leog_mode
         self.leog_encoders = leog_encoders
         if leog_mode == "frozen":
@@ -171,9 +178,7 @@ class MultiModalExtractor(BaseFeaturesExtractor):
             encoder = LeogEncoder(dict(architecture))
             size = encoder.latent
         head, out = mlp(size, settings["leog_head"])
-        branch = _LeogBranch(encoder, head)
-        branch.out_features = out
-        return branch
+        return _LeogBranch(encoder, head, out)
 
     def load_leog_encoder(self, state_dict: Mapping[str, torch.Tensor]) -> None:
         """Copy pre-trained weights into the LEOG encoder (frozen/finetune start)."""
@@ -192,10 +197,13 @@ class MultiModalExtractor(BaseFeaturesExtractor):
         Registered encoders get SB3's preprocessing.
         """
         prepared = {}
-        for key, space in self._observation_space.spaces.items():
+        for key, space in self.boxes.items():
             value = observations[key]
             if key not in self.raw_keys:
-                value = preprocess_obs(value, space, normalize_images=normalize_images)
+                processed = preprocess_obs(value, space, normalize_images=normalize_images)
+                if isinstance(processed, dict):  # SB3 returns a dict only for a Dict space, and these are Boxes
+                    raise TypeError(f"observation {key!r}: preprocess_obs returned a dict for {space}")
+                value = processed
             elif len(space.shape) != 3 and value.dtype != torch.float32:
                 value = value.float()
             prepared[key] = value

@@ -7,7 +7,8 @@ algorithm, add it to :data:`ALGORITHMS` (and its defaults to :data:`ALGORITHM_DE
 
 from __future__ import annotations
 
-from typing import Any
+from functools import partial
+from typing import Any, SupportsFloat
 
 import gymnasium as gym
 import numpy as np
@@ -17,12 +18,20 @@ from crowdnav.agents.encoders import LeogEncoder
 from crowdnav.agents.extractor import MultiModalExtractor
 from crowdnav.agents.replay_buffer import PackedGridReplayBuffer
 from crowdnav.agents.seeding import EpisodeSeedCounter
+from crowdnav.agents.space_checks import action_box, box_space
 from crowdnav.agents.vec_env import CrowdNavSB3VecEnv
-from crowdnav.agents.wrappers import EpisodeSeeds, LeogLatentWrapper, NormalizeObservation, ObservationScales, declared_scales
+from crowdnav.agents.wrappers import (
+    EpisodeSeeds,
+    LeogLatentWrapper,
+    NormalizeObservation,
+    ObservationScales,
+    declared_scales,
+)
 from stable_baselines3 import A2C, DDPG, PPO, SAC, TD3
 from stable_baselines3.common.base_class import BaseAlgorithm
 from stable_baselines3.common.monitor import Monitor
 from stable_baselines3.common.noise import NormalActionNoise
+from stable_baselines3.common.type_aliases import GymEnv
 
 from crowdnav.registry import OFF_POLICY_ALGORITHMS
 
@@ -116,8 +125,12 @@ def make_env(config: TrainConfig, encoder: LeogEncoder | None = None, first_epis
         env = LeogLatentWrapper(env, encoder)
     env = Monitor(EpisodeSeeds(env, config.seed, first_episode))
     if config.reward_scale != 1.0:
-        env = gym.wrappers.TransformReward(env, lambda reward, scale=config.reward_scale: reward * scale)
+        env = gym.wrappers.TransformReward(env, partial(_scaled, scale=config.reward_scale))
     return env
+
+
+def _scaled(reward: SupportsFloat, scale: float) -> float:
+    return float(reward) * scale
 
 
 def make_vec_env(config: TrainConfig, encoder: LeogEncoder | None = None, first_episode: int = 0,
@@ -160,6 +173,8 @@ def load_leog_weights(config: TrainConfig) -> tuple[LeogEncoder | None, dict[str
     """The pre-trained encoder of frozen/finetune modes (None for scratch) and its saved dict."""
     if config.encoder.mode == "scratch":
         return None, None
+    if config.encoder.weights is None:  # TrainConfig refuses this; a config built with model_construct skips that check
+        raise ConfigError(f"encoder.weights: encoder mode {config.encoder.mode!r} needs pre-trained weights (crowdnav pretrain-encoder)")
     from crowdnav.agents.pretrain import load_encoder
 
     try:
@@ -168,9 +183,9 @@ def load_leog_weights(config: TrainConfig) -> tuple[LeogEncoder | None, dict[str
         raise ConfigError(f"encoder.weights: {error}") from None
 
 
-def check_leog_shape(config: TrainConfig, architecture: dict[str, Any], observation_space: gym.spaces.Dict) -> None:
+def check_leog_shape(config: TrainConfig, architecture: dict[str, Any], observation_space: gym.Space[Any]) -> None:
     """ConfigError unless the pre-trained encoder was made for the environment's grid shape."""
-    expected, actual = tuple(architecture["grid_shape"]), tuple(observation_space["leog"].shape)
+    expected, actual = tuple(architecture["grid_shape"]), box_space(observation_space, "leog").shape
     if expected != actual:
         raise ConfigError(
             f"encoder.weights: {config.encoder.weights} expects grids of shape {expected}, but the environment's leog has "
@@ -207,7 +222,7 @@ def policy_kwargs(config: TrainConfig, architecture: dict[str, Any] | None, refe
     return kwargs
 
 
-def make_model(config: TrainConfig, env: gym.Env, saved_encoder: dict[str, Any] | None = None,
+def make_model(config: TrainConfig, env: GymEnv, saved_encoder: dict[str, Any] | None = None,
                tensorboard_log: str | None = None, reference: bool = False) -> BaseAlgorithm:
     """A new SB3 model for ``config`` on ``env``, with pre-trained LEOG weights loaded if any.
 
@@ -228,7 +243,7 @@ def make_model(config: TrainConfig, env: gym.Env, saved_encoder: dict[str, Any] 
         # half up, not Python's round-half-even (4 worlds at 0.125 would give 1 update, double the ratio asked)
         kwargs["gradient_steps"] = max(1, int(hyper["updates_per_step"] * config.num_envs * frequency + 0.5))
     if config.algo in ("td3", "ddpg") and config.action_noise > 0:
-        dims = env.action_space.shape[0]
+        dims = action_box(env.action_space).shape[0]
         kwargs["action_noise"] = NormalActionNoise(np.zeros(dims), np.full(dims, config.action_noise))
     clash = sorted(set(config.algo_kwargs) & {"policy", "env", "policy_kwargs", "seed", "device", "tensorboard_log"})
     if clash:

@@ -117,14 +117,16 @@ _POLICIES = {("stable_baselines3.common.policies", "MultiInputActorCriticPolicy"
 """(module, class) a zip's JSON may name: SB3's own policies for Dict observations (DDPG's is TD3's)."""
 
 _ACTIVATIONS = ("ReLU", "Tanh", "ELU", "LeakyReLU", "GELU", "SiLU", "Sigmoid", "Softplus", "Identity")
-_FLAGS = {"use_sde": bool, "ortho_init": bool, "share_features_extractor": bool, "squash_output": bool, "full_std": bool,
-          "use_expln": bool, "normalize_images": bool, "log_std_init": (int, float), "clip_mean": (int, float)}
+_FLAGS: dict[str, type | tuple[type, ...]] = {
+    "use_sde": bool, "ortho_init": bool, "share_features_extractor": bool, "squash_output": bool, "full_std": bool,
+    "use_expln": bool, "normalize_images": bool, "log_std_init": (int, float), "clip_mean": (int, float)}
 _IGNORED = {"optimizer_class", "optimizer_kwargs"}
 """Only training uses them; a loaded policy does not."""
 
 
-def zip_policy(path: str | Path, observation_space: Any, action_space: Any) -> tuple[Callable, dict[str, tuple[int, ...]] | None]:
-    """(act, observation shapes the zip was trained on) for a zip saved by Stable-Baselines3.
+def zip_policy(path: str | Path, observation_space: Any,
+               action_space: Any) -> tuple[Callable[..., Any] | None, dict[str, tuple[int, ...]] | None]:
+    """(act, observation shapes the zip was trained on) for a zip saved by Stable-Baselines3 (act None: the shapes differ).
 
     The policy class, ``net_arch``, activation and flags come from the JSON ``data``; the
     network is built on ``observation_space`` (the scenario's, which the caller checks against

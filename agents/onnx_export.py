@@ -47,6 +47,9 @@ class ExportError(CrowdNavError, ValueError):
 class DeployablePolicy(nn.Module):
     """Raw observation tensors (in :attr:`keys` order) -> deterministic actions, as :class:`crowdnav.agents.AgentPolicy` computes them."""
 
+    low: torch.Tensor  # the action space's bounds (buffers), declared for the type checker
+    high: torch.Tensor
+
     def __init__(self, policy: Any, keys: list[str]):
         super().__init__()
         self.keys = list(keys)

@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import json
 import time
-from collections.abc import Sequence
+from collections.abc import Iterable, Sequence
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
@@ -92,11 +92,12 @@ def pretrain_encoder(
     loss_fn = nn.BCEWithLogitsLoss()
     val_loss = [_evaluate(model, val, loss_fn)]
     train_loss: list[float] = []
-    epochs_iter = range(epochs)
+    epochs_iter: Iterable[int] = range(epochs)
+    bar = None  # tqdm's bar over the epochs, when progress is shown
     if progress:
         from tqdm import tqdm
 
-        epochs_iter = tqdm(epochs_iter, desc="pretrain", unit="epoch")
+        epochs_iter = bar = tqdm(epochs_iter, desc="pretrain", unit="epoch")
     for _ in epochs_iter:
         model.train()
         total, seen = 0.0, 0
@@ -110,8 +111,8 @@ def pretrain_encoder(
             seen += len(batch)
         train_loss.append(total / seen)
         val_loss.append(_evaluate(model, val, loss_fn))
-        if progress:
-            epochs_iter.set_postfix(train=f"{train_loss[-1]:.4f}", held_out=f"{val_loss[-1]:.4f}")
+        if bar is not None:
+            bar.set_postfix(train=f"{train_loss[-1]:.4f}", held_out=f"{val_loss[-1]:.4f}")
     metadata = {
         "dataset": dataset.metadata, "grids": len(dataset), "held_out": n_val, "epochs": epochs, "batch_size": batch_size,
         "learning_rate": learning_rate, "seed": seed, "decoder_width": decoder_width, "occupied_fraction": float(grids.mean()),

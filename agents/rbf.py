@@ -26,6 +26,13 @@ class GaussianRBF(nn.Module):
     """
 
     reference = False  # True: always the plain formula (reference_forward), for benchmarks/bench_train.py's reference timing
+    # buffers (register_buffer) and, when trainable, parameters: declared for the type checker
+    centre: torch.Tensor
+    log_width: torch.Tensor
+    _scale: torch.Tensor
+    _offset: torch.Tensor
+    _finite: torch.Tensor
+    _repeat: torch.Tensor
 
     def __init__(self, low: np.ndarray, high: np.ndarray, centres: int = 16, trainable: bool = False, keep_input: bool = True):
         super().__init__()

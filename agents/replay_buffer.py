@@ -23,6 +23,7 @@ from typing import Any
 
 import numpy as np
 import torch
+from crowdnav.agents.space_checks import box_space
 from gymnasium import spaces
 from stable_baselines3.common.buffers import DictReplayBuffer
 from stable_baselines3.common.type_aliases import DictReplayBufferSamples
@@ -32,8 +33,11 @@ OCCUPIED = 255
 
 def packable_keys(observation_space: spaces.Dict, keys: Sequence[str]) -> list[str]:
     """The ``keys`` that hold uint8 grids (3-D Box), i.e. those that can be stored packed."""
-    return [key for key in keys if key in observation_space.spaces and len(observation_space[key].shape) == 3
-            and observation_space[key].dtype == np.uint8]
+    return [key for key in keys if key in observation_space.spaces and _is_grid(observation_space[key])]
+
+
+def _is_grid(space: spaces.Space[Any]) -> bool:
+    return isinstance(space, spaces.Box) and len(space.shape) == 3 and space.dtype == np.uint8
 
 
 class PackedGridReplayBuffer(DictReplayBuffer):
@@ -54,7 +58,7 @@ class PackedGridReplayBuffer(DictReplayBuffer):
         self.gamma = float(gamma)
         self.fast_sampling = bool(fast_sampling)
         self.packed_keys = packable_keys(observation_space, packed_keys)
-        self.grid_shapes = {key: tuple(observation_space[key].shape) for key in self.packed_keys}
+        self.grid_shapes = {key: box_space(observation_space, key).shape for key in self.packed_keys}
         stored = dict(observation_space.spaces)
         for key, shape in self.grid_shapes.items():
             stored[key] = spaces.Box(0, 255, shape=((int(np.prod(shape)) + 7) // 8,), dtype=np.uint8)
@@ -77,6 +81,13 @@ class PackedGridReplayBuffer(DictReplayBuffer):
         bits *= OCCUPIED
         return bits.reshape(len(rows), *shape)
 
+    def _normalized(self, batch: dict[str, np.ndarray], env: Any) -> dict[str, torch.Tensor]:
+        """A sampled Dict batch through SB3's normalisation (a VecNormalize env's, if any), as tensors."""
+        normalized = self._normalize_obs(batch, env)
+        if not isinstance(normalized, dict):  # SB3 returns what it was given: a dict for a dict
+            raise TypeError(f"expected the normalised batch to be a dict, got {type(normalized).__name__}")
+        return {key: self.to_torch(values) for key, values in normalized.items()}
+
     def _get_samples(self, batch_inds: np.ndarray, env=None) -> DictReplayBufferSamples:  # type: ignore[override]
         env_indices = np.random.randint(0, high=self.n_envs, size=(len(batch_inds),))
         if self.n_steps == 1:
@@ -95,9 +106,8 @@ class PackedGridReplayBuffer(DictReplayBuffer):
             actions = self._select(self.actions, rows)
         else:  # SB3's way (also with a VecNormalize env, which normalises the numpy batch)
             observations, next_observations = (
-                {key: self.to_torch(values) for key, values in self._normalize_obs(
-                    {key: (self._unpack(stored, key, rows, env_indices) if key in self.grid_shapes else values[rows, env_indices, :])
-                     for key, values in stored.items()}, env).items()}
+                self._normalized({key: (self._unpack(stored, key, rows, env_indices) if key in self.grid_shapes else values[rows, env_indices, :])
+                                  for key, values in stored.items()}, env)
                 for stored, rows in ((self.observations, batch_inds), (self.next_observations, last_inds)))
             actions = self.to_torch(self.actions[batch_inds, env_indices])
         dones = self.dones[last_inds, env_indices] * (1 - self.timeouts[last_inds, env_indices])

@@ -41,6 +41,7 @@ from contextlib import contextmanager
 from dataclasses import dataclass
 from typing import Any
 
+from crowdnav.agents.algorithm_kinds import off_policy, on_policy, train_freq
 from crowdnav.agents.resume_state import rng_state
 from stable_baselines3.common.base_class import BaseAlgorithm
 from stable_baselines3.common.type_aliases import TrainFreq, TrainFrequencyUnit
@@ -124,17 +125,18 @@ class ResumePoint:
 
     def continue_run(self, steps_after: int) -> None:
         """Start of a resumed run: take the update the checkpoint preceded, or first finish the interrupted rollout."""
-        model = self.model
         if not self.off_policy:
             if self._pending_rollout:  # as SB3's loop does after a rollout
-                model._update_current_progress_remaining(model.num_timesteps, model._total_timesteps)
-                model.train()
+                collector = on_policy(self.model)
+                collector._update_current_progress_remaining(collector.num_timesteps, collector._total_timesteps)
+                collector.train()
                 self._pending_rollout = False
             return
+        model = off_policy(self.model)
         if self.batched:
             if self._pending_rollout and model.num_timesteps > model.learning_starts:  # as SB3's loop does after a rollout
                 # gradient_steps -1: as many as the rollout's env steps (checkpoints end rollouts of train_freq steps of every world)
-                steps = model.gradient_steps if model.gradient_steps >= 0 else model.train_freq.frequency * model.n_envs
+                steps = model.gradient_steps if model.gradient_steps >= 0 else train_freq(model).frequency * model.n_envs
                 model._update_current_progress_remaining(model.num_timesteps, model._total_timesteps)
                 if steps > 0:
                     model.train(batch_size=model.batch_size, gradient_steps=steps)
@@ -142,26 +144,29 @@ class ResumePoint:
             return
         if steps_after <= 0:
             if model.num_timesteps > model.learning_starts:
-                steps = model.gradient_steps if model.gradient_steps >= 0 else model.train_freq.frequency
+                steps = model.gradient_steps if model.gradient_steps >= 0 else train_freq(model).frequency
                 if steps > 0:
                     model.train(batch_size=model.batch_size, gradient_steps=steps)
             return
         # the first rollout is the rest of the interrupted one; then the usual rollouts
-        self._restore = (model.train_freq, model.gradient_steps)
+        self._restore = (train_freq(model), model.gradient_steps)
         if model.gradient_steps < 0:  # "as many updates as steps": the whole interrupted rollout's
-            model.gradient_steps = model.train_freq.frequency
-        model.train_freq = TrainFreq(steps_after, TrainFrequencyUnit.STEP)
+            model.gradient_steps = train_freq(model).frequency
+        # SB3 types train_freq as the constructor's argument; after set-up it holds a TrainFreq, as here
+        model.train_freq = TrainFreq(steps_after, TrainFrequencyUnit.STEP)  # type: ignore[assignment]
 
     def rollout_ended(self) -> None:
         """End of the first rollout of a resumed run: the next rollouts have the configured length."""
         if self._restore is not None:
-            self.model.train_freq = self._restore[0]
+            off_policy(self.model).train_freq = self._restore[0]  # type: ignore[assignment]  # a TrainFreq, as SB3 stores it
 
     def rollout_started(self) -> None:
         """Start of the second rollout: the first one's update used the interrupted rollout's gradient steps."""
-        if self._restore is not None and self.model.train_freq is self._restore[0]:
-            self.model.gradient_steps = self._restore[1]
-            self._restore = None
+        if self._restore is not None:
+            model = off_policy(self.model)
+            if model.train_freq is self._restore[0]:
+                model.gradient_steps = self._restore[1]
+                self._restore = None
 
 
 def _after_episode_end(buffer: Any, marked: tuple[int, bool]) -> tuple[int, bool]:

@@ -32,6 +32,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from crowdnav.agents.space_checks import action_box
 from stable_baselines3.common.vec_env import VecEnv, VecEnvWrapper
 
 from crowdnav.errors import CrowdNavError
@@ -69,7 +70,10 @@ def rng_state(model: Any) -> dict[str, Any]:
     """The random streams training draws from (torch, numpy, Python, the action space's), as JSON values."""
     import torch
 
-    kind, keys, position, has_gauss, gauss = np.random.get_state()
+    legacy = np.random.get_state()
+    if isinstance(legacy, dict):  # legacy=True (the default) gives the tuple of the global MT19937 stream
+        raise TypeError("numpy's global random state is not the legacy tuple")
+    kind, keys, position, has_gauss, gauss = legacy
     version, internal, gauss_next = random.getstate()
     space = getattr(model, "action_space", None)
     return {"torch": base64.b64encode(torch.get_rng_state().numpy().tobytes()).decode("ascii"),
@@ -120,7 +124,9 @@ def restore_training_state(model: Any, path: Path) -> dict[str, Any]:
 # ------------------------------------------------------------------ arrays
 
 def _write_npz(path: Path, arrays: Mapping[str, np.ndarray], meta: Mapping[str, Any]) -> None:
-    np.savez(path, **arrays, **{"meta.json": np.array(json.dumps({"format": RESUME_FORMAT, **meta}))})
+    # typed as savez's keyword arguments: a dict of arrays alone would be matched against allow_pickle too
+    contents: dict[str, Any] = {**arrays, "meta.json": np.array(json.dumps({"format": RESUME_FORMAT, **meta}))}
+    np.savez(path, **contents)
 
 
 def _read_npz(path: Path) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
@@ -194,7 +200,7 @@ class ActionLog(VecEnvWrapper):
 
     def __init__(self, venv: VecEnv):
         super().__init__(venv)
-        self.actions = np.zeros((self.num_envs, 64, *self.action_space.shape))
+        self.actions = np.zeros((self.num_envs, 64, *action_box(self.action_space).shape))
         self.lengths = np.zeros(self.num_envs, dtype=np.int64)
 
     def reset(self) -> Any:

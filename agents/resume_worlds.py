@@ -82,6 +82,8 @@ def _world_state(env: Any) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
     inner = env.venv
     if isinstance(inner, CrowdNavSB3VecEnv):
         counter = inner.episode_seeds
+        if counter is None:  # training always gives the batched env its counter (make_vec_env)
+            raise ResumeStateError("the run's vector env has no episode counter to store")
         arrays.update({"worlds/returns": inner._returns.copy(), "worlds/episode_lengths": inner._lengths.copy()})
         return arrays, {"kind": "vector", "run_seed": counter.run_seed, "next_episode": counter.next_episode,
                         "episode_of": [counter.episode_of[i] for i in range(inner.num_envs)],
@@ -111,7 +113,7 @@ def _restore_worlds(path: Path, env: ActionLog, arrays: Mapping[str, np.ndarray]
         observation = _replay_vector(inner, actions, lengths, meta)
         for name, key in (("_returns", "worlds/returns"), ("_lengths", "worlds/episode_lengths")):
             _fill(path, inner, name, arrays, key)
-    elif meta["kind"] == "single" and not isinstance(inner, CrowdNavSB3VecEnv):
+    elif meta["kind"] == "single" and isinstance(inner, DummyVecEnv):
         observation = _replay_single(inner, actions, lengths, meta)
     else:
         raise ResumeStateError(f"{path}: its worlds are {meta['kind']}, the run's config builds {type(inner).__name__}")

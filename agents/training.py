@@ -29,8 +29,10 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+import gymnasium as gym
 import torch
 import yaml
+from crowdnav.agents.algorithm_kinds import off_policy, replay_buffer
 from crowdnav.agents.callbacks import EpisodeCallback, EpisodeRecord
 from crowdnav.agents.checkpoint import (
     ENCODER_FILE,
@@ -69,10 +71,11 @@ from crowdnav.agents.resume_state import (
     restore_training_state,
 )
 from crowdnav.agents.run_folder import checkpoint_dir, episode_log, recover_checkpoint, snapshot_dir, snapshot_folders, writing
-from crowdnav.agents.seeding import train_seed
+from crowdnav.agents.seeding import EpisodeSeedCounter, train_seed
+from crowdnav.agents.vec_env import CrowdNavSB3VecEnv
 from crowdnav.agents.wrappers import scales_from_json, scales_to_json
 from stable_baselines3.common.base_class import BaseAlgorithm
-from stable_baselines3.common.vec_env import DummyVecEnv
+from stable_baselines3.common.vec_env import DummyVecEnv, VecEnv
 
 
 @dataclass
@@ -144,12 +147,20 @@ def _train(config: TrainConfig, resume: bool, on_checkpoint: Callable[[int], Non
     # batched: episodes end in another order than they start, so the first one not yet started can be past the count
     # (only used when the checkpoint's own vector env is not restored: its counter goes on)
     first_started = (state.get("next_episode") or first_episode) if state and batched else first_episode
-    env = (make_vec_env if batched else make_env)(config, encoder if precompute else None, first_started,
-                                                  scales_from_json(stored) if stored is not None else None)
+    leog, saved_scales = encoder if precompute else None, scales_from_json(stored) if stored is not None else None
+    # collecting: what the model steps; on-policy and batched checkpoints store its worlds mid-episode (crowdnav.agents.resume_worlds)
+    if batched:
+        vector = make_vec_env(config, leog, first_started, saved_scales)
+        env: gym.Env | CrowdNavSB3VecEnv = vector
+        collecting: gym.Env | VecEnv = ActionLog(vector)
+        max_steps = vector.env.scenario.max_steps
+    else:
+        single = make_env(config, leog, first_started, saved_scales)
+        env = collecting = single
+        if config.algo not in OFF_POLICY:
+            collecting = ActionLog(DummyVecEnv([lambda: single]))
+        max_steps = _scenario_max_steps(single)
     scales = observation_normalization(env)
-    collecting = env  # what the model steps: on-policy and batched checkpoints store its worlds mid-episode (crowdnav.agents.resume_worlds)
-    if batched or config.algo not in OFF_POLICY:
-        collecting = ActionLog(env if batched else DummyVecEnv([lambda: env]))
     unit = "steps" if config.checkpoint_every_steps is not None else "episodes"  # what snapshots and checkpoints count
     tensorboard_log = _tensorboard_folder(config, out)
     on_start = None
@@ -159,14 +170,14 @@ def _train(config: TrainConfig, resume: bool, on_checkpoint: Callable[[int], Non
         if tensorboard_log is not None:
             model.tensorboard_log = tensorboard_log
         if config.algo in OFF_POLICY and (checkpoint / REPLAY_FILE).is_file():
-            model.load_replay_buffer(checkpoint / REPLAY_FILE)
+            off_policy(model).load_replay_buffer(checkpoint / REPLAY_FILE)
         saved_streams = restore_pickled_rng_state(model, checkpoint / RNG_FILE)
     elif state:  # tensors, JSON and arrays only
         with _resume_errors(_restart_hint(out)):
             model = resume_model(checkpoint, config, collecting, saved_encoder, tensorboard_log)
         if config.algo in OFF_POLICY and (checkpoint / REPLAY_ARRAYS).is_file():
             with _resume_errors(f"; remove {checkpoint / REPLAY_ARRAYS} to resume with an empty replay buffer"):
-                load_replay_buffer(model.replay_buffer, checkpoint / REPLAY_ARRAYS)
+                load_replay_buffer(replay_buffer(model), checkpoint / REPLAY_ARRAYS)
     else:
         model = make_model(config, collecting, saved_encoder, tensorboard_log)
         from crowdnav.agents.demonstrations import warm_start
@@ -176,7 +187,7 @@ def _train(config: TrainConfig, resume: bool, on_checkpoint: Callable[[int], Non
     resume_point = ResumePoint(model, off_policy=config.algo in OFF_POLICY, batched=batched)
     # the resumed run is the uninterrupted one: single-env off-policy checkpoints are rewound to an episode end,
     # the others carry their worlds mid-episode (without them, e.g. an older crowdnav's: a close resume)
-    worlds = bool(state) and not state["legacy"] and not rewinds and (checkpoint / ROLLOUT_ARRAYS).is_file()
+    worlds = bool(state and not state["legacy"] and not rewinds and (checkpoint / ROLLOUT_ARRAYS).is_file())
     if worlds:
         from crowdnav.agents.resume_worlds import load_rollout
 
@@ -197,7 +208,7 @@ def _train(config: TrainConfig, resume: bool, on_checkpoint: Callable[[int], Non
         shutil.copyfile(_encoder_path(config), encoder_copy)
 
     def info(episodes: int) -> dict[str, Any]:
-        started = {"next_episode": model.get_env().episode_seeds.next_episode} if batched else {}
+        started = {"next_episode": _next_episode(model)} if batched else {}
         return {"algo": config.algo, "env": env_options(config),
                 "observation_normalization": None if scales is None else scales_to_json(scales),
                 "episodes": episodes, "timesteps": model.num_timesteps, **started,
@@ -241,15 +252,14 @@ def _train(config: TrainConfig, resume: bool, on_checkpoint: Callable[[int], Non
     start_steps = model.num_timesteps
     callback.model = model  # the budget check reads its step count before learn() binds it
     if not callback.finished:
-        max_steps = (env.env if batched else env.unwrapped).scenario.max_steps
         # an upper bound (the callback stops on the budget), and the same total as an uninterrupted run's,
         # so a learning-rate schedule sees the same progress after a resume
         # (B worlds finish N episodes of at most max_steps within ceil(N / B) * max_steps steps each; one env: as before batching)
-        worlds = config.num_envs - 1
-        total = config.timesteps if config.timesteps is not None else (config.episodes + worlds) * max_steps + 1
+        other_worlds = config.num_envs - 1
+        total = config.timesteps if config.timesteps is not None else (config.episodes + other_worlds) * max_steps + 1
         budget = total - model.num_timesteps  # enough: the steps already taken count
         if state and not exact and config.timesteps is None:  # the steps of the interrupted episodes are taken again
-            budget = max(budget, (config.episodes - callback.done + worlds) * max_steps + 1)
+            budget = max(budget, (config.episodes - callback.done + other_worlds) * max_steps + 1)
         model.learn(budget, callback=callback, reset_num_timesteps=state is None, tb_log_name=config.algo)
         save(callback.done, final=True)
     seconds = time.perf_counter() - started
@@ -344,7 +354,27 @@ def _restart_hint(out: Path) -> str:
     return f"; this checkpoint cannot be resumed: move {out} away (its snapshots still load as policies) and train again"
 
 
+def _next_episode(model: BaseAlgorithm) -> int:
+    """A batched run's first episode not yet started: its worlds' episode counter (an ActionLog forwards the attribute)."""
+    counter = getattr(model.get_env(), "episode_seeds", None)
+    if not isinstance(counter, EpisodeSeedCounter):
+        raise TypeError(f"a batched run's env counts its episodes with an EpisodeSeedCounter, got {counter!r}")
+    return counter.next_episode
+
+
+def _scenario_max_steps(env: gym.Env) -> int:
+    """The episode length limit of the scenario of a :func:`make_env` environment."""
+    from crowdnav.envs import CrowdNavEnv
+
+    core = env.unwrapped
+    if not isinstance(core, CrowdNavEnv):
+        raise TypeError(f"expected a CrowdNavEnv under the wrappers, got {type(core).__name__}")
+    return int(core.scenario.max_steps)
+
+
 def _encoder_path(config: TrainConfig) -> Path:
+    if config.encoder.weights is None:  # only frozen runs copy their encoder, and TrainConfig requires their weights
+        raise ConfigError("encoder.weights: encoder mode 'frozen' needs pre-trained weights (crowdnav pretrain-encoder)")
     path = Path(config.encoder.weights)
     return path / ENCODER_FILE if path.is_dir() else path
 

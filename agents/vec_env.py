@@ -29,6 +29,7 @@ from typing import Any
 
 import numpy as np
 from crowdnav.agents.seeding import EpisodeSeedCounter, train_seed
+from crowdnav.agents.space_checks import box_space, dict_space
 from crowdnav.agents.wrappers import ObservationScales, agent_observation
 from gymnasium import spaces
 from gymnasium.vector import AutoresetMode
@@ -46,10 +47,11 @@ class CrowdNavSB3VecEnv(VecEnv):
         if env.autoreset_mode is not AutoresetMode.SAME_STEP:
             raise ValueError("CrowdNavSB3VecEnv needs a CrowdNavVectorEnv with autoreset_mode=AutoresetMode.SAME_STEP (SB3 resets in the same step)")
         self.env = env
-        space = env.single_observation_space
+        space = dict_space(env.single_observation_space)
         if scales is not None:  # as NormalizeObservation: scaled keys get their mapped Box, the others pass through
-            scales = {key: checked_scale(key, space[key], *scales[key]) for key in space.spaces if key in scales}
-            space = spaces.Dict({key: normalized_box(box, *scales[key]) if key in scales else box for key, box in space.spaces.items()})
+            scales = {key: checked_scale(key, box_space(space, key), *scales[key]) for key in space.spaces if key in scales}
+            space = spaces.Dict({key: normalized_box(box_space(space, key), *scales[key]) if key in scales else box
+                                 for key, box in space.spaces.items()})
         if encoder is not None:  # the frozen encoder's latent instead of the grid
             encoder = encoder.eval().requires_grad_(False)
             space = spaces.Dict({**space.spaces, "leog": spaces.Box(-1.0, 1.0, shape=(encoder.latent,), dtype=np.float32)})
@@ -79,7 +81,7 @@ class CrowdNavSB3VecEnv(VecEnv):
 
     def reset(self) -> VecEnvObs:
         # VecEnv.seed() (SB3 calls it with the algorithm's seed) wins over the constructor's; either applies to this reset only
-        seed = self._seeds if any(s is not None for s in self._seeds) else self._seed
+        seed: Sequence[int | None] | int | None = self._seeds if any(s is not None for s in self._seeds) else self._seed
         if self.episode_seeds is not None:  # training: the run's own episode numbering, never the algorithm's seed
             seed = self.episode_seeds(range(self.num_envs))
         observation, _ = self.env.reset(seed=seed)

@@ -22,6 +22,7 @@ import numpy as np
 import torch
 from crowdnav.agents.encoders import LeogEncoder
 from crowdnav.agents.seeding import DATASET_SEED_OFFSET, TRAIN_SEED_BASE, dataset_seed, train_seed  # noqa: F401  (re-exported)
+from crowdnav.agents.space_checks import box_space
 from gymnasium import spaces
 
 from crowdnav.sensors.base import checked_scale, normalize_values, normalized_box
@@ -116,10 +117,11 @@ class NormalizeObservation(gym.ObservationWrapper):
         unknown = sorted(set(scales) - set(space.spaces))
         if unknown:
             raise ValueError(f"NormalizeObservation: scales for keys the environment does not observe: {unknown}")
-        self.scales: ObservationScales = {key: checked_scale(key, space[key], *scales[key]) for key in space.spaces if key in scales}
+        self.scales: ObservationScales = {key: checked_scale(key, box_space(space, key), *scales[key]) for key in space.spaces
+                                          if key in scales}
         """Key -> (offset, scale) float32 arrays; the keys left out pass through."""
         self.observation_space = spaces.Dict({
-            key: normalized_box(box, *self.scales[key]) if key in self.scales else box for key, box in space.spaces.items()
+            key: normalized_box(box_space(space, key), *self.scales[key]) if key in self.scales else box for key, box in space.spaces.items()
         })
 
     def observation(self, observation: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
@@ -138,7 +140,7 @@ class LeogLatentWrapper(gym.ObservationWrapper):
         space = env.observation_space
         if not isinstance(space, spaces.Dict) or key not in space.spaces:
             raise ValueError(f"LeogLatentWrapper needs a Dict observation with a {key!r} key, got {space}")
-        if tuple(space[key].shape) != tuple(encoder.architecture["grid_shape"]):
+        if box_space(space, key).shape != tuple(encoder.architecture["grid_shape"]):
             raise ValueError(
                 f"the encoder expects grids of shape {tuple(encoder.architecture['grid_shape'])}, "
                 f"the environment's {key!r} has shape {space[key].shape}"

@@ -59,6 +59,7 @@ class ResultsExistError(CrowdNavError, FileExistsError):
 def _load_sb3_zip(path: Path, options: Mapping[str, Any]) -> Callable:
     """A zip saved by SB3 itself, rebuilt from its parameters and JSON (nothing unpickled)."""
     from crowdnav.agents.model_zip import ModelZipError, describe_shapes, zip_policy
+    from crowdnav.agents.space_checks import box_space, dict_space
 
     from crowdnav.envs import CrowdNavEnv
 
@@ -69,9 +70,9 @@ def _load_sb3_zip(path: Path, options: Mapping[str, Any]) -> Callable:
         raise PolicyError(str(error)) from None
     finally:
         env.close()
-    if act is None:
-        scenario = describe_shapes({key: tuple(space.shape) for key, space in env.observation_space.spaces.items()})
-        raise PolicyError(f"{path} expects observations {describe_shapes(shapes)}, but the scenario with modalities "
+    if act is None:  # the zip's observation shapes (never None then) differ from the scenario's
+        scenario = describe_shapes({key: box_space(env.observation_space, key).shape for key in dict_space(env.observation_space).spaces})
+        raise PolicyError(f"{path} expects observations {describe_shapes(shapes or {})}, but the scenario with modalities "
                           f"{list(options.get('modalities') or [])} gives {scenario}; pass the --modalities it was trained on")
     return act
 
