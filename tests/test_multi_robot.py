@@ -317,3 +317,36 @@ def test_gym_env_reports_the_other_robots_outcomes_and_a_callable_drives_them():
 def test_an_unknown_other_robot_policy_is_a_one_line_error():
     with pytest.raises(ValueError, match="other_robots='wander' is not a scripted robot policy"):
         CrowdNavEnv(HALL, other_robots="wander")
+
+
+# ----------------------------------------------------------------------------- rendering
+
+
+def test_rgb_frames_draw_every_robot_in_its_own_colour_and_name_it_in_the_legend():
+    pytest.importorskip("pygame")
+    from crowdnav.rendering.renderer import Overlays, Palette
+
+    env = CrowdNavEnv("robots_crossing_hall", render_mode="rgb_array", other_robots="straight")
+    env.reset(seed=0)
+    env.step(np.array([1.0, 0.0]))
+    frame = env.render()
+    colours = Palette().robots[:3]
+    assert len(set(colours)) == 3
+    counts = [int((frame == np.array(colour, dtype=np.uint8)).all(-1).sum()) for colour in colours]
+    assert min(counts) > 100, counts  # each robot's disc (and goal ring) in its colour
+    names = [name for _, name, _ in env.core.view.renderer._legend_entries(Overlays())]
+    assert names[:3] == ["east_bound", "west_bound", "north_bound"]
+
+
+def test_a_robot_that_left_is_no_longer_drawn():
+    pytest.importorskip("pygame")
+    from crowdnav.rendering.renderer import Palette
+
+    env = CrowdNavEnv("robots_crossing_hall", render_mode="rgb_array", other_robots="straight")
+    env.reset(seed=0)
+    env.simulator.retire_robots([2])
+    env.step(np.zeros(2))
+    north = np.array(Palette().robots[2], dtype=np.uint8)
+    frame = env.render()
+    legend_swatch = 200  # the legend keeps the robot's entry; the map has no disc of its colour left
+    assert 0 < int((frame == north).all(-1).sum()) < legend_swatch

@@ -199,6 +199,8 @@ class CrowdNavParallelEnv(ParallelEnv):
         truncated = bool(still) and self.simulator.step_count >= self.scenario.max_steps  # time up while some robot runs
         over = not still or truncated
         observations = self._observations(None, was_active)
+        if self.render_mode == "human":  # the one-robot path draws in core.observe()
+            self.core.render()
         rewards = dict.fromkeys(agents, 0.0)
         terminations, truncations = dict.fromkeys(agents, False), dict.fromkeys(agents, False)
         for name in self._human_names:  # the humans end with the episode (or alone, by human_exit: below)

@@ -58,6 +58,9 @@ class Palette:
     text: tuple[int, int, int] = (20, 20, 20)
     outline: tuple[int, int, int] = (30, 30, 30)
     groups: tuple[tuple[int, int, int], ...] = ((66, 120, 200), (215, 135, 40), (125, 80, 175), (70, 155, 90), (200, 80, 140), (110, 110, 110))
+    robots: tuple[tuple[int, int, int], ...] = ((210, 60, 50), (0, 150, 150), (235, 175, 0), (150, 50, 200), (120, 70, 30), (255, 105, 180),
+                                                (40, 40, 40), (0, 200, 90))
+    """Several robots (``robots:``): robot k's colour (the first is ``robot``), its path and goal in the same hue."""
     """Colours of human groups without their own ``colour``, in file order (the first is ``human``)."""
 
 
@@ -97,6 +100,8 @@ class RenderOptions:
 class _History:
     robot: list[complex] = field(default_factory=list)
     humans: deque = field(default_factory=lambda: deque(maxlen=12))
+    robots: list[np.ndarray] = field(default_factory=list)
+    """Several robots: every robot's centre per record (:data:`crowdnav.robots.PARKED` once it left)."""
 
 
 class Renderer:
@@ -152,8 +157,12 @@ class Renderer:
 
     def record(self) -> None:
         """Append the current positions to the trails; call once per reset/step."""
-        self._history.robot.append(self.sim.robot_position)
+        team = self.sim.team
+        if team is None or team.state.active[0]:  # the first robot's path ends where it left
+            self._history.robot.append(self.sim.robot_position)
         self._history.humans.append(self.sim.human_positions.copy())
+        if team is not None:
+            self._history.robots.append(self.sim.robot_positions)
 
     def frame(self, overlays: Overlays | None = None, hud: str = "") -> np.ndarray:
         """The current state as a ``uint8`` array of shape (H, W, 3)."""
@@ -241,9 +250,10 @@ class Renderer:
                 pygame.draw.circle(surface, palette.lidar, end, 2)
         # the goal above the LIDAR rays and trails, below the agents
         goal, goal_px = self.to_pixels(sim.robot_goal), max(6.0, sim.scenario.robot.goal_radius * scale)
-        pygame.draw.circle(surface, palette.goal_fill, goal, goal_px)
-        pygame.draw.circle(surface, palette.goal, goal, goal_px, 3)
-        _cross(surface, palette.goal, goal, max(5.0, goal_px * 0.6))
+        if sim.team is None or sim.team.state.active[0]:
+            pygame.draw.circle(surface, palette.goal_fill, goal, goal_px)
+            pygame.draw.circle(surface, palette.goal, goal, goal_px, 3)
+            _cross(surface, palette.goal, goal, max(5.0, goal_px * 0.6))
         radius = sim.scenario.humans.radius * scale
         colours = self._group_colours
         for position, velocity, group in zip(self.to_pixels(sim.human_positions), sim.human_velocities, sim.human_group, strict=True):
@@ -254,9 +264,12 @@ class Renderer:
                 pygame.draw.line(surface, palette.outline, position, tip, 2)
         centre = self.to_pixels(robot)
         robot_radius = sim.scenario.robot.radius * scale
-        pygame.draw.circle(surface, palette.robot, centre, robot_radius)
-        pygame.draw.circle(surface, palette.outline, centre, robot_radius, 2)
-        pygame.draw.line(surface, palette.outline, centre, centre + robot_radius * np.array([math.cos(heading), -math.sin(heading)]), 3)
+        if sim.team is not None:
+            self._draw_robots(surface)
+        else:
+            pygame.draw.circle(surface, palette.robot, centre, robot_radius)
+            pygame.draw.circle(surface, palette.outline, centre, robot_radius, 2)
+            pygame.draw.line(surface, palette.outline, centre, centre + robot_radius * np.array([math.cos(heading), -math.sin(heading)]), 3)
         if overlays.closest_point is not None:
             point = self.to_pixels(robot + overlays.closest_point * complex(math.cos(heading), math.sin(heading)))
             pygame.draw.line(surface, palette.closest, centre, point, 2)
@@ -286,9 +299,42 @@ class Renderer:
         surface.blit(caption, (left, top + side + 3))
         return left + side, top + side + caption.get_height() + 10
 
+    def robot_colour(self, index: int) -> tuple[int, int, int]:
+        """Robot ``index``'s colour (several robots; the palette's colours repeat after eight)."""
+        colours = self.palette.robots
+        return colours[index % len(colours)]
+
+    def _draw_robots(self, surface: pygame.Surface) -> None:
+        """Several robots: each active one in its colour with its name, its goal (a ring in its colour) and its path."""
+        pygame = _pygame()
+        sim, palette, scale = self.sim, self.palette, self.scale
+        team = sim.team
+        active, names = team.state.active, team.names
+        path = np.array(self._history.robots) if len(self._history.robots) > 1 else None
+        for k, (position, goal, heading) in enumerate(zip(sim.robot_positions, sim.robot_goals, sim.robot_headings, strict=True)):
+            if not active[k]:
+                continue
+            colour, radius = self.robot_colour(k), float(team.all_radii[k]) * scale
+            if path is not None and k:  # the first robot's path is drawn with the robot's own (record() keeps both)
+                here = path[:, k]
+                here = here[np.abs(here) < 1e6]  # not the points after it left
+                if len(here) > 1:
+                    pygame.draw.lines(surface, colour, False, self.to_pixels(here), 2)
+            ring = max(6.0, float(sim.robot_scenario(k).robot.goal_radius) * scale)  # type: ignore[attr-defined]
+            pygame.draw.circle(surface, colour, self.to_pixels(goal), ring, 3)
+            centre = self.to_pixels(position)
+            pygame.draw.circle(surface, colour, centre, radius)
+            pygame.draw.circle(surface, palette.outline, centre, radius, 2)
+            pygame.draw.line(surface, palette.outline, centre, centre + radius * np.array([math.cos(heading), -math.sin(heading)]), 3)
+            label = self._font.render(names[k], True, palette.text)
+            surface.blit(label, (centre[0] + radius + 2, centre[1] - radius - label.get_height() / 2))
+
     def _legend_entries(self, overlays: Overlays) -> list[tuple[str, str, tuple[int, int, int]]]:
         palette = self.palette
         entries = [("disc", "robot", palette.robot), ("goal", "robot goal", palette.goal)]
+        if self.sim.team is not None:  # one entry per robot, in its colour; its goal is a ring of the same colour
+            entries = [("disc", name, self.robot_colour(k)) for k, name in enumerate(self.sim.team.names)]
+            entries.append(("goal", "first robot's goal", palette.goal))
         if self.sim.scenario.humans.groups:  # one entry per named group
             entries += [("disc", f"{group.name}{' (standing)' if group.standing else ''}", colour)
                         for group, colour in zip(self.sim.groups, self._group_colours, strict=True)]
