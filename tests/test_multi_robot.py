@@ -350,3 +350,13 @@ def test_a_robot_that_left_is_no_longer_drawn():
     frame = env.render()
     legend_swatch = 200  # the legend keeps the robot's entry; the map has no disc of its colour left
     assert 0 < int((frame == north).all(-1).sum()) < legend_swatch
+
+
+def test_humans_as_agents_see_the_nearest_robot_when_they_see_robots():
+    env = parallel_env(hall(humans={**HALL["humans"], "see_robot": True}), modalities=["goal"])
+    observations, _ = env.reset(seed=0)
+    sim = env.simulator
+    human = sim.human_positions[0]
+    nearest = sim.robot_positions[np.argmin(np.abs(sim.robot_positions - human))]
+    np.testing.assert_allclose(observations["human_0"]["robot_offset"], [(nearest - human).real, (nearest - human).imag], rtol=1e-6)
+    assert all(env.observation_space(name).contains(observations[name]) for name in observations)

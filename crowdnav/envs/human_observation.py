@@ -20,7 +20,8 @@ key                   shape     meaning
 ``humans_radius``     (N-1,)    other humans' radii, padding zero
 ``humans_mask``       (N-1,)    1.0 where the slot holds an active human, 0.0 for padding
 ``obstacles_offset``  (O, 2)    nearest point of each static obstacle minus own centre
-``robot_offset``      (2,)      robot centre minus own centre (only with ``see_robot``)
+``robot_offset``      (2,)      robot centre minus own centre (only with ``see_robot``; several
+                                robots: the nearest one still in the world, by surface distance)
 ``robot_velocity``    (2,)      robot velocity minus own velocity (only with ``see_robot``)
 ``robot_radius``      (1,)      robot body radius (only with ``see_robot``)
 ``active``            (1,)      1.0 for an active human, 0.0 for an inactive one (only with
@@ -58,7 +59,7 @@ class HumanObservations:
     """Observation spaces and vectorized observations of the ``human_<i>`` agents."""
 
     def __init__(self, scenario: Scenario, obstacles: StaticObstacles, *, active_flag: bool = False):
-        humans, robot = scenario.humans, scenario.robot
+        humans = scenario.humans
         self.active_flag = active_flag
         self.max_humans = humans.max_count
         self.see_robot = humans.see_robot
@@ -67,8 +68,9 @@ class HumanObservations:
         self._static_count = obstacles.polygon_count + obstacles.disc_count
         self._preferred_max = humans.max_preferred_speed * _ROUNDING
         self._speed_max = humans.max_preferred_speed * humans.social_force.max_speed_factor * _ROUNDING
-        self._radius_max = max(humans.radius, robot.radius) * _ROUNDING
-        self._robot_speed_max = robot.max_speed * _ROUNDING
+        robots = scenario.robot_specs  # several robots: a human sees the nearest one
+        self._radius_max = max(humans.radius, *(robot.radius for robot in robots)) * _ROUNDING
+        self._robot_speed_max = max(robot.max_speed for robot in robots) * _ROUNDING
         self._others = np.zeros((0, 0), dtype=np.intp)
         self._constants: dict[str, np.ndarray] = {}
         self._shapes = {key: space.shape for key, space in self.space().spaces.items()}
@@ -118,7 +120,7 @@ class HumanObservations:
             "humans_radius": humans_radius,
             "humans_mask": mask,
         }
-        if self.see_robot:
+        if self.see_robot and sim.team is None:
             self._constants["robot_radius"] = np.full((n, 1), sim.radii[0], dtype=np.float32)
 
     def batch(self, sim: Simulator) -> dict[str, np.ndarray]:
@@ -141,9 +143,13 @@ class HumanObservations:
         }
         for key, constant in self._constants.items():
             out[key] = constant.copy()
-        if self.see_robot:
+        if self.see_robot and sim.team is None:
             out["robot_offset"] = _xy(sim.pair_offset[1:, 0])
             out["robot_velocity"] = _xy(sim.velocities[0] - own_velocity)
+        elif self.see_robot:
+            offset, velocity, radius = _nearest_robot(sim)
+            out["robot_offset"], out["robot_velocity"] = _xy(offset), _xy(velocity - own_velocity)
+            out["robot_radius"] = radius[:, None].astype(np.float32)
         return out
 
     def fixed(self, sim: Simulator, active: np.ndarray) -> dict[str, np.ndarray]:
@@ -170,3 +176,15 @@ class HumanObservations:
         to_center, center_distance = sim.disc_offset[1:], sim.disc_distance[1:]
         discs = to_center * (1.0 - self._disc_radius / center_distance)
         return np.concatenate([polygons, discs], axis=1)
+
+
+def _nearest_robot(sim: Simulator) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Several robots: each human's nearest active robot by surface distance: (n,) offsets, velocities and radii."""
+    team = sim.team
+    robots = sim.robot_positions
+    velocities = np.concatenate([sim.velocities[:1], team.state.velocities])
+    offset = robots[None, :] - sim.positions[1:, None]  # (n, R) from each human to each robot
+    gap = np.where(team.state.active, np.abs(offset) - team.all_radii, np.inf)
+    nearest = gap.argmin(axis=1) if len(gap) else np.zeros(0, dtype=int)
+    rows = np.arange(len(offset))
+    return offset[rows, nearest], velocities[nearest], team.all_radii[nearest]
