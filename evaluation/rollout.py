@@ -66,7 +66,7 @@ class HeldOutEpisodes:
         running = list(range(len(envs)))
         while running:
             if privileged:
-                actions = np.stack([policy(envs[i].simulator) for i in running])
+                actions = np.stack([policy(envs[i].simulator.robot_view(0)) for i in running])  # several robots: it sees the others
             else:
                 batch = {key: np.stack([observations[i][key] for i in running]) for key in observations[running[0]]}
                 actions = np.asarray(policy(batch)).reshape(len(running), -1)
@@ -157,9 +157,11 @@ class _Log:
         out = [owner._episode(i, sim, self.positions[i], self.forces[i], self.returns[i], ends[i]) for i, sim in enumerate(sims)]
         if self.frames is not None:
             for episode, states, sim in zip(out, self.frames, sims, strict=True):
-                # each agent's group, for the whole episode (the robot is its own)
-                groups = ["robot", *(sim.groups[g].name for g in sim.human_group.tolist())]
-                episode["frames"] = {"dt": float(sim.dt), "groups": groups, **{key: np.stack([s[key] for s in states]) for key in states[0]}}
+                # each agent's group, for the whole episode (the robot is its own; several robots: after the humans)
+                groups = ["robot", *(sim.groups[g].name for g in sim.human_group.tolist()), *["robot"] * (sim.robot_count - 1)]
+                names = [sim.scenario.robot_names[0], *(f"human_{i}" for i in range(sim.n_humans)), *sim.scenario.robot_names[1:]]
+                episode["frames"] = {"dt": float(sim.dt), "groups": groups, "agents": names,
+                                     **{key: np.stack([s[key] for s in states]) for key in states[0]}}
         return out
 
 
@@ -170,6 +172,15 @@ def _world_state(env: Any, i: int) -> dict[str, np.ndarray]:
 
 
 def _state(sim: Any) -> dict[str, np.ndarray]:
-    """Positions, velocities and goals of the robot (index 0) and the humans, copied (complex, (n + 1,)); each human's respawns (n,)."""
-    return {"positions": sim.positions.copy(), "velocities": sim.velocities.copy(),
-            "goals": np.concatenate([[sim.robot_goal], sim.human_goals]), "respawns": sim.human_respawns.copy()}
+    """Positions, velocities and goals of the robot (index 0) and the humans, copied (complex, (n + 1,)); each human's respawns (n,).
+
+    Several robots (``robots:``): the other robots follow the humans (n + R,); NaN once a robot has left the world.
+    """
+    if sim.team is None:
+        return {"positions": sim.positions.copy(), "velocities": sim.velocities.copy(),
+                "goals": np.concatenate([[sim.robot_goal], sim.human_goals]), "respawns": sim.human_respawns.copy()}
+    team = sim.team.state
+    gone = np.where(team.active[1:], 0j, complex(np.nan, np.nan))
+    return {"positions": np.concatenate([sim.positions, team.positions + gone]),
+            "velocities": np.concatenate([sim.velocities, team.velocities + gone]),
+            "goals": np.concatenate([[sim.robot_goal], sim.human_goals, team.goals]), "respawns": sim.human_respawns.copy()}

@@ -25,7 +25,9 @@ column            meaning
 ``test_episode``  index of the held-out episode; ``test_seed`` its reset seed
 ``outcome``       how the episode ended (success, collision, out_of_bounds, truncated)
 ``step``          0 for the reset state, then one per env step; ``time_s`` = step * dt
-``agent``         ``robot`` or ``human_<i>`` (the simulator's slot: one slot holds every life of a respawning human)
+``agent``         ``robot`` or ``human_<i>`` (the simulator's slot: one slot holds every life of a respawning human);
+                  several robots: each robot's name, the first robot's rows first, the others' after the humans
+                  (x, y, vx, vy NaN once a robot has left the world)
 ``track``         the track id, the ``p`` of the TrajNet++ file: one per robot, per human and per respawn
 ``respawned``     True on the first row of a track that starts with a respawn (its previous row of
                   the same ``agent`` is the other track's last)
@@ -72,7 +74,7 @@ def _respawn_steps(states: Mapping[str, Any]) -> np.ndarray:
     steps, agents = states["positions"].shape
     counts = np.asarray(states.get("respawns", np.zeros((steps, agents - 1), dtype=np.int64)))
     out = np.zeros((steps, agents), dtype=bool)
-    out[1:, 1:] = np.diff(counts, axis=0) > 0  # at most one respawn per human and step
+    out[1:, 1 : 1 + counts.shape[1]] = np.diff(counts, axis=0) > 0  # at most one respawn per human and step (other robots: never)
     return out
 
 
@@ -111,7 +113,7 @@ def tidy_table(episodes: Iterable[Mapping[str, Any]]) -> Any:
         frames.append(pd.DataFrame({
             "test_episode": episode["test_episode"], "test_seed": episode["test_seed"], "outcome": episode["outcome"],
             "step": np.repeat(np.arange(steps), agents), "time_s": np.repeat(np.arange(steps) * states["dt"], agents),
-            "agent": np.tile(agent_names(agents), steps), "track": tracks.ravel(), "respawned": respawned.ravel(),
+            "agent": np.tile(states.get("agents", agent_names(agents)), steps), "track": tracks.ravel(), "respawned": respawned.ravel(),
             "group": np.tile(states.get("groups", ["robot", *["crowd"] * (agents - 1)]), steps),
             "x": positions.real.ravel(), "y": positions.imag.ravel(), "vx": velocities.real.ravel(), "vy": velocities.imag.ravel(),
             "goal_x": goals.real.ravel(), "goal_y": goals.imag.ravel(),
@@ -134,9 +136,10 @@ def trajnet_lines(episodes: Iterable[Mapping[str, Any]]) -> list[str]:
         lines.append(json.dumps({"scene": scene}))
         xs, ys = np.round(positions.real, 4).tolist(), np.round(positions.imag, 4).tolist()
         ids = tracks.tolist()
+        there = np.isfinite(positions).tolist()  # a robot that left the world (several robots) has no more track lines
         for step in range(steps):  # text output: one line per agent and frame
             lines.extend(json.dumps({"track": {"f": first_frame + step, "p": ids[step][a], "x": xs[step][a], "y": ys[step][a]}})
-                         for a in range(agents))
+                         for a in range(agents) if there[step][a])
         first_frame += steps
     return lines
 

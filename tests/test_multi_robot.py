@@ -360,3 +360,19 @@ def test_humans_as_agents_see_the_nearest_robot_when_they_see_robots():
     nearest = sim.robot_positions[np.argmin(np.abs(sim.robot_positions - human))]
     np.testing.assert_allclose(observations["human_0"]["robot_offset"], [(nearest - human).real, (nearest - human).imag], rtol=1e-6)
     assert all(env.observation_space(name).contains(observations[name]) for name in observations)
+
+
+# ----------------------------------------------------------------------------- trajectories
+
+
+def test_trajectories_have_one_track_per_robot_under_its_name_until_it_leaves():
+    from crowdnav.evaluation.trajectories import record_policy, tidy_table, trajnet_lines
+
+    episodes = record_policy("baseline:straight", "robots_crossing_hall", episodes=2)
+    table = tidy_table(episodes)
+    robots = table[table.group == "robot"]
+    assert set(robots.agent) == {"east_bound", "west_bound", "north_bound"}
+    assert robots.groupby(["test_episode", "agent"]).track.nunique().eq(1).all()
+    assert not table[table.agent == "east_bound"][["x", "y"]].isna().any().any()  # the learned robot ends the episode
+    for line in trajnet_lines(episodes):
+        assert "NaN" not in line
