@@ -133,7 +133,8 @@ class CrowdNavSACActor(SampledObservations, SACActor):
     """
 
     def _plain_gaussian(self) -> bool:
-        return not self.use_sde and type(self.action_dist) is SquashedDiagGaussianDistribution
+        # SB3 annotates action_dist with its gSDE branch's class only
+        return not self.use_sde and type(self.action_dist) is SquashedDiagGaussianDistribution  # type: ignore[comparison-overlap]
 
     def forward(self, obs: Any, deterministic: bool = False) -> torch.Tensor:
         if not self._plain_gaussian():

@@ -18,6 +18,7 @@ from __future__ import annotations
 import threading
 import weakref
 from collections.abc import Callable, Hashable
+from typing import Any
 
 import torch
 
@@ -27,7 +28,7 @@ SIZE = 8
 _LOCAL = threading.local()  # one list of entries per thread: (key, tensor, its version, result), newest first
 
 
-def _entries() -> list[tuple[Hashable, weakref.ref, int, torch.Tensor]]:
+def _entries() -> list[tuple[Hashable, weakref.ref[torch.Tensor], int, torch.Tensor]]:
     entries = getattr(_LOCAL, "entries", None)
     if entries is None:
         entries = _LOCAL.entries = []
@@ -55,6 +56,6 @@ def clear() -> None:
     _entries().clear()
 
 
-def fingerprint(*tensors: torch.Tensor) -> tuple:
+def fingerprint(*tensors: torch.Tensor) -> tuple[tuple[Any, ...], ...]:
     """A hashable key made of the tensors' values (shape, dtype, device and bytes)."""
     return tuple((tuple(t.shape), str(t.dtype), str(t.device), t.detach().cpu().numpy().tobytes()) for t in tensors)

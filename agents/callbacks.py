@@ -8,6 +8,7 @@ import time
 from collections.abc import Callable
 from dataclasses import asdict, dataclass
 from pathlib import Path
+from typing import Any
 
 from crowdnav.agents.episode_log import DISCARDED_SUFFIX, EpisodeLogWriter, prepare_log
 from crowdnav.agents.resume_point import ResumePoint
@@ -155,7 +156,7 @@ class EpisodeCallback(BaseCallback):
         """Whether the budget (episodes, or env steps) is spent."""
         return self.done >= self.episodes if self.timesteps is None else self.model.num_timesteps >= self.timesteps
 
-    def _record(self, info: dict) -> None:
+    def _record(self, info: dict[str, Any]) -> None:
         if self.resume_point is not None:
             self.resume_point.mark()
         episode = info.get("episode", {})

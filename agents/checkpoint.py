@@ -27,7 +27,7 @@ import json
 import shutil
 from collections.abc import Mapping
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from crowdnav.agents.model_zip import ModelZipError, check_layers, read_model_zip
@@ -45,6 +45,9 @@ from crowdnav.agents.wrappers import ObservationScales, agent_observation, scale
 from stable_baselines3.common.base_class import BaseAlgorithm
 
 from crowdnav.errors import CrowdNavError
+
+if TYPE_CHECKING:
+    from crowdnav.envs import CrowdNavEnv
 
 POLICY_FORMAT = "crowdnav-policy/1"
 """``policy.json``'s ``format``: a name and a version, raised when the checkpoint layout changes incompatibly."""
@@ -185,7 +188,7 @@ class AgentPolicy:
         action, _ = self.model.predict(self.preprocess(observation), deterministic=True)
         return action.astype(np.float32, copy=False)
 
-    def make_env(self, **extra: Any):
+    def make_env(self, **extra: Any) -> CrowdNavEnv:
         """A CrowdNavEnv configured as in training (``extra`` adds e.g. ``render_mode``).
 
         Its observations are raw; calling the policy on them applies the normalisation and the

@@ -37,7 +37,7 @@ class GridDataset:
 
     @property
     def grid_shape(self) -> tuple[int, int, int]:
-        return tuple(self.grids.shape[1:])  # type: ignore[return-value]
+        return tuple(self.grids.shape[1:])
 
 
 def save_dataset(dataset: GridDataset, path: str | Path) -> Path:

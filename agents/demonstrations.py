@@ -136,7 +136,7 @@ def collect_demonstrations(config: TrainConfig | Mapping[str, Any], episodes: in
         encoder = load_leog_weights(config)[0] if precomputes_leog(config) else None
     expert = SocialForceRobot()
     envs = [CrowdNavEnv(**env_options(config)) for _ in range(min(worlds or config.num_envs, episodes))]
-    steps: dict[int, list[tuple]] = {}
+    steps: dict[int, list[tuple[Any, ...]]] = {}
     outcomes: dict[int, str] = {}
     playing: list[int | None] = [None] * len(envs)
     current: list[dict[str, np.ndarray]] = [{} for _ in envs]  # each world's last observation (set by its first reset)

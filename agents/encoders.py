@@ -171,7 +171,7 @@ class LidarEncoder(nn.Module):
             in_channels = out_channels
         self.conv = nn.Sequential(*layers) if layers else None
         self.fc, self.out_features = mlp(in_channels * length, hidden)
-        self._key: tuple | None = None
+        self._key: tuple[Any, ...] | None = None
 
     reference = False  # True: the proximities computed on every call, for benchmarks/bench_train.py's reference timing
 

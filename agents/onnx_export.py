@@ -32,6 +32,7 @@ from typing import Any
 
 import numpy as np
 import torch
+from crowdnav.agents.space_checks import box_space, dict_space
 from torch import nn
 
 from crowdnav.errors import CrowdNavError
@@ -101,7 +102,7 @@ def export_onnx(policy_path: str | Path, out: str | Path, *, opset: int = OPSET)
         raise ExportError(f"{policy_path}: {str(error).splitlines()[0]}") from None
     env = policy.make_env()
     try:
-        raw = env.observation_space
+        raw = dict_space(env.observation_space)
         example, _ = env.reset(seed=0)
     finally:
         env.close()
@@ -125,7 +126,8 @@ def export_onnx(policy_path: str | Path, out: str | Path, *, opset: int = OPSET)
     _add_metadata(out, {
         "crowdnav.env_options": json.dumps(policy.env_options, sort_keys=True),
         "crowdnav.algo": policy.algo,
-        "crowdnav.observation": json.dumps({key: {"shape": list(space.shape), "dtype": str(space.dtype)} for key, space in raw.spaces.items()}),
+        "crowdnav.observation": json.dumps({key: {"shape": list(box_space(raw, key).shape), "dtype": str(space.dtype)}
+                                          for key, space in raw.spaces.items()}),
     })
     return out
 

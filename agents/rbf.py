@@ -7,6 +7,8 @@ gives the next layer a local, nearly one-hot code of it (the paper's RBF layer).
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 import torch
 from crowdnav.agents import batch_cache
@@ -66,7 +68,7 @@ class GaussianRBF(nn.Module):
             self.register_buffer("log_width", log_width)
         # fixed centres and widths: every constant of the expansion precomputed, flattened in output order
         self.register_buffer("_repeat", torch.arange(self.in_features).repeat_interleave(centres), persistent=False)
-        self._constants: tuple[tuple, tuple, torch.Tensor, torch.Tensor] | None = None
+        self._constants: tuple[tuple[Any, ...], tuple[Any, ...], torch.Tensor, torch.Tensor] | None = None
 
     def scaled(self, x: torch.Tensor) -> torch.Tensor:
         """Inputs mapped to [-1, 1] (affinely from finite bounds, tanh otherwise)."""
@@ -88,7 +90,7 @@ class GaussianRBF(nn.Module):
         features = torch.index_select(z, 1, self._repeat).sub_(centre).mul_(inverse_width).square_().mul_(-0.5).exp_()
         return torch.cat((z, features), dim=1) if self.keep_input else features
 
-    def _fixed_constants(self) -> tuple[tuple, torch.Tensor, torch.Tensor]:
+    def _fixed_constants(self) -> tuple[tuple[Any, ...], torch.Tensor, torch.Tensor]:
         """(cache key naming the constants by value, flattened centres, 1 / widths as reference_forward computes them).
 
         Remade when a constant changes (load_state_dict, .to()).

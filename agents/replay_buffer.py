@@ -27,6 +27,7 @@ from crowdnav.agents.space_checks import box_space
 from gymnasium import spaces
 from stable_baselines3.common.buffers import DictReplayBuffer
 from stable_baselines3.common.type_aliases import DictReplayBufferSamples
+from stable_baselines3.common.vec_env import VecNormalize
 
 OCCUPIED = 255
 
@@ -47,7 +48,7 @@ class PackedGridReplayBuffer(DictReplayBuffer):
     gamma = 0.99
     fast_sampling = True
 
-    def __init__(self, buffer_size: int, observation_space: spaces.Dict, action_space: spaces.Space, device: Any = "auto",
+    def __init__(self, buffer_size: int, observation_space: spaces.Dict, action_space: spaces.Space[Any], device: Any = "auto",
                  n_envs: int = 1, optimize_memory_usage: bool = False, handle_timeout_termination: bool = True,
                  packed_keys: Sequence[str] = ("leog",), n_steps: int = 1, gamma: float = 0.99, fast_sampling: bool = True):
         if n_steps < 1:
@@ -72,7 +73,10 @@ class PackedGridReplayBuffer(DictReplayBuffer):
             packed[key] = np.packbits(grids > 0, axis=1)
         return packed
 
-    def add(self, obs, next_obs, action, reward, done, infos) -> None:  # type: ignore[override]
+    def add(  # type: ignore[override]  # DictReplayBuffer's own signature (SB3 marks it so too)
+        self, obs: dict[str, np.ndarray], next_obs: dict[str, np.ndarray], action: np.ndarray, reward: np.ndarray, done: np.ndarray,
+        infos: list[dict[str, Any]],
+    ) -> None:
         super().add(self._pack(obs), self._pack(next_obs), action, reward, done, infos)
 
     def _unpack(self, stored: dict[str, np.ndarray], key: str, rows: np.ndarray, env_indices: np.ndarray) -> np.ndarray:
@@ -81,14 +85,14 @@ class PackedGridReplayBuffer(DictReplayBuffer):
         bits *= OCCUPIED
         return bits.reshape(len(rows), *shape)
 
-    def _normalized(self, batch: dict[str, np.ndarray], env: Any) -> dict[str, torch.Tensor]:
+    def _normalized(self, batch: dict[str, np.ndarray], env: VecNormalize | None) -> dict[str, torch.Tensor]:
         """A sampled Dict batch through SB3's normalisation (a VecNormalize env's, if any), as tensors."""
         normalized = self._normalize_obs(batch, env)
         if not isinstance(normalized, dict):  # SB3 returns what it was given: a dict for a dict
             raise TypeError(f"expected the normalised batch to be a dict, got {type(normalized).__name__}")
         return {key: self.to_torch(values) for key, values in normalized.items()}
 
-    def _get_samples(self, batch_inds: np.ndarray, env=None) -> DictReplayBufferSamples:  # type: ignore[override]
+    def _get_samples(self, batch_inds: np.ndarray, env: VecNormalize | None = None) -> DictReplayBufferSamples:  # type: ignore[override]
         env_indices = np.random.randint(0, high=self.n_envs, size=(len(batch_inds),))
         if self.n_steps == 1:
             last_inds = batch_inds

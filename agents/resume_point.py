@@ -164,7 +164,7 @@ class ResumePoint:
         """Start of the second rollout: the first one's update used the interrupted rollout's gradient steps."""
         if self._restore is not None:
             model = off_policy(self.model)
-            if model.train_freq is self._restore[0]:
+            if train_freq(model) is self._restore[0]:
                 model.gradient_steps = self._restore[1]
                 self._restore = None
 

@@ -25,7 +25,6 @@ import time
 import warnings
 from collections.abc import Callable, Iterator, Mapping
 from contextlib import contextmanager
-from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -33,13 +32,11 @@ import gymnasium as gym
 import torch
 import yaml
 from crowdnav.agents.algorithm_kinds import off_policy, replay_buffer
-from crowdnav.agents.callbacks import EpisodeCallback, EpisodeRecord
+from crowdnav.agents.callbacks import EpisodeCallback
 from crowdnav.agents.checkpoint import (
     ENCODER_FILE,
     LEGACY_FILES,
     MODEL_FILE,
-    REPLAY_FILE,
-    RNG_FILE,
     find_checkpoint,
     load_model,
     read_policy_info,
@@ -70,37 +67,13 @@ from crowdnav.agents.resume_state import (
     load_replay_buffer,
     restore_training_state,
 )
-from crowdnav.agents.run_folder import checkpoint_dir, episode_log, recover_checkpoint, snapshot_dir, snapshot_folders, writing
+from crowdnav.agents.run_folder import REPLAY_FILE, RNG_FILE, checkpoint_dir, episode_log, recover_checkpoint, snapshot_dir, snapshot_folders, writing
 from crowdnav.agents.seeding import EpisodeSeedCounter, train_seed
+from crowdnav.agents.train_result import TrainResult as TrainResult
 from crowdnav.agents.vec_env import CrowdNavSB3VecEnv
 from crowdnav.agents.wrappers import scales_from_json, scales_to_json
 from stable_baselines3.common.base_class import BaseAlgorithm
 from stable_baselines3.common.vec_env import DummyVecEnv, VecEnv
-
-
-@dataclass
-class TrainResult:
-    """Summary of a finished (or resumed and finished) run."""
-
-    out: Path
-    checkpoint: Path
-    episodes: int
-    """Episodes done in all, resumed ones included."""
-    timesteps: int
-    successes: int
-    """Successful episodes in all."""
-    seconds: float
-    """Wall time of this session."""
-    steps_per_second: float
-    """Env steps per second in this session, gradient updates included."""
-    records: list[EpisodeRecord] = field(default_factory=list)
-    """The episodes of this session."""
-    model: BaseAlgorithm | None = field(default=None, repr=False)
-    """The trained SB3 model."""
-
-    @property
-    def success_rate(self) -> float:
-        return self.successes / self.episodes if self.episodes else 0.0
 
 
 def train(config: TrainConfig | Mapping[str, Any] | str | Path, *, resume: bool = False,
@@ -117,6 +90,10 @@ def train(config: TrainConfig | Mapping[str, Any] | str | Path, *, resume: bool 
     elif isinstance(config, Mapping):
         config = config_from_mapping(config)
     # a TrainConfig was checked when it was built: not again here (one validation per run)
+    if config.agents == "robots":  # every robot of a multi-robot scenario, one shared policy: SuperSuit + SB3's PPO
+        from crowdnav.agents.marl import train_robots
+
+        return train_robots(config, resume=resume, on_checkpoint=on_checkpoint)
     torch.set_num_threads(config.torch_threads)
     with writing(config.out):  # one process writes a run at a time
         return _train(config, resume, on_checkpoint, trust_pickle)

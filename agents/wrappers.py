@@ -37,7 +37,7 @@ class EpisodeSeeds(gym.Wrapper):
         self.episode = first_episode - 1
         """Index of the current episode (-1 before the first reset)."""
 
-    def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None):
+    def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None) -> tuple[Any, dict[str, Any]]:
         self.episode += 1
         observation, info = self.env.reset(seed=train_seed(self.run_seed, self.episode), options=options)
         info["episode_index"] = self.episode
@@ -84,7 +84,7 @@ def normalize_observation(observation: Mapping[str, np.ndarray], scales: Observa
     return observation
 
 
-def scales_to_json(scales: ObservationScales) -> dict[str, dict[str, list]]:
+def scales_to_json(scales: ObservationScales) -> dict[str, dict[str, list[Any]]]:
     """JSON-ready ``{key: {"offset": [...], "scale": [...]}}`` (nested lists of the observation's shape)."""
     return {key: {"offset": offset.tolist(), "scale": scale.tolist()} for key, (offset, scale) in scales.items()}
 

@@ -1,7 +1,9 @@
 """Scripted baselines on an experiment's own test episodes: the bar a learned policy must clear.
 
 Every experiment evaluates two privileged scripted robots (:mod:`crowdnav.policies`) on the
-same held-out test episodes as its learned runs, with the same scenario, overrides and reward:
+same held-out test episodes as its learned runs, with the same scenario, overrides and reward
+(a configuration with ``agents: robots``: the baseline drives every robot of the scenario,
+:mod:`crowdnav.evaluation.robot_rollout`):
 
 * ``straight``: drive at the goal at full speed, blind to everyone. A learned policy that does
   worse has not learned to navigate, only (at best) to head for the goal;
@@ -30,6 +32,7 @@ from pathlib import Path
 from typing import Any
 
 from crowdnav.evaluation.protocol import Protocol
+from crowdnav.evaluation.robot_rollout import ROBOTS_AGENTS
 from crowdnav.evaluation.storage import (
     META_FILE,
     TEST_FILE,
@@ -69,8 +72,11 @@ def scripted_policy(name: str) -> Any:
 
 def baseline_env_options(train: Mapping[str, Any]) -> dict[str, Any]:
     """The env options a baseline shares with a configuration: scenario, overrides, reward (its own observation: the goal)."""
-    return {"scenario": train.get("scenario", "open_space"), "modalities": ["goal"], "overrides": dict(train.get("overrides", {})),
-            "reward_weights": dict(train.get("reward_weights", {}))}
+    options = {"scenario": train.get("scenario", "open_space"), "modalities": ["goal"], "overrides": dict(train.get("overrides", {})),
+               "reward_weights": dict(train.get("reward_weights", {}))}
+    if train.get("agents") == ROBOTS_AGENTS:  # the baseline drives every robot, as the shared policy does
+        options["agents"] = ROBOTS_AGENTS
+    return options
 
 
 def experiment_baselines(experiment: Any) -> list[tuple[str, str, dict[str, Any]]]:
@@ -93,6 +99,7 @@ def evaluate_baseline(experiment: str, configuration: str, label: str, env_optio
     """Play the baseline on the protocol's test episodes into ``out_dir`` (skipped when already there); returns the folder."""
     import pandas as pd
     from crowdnav.evaluation.provenance import git_commit, package_versions
+    from crowdnav.evaluation.robot_rollout import RobotEpisodes
     from crowdnav.evaluation.rollout import HeldOutEpisodes
     from crowdnav.evaluation.unit_spec import RUN_COLUMNS
 
@@ -106,7 +113,8 @@ def evaluate_baseline(experiment: str, configuration: str, label: str, env_optio
             return out_dir  # deterministic: the same episodes give the same rows
     started = time.perf_counter()
     name = _baseline_name(configuration)
-    episodes = HeldOutEpisodes(env_options, protocol.test_seeds)
+    robots = env_options.get("agents") == ROBOTS_AGENTS
+    episodes = (RobotEpisodes if robots else HeldOutEpisodes)(env_options, protocol.test_seeds)
     try:
         rows = episodes.run(scripted_policy(name), privileged=True)
     finally:
@@ -136,7 +144,7 @@ def evaluate_baseline(experiment: str, configuration: str, label: str, env_optio
     return out_dir
 
 
-def _episodes_of(protocol: Protocol) -> tuple:
+def _episodes_of(protocol: Protocol) -> tuple[str, int, int, int, int]:
     """What decides a baseline's rows: the test episodes and the evaluation points in their unit (not the number of seeds)."""
     return protocol.unit, protocol.budget, protocol.interval, protocol.test_episodes, protocol.test_seed_base
 

@@ -150,7 +150,7 @@ EVALUATED_STYLES = [("-.", "C3"), ((0, (5, 1, 1, 1, 1, 1)), "C4"), ((0, (1, 1)),
 HATCHES = ["", "//", "..", "xx", "\\\\", "oo", "--", "++"]
 
 
-def _baseline_style(baseline: Any, tests: Any, palette: dict, k: int = 0) -> dict[str, Any]:
+def _baseline_style(baseline: Any, tests: Any, palette: dict[str, Any], k: int = 0) -> dict[str, Any]:
     """Dashed for straight-to-goal, dotted for social force; grey, or the colour of the configuration whose
     environment it shares when an experiment has several (``baseline_<name>_<configuration>``); the k-th
     policy evaluated without training gets the k-th of :data:`EVALUATED_STYLES`."""

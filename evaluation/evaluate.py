@@ -48,6 +48,10 @@ from crowdnav.errors import CrowdNavError
 EXPERIMENT = "evaluate"
 
 
+Act = Callable[[Any], Any]
+"""A policy as evaluation calls it: stacked observations (a privileged one: a simulator) -> actions."""
+
+
 class PolicyError(CrowdNavError, ValueError):
     """A POLICY that cannot be loaded, whose spaces do not fit the scenario, or that raised while acting; one line."""
 
@@ -56,7 +60,7 @@ class ResultsExistError(CrowdNavError, FileExistsError):
     """The results folder of this (policy, scenario, test set) is already there and ``force`` was not given."""
 
 
-def _load_sb3_zip(path: Path, options: Mapping[str, Any]) -> Callable:
+def _load_sb3_zip(path: Path, options: Mapping[str, Any]) -> Act:
     """A zip saved by SB3 itself, rebuilt from its parameters and JSON (nothing unpickled)."""
     from crowdnav.agents.model_zip import ModelZipError, describe_shapes, zip_policy
     from crowdnav.agents.space_checks import box_space, dict_space
@@ -77,7 +81,7 @@ def _load_sb3_zip(path: Path, options: Mapping[str, Any]) -> Callable:
     return act
 
 
-def resolve_policy(spec: str, env_options: Mapping[str, Any]) -> tuple[str, str, Callable, bool, dict[str, Any]]:
+def resolve_policy(spec: str, env_options: Mapping[str, Any]) -> tuple[str, str, Act, bool, dict[str, Any]]:
     """(configuration name, label, act, privileged, env options) for a POLICY string.
 
     ``act`` maps stacked observations (or, with ``privileged``, a simulator) to actions.
@@ -159,7 +163,7 @@ def scenario_key(scenario: str, overrides: Mapping[str, Any]) -> str:
     return f"{_safe(path.stem)}-{hashlib.sha256(identity.encode()).hexdigest()[:8]}"
 
 
-def _guarded(act: Callable, spec: str) -> Callable:
+def _guarded(act: Act, spec: str) -> Act:
     """``act`` whose exceptions (and exits) become one PolicyError line naming the policy."""
     def guarded(batch: Any) -> Any:
         try:

@@ -264,7 +264,7 @@ class _Board:
     def evaluated(self, spec: dict[str, Any], data: dict[str, Any]) -> None:
         self.events.append((spec, data))
 
-    def drain(self) -> tuple[dict[str, int], dict[str, int], list]:
+    def drain(self) -> tuple[dict[str, int], dict[str, int], list[tuple[dict[str, Any], dict[str, Any]]]]:
         events, self.events = self.events, []
         return dict(self.episodes), dict(self.attempts), events
 

@@ -15,7 +15,7 @@ import errno
 import importlib.util
 import os
 import sys
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 
 from crowdnav.cli import benchmark, export, render, scenario, schema, train, trajectories
 from crowdnav.cli.common import CliError
@@ -41,7 +41,7 @@ def _require(modules: Sequence[str]) -> None:
             raise ModuleNotFoundError(f"No module named {module!r}", name=module)
 
 
-def command_groups() -> tuple:
+def command_groups() -> tuple[Callable[[argparse._SubParsersAction[argparse.ArgumentParser]], None], ...]:
     """Registration functions of the command groups, in the order ``--help`` lists them."""
     return (scenario.register, train.register, render.register, benchmark.register, trajectories.register, export.register, schema.register)
 
@@ -74,7 +74,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         return exit_.code if isinstance(exit_.code, int) else 0 if exit_.code is None else 2
     try:
         _require(NEEDS.get(args.command, ()))
-        return args.handler(args)
+        status: int = args.handler(args)  # every leaf command sets a handler (args) -> int
+        return status
     except CliError as error:
         print(f"crowdnav: error: {error}", file=sys.stderr)
         return 1

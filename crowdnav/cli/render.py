@@ -3,9 +3,14 @@
 from __future__ import annotations
 
 import argparse
+from collections.abc import Mapping
+from typing import TYPE_CHECKING
 
 from crowdnav.cli.common import CliError, add_override_option, add_reward_options, parse_overrides, reward_options
 from crowdnav.suggest import unknown_name_message
+
+if TYPE_CHECKING:
+    from crowdnav.envs import CrowdNavEnv
 
 
 def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
@@ -94,10 +99,12 @@ def _render_foreign(args: argparse.Namespace) -> int:
     try:
         name, _, act, privileged, env_options = resolve_policy(args.policy, options)
 
-        def play(env, observation):  # one episode at a time: a batch of one
+        def play(env: CrowdNavEnv, observation: Mapping[str, np.ndarray]) -> np.ndarray:  # one episode at a time: a batch of one
             if privileged:
-                return act(env.simulator)
-            return np.asarray(act({key: np.asarray(value)[None] for key, value in observation.items()}))[0]
+                action: np.ndarray = act(env.simulator)
+            else:
+                action = np.asarray(act({key: np.asarray(value)[None] for key, value in observation.items()}))[0]
+            return action
 
         extra = {key: value for key, value in env_options.items() if key not in ("scenario", "overrides")}
         paths = render_episodes(args.scenario, play, label=name, env_options=extra, episodes=args.episodes, seed=args.seed, out=args.out,
