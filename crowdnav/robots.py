@@ -160,12 +160,21 @@ class Team:
 
     # ------------------------------------------------------------------ step
 
+    def checked_actions(self, actions: np.ndarray | None) -> np.ndarray | None:
+        """The other robots' actions as (m, 2) floats clipped to [-1, 1], checked before the step changes anything."""
+        if actions is None:
+            return None
+        actions = np.asarray(actions, dtype=float)
+        if actions.shape != (len(self.specs), 2) or not np.isfinite(actions).all():
+            raise ValueError(f"other_robot_actions must be {len(self.specs)} finite rows of 2 values (one per robot after the first), "
+                             f"got shape {actions.shape}")
+        return np.clip(actions, -1.0, 1.0)
+
     def move(self, actions: np.ndarray | None, dt: float) -> None:
         """Every active other robot's velocity from its action ((m, 2) in [-1, 1]; None: standing still), then its new position."""
         state = self.state
         state.velocities[:] = 0.0
         if actions is not None:
-            actions = np.clip(np.asarray(actions, dtype=float), -1.0, 1.0)
             for j, robot in enumerate(self.specs):  # 1 to 7 robots: each its own kinematics
                 if state.active[j + 1]:
                     velocity, state.headings[j] = robot_kinematics(robot, float(state.headings[j]), float(actions[j, 0]),

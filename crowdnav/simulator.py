@@ -271,6 +271,8 @@ class Simulator(StateFields):
         if not self._ready:
             raise RuntimeError("call reset() before step()")
         state = self._state
+        if self.team is not None:  # before anything moves: a bad action leaves the state as it was
+            other_robot_actions = self.team.checked_actions(other_robot_actions)
         robot_velocity = self._robot_velocity(robot_action)
         if human_actions is None:
             commands = self.crowd_commands()
@@ -511,7 +513,10 @@ class Simulator(StateFields):
         if self.team is None:
             raise ValueError("retire_robots needs a scenario with robots:; the one robot's episode ends with it")
         state = self.team.state
-        for k in np.asarray(index, dtype=int).tolist():
+        index = np.asarray(index, dtype=int).reshape(-1)
+        if ((index < 0) | (index >= len(state.active))).any():
+            raise ValueError(f"robot indices must be in [0, {len(state.active) - 1}], got {index.tolist()}")
+        for k in index.tolist():
             if not state.active[k]:
                 continue
             state.active[k] = False

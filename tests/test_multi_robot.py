@@ -376,3 +376,18 @@ def test_trajectories_have_one_track_per_robot_under_its_name_until_it_leaves():
     assert not table[table.agent == "east_bound"][["x", "y"]].isna().any().any()  # the learned robot ends the episode
     for line in trajnet_lines(episodes):
         assert "NaN" not in line
+
+
+def test_bad_other_robot_actions_and_indices_are_one_line_errors():
+    sim = Simulator(HEAD_ON)
+    sim.reset(seed=0)
+    before = sim.robot_positions
+    with pytest.raises(ValueError, match=r"other_robot_actions must be 1 finite rows of 2 values .* got shape \(2, 2\)"):
+        sim.step(np.zeros(2), other_robot_actions=np.zeros((2, 2)))
+    with pytest.raises(ValueError, match="other_robot_actions must be"):
+        sim.step(np.ones(2), other_robot_actions=np.array([[np.nan, 0.0]]))
+    assert np.array_equal(sim.robot_positions, before) and sim.step_count == 0  # nothing moved
+    with pytest.raises(ValueError, match=r"robot indices must be in \[0, 1\], got \[2\]"):
+        sim.retire_robots([2])
+    with pytest.raises(ValueError, match="retire_robots needs a scenario with robots:"):
+        Simulator("open_space").retire_robots([0])
