@@ -168,7 +168,8 @@ class Team:
         if actions.shape != (len(self.specs), 2) or not np.isfinite(actions).all():
             raise ValueError(f"other_robot_actions must be {len(self.specs)} finite rows of 2 values (one per robot after the first), "
                              f"got shape {actions.shape}")
-        return np.clip(actions, -1.0, 1.0)
+        clipped: np.ndarray = np.clip(actions, -1.0, 1.0)
+        return clipped
 
     def move(self, actions: np.ndarray | None, dt: float) -> None:
         """Every active other robot's velocity from its action ((m, 2) in [-1, 1]; None: standing still), then its new position."""
