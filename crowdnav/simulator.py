@@ -28,6 +28,10 @@ methods change it (:meth:`Simulator.step`, :meth:`Simulator.stop_humans`, the go
 runs); staging a scene by hand (tests, scripted set-ups) writes those arrays and then calls
 :meth:`Simulator.refresh`.
 
+A scenario with ``robots:`` has several robots: agent 0 stays the first (ego) robot and the
+others live in :attr:`Simulator.team` (:mod:`crowdnav.robots`; None for one robot, whose step
+is unchanged); :attr:`Simulator.robot_events` holds every robot's events of the last step.
+
 Randomness comes only from the generator seeded by :meth:`Simulator.reset`.
 """
 

@@ -8,6 +8,7 @@ import warnings
 import numpy as np
 import pytest
 
+import crowdnav
 from crowdnav.envs import CrowdNavEnv, parallel_env
 from crowdnav.scenario.errors import ScenarioError
 from crowdnav.scenario.loader import load_scenario
@@ -391,3 +392,20 @@ def test_bad_other_robot_actions_and_indices_are_one_line_errors():
         sim.retire_robots([2])
     with pytest.raises(ValueError, match="retire_robots needs a scenario with robots:"):
         Simulator("open_space").retire_robots([0])
+
+
+@pytest.mark.parametrize("options", [{}, {"flat_observations": True, "fixed_agents": True, "humans_as_agents": False}])
+def test_the_aec_env_of_a_multi_robot_scenario_passes_pettingzoo_api_test(options):
+    from pettingzoo.test import api_test
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # Dict observations draw style recommendations, not failures
+        api_test(crowdnav.env("robots_crossing_hall", modalities=["goal"], **options), num_cycles=100)
+
+
+@pytest.mark.filterwarnings("error")
+def test_parallel_seed_test_passes_for_robots_only_fixed_agents():
+    from pettingzoo.test import parallel_seed_test
+
+    parallel_seed_test(lambda: parallel_env("robots_crossing_hall", modalities=["goal"], humans_as_agents=False, fixed_agents=True),
+                       num_cycles=50)
