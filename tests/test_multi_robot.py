@@ -409,3 +409,36 @@ def test_parallel_seed_test_passes_for_robots_only_fixed_agents():
 
     parallel_seed_test(lambda: parallel_env("robots_crossing_hall", modalities=["goal"], humans_as_agents=False, fixed_agents=True),
                        num_cycles=50)
+
+
+def test_robots_only_parallel_env_plays_the_gym_envs_episode_when_the_others_follow_the_same_policy():
+    from crowdnav.policies import StraightToGoal
+
+    gym_env, par_env = CrowdNavEnv(HALL, other_robots="straight"), parallel_env(HALL, humans_as_agents=False)
+    gym_observation, _ = gym_env.reset(seed=4)
+    par_observations, _ = par_env.reset(seed=4)
+    straight, action = StraightToGoal(), np.array([0.6, 0.3])
+    for _ in range(HALL.get("max_steps", 150)):
+        actions = {"east": action}
+        if "west" in par_env.agents:
+            actions["west"] = straight(par_env.simulator.robot_view(1))
+        gym_observation, reward, terminated, truncated, _ = gym_env.step(action)
+        par_observations, rewards, terminations, truncations, _ = par_env.step(actions)
+        assert all(np.array_equal(gym_observation[key], par_observations["east"][key]) for key in gym_observation)
+        assert reward == rewards["east"] and terminated == terminations["east"]
+        if terminated or truncated:
+            break
+    assert np.array_equal(gym_env.simulator.positions, par_env.simulator.positions)
+
+
+def test_one_robot_robots_only_mode_is_the_gym_env_as_a_parallel_env():
+    gym_env, par_env = CrowdNavEnv("open_space", modalities=["goal"]), parallel_env("open_space", modalities=["goal"], humans_as_agents=False)
+    gym_observation, _ = gym_env.reset(seed=3)
+    par_env.reset(seed=3)
+    assert par_env.possible_agents == ["robot"]
+    for _ in range(40):
+        gym_observation, reward, terminated, truncated, _ = gym_env.step(np.array([0.5, 0.2]))
+        observations, rewards, *_ = par_env.step({"robot": np.array([0.5, 0.2])})
+        assert np.array_equal(gym_observation["goal"], observations["robot"]["goal"]) and reward == rewards["robot"]
+        if terminated or truncated:
+            break

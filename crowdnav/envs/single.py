@@ -86,7 +86,8 @@ class CrowdNavEnv(gym.Env):
     (``"social-force"``, the default; ``"straight"``; ``"orca"`` with pyrvo) or a callable
     ``policy(view) -> action`` called with :meth:`crowdnav.Simulator.robot_view` of each robot
     (one policy object per robot: a class is instantiated per robot, another callable shared).
-    A robot that ends (success, collision, out of the world) leaves the world; the episode ends
+    A robot that ends (success, collision, out of the world) leaves the world after that step (the
+    step's observation still shows it, as in :func:`crowdnav.parallel_env`); the episode ends
     with the first robot's end or the time limit. ``info["other_robots"]`` maps each other
     robot's name to its outcome, None while it runs; a collision with another robot is
     ``collision_kind`` ``"robot"`` with its name as ``collision_partner``.
@@ -125,6 +126,7 @@ class CrowdNavEnv(gym.Env):
         terminated = events.terminated
         truncated = events.truncated and not terminated
         info = step_info(events, terms)
+        observation = self.core.observe()  # a robot that ends this step is still seen; it leaves after (as in parallel_env)
         if self._other_names:
             info["other_robots"] = self._others_after_step(terminated or truncated)
         if not terminated:
@@ -133,7 +135,7 @@ class CrowdNavEnv(gym.Env):
             # asking the env, so the info names the outcome the episode has if it stops here.
             info.setdefault("outcome", "truncated")
             info.setdefault("is_success", False)
-        return self.core.observe(), reward, terminated, truncated, info
+        return observation, reward, terminated, truncated, info
 
     def _other_actions(self) -> np.ndarray:
         """(R-1, 2): each other robot's action from its policy (0 for a robot that left)."""
