@@ -161,15 +161,14 @@ class Team:
     # ------------------------------------------------------------------ step
 
     def checked_actions(self, actions: np.ndarray | None) -> np.ndarray | None:
-        """The other robots' actions as (m, 2) floats clipped to [-1, 1], checked before the step changes anything."""
+        """The other robots' actions as (m, 2) floats, checked before the step changes anything (clipped to [-1, 1] when used)."""
         if actions is None:
             return None
         actions = np.asarray(actions, dtype=float)
         if actions.shape != (len(self.specs), 2) or not np.isfinite(actions).all():
             raise ValueError(f"other_robot_actions must be {len(self.specs)} finite rows of 2 values (one per robot after the first), "
                              f"got shape {actions.shape}")
-        clipped: np.ndarray = np.clip(actions, -1.0, 1.0)
-        return clipped
+        return actions  # clipped per value in move()
 
     def move(self, actions: np.ndarray | None, dt: float) -> None:
         """Every active other robot's velocity from its action ((m, 2) in [-1, 1]; None: standing still), then its new position."""
@@ -178,8 +177,8 @@ class Team:
         if actions is not None:
             for j, robot in enumerate(self.specs):  # 1 to 7 robots: each its own kinematics
                 if state.active[j + 1]:
-                    velocity, state.headings[j] = robot_kinematics(robot, float(state.headings[j]), float(actions[j, 0]),
-                                                                   float(actions[j, 1]), dt)
+                    a0, a1 = min(1.0, max(-1.0, float(actions[j, 0]))), min(1.0, max(-1.0, float(actions[j, 1])))
+                    velocity, state.headings[j] = robot_kinematics(robot, float(state.headings[j]), a0, a1, dt)
                     state.velocities[j] = velocity
         state.positions += state.velocities * dt
 
@@ -191,9 +190,9 @@ class Team:
         self.offset, self.distance = offset, distance
         n = len(positions) - 1
         if n:
-            gain = np.broadcast_to(self._push_gain, (n, len(robots)))
-            repulsion[1:] += sf.repulsion(offset[1:], distance[1:], gain, self._push_decay)
-            self.social = sf.repulsion(-offset[1:].T, distance[1:].T, np.broadcast_to(self._social_gain, (len(robots), n)), self._social_decay)
+            # the (m,) and (m, 1) gains broadcast against the (n, m) and (m, n) pairs
+            repulsion[1:] += sf.repulsion(offset[1:], distance[1:], self._push_gain, self._push_decay)
+            self.social = sf.repulsion(-offset[1:].T, distance[1:].T, self._social_gain, self._social_decay)
         else:
             self.social = np.zeros(len(robots), dtype=complex)
         pair = robots[None, :] - robots[:, None]
@@ -208,34 +207,42 @@ class Team:
     def outcomes(self, sim: Any, ego_gap: np.ndarray, truncated: bool) -> list[StepEvents | None]:
         """Every robot's events of the step (None for a robot that already left), the ego robot first.
 
-        ``ego_gap``: the ego robot's surface gaps to itself, every human and every obstacle (the simulator's).
+        ``ego_gap``: the ego robot's surface gaps to itself, every human and every obstacle (the
+        simulator's). The other robots' checks are (m, ...) array operations; only a robot that
+        touches something pays for naming its deepest contact.
         """
-        state, r0 = self.state, self.all_radii[0]
+        state, r0, n = self.state, self.all_radii[0], sim.n_humans
+        gone = ~state.active[1:]
         events: list[StepEvents | None] = []
-        n = sim.n_humans
         if state.active[0]:
             to_robots = self.distance[0] - r0 - self.radii
-            to_robots[~state.active[1:]] = np.inf
+            to_robots[gone] = np.inf
             collision = _deepest(ego_gap, to_robots, n, self._static_labels, self.names[1:])
             left = sim.robot_left_world()
             reached = goal_distance(sim.robot_goal, complex(sim.positions[0])) <= sim.scenario.robot.goal_radius
             events.append(StepEvents(goal_reached=bool(reached), collision=collision, truncated=truncated, left_world=left))
         else:
             events.append(None)
-        for j in range(len(self.specs)):
-            if not state.active[j + 1]:
+        # row j: robot j's surface gaps to the ego robot, the other robots, the humans, the obstacles
+        to_ego = self.distance[0] - r0 - self.radii if state.active[0] else np.full(len(self.radii), np.inf)
+        to_others = self.pair_distance - self._pair_contact  # the diagonal (itself): a huge gap
+        to_others[:, gone] = np.inf
+        gaps = np.concatenate([to_ego[:, None], to_others, self.distance[1:].T - self._human_radius - self.radii[:, None],
+                               self.static_distance - self._static_contact], axis=1)
+        touching = gaps.min(axis=1) <= 0.0
+        positions = state.positions
+        reached = goal_distance(state.goals, positions) <= self.goal_radii
+        left = outside(positions.real, positions.imag, sim.bounds) if sim.bounds is not None else np.zeros(len(positions), bool)
+        m = len(self.specs)
+        for j in range(m):  # one StepEvents per robot; the contact named only where it touches
+            if gone[j]:
                 events.append(None)
                 continue
-            gap = np.concatenate([[SELF_DISTANCE], self.distance[1:, j] - self._human_radius - self.radii[j],
-                                  self.static_distance[j] - self._static_contact[j]])
-            to_others = self.pair_distance[j] - self._pair_contact[j]  # itself: a huge gap
-            to_others[~state.active[1:]] = np.inf
-            to_ego = self.distance[0, j] - r0 - self.radii[j] if state.active[0] else np.inf
-            collision = _deepest(gap, np.concatenate([[to_ego], to_others]), n, self._static_labels, self.names)
-            point = complex(state.positions[j])
-            left = sim.bounds is not None and bool(outside(point.real, point.imag, sim.bounds))
-            reached = bool(goal_distance(complex(state.goals[j]), point) <= self.goal_radii[j])
-            events.append(StepEvents(goal_reached=reached, collision=collision, truncated=truncated, left_world=left))
+            collision = None
+            if touching[j]:
+                row = gaps[j]
+                collision = _deepest(np.concatenate([[SELF_DISTANCE], row[1 + m :]]), row[: 1 + m], n, self._static_labels, self.names)
+            events.append(StepEvents(goal_reached=bool(reached[j]), collision=collision, truncated=truncated, left_world=bool(left[j])))
         return events
 
 
