@@ -139,6 +139,11 @@ class TrainConfig(_Section):
     overrides: dict[str, Any] = option({}, "Dotted scenario overrides, e.g. {humans.count: 5}.")
     reward_weights: dict[str, Any] = option({}, "Reward preset and weight overrides, e.g. {preset: paper, social: -50} (docs/agents.md#reward).")
     algo: Algorithm = option("sac", "Stable-Baselines3 algorithm (crowdnav.registry.ALGORITHMS).")
+    agents: Literal["robot", "robots"] = option(
+        "robot", "robot: the Gymnasium env's first robot learns; robots: every robot of a multi-robot scenario learns one shared "
+                 "PPO policy through SuperSuit (docs/agents.md#several-robots-shared-parameter-ppo).")
+    agent_identity: Bool = option(True, "agents: robots: append a one-hot of the robot's index to its observation, so the shared "
+                                        "network can tell robots of different kinematics apart.")
     episodes: Int = option(700, "Training length in episodes (the paper trains for 700); ignored when timesteps is set.", ge=1)
     timesteps: Int | None = option(None, "Training length in env steps, counted over all worlds (None: the episodes budget).", ge=1)
     num_envs: Int = option(32, "Worlds collected from at once (the native vector env, docs/agents.md#batched-training); "
@@ -206,9 +211,26 @@ def cross_field_problems(config: TrainConfig) -> list[tuple[str, str]]:
         problems.append(("checkpoint_every_steps", "applies to a budget in env steps; set timesteps too (or use checkpoint_every)"))
     if config.updates_per_step is not None and config.num_envs == 1:
         problems.append(("updates_per_step", "applies to batched training (num_envs > 1); one env takes algo_kwargs.train_freq / gradient_steps"))
+    problems.extend(robots_problems(config))
     extractor = config.extractor
     if not (len(extractor.leog_channels) == len(extractor.leog_kernels) == len(extractor.leog_strides)) or not extractor.leog_channels:
         problems.append(("extractor", "leog_channels, leog_kernels and leog_strides must be non-empty lists of the same length"))
+    return problems
+
+
+def robots_problems(config: TrainConfig) -> list[tuple[str, str]]:
+    """What shared-parameter robot training (``agents: robots``, crowdnav.agents.marl) cannot take."""
+    if config.agents != "robots":
+        return []
+    problems = []
+    if config.algo != "ppo":
+        problems.append(("algo", f"agents: robots trains shared-parameter PPO through SuperSuit; set algo: ppo (got {config.algo!r})"))
+    if config.demonstrations.episodes:
+        problems.append(("demonstrations.episodes", "agents: robots has no warm start from demonstrations; set it to 0"))
+    if config.encoder.mode != "scratch" or "leog" in config.modalities:
+        problems.append(("modalities", "agents: robots feeds flat observations to an MLP; the LEOG grid and its encoder are not supported"))
+    if config.updates_per_step is not None:
+        problems.append(("updates_per_step", "applies to off-policy algorithms; agents: robots trains PPO"))
     return problems
 
 

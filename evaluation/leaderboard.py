@@ -112,8 +112,10 @@ def leaderboard_table(tests: Any, metas: list[dict[str, Any]], missing: Sequence
     for (experiment, configuration), frame in tests.groupby(["experiment", "configuration"], sort=True):
         last = frame.groupby("seed")["evaluation"].transform("max")
         final = frame[frame["evaluation"] > last - final_count[experiment]]
+        # a shared robot policy's rows: one per robot per test episode (evaluation/robot_rollout.py); rates average over robots
+        per_robot = "robot" in final and final["robot"].notna().any() and bool((final["robot"] != "").any())
         if is_baseline(configuration):  # one deterministic play, its rows repeated per evaluation: count each episode once
-            final = final.drop_duplicates(["seed", "test_episode"])
+            final = final.drop_duplicates(["seed", "test_episode", "robot"] if per_robot else ["seed", "test_episode"])
         row: dict[str, Any] = {"experiment": experiment, "configuration": configuration, "label": frame["label"].iloc[0],
                                "kind": "baseline" if is_baseline(configuration) else "learned", "seeds": int(frame["seed"].nunique())}
         row["seeds_expected"] = row["seeds"] + absent[(experiment, configuration)]
@@ -121,6 +123,8 @@ def leaderboard_table(tests: Any, metas: list[dict[str, Any]], missing: Sequence
                 if (experiment, configuration, seed) in run_meta}
         row["scenario"], row["test_set"] = sorted(sets)[0] if len(sets) == 1 else ("mixed", "mixed")
         row["test_episodes"] = int(final.groupby("seed").size().iloc[0])  # per run, over the final evaluations
+        if per_robot:  # robot episodes: one row per robot per test episode
+            row["test_episodes"] //= int(final["robot"].nunique())
         kinds = final["collision_kind"].fillna("") if "collision_kind" in final else None
         for outcome in (*OUTCOMES, "collision_human", "collision_static"):
             hits = final["outcome"] == outcome if outcome in OUTCOMES else (final["outcome"] == "collision") & (kinds == outcome[10:])
@@ -238,7 +242,9 @@ def evaluation_rates(tests: Any) -> Any:
 
 def write_leaderboard(paths: Iterable[str | Path], out: str | Path) -> tuple[Any, list[Path]]:
     """Build the leaderboard of every finished run below ``paths``; write ``out``.md and ``out``.csv, and the
-    per-evaluation rates of every run next to them (``evaluation_rates.csv``)."""
+    per-evaluation rates of every run next to them (``evaluation_rates.csv``); with shared robot policies, each robot's
+    final rates (``out``_robots.csv)."""
+    from crowdnav.evaluation.robot_rollout import robot_rates
     from crowdnav.evaluation.storage import atomic_write_text, load_results
 
     missing: list[MissingRun] = []
@@ -248,4 +254,7 @@ def write_leaderboard(paths: Iterable[str | Path], out: str | Path) -> tuple[Any
     written = [atomic_write_text(out.with_name(out.name + ".md"), to_markdown(table)),
                atomic_write_text(out.with_name(out.name + ".csv"), to_csv(table)),
                atomic_write_text(out.with_name("evaluation_rates.csv"), to_csv(evaluation_rates(tests)))]
+    robots = robot_rates(tests)
+    if len(robots):  # shared robot policies and their baselines: the final rates of each robot (``<out>_robots.csv``)
+        written.append(atomic_write_text(out.with_name(out.name + "_robots.csv"), robots.to_csv(index=False)))
     return table, written

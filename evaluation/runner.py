@@ -37,6 +37,7 @@ from crowdnav.agents.run_folder import (
 from crowdnav.evaluation.protocol import AXIS_LABELS, Protocol
 from crowdnav.evaluation.provenance import git_commit as git_commit
 from crowdnav.evaluation.provenance import package_versions as package_versions
+from crowdnav.evaluation.robot_rollout import ROBOTS_AGENTS
 from crowdnav.evaluation.storage import (
     EVALUATIONS_DIR,
     META_FILE,
@@ -62,6 +63,8 @@ from crowdnav.simulator import OUTCOMES as OUTCOMES
 if TYPE_CHECKING:
     from crowdnav.agents.checkpoint import AgentPolicy
     from crowdnav.agents.config import TrainConfig
+    from crowdnav.agents.marl import RobotsPolicy
+    from crowdnav.evaluation.robot_rollout import RobotEpisodes
     from crowdnav.evaluation.rollout import HeldOutEpisodes
 
 EventHook = Callable[[str, dict[str, Any]], None]
@@ -116,7 +119,16 @@ def _train_and_evaluate(spec: UnitSpec, out_dir: Path, hook: EventHook, repairs:
     trained = _trained(train_dir, recover_checkpoint(train_dir), protocol)
     resumed = trained > 0 or (out_dir / EVALUATIONS_DIR).is_dir()
     # the run's own TrainConfig rebuilds each snapshot's network: validated once, at experiment load
-    evaluator = _Evaluator(spec, out_dir, protocol, lambda folder: load_policy(folder, config=config), clock, hook, repairs)
+    loader: Callable[[Path], Any] = lambda folder: load_policy(folder, config=config)  # noqa: E731
+    rows = protocol.test_episodes
+    if config.agents == ROBOTS_AGENTS:  # one shared policy for every robot: one row per robot per test episode
+        from crowdnav.agents.factory import env_options
+        from crowdnav.agents.marl import load_robots_policy
+        from crowdnav.evaluation.robot_rollout import robot_count
+
+        loader = lambda folder: load_robots_policy(folder, config=config)  # noqa: E731
+        rows *= robot_count(env_options(config))
+    evaluator = _Evaluator(spec, out_dir, protocol, loader, clock, hook, repairs, rows)
     if trained < protocol.budget:
         evaluator.evaluate_available(train_dir)  # before resuming replaces the checkpoint
         result = train(config, resume=checkpoint_dir(train_dir).exists(), on_checkpoint=lambda episodes: clock.save())
@@ -169,11 +181,13 @@ def _claim(out_dir: Path, spec: UnitSpec) -> None:
 class _Evaluator:
     """Evaluates the policies of the scheduled points, one CSV per evaluation."""
 
-    def __init__(self, spec: UnitSpec, out_dir: Path, protocol: Protocol, load_policy: Callable[[Path], AgentPolicy], clock: _Clock,
-                 hook: EventHook, repairs: list[str] | None = None):
+    def __init__(self, spec: UnitSpec, out_dir: Path, protocol: Protocol, load_policy: Callable[[Path], AgentPolicy | RobotsPolicy],
+                 clock: _Clock, hook: EventHook, repairs: list[str] | None = None, rows: int | None = None):
         self.spec, self.protocol, self.load_policy, self.clock, self.hook = spec, protocol, load_policy, clock, hook
+        self.rows = protocol.test_episodes if rows is None else rows
+        """Rows of one evaluation's table: a test episode's (one, or one per robot for a shared robot policy)."""
         self.folder = out_dir / EVALUATIONS_DIR
-        self.episodes: HeldOutEpisodes | None = None  # the test environments, built on first use
+        self.episodes: HeldOutEpisodes | RobotEpisodes | None = None  # the test environments, built on first use
         self.repairs = list(repairs or [])
         """What was found missing or damaged in the run's files, and what was done about it."""
         self._checked: set[int] = set()
@@ -185,7 +199,7 @@ class _Evaluator:
             return
         self._checked.add(k)
         fixed = {"experiment": self.spec.experiment, "configuration": self.spec.configuration, "seed": self.spec.seed, "evaluation": k}
-        damage = table_damage(path, self.protocol.test_episodes, fixed)
+        damage = table_damage(path, self.rows, fixed)
         if damage is not None:
             path.replace(path.with_name(path.name + ".damaged"))
             self.repairs.append(f"{EVALUATIONS_DIR}/{damage}: evaluated again from its snapshot (kept as {path.name}.damaged)")
@@ -212,12 +226,14 @@ class _Evaluator:
 
     def _evaluate(self, k: int, saved_at: int, folder: Path) -> None:
         import pandas as pd
+        from crowdnav.evaluation.robot_rollout import RobotEpisodes
         from crowdnav.evaluation.rollout import HeldOutEpisodes
 
         policy = self.load_policy(folder)
         if self.episodes is None:
-            self.episodes = HeldOutEpisodes(policy.env_options, self.protocol.test_seeds)
-        rows = self.episodes.run(policy)
+            robots = policy.info.get("agents") == ROBOTS_AGENTS
+            self.episodes = (RobotEpisodes if robots else HeldOutEpisodes)(policy.env_options, self.protocol.test_seeds)
+        rows = self.episodes.run(policy)  # type: ignore[arg-type]  # each kind of episodes gets its own kind of policy
         spec = self.spec
         frame = pd.DataFrame(rows)
         if self.protocol.unit == "episodes":  # the columns every result had before step budgets: older tables read the same

@@ -99,7 +99,7 @@ def pretrained_encoder_path(experiment_dir: str | Path) -> Path:
     return encoder_folder(experiment_dir) / ENCODER_FILE
 
 
-STRING_COLUMNS = frozenset({"experiment", "configuration", "label", "outcome", "collision_kind"})
+STRING_COLUMNS = frozenset({"experiment", "configuration", "label", "outcome", "collision_kind", "robot"})
 """The text columns of the result tables; every other column holds numbers (``nan`` and ``inf`` included)."""
 INTEGER_COLUMNS = frozenset({"seed", "training_episodes", "training_steps", "evaluation", "test_episode", "test_seed", "steps",
                              "episode", "episode_seed", "length", "timesteps"})

@@ -22,12 +22,13 @@ def write(tmp_path, document, name="experiment.yaml"):
 
 def test_shipped_experiments_cover_figure_4_the_default_and_the_reference_agents():
     assert set(shipped_experiments()) == {"default", "encoders", "modalities", "modalities_paper", "fusion", "paradigms", "learning_check",
-                                          "reference_figure4", "reference_room", "modalities_steps", "paradigms_steps"}
+                                          "reference_figure4", "reference_room", "modalities_steps", "paradigms_steps", "robots"}
     labels = {name: [c.name for c in load_experiment(name).configurations] for name in shipped_experiments()}
     assert labels["encoders"] == ["frozen", "finetune", "scratch"]
     assert labels["modalities"] == labels["modalities_paper"] == ["leog", "lidar", "closest_obstacle"]
     assert labels["fusion"] == ["leog", "lidar", "leog_lidar"]
     assert labels["paradigms"] == ["sac", "td3", "ddpg", "a2c"]
+    assert labels["robots"] == ["shared_ppo", "shared_ppo_anonymous"]
     assert labels["modalities_steps"] == labels["modalities"] and labels["paradigms_steps"] == [*labels["paradigms"], "ppo"]
     assert load_experiment(None).name == "default"
 

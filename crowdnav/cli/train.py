@@ -61,6 +61,9 @@ def register_train(groups: argparse._SubParsersAction[argparse.ArgumentParser]) 
     parser.add_argument("--config", type=Path, metavar="CONFIG.yaml", help="training config (default: all defaults)")
     parser.add_argument("--scenario", metavar="NAME_OR_PATH", help="library scenario name or scenario YAML file (default: {scenario})")
     parser.add_argument("--algo", choices=ALGOS, help="RL algorithm (default: {algo})")
+    parser.add_argument("--agents", choices=("robot", "robots"),
+                        help="robot: the first robot learns; robots: every robot of a multi-robot scenario, one shared PPO policy "
+                             "(default: {agents})")
     parser.add_argument("--modalities", metavar="KEYS", help="comma-separated observation keys, e.g. leog,lidar,goal (default: {modalities})")
     parser.add_argument("--encoder", choices=MODES, help="LEOG encoder mode (default: {encoder.mode})")
     parser.add_argument("--encoder-weights", metavar="PATH", help="pre-trained encoder (encoder.pt or its folder) (default: {encoder.weights})")
@@ -128,7 +131,7 @@ def register_pretrain_encoder(groups: argparse._SubParsersAction[argparse.Argume
 def train_overrides(args: argparse.Namespace) -> dict[str, Any]:
     """The flags given on the command line, as dotted config overrides."""
     overrides: dict[str, Any] = {}
-    simple = {"scenario": "scenario", "algo": "algo", "episodes": "episodes", "seed": "seed", "out": "out",
+    simple = {"scenario": "scenario", "algo": "algo", "agents": "agents", "episodes": "episodes", "seed": "seed", "out": "out",
               "timesteps": "timesteps", "num_envs": "num_envs", "updates_per_step": "updates_per_step",
               "threads": "torch_threads", "device": "device", "encoder": "encoder.mode", "encoder_weights": "encoder.weights"}
     for flag, field in simple.items():

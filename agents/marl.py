@@ -1,0 +1,257 @@
+"""Shared-parameter PPO for the robots of a multi-robot scenario (``agents: robots`` in a TrainConfig).
+
+No training loop of crowdnav's own: SuperSuit turns the robots-only PettingZoo env
+(:class:`crowdnav.agents.marl_env.RobotsTrainingEnv`) into one vector row per robot
+(``pettingzoo_env_to_vec_env_v1``) and stacks ``num_envs`` worlds (``concat_vec_envs_v1``, in
+this process); Stable-Baselines3's PPO trains one ``MlpPolicy`` on every row, so every robot
+acts with the same network (told apart by the one-hot of ``agent_identity``).
+
+The output folder is a run folder like a single-agent run's (:mod:`crowdnav.agents.run_folder`):
+``config.yaml``, ``episodes.csv`` (one row per *robot* episode: a world's episode with three
+robots adds three rows, each with that robot's outcome, return and length), ``checkpoint/`` and
+``snapshots/`` (``policy.json`` + ``model.zip``, loaded without unpickling by
+:func:`load_robots_policy`). Budgets and checkpoints count what SB3 counts: ``timesteps`` are
+robot steps (one per robot row per world step), ``episodes`` robot episodes.
+
+A folder that holds a run is refused unless ``resume``; a resume loads the checkpoint's
+parameters and optimizer and starts new episodes in every world (the numbering carries on, so
+no seed repeats). It is a close resume, not a bit-exact one: the worlds' unfinished episodes
+and the PPO rollout in progress are not stored.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable, Mapping
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+import yaml
+from crowdnav.agents.callbacks import EpisodeRecord
+from crowdnav.agents.checkpoint import MODEL_FILE, check_network_size, load_parameters, read_policy_info, save_checkpoint
+from crowdnav.agents.config import ConfigError, TrainConfig, config_from_mapping, config_to_dict
+from crowdnav.agents.episode_log import EpisodeLogWriter, prepare_log
+from crowdnav.agents.factory import LinearDecay, env_options, hyperparameters
+from crowdnav.agents.marl_env import RobotsTrainingEnv, robots_env
+from crowdnav.agents.model_zip import read_model_zip
+from crowdnav.agents.run_folder import checkpoint_dir, episode_log, snapshot_dir, writing
+from crowdnav.agents.train_result import TrainResult
+from stable_baselines3 import PPO
+from stable_baselines3.common.callbacks import BaseCallback
+from stable_baselines3.common.policies import ActorCriticPolicy
+from stable_baselines3.common.utils import set_random_seed
+
+ROBOTS_KIND = "robots"
+"""``policy.json``'s ``agents`` for a shared robot policy (single-agent checkpoints have none)."""
+
+
+def make_robots_vec_env(config: TrainConfig, first_episode: int = 0) -> Any:
+    """``num_envs`` worlds of the run's robots as one SB3 VecEnv (one row per robot per world), through SuperSuit."""
+    import supersuit as ss
+
+    base = RobotsTrainingEnv(env_options(config), normalize=config.normalize_observations, identity=config.agent_identity,
+                             run_seed=config.seed, first_episode=first_episode)
+    vec = ss.concat_vec_envs_v1(ss.pettingzoo_env_to_vec_env_v1(base), config.num_envs, base_class="stable_baselines3")
+    for world, markov in enumerate(vec.venv.vec_envs):  # SuperSuit copied the env: each copy learns which world it is
+        markov.par_env.assign_world(world, config.num_envs)
+    return vec
+
+
+def _worlds(vec: Any) -> list[RobotsTrainingEnv]:
+    return [markov.par_env for markov in vec.venv.vec_envs]
+
+
+def _ppo(config: TrainConfig, vec: Any, total: int) -> PPO:
+    """SB3's PPO with crowdnav's batched PPO defaults (``hyperparameters``), on an MLP over the flat observations."""
+    chosen = hyperparameters(config)
+    rate = chosen["learning_rate"]
+    schedule = LinearDecay(rate) if chosen["learning_rate_schedule"] == "linear" else rate
+    kwargs = {"n_steps": chosen["n_steps"], "batch_size": min(chosen["batch_size"], chosen["n_steps"] * vec.num_envs),
+              "gamma": chosen["gamma"], "learning_rate": schedule, **config.algo_kwargs}
+    set_random_seed(config.seed)  # SB3's own seeding calls env.seed, which SuperSuit's vector env lacks
+    return PPO("MlpPolicy", vec, policy_kwargs={"net_arch": list(chosen["net_arch"]), **config.policy_kwargs},
+               device=config.device, verbose=0, **kwargs)
+
+
+class _RobotEpisodes(BaseCallback):
+    """Logs every robot episode, takes snapshots at the budget's points and stops at the budget."""
+
+    def __init__(self, config: TrainConfig, out: Path, first_episode: int, successes: int, save: Callable[[], None],
+                 snapshot: Callable[[int], None]):
+        super().__init__()
+        self.config, self.out, self.save_checkpoint, self.snapshot = config, out, save, snapshot
+        self.unit = "steps" if config.timesteps is not None else "episodes"
+        self.every = (config.checkpoint_every_steps or config.timesteps or 1) if self.unit == "steps" else config.checkpoint_every
+        self.done, self.successes = first_episode, successes
+        self.records: list[EpisodeRecord] = []
+        self.log = EpisodeLogWriter(episode_log(out))
+        self.started = time.perf_counter()
+        self.returns: np.ndarray | None = None
+        self.lengths: np.ndarray | None = None
+        self.point = 0
+
+    def _on_step(self) -> bool:
+        infos, rewards = self.locals["infos"], self.locals["rewards"]
+        dones = np.asarray(self.locals["dones"], dtype=bool)  # SuperSuit's are uint8: as an index they would pick rows 0 and 1
+        if self.returns is None or self.lengths is None:
+            self.returns, self.lengths = np.zeros(len(infos)), np.zeros(len(infos), dtype=int)
+        self.returns += rewards
+        for row, info in enumerate(infos):
+            if info.get("outcome") is not None:  # the step this robot ended (its later rows are inactive, reward 0)
+                self._record(info, float(self.returns[row]), int(self.lengths[row]) + 1)
+            elif info.get("active", True) and not dones[row]:
+                self.lengths[row] += 1
+        self.returns[dones], self.lengths[dones] = 0.0, 0
+        if self.unit == "steps" and self.num_timesteps >= self.point + self.every:
+            self.point = self.num_timesteps // self.every * self.every
+            self.snapshot(self.point)
+            self.save_checkpoint()
+        budget = self.config.timesteps
+        return self.num_timesteps < budget if budget is not None else self.done < self.config.episodes
+
+    def _record(self, info: Mapping[str, Any], reward: float, length: int) -> None:
+        record = EpisodeRecord(self.done, int(info["episode_seed"]), str(info["outcome"]), reward, length, self.num_timesteps,
+                               time.perf_counter() - self.started)
+        self.log.write(f"{record.episode},{record.seed},{record.outcome},{record.reward!r},{record.length},{record.timesteps},"
+                       f"{record.seconds:.3f}")
+        self.records.append(record)
+        self.done += 1
+        self.successes += record.outcome == "success"
+        if self.unit == "episodes" and self.done % self.every == 0:
+            self.snapshot(self.done)
+            self.save_checkpoint()
+
+
+def train_robots(config: TrainConfig, *, resume: bool = False, on_checkpoint: Callable[[int], None] | None = None) -> TrainResult:
+    """Train one shared PPO policy for every robot of ``config.scenario`` (``config.agents == "robots"``); see the module docstring."""
+    if config.agents != ROBOTS_KIND:
+        raise ConfigError(f"train_robots trains agents: robots; this config has agents: {config.agents}")
+    torch.set_num_threads(config.torch_threads)
+    with writing(config.out):
+        return _train(config, resume, on_checkpoint)
+
+
+def _train(config: TrainConfig, resume: bool, on_checkpoint: Callable[[int], None] | None) -> TrainResult:
+    out = Path(config.out)
+    checkpoint = checkpoint_dir(out)
+    if not resume and checkpoint.exists():
+        raise ConfigError(f"{out} already holds a run (checkpoint/); resume it with --resume or choose another --out")
+    state = read_policy_info(checkpoint) if resume and checkpoint.exists() else None
+    first_episode = int(state["episodes"]) if state else 0
+    out.mkdir(parents=True, exist_ok=True)
+    (out / "config.yaml").write_text(yaml.safe_dump(config_to_dict(config), sort_keys=False), encoding="utf-8")
+    prepare_log(episode_log(out), first_episode)  # a resume sets aside the rows after its checkpoint
+    vec = make_robots_vec_env(config, int(state["next_episode"]) if state else 0)
+    inputs = _worlds(vec)[0].inputs
+    if state and not inputs.matches(state["robots"]):
+        raise ConfigError(f"{checkpoint}: its robots' observations differ from this config's scenario and options; "
+                          "resume with the run's own config.yaml")
+    budget = config.timesteps if config.timesteps is not None else None
+    model = _ppo(config, vec, budget or 0)
+    if state:
+        load_parameters(model, checkpoint / MODEL_FILE, config.device)
+        model.num_timesteps = int(state["timesteps"])
+
+    def info() -> dict[str, Any]:
+        # the episode after every one any world has started: a resume's worlds start there, so no seed repeats
+        following = max(world.next_episode for world in _worlds(vec))
+        return {"algo": config.algo, "agents": ROBOTS_KIND, "env": env_options(config), "robots": inputs.to_json(),
+                "episodes": callback.done, "timesteps": model.num_timesteps, "next_episode": following,
+                "successes": callback.successes, "hyperparameters": hyperparameters(config), "config": config_to_dict(config)}
+
+    def snapshot(point: int) -> None:
+        save_checkpoint(model, snapshot_dir(out, point, callback.unit), info())
+
+    def save() -> None:
+        callback.log.sync()  # the log holds every episode the checkpoint counts
+        save_checkpoint(model, checkpoint, info())
+        if on_checkpoint is not None:
+            on_checkpoint(callback.done)
+
+    callback = _RobotEpisodes(config, out, first_episode, int(state["successes"]) if state else 0, save, snapshot)
+    callback.point = model.num_timesteps // callback.every * callback.every if callback.unit == "steps" else 0
+    started, start_steps = time.perf_counter(), model.num_timesteps
+    rows = vec.num_envs
+    # an upper bound in robot steps: the callback stops at the budget (episodes of at most max_steps each)
+    max_steps = _worlds(vec)[0].env.scenario.max_steps
+    total = budget if budget is not None else (config.episodes + rows) * max_steps
+    remaining = max(total - model.num_timesteps, 0)
+    if remaining and not (callback.unit == "episodes" and first_episode >= config.episodes):
+        model.learn(remaining, callback=callback, reset_num_timesteps=state is None)
+    if callback.unit == "steps" and model.num_timesteps // callback.every * callback.every > callback.point:
+        snapshot(model.num_timesteps // callback.every * callback.every)
+    save()
+    callback.log.close()
+    seconds = time.perf_counter() - started
+    vec.close()
+    return TrainResult(out=out, checkpoint=checkpoint, episodes=callback.done, timesteps=model.num_timesteps,
+                       successes=callback.successes, seconds=seconds,
+                       steps_per_second=(model.num_timesteps - start_steps) / seconds if seconds > 0 else 0.0,
+                       records=callback.records, model=model)
+
+
+class RobotsPolicy:
+    """A trained shared robot policy: ``policy.act(observations, infos) -> actions`` for the robots-only env.
+
+    ``observations``/``infos`` are what ``crowdnav.parallel_env(**policy.env_options,
+    humans_as_agents=False, fixed_agents=True, flat_observations=True)`` returns (raw units);
+    the stored scales and one-hot are applied here. Actions: float32 (2,) per robot, deterministic.
+    """
+
+    def __init__(self, network: ActorCriticPolicy, info: Mapping[str, Any]):
+        self.network = network
+        self.info = dict(info)
+        self.env_options: dict[str, Any] = dict(info["env"])
+        robots = info["robots"]
+        self.robots: list[str] = list(robots["robots"])
+        self.identity = bool(robots["identity"])
+        self.offset = np.asarray(robots["offset"], np.float32)
+        self.scale = np.asarray(robots["scale"], np.float32)
+
+    @property
+    def algo(self) -> str:
+        return str(self.info["algo"])
+
+    def make_env(self) -> Any:
+        """The robots-only env these observations come from (the one training used, without its seeds and one-hot)."""
+        return robots_env(self.env_options)
+
+    def inputs(self, observations: Mapping[str, np.ndarray], infos: Mapping[str, Mapping[str, Any]]) -> np.ndarray:
+        rows = []
+        for k, name in enumerate(self.robots):
+            active = bool(infos.get(name, {}).get("active", True))
+            scaled = (np.asarray(observations[name], np.float32) - self.offset) / self.scale if active else np.zeros_like(self.offset)
+            rows.append(np.concatenate([scaled, np.eye(len(self.robots), dtype=np.float32)[k]]) if self.identity else scaled)
+        return np.stack(rows).astype(np.float32)
+
+    def act(self, observations: Mapping[str, np.ndarray], infos: Mapping[str, Mapping[str, Any]]) -> dict[str, np.ndarray]:
+        actions, _ = self.network.predict(self.inputs(observations, infos), deterministic=True)
+        return {name: np.asarray(actions[k], np.float32) for k, name in enumerate(self.robots)}
+
+
+def load_robots_policy(path: str | Path, device: str = "cpu", *, config: TrainConfig | None = None) -> RobotsPolicy:
+    """A checkpoint or snapshot folder of :func:`train_robots` as a :class:`RobotsPolicy`.
+
+    The network is rebuilt from the run's config (sizes checked first) and gets the zip's
+    tensors; nothing in the zip is unpickled. ``config``: the run's TrainConfig, if the caller has it.
+    """
+    folder = Path(path)
+    info = read_policy_info(folder)
+    if info.get("agents") != ROBOTS_KIND:
+        raise ConfigError(f"{folder}: not a shared robot policy (agents: robots); load it with crowdnav.agents.load_policy")
+    if config is None:
+        config = config_from_mapping({**info["config"], "device": device}, str(folder / "policy.json"))
+    check_network_size(config, str(folder))
+    width = len(info["robots"]["offset"]) + (len(info["robots"]["robots"]) if info["robots"]["identity"] else 0)
+    from gymnasium import spaces
+
+    network = ActorCriticPolicy(spaces.Box(-np.inf, np.inf, (width,), np.float32), spaces.Box(-1.0, 1.0, (2,), np.float32),
+                                lambda _: 0.0, net_arch=list(hyperparameters(config)["net_arch"]), **config.policy_kwargs)
+    try:
+        network.load_state_dict(read_model_zip(folder / MODEL_FILE, device).parameters["policy"])
+    except (RuntimeError, KeyError) as error:
+        raise ConfigError(f"{folder}: its parameters do not fit the network its config describes ({str(error).splitlines()[0][:200]})") from None
+    network.set_training_mode(False)
+    return RobotsPolicy(network.to(device), info)

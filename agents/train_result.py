@@ -1,0 +1,34 @@
+"""What a finished training run reports (:class:`TrainResult`), for single-agent and shared robot runs alike."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from crowdnav.agents.callbacks import EpisodeRecord
+from stable_baselines3.common.base_class import BaseAlgorithm
+
+
+@dataclass
+class TrainResult:
+    """Summary of a finished (or resumed and finished) run."""
+
+    out: Path
+    checkpoint: Path
+    episodes: int
+    """Episodes done in all, resumed ones included."""
+    timesteps: int
+    successes: int
+    """Successful episodes in all."""
+    seconds: float
+    """Wall time of this session."""
+    steps_per_second: float
+    """Env steps per second in this session, gradient updates included."""
+    records: list[EpisodeRecord] = field(default_factory=list)
+    """The episodes of this session."""
+    model: BaseAlgorithm | None = field(default=None, repr=False)
+    """The trained SB3 model."""
+
+    @property
+    def success_rate(self) -> float:
+        return self.successes / self.episodes if self.episodes else 0.0

@@ -1,0 +1,138 @@
+"""Held-out test episodes of a multi-robot scenario, every robot driven by one policy: one row per robot per episode.
+
+A shared robot policy (:class:`crowdnav.agents.marl.RobotsPolicy`, trained with ``agents: robots``)
+and the scripted baselines play the *same* episodes: test seed ``s`` resets the robots-only
+PettingZoo env (``crowdnav.parallel_env(..., humans_as_agents=False, fixed_agents=True,
+flat_observations=True)``) with ``s``, and every robot acts with the policy (a scripted one reads
+that robot's ``simulator.robot_view(k)``, as the Gymnasium env's ``other_robots`` do). The humans
+follow the scenario's crowd model; a robot that ends leaves the world, the others go on.
+
+Each robot's row has the columns of a single-robot test episode (:mod:`crowdnav.evaluation.rollout`:
+``test_episode``, ``test_seed``, ``outcome``, ``collision_kind``, ``return`` and the metrics of
+:func:`crowdnav.evaluation.metrics.episode_metrics`, measured on that robot and the humans) plus
+``robot``, the robot's name. The leaderboard's rates over these rows are the mean over robots
+and episodes; :func:`robot_rates` breaks them down per robot.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Mapping, Sequence
+from typing import Any
+
+import numpy as np
+from crowdnav.evaluation.metrics import Trajectory, episode_metrics
+
+ScriptedPolicy = Callable[[Any], np.ndarray]
+"""A privileged robot policy: a robot's view (``simulator.robot_view(k)``) -> action (2,)."""
+
+ROBOTS_AGENTS = "robots"
+"""A configuration's ``agents`` (and a baseline's env option) when every robot of the scenario is played by one policy."""
+
+
+def robot_count(env_options: Mapping[str, Any]) -> int:
+    """Robots in the scenario of ``env_options`` (rows per test episode)."""
+    from crowdnav.scenario import load_scenario
+
+    return len(load_scenario(env_options["scenario"], dict(env_options.get("overrides") or {})).robot_names)
+
+
+class RobotEpisodes:
+    """The test episodes of a multi-robot scenario, one env reused episode after episode.
+
+    ``env_options``: keyword arguments of :class:`crowdnav.envs.CrowdNavEnv` (scenario, modalities,
+    sensors, overrides, reward weights); ``seeds``: the held-out episode seeds.
+    """
+
+    def __init__(self, env_options: Mapping[str, Any], seeds: Sequence[int]):
+        from crowdnav.envs import parallel_env
+
+        self.env_options = {key: value for key, value in env_options.items() if key != "agents"}
+        self.seeds = list(seeds)
+        self.env = parallel_env(**self.env_options, humans_as_agents=False, fixed_agents=True, flat_observations=True)
+        self.robots = list(self.env.possible_agents)
+
+    def run(self, policy: Any, *, privileged: bool = False) -> list[dict[str, Any]]:
+        """One row per robot per seed (seed order, robots in scenario order).
+
+        ``policy``: a shared robot policy (``policy.act(observations, infos) -> {robot: action}``),
+        or with ``privileged`` a scripted robot policy called with each running robot's view.
+        """
+        rows = []
+        for i, seed in enumerate(self.seeds):
+            rows.extend(self._episode(i, seed, policy, privileged))
+        return rows
+
+    def _episode(self, i: int, seed: int, policy: Any, privileged: bool) -> list[dict[str, Any]]:
+        env, robots = self.env, self.robots
+        observations, infos = env.reset(seed=seed)
+        sim = env.simulator
+        views = [sim.robot_view(k, with_robots=False) for k in range(len(robots))]
+        tracks: list[list[np.ndarray]] = [[view.positions.copy()] for view in views]  # robot k first, then the humans
+        forces: list[list[float]] = [[] for _ in robots]
+        returns = dict.fromkeys(robots, 0.0)
+        ends: dict[str, dict[str, Any]] = {}
+        specs = [view.scenario.robot for view in views]
+        radii = [view.radii.copy() for view in views]
+        while env.agents:
+            if privileged:
+                actions = {name: np.asarray(policy(sim.robot_view(k)), np.float32) if name not in ends else np.zeros(2, np.float32)
+                           for k, name in enumerate(robots)}
+            else:
+                actions = policy.act(observations, infos)
+            observations, rewards, terminations, truncations, infos = env.step(actions)
+            for k, name in enumerate(robots):
+                if name in ends:
+                    continue
+                returns[name] += float(rewards[name])
+                view = sim.robot_view(k, with_robots=False) if infos[name].get("outcome") is None else None
+                tracks[k].append(view.positions.copy() if view is not None else _final(tracks[k][-1], sim))
+                forces[k].append(abs(view.robot_social_force) if view is not None else 0.0)
+                if infos[name].get("outcome") is not None:
+                    ends[name] = infos[name]
+        rows = []
+        for k, name in enumerate(robots):
+            info = ends.get(name, {"outcome": "truncated"})
+            positions = np.stack([track[: len(tracks[k][0])] for track in tracks[k]])
+            trajectory = Trajectory(positions=positions, radii=radii[k], goal=complex(views[k].robot_goal),
+                                    goal_radius=float(specs[k].goal_radius), dt=float(sim.dt), social_force=np.asarray(forces[k]),
+                                    max_speed=float(specs[k].max_speed))
+            rows.append({"test_episode": i, "test_seed": seed, "robot": name, "outcome": info["outcome"],
+                         "collision_kind": info.get("collision_kind") or "", "return": returns[name],
+                         **episode_metrics(trajectory, info["outcome"] == "success")})
+        return rows
+
+    def close(self) -> None:
+        self.env.close()
+
+
+def _final(previous: np.ndarray, sim: Any) -> np.ndarray:
+    """A robot's row for the step it ended in: it has left the world (moved far away), so its last seen position stays.
+
+    Its path therefore misses the ending step's few centimetres; the humans' positions are the new ones.
+    """
+    row = previous.copy()
+    humans = sim.positions[1:]
+    row[1 : 1 + len(humans)] = humans[: len(row) - 1]
+    return row
+
+
+def robot_rates(tests: Any) -> Any:
+    """Final-evaluation rates per robot: a DataFrame with one row per (experiment, configuration, robot).
+
+    ``tests``: test rows with a ``robot`` column (a robots run's or baseline's ``test_episodes.csv``,
+    or :func:`crowdnav.evaluation.storage.load_results`' tests); the last evaluation of each run counts.
+    """
+    import pandas as pd
+
+    from crowdnav.simulator import OUTCOMES
+
+    if "robot" not in tests or tests["robot"].isna().all():
+        return pd.DataFrame(columns=["experiment", "configuration", "label", "robot", "episodes", *OUTCOMES])
+    frame = tests[tests["robot"].notna() & (tests["robot"] != "")]
+    last = frame.groupby(["experiment", "configuration", "seed"])["evaluation"].transform("max")
+    final = frame[frame["evaluation"] == last].drop_duplicates(["experiment", "configuration", "seed", "test_episode", "robot"])
+    rows = []
+    for (experiment, configuration, robot), group in final.groupby(["experiment", "configuration", "robot"], sort=True):
+        rows.append({"experiment": experiment, "configuration": configuration, "label": group["label"].iloc[0], "robot": robot,
+                     "episodes": len(group), **{outcome: float((group["outcome"] == outcome).mean()) for outcome in OUTCOMES}})
+    return pd.DataFrame(rows)
