@@ -128,3 +128,45 @@ def test_shared_ppo_beats_straight_to_goal_on_held_out_episodes(tmp_path):
     straight = RobotEpisodes({"scenario": HALL, "modalities": ["goal"]}, seeds).run(scripted_policy("straight"), privileged=True)
     rate = {name: np.mean([row["outcome"] == "success" for row in rows]) for name, rows in (("learned", learned), ("straight", straight))}
     assert rate["learned"] > rate["straight"] + 0.2, rate
+
+
+def test_an_experiment_trains_shared_robots_and_ranks_them_with_baselines_driving_every_robot(tmp_path):
+    import pandas as pd
+    from crowdnav.evaluation.benchmark import run_experiment
+    from crowdnav.evaluation.experiment import experiment_from_mapping
+
+    train_fields = {key: value for key, value in robots_config(tmp_path).items()
+                    if key not in ("timesteps", "checkpoint_every_steps", "seed", "out", "progress")}
+    document = {"name": "tiny_robots", "protocol": {"train_steps": 192, "eval_every_steps": 96, "test_episodes": 2, "seeds": 1,
+                                                    "window": 2, "final_evaluations": 1},
+                "defaults": train_fields, "configurations": [{"name": "shared"}]}
+    report = run_experiment(experiment_from_mapping(document), tmp_path / "results", workers=1, progress=False, video=False,
+                            log=lambda line: None)
+    assert not report.failures, report.failures
+    folder = report.folder
+    for run in ("shared/seed_0", "baseline_straight/baseline", "baseline_social_force/baseline"):
+        tests = pd.read_csv(folder / run / "test_episodes.csv", keep_default_na=False)
+        # every evaluation: 2 episodes x 3 robots, each robot driven by the run's policy
+        assert sorted(tests.groupby("evaluation")["robot"].apply(sorted).iloc[0]) == sorted(["east_bound", "west_bound", "north_bound"] * 2)
+        assert set(tests["test_seed"]) == {0, 1}
+    board = pd.read_csv(folder / "leaderboard.csv")
+    assert set(board["test_episodes"]) == {2}  # world episodes, not robot rows
+    per_robot = pd.read_csv(folder / "leaderboard_robots.csv")
+    assert len(per_robot) == 3 * 3 and set(per_robot["episodes"]) == {2}
+
+
+def test_the_command_line_trains_shared_robots_from_a_config_file(tmp_path, capsys):
+    import json
+
+    import yaml
+
+    from crowdnav.cli import main
+
+    path = tmp_path / "robots.yaml"
+    config = robots_config(tmp_path / "run")
+    del config["agents"]
+    path.write_text(yaml.safe_dump(config), encoding="utf-8")
+    assert main(["train", "--config", str(path), "--agents", "robots", "--timesteps", "96"]) == 0
+    summary = json.loads(capsys.readouterr().out.strip().splitlines()[-1])
+    assert summary["timesteps"] == 96
+    assert json.loads((tmp_path / "run" / "checkpoint" / "policy.json").read_text())["agents"] == "robots"
