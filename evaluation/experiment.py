@@ -325,6 +325,8 @@ def _holds(document: Any, dotted: str) -> bool:
 
 def _check_environment(label: str, item: Configuration, where: str, root: Any) -> None:
     """Build the environment the runs will train in: scenario, modalities, sensors, overrides, reward weights."""
+    from crowdnav.evaluation.robot_rollout import ROBOTS_AGENTS, robot_count
+
     from crowdnav.envs import CrowdNavEnv
     from crowdnav.scenario import ScenarioError
 
@@ -332,6 +334,8 @@ def _check_environment(label: str, item: Configuration, where: str, root: Any) -
     try:
         CrowdNavEnv(config.scenario, modalities=config.modalities, sensors=config.sensors, overrides=config.overrides,
                     reward_weights=config.reward_weights).close()
+        if config.agents == ROBOTS_AGENTS and robot_count({"scenario": config.scenario, "overrides": config.overrides}) < 2:
+            raise ValueError(f"agents: robots needs a scenario with several robots (robots:), and {config.scenario!r} has one")
     except (ScenarioError, ValueError) as error:
         detail = " / ".join(str(error).splitlines())
         raise _error(label, [ConfigIssue(where, f"environment: {detail} (configuration '{item.name}')", yaml_line(root, where))]) from None

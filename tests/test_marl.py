@@ -170,3 +170,11 @@ def test_the_command_line_trains_shared_robots_from_a_config_file(tmp_path, caps
     summary = json.loads(capsys.readouterr().out.strip().splitlines()[-1])
     assert summary["timesteps"] == 96
     assert json.loads((tmp_path / "run" / "checkpoint" / "policy.json").read_text())["agents"] == "robots"
+
+
+def test_an_experiment_asking_one_robot_scenario_for_shared_robots_is_refused_at_load_in_one_line():
+    from crowdnav.evaluation.experiment import ExperimentError, experiment_from_mapping
+
+    document = {"defaults": {"scenario": "open_space", "agents": "robots", "algo": "ppo"}, "configurations": [{"name": "shared"}]}
+    with pytest.raises(ExperimentError, match="configurations.0.train: environment: agents: robots needs a scenario with several robots"):
+        experiment_from_mapping(document)
