@@ -307,10 +307,40 @@ class RobotView:
         self.polygon_offset, self.polygon_distance = polygon_offset[:, :count], polygon_distance[:, :count]
         self.disc_offset, self.disc_distance = polygon_offset[:, count:], polygon_distance[:, count:]
 
+        self.step_count = sim.step_count
+        self._pairs: tuple[np.ndarray, np.ndarray] | None = None
+
     @property
     def n_humans(self) -> int:
         """Every disc this robot sees besides itself: the humans and the other active robots."""
         return len(self.positions) - 1
+
+    @property
+    def human_positions(self) -> np.ndarray:
+        """(n_humans,) complex: the discs besides this robot (humans, then the other robots)."""
+        return self.positions[1:]
+
+    @property
+    def human_velocities(self) -> np.ndarray:
+        return self.velocities[1:]
+
+    @property
+    def pair_offset(self) -> np.ndarray:
+        """(N+1, N+1) complex: from agent i to agent j of this view (built when first read)."""
+        return self._pair_tables()[0]
+
+    @property
+    def pair_distance(self) -> np.ndarray:
+        """(N+1, N+1): centre distances of this view's agents, the diagonal a huge number."""
+        return self._pair_tables()[1]
+
+    def _pair_tables(self) -> tuple[np.ndarray, np.ndarray]:
+        if self._pairs is None:
+            offset = self.positions[None, :] - self.positions[:, None]
+            distance = np.abs(offset)
+            distance.flat[:: len(self.positions) + 1] = SELF_DISTANCE
+            self._pairs = (offset, distance)
+        return self._pairs
 
     @property
     def robot_position(self) -> complex:

@@ -442,3 +442,14 @@ def test_one_robot_robots_only_mode_is_the_gym_env_as_a_parallel_env():
         assert np.array_equal(gym_observation["goal"], observations["robot"]["goal"]) and reward == rewards["robot"]
         if terminated or truncated:
             break
+
+
+def test_a_robot_view_offers_the_pair_tables_a_custom_modality_reads():
+    sim = Simulator(HALL)
+    sim.reset(seed=1)
+    view = sim.robot_view(1)
+    assert view.n_humans == sim.n_humans + 1 and view.pair_offset.shape == (view.n_humans + 1,) * 2
+    np.testing.assert_allclose(view.pair_offset[0, 1:], view.human_positions - view.robot_position)
+    assert view.pair_distance[0, -1] == abs(sim.robot_positions[0] - sim.robot_positions[1])  # the other robot, last
+    people = sim.robot_view(1, with_robots=False)
+    assert people.n_humans == sim.n_humans

@@ -80,7 +80,7 @@ class EpisodeView:
         if key in observation:
             return observation[key]
         sensor = self._sensors.get(key)
-        return sensor.observe(self.sim) if sensor is not None else None
+        return sensor.observe(self.sim.robot_view(0)) if sensor is not None else None  # several robots: it sees the others
 
     def _overlays(self, observation: Mapping[str, np.ndarray]) -> Overlays:
         overlays = Overlays(human_goals=self.options.human_goals)
