@@ -63,7 +63,7 @@ def _worlds(vec: Any) -> list[RobotsTrainingEnv]:
     return [markov.par_env for markov in vec.venv.vec_envs]
 
 
-def _ppo(config: TrainConfig, vec: Any, total: int) -> PPO:
+def _ppo(config: TrainConfig, vec: Any) -> PPO:
     """SB3's PPO with crowdnav's batched PPO defaults (``hyperparameters``), on an MLP over the flat observations."""
     chosen = hyperparameters(config)
     rate = chosen["learning_rate"]
@@ -148,8 +148,7 @@ def _train(config: TrainConfig, resume: bool, on_checkpoint: Callable[[int], Non
     if state and not inputs.matches(state["robots"]):
         raise ConfigError(f"{checkpoint}: its robots' observations differ from this config's scenario and options; "
                           "resume with the run's own config.yaml")
-    budget = config.timesteps if config.timesteps is not None else None
-    model = _ppo(config, vec, budget or 0)
+    model = _ppo(config, vec)
     if state:
         load_parameters(model, checkpoint / MODEL_FILE, config.device)
         model.num_timesteps = int(state["timesteps"])
@@ -176,7 +175,7 @@ def _train(config: TrainConfig, resume: bool, on_checkpoint: Callable[[int], Non
     rows = vec.num_envs
     # an upper bound in robot steps: the callback stops at the budget (episodes of at most max_steps each)
     max_steps = _worlds(vec)[0].env.scenario.max_steps
-    total = budget if budget is not None else (config.episodes + rows) * max_steps
+    total = config.timesteps if config.timesteps is not None else (config.episodes + rows) * max_steps
     remaining = max(total - model.num_timesteps, 0)
     if remaining and not (callback.unit == "episodes" and first_episode >= config.episodes):
         model.learn(remaining, callback=callback, reset_num_timesteps=state is None)
