@@ -49,14 +49,15 @@ from crowdnav.groups import apply_goal_rules, first_goals, place_groups
 from crowdnav.obstacles import nearest_on_edges
 from crowdnav.orca import OrcaCrowd, OrcaUnavailableError
 from crowdnav.placement import JITTER_REACH
-from crowdnav.robots import PARKED, RobotView, Team, first_heading, robot_kinematics, robot_scenario
+from crowdnav.robot_view import RobotAccessors, robot_scenario
+from crowdnav.robots import PARKED, Team, first_heading, robot_kinematics
 from crowdnav.scenario.errors import ScenarioError, ScenarioIssue
 from crowdnav.scenario.loader import Overrides
 from crowdnav.sim_state import SELF_DISTANCE, PairConstants, SimState, StateFields, pair_constants
 from crowdnav.world import CompiledWorld, WorldSource, load_world
 
 
-class Simulator(StateFields):
+class Simulator(StateFields, RobotAccessors):
     """Vectorized crowd simulator for one scenario.
 
     >>> sim = Simulator("room_furniture")
@@ -494,24 +495,6 @@ class Simulator(StateFields):
 
     # ----------------------------------------------------------------- several robots
 
-    @property
-    def robot_count(self) -> int:
-        """R: the scenario's robots (1 without ``robots:``)."""
-        return 1 if self.team is None else self.team.count
-
-    def robot_scenario(self, index: int) -> object:
-        """The scenario as robot ``index`` sees it: its own spec as ``robot`` (the scenario itself for the ego robot)."""
-        return self._robot_scenarios[index]
-
-    def robot_view(self, index: int, with_robots: bool = True) -> RobotView | Simulator:
-        """The world from robot ``index`` (:class:`crowdnav.robots.RobotView`), what its sensors, reward and scripted policy read.
-
-        ``with_robots=False``: the other robots left out (what a people tracker sees). One robot: the simulator itself.
-        """
-        if self.team is None:
-            return self
-        return RobotView(self, index, with_robots)
-
     def retire_robots(self, index: np.ndarray | list[int]) -> None:
         """Robots ``index`` (0: the ego robot) leave the world for the rest of the episode (:data:`crowdnav.robots.PARKED`)."""
         if self.team is None:
@@ -531,29 +514,3 @@ class Simulator(StateFields):
                 state.left_at[k] = state.positions[k - 1]
                 state.positions[k - 1], state.velocities[k - 1] = PARKED, 0.0
         self.refresh()
-
-    @property
-    def robot_positions(self) -> np.ndarray:
-        """(R,) complex (m): every robot's centre, the ego robot first (:data:`crowdnav.robots.PARKED` once it left)."""
-        if self.team is None:
-            return self._state.positions[:1].copy()
-        return np.concatenate([self._state.positions[:1], self.team.state.positions])
-
-    @property
-    def robot_goals(self) -> np.ndarray:
-        """(R,) complex (m): every robot's goal, the ego robot first."""
-        if self.team is None:
-            return np.array([self._state.robot_goal])
-        return np.concatenate([[self._state.robot_goal], self.team.state.goals])
-
-    @property
-    def robot_headings(self) -> np.ndarray:
-        """(R,) float (rad): every robot's heading, the ego robot first."""
-        if self.team is None:
-            return np.array([self._state.robot_heading])
-        return np.concatenate([[self._state.robot_heading], self.team.state.headings])
-
-    @property
-    def robots_active(self) -> np.ndarray:
-        """(R,) bool: robots still in the world (one robot: always ``[True]``)."""
-        return np.ones(1, dtype=bool) if self.team is None else self.team.state.active.copy()

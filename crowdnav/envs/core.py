@@ -19,7 +19,7 @@ from gymnasium import spaces
 
 from crowdnav.envs.reward import Reward
 from crowdnav.rendering.episode_view import RENDER_MODES, EpisodeView, RenderOptions
-from crowdnav.robots import RobotView
+from crowdnav.robot_view import RobotView
 from crowdnav.scenario import ScenarioIssue, library
 from crowdnav.sensors import Modality, build_modalities
 from crowdnav.simulator import Simulator, StepEvents

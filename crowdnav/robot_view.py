@@ -1,0 +1,164 @@
+"""Several robots seen one at a time: :class:`RobotView` (the world from one robot) and the simulator's robot accessors.
+
+:class:`RobotView` shows the world from robot k: index 0 is that robot, then the humans, then
+the other robots still in the world, with the attribute names the sensors, the reward and the
+scripted policies read from a simulator, so all of them work for any robot unchanged.
+:class:`RobotAccessors` is the mixin of :class:`crowdnav.Simulator` that reads every robot at
+once (one robot: the first and only). Nothing here writes a state.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from crowdnav.sim_state import SELF_DISTANCE
+
+
+class RobotView:
+    """The world seen from robot ``index`` (0: the ego robot): the simulator's attributes, that robot first.
+
+    Agents are that robot, the humans, then the other active robots (``n_humans`` counts them
+    all: for a sensor, another robot is one more moving disc; ``with_robots=False``: the humans
+    only, for the modalities that track people). Built fresh after each step
+    (:meth:`crowdnav.Simulator.robot_view`); reading it does not change the simulator.
+    """
+
+    def __init__(self, sim: Any, index: int, with_robots: bool = True):
+        team, state = sim.team, sim.team.state
+        self.world, self.obstacles, self.dt, self.bounds = sim.world, sim.obstacles, sim.dt, sim.bounds
+        self.scenario = sim.robot_scenario(index)
+        others = np.flatnonzero(state.active[1:]) if with_robots else np.zeros(0, dtype=int)
+        if index:
+            others = others[others != index - 1]
+            j = index - 1
+            me, velocity, radius = state.positions[j], state.velocities[j], team.radii[j]
+            self.robot_heading, self.robot_goal = float(state.headings[j]), complex(state.goals[j])
+            self.robot_social_force = complex(team.social[j])
+            polygon_offset, polygon_distance = team.static_offset[j : j + 1], team.static_distance[j : j + 1]
+            seen = bool(state.active[0]) and with_robots
+            ego = [sim.positions[0]] if seen else []
+            ego_velocity = [sim.velocities[0]] if seen else []
+            ego_radius = [team.all_radii[0]] if seen else []
+            ego_speed = [sim.scenario.robot.max_speed] if seen else []
+        else:
+            me, velocity, radius = sim.positions[0], sim.velocities[0], team.all_radii[0]
+            self.robot_heading, self.robot_goal = sim.robot_heading, sim.robot_goal
+            self.robot_social_force = sim.robot_social_force
+            static_count = sim.obstacles.polygon_count + sim.obstacles.disc_count
+            polygon_offset = np.concatenate([sim.polygon_offset[:1], sim.disc_offset[:1]], axis=1) if static_count else np.zeros((1, 0), complex)
+            polygon_distance = np.concatenate([sim.polygon_distance[:1], sim.disc_distance[:1]], axis=1) if static_count else np.zeros((1, 0))
+            ego, ego_velocity, ego_radius, ego_speed = [], [], [], []
+        humans = sim.positions[1:]
+        self.positions = np.concatenate([[me], humans, ego, state.positions[others]])
+        self.velocities = np.concatenate([[velocity], sim.velocities[1:], ego_velocity, state.velocities[others]])
+        self.radii = np.concatenate([[radius], sim.radii[1:], ego_radius, team.radii[others]])
+        self.human_max_speed = np.concatenate([sim.human_max_speed, ego_speed, team.max_speeds[others]])
+        self.robot_offset = self.positions - me
+        self.robot_distance = np.abs(self.robot_offset)
+        self.robot_distance[0] = SELF_DISTANCE
+        count = sim.obstacles.polygon_count
+        self.polygon_offset, self.polygon_distance = polygon_offset[:, :count], polygon_distance[:, :count]
+        self.disc_offset, self.disc_distance = polygon_offset[:, count:], polygon_distance[:, count:]
+
+        self.step_count = sim.step_count
+        self._pairs: tuple[np.ndarray, np.ndarray] | None = None
+
+    @property
+    def n_humans(self) -> int:
+        """Every disc this robot sees besides itself: the humans and the other active robots."""
+        return len(self.positions) - 1
+
+    @property
+    def human_positions(self) -> np.ndarray:
+        """(n_humans,) complex: the discs besides this robot (humans, then the other robots)."""
+        return self.positions[1:]
+
+    @property
+    def human_velocities(self) -> np.ndarray:
+        return self.velocities[1:]
+
+    @property
+    def pair_offset(self) -> np.ndarray:
+        """(N+1, N+1) complex: from agent i to agent j of this view (built when first read)."""
+        return self._pair_tables()[0]
+
+    @property
+    def pair_distance(self) -> np.ndarray:
+        """(N+1, N+1): centre distances of this view's agents, the diagonal a huge number."""
+        return self._pair_tables()[1]
+
+    def _pair_tables(self) -> tuple[np.ndarray, np.ndarray]:
+        if self._pairs is None:
+            offset = self.positions[None, :] - self.positions[:, None]
+            distance = np.abs(offset)
+            distance.flat[:: len(self.positions) + 1] = SELF_DISTANCE
+            self._pairs = (offset, distance)
+        return self._pairs
+
+    @property
+    def robot_position(self) -> complex:
+        return complex(self.positions[0])
+
+    @property
+    def robot_goal_distance(self) -> float:
+        return abs(self.robot_goal - complex(self.positions[0]))
+
+
+def robot_scenario(scenario: Any, index: int) -> Any:
+    """``scenario`` as robot ``index`` sees it: its spec as ``robot`` (a shallow copy; the same scenario for the ego robot)."""
+    if index == 0:
+        return scenario
+    return scenario.model_copy(update={"robot": scenario.robot_specs[index]})  # no validation: robots stays as written
+
+
+class RobotAccessors:
+    """Every robot's name, view, centre, goal and heading: the mixin of :class:`crowdnav.Simulator` (``team``: None for one robot)."""
+
+    team: Any
+    _state: Any  # the simulator's SimState
+    _robot_scenarios: list[Any]
+
+    @property
+    def robot_count(self) -> int:
+        """R: the scenario's robots (1 without ``robots:``)."""
+        return 1 if self.team is None else self.team.count
+
+    def robot_scenario(self, index: int) -> object:
+        """The scenario as robot ``index`` sees it: its own spec as ``robot`` (the scenario itself for the ego robot)."""
+        return self._robot_scenarios[index]
+
+    def robot_view(self, index: int, with_robots: bool = True) -> Any:
+        """The world from robot ``index`` (:class:`RobotView`), what its sensors, reward and scripted policy read.
+
+        ``with_robots=False``: the other robots left out (what a people tracker sees). One robot: the simulator itself.
+        """
+        if self.team is None:
+            return self
+        return RobotView(self, index, with_robots)
+
+    @property
+    def robot_positions(self) -> np.ndarray:
+        """(R,) complex (m): every robot's centre, the ego robot first (:data:`crowdnav.robots.PARKED` once it left)."""
+        first: np.ndarray = self._state.positions[:1]
+        return first.copy() if self.team is None else np.concatenate([first, self.team.state.positions])
+
+    @property
+    def robot_goals(self) -> np.ndarray:
+        """(R,) complex (m): every robot's goal, the ego robot first."""
+        if self.team is None:
+            return np.array([self._state.robot_goal])
+        return np.concatenate([[self._state.robot_goal], self.team.state.goals])
+
+    @property
+    def robot_headings(self) -> np.ndarray:
+        """(R,) float (rad): every robot's heading, the ego robot first."""
+        if self.team is None:
+            return np.array([self._state.robot_heading])
+        return np.concatenate([[self._state.robot_heading], self.team.state.headings])
+
+    @property
+    def robots_active(self) -> np.ndarray:
+        """(R,) bool: robots still in the world (one robot: always ``[True]``)."""
+        return np.ones(1, dtype=bool) if self.team is None else self.team.state.active.copy()
