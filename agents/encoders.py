@@ -8,7 +8,7 @@ plain dict (:func:`leog_architecture`) stored next to pre-trained weights.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Iterable, Sequence
 from typing import Any, cast
 
 import numpy as np
@@ -32,9 +32,9 @@ class MLP(nn.Module):
         self.out_features = sizes[-1]
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:
-        for layer in self.layers:
-            linear = cast(nn.Linear, layer)  # a ModuleList yields Modules: these are the nn.Linear built above
-            x = torch.relu(F.linear(x, linear.weight, linear.bias))
+        # a ModuleList yields Modules: these are the nn.Linear built above (one cast per call, none per layer)
+        for layer in cast("Iterable[nn.Linear]", self.layers):
+            x = torch.relu(F.linear(x, layer.weight, layer.bias))
         return x
 
 
