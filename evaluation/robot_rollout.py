@@ -127,12 +127,17 @@ def robot_rates(tests: Any) -> Any:
     from crowdnav.simulator import OUTCOMES
 
     if "robot" not in tests or tests["robot"].isna().all():
-        return pd.DataFrame(columns=["experiment", "configuration", "label", "robot", "episodes", *OUTCOMES])
+        return pd.DataFrame(columns=["experiment", "configuration", "label", "robot", "episodes", *OUTCOMES,
+                                     "collision_robot", "collision_human", "collision_static"])
     frame = tests[tests["robot"].notna() & (tests["robot"] != "")]
     last = frame.groupby(["experiment", "configuration", "seed"])["evaluation"].transform("max")
     final = frame[frame["evaluation"] == last].drop_duplicates(["experiment", "configuration", "seed", "test_episode", "robot"])
     rows = []
     for (experiment, configuration, robot), group in final.groupby(["experiment", "configuration", "robot"], sort=True):
+        collided = group["outcome"] == "collision"
+        kinds = group["collision_kind"].fillna("") if "collision_kind" in group else pd.Series("", index=group.index)
         rows.append({"experiment": experiment, "configuration": configuration, "label": group["label"].iloc[0], "robot": robot,
-                     "episodes": len(group), **{outcome: float((group["outcome"] == outcome).mean()) for outcome in OUTCOMES}})
+                     "episodes": len(group), **{outcome: float((group["outcome"] == outcome).mean()) for outcome in OUTCOMES},
+                     # whom it hit: another robot is the multi-robot scenario's own risk
+                     **{f"collision_{kind}": float((collided & (kinds == kind)).mean()) for kind in ("robot", "human", "static")}})
     return pd.DataFrame(rows)
