@@ -121,7 +121,7 @@ def build_placement(scenario: Scenario, obstacles: StaticObstacles) -> Placement
               for robot, path in zip(scenario.robot_specs, scenario.robot_paths, strict=True)]
     groups = [_group_placement(scenario, path, group, world_box, occupied) for path, group in humans.crowd]
     first = robots[0]
-    _check_capacity(scenario, first.robot_start, first.robot_goal, groups)
+    _check_capacity(scenario, first.robot_start, first.robot_goal, groups, robots[1:])
     first.groups, first.other_robots = groups, robots[1:]
     return first
 
@@ -211,8 +211,11 @@ def _group_placement(scenario: Scenario, path: str, group, world_box, occupied) 
     return GroupPlacement(path, spawn, goal)
 
 
-def _check_capacity(scenario: Scenario, robot_start: CandidateSet, robot_goal: CandidateSet, groups: list[GroupPlacement]) -> None:
-    """Every group finds room at reset whatever the robot's start and the groups placed before it.
+def _check_capacity(scenario: Scenario, robot_start: CandidateSet, robot_goal: CandidateSet, groups: list[GroupPlacement],
+                    other_robots: list[Placement] | None = None) -> None:
+    """Every group finds room at reset whatever the robots' starts and the groups placed before it.
+
+    ``other_robots``: the sets of the robots after the first (``robots:``); each blocks as the first does.
 
     Groups are placed in file order. Each agent placed earlier blocks at most ``_max_blocked``
     of a group's candidates, so subtracting the worst case of all of them is a sufficient bound
@@ -227,6 +230,11 @@ def _check_capacity(scenario: Scenario, robot_start: CandidateSet, robot_goal: C
         capacity = len(points) - _blocked(placement.spawn, robot_start, robot.radius + ring + humans.radius + GAP + slack)
         if group.standing:
             capacity -= _blocked(placement.spawn, robot_goal, robot.radius + ring + humans.radius + GAP + slack)
+        for spec, sets in zip(scenario.robot_specs[1:], other_robots or [], strict=True):
+            reach = spec.radius + ring + humans.radius + GAP + slack
+            capacity -= _blocked(placement.spawn, sets.robot_start, reach)
+            if group.standing:
+                capacity -= _blocked(placement.spawn, sets.robot_goal, reach)
         for earlier, other in zip(groups[:k], crowd[:k], strict=False):
             if other.max_count == 0:
                 continue
@@ -242,7 +250,7 @@ def _check_capacity(scenario: Scenario, robot_start: CandidateSet, robot_goal: C
             raise GeometryError(
                 field,
                 f"the spawn regions hold at most {max(capacity, 0)} human{'' if capacity == 1 else 's'} of radius {humans.radius:g} m "
-                f"next to the robot{' and the groups listed before' if k else ''} "
+                f"next to the robot{'s' if other_robots else ''}{' and the groups listed before' if k else ''} "
                 f"(asked for up to {group.max_count}); expected a smaller count, a smaller radius or larger spawn regions",
             )
 

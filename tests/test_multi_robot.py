@@ -10,6 +10,7 @@ import pytest
 from crowdnav.scenario.errors import ScenarioError
 from crowdnav.scenario.loader import load_scenario
 from crowdnav.simulator import Simulator
+from crowdnav.world import load_world
 from tests.multi_robot_scenes import HALL, HEAD_ON, hall
 
 
@@ -182,3 +183,15 @@ def test_a_robot_view_offers_the_pair_tables_a_custom_modality_reads():
     assert view.pair_distance[0, -1] == abs(sim.robot_positions[0] - sim.robot_positions[1])  # the other robot, last
     people = sim.robot_view(1, with_robots=False)
     assert people.n_humans == sim.n_humans
+
+
+def test_the_crowd_capacity_check_counts_every_robots_start():
+    crowded = {"count": 24, "spawn": [{"type": "rectangle", "min": [-4.6, -2.5], "max": [-2.0, 2.5]}],
+               "goal": [{"type": "rectangle", "min": [-2, 3], "max": [2, 4]}]}
+    robots = [{"start": {"type": "points", "points": [[-4, -0.6]]}, "goal": {"type": "points", "points": [[4, 0]]}},
+              {"start": {"type": "points", "points": [[-4, 0.6]]}, "goal": {"type": "points", "points": [[4, 3]]}}]
+    document = hall(humans=crowded)
+    document.pop("robots")
+    load_world({**document, "robot": robots[0]})  # room for 24 next to the first robot alone
+    with pytest.raises(ScenarioError, match=r"humans.count: the spawn regions hold at most 22 humans .* next to the robots"):
+        load_world({**document, "robots": robots})
