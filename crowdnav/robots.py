@@ -34,7 +34,7 @@ from crowdnav import social_force as sf
 from crowdnav.contacts import goal_distance, outside
 from crowdnav.events import Collision, StepEvents
 from crowdnav.obstacles import nearest_on_edges
-from crowdnav.placement import GAP, JITTER_REACH
+from crowdnav.placement import GAP, JITTER_REACH, PlacementError
 from crowdnav.sim_state import SELF_DISTANCE
 
 PARKED = complex(1.0e7, 1.0e7)
@@ -139,14 +139,22 @@ class Team:
         radii = self.all_radii
         for j, (robot, places) in enumerate(zip(self.specs, self.placements, strict=True), start=1):
             clear = radii[j] + radii[:j] + GAP + 2 * JITTER_REACH
-            begin = places.robot_start.draw(rng, 1, allowed=places.start_goal_ok.any(1), away_from=np.array(starts), min_distance=clear)[0]
+            try:
+                begin = places.robot_start.draw(rng, 1, allowed=places.start_goal_ok.any(1), away_from=np.array(starts), min_distance=clear)[0]
+            except PlacementError:
+                raise PlacementError(f"robots.{j}.start: no start is clear of the robots drawn before it this episode; "
+                                     "expected start regions with room for every robot") from None
             reachable = None
             if places.start_component is not None:
                 nearest = int(np.argmin(np.abs(places.robot_start.points - begin)))
                 reachable = places.goal_component == places.start_component[nearest]
             away = np.array([begin, *goals])
             near = np.concatenate([[robot.min_start_goal_distance + JITTER_REACH], clear])
-            end = places.robot_goal.draw(rng, 1, allowed=reachable, away_from=away, min_distance=near)[0]
+            try:
+                end = places.robot_goal.draw(rng, 1, allowed=reachable, away_from=away, min_distance=near)[0]
+            except PlacementError:
+                raise PlacementError(f"robots.{j}.goal: no goal is clear of the other robots' goals this episode (and "
+                                     f"min_start_goal_distance from its start); expected goal regions with room for every robot") from None
             headings.append(first_heading(robot, rng, begin, end))
             starts.append(begin)
             goals.append(end)

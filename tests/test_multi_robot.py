@@ -195,3 +195,13 @@ def test_the_crowd_capacity_check_counts_every_robots_start():
     load_world({**document, "robot": robots[0]})  # room for 24 next to the first robot alone
     with pytest.raises(ScenarioError, match=r"humans.count: the spawn regions hold at most 22 humans .* next to the robots"):
         load_world({**document, "robots": robots})
+
+
+def test_robots_sharing_one_start_point_fail_at_reset_naming_the_robot():
+    from crowdnav.placement import PlacementError
+
+    same = {"type": "points", "points": [[-4, 0]]}
+    sim = Simulator(hall(robots=[{"start": same, "goal": {"type": "points", "points": [[4, 0]]}},
+                                 {"start": same, "goal": {"type": "points", "points": [[4, 2]]}}]))
+    with pytest.raises(PlacementError, match=r"^robots.1.start: no start is clear of the robots drawn before it"):
+        sim.reset(seed=0)
