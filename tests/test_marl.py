@@ -118,9 +118,11 @@ def test_the_shared_policy_and_the_baselines_play_the_same_test_episodes(tmp_pat
 def test_shared_ppo_beats_straight_to_goal_on_held_out_episodes(tmp_path):
     """The docs' claim at a small budget: 100,000 robot steps (about 33,000 world steps of 8 worlds, 2-4 minutes on
     one core) lift every-robot success on 50 held-out episodes well above straight-to-goal's on the same episodes.
-    Measured: see docs/agents.md#several-robots-shared-parameter-ppo (the margin asserted is a fraction of it)."""
+    Measured: 51% against straight-to-goal's 12% (docs/agents.md#several-robots-shared-parameter-ppo); the run is
+    deterministic for its seed, and the margin asserted is half the one measured."""
+    # a constant learning rate: decaying it to 0 over so short a budget left seed 0 at 1% (straight: 12%)
     config = {"scenario": HALL, "agents": "robots", "algo": "ppo", "num_envs": 8, "timesteps": 100_000, "seed": 0,
-              "out": str(tmp_path / "run"), "progress": False}
+              "learning_rate_schedule": "constant", "out": str(tmp_path / "run"), "progress": False}
     train(config)
     policy = load_robots_policy(tmp_path / "run" / "checkpoint")
     seeds = list(range(50))
