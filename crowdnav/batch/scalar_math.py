@@ -18,14 +18,18 @@ Arrays are pairs ``(re, im)`` of float64 arrays.
 from __future__ import annotations
 
 import math
+from typing import TypeVar
 
 import numpy as np
 
 TWO_PI = 2.0 * math.pi
 
+F = TypeVar("F", float, np.ndarray)
+"""A Python float (one world) or a float array (one entry per world)."""
 
-def cmul(ar: np.ndarray, ai: np.ndarray, br: np.ndarray | float, bi: np.ndarray | float) -> tuple[np.ndarray, np.ndarray]:
-    """CPython's complex product ``(ar + ai j) * (br + bi j)`` as ``(re, im)``."""
+
+def cmul(ar: F, ai: F | float, br: F | float, bi: F | float) -> tuple[F, F]:
+    """CPython's complex product ``(ar + ai j) * (br + bi j)`` as ``(re, im)``; arrays if ``ar`` is one."""
     return ar * br - ai * bi, ar * bi + ai * br
 
 
@@ -37,7 +41,7 @@ def remainder(x: np.ndarray, y: float) -> np.ndarray:
     quotient: the truncated quotient's parity decides (computed exactly for |x| < 2**52 y).
     """
     x = np.asarray(x, dtype=float)
-    f = np.fmod(x, y)
+    f: np.ndarray = np.fmod(x, y)
     half = 0.5 * y
     quotient_odd = np.fmod(np.trunc((x - f) / y), 2.0) != 0.0
     over = (np.abs(f) > half) | ((np.abs(f) == half) & quotient_odd)

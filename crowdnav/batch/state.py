@@ -10,36 +10,45 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Any
+from typing import TYPE_CHECKING, TypeAlias
 
 import numpy as np
+import numpy.typing as npt
+
+if TYPE_CHECKING:
+    from crowdnav.simulator import Simulator
+
+ComplexArray: TypeAlias = npt.NDArray[np.complex128]
+"""Points and vectors in the plane, ``x + y j``."""
+FloatArray: TypeAlias = npt.NDArray[np.float64]
+"""Distances, headings, radii."""
 
 
 @dataclass
 class BatchState:
     """K worlds with the same number of humans n; agent 0 is the robot, as in the simulator."""
 
-    positions: np.ndarray
+    positions: ComplexArray
     """(K, n+1) complex: robot then humans, metres, world frame."""
-    velocities: np.ndarray
+    velocities: ComplexArray
     """(K, n+1) complex: velocities over the last step, m/s."""
-    robot_heading: np.ndarray
+    robot_heading: FloatArray
     """(K,) float: the robot's heading, radians."""
-    robot_goal: np.ndarray
+    robot_goal: ComplexArray
     """(K,) complex: the robot's goal."""
-    radii: np.ndarray
+    radii: FloatArray
     """(n+1,) float: body radii, shared by the K worlds (robot first)."""
-    robot_offset: np.ndarray
+    robot_offset: ComplexArray
     """(K, n+1) complex: from the robot to every agent's centre (column 0: the robot itself, 0)."""
-    robot_distance: np.ndarray
+    robot_distance: FloatArray
     """(K, n+1) float: centre distances from the robot (column 0: a huge number)."""
-    polygon_offset: np.ndarray
+    polygon_offset: ComplexArray
     """(K, P) complex: from the robot's centre to the nearest point of each static polygon."""
-    polygon_distance: np.ndarray
+    polygon_distance: FloatArray
     """(K, P) float: its length."""
-    disc_offset: np.ndarray
+    disc_offset: ComplexArray
     """(K, C) complex: from the robot's centre to each round obstacle's centre."""
-    disc_distance: np.ndarray
+    disc_distance: FloatArray
     """(K, C) float: its length (centre distance)."""
 
     @property
@@ -48,10 +57,11 @@ class BatchState:
 
     @property
     def n_humans(self) -> int:
-        return self.positions.shape[1] - 1
+        humans: int = self.positions.shape[1] - 1
+        return humans
 
     @classmethod
-    def stack(cls, sims: Sequence[Any]) -> BatchState:
+    def stack(cls, sims: Sequence[Simulator]) -> BatchState:
         """The state of single simulators with the same crowd size, stacked in the given order."""
         sizes = {sim.n_humans for sim in sims}
         if len(sizes) != 1:

@@ -2,12 +2,12 @@
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING, TypeVar
+from typing import TYPE_CHECKING
 
 import numpy as np
 from gymnasium import spaces
 
-from crowdnav.batch.scalar_math import cmul
+from crowdnav.batch.scalar_math import F, cmul
 from crowdnav.scenario.schema import GoalSensor
 from crowdnav.sensors.base import Modality, register_modality
 from crowdnav.sensors.frames import encode_vector, encode_vectors, to_robot_frame, to_robot_frame_batch, vector_space
@@ -16,9 +16,6 @@ if TYPE_CHECKING:
     from crowdnav.batch.state import BatchState
     from crowdnav.simulator import Simulator
     from crowdnav.world import CompiledWorld
-
-F = TypeVar("F", float, np.ndarray)
-"""A Python float (one world) or a (K,) float array (K worlds)."""
 
 GOAL_RANGE_FACTOR = 2.0
 """Goal distances are clipped to this many world diagonals (reached only far outside an open world)."""

@@ -192,10 +192,10 @@ class LeogModality(Modality):
         scale_re, scale_im = cmul(np.cos(heading), -np.sin(heading), -1.0 / self.resolution, 0.0)
         robot = positions[:, 0]
         robot_re, robot_im = cmul(robot.real, robot.imag, scale_re, scale_im)
-        scale, shift = np.empty((len(positions), 1), dtype=complex), np.empty((len(positions), 1), dtype=complex)
-        scale.real[:, 0], scale.imag[:, 0] = scale_re, scale_im
-        shift.real[:, 0], shift.imag[:, 0] = self._grid_origin.real - robot_re, self._grid_origin.imag - robot_im
-        return scale, shift
+        scales, shifts = np.empty((len(positions), 1), dtype=complex), np.empty((len(positions), 1), dtype=complex)
+        scales.real[:, 0], scales.imag[:, 0] = scale_re, scale_im
+        shifts.real[:, 0], shifts.imag[:, 0] = self._grid_origin.real - robot_re, self._grid_origin.imag - robot_im
+        return scales, shifts
 
     def _primitive_points(self, positions: np.ndarray) -> np.ndarray:
         """``(*W, 2E + n + C)`` complex, world frame: [edge ends, edge starts, humans, round obstacles] per world."""
