@@ -33,7 +33,7 @@ def cmul(ar: F, ai: F | float, br: F | float, bi: F | float) -> tuple[F, F]:
     return ar * br - ai * bi, ar * bi + ai * br
 
 
-def remainder(x: np.ndarray, y: float) -> np.ndarray:
+def remainder(x: np.ndarray | float, y: float) -> np.ndarray:
     """``math.remainder(x, y)`` for each entry (IEEE remainder: x - n y, n the nearest integer to x / y, ties to even).
 
     ``fmod`` is exact and leaves ``|f| < y`` with the sign of x; when ``|f| > y / 2`` one more ``y``

@@ -69,10 +69,10 @@ class ClosestObstacleModality(Modality):
         """World-frame vector from the robot's centre to the nearest obstacle point (None: no obstacle)."""
         if not self._has_polygons and not self._has_discs and not sim.n_humans:
             return None
-        column, offset = self.nearest(sim.robot_distance, sim.robot_offset, sim.polygon_distance[0], sim.polygon_offset[0],
-                                      sim.disc_distance[0], sim.disc_offset[0], sim.radii)
+        column, nearest = self.nearest(sim.robot_distance, sim.robot_offset, sim.polygon_distance[0], sim.polygon_offset[0],
+                                       sim.disc_distance[0], sim.disc_offset[0], sim.radii)
         radius, is_disc = self._columns(sim.radii)
-        offset = complex(offset)
+        offset = complex(nearest)
         if is_disc[column]:
             # from the robot to the centre, minus one radius along that line
             centre_distance = abs(offset)

@@ -183,10 +183,10 @@ class LidarModality(Modality):
         if not batched:
             h = math.remainder(float(heading), TWO_PI)
             return (self.fov / 2 - h) / self.step - 0.5 + 3 * self._beams_per_turn, complex(math.cos(h), math.sin(h))
-        h = remainder(heading, TWO_PI)[:, None]
-        rotation = np.empty(h.shape, dtype=complex)
-        rotation.real, rotation.imag = np.cos(h), np.sin(h)
-        return (self.fov / 2 - h) / self.step - 0.5 + 3 * self._beams_per_turn, rotation
+        hk = remainder(heading, TWO_PI)[:, None]
+        rotation = np.empty(hk.shape, dtype=complex)
+        rotation.real, rotation.imag = np.cos(hk), np.sin(hk)
+        return (self.fov / 2 - hk) / self.step - 0.5 + 3 * self._beams_per_turn, rotation
 
     def _primitive_points(self, positions: np.ndarray) -> np.ndarray:
         """``(*W, 2P)`` complex: [edge ends, humans, round obstacles | edge starts, humans, round obstacles] per world."""
