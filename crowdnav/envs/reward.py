@@ -51,17 +51,16 @@ def reward_terms(
     (K,) object array of :func:`crowdnav.events.outcomes`). Only elementwise float operations, in
     the order of the module doc, so a world's terms have the same bits either way.
     """
-    batched = isinstance(distance, np.ndarray)
-    terms = {
-        "step": np.full(np.shape(distance), weights["step"]) if batched else weights["step"],
-        "goal_progress": weights["goal_progress"] * (previous_distance - distance),
-        "social": weights["social"] * social_force,
-    }
-    for term, paid_on in PAID_ON.items():
-        if batched:
-            paid = np.logical_or.reduce([outcome == name for name in paid_on])
-            terms[term] = np.where(paid, weights[term], 0.0)
-        else:
+    progress = weights["goal_progress"] * (previous_distance - distance)
+    social = weights["social"] * social_force
+    # the isinstance test in place (not in a flag), so that mypy knows F in each branch
+    if isinstance(distance, np.ndarray):
+        terms = {"step": np.full(np.shape(distance), weights["step"]), "goal_progress": progress, "social": social}
+        for term, paid_on in PAID_ON.items():
+            terms[term] = np.where(np.logical_or.reduce([outcome == name for name in paid_on]), weights[term], 0.0)
+    else:
+        terms = {"step": weights["step"], "goal_progress": progress, "social": social}
+        for term, paid_on in PAID_ON.items():
             terms[term] = weights[term] if outcome in paid_on else 0.0
     reward = terms["step"] + terms["goal_progress"] + terms["social"] + terms["goal_reached"] + terms["collision"]
     return reward, terms
