@@ -56,7 +56,10 @@ class SocialForceRobot:
     """The humans' social-force model applied to the robot: goal attraction plus repulsion.
 
     Repulsion from humans is the simulator's ``robot_social_force``; repulsion from static
-    obstacles uses the scenario's obstacle parameters with the robot's radius.
+    obstacles uses the scenario's obstacle parameters with the robot's radius. With several
+    robots (called with :meth:`crowdnav.Simulator.robot_view`), the other robots repel it as a
+    robot repels the humans (``robot_strength``, ``robot_range``): without that, two of them
+    driving at each other would meet head on.
     """
 
     def __call__(self, sim: Simulator) -> np.ndarray:
@@ -71,6 +74,11 @@ class SocialForceRobot:
             contact = robot.radius + sim.obstacles.surface_radius
             gain = sf.repulsion_gain(params.obstacle_strength, contact, params.obstacle_range)
             force += complex(sf.repulsion(offsets[None, :], distances[None, :], gain[None, :], -1.0 / params.obstacle_range)[0])
+        others = sim.other_robot_discs
+        if len(sim.positions[others]):
+            offsets = sim.positions[others] - sim.positions[0]
+            gain = sf.repulsion_gain(params.robot_strength, robot.radius + sim.radii[others], params.robot_range)
+            force += complex(sf.repulsion(offsets[None, :], np.abs(offsets)[None, :], gain[None, :], -1.0 / params.robot_range)[0])
         velocity = force * robot.max_speed
         if abs(velocity) > robot.max_speed:
             velocity *= robot.max_speed / abs(velocity)

@@ -51,6 +51,8 @@ class RobotView:
             polygon_distance = np.concatenate([sim.polygon_distance[:1], sim.disc_distance[:1]], axis=1) if static_count else np.zeros((1, 0))
             ego, ego_velocity, ego_radius, ego_speed = [], [], [], []
         humans = sim.positions[1:]
+        self.other_robot_discs = slice(len(humans) + 1, None)
+        """Which entries of ``positions`` are the other robots (after this robot and the humans)."""
         self.positions = np.concatenate([[me], humans, ego, state.positions[others]])
         self.velocities = np.concatenate([[velocity], sim.velocities[1:], ego_velocity, state.velocities[others]])
         self.radii = np.concatenate([[radius], sim.radii[1:], ego_radius, team.radii[others]])
@@ -137,6 +139,11 @@ class RobotAccessors:
         if self.team is None:
             return self
         return RobotView(self, index, with_robots)
+
+    @property
+    def other_robot_discs(self) -> slice:
+        """Which entries of ``positions`` are other robots: none for the simulator itself (a view lists them after the humans)."""
+        return slice(len(self._state.positions), None)
 
     @property
     def robot_positions(self) -> np.ndarray:

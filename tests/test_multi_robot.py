@@ -205,3 +205,22 @@ def test_robots_sharing_one_start_point_fail_at_reset_naming_the_robot():
                                  {"start": same, "goal": {"type": "points", "points": [[4, 2]]}}]))
     with pytest.raises(PlacementError, match=r"^robots.1.start: no start is clear of the robots drawn before it"):
         sim.reset(seed=0)
+
+
+def test_social_force_robots_driving_head_on_feel_each_other_and_do_not_collide():
+    from crowdnav.policies import SocialForceRobot
+
+    sim, policy = Simulator(HEAD_ON), SocialForceRobot()
+    sim.reset(seed=0)
+    for _ in range(60):
+        east, west = policy(sim.robot_view(0)), policy(sim.robot_view(1))
+        events = sim.step(east, other_robot_actions=west[None, :])
+        if events.terminated:
+            break
+    assert [event.collision for event in sim.robot_events] == [None, None]  # blind to each other they collide at step 6
+
+
+def test_the_social_force_robot_feels_no_other_robot_in_a_one_robot_world():
+    sim = Simulator("open_space")
+    sim.reset(seed=0)
+    assert len(sim.positions[sim.other_robot_discs]) == 0
