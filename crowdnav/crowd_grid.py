@@ -18,11 +18,15 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from crowdnav import social_force as sf
 from crowdnav.neighbours import close_pairs
+
+if TYPE_CHECKING:
+    from crowdnav.scenario.crowd import SocialForce
 
 PAIR_FORCE_TOLERANCE = 1e-6
 """Largest human-human force (dimensionless) a left-out pair could exert."""
@@ -53,7 +57,7 @@ class GridGeometry:
 class CrowdGrid:
     """Constants of a crowd of ``n`` humans for the neighbour-grid geometry."""
 
-    def __init__(self, n: int, robot_radius: float, human_radius: float, force, see_robot: bool,
+    def __init__(self, n: int, robot_radius: float, human_radius: float, force: SocialForce, see_robot: bool,
                  static_gain: np.ndarray, static_decay: float, static_contact: np.ndarray, self_distance: float):
         self.n = n
         self.contact = 2 * human_radius
@@ -94,7 +98,7 @@ class CrowdGrid:
         repulsion -= robot_offset * column
         robot_gap = robot_distance - self.row_contact
         humans_touch = bool((pair_distance < self.contact).any() or (robot_gap[1:] < 0).any())
-        if static_offset is not None:
+        if static_offset is not None and static_distance is not None:  # both or neither
             repulsion += sf.repulsion(static_offset, static_distance, self.static_gain, self.static_decay)
             static_gap = static_distance - self.static_contact
             robot_gap = np.concatenate([robot_gap, static_gap[0]])

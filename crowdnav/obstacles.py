@@ -11,14 +11,19 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from typing import TypeAlias
 
 import numpy as np
 import shapely
 from shapely.geometry import LineString, Point, Polygon, box
+from shapely.geometry.base import BaseGeometry
 from shapely.validation import explain_validity
 
 from crowdnav.errors import CrowdNavError
 from crowdnav.scenario.schema import CircleFurniture, RectangleFurniture, Scenario
+
+Vertex: TypeAlias = tuple[float, float]
+"""A point ``(x, y)`` of a scenario's outline, in metres."""
 
 FAR = 1.0e6
 """Coordinate of padding edges: far enough never to be the nearest edge."""
@@ -64,7 +69,7 @@ class StaticObstacles:
         return len(self.disc_radius)
 
     @property
-    def union(self):
+    def union(self) -> BaseGeometry:
         """All static obstacles as one shapely geometry (load-time use only)."""
         shapes = list(self.polygons) + [Point(c.real, c.imag).buffer(r, 64) for c, r in zip(self.disc_center, self.disc_radius, strict=False)]
         return shapely.union_all(shapes) if shapes else shapely.Polygon()
@@ -167,9 +172,9 @@ def check_edge_table(polygons: list[Polygon], labels: list[str]) -> None:
                             "fewer vertices here or fewer obstacles")
 
 
-def _input_chains(scenario: Scenario) -> list[tuple[str, list, bool]]:
+def _input_chains(scenario: Scenario) -> list[tuple[str, list[Vertex], bool]]:
     """(field path, vertices, closed) of every outline the obstacles are built from (discs: their bounding square)."""
-    chains: list[tuple[str, list, bool]] = []
+    chains: list[tuple[str, list[Vertex], bool]] = []
     if scenario.world.points is not None:
         chains.append(("world.points", list(scenario.world.points), True))
     chains.extend((f"walls.{i}.points", list(wall.points), False) for i, wall in enumerate(scenario.walls))
@@ -245,9 +250,9 @@ def build_obstacles(scenario: Scenario) -> StaticObstacles:
 
 
 def _as_arrays(polygons: list[Polygon], labels: list[str], discs: list[tuple[complex, float, str]]) -> StaticObstacles:
-    rings = []
+    rings: list[list[tuple[complex, complex]]] = []
     for poly in polygons:
-        edges = []
+        edges: list[tuple[complex, complex]] = []
         for ring in [poly.exterior, *poly.interiors]:
             xy = np.asarray(ring.coords)
             z = xy[:, 0] + 1j * xy[:, 1]
@@ -284,18 +289,18 @@ def _as_arrays(polygons: list[Polygon], labels: list[str], discs: list[tuple[com
     )
 
 
-def _rotated_rectangle(center, size, angle_deg) -> Polygon:
+def _rotated_rectangle(center: Vertex, size: tuple[float, float], angle_deg: float) -> Polygon:
     half_w, half_h = size[0] / 2, size[1] / 2
     corners = np.array([-half_w - 1j * half_h, half_w - 1j * half_h, half_w + 1j * half_h, -half_w + 1j * half_h])
     corners = corners * np.exp(1j * math.radians(angle_deg)) + complex(*center)
     return Polygon(np.column_stack([corners.real, corners.imag]))
 
 
-def _polygon_parts(shape) -> list[Polygon]:
+def _polygon_parts(shape: BaseGeometry) -> list[Polygon]:
     return list(shape.geoms) if hasattr(shape, "geoms") else [shape]
 
 
-def _check_inside(shape, world_box: Polygon, path: str, what: str, tolerance: float = 0.0) -> None:
+def _check_inside(shape: BaseGeometry, world_box: Polygon, path: str, what: str, tolerance: float = 0.0) -> None:
     if not shape.within(world_box.buffer(tolerance + 1e-9, join_style="mitre")):
         minx, miny, maxx, maxy = world_box.bounds
         raise GeometryError(path, f"{what} extends outside the world; expected it inside x in [{minx:g}, {maxx:g}], y in [{miny:g}, {maxy:g}]")

@@ -280,7 +280,7 @@ class Humans(StrictModel):
         """A walking group with the crowd's defaults for what it leaves out (speeds, model)."""
         if group.standing:
             return group
-        missing = {"preferred_speed": self.preferred_speed} if group.preferred_speed is None else {}
+        missing: dict[str, object] = {"preferred_speed": self.preferred_speed} if group.preferred_speed is None else {}
         if group.model is None:
             missing["model"] = self.model
         return group.model_copy(update=missing) if missing else group
@@ -296,5 +296,6 @@ class Humans(StrictModel):
     @property
     def max_preferred_speed(self) -> float:
         """The fastest preferred speed any walking member can draw (m/s; humans.preferred_speed's max without walkers)."""
-        speeds = [group.preferred_speed[1] for _, group in self.crowd if not group.standing]
+        # walkers always have one once filled in (:meth:`_filled_in`); the None test is for the type
+        speeds = [group.preferred_speed[1] for _, group in self.crowd if not group.standing and group.preferred_speed is not None]
         return max(speeds, default=self.preferred_speed[1])
