@@ -24,6 +24,7 @@ from typing import Any, Literal
 import yaml
 from pydantic import BaseModel, ValidationError
 from pydantic.fields import FieldInfo
+from pydantic_core import ErrorDetails
 
 from crowdnav.errors import CrowdNavError
 from crowdnav.suggest import did_you_mean
@@ -75,7 +76,7 @@ def yaml_line(root: yaml.Node | None, dotted: str) -> int | None:
     """1-based line of the deepest YAML node on the path ``dotted`` (``yaml.compose`` tree), or None without a tree."""
     if root is None:
         return None
-    node, line = root, root.start_mark.line + 1
+    node, line = root, int(root.start_mark.line) + 1
     for part in filter(None, dotted.split(".")):
         if isinstance(node, yaml.MappingNode):
             match = [(k, v) for k, v in node.value if k.value == part]
@@ -141,7 +142,7 @@ def validation_issues(error: ValidationError, document: Any, model: type[BaseMod
     return [ConfigIssue(path, "; or ".join(messages)) for path, messages in grouped.items()]
 
 
-def describe(item: dict[str, Any], document: Any, model: type[BaseModel]) -> tuple[str, str]:
+def describe(item: ErrorDetails, document: Any, model: type[BaseModel]) -> tuple[str, str]:
     """Turn one pydantic error into (dotted path, message)."""
     parts = _document_parts(item, document)
     path = ".".join(str(part) for part in parts)
@@ -192,7 +193,7 @@ def describe(item: dict[str, Any], document: Any, model: type[BaseModel]) -> tup
     return path, f"{message[0].lower()}{message[1:]}{got}"
 
 
-def _document_parts(item: dict[str, Any], document: Any) -> list[str | int]:
+def _document_parts(item: ErrorDetails, document: Any) -> list[str | int]:
     """The error's location without union-branch tags such as 'rectangle' or 'int'."""
     parts: list[str | int] = []
     node: Any = document
@@ -248,7 +249,7 @@ def _union_tags(field: FieldInfo | None) -> list[str]:
     """The ``type`` values accepted by a field holding a tagged union (regions, furniture)."""
     if field is None:
         return []
-    tags = []
+    tags: list[str] = []
     for model in _models_in(field.annotation):
         tag = model.model_fields.get("type")
         if tag is not None:
@@ -269,7 +270,7 @@ def _base(annotation: Any) -> Any:
 
 
 def _number_words(field: FieldInfo | None) -> str:
-    base = _base(field.annotation) if field is not None else None
+    base: Any = _base(field.annotation) if field is not None else None
     if typing.get_origin(base) is list and typing.get_args(base):  # an item of a list field
         base = _base(typing.get_args(base)[0])
     return {int: "an integer", float: "a number"}.get(base, "a value")
