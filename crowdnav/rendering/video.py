@@ -2,9 +2,14 @@
 
 from __future__ import annotations
 
+from collections.abc import Iterable
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
+
+if TYPE_CHECKING:
+    from imageio.core.format import Format
 
 VIDEO_FORMATS = (".mp4", ".gif")
 
@@ -24,7 +29,7 @@ class VideoWriter:
             raise ValueError(f"unsupported video format {suffix!r} for {self.path}; expected one of {', '.join(VIDEO_FORMATS)}")
         self.path.parent.mkdir(parents=True, exist_ok=True)
         self._gif_frames: list[np.ndarray] | None = [] if suffix == ".gif" else None
-        self._mp4 = None
+        self._mp4: Format.Writer | None = None
         self.frames_written = 0
 
     def append(self, frame: np.ndarray) -> None:
@@ -60,11 +65,11 @@ class VideoWriter:
     def __enter__(self) -> VideoWriter:
         return self
 
-    def __exit__(self, *exc) -> None:
+    def __exit__(self, *exc: object) -> None:
         self.close()
 
 
-def write_video(frames, path: str | Path, fps: float = 10.0) -> Path:
+def write_video(frames: Iterable[np.ndarray], path: str | Path, fps: float = 10.0) -> Path:
     """Write an iterable of frames to ``path`` (MP4 or GIF) and return the path."""
     with VideoWriter(path, fps) as writer:
         for frame in frames:
