@@ -138,6 +138,8 @@ def test_vector_env_rejects_bad_actions_seeds_masks_and_large_crowds(monkeypatch
         env.step(np.array([[0.0, 0.0], [np.nan, 0.0]]))
     with pytest.raises(ValueError, match="one per world"):
         env.reset(seed=[1, 2, 3])
+    with pytest.raises(ValueError, match="an int or a list of one per world, got True"):
+        env.reset(seed=True)
     with pytest.raises(ValueError, match="reset_mask"):
         env.reset(options={"reset_mask": np.zeros(2, dtype=bool)})
     with pytest.raises(ValueError, match="autoreset_mode"):

@@ -8,7 +8,7 @@ returns a :class:`CrowdNavVectorEnv`; ``vectorization_mode="sync"`` still gives 
 from __future__ import annotations
 
 from collections.abc import Callable, Mapping, Sequence
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from gymnasium import spaces
@@ -21,6 +21,9 @@ from crowdnav.contacts import goal_distance
 from crowdnav.envs.core import ScenarioSource, load_env_world, option_overrides, real_array
 from crowdnav.envs.reward import REWARD_TERMS, reward_terms
 from crowdnav.events import outcomes
+
+if TYPE_CHECKING:
+    from crowdnav.simulator import Simulator
 
 MAX_WORLDS = 4_096
 """Most worlds in one vector env (the training config's num_envs bound)."""
@@ -117,17 +120,22 @@ class CrowdNavVectorEnv(VectorEnv):
         self._started = np.zeros(b, dtype=bool)
         self._ended = np.zeros(b, dtype=bool)  # the episode ended at the last step (NEXT_STEP: reset next; DISABLED: wait)
         self._last_flags = (np.zeros(b, dtype=bool), np.zeros(b, dtype=bool))
-        self._observations = {key: np.zeros((b, *space.shape), dtype=space.dtype) for key, space in self.single_observation_space.spaces.items()}
+        # the modalities' own Boxes (the same objects as the Dict's): a Box's shape is never None
+        self._observations = {key: np.zeros((b, *modality.space().shape), dtype=modality.space().dtype) for key, modality in self._sensors}
 
     # ------------------------------------------------------------------ reset
 
-    def reset(self, *, seed: int | Sequence[int | None] | None = None, options: dict[str, Any] | None = None):
+    def reset(
+        self, *, seed: int | Sequence[int | None] | None = None, options: dict[str, Any] | None = None
+    ) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
         """Reset every world (or those of ``options["reset_mask"]``); ``seed``: None, an int s (world i gets s + i) or one per world."""
         super().reset(seed=seed if isinstance(seed, int) else None)
         b = self.num_envs
         if seed is None:
             seeds: list[int | None] = [None] * b
-        elif isinstance(seed, (int, np.integer)) and not isinstance(seed, bool):
+        elif isinstance(seed, bool):
+            raise ValueError(f"seed must be None, an int or a list of one per world, got {seed!r}")
+        elif isinstance(seed, (int, np.integer)):
             seeds = [int(seed) + i for i in range(b)]
         else:
             seeds = list(seed)
@@ -160,11 +168,12 @@ class CrowdNavVectorEnv(VectorEnv):
         out = np.zeros(self.num_envs)
         for bucket in self.batch.buckets.values():
             out[bucket.world] = goal_distance(bucket.robot_goal, bucket.positions[:, 0])
-        return out[worlds]
+        distances: np.ndarray = out[worlds]
+        return distances
 
     # ------------------------------------------------------------------- step
 
-    def step(self, actions: Any):
+    def step(self, actions: Any) -> tuple[dict[str, np.ndarray], np.ndarray, np.ndarray, np.ndarray, dict[str, Any]]:
         """Step every running world with its row of ``actions`` ((num_envs, 2), each checked finite); autoreset per the mode."""
         if not self._started.all():
             raise RuntimeError("call reset() before step(): some worlds have not been reset")
@@ -234,7 +243,7 @@ class CrowdNavVectorEnv(VectorEnv):
         collided = outcome == "collision"
         kind, partner = np.full(b, None, dtype=object), np.full(b, None, dtype=object)
         for i in np.flatnonzero(collided):  # per collision event
-            hit = result.collisions[i]
+            hit = result.collisions[int(i)]
             kind[i], partner[i] = hit.kind, hit.partner
         infos["outcome"], infos["_outcome"] = outcome, stepping.copy()
         infos["is_success"], infos["_is_success"] = outcome == "success", stepping.copy()
@@ -301,13 +310,14 @@ class CrowdNavVectorEnv(VectorEnv):
 
     def _row(self, name: str, world: int) -> np.ndarray:
         bucket, row = self.batch.locate(world)
-        return getattr(bucket, name)[row].copy()
+        values: np.ndarray = getattr(bucket, name)[row].copy()
+        return values
 
     def robot_goal(self, world: int) -> complex:
         bucket, row = self.batch.locate(world)
         return complex(bucket.robot_goal[row])
 
-    def simulator(self, world: int) -> Any:
+    def simulator(self, world: int) -> Simulator:
         """A snapshot of ``world`` as a :class:`crowdnav.Simulator`, built on each call: a copy of its current state.
 
         Its state and geometry are the world's at the moment of the call (call again after a step);
