@@ -9,7 +9,7 @@ from __future__ import annotations
 
 from collections.abc import Callable, Mapping
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -17,6 +17,9 @@ from crowdnav.envs import CrowdNavEnv
 from crowdnav.paths import inside
 from crowdnav.policies import SCRIPTED_POLICIES
 from crowdnav.rendering.video import VIDEO_FORMATS, VideoWriter
+
+if TYPE_CHECKING:
+    from tqdm import tqdm
 
 Act = Callable[[CrowdNavEnv, Mapping[str, np.ndarray]], np.ndarray]
 
@@ -71,11 +74,11 @@ def render_episodes(
             path = inside(out, f"{env.scenario.name}_{label}_seed{seed + episode}{suffix}")
             observation, _ = env.reset(seed=seed + episode)
             with VideoWriter(path, fps=env.metadata["render_fps"]) as writer:
-                writer.append(env.render())
+                writer.append(_frame(env))
                 done = False
                 while not done:
                     observation, _, terminated, truncated, info = env.step(act(env, observation))
-                    writer.append(env.render())
+                    writer.append(_frame(env))
                     done = terminated or truncated
                     bar.update(1)
             bar.update(env.scenario.max_steps - env.simulator.step_count)  # an early end skips the rest
@@ -90,7 +93,14 @@ def render_episodes(
     return paths
 
 
-def _progress(total: int, enabled: bool):
+def _frame(env: CrowdNavEnv) -> np.ndarray:
+    frame = env.render()
+    if frame is None:  # never in rgb_array mode, which render_episodes sets
+        raise RuntimeError(f"the environment rendered no frame (render_mode {env.render_mode!r}); expected 'rgb_array'")
+    return frame
+
+
+def _progress(total: int, enabled: bool) -> tqdm:
     from tqdm import tqdm
 
     return tqdm(total=total, unit="step", desc="rendering", disable=not enabled, leave=False)
