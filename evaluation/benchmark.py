@@ -130,7 +130,9 @@ def describe_baseline(folder: Path) -> str:
 
     meta = read_json(folder / META_FILE)
     rates = ", ".join(f"{outcome} {rate:.0%}" for outcome, rate in sorted(meta["final"].items(), key=lambda item: item[0] != "success"))
-    return f"baseline {meta['label']}: {rates} on the {meta['test_episodes']} test episodes"
+    # a baseline driving every robot has one row per robot per test episode
+    episodes = "robot episodes" if (meta.get("env") or {}).get("agents") == "robots" else "test episodes"
+    return f"baseline {meta['label']}: {rates} on the {meta['test_episodes']} {episodes}"
 
 
 def claim_folder(folder: Path, experiment: Experiment) -> None:
