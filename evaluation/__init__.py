@@ -36,6 +36,8 @@ _EXPORTS = {
     "Trajectory": "crowdnav.evaluation.metrics",
     "episode_metrics": "crowdnav.evaluation.metrics",
     "HeldOutEpisodes": "crowdnav.evaluation.rollout",
+    "RobotEpisodes": "crowdnav.evaluation.robot_rollout",
+    "robot_rates": "crowdnav.evaluation.robot_rollout",
     "ResultsError": "crowdnav.evaluation.storage",
     "load_results": "crowdnav.evaluation.storage",
     "rate_curves": "crowdnav.evaluation.curves",
