@@ -43,6 +43,9 @@ from stable_baselines3.common.callbacks import BaseCallback
 from stable_baselines3.common.policies import ActorCriticPolicy
 from stable_baselines3.common.utils import set_random_seed
 
+MAX_INPUTS = 65_536
+"""Most inputs a loaded shared robot network may declare (a 360-beam LIDAR and the goal: 363)."""
+
 ROBOTS_KIND = "robots"
 """``policy.json``'s ``agents`` for a shared robot policy (single-agent checkpoints have none)."""
 
@@ -244,6 +247,8 @@ def load_robots_policy(path: str | Path, device: str = "cpu", *, config: TrainCo
         config = config_from_mapping({**info["config"], "device": device}, str(folder / "policy.json"))
     check_network_size(config, str(folder))
     width = len(info["robots"]["offset"]) + (len(info["robots"]["robots"]) if info["robots"]["identity"] else 0)
+    if not 0 < width <= MAX_INPUTS:  # checked before the network is built: a hostile policy.json cannot make it allocate gigabytes
+        raise ConfigError(f"{folder}: policy.json declares {width:,} inputs; expected 1 to {MAX_INPUTS:,}")
     from gymnasium import spaces
 
     network = ActorCriticPolicy(spaces.Box(-np.inf, np.inf, (width,), np.float32), spaces.Box(-1.0, 1.0, (2,), np.float32),

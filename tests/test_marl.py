@@ -180,3 +180,15 @@ def test_an_experiment_asking_one_robot_scenario_for_shared_robots_is_refused_at
     document = {"defaults": {"scenario": "open_space", "agents": "robots", "algo": "ppo"}, "configurations": [{"name": "shared"}]}
     with pytest.raises(ExperimentError, match="configurations.0.train: environment: agents: robots needs a scenario with several robots"):
         experiment_from_mapping(document)
+
+
+def test_a_policy_json_declaring_a_huge_input_is_refused_before_any_network_is_built(tmp_path):
+    import json
+
+    train(robots_config(tmp_path / "run", timesteps=96))
+    info_file = tmp_path / "run" / "checkpoint" / "policy.json"
+    info = json.loads(info_file.read_text())
+    info["robots"]["offset"] = [0.0] * 70_000
+    info_file.write_text(json.dumps(info))
+    with pytest.raises(ConfigError, match="declares 70,003 inputs"):
+        load_robots_policy(tmp_path / "run" / "checkpoint")
