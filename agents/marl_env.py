@@ -60,9 +60,11 @@ class RobotObservations:
         first = shapes[robots[0]]
         differing = [name for name, space in shapes.items() if space != first]
         if differing:
-            raise RobotsConfigError(f"agents: robots trains one network for every robot, but {differing[0]!r} observes "
-                                    f"{list(shapes[differing[0]].spaces)} and {robots[0]!r} {list(first.spaces)}; "
-                                    "give the robots the same modalities")
+            other = shapes[differing[0]]
+            keys = [key for key in {**first.spaces, **other.spaces} if first.spaces.get(key) != other.spaces.get(key)]
+            raise RobotsConfigError(f"agents: robots trains one network for every robot, but {differing[0]!r} and {robots[0]!r} "
+                                    f"observe {keys} differently (other modalities, sensor settings or, for velocity, "
+                                    "kinematics); give the robots the same observation")
         self.robots = list(robots)
         self.identity = bool(identity)
         size = int(spaces.flatdim(first))

@@ -192,3 +192,10 @@ def test_a_policy_json_declaring_a_huge_input_is_refused_before_any_network_is_b
     info_file.write_text(json.dumps(info))
     with pytest.raises(ConfigError, match="declares 70,003 inputs"):
         load_robots_policy(tmp_path / "run" / "checkpoint")
+
+
+def test_robots_observing_a_modality_differently_are_refused_in_one_line_naming_it(tmp_path):
+    # the unicycle's velocity is (speed, turn rate), the others' (vx, vy): one network cannot read both as one input
+    with pytest.raises(RobotsConfigError, match=r"'north_bound' and 'east_bound' observe \['velocity'\] differently") as error:
+        train(robots_config(tmp_path / "run", modalities=["goal", "lidar", "velocity"]))
+    assert "\n" not in str(error.value)
