@@ -49,7 +49,79 @@ def resolve_policy(policy: str, seed: int) -> tuple[Act, dict[str, Any]]:
 
 
 def render_policy(scenario: str, policy: str = "social-force", *, seed: int = 0, **options: Any) -> list[Path]:
-    """:func:`render_episodes` of a scripted policy's name or a checkpoint path; ``options`` as there."""
+    """:func:`render_episodes` of a scripted policy's name or a checkpoint path; ``options`` as there.
+
+    A shared robot policy's checkpoint (``agents: robots``) drives every robot of its scenario
+    (:func:`render_robots_policy`).
+    """
+    if _is_robots_checkpoint(policy):
+        return render_robots_policy(scenario, policy, seed=seed, **options)
     act, env_options = resolve_policy(policy, seed)
     label = policy if policy in SCRIPTED_POLICIES else Path(policy).stem
     return render_episodes(scenario, act, label=label, env_options=env_options, seed=seed, **options)
+
+
+def _is_robots_checkpoint(policy: str) -> bool:
+    if policy in SCRIPTED_POLICIES or not Path(policy).exists():
+        return False
+    from crowdnav.agents.checkpoint import read_policy_info
+    from crowdnav.agents.marl import ROBOTS_KIND
+
+    try:
+        return bool(read_policy_info(policy).get("agents") == ROBOTS_KIND)
+    except (OSError, ValueError):  # not a checkpoint: resolve_policy says so in one line
+        return False
+
+
+def render_robots_policy(scenario: str, policy: str, *, seed: int = 0, episodes: int = 3, out: str | Path = "videos",
+                         video_format: str = "mp4", progress: bool = True, **options: Any) -> list[Path]:
+    """Videos of a shared robot policy (``agents: robots``) driving every robot; one file per episode (seeds ``seed``, ...).
+
+    Each file is named by the scenario, the checkpoint, the seed and how many robots reached their
+    goal (``..._seed7_2of3_success.mp4``). The policy plays the world it was trained in: scenario
+    overrides, reward weights and render options are refused in one line.
+    """
+    from crowdnav.paths import inside
+    from crowdnav.rendering.video import VIDEO_FORMATS, VideoWriter
+
+    suffix = f".{video_format.lower().lstrip('.')}"
+    if suffix not in VIDEO_FORMATS:
+        raise ValueError(f"unsupported video format {video_format!r}; expected one of {', '.join(f[1:] for f in VIDEO_FORMATS)}")
+    if episodes < 1:
+        raise ValueError(f"episodes must be at least 1, got {episodes}")
+    unused = sorted(name for name, value in options.items() if value)
+    if unused:
+        raise PolicyLoadError(f"{policy} is a shared robot policy; it plays the world it was trained in, without {', '.join(unused)}")
+    from crowdnav.agents.marl import load_robots_policy
+    from crowdnav.agents.marl_env import robots_env
+
+    trained = load_robots_policy(policy)
+    if scenario != trained.env_options["scenario"]:
+        raise PolicyLoadError(f"{policy} drives the robots of {trained.env_options['scenario']!r}, not {scenario!r}")
+
+    env = robots_env({**trained.env_options, "render_mode": "rgb_array"})
+    label, paths = Path(policy).stem, []
+    try:
+        for episode in range(episodes):
+            path = inside(Path(out), f"{env.scenario.name}_{label}_seed{seed + episode}{suffix}")
+            observations, infos = env.reset(seed=seed + episode)
+            outcomes: dict[str, str] = {}
+            with VideoWriter(path, fps=env.metadata["render_fps"]) as writer:
+                writer.append(env.render())
+                while env.agents:
+                    observations, _, terminations, truncations, infos = env.step(trained.act(observations, infos))
+                    writer.append(env.render())
+                    for name, info in infos.items():  # the outcome of the step a robot ended (later steps: inactive)
+                        if "outcome" in info:
+                            outcomes.setdefault(name, info["outcome"])
+                    if all(terminations.values()) or all(truncations.values()):
+                        break
+            reached = sum(outcome == "success" for outcome in outcomes.values())
+            named = inside(Path(out), f"{env.scenario.name}_{label}_seed{seed + episode}_{reached}of{len(trained.robots)}_success{suffix}")
+            path.replace(named)
+            paths.append(named)
+            if progress:
+                print(f"{named.name}: " + ", ".join(f"{name} {outcomes.get(name, 'truncated')}" for name in trained.robots))
+    finally:
+        env.close()
+    return paths

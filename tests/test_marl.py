@@ -142,7 +142,7 @@ def test_an_experiment_trains_shared_robots_and_ranks_them_with_baselines_drivin
     document = {"name": "tiny_robots", "protocol": {"train_steps": 192, "eval_every_steps": 96, "test_episodes": 2, "seeds": 1,
                                                     "window": 2, "final_evaluations": 1},
                 "defaults": train_fields, "configurations": [{"name": "shared"}]}
-    report = run_experiment(experiment_from_mapping(document), tmp_path / "results", workers=1, progress=False, video=False,
+    report = run_experiment(experiment_from_mapping(document), tmp_path / "results", workers=1, progress=False, video=True,
                             log=lambda line: None)
     assert not report.failures, report.failures
     folder = report.folder
@@ -155,6 +155,7 @@ def test_an_experiment_trains_shared_robots_and_ranks_them_with_baselines_drivin
     assert set(board["test_episodes"]) == {2}  # world episodes, not robot rows
     per_robot = pd.read_csv(folder / "leaderboard_robots.csv")
     assert len(per_robot) == 3 * 3 and set(per_robot["episodes"]) == {2}
+    assert [path.name for path in (folder / "videos").iterdir()][0].startswith("shared_seed_0_final_test0")  # every robot driven
 
 
 def test_the_command_line_trains_shared_robots_from_a_config_file(tmp_path, capsys):
@@ -199,3 +200,20 @@ def test_robots_observing_a_modality_differently_are_refused_in_one_line_naming_
     with pytest.raises(RobotsConfigError, match=r"'north_bound' and 'east_bound' observe \['velocity'\] differently") as error:
         train(robots_config(tmp_path / "run", modalities=["goal", "lidar", "velocity"]))
     assert "\n" not in str(error.value)
+
+
+def test_a_shared_robot_checkpoint_renders_every_robot_to_a_video_named_by_how_many_arrived(tmp_path, capsys):
+    from crowdnav.agents.render import PolicyLoadError, render_policy
+
+    train(robots_config(tmp_path / "run"))
+    checkpoint = str(tmp_path / "run" / "checkpoint")
+    paths = render_policy(HALL, checkpoint, seed=3, episodes=2, out=tmp_path / "videos", video_format="gif", progress=True)
+    assert [path.name.rsplit("_", 2)[0] for path in paths] == [f"{HALL}_checkpoint_seed3", f"{HALL}_checkpoint_seed4"]
+    assert all(path.name.endswith("of3_success.gif") and path.stat().st_size > 0 for path in paths)
+    printed = capsys.readouterr().out.splitlines()
+    assert [line.split(":")[0] for line in printed] == [path.name for path in paths]
+    assert all(name in printed[0] for name in ("east_bound", "west_bound", "north_bound"))
+    with pytest.raises(PolicyLoadError, match=r"plays the world it was trained in, without overrides$"):
+        render_policy(HALL, checkpoint, out=tmp_path / "videos", overrides={"humans.count": 2})
+    with pytest.raises(PolicyLoadError, match=r"drives the robots of 'robots_crossing_hall', not 'open_space'$"):
+        render_policy("open_space", checkpoint, out=tmp_path / "videos")
