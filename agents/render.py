@@ -10,6 +10,8 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
 from crowdnav.errors import CrowdNavError
 from crowdnav.policies import SCRIPTED_POLICIES
 from crowdnav.rendering.episodes import Act, render_episodes, scripted_act
@@ -101,16 +103,25 @@ def render_robots_policy(scenario: str, policy: str, *, seed: int = 0, episodes:
 
     env = robots_env({**trained.env_options, "render_mode": "rgb_array"})
     label, paths = Path(policy).stem, []
+    fps = env.metadata["render_fps"]
+    assert isinstance(fps, float)  # PettingZoo types its metadata as a dict of objects
+
+    def frame() -> np.ndarray:
+        image = env.render()
+        if image is None:  # never in rgb_array mode
+            raise RuntimeError("the robots env rendered no frame; expected render_mode 'rgb_array'")
+        return image
+
     try:
         for episode in range(episodes):
             path = inside(Path(out), f"{env.scenario.name}_{label}_seed{seed + episode}{suffix}")
             observations, infos = env.reset(seed=seed + episode)
             outcomes: dict[str, str] = {}
-            with VideoWriter(path, fps=env.metadata["render_fps"]) as writer:
-                writer.append(env.render())
+            with VideoWriter(path, fps=fps) as writer:
+                writer.append(frame())
                 while env.agents:
                     observations, _, terminations, truncations, infos = env.step(trained.act(observations, infos))
-                    writer.append(env.render())
+                    writer.append(frame())
                     for name, info in infos.items():  # the outcome of the step a robot ended (later steps: inactive)
                         if "outcome" in info:
                             outcomes.setdefault(name, info["outcome"])
