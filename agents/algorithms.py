@@ -2,7 +2,7 @@
 
 The updates are SB3's own, term for term (same losses, optimizers, update-to-data ratio, target
 updates and random draws: a fixed seed gives the same networks to the last bit, see
-``tests/test_agents_training.py``). What changes is the work around them, which dominates with
+``tests/agents/test_agents_training.py``). What changes is the work around them, which dominates with
 crowdnav's small networks on a CPU (measured in docs/agents.md#performance):
 
 * **actor backward pass restricted to the actor's parameters.** SB3 back-propagates the actor

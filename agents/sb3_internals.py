@@ -1,4 +1,4 @@
-"""The Stable-Baselines3 internals crowdnav relies on, in one list (checked by ``tests/test_sb3_coupling.py``).
+"""The Stable-Baselines3 internals crowdnav relies on, in one list (checked by ``tests/agents/test_sb3_coupling.py``).
 
 Exact resume and the faster update loops reach past SB3's public API: they read and restore
 private counters (``_episode_num``, ``_n_updates``, ...), fill its buffers' arrays, call its

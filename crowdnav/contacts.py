@@ -7,7 +7,7 @@ calls them with a chunk of worlds, :class:`crowdnav.Simulator` with its one worl
 K = 1 where the kernel loops over worlds that still overlap, which only steps with overlaps
 pay; the robot's checks take no world axis at all, so the single path pays no numpy overhead).
 Every world's numbers come from the same operations on the same values whatever K, so both
-simulators agree bit for bit (tests/test_vector_env.py).
+simulators agree bit for bit (tests/core/test_vector_env.py).
 """
 
 from __future__ import annotations

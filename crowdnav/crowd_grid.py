@@ -11,7 +11,7 @@ robot's collisions, humans who see the robot) over everyone, exactly as before.
 ``PAIR_FORCE_TOLERANCE`` (1e-6, dimensionless, against forces of order 1), and those pairs are
 left out: about 4.7 m for the default parameters (A = 2, B = 0.3 m, r = 0.3 m). Everything else
 (obstacles, the robot, overlaps) is computed as in the all-pairs model, so one step differs from
-it by at most the left-out pairs' forces (tests/test_crowd_grid.py).
+it by at most the left-out pairs' forces (tests/core/test_crowd_grid.py).
 """
 
 from __future__ import annotations

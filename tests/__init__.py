@@ -1,1 +1,1 @@
-"""crowdnav's tests: a package, so shared helpers import by name (``from tests.agents_tiny import tiny_config``)."""
+"""crowdnav's tests: a package, so shared helpers import by name (``from tests.agents.agents_tiny import tiny_config``)."""

@@ -1,5 +1,5 @@
-"""Fixtures shared by several test files; helpers that are plain functions live in tests/agents_tiny.py
-and tests/evaluation_tiny.py (imported as ``tests.agents_tiny``, ``tests.evaluation_tiny``).
+"""Fixtures shared by several test files; helpers that are plain functions live in tests/agents/agents_tiny.py
+and tests/evaluation/evaluation_tiny.py (imported as ``tests.agents.agents_tiny``, ``tests.evaluation.evaluation_tiny``).
 
 Heavy imports (torch) happen inside the fixtures, so the core tests run without the training extras.
 """
@@ -14,7 +14,7 @@ from pathlib import Path
 import pytest
 from hypothesis import settings
 
-from tests.agents_tiny import SMALL_LEOG, TINY_EXTRACTOR
+from tests.agents.agents_tiny import SMALL_LEOG, TINY_EXTRACTOR
 
 # CI (.ci/run sets CI=true) replays the same fuzzing examples every run, so a red build names a change, not a draw;
 # elsewhere every run draws new examples (and `-m slow` draws thousands), which is where the fuzzing finds bugs.

@@ -10,7 +10,7 @@ writes every such operation as separately rounded real operations, in CPython's 
   multiplies a float into each part directly (C99 Annex G), which can differ in the sign of a zero);
 * ``abs(complex)``: ``hypot(re, im)`` (``np.hypot`` calls the same libm function);
 * ``math.remainder(x, 2 pi)``: exact, from ``np.fmod`` (exact) and one exact subtraction;
-* ``math.cos`` / ``math.sin`` equal ``np.cos`` / ``np.sin`` here (tested in tests/test_vector_env.py).
+* ``math.cos`` / ``math.sin`` equal ``np.cos`` / ``np.sin`` here (tested in tests/core/test_vector_env.py).
 
 Arrays are pairs ``(re, im)`` of float64 arrays.
 """

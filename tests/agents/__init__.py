@@ -1,0 +1,1 @@
+"""crowdnav tests of the agents layer (tests/README.md)."""

@@ -1,0 +1,1 @@
+"""crowdnav tests of the cli layer (tests/README.md)."""

@@ -1,0 +1,1 @@
+"""crowdnav tests of the core layer (tests/README.md)."""

@@ -1,0 +1,1 @@
+"""crowdnav tests of the evaluation layer (tests/README.md)."""

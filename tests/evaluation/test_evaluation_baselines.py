@@ -1,0 +1,95 @@
+"""Scripted baselines: played on the experiment's own test episodes, ranked and drawn with the learned runs."""
+
+from __future__ import annotations
+
+import pandas as pd
+import pytest
+from crowdnav.evaluation.baselines import BASELINES, evaluate_baseline, experiment_baselines, is_baseline
+from crowdnav.evaluation.curves import curves_figure
+from crowdnav.evaluation.experiment import ExperimentError, experiment_from_mapping
+from crowdnav.evaluation.leaderboard import leaderboard_table
+from crowdnav.evaluation.protocol import Protocol
+from crowdnav.evaluation.storage import META_FILE, TEST_FILE, load_results, read_json
+
+from crowdnav.envs import CrowdNavEnv
+from crowdnav.policies import SocialForceRobot, StraightToGoal
+from tests.evaluation.evaluation_tiny import tiny_experiment_document, tiny_results
+
+
+def _outcome(policy, env_options, seed):
+    env = CrowdNavEnv(**env_options)
+    env.reset(seed=seed)
+    while True:
+        _, _, terminated, truncated, info = env.step(policy(env.simulator))
+        if terminated or truncated:
+            return info["outcome"]
+
+
+def test_baselines_play_the_protocols_test_episodes_like_the_scripted_policies_do(tmp_path):
+    options = {"scenario": "open_space", "modalities": ["goal"], "overrides": {"max_steps": 60}, "reward_weights": {}}
+    protocol = Protocol(train_episodes=4, eval_every=2, test_episodes=4, seeds=1, test_seed_base=7)
+    for name, policy in (("straight", StraightToGoal()), ("social_force", SocialForceRobot())):
+        folder = evaluate_baseline("x", f"baseline_{name}", BASELINES[name], options, protocol, tmp_path / name)
+        tests = pd.read_csv(folder / TEST_FILE, keep_default_na=False)
+        # the same rows at both evaluation points, one per test seed, as the scripted policy plays them
+        assert list(tests["training_episodes"].unique()) == [2, 4]
+        for _, rows in tests.groupby("evaluation"):
+            assert list(rows["test_seed"]) == [7, 8, 9, 10]
+            assert list(rows["outcome"]) == [_outcome(policy, options, seed) for seed in range(7, 11)]
+        meta = read_json(folder / META_FILE)
+        assert meta["kind"] == "baseline" and meta["env_steps"]["train"] == 0 and meta["policy"] == name
+
+
+def test_a_finished_baseline_is_not_played_again(tmp_path):
+    options = {"scenario": "open_space", "modalities": ["goal"], "overrides": {"max_steps": 30}, "reward_weights": {}}
+    protocol = Protocol(train_episodes=2, eval_every=2, test_episodes=2, seeds=1)
+    folder = evaluate_baseline("x", "baseline_straight", "straight", options, protocol, tmp_path / "b")
+    stamp = (folder / META_FILE).stat().st_mtime_ns
+    evaluate_baseline("x", "baseline_straight", "straight", options, protocol, tmp_path / "b")
+    assert (folder / META_FILE).stat().st_mtime_ns == stamp
+
+
+def test_an_experiment_gets_one_pair_of_baselines_per_distinct_environment():
+    experiment = experiment_from_mapping(tiny_experiment_document())
+    assert [name for name, _, _ in experiment_baselines(experiment)] == ["baseline_straight", "baseline_social_force"]
+    document = tiny_experiment_document()
+    document["configurations"][1]["train"]["scenario"] = "room_furniture"
+    names = [name for name, _, _ in experiment_baselines(experiment_from_mapping(document))]
+    assert names == ["baseline_straight_lidar", "baseline_social_force_lidar", "baseline_straight_closest", "baseline_social_force_closest"]
+
+
+def test_configuration_names_starting_with_baseline_are_refused():
+    document = tiny_experiment_document()
+    document["configurations"][0]["name"] = "baseline_mine"
+    with pytest.raises(ExperimentError, match="kept for the scripted baselines"):
+        experiment_from_mapping(document)
+
+
+def test_benchmark_results_rank_the_baselines_and_draw_them_as_horizontal_lines(tmp_path_factory):
+    results = tiny_results(tmp_path_factory)
+    tests, _, metas = load_results([results])
+    table = leaderboard_table(tests, metas)
+    baselines = table[table["kind"] == "baseline"]
+    assert sorted(baselines["configuration"]) == ["baseline_social_force", "baseline_straight"]
+    assert (baselines["seeds"] == 1).all() and all(map(is_baseline, baselines["configuration"]))
+    figure = curves_figure(tests, window=3)
+    # one dashed / dotted horizontal line per baseline in every outcome panel
+    for axis in figure.axes:
+        horizontal = [line for line in axis.get_lines() if len(set(line.get_ydata())) == 1 and line.get_linestyle() in ("--", ":")]
+        assert len(horizontal) == 2
+
+
+def test_a_baseline_that_cannot_be_played_is_reported_and_the_others_are_played(tmp_path):
+    from crowdnav.evaluation.baselines import evaluate_experiment_baselines
+
+    scenario = tmp_path / "gone.yaml"
+    document = tiny_experiment_document(seeds=1)
+    from crowdnav.scenario.library import library_dir
+
+    scenario.write_text((library_dir() / "open_space.yaml").read_text())
+    document["configurations"][1]["train"]["scenario"] = str(scenario)
+    experiment = experiment_from_mapping(document)
+    scenario.unlink()
+    done = evaluate_experiment_baselines(experiment, tmp_path / "results")
+    assert [isinstance(item, str) for item in done] == [False, False, True, True]
+    assert "gone.yaml" in done[2] and done[2].startswith("baseline straight to goal (scripted) [closest] skipped: ")

@@ -1,0 +1,1 @@
+"""crowdnav tests of the project layer (tests/README.md)."""
