@@ -21,6 +21,8 @@ import yaml
 
 FILES = ("curves.png", "curves.pdf", "leaderboard.md", "leaderboard.csv", "evaluation_rates.csv")
 START, END = "<!-- FACTS -->", "<!-- /FACTS -->"
+FIGURE4_EXPERIMENTS = ("modalities", "fusion", "paradigms", "modalities_paper", "encoders")
+"""The experiments benchmarks/run_figure4.sh runs (its command is named beside theirs)."""
 
 
 def facts(folder: Path) -> str:
@@ -39,7 +41,8 @@ def facts(folder: Path) -> str:
     first = experiment["configurations"][0].get("train", {})
     defaults = experiment.get("defaults") or {key: first[key] for key in ("scenario", "overrides", "reward_weights") if key in first}
     lines = [
-        "```bash", f"crowdnav benchmark {folder.name} --workers 2 --no-video   # or benchmarks/run_figure4.sh", "```", "",
+        "```bash", f"crowdnav benchmark {folder.name} --workers 2 --no-video"
+        + ("   # or benchmarks/run_figure4.sh" if folder.name in FIGURE4_EXPERIMENTS else ""), "```", "",
         f"* **Protocol:** {_budget(protocol)} on the same "
         f"{protocol['test_episodes']} held-out test episodes, {protocol['seeds']} seeds per configuration, sliding window "
         f"{protocol['window']}, final rates over the last {protocol['final_evaluations']} evaluations.",
