@@ -1,6 +1,7 @@
 """Scripted robot policies that read the simulator's state directly (baselines, demos, videos).
 
-Each policy is a callable ``policy(sim) -> action`` returning the robot's normalized action
+Each policy is a callable ``policy(sim) -> action`` (:data:`ScriptedPolicy`; ``sim`` a simulator or
+one robot's :class:`crowdnav.robot_view.RobotView`, :class:`crowdnav.robot_view.RobotWorld`) returning the robot's normalized action
 (2 values in [-1, 1]) for the scenario's kinematics. They are privileged (they see the true
 state, not the observation), which is what a baseline for a video or a sanity check needs.
 """
@@ -9,15 +10,21 @@ from __future__ import annotations
 
 import cmath
 import math
+from collections.abc import Callable
+from typing import TypeAlias
 
 import numpy as np
 
 from crowdnav import social_force as sf
 from crowdnav.orca import OrcaSolver, obstacle_rings, pyrvo_module, toward_goal
-from crowdnav.simulator import Simulator
+from crowdnav.robot_view import RobotWorld
+from crowdnav.world import CompiledWorld
+
+ScriptedPolicy: TypeAlias = Callable[[RobotWorld], np.ndarray]
+"""``policy(sim) -> action``: float32 (2,) in [-1, 1]."""
 
 
-def velocity_to_action(sim: Simulator, velocity: complex) -> np.ndarray:
+def velocity_to_action(sim: RobotWorld, velocity: complex) -> np.ndarray:
     """The normalized action that moves the robot at ``velocity`` (world frame, m/s), as close as its kinematics allow."""
     robot = sim.scenario.robot
     local = velocity * cmath.exp(-1j * sim.robot_heading) / robot.max_speed  # robot frame, in max-speed units
@@ -27,6 +34,7 @@ def velocity_to_action(sim: Simulator, velocity: complex) -> np.ndarray:
         return np.array([local.real, local.imag], dtype=np.float32)
     # unicycle: turn towards the direction (as fast as one step allows), drive along the heading
     bearing = cmath.phase(local) if abs(local) > 1e-9 else 0.0
+    assert robot.max_angular_speed is not None  # the schema requires it of a unicycle
     turn = bearing / (robot.max_angular_speed * sim.dt)
     forward = abs(local) * max(0.0, math.cos(bearing))
     return np.clip(np.array([forward, turn], dtype=np.float32), -1.0, 1.0)
@@ -35,7 +43,7 @@ def velocity_to_action(sim: Simulator, velocity: complex) -> np.ndarray:
 class StraightToGoal:
     """Head straight for the goal at full speed, slowing so as not to overshoot it."""
 
-    def __call__(self, sim: Simulator) -> np.ndarray:
+    def __call__(self, sim: RobotWorld) -> np.ndarray:
         to_goal = sim.robot_goal - sim.robot_position
         speed = min(sim.scenario.robot.max_speed, abs(to_goal) / sim.dt)
         direction = to_goal / abs(to_goal) if abs(to_goal) > 1e-12 else 0j
@@ -45,10 +53,10 @@ class StraightToGoal:
 class RandomPolicy:
     """Uniformly random actions from its own seeded generator."""
 
-    def __init__(self, seed: int | None = None):
+    def __init__(self, seed: int | None = None) -> None:
         self.rng = np.random.default_rng(seed)
 
-    def __call__(self, sim: Simulator) -> np.ndarray:
+    def __call__(self, sim: RobotWorld) -> np.ndarray:
         return self.rng.uniform(-1.0, 1.0, size=2).astype(np.float32)
 
 
@@ -62,7 +70,7 @@ class SocialForceRobot:
     driving at each other would meet head on.
     """
 
-    def __call__(self, sim: Simulator) -> np.ndarray:
+    def __call__(self, sim: RobotWorld) -> np.ndarray:
         params = sim.scenario.humans.social_force
         robot = sim.scenario.robot
         to_goal = np.array([sim.robot_goal - sim.robot_position])
@@ -71,6 +79,7 @@ class SocialForceRobot:
         if sim.obstacles.polygon_count + sim.obstacles.disc_count:
             offsets = np.concatenate([sim.polygon_offset[0], sim.disc_offset[0] if sim.obstacles.disc_count else []])
             distances = np.concatenate([sim.polygon_distance[0], sim.disc_distance[0] if sim.obstacles.disc_count else []])
+            assert sim.obstacles.surface_radius is not None  # build_obstacles sets it for every world
             contact = robot.radius + sim.obstacles.surface_radius
             gain = sf.repulsion_gain(params.obstacle_strength, contact, params.obstacle_range)
             force += complex(sf.repulsion(offsets[None, :], distances[None, :], gain[None, :], -1.0 / params.obstacle_range)[0])
@@ -96,15 +105,16 @@ class OrcaRobot:
     optional package pyrvo (``pip install 'crowdnav[orca]'``).
     """
 
-    def __init__(self):
+    def __init__(self) -> None:
         pyrvo_module("the ORCA robot (baseline:orca)")
-        self._worlds: dict[int, tuple] = {}
+        self._worlds: dict[int, tuple[CompiledWorld, list[list[tuple[float, float]]], dict[int, OrcaSolver]]] = {}
         """id(world) -> (world, its obstacles as RVO2 rings, agent count -> solver): one policy may drive many envs."""
 
-    def __call__(self, sim: Simulator) -> np.ndarray:
-        world, rings, solvers = self._worlds.get(id(sim.world), (None, None, None))
-        if world is not sim.world:  # (the tuple holds the world, so its id is not reused while cached)
-            world, rings, solvers = self._worlds[id(sim.world)] = (sim.world, obstacle_rings(sim.obstacles), {})
+    def __call__(self, sim: RobotWorld) -> np.ndarray:
+        cached = self._worlds.get(id(sim.world))
+        if cached is None or cached[0] is not sim.world:  # (the tuple holds the world, so its id is not reused while cached)
+            cached = self._worlds[id(sim.world)] = (sim.world, obstacle_rings(sim.obstacles), {})
+        _, rings, solvers = cached
         robot, count = sim.scenario.robot, sim.n_humans + 1
         solver = solvers.get(count)
         if solver is None:
@@ -118,5 +128,7 @@ class OrcaRobot:
         return velocity_to_action(sim, velocity)
 
 
-SCRIPTED_POLICIES = {"social-force": SocialForceRobot, "straight": StraightToGoal, "random": RandomPolicy, "orca": OrcaRobot}
-"""Names accepted by ``crowdnav render --policy``."""
+SCRIPTED_POLICIES: dict[str, Callable[..., ScriptedPolicy]] = {
+    "social-force": SocialForceRobot, "straight": StraightToGoal, "random": RandomPolicy, "orca": OrcaRobot,
+}
+"""Names accepted by ``crowdnav render --policy`` -> the policy's class (``random`` takes a seed, the others nothing)."""

@@ -9,11 +9,61 @@ once (one robot: the first and only). Nothing here writes a state.
 
 from __future__ import annotations
 
-from typing import Any
+from typing import TYPE_CHECKING, Any, Protocol
 
 import numpy as np
 
 from crowdnav.sim_state import SELF_DISTANCE
+
+if TYPE_CHECKING:
+    from crowdnav.obstacles import StaticObstacles
+    from crowdnav.scenario.schema import Scenario
+    from crowdnav.world import CompiledWorld
+
+
+class RobotWorld(Protocol):
+    """What the scripted policies read of the world around one robot: a :class:`crowdnav.Simulator` or a :class:`RobotView`.
+
+    Index 0 of the arrays is that robot, then the discs it sees (``positions`` (N+1,) complex m,
+    ``velocities`` (N+1,) complex m/s, ``radii`` (N+1,) m); the obstacle tables are (1, P) / (1, C).
+    """
+
+    @property
+    def world(self) -> CompiledWorld: ...
+    @property
+    def scenario(self) -> Scenario: ...
+    @property
+    def obstacles(self) -> StaticObstacles: ...
+    @property
+    def dt(self) -> float: ...
+    @property
+    def n_humans(self) -> int: ...
+    @property
+    def robot_position(self) -> complex: ...
+    @property
+    def robot_goal(self) -> complex: ...
+    @property
+    def robot_heading(self) -> float: ...
+    @property
+    def robot_social_force(self) -> complex: ...
+    @property
+    def other_robot_discs(self) -> slice: ...
+    @property
+    def positions(self) -> np.ndarray: ...
+    @property
+    def velocities(self) -> np.ndarray: ...
+    @property
+    def radii(self) -> np.ndarray: ...
+    @property
+    def human_max_speed(self) -> np.ndarray: ...
+    @property
+    def polygon_offset(self) -> np.ndarray: ...
+    @property
+    def polygon_distance(self) -> np.ndarray: ...
+    @property
+    def disc_offset(self) -> np.ndarray: ...
+    @property
+    def disc_distance(self) -> np.ndarray: ...
 
 
 class RobotView:
@@ -120,14 +170,14 @@ class RobotAccessors:
 
     team: Any
     _state: Any  # the simulator's SimState
-    _robot_scenarios: list[Any]
+    _robot_scenarios: list[Scenario]
 
     @property
     def robot_count(self) -> int:
         """R: the scenario's robots (1 without ``robots:``)."""
         return 1 if self.team is None else self.team.count
 
-    def robot_scenario(self, index: int) -> object:
+    def robot_scenario(self, index: int) -> Scenario:
         """The scenario as robot ``index`` sees it: its own spec as ``robot`` (the scenario itself for the ego robot)."""
         return self._robot_scenarios[index]
 

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from collections.abc import Callable
-from typing import Any, cast
+from typing import Any
 
 import gymnasium as gym
 import numpy as np
@@ -109,7 +109,7 @@ class CrowdNavEnv(gym.Env):
         self.observation_space = self.core.observation_space
         self.action_space = self.core.action_space
 
-    def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None):
+    def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
         """Start an episode; the same seed gives the same episode. ``options`` is accepted and unused."""
         super().reset(seed=seed)
         observation = self.core.reset(seed)
@@ -118,7 +118,7 @@ class CrowdNavEnv(gym.Env):
         self._other_outcomes = dict.fromkeys(self._other_names)
         return observation, {}
 
-    def step(self, action: np.ndarray):
+    def step(self, action: np.ndarray) -> tuple[dict[str, np.ndarray], float, bool, bool, dict[str, Any]]:
         if self._other_names:
             events, reward, terms = self.core.step(action, other_robot_actions=self._other_actions())
         else:
@@ -169,7 +169,7 @@ def _other_robot_policy(policy: str | Callable[..., Any]) -> Callable[..., Any]:
         if policy not in OTHER_ROBOT_POLICIES:
             raise ValueError(f"other_robots={policy!r} is not a scripted robot policy; expected one of {OTHER_ROBOT_POLICIES} "
                              "or a callable policy(view) -> action")
-        return cast(Callable[..., Any], SCRIPTED_POLICIES[policy]())
+        return SCRIPTED_POLICIES[policy]()
     if isinstance(policy, type):
         made: Callable[..., Any] = policy()
         return made
