@@ -21,6 +21,7 @@ from crowdnav.envs.reward import Reward
 from crowdnav.rendering.episode_view import RENDER_MODES, EpisodeView, RenderOptions
 from crowdnav.robot_view import RobotView
 from crowdnav.scenario import ScenarioIssue, library
+from crowdnav.scenario.loader import LoadedScenario
 from crowdnav.sensors import Modality, build_modalities
 from crowdnav.simulator import Simulator, StepEvents
 from crowdnav.world import CompiledWorld, WorldSource, load_world
@@ -91,8 +92,15 @@ def load_env_world(scenario: ScenarioSource | None, overrides: Mapping[str, Any]
     try:
         modalities = build_modalities(sensors.modalities, world, sensors)
     except ValueError as error:  # unknown or duplicate keys: report them like any other scenario field
-        raise world.source.error([ScenarioIssue("sensors.modalities", str(error))]) from None
+        raise _source(world).error([ScenarioIssue("sensors.modalities", str(error))]) from None
     return world, modalities
+
+
+def _source(world: CompiledWorld) -> LoadedScenario:
+    """The file ``world`` was loaded from, for errors with file and line (:func:`crowdnav.world.load_world` records it)."""
+    if world.source is None:
+        raise RuntimeError("the world was compiled without load_world, so it has no source to name in an error")
+    return world.source
 
 
 def real_array(value: Any, what: str) -> np.ndarray:
@@ -178,7 +186,7 @@ class EnvCore:
                 built = build_modalities(keys, dataclasses.replace(world, scenario=self.simulator.robot_scenario(k)), sensors)
             except ValueError as error:
                 field = f"robots.{k}.modalities" if own is not None else "sensors.modalities"
-                raise world.source.error([ScenarioIssue(field, str(error))]) from None
+                raise _source(world).error([ScenarioIssue(field, str(error))]) from None
             space = spaces.Dict({key: modality.space() for key, modality in built.items()})
             self._robot_sensors.append(tuple((key, built[key]) for key in space.spaces))
             if k == 0:
@@ -193,7 +201,7 @@ class EnvCore:
         self.simulator.reset(seed=seed)
         self.reward.reset(self.simulator)
         for k, reward in enumerate(self.robot_rewards[1:], start=1):
-            reward.reset(self.simulator.robot_view(k))  # type: ignore[arg-type]  # reads what a simulator offers
+            reward.reset(self.simulator.robot_view(k))  # a RobotView reads as a simulator
         self._running = True
         if self.view is not None:
             self.view.on_reset()
@@ -211,10 +219,10 @@ class EnvCore:
         observation = {}
         for key, modality in self._robot_sensors[index]:
             if modality.sees_robots:
-                observation[key] = modality.observe(view)  # type: ignore[arg-type]
+                observation[key] = modality.observe(view)
             else:
                 people = people if people is not None else sim.robot_view(index, with_robots=False)
-                observation[key] = modality.observe(people)  # type: ignore[arg-type]
+                observation[key] = modality.observe(people)  # type: ignore[arg-type]  # a RobotView reads as a simulator
         return observation
 
     def observe(self) -> dict[str, np.ndarray]:
@@ -227,7 +235,7 @@ class EnvCore:
             self._observation = {key: modality.observe(sim) for key, modality in self._sensors}
         else:
             self._observation = self.observe_robot(0)
-        if self.render_mode == "human":
+        if self.render_mode == "human" and self.view is not None:  # (human mode always has a view)
             self.view.render(self._observation)
         return self._observation
 
@@ -266,7 +274,7 @@ class EnvCore:
             if events is None:
                 results.append(None)
                 continue
-            reward, terms = self.robot_rewards[k](sim.robot_view(k), events)  # type: ignore[arg-type]  # reads what a simulator offers
+            reward, terms = self.robot_rewards[k](sim.robot_view(k), events)  # a RobotView reads as a simulator
             results.append((events, reward, terms))
         if all(result is None or result[0].terminated or result[0].truncated for result in results):
             self._running = False
