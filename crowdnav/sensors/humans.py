@@ -106,6 +106,7 @@ class HumansModality(Modality):
             return out
         surface = robot_distance[..., 1:] - radii[1:]
         order = np.argsort(surface, axis=-1, kind="stable")[..., : self.count]
+        robot_velocity: complex | np.ndarray  # (K, 1) for K worlds, a Python complex for one
         if batched:
             def gather(values: np.ndarray) -> np.ndarray:
                 return np.take_along_axis(values, order, axis=-1)
