@@ -15,6 +15,9 @@ Step order: humans' commands (social force or ORCA, or given actions) and robot 
 integrate -> measure the new geometry once (pairwise distances, nearest obstacle points) ->
 keep humans out of walls and of each other -> robot collision, world-exit and goal checks ->
 humans at their goals follow the scenario's ``on_goal`` rule.
+The measuring and what is read from it (``refresh``, the overlap pushes, the robot's collision
+and world-exit checks) live in :mod:`crowdnav.sim_geometry` (:class:`crowdnav.sim_geometry.SimGeometry`,
+a mixin of this class); this module draws episodes and steps them.
 
 The robot cannot escape the task: leaving the world (its centre outside the scenario's
 ``world.min`` / ``world.max`` rectangle) is either impossible (``world.boundary_walls``: the
@@ -43,21 +46,24 @@ import math
 import numpy as np
 
 from crowdnav import social_force as sf
-from crowdnav.contacts import deepest_contact, goal_distance, outside, push_humans_apart, push_out_of_obstacles, touching
+from crowdnav.contacts import goal_distance
 from crowdnav.events import OUTCOMES, Collision, SimulationError, StepEvents  # noqa: F401  (re-exported: their public home)
 from crowdnav.groups import apply_goal_rules, first_goals, place_groups
-from crowdnav.obstacles import nearest_on_edges
 from crowdnav.orca import OrcaCrowd, OrcaUnavailableError
 from crowdnav.placement import JITTER_REACH
 from crowdnav.robot_view import RobotAccessors, robot_scenario
 from crowdnav.robots import PARKED, Team, first_heading, robot_kinematics
 from crowdnav.scenario.errors import ScenarioError, ScenarioIssue
 from crowdnav.scenario.loader import Overrides
-from crowdnav.sim_state import SELF_DISTANCE, PairConstants, SimState, StateFields, pair_constants
+from crowdnav.sim_geometry import SimGeometry
+from crowdnav.sim_state import PairConstants, SimState, StateFields, pair_constants
 from crowdnav.world import CompiledWorld, WorldSource, load_world
 
+_NO_TABLE = np.zeros((0, 0))
+"""The all-pairs tables of a crowd on the neighbour grid, which has none (and never reads them)."""
 
-class Simulator(StateFields, RobotAccessors):
+
+class Simulator(StateFields, RobotAccessors, SimGeometry):
     """Vectorized crowd simulator for one scenario.
 
     >>> sim = Simulator("room_furniture")
@@ -133,11 +139,6 @@ class Simulator(StateFields, RobotAccessors):
         if self._state is None:
             raise RuntimeError("call reset() before reading the simulator's state")
         return self._state
-
-    @property
-    def n_humans(self) -> int:
-        """Active humans this episode."""
-        return len(self._state.positions) - 1
 
     @property
     def robot_position(self) -> complex:
@@ -233,8 +234,11 @@ class Simulator(StateFields, RobotAccessors):
         constants = self.pair_constants(n)
         self.radii = constants.radii
         """(n+1,) body radii (m), robot first."""
-        self._contact, self._gain, self._decay = constants.contact, constants.gain, constants.decay
-        self._contact_all, self._grid = constants.contact_all, constants.grid
+        self._grid = constants.grid
+        if constants.gain is None or constants.decay is None or constants.contact_all is None:
+            self._gain = self._decay = self._contact_all = _NO_TABLE  # a grid crowd: refresh() reads the grid's instead
+        else:
+            self._gain, self._decay, self._contact_all = constants.gain, constants.decay, constants.contact_all
 
     def load_state(self, state: SimState) -> None:
         """Make ``state`` (one world's, owned by this simulator from now on) the episode's state and measure its geometry.
@@ -348,14 +352,6 @@ class Simulator(StateFields, RobotAccessors):
         total += self._repulsion[1:]
         return sf.velocity_command(total, state.velocities[1:], state.human_preferred_speed, state.command_cap, self.relaxation)
 
-    @property
-    def robot_social_force(self) -> complex:
-        """Social repulsion the humans exert on the robot (dimensionless force, world frame).
-
-        Row 0 of the fused repulsion: the robot's own column and its obstacle columns have zero gain.
-        """
-        return complex(self._repulsion[0])
-
     def _robot_velocity(self, action: np.ndarray) -> complex:
         a0, a1 = float(action[0]), float(action[1])
         if not (math.isfinite(a0) and math.isfinite(a1)):
@@ -375,123 +371,6 @@ class Simulator(StateFields, RobotAccessors):
         command = np.clip(actions[:, 0], -1, 1) + 1j * np.clip(actions[:, 1], -1, 1)
         command /= np.maximum(np.abs(command), 1.0)
         return command * self._state.human_max_speed
-
-    # ------------------------------------------------------------------- geometry
-
-    def refresh(self) -> None:
-        """Geometry at the current positions, computed once per step and read by sensors.
-
-        Sets ``robot_offset`` / ``robot_distance`` ((n+1,): from the robot to every agent, centre
-        distance, its own a huge number), ``pair_offset`` / ``pair_distance`` ((n+1, n+1): from
-        agent i to agent j; for crowds of ``grid_from`` humans or more they are built only when
-        read), ``polygon_offset`` / ``polygon_distance``
-        ((n+1, P): to the nearest point of each static polygon) and, with round obstacles,
-        ``disc_offset`` / ``disc_distance`` ((n+1, C): to each disc's centre, centre distance).
-        Also the repulsion on every agent from humans (and the robot if seen) and obstacles.
-        Call it after editing ``positions`` by hand (tests, scripted set-ups).
-        """
-        z = self._state.positions
-        if self._grid is not None:
-            self._refresh_grid(z)
-            return
-        offset = z[None, :] - z[:, None]  # row i, column j: from agent i to agent j
-        distance = np.abs(offset)
-        distance.flat[:: len(z) + 1] = SELF_DISTANCE
-        self._pair_offset, self._pair_distance = offset, distance
-        self.robot_offset, self.robot_distance = offset[0], distance[0]
-        static_offset, static_distance = self._measure_obstacles(z)
-        if static_offset is not None:
-            offset = np.concatenate([offset, static_offset], axis=1)
-            distance = np.concatenate([distance, static_distance], axis=1)
-        self._gap = distance - self._contact_all  # surface gaps: agents then obstacles, (n+1, n+1+P+C)
-        self._robot_gap = self._gap[0]
-        self._humans_touch = len(z) > 1 and bool(self._gap[1:].min() < 0.0)
-        self._repulsion = sf.repulsion(offset, distance, self._gain, self._decay)
-        if self.team is not None:
-            self.team.refresh(z, self._repulsion)
-
-    def _measure_obstacles(self, z: np.ndarray) -> tuple[np.ndarray | None, np.ndarray | None]:
-        """Every agent's offset and distance to each static obstacle (polygons, then disc centres; None without any).
-
-        Also sets the per-kind views the sensors read: ``polygon_*`` and ``disc_*``.
-        """
-        if not self._static_count:
-            empty = np.zeros((len(z), 0))
-            self.polygon_offset = self.disc_offset = empty.astype(complex)
-            self.polygon_distance = self.disc_distance = empty
-            return None, None
-        static_offset, static_distance = nearest_on_edges(z, self.obstacles.surface)
-        count = self.obstacles.polygon_count
-        self.polygon_offset, self.polygon_distance = static_offset[:, :count], static_distance[:, :count]
-        self.disc_offset, self.disc_distance = static_offset[:, count:], static_distance[:, count:]
-        return static_offset, static_distance
-
-    def _refresh_grid(self, z: np.ndarray) -> None:
-        """:meth:`refresh` for a large crowd: the robot against everyone, humans against neighbours."""
-        geometry = self._grid.refresh(z, *self._measure_obstacles(z))
-        self._geometry = geometry
-        self._pair_offset = self._pair_distance = None  # built from positions only if someone asks
-        self.robot_offset, self.robot_distance = geometry.robot_offset, geometry.robot_distance
-        self._robot_gap, self._humans_touch, self._repulsion = geometry.robot_gap, geometry.humans_touch, geometry.repulsion
-        if self.team is not None:
-            self._repulsion = self._repulsion.copy()  # the grid's own array: the team adds to a copy
-            self.team.refresh(z, self._repulsion)
-
-    @property
-    def pair_offset(self) -> np.ndarray:
-        """(n+1, n+1) complex: from agent i to agent j (all pairs; built on demand for large crowds)."""
-        if self._pair_offset is None:
-            self._dense_pairs()
-        return self._pair_offset
-
-    @property
-    def pair_distance(self) -> np.ndarray:
-        """(n+1, n+1): centre distances, the diagonal a huge number (built on demand for large crowds)."""
-        if self._pair_distance is None:
-            self._dense_pairs()
-        return self._pair_distance
-
-    def _dense_pairs(self) -> None:
-        z = self._state.positions
-        offset = z[None, :] - z[:, None]
-        distance = np.abs(offset)
-        distance.flat[:: len(z) + 1] = SELF_DISTANCE
-        self._pair_offset, self._pair_distance = offset, distance
-
-    def _resolve_human_overlaps(self) -> None:
-        """Push humans apart (half the overlap each), then out of walls and furniture.
-
-        Obstacles go last, from the positions after the pair push, because a neighbour's push
-        can move a human into furniture; a second obstacle pass settles corners where the first
-        pass out of one obstacle lands in another. Repulsion keeps all of this rare; it is what
-        holds humans out of walls and furniture (penetration under 1 cm, docs/simulator.md).
-        """
-        n, positions = self.n_humans, self._state.positions
-        if self._grid is not None:
-            positions += self._grid.push_apart(self._geometry)
-            contact = self._grid.static_contact[1:]
-        else:  # the batch's kernels, on this one world (views with a world axis of one)
-            push_humans_apart(positions[None], self._pair_offset[None, 1:, 1:], self._pair_distance[None, 1:, 1:], self._gap[None, 1:, 1 : n + 1])
-            contact = self._contact_all[1:, n + 1 :]
-        if self._static_count:
-            push_out_of_obstacles(positions[None], self.obstacles.surface, contact)
-
-    def robot_collision(self) -> Collision | None:
-        """The robot's deepest contact in the current state (touching counts), or None."""
-        gaps = self._robot_gap
-        if not len(gaps) or not touching(gaps):
-            return None  # the common case, decided with one reduction
-        return deepest_contact(gaps, self.n_humans, self.obstacles.labels + self.obstacles.disc_labels)
-
-    def robot_left_world(self) -> bool:
-        """Whether the robot's centre is outside the world rectangle (always False with boundary walls).
-
-        Four scalar comparisons: the robot is one point, whatever the crowd size.
-        """
-        if self.bounds is None:
-            return False
-        robot = complex(self._state.positions[0])
-        return outside(robot.real, robot.imag, self.bounds)
 
     # ----------------------------------------------------------------- several robots
 
