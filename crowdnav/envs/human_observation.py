@@ -35,6 +35,8 @@ inactive one's (absent this episode, or gone through ``human_exit``) is all zero
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 from gymnasium import spaces
 
@@ -73,10 +75,15 @@ class HumanObservations:
         self._robot_speed_max = max(robot.max_speed for robot in robots) * _ROUNDING
         self._others = np.zeros((0, 0), dtype=np.intp)
         self._constants: dict[str, np.ndarray] = {}
-        self._shapes = {key: space.shape for key, space in self.space().spaces.items()}
+        self._shapes = {key: box.shape for key, box in self._boxes().items()}
 
     def space(self) -> spaces.Dict:
         """A new Dict space for one human (each agent gets its own object, seeded separately)."""
+        fields: dict[str, spaces.Space[Any]] = dict(self._boxes())
+        return spaces.Dict(fields)
+
+    def _boxes(self) -> dict[str, spaces.Box]:
+        """The space's fields, new objects each call."""
         inf, k, o = np.inf, self._slots, self._static_count
         speed = self._speed_max
         fields = {
@@ -99,7 +106,7 @@ class HumanObservations:
             fields["robot_radius"] = _box(0.0, self._radius_max, (1,))
         if self.active_flag:
             fields["active"] = _box(0.0, 1.0, (1,))
-        return spaces.Dict(fields)
+        return fields
 
     def reset(self, sim: Simulator) -> None:
         """Per-episode index tables and constant fields (the crowd size is fixed within an episode)."""

@@ -34,6 +34,7 @@ are the documented examples; by default humans get 0 and stay until the episode 
 from __future__ import annotations
 
 from collections.abc import Callable, Mapping
+from typing import cast
 
 import numpy as np
 from gymnasium import spaces
@@ -99,12 +100,14 @@ def goal_reward(sim: Simulator) -> np.ndarray:
 
 def exit_at_goal(sim: Simulator) -> np.ndarray:
     """Example human exit: a human leaves the episode when it reaches its goal."""
-    return sim.human_arrived.copy()
+    leaving: np.ndarray = sim.human_arrived.copy()  # (numpy types copy() of an unknown shape as Any)
+    return leaving
 
 
-def flat_spaces(observation_spaces: Mapping[str, spaces.Space]) -> dict[str, spaces.Box]:
+def flat_spaces(observation_spaces: Mapping[str, spaces.Dict]) -> dict[str, spaces.Box]:
     """Each agent's Dict space as the flat Box of :func:`gymnasium.spaces.flatten_space`."""
-    return {agent: spaces.flatten_space(space) for agent, space in observation_spaces.items()}
+    # a Dict of Boxes flattens to a Box (flatten_space is typed for any space)
+    return {agent: cast(spaces.Box, spaces.flatten_space(space)) for agent, space in observation_spaces.items()}
 
 
 def flatten_batch(space: spaces.Dict, batch: Mapping[str, np.ndarray], n: int) -> np.ndarray:

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from collections.abc import Mapping
-from typing import Any
+from typing import Any, TypeAlias, cast
 
 import numpy as np
 from gymnasium import spaces
@@ -16,8 +16,16 @@ from crowdnav.rendering.episode_view import RENDER_MODES
 
 ROBOT = "robot"
 
+AgentObservation: TypeAlias = Any
+"""One agent's observation: a dict of arrays, or (``flat_observations``) one float32 array. Any, not their union:
+which one is the env's option, so each caller reads the kind it asked for without narrowing every value."""
+Infos: TypeAlias = dict[str, dict[str, Any]]
+"""Each agent's info (outcome, reward terms, group, ...: values of several kinds)."""
+StepReturn: TypeAlias = tuple[dict[str, AgentObservation], dict[str, float], dict[str, bool], dict[str, bool], Infos]
+"""PettingZoo's (observations, rewards, terminations, truncations, infos), each keyed by agent."""
 
-class CrowdNavParallelEnv(ParallelEnv):
+
+class CrowdNavParallelEnv(ParallelEnv):  # type: ignore[misc]  # pettingzoo has no type information
     """Robot and humans as PettingZoo agents, stepped together.
 
     **Agents.** ``possible_agents`` is ``["robot", "human_0", ..., "human_{N-1}"]`` with N the
@@ -124,11 +132,11 @@ class CrowdNavParallelEnv(ParallelEnv):
         self._several = self.simulator.team is not None
         self.possible_agents = [*self._robot_names, *self._human_names]
         self.agents: list[str] = []
-        self.observation_spaces = dict(zip(self._robot_names, self.core.robot_spaces, strict=True))
-        self.observation_spaces.update({name: self._humans.space() for name in self._human_names})
-        self._dict_spaces = dict(self.observation_spaces)
+        self._dict_spaces = dict(zip(self._robot_names, self.core.robot_spaces, strict=True))
+        self._dict_spaces.update({name: self._humans.space() for name in self._human_names})
+        self.observation_spaces: dict[str, spaces.Space[Any]] = dict(self._dict_spaces)
         if self.flat_observations:
-            self.observation_spaces = flat_spaces(self._dict_spaces)
+            self.observation_spaces = dict(flat_spaces(self._dict_spaces))
         self.state_space = state_space(self.scenario.humans.max_count, len(self._robot_names))
         self.action_spaces = {name: spaces.Box(-1.0, 1.0, shape=(2,), dtype=np.float32) for name in self._robot_names}
         self.action_spaces.update({name: spaces.Box(-1.0, 1.0, shape=(2,), dtype=np.float32) for name in self._human_names})
@@ -139,13 +147,13 @@ class CrowdNavParallelEnv(ParallelEnv):
         """The global state (:mod:`crowdnav.envs.multi_agent`): (R + N) rows of x, y, vx, vy, gx, gy, radius, active."""
         return global_state(self.simulator, self.scenario.humans.max_count)
 
-    def observation_space(self, agent: str) -> spaces.Space:
+    def observation_space(self, agent: str) -> spaces.Space[Any]:
         return self.observation_spaces[agent]
 
-    def action_space(self, agent: str) -> spaces.Space:
+    def action_space(self, agent: str) -> spaces.Space[Any]:
         return self.action_spaces[agent]
 
-    def reset(self, seed: int | None = None, options: dict[str, Any] | None = None):
+    def reset(self, seed: int | None = None, options: dict[str, Any] | None = None) -> tuple[dict[str, AgentObservation], Infos]:
         """Start an episode; the same seed gives the same episode. ``options`` is accepted and unused."""
         robot_observation = self.core.reset(seed)
         self._humans.reset(self.simulator)
@@ -162,13 +170,13 @@ class CrowdNavParallelEnv(ParallelEnv):
         robot_info: dict[str, Any] = {"active": True} if self.fixed_agents and self._several else {}
         return observations, {**{name: dict(robot_info) for name in self._robot_names}, **infos}
 
-    def step(self, actions: Mapping[str, Any]):
+    def step(self, actions: Mapping[str, Any]) -> StepReturn:
         """One action per agent in ``agents``; out-of-range values are clipped, NaN/inf raise ValueError."""
         if not isinstance(actions, Mapping):
             raise TypeError(f"step() takes a dict {{agent: action}} with one action per agent in env.agents, got {type(actions).__name__}")
         if not self.agents:
             raise RuntimeError("the episode is over or has not started: call reset() before step()")
-        human_actions = self._human_actions(actions)  # checks every agent's action, the robots' keys too
+        human_actions: np.ndarray | None = self._human_actions(actions)  # checks every agent's action, the robots' keys too
         if not self.humans_as_agents:
             human_actions = None  # the scenario's crowd model moves them
         if self._several:
@@ -181,14 +189,14 @@ class CrowdNavParallelEnv(ParallelEnv):
         terminated = events.terminated
         truncated = events.truncated and not terminated
         terminations, truncations = dict.fromkeys(agents, terminated), dict.fromkeys(agents, truncated)
-        infos: dict[str, dict[str, Any]] = {agent: {} for agent in agents}
+        infos: Infos = {agent: {} for agent in agents}
         infos[ROBOT] = step_info(events, terms)
         self._step_humans(rewards, terminations, infos, terminated, truncated)
         if terminated or truncated:
             self.agents = []
         return observations, rewards, terminations, truncations, infos
 
-    def _step_robots(self, actions: Mapping[str, Any], human_actions: np.ndarray | None):
+    def _step_robots(self, actions: Mapping[str, Any], human_actions: np.ndarray | None) -> StepReturn:
         """:meth:`step` with several robots: each its own outcome; the episode ends when every robot's has."""
         robots, fixed = self._robot_names, self.fixed_agents
         was_active = list(self._active_robots)
@@ -206,7 +214,7 @@ class CrowdNavParallelEnv(ParallelEnv):
         for name in self._human_names:  # the humans end with the episode (or alone, by human_exit: below)
             if name in terminations:
                 terminations[name], truncations[name] = over and not truncated, truncated
-        infos: dict[str, dict[str, Any]] = {agent: {} for agent in agents}
+        infos: Infos = {agent: {} for agent in agents}
         for name, result in zip(robots, results, strict=True):
             if result is None:  # it left before this step: an agent still only under fixed_agents
                 if name in terminations:
@@ -237,7 +245,7 @@ class CrowdNavParallelEnv(ParallelEnv):
                 self.agents = [agent for agent in self.agents if agent not in ended]
         return observations, rewards, terminations, truncations, infos
 
-    def _step_humans(self, rewards: dict[str, float], terminations: dict[str, bool], infos: dict[str, dict[str, Any]],
+    def _step_humans(self, rewards: dict[str, float], terminations: dict[str, bool], infos: Infos,
                      terminated: bool, truncated: bool) -> None:
         """The humans' rewards, infos and exits of the step just taken (``terminated`` / ``truncated``: the episode's end)."""
         sim, fixed = self.simulator, self.fixed_agents
@@ -275,23 +283,25 @@ class CrowdNavParallelEnv(ParallelEnv):
         """Simulator indices (0-based among humans) of the humans still in ``agents``."""
         return np.array([int(name[len("human_") :]) for name in self._active_humans], dtype=int)
 
-    def _observations(self, robot_observation: dict[str, np.ndarray] | None, robots: list[str] | None = None) -> dict[str, Any]:
+    def _observations(self, robot_observation: dict[str, np.ndarray] | None, robots: list[str] | None = None) -> dict[str, AgentObservation]:
         """Every agent's observation: the one robot's ``robot_observation``, or (several robots) those of ``robots``
         (default: every active robot), all-zero for the others under ``fixed_agents``."""
-        observations: dict[str, Any] = {}
+        observations: dict[str, AgentObservation] = {}
         if self._several:
             robots = self._active_robots if robots is None else robots
             for k, name in enumerate(self._robot_names):
                 if name in robots:
                     observations[name] = self.core.observe_robot(k)
                 elif self.fixed_agents:
-                    observations[name] = {key: np.zeros(space.shape, space.dtype) for key, space in self._dict_spaces[name].spaces.items()}
+                    boxes = self._dict_spaces[name].spaces.items()  # (a robot's Dict holds Boxes: a shape and a dtype each)
+                    observations[name] = {key: np.zeros(cast(spaces.Box, box).shape, box.dtype) for key, box in boxes}
         else:
             observations[ROBOT] = robot_observation
         if self.flat_observations:
             for name in self._robot_names:
                 if name in observations:
-                    observations[name] = spaces.flatten(self._dict_spaces[name], observations[name]).astype(np.float32, copy=False)
+                    flat = cast(np.ndarray, spaces.flatten(self._dict_spaces[name], observations[name]))  # a Dict of Boxes flattens to an array
+                    observations[name] = flat.astype(np.float32, copy=False)
         if self.fixed_agents and self._human_names:
             batch = self._humans.fixed(self.simulator, self._active_index)
             if self.flat_observations:
