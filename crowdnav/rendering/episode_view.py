@@ -11,12 +11,13 @@ from __future__ import annotations
 import dataclasses
 import math
 from collections.abc import Mapping
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 
 from crowdnav.rendering.renderer import Overlays, Renderer, RenderOptions
 from crowdnav.sensors import build_modalities
+from crowdnav.sensors.lidar import LidarModality
 from crowdnav.simulator import Simulator, StepEvents
 
 RENDER_MODES = ["human", "rgb_array"]
@@ -86,19 +87,19 @@ class EpisodeView:
         overlays = Overlays(human_goals=self.options.human_goals)
         lidar = self._reading("lidar", observation) if self.options.lidar else None
         if lidar is not None:
-            sensor = self._sensors["lidar"]
+            sensor = cast(LidarModality, self._sensors["lidar"])  # the registry's "lidar"
             overlays.lidar = (sensor.angles, np.asarray(lidar, dtype=float) * sensor.max_range, sensor.max_range)
         if self.options.leog:
             overlays.leog = self._reading("leog", observation)
         closest = self._reading("closest_obstacle", observation) if self.options.closest_obstacle else None
         if closest is not None:
-            sensor = self._sensors["closest_obstacle"]
-            if sensor.settings.frame == "polar":
+            settings = self._sensors["closest_obstacle"].settings
+            if settings.frame == "polar":
                 distance, sine, cosine = (float(v) for v in closest)
-                point = distance * complex(cosine, sine) if distance < sensor.settings.max_range else None
+                point = distance * complex(cosine, sine) if distance < settings.max_range else None
             else:
                 point = complex(float(closest[0]), float(closest[1]))
-                point = point if abs(point) < sensor.settings.max_range else None
+                point = point if abs(point) < settings.max_range else None
             overlays.closest_point = point
         return overlays
 

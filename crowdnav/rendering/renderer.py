@@ -17,8 +17,9 @@ from __future__ import annotations
 import math
 import os
 from collections import deque
+from collections.abc import Sequence
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any, cast
 
 import numpy as np
 
@@ -26,14 +27,6 @@ from crowdnav.simulator import Simulator
 
 if TYPE_CHECKING:
     import pygame
-
-
-def _pygame():
-    """pygame, imported on first use (without its greeting on stdout)."""
-    os.environ.setdefault("PYGAME_HIDE_SUPPORT_PROMPT", "1")
-    import pygame
-
-    return pygame
 
 
 @dataclass(frozen=True)
@@ -99,7 +92,7 @@ class RenderOptions:
 @dataclass
 class _History:
     robot: list[complex] = field(default_factory=list)
-    humans: deque = field(default_factory=lambda: deque(maxlen=12))
+    humans: deque[np.ndarray] = field(default_factory=lambda: deque(maxlen=12))
     robots: list[np.ndarray] = field(default_factory=list)
     """Several robots: every robot's centre per record (:data:`crowdnav.robots.PARKED` once it left)."""
 
@@ -108,7 +101,9 @@ class Renderer:
     """Draws one scenario's states; call :meth:`reset` at each episode start, :meth:`frame` per step."""
 
     def __init__(self, sim: Simulator, options: RenderOptions | None = None):
-        pygame = _pygame()
+        os.environ.setdefault("PYGAME_HIDE_SUPPORT_PROMPT", "1")  # pygame's first import: no greeting on stdout
+        import pygame  # (imported here, not at the top: an env without a render mode never loads it)
+
         self.sim = sim
         self.options = options or RenderOptions()
         self.palette = Palette()
@@ -166,15 +161,17 @@ class Renderer:
 
     def frame(self, overlays: Overlays | None = None, hud: str = "") -> np.ndarray:
         """The current state as a ``uint8`` array of shape (H, W, 3)."""
-        pygame = _pygame()
+        import pygame
+
         surface = self._draw(overlays or Overlays(), hud)
         return np.ascontiguousarray(pygame.surfarray.pixels3d(surface).transpose(1, 0, 2))
 
     def show(self, overlays: Overlays | None = None, hud: str = "", fps: float = 10.0) -> None:
         """Draw into a window (opened on first use) and wait to keep ``fps``."""
-        pygame = _pygame()
+        import pygame
+
         surface = self._draw(overlays or Overlays(), hud)
-        if self._window is None:
+        if self._window is None or self._clock is None:  # (both are set together)
             pygame.display.init()
             pygame.display.set_caption(f"crowdnav: {self.sim.scenario.name}")
             self._window = pygame.display.set_mode(self.size)
@@ -185,7 +182,8 @@ class Renderer:
         self._clock.tick(fps)
 
     def close(self) -> None:
-        pygame = _pygame()
+        import pygame
+
         if self._window is not None:
             pygame.display.quit()
             self._window = None
@@ -198,7 +196,8 @@ class Renderer:
     # ---------------------------------------------------------------- drawing
 
     def _draw_static(self) -> pygame.Surface:
-        pygame = _pygame()
+        import pygame
+
         surface = pygame.Surface(self.size)
         surface.fill(self.palette.panel)
         surface.fill(self.palette.outside, self._map_rect)
@@ -206,7 +205,7 @@ class Renderer:
         world = self.sim.scenario.world
         corners = self.to_pixels(np.array([complex(*world.min), complex(world.max[0], world.min[1]),
                                            complex(*world.max), complex(world.min[0], world.max[1])]))
-        pygame.draw.polygon(surface, self.palette.background, corners)
+        pygame.draw.polygon(surface, self.palette.background, _xy(corners))
         obstacles = self.sim.obstacles
         for polygon, label in zip(obstacles.polygons, obstacles.labels, strict=True):
             colour = self.palette.furniture if label.startswith("furniture") else self.palette.wall
@@ -214,9 +213,9 @@ class Renderer:
                 colour = self.palette.outside
             for ring in [polygon.exterior, *polygon.interiors]:
                 xy = np.asarray(ring.coords)
-                pygame.draw.polygon(surface, colour, self.to_pixels(xy[:, 0] + 1j * xy[:, 1]))
+                pygame.draw.polygon(surface, colour, _xy(self.to_pixels(xy[:, 0] + 1j * xy[:, 1])))
         for centre, radius in zip(obstacles.disc_center, obstacles.disc_radius, strict=True):
-            pygame.draw.circle(surface, self.palette.furniture, self.to_pixels(centre), radius * self.scale)
+            pygame.draw.circle(surface, self.palette.furniture, _xy(self.to_pixels(centre)), radius * self.scale)
         surface.set_clip(None)
         edge = (self._panel_rect.topright if self._below else self._panel_rect.bottomleft)
         pygame.draw.line(surface, self.palette.outline, self._panel_rect.topleft, edge, 1)
@@ -224,7 +223,8 @@ class Renderer:
         return surface
 
     def _draw(self, overlays: Overlays, hud: str) -> pygame.Surface:
-        pygame = _pygame()
+        import pygame
+
         sim, palette, scale = self.sim, self.palette, self.scale
         surface = self._static.copy()
         surface.set_clip(self._map_rect)  # nothing drawn on the map spills into the bar or the panel
@@ -237,43 +237,43 @@ class Renderer:
             trails = self.to_pixels(np.array(self._history.humans))  # (T, n, 2)
             if trails.shape[1] == sim.n_humans:
                 for i in range(trails.shape[1]):
-                    pygame.draw.lines(surface, palette.human_trail, False, trails[:, i], 2)
+                    pygame.draw.lines(surface, palette.human_trail, False, _xy(trails[:, i]), 2)
         if len(self._history.robot) > 1:
-            pygame.draw.lines(surface, palette.robot_path, False, self.to_pixels(np.array(self._history.robot)), 2)
+            pygame.draw.lines(surface, palette.robot_path, False, _xy(self.to_pixels(np.array(self._history.robot))), 2)
         if overlays.lidar is not None:
             bearings, ranges, max_range = overlays.lidar
             ends = self.to_pixels(robot + ranges * np.exp(1j * (bearings + heading)))
             start = self.to_pixels(robot)
             for end in ends:
-                pygame.draw.line(surface, palette.lidar_ray, start, end, 1)
+                pygame.draw.line(surface, palette.lidar_ray, _xy(start), _xy(end), 1)
             for end in ends[ranges < max_range]:  # beams that hit something
-                pygame.draw.circle(surface, palette.lidar, end, 2)
+                pygame.draw.circle(surface, palette.lidar, _xy(end), 2)
         # the goal above the LIDAR rays and trails, below the agents
         goal, goal_px = self.to_pixels(sim.robot_goal), max(6.0, sim.scenario.robot.goal_radius * scale)
         if sim.team is None or sim.team.state.active[0]:
-            pygame.draw.circle(surface, palette.goal_fill, goal, goal_px)
-            pygame.draw.circle(surface, palette.goal, goal, goal_px, 3)
+            pygame.draw.circle(surface, palette.goal_fill, _xy(goal), goal_px)
+            pygame.draw.circle(surface, palette.goal, _xy(goal), goal_px, 3)
             _cross(surface, palette.goal, goal, max(5.0, goal_px * 0.6))
         radius = sim.scenario.humans.radius * scale
         colours = self._group_colours
         for position, velocity, group in zip(self.to_pixels(sim.human_positions), sim.human_velocities, sim.human_group, strict=True):
-            pygame.draw.circle(surface, colours[group], position, radius)
-            pygame.draw.circle(surface, palette.outline, position, radius, 1)
+            pygame.draw.circle(surface, colours[group], _xy(position), radius)
+            pygame.draw.circle(surface, palette.outline, _xy(position), radius, 1)
             if abs(velocity) > 1e-6:
                 tip = position + radius * np.array([velocity.real, -velocity.imag]) / abs(velocity)
-                pygame.draw.line(surface, palette.outline, position, tip, 2)
+                pygame.draw.line(surface, palette.outline, _xy(position), _xy(tip), 2)
         centre = self.to_pixels(robot)
         robot_radius = sim.scenario.robot.radius * scale
         if sim.team is not None:
             self._draw_robots(surface)
         else:
-            pygame.draw.circle(surface, palette.robot, centre, robot_radius)
-            pygame.draw.circle(surface, palette.outline, centre, robot_radius, 2)
-            pygame.draw.line(surface, palette.outline, centre, centre + robot_radius * np.array([math.cos(heading), -math.sin(heading)]), 3)
+            pygame.draw.circle(surface, palette.robot, _xy(centre), robot_radius)
+            pygame.draw.circle(surface, palette.outline, _xy(centre), robot_radius, 2)
+            pygame.draw.line(surface, palette.outline, _xy(centre), _xy(centre + robot_radius * np.array([math.cos(heading), -math.sin(heading)])), 3)
         if overlays.closest_point is not None:
             point = self.to_pixels(robot + overlays.closest_point * complex(math.cos(heading), math.sin(heading)))
-            pygame.draw.line(surface, palette.closest, centre, point, 2)
-            pygame.draw.circle(surface, palette.closest, point, 4)
+            pygame.draw.line(surface, palette.closest, _xy(centre), _xy(point), 2)
+            pygame.draw.circle(surface, palette.closest, _xy(point), 4)
         surface.set_clip(None)
         left, top = self._panel_rect.left + 12, self._panel_rect.top + 8
         if overlays.leog is not None:
@@ -286,7 +286,8 @@ class Renderer:
 
     def _draw_inset(self, surface: pygame.Surface, grid: np.ndarray, left: int, top: int) -> tuple[int, int]:
         """The LEOG in the panel with its caption; returns its right edge and the y below the caption."""
-        pygame = _pygame()
+        import pygame
+
         grid = grid.reshape(grid.shape[-2], grid.shape[-1])
         side = self._inset_side
         pixels = np.where(grid > 0, 30, 235).astype(np.uint8)
@@ -306,7 +307,8 @@ class Renderer:
 
     def _draw_robots(self, surface: pygame.Surface) -> None:
         """Several robots: each active one in its colour with its name, its goal (a ring in its colour) and its path."""
-        pygame = _pygame()
+        import pygame
+
         sim, palette, scale = self.sim, self.palette, self.scale
         team = sim.team
         active, names = team.state.active, team.names
@@ -319,13 +321,13 @@ class Renderer:
                 here = path[:, k]
                 here = here[np.abs(here) < 1e6]  # not the points after it left
                 if len(here) > 1:
-                    pygame.draw.lines(surface, colour, False, self.to_pixels(here), 2)
-            ring = max(6.0, float(sim.robot_scenario(k).robot.goal_radius) * scale)  # type: ignore[attr-defined]
-            pygame.draw.circle(surface, colour, self.to_pixels(goal), ring, 3)
+                    pygame.draw.lines(surface, colour, False, _xy(self.to_pixels(here)), 2)
+            ring = max(6.0, float(sim.robot_scenario(k).robot.goal_radius) * scale)
+            pygame.draw.circle(surface, colour, _xy(self.to_pixels(goal)), ring, 3)
             centre = self.to_pixels(position)
-            pygame.draw.circle(surface, colour, centre, radius)
-            pygame.draw.circle(surface, palette.outline, centre, radius, 2)
-            pygame.draw.line(surface, palette.outline, centre, centre + radius * np.array([math.cos(heading), -math.sin(heading)]), 3)
+            pygame.draw.circle(surface, colour, _xy(centre), radius)
+            pygame.draw.circle(surface, palette.outline, _xy(centre), radius, 2)
+            pygame.draw.line(surface, palette.outline, _xy(centre), _xy(centre + radius * np.array([math.cos(heading), -math.sin(heading)])), 3)
             label = self._font.render(names[k], True, palette.text)
             surface.blit(label, (centre[0] + radius + 2, centre[1] - radius - label.get_height() / 2))
 
@@ -352,7 +354,8 @@ class Renderer:
 
     def _draw_legend(self, surface: pygame.Surface, overlays: Overlays, left: int, top: int) -> None:
         """One entry per row from (left, top); below the map, in columns that fit the panel's height."""
-        pygame = _pygame()
+        import pygame
+
         row, column_width = self._row, 150
         entries = self._legend_entries(overlays)
         if self._below:
@@ -378,7 +381,8 @@ class Renderer:
 
     def _draw_scale_bar(self, surface: pygame.Surface) -> None:
         """A bar of a round number of metres at the panel's bottom (right end below the map)."""
-        pygame = _pygame()
+        import pygame
+
         room = 160 if self._below else self._panel_rect.width - 24
         metres = max((m for m in (0.5, 1, 2, 5, 10, 20, 50, 100) if m * self.scale <= room), default=0.5)
         length = metres * self.scale
@@ -406,15 +410,25 @@ def _fit(font: pygame.font.Font, text: str, width: int) -> str:
 
 def _group_colours(sim: Simulator, palette: Palette) -> list[tuple[int, int, int]]:
     """Each group's drawing colour: its own ``colour``, else the palette's group colours in turn."""
-    return [tuple(int(group.colour[i : i + 2], 16) for i in (1, 3, 5)) if group.colour else palette.groups[k % len(palette.groups)]
-            for k, group in enumerate(sim.groups)]
+    return [_rgb(group.colour) if group.colour else palette.groups[k % len(palette.groups)] for k, group in enumerate(sim.groups)]
 
 
-def _cross(surface: pygame.Surface, colour, centre: np.ndarray, half: float) -> None:
-    pygame = _pygame()
+def _rgb(colour: str) -> tuple[int, int, int]:
+    """``"#rrggbb"`` -> (r, g, b)."""
+    return int(colour[1:3], 16), int(colour[3:5], 16), int(colour[5:7], 16)
+
+
+def _cross(surface: pygame.Surface, colour: tuple[int, int, int], centre: np.ndarray, half: float) -> None:
+    import pygame
+
     x, y = centre
     pygame.draw.line(surface, colour, (x - half, y - half), (x + half, y + half), 2)
     pygame.draw.line(surface, colour, (x - half, y + half), (x + half, y - half), 2)
+
+
+def _xy(pixels: np.ndarray) -> Sequence[Any]:
+    """Pixel coordinates, (2,) or (k, 2), as the sequence pygame's stubs name (pygame reads an array as one; no copy)."""
+    return cast(Sequence[Any], pixels)
 
 
 def _ceil_16(pixels: float) -> int:
