@@ -14,11 +14,11 @@ the load-time capacity and reachability checks. The names users import live on h
 
 from __future__ import annotations
 
-from typing import Any
-
 import numpy as np
 import shapely
+from shapely.geometry import Polygon as ShapelyPolygon
 from shapely.geometry import box
+from shapely.geometry.base import BaseGeometry
 
 from crowdnav.obstacles import GeometryError, StaticObstacles
 from crowdnav.placement_checks import (
@@ -40,7 +40,7 @@ from crowdnav.placement_regions import GroupPlacement as GroupPlacement
 from crowdnav.placement_regions import Placement as Placement
 from crowdnav.placement_regions import PlacementError as PlacementError
 from crowdnav.placement_regions import clear_of, merge_candidates, region_candidates
-from crowdnav.scenario.schema import Scenario
+from crowdnav.scenario.schema import HumanGroup, Robot, Scenario
 
 
 def build_placement(scenario: Scenario, obstacles: StaticObstacles) -> Placement:
@@ -56,7 +56,7 @@ def build_placement(scenario: Scenario, obstacles: StaticObstacles) -> Placement
     return first
 
 
-def _robot_placement(robot: Any, path: str, world_box: Any, occupied: Any) -> Placement:
+def _robot_placement(robot: Robot, path: str, world_box: ShapelyPolygon, occupied: BaseGeometry) -> Placement:
     """One robot's candidate sets (``groups`` left empty), its errors named at ``path`` (``robot`` or ``robots.<i>``)."""
     robot_start = region_candidates(robot.start, f"{path}.start", robot.radius, world_box, occupied)
     robot_goal = region_candidates(robot.goal, f"{path}.goal", robot.radius, world_box, occupied)
@@ -93,12 +93,12 @@ def _robot_placement(robot: Any, path: str, world_box: Any, occupied: Any) -> Pl
                 f"episode could end as a success before the robot moves; expected {path}.min_start_goal_distance above the goal "
                 "radius, or a smaller goal radius",
             )
-    split = start_component is not None and len(set(start_component.tolist()) | set(goal_component.tolist())) > 1
+    split = start_component is not None and goal_component is not None and len(set(start_component.tolist()) | set(goal_component.tolist())) > 1
     components_kept = (start_component, goal_component) if split else (None, None)
     return Placement(robot_start, robot_goal, [], start_goal_ok, *components_kept)
 
 
-def _group_placement(scenario: Scenario, path: str, group, world_box, occupied) -> GroupPlacement:
+def _group_placement(scenario: Scenario, path: str, group: HumanGroup, world_box: ShapelyPolygon, occupied: BaseGeometry) -> GroupPlacement:
     """Candidate sets of one group: member spawns and goals (walking) or circle centres (standing)."""
     humans, slack = scenario.humans, 2 * JITTER_REACH
     empty = CandidateSet(np.zeros(0, dtype=complex), 0.0)

@@ -2,9 +2,9 @@
 
 One declared structure for both simulators. :class:`crowdnav.Simulator` owns one
 :class:`SimState` of one world; :class:`crowdnav.batch.simulator.BatchSimulator` keeps the
-worlds that have the same number of humans as one :class:`SimState` whose every field has a
-leading world axis (K,) and moves rows between the two with :meth:`SimState.row`,
-:meth:`SimState.set_row`, :meth:`SimState.append` and :meth:`SimState.take`. Nothing outside the
+worlds that have the same number of humans as one
+:class:`crowdnav.batch.stacked_state.StackedState`: the same fields, each with a leading world
+axis (K,) (its rows are :class:`SimState` views). Nothing outside the
 simulators writes into a state: the simulator's methods (:meth:`crowdnav.Simulator.stop_humans`)
 and the goal rules (:func:`crowdnav.groups.apply_goal_rules`, on the state they are given) do.
 
@@ -14,7 +14,6 @@ recomputed from the positions by ``refresh`` and never written by anyone else.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
 from dataclasses import dataclass, fields
 from typing import Any
 
@@ -31,7 +30,7 @@ SELF_DISTANCE = 1.0e9
 
 @dataclass(eq=False)
 class SimState:
-    """One world's episode state (or K worlds', each field with a leading (K,) axis); agent 0 is the robot.
+    """One world's episode state (K worlds': :class:`crowdnav.batch.stacked_state.StackedState`); agent 0 is the robot.
 
     Points and velocities are complex ``x + 1j*y`` (m, m/s, world frame); ``n`` is the episode's
     number of humans, human ``i`` is agent ``i + 1``. For one world the scalar fields are Python
@@ -67,37 +66,12 @@ class SimState:
 
     @property
     def n_humans(self) -> int:
-        return self.positions.shape[-1] - 1
+        humans: int = self.positions.shape[-1] - 1
+        return humans
 
     def copy(self) -> SimState:
         """A deep copy (arrays copied; scalars are immutable)."""
         return SimState(**{name: value.copy() if isinstance(value, np.ndarray) else value for name, value in self._items()})
-
-    # ------------------------------------------------- K worlds, one per row
-
-    @classmethod
-    def stack(cls, states: Sequence[SimState]) -> SimState:
-        """Worlds with the same number of humans as one state with a leading world axis, in the given order."""
-        return cls(**{f.name: np.stack([np.asarray(getattr(state, f.name)) for state in states]) for f in fields(cls)})
-
-    def row(self, k: int) -> SimState:
-        """World ``k`` of a stacked state: its arrays are views (writing them writes the stack), its scalars Python numbers."""
-        out = {name: value[k] for name, value in self._items()}
-        return SimState(**{**out, "robot_goal": complex(out["robot_goal"]), "robot_heading": float(out["robot_heading"]),
-                           "step_count": int(out["step_count"])})
-
-    def set_row(self, k: int, state: SimState) -> None:
-        """Overwrite world ``k`` of a stacked state with one world's ``state`` (same number of humans)."""
-        for name, value in self._items():
-            value[k] = getattr(state, name)
-
-    def append(self, state: SimState) -> SimState:
-        """A stacked state with one world's ``state`` added as its last row (new arrays)."""
-        return SimState(**{name: np.concatenate([value, np.asarray(getattr(state, name))[None]]) for name, value in self._items()})
-
-    def take(self, rows: np.ndarray) -> SimState:
-        """The worlds ``rows`` (indices or a bool mask) of a stacked state (new arrays)."""
-        return SimState(**{name: value[rows] for name, value in self._items()})
 
     def _items(self) -> list[tuple[str, Any]]:
         return [(f.name, getattr(self, f.name)) for f in fields(self)]

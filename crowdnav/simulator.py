@@ -42,6 +42,7 @@ from __future__ import annotations
 
 import copy
 import math
+from typing import cast
 
 import numpy as np
 
@@ -55,6 +56,7 @@ from crowdnav.robot_view import RobotAccessors, robot_scenario
 from crowdnav.robots import PARKED, Team, first_heading, robot_kinematics
 from crowdnav.scenario.errors import ScenarioError, ScenarioIssue
 from crowdnav.scenario.loader import Overrides
+from crowdnav.scenario.schema import HumanGroup
 from crowdnav.sim_geometry import SimGeometry
 from crowdnav.sim_state import PairConstants, SimState, StateFields, pair_constants
 from crowdnav.world import CompiledWorld, WorldSource, load_world
@@ -98,11 +100,11 @@ class Simulator(StateFields, RobotAccessors, SimGeometry):
         """``min(1, dt / relaxation_time)``: the share of the way to its desired velocity a human goes in one step."""
         self._static_count = self.obstacles.polygon_count + self.obstacles.disc_count
         world = scenario.world
-        self.bounds = None if world.boundary_walls else (*map(float, world.min), *map(float, world.max))
+        self.bounds: tuple[float, float, float, float] | None = (
+            None if world.boundary_walls else (float(world.min[0]), float(world.min[1]), float(world.max[0]), float(world.max[1])))
         """Open space: ``(x0, y0, x1, y1)`` (m), the rectangle the robot's centre must stay in (None: boundary walls keep it in)."""
         self._rng = np.random.default_rng()
         self._constants: dict[tuple[int, bool], PairConstants] = {}
-        self._state: SimState | None = None
         self.team = Team(scenario, self.obstacles, self.placement) if scenario.robots is not None else None
         """The robots after the first (:mod:`crowdnav.robots`) of a scenario with ``robots:``; None for one robot."""
         self._robot_scenarios = [robot_scenario(scenario, k) for k in range(len(scenario.robot_specs))]
@@ -136,7 +138,7 @@ class Simulator(StateFields, RobotAccessors, SimGeometry):
     @property
     def state(self) -> SimState:
         """The episode's state (the simulator's own: read it; it changes through the simulator's methods)."""
-        if self._state is None:
+        if not self._ready:  # _state is set by the first reset
             raise RuntimeError("call reset() before reading the simulator's state")
         return self._state
 
@@ -154,7 +156,8 @@ class Simulator(StateFields, RobotAccessors, SimGeometry):
 
     @property
     def robot_goal_distance(self) -> float:
-        return abs(self._state.robot_goal - self._state.positions[0])
+        distance: float = abs(self._state.robot_goal - self._state.positions[0])
+        return distance
 
     @property
     def rng(self) -> np.random.Generator:
@@ -177,7 +180,7 @@ class Simulator(StateFields, RobotAccessors, SimGeometry):
         rng, robot, placement = self._rng, self.scenario.robot, self.placement
         counts = [int(rng.integers(group.min_count, group.max_count + 1)) for group in self.groups]
         n = sum(counts)
-        start = placement.robot_start.draw(rng, 1, allowed=placement.start_goal_ok.any(1))
+        start = placement.robot_start.draw(rng, 1, allowed=cast(np.ndarray, placement.start_goal_ok.any(1)))
         reachable = None
         if placement.start_component is not None:  # walls split the free space: a goal on the start's side
             nearest = int(np.argmin(np.abs(placement.robot_start.points - start[0])))
@@ -193,9 +196,8 @@ class Simulator(StateFields, RobotAccessors, SimGeometry):
         spawn = place_groups(self, starts, goals, counts)
         standing = np.repeat([group.standing for group in self.groups], counts).astype(bool)
         human_goals = np.concatenate([np.zeros(0, dtype=complex), *first_goals(self, spawn)])
-        preferred_speed = np.concatenate([np.zeros(0), *(
-            np.zeros(count) if group.standing else rng.uniform(*group.preferred_speed, size=count)
-            for group, count in zip(self.groups, counts, strict=True))])
+        preferred_speed = np.concatenate([np.zeros(0), *(_preferred_speeds(rng, group, count)
+                                                         for group, count in zip(self.groups, counts, strict=True))])
         max_speed = preferred_speed * self._force.max_speed_factor
         self._state = SimState(
             positions=np.concatenate([start, *spawn]),
@@ -370,7 +372,8 @@ class Simulator(StateFields, RobotAccessors, SimGeometry):
             raise ValueError("human_actions must be finite")
         command = np.clip(actions[:, 0], -1, 1) + 1j * np.clip(actions[:, 1], -1, 1)
         command /= np.maximum(np.abs(command), 1.0)
-        return command * self._state.human_max_speed
+        scaled: np.ndarray = command * self._state.human_max_speed
+        return scaled
 
     # ----------------------------------------------------------------- several robots
 
@@ -393,3 +396,11 @@ class Simulator(StateFields, RobotAccessors, SimGeometry):
                 state.left_at[k] = state.positions[k - 1]
                 state.positions[k - 1], state.velocities[k - 1] = PARKED, 0.0
         self.refresh()
+
+
+def _preferred_speeds(rng: np.random.Generator, group: HumanGroup, count: int) -> np.ndarray:
+    """``count`` preferred speeds (m/s) of ``group``'s members: drawn from its range, 0 for a standing group."""
+    if group.standing:
+        return np.zeros(count)
+    assert group.preferred_speed is not None  # a walking group always has its range (Humans.crowd fills it in)
+    return rng.uniform(*group.preferred_speed, size=count)

@@ -9,7 +9,7 @@ summation rounds differently for another length, so a padded world would drift f
 simulator in the last bits. A step loops over the crowd sizes present (a scenario's count range),
 never over worlds, humans, pairs or edges.
 
-A bucket's episode state is one :class:`crowdnav.sim_state.SimState` with a leading world axis,
+A bucket's episode state is one :class:`crowdnav.batch.stacked_state.StackedState` (SimState's fields with a leading world axis),
 its geometry the same arrays a :class:`crowdnav.Simulator` measures, stacked. Resets, and the
 goal rules of worlds where a human reached its goal, draw from each world's own generator: they
 run per world. A reset draws on the world's own :class:`crowdnav.Simulator` (its *slot*) and its
@@ -29,11 +29,12 @@ import numpy as np
 
 from crowdnav import social_force as sf
 from crowdnav.batch.scalar_math import TWO_PI, cmul, remainder
-from crowdnav.batch.state import BatchState
+from crowdnav.batch.stacked_state import StackedState
+from crowdnav.batch.state import BatchState, BoolArray, ComplexArray, FloatArray, IntArray
 from crowdnav.contacts import deepest_contact, goal_distance, outside, push_humans_apart, push_out_of_obstacles, touching
 from crowdnav.events import Collision, SimulationError
 from crowdnav.groups import apply_goal_rules
-from crowdnav.obstacles import nearest_on_edges
+from crowdnav.obstacles import EdgeSet, nearest_on_edges
 from crowdnav.sim_state import SELF_DISTANCE, PairConstants, SimState
 from crowdnav.simulator import Simulator
 from crowdnav.world import CompiledWorld
@@ -64,29 +65,58 @@ class StepResult:
 
     @property
     def terminated(self) -> np.ndarray:
-        return self.goal_reached | self.left_world | self.collided
+        ended: np.ndarray = self.goal_reached | self.left_world | self.collided
+        return ended
 
 
 def _state_field(name: str) -> property:
-    return property(lambda self: getattr(self.state, name), doc=f"(K, ...) :attr:`SimState.{name}` of every row (``state.{name}``).")
+    return property(lambda self: getattr(self.state, name), doc=f"(K, ...) :attr:`StackedState.{name}` of every row (``state.{name}``).")
 
 
 class Bucket:
     """The worlds of a batch that have ``n`` humans this episode, stacked row by row.
 
-    ``state``: their :class:`SimState` with a leading world axis (its fields also read as the
-    bucket's attributes: ``bucket.positions`` is ``bucket.state.positions``); the geometry arrays
-    (``pair_offset``, ``gap``, ``repulsion``, ...) are created by the first refresh.
+    ``state``: their :class:`StackedState` (its fields also read as the bucket's attributes:
+    ``bucket.positions`` is ``bucket.state.positions``); the geometry arrays (``pair_offset``,
+    ``gap``, ``repulsion``, ...) are created by the first refresh.
     """
 
+    # the state's fields read as the bucket's (properties set after the class)
+    positions: ComplexArray
+    velocities: ComplexArray
+    robot_goal: ComplexArray
+    robot_heading: FloatArray
+    step_count: IntArray
+    human_group: IntArray
+    human_goals: ComplexArray
+    human_preferred_speed: FloatArray
+    human_max_speed: FloatArray
+    command_cap: FloatArray
+    human_stopped: BoolArray
+    human_arrived: BoolArray
+    human_respawns: IntArray
+    # the geometry (_GEOMETRY), one row per world: absent until the first refresh creates it
+    pair_offset: ComplexArray
+    pair_distance: FloatArray
+    gap: FloatArray
+    repulsion: ComplexArray
+    humans_touch: BoolArray
+    polygon_offset: ComplexArray
+    polygon_distance: FloatArray
+    disc_offset: ComplexArray
+    disc_distance: FloatArray
+
     def __init__(self, n: int, constants: PairConstants, world: int, state: SimState):
+        if constants.contact_all is None or constants.gain is None or constants.decay is None:
+            raise ValueError(f"a bucket holds crowds measured by all pairs; {n} humans use the neighbour grid")
         self.n = n
         self.radii = constants.radii
-        self.contact_all = constants.contact_all
-        self.gain, self.decay = constants.gain, constants.decay
+        self.contact_all: FloatArray = constants.contact_all
+        self.gain: FloatArray = constants.gain
+        self.decay: FloatArray = constants.decay
         self.world = np.array([world], dtype=np.intp)
         """(K,) the batch index of each row's world."""
-        self.state = SimState.stack([state])
+        self.state = StackedState.stack([state])
 
     def __len__(self) -> int:
         return len(self.world)
@@ -112,7 +142,7 @@ class Bucket:
             setattr(self, name, getattr(self, name)[keep])
 
 
-for _name in SimState.__dataclass_fields__:  # bucket.positions is bucket.state.positions, and so on
+for _name in StackedState.__dataclass_fields__:  # bucket.positions is bucket.state.positions, and so on
     setattr(Bucket, _name, _state_field(_name))
 
 
@@ -141,7 +171,8 @@ class BatchSimulator:
             raise ValueError(f"the batched simulator handles crowds below {first.grid_from} humans (all pairs); "
                              f"this scenario allows {first.max_humans}: use gymnasium.make_vec(..., vectorization_mode='sync')")
         obstacles = world.obstacles
-        self._surface = obstacles.surface
+        assert obstacles.surface is not None  # a compiled world has its edge table
+        self._surface: EdgeSet = obstacles.surface
         self._polygons = obstacles.polygon_count
         self._static_count = obstacles.polygon_count + obstacles.disc_count
         self._labels = obstacles.labels + obstacles.disc_labels
@@ -155,7 +186,7 @@ class BatchSimulator:
 
     # ------------------------------------------------------------------ reset
 
-    def reset(self, worlds: Sequence[int], seeds: Sequence[int | None]) -> None:
+    def reset(self, worlds: Sequence[int] | np.ndarray, seeds: Sequence[int | None] | np.ndarray) -> None:
         """Start a new episode in each of ``worlds`` (``seeds[k]`` for ``worlds[k]``; None continues its generator)."""
         fresh: dict[int, list[int]] = {}
         for world, seed in zip(worlds, seeds, strict=True):  # per reset event: placement draws from each world's generator
@@ -238,6 +269,7 @@ class BatchSimulator:
                 commands = sf.velocity_command(total, velocities[:, 1:], state.human_preferred_speed[rows], state.command_cap[rows], self._relax)
             if self._orca is not None:
                 commands = self._orca_commands(bucket, rows, positions, velocities, commands)
+            assert commands is not None  # without ORCA the social force gave them
             stopped = state.human_stopped[rows]
             if stopped.any():  # np.where picks the command itself where not stopped: exact for the others
                 commands = np.where(stopped, 0.0, commands)

@@ -22,6 +22,10 @@ ComplexArray: TypeAlias = npt.NDArray[np.complex128]
 """Points and vectors in the plane, ``x + y j``."""
 FloatArray: TypeAlias = npt.NDArray[np.float64]
 """Distances, headings, radii."""
+IntArray: TypeAlias = npt.NDArray[np.int64]
+"""Counts and indices (steps, groups, respawns)."""
+BoolArray: TypeAlias = npt.NDArray[np.bool_]
+"""Masks (stopped, arrived)."""
 
 
 @dataclass

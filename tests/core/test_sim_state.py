@@ -11,6 +11,7 @@ from gymnasium.vector import AutoresetMode
 
 from crowdnav import Simulator
 from crowdnav.batch.simulator import BatchSimulator
+from crowdnav.batch.stacked_state import StackedState
 from crowdnav.envs.vector import CrowdNavVectorEnv
 from crowdnav.sim_state import SimState
 from crowdnav.world import load_world
@@ -162,5 +163,9 @@ def test_batch_buckets_hold_one_stacked_state_whose_rows_are_the_worlds():
         for i, sim in enumerate(singles):
             sim.step(np.full(2, 0.3))
             bucket, row = batch.locate(i)
-            assert isinstance(bucket.state, SimState) and bucket.positions is bucket.state.positions
+            assert isinstance(bucket.state, StackedState) and bucket.positions is bucket.state.positions
             _same_state(sim, bucket.state.row(row))
+
+
+def test_stacked_state_declares_the_fields_of_one_world_state_in_the_same_order():
+    assert [f.name for f in dataclasses.fields(StackedState)] == FIELDS
