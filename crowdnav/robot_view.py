@@ -3,6 +3,7 @@
 :class:`RobotView` shows the world from robot k: index 0 is that robot, then the humans, then
 the other robots still in the world, with the attribute names the sensors, the reward and the
 scripted policies read from a simulator, so all of them work for any robot unchanged.
+:class:`RobotWorld` is the type of that shared reading (a :class:`typing.Protocol` both match).
 :class:`RobotAccessors` is the mixin of :class:`crowdnav.Simulator` that reads every robot at
 once (one robot: the first and only). Nothing here writes a state.
 """
