@@ -1,4 +1,4 @@
-"""Type-check crowdnav with mypy (configured in pyproject.toml: strict on the core, the default level elsewhere).
+"""Type-check crowdnav with mypy (configured in pyproject.toml: strict, agents and evaluation but for two checks).
 
 The repository's agents/, evaluation/ and scenarios/ install as crowdnav.agents, crowdnav.evaluation
 and crowdnav.scenarios ([tool.setuptools.package-dir]); mypy reads neither that mapping nor the
