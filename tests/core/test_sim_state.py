@@ -169,3 +169,10 @@ def test_batch_buckets_hold_one_stacked_state_whose_rows_are_the_worlds():
 
 def test_stacked_state_declares_the_fields_of_one_world_state_in_the_same_order():
     assert [f.name for f in dataclasses.fields(StackedState)] == FIELDS
+
+
+def test_a_bucket_declares_for_the_type_checker_every_state_field_with_the_stacked_states_type():
+    from crowdnav.batch.simulator import Bucket
+
+    declared = {name: kind for name, kind in Bucket.__annotations__.items() if name in FIELDS}
+    assert declared == {f.name: f.type for f in dataclasses.fields(StackedState)}
