@@ -14,9 +14,9 @@ class Collision:
     """A robot collision: what it hit and how deep."""
 
     kind: str
-    """``human`` or ``static``."""
+    """``human``, ``static`` or (several robots) ``robot``."""
     partner: str
-    """``human_<i>`` or the obstacle's scenario path (e.g. ``furniture.2 (table)``)."""
+    """``human_<i>``, the obstacle's scenario path (e.g. ``furniture.2 (table)``) or the other robot's name."""
     surface_distance: float
     """Distance between surfaces in metres (<= 0: touching or overlapping)."""
 

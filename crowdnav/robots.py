@@ -25,13 +25,13 @@ from __future__ import annotations
 
 import cmath
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
 
 from crowdnav import social_force as sf
-from crowdnav.contacts import goal_distance, outside
+from crowdnav.contacts import deepest_contact, goal_distance, outside, touching
 from crowdnav.events import Collision, StepEvents
 from crowdnav.obstacles import nearest_on_edges
 from crowdnav.placement import GAP, JITTER_REACH, PlacementError
@@ -211,12 +211,12 @@ class Team:
             self.static_offset = np.zeros((len(robots), 0), dtype=complex)
             self.static_distance = np.zeros((len(robots), 0))
 
-    def outcomes(self, sim: Any, ego_gap: np.ndarray, truncated: bool) -> list[StepEvents | None]:
+    def outcomes(self, sim: Any, ego: StepEvents, truncated: bool) -> list[StepEvents | None]:
         """Every robot's events of the step (None for a robot that already left), the ego robot first.
 
-        ``ego_gap``: the ego robot's surface gaps to itself, every human and every obstacle (the
-        simulator's). The other robots' checks are (m, ...) array operations; only a robot that
-        touches something pays for naming its deepest contact.
+        ``ego``: the ego robot's events as the one-robot step finds them (humans and obstacles);
+        they gain its contacts with the other robots here. The other robots' checks are (m, ...)
+        array operations; only a robot that touches something pays for naming its deepest contact.
         """
         state, r0, n = self.state, self.all_radii[0], sim.n_humans
         gone = ~state.active[1:]
@@ -224,10 +224,7 @@ class Team:
         if state.active[0]:
             to_robots = self.distance[0] - r0 - self.radii
             to_robots[gone] = np.inf
-            collision = _deepest(ego_gap, to_robots, n, self._static_labels, self.names[1:])
-            left = sim.robot_left_world()
-            reached = goal_distance(sim.robot_goal, complex(sim.positions[0])) <= sim.scenario.robot.goal_radius
-            events.append(StepEvents(goal_reached=bool(reached), collision=collision, truncated=truncated, left_world=left))
+            events.append(replace(ego, collision=_with_robot_contact(ego.collision, to_robots, self.names[1:])))
         else:
             events.append(None)
         # row j: robot j's surface gaps to the ego robot, the other robots, the humans, the obstacles
@@ -236,7 +233,7 @@ class Team:
         to_others[:, gone] = np.inf
         gaps = np.concatenate([to_ego[:, None], to_others, self.distance[1:].T - self._human_radius - self.radii[:, None],
                                self.static_distance - self._static_contact], axis=1)
-        touching = gaps.min(axis=1) <= 0.0
+        touches = touching(gaps)
         positions = state.positions
         reached = goal_distance(state.goals, positions) <= self.goal_radii
         left = outside(positions.real, positions.imag, sim.bounds) if sim.bounds is not None else np.zeros(len(positions), bool)
@@ -246,23 +243,23 @@ class Team:
                 events.append(None)
                 continue
             collision = None
-            if touching[j]:
-                row = gaps[j]
-                collision = _deepest(np.concatenate([[SELF_DISTANCE], row[1 + m :]]), row[: 1 + m], n, self._static_labels, self.names)
+            if touches[j]:
+                gap = np.concatenate([[SELF_DISTANCE], gaps[j, 1 + m :]])  # as the ego robot's: itself, the humans, the obstacles
+                collision = _with_robot_contact(deepest_contact(gap, n, self._static_labels) if touching(gap) else None,
+                                                gaps[j, : 1 + m], self.names)
             events.append(StepEvents(goal_reached=bool(reached[j]), collision=collision, truncated=truncated, left_world=bool(left[j])))
         return events
 
 
-def _deepest(gap: np.ndarray, to_robots: np.ndarray, n: int, labels: list[str], robot_names: list[str]) -> Collision | None:
-    """A robot's deepest contact: ``gap`` (1+n+S,) to itself, the humans and the obstacles; ``to_robots`` to the other robots."""
-    best = float(gap.min()) if len(gap) else math.inf
-    robot_best = float(to_robots.min()) if len(to_robots) else math.inf
-    if min(best, robot_best) > 0.0:
-        return None
-    if robot_best < best:
-        k = int(to_robots.argmin())
-        return Collision("robot", robot_names[k], robot_best)
-    k = int(gap.argmin())
-    if k <= n:
-        return Collision("human", f"human_{k - 1}", best)
-    return Collision("static", labels[k - n - 1], best)
+def _with_robot_contact(collision: Collision | None, to_robots: np.ndarray, robot_names: list[str]) -> Collision | None:
+    """A robot's contact with humans or obstacles (``collision``), or its deepest robot contact where that is deeper.
+
+    ``to_robots``: its surface gaps to the robots it can touch (``robot_names``, the same order).
+    """
+    if not len(to_robots):
+        return collision
+    k = int(to_robots.argmin())
+    depth = float(to_robots[k])
+    if depth > 0.0 or (collision is not None and collision.surface_distance <= depth):
+        return collision
+    return Collision("robot", robot_names[k], depth)

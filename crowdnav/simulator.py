@@ -311,19 +311,17 @@ class Simulator(StateFields, RobotAccessors, SimGeometry):
             self._resolve_human_overlaps()
             self.refresh()
         truncated = state.step_count >= self.scenario.max_steps
-        if self.team is not None:
-            self.robot_events = self.team.outcomes(self, self._robot_gap, truncated)
-            if n and apply_goal_rules(state, self):
-                self.refresh()
-            ego = self.robot_events[0]  # a robot that left has no events: report a quiet step for it
-            return ego if ego is not None else StepEvents(goal_reached=False, collision=None, truncated=truncated)
         collision = self.robot_collision()
         left_world = self.robot_left_world()
         goal_reached = goal_distance(state.robot_goal, positions[0]) <= self.scenario.robot.goal_radius
+        events = StepEvents(goal_reached=bool(goal_reached), collision=collision, truncated=truncated, left_world=left_world)
+        if self.team is None:
+            self.robot_events = [events]
+        else:  # the ego robot's events gain its robot contacts; a robot that left has none: report a quiet step for it
+            self.robot_events = self.team.outcomes(self, events, truncated)
+            events = self.robot_events[0] or StepEvents(goal_reached=False, collision=None, truncated=truncated)
         if n and apply_goal_rules(state, self):  # someone respawned: the geometry of the new positions
             self.refresh()
-        events = StepEvents(goal_reached=bool(goal_reached), collision=collision, truncated=truncated, left_world=left_world)
-        self.robot_events = [events]
         return events
 
     def stop_humans(self, index: np.ndarray) -> None:
