@@ -84,8 +84,8 @@ class SocialForceRobot:
             gain = sf.repulsion_gain(params.obstacle_strength, contact, params.obstacle_range)
             force += complex(sf.repulsion(offsets[None, :], distances[None, :], gain[None, :], -1.0 / params.obstacle_range)[0])
         others = sim.other_robot_discs
-        if len(sim.positions[others]):
-            offsets = sim.positions[others] - sim.positions[0]
+        offsets = sim.positions[others] - sim.positions[0]
+        if len(offsets):
             gain = sf.repulsion_gain(params.robot_strength, robot.radius + sim.radii[others], params.robot_range)
             force += complex(sf.repulsion(offsets[None, :], np.abs(offsets)[None, :], gain[None, :], -1.0 / params.robot_range)[0])
         velocity = force * robot.max_speed
