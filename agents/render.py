@@ -14,7 +14,7 @@ import numpy as np
 
 from crowdnav.errors import CrowdNavError
 from crowdnav.policies import SCRIPTED_POLICIES
-from crowdnav.rendering.episodes import Act, render_episodes, scripted_act
+from crowdnav.rendering.episodes import Act, render_episodes, scripted_act, video_suffix
 
 
 class PolicyLoadError(CrowdNavError, ValueError):
@@ -84,13 +84,9 @@ def render_robots_policy(scenario: str, policy: str, *, seed: int = 0, episodes:
     overrides, reward weights and render options are refused in one line.
     """
     from crowdnav.paths import inside
-    from crowdnav.rendering.video import VIDEO_FORMATS, VideoWriter
+    from crowdnav.rendering.video import VideoWriter
 
-    suffix = f".{video_format.lower().lstrip('.')}"
-    if suffix not in VIDEO_FORMATS:
-        raise ValueError(f"unsupported video format {video_format!r}; expected one of {', '.join(f[1:] for f in VIDEO_FORMATS)}")
-    if episodes < 1:
-        raise ValueError(f"episodes must be at least 1, got {episodes}")
+    suffix = video_suffix(video_format, episodes)
     unused = sorted(name for name, value in options.items() if value)
     if unused:
         raise PolicyLoadError(f"{policy} is a shared robot policy; it plays the world it was trained in, without {', '.join(unused)}")

@@ -32,6 +32,16 @@ def scripted_act(name: str, seed: int = 0) -> Act:
     return lambda env, observation: scripted(env.simulator)
 
 
+def video_suffix(video_format: str, episodes: int) -> str:
+    """The file suffix of ``video_format`` (``"mp4"`` -> ``".mp4"``), after checking it and the episode count (one-line errors)."""
+    suffix = f".{video_format.lower().lstrip('.')}"
+    if suffix not in VIDEO_FORMATS:
+        raise ValueError(f"unsupported video format {video_format!r}; expected one of {', '.join(f[1:] for f in VIDEO_FORMATS)}")
+    if episodes < 1:
+        raise ValueError(f"episodes must be at least 1, got {episodes}")
+    return suffix
+
+
 def render_episodes(
     scenario: str,
     policy: str | Act = "social-force",
@@ -53,11 +63,7 @@ def render_episodes(
     names it in the file names (default: the scripted name, else ``policy``); ``env_options``:
     CrowdNavEnv keyword arguments the policy needs (e.g. a trained agent's modalities).
     """
-    suffix = f".{video_format.lower().lstrip('.')}"
-    if suffix not in VIDEO_FORMATS:
-        raise ValueError(f"unsupported video format {video_format!r}; expected one of {', '.join(f[1:] for f in VIDEO_FORMATS)}")
-    if episodes < 1:
-        raise ValueError(f"episodes must be at least 1, got {episodes}")
+    suffix = video_suffix(video_format, episodes)
     act = scripted_act(policy, seed) if isinstance(policy, str) else policy
     env_options = dict(env_options or {})
     if overrides:
