@@ -34,7 +34,7 @@ from crowdnav.agents.checkpoint import MODEL_FILE, check_network_size, load_para
 from crowdnav.agents.config import ConfigError, TrainConfig, config_from_mapping, config_to_dict
 from crowdnav.agents.episode_log import EpisodeLogWriter, prepare_log
 from crowdnav.agents.factory import LinearDecay, env_options, hyperparameters
-from crowdnav.agents.marl_env import RobotsTrainingEnv, robots_env
+from crowdnav.agents.marl_env import RobotObservations, RobotsTrainingEnv, robots_env
 from crowdnav.agents.model_zip import read_model_zip
 from crowdnav.agents.run_folder import checkpoint_dir, episode_log, snapshot_dir, writing
 from crowdnav.agents.train_result import TrainResult
@@ -206,11 +206,9 @@ class RobotsPolicy:
         self.network = network
         self.info = dict(info)
         self.env_options: dict[str, Any] = dict(info["env"])
-        robots = info["robots"]
-        self.robots: list[str] = list(robots["robots"])
-        self.identity = bool(robots["identity"])
-        self.offset = np.asarray(robots["offset"], np.float32)
-        self.scale = np.asarray(robots["scale"], np.float32)
+        self.observe = RobotObservations.from_json(info["robots"])
+        """The stored scales and one-hot, applied to each robot's observation as in training."""
+        self.robots: list[str] = self.observe.robots
 
     @property
     def algo(self) -> str:
@@ -221,12 +219,8 @@ class RobotsPolicy:
         return robots_env(self.env_options)
 
     def inputs(self, observations: Mapping[str, np.ndarray], infos: Mapping[str, Mapping[str, Any]]) -> np.ndarray:
-        rows = []
-        for k, name in enumerate(self.robots):
-            active = bool(infos.get(name, {}).get("active", True))
-            scaled = (np.asarray(observations[name], np.float32) - self.offset) / self.scale if active else np.zeros_like(self.offset)
-            rows.append(np.concatenate([scaled, np.eye(len(self.robots), dtype=np.float32)[k]]) if self.identity else scaled)
-        return np.stack(rows).astype(np.float32)
+        return np.stack([self.observe(k, observations[name], bool(infos.get(name, {}).get("active", True)))
+                         for k, name in enumerate(self.robots)])
 
     def act(self, observations: Mapping[str, np.ndarray], infos: Mapping[str, Mapping[str, Any]]) -> dict[str, np.ndarray]:
         actions, _ = self.network.predict(self.inputs(observations, infos), deterministic=True)

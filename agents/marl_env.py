@@ -89,6 +89,18 @@ class RobotObservations:
         one_hot[index] = 1.0
         return np.concatenate([scaled, one_hot]).astype(np.float32, copy=False)
 
+    @classmethod
+    def from_json(cls, document: Mapping[str, Any]) -> RobotObservations:
+        """The settings :meth:`to_json` stored with a checkpoint (what a loaded policy applies)."""
+        inputs = cls.__new__(cls)
+        inputs.robots = list(document["robots"])
+        inputs.identity = bool(document["identity"])
+        inputs.offset = np.asarray(document["offset"], np.float32)
+        inputs.scale = np.asarray(document["scale"], np.float32)
+        width = len(inputs.offset) + (len(inputs.robots) if inputs.identity else 0)
+        inputs.space = spaces.Box(-np.inf, np.inf, shape=(width,), dtype=np.float32)
+        return inputs
+
     def to_json(self) -> dict[str, Any]:
         return {"robots": self.robots, "identity": self.identity, "offset": self.offset.tolist(), "scale": self.scale.tolist()}
 
