@@ -20,7 +20,8 @@ agent; they run through ``map`` (no Python bytecode per agent), see docs/simulat
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections import OrderedDict
+from collections.abc import Callable, Sequence
 from typing import Any
 
 import numpy as np
@@ -114,6 +115,39 @@ class OrcaSolver:
         return xy[:, 0] + 1j * xy[:, 1]
 
 
+SOLVERS_KEPT = 4
+"""Solvers one :class:`SolverCache` keeps (the most recently used agent counts); others are freed."""
+
+
+class SolverCache:
+    """The solvers of the last few agent counts (:data:`SOLVERS_KEPT`), the least recently used freed first.
+
+    A solver serves one agent count for good (RVO2 cannot remove agents), so a crowd whose size
+    changes at each reset (``humans.count: [1, 2000]``) would otherwise keep one solver per size
+    ever seen. A solver's results do not depend on what it computed before (it keeps no state
+    between steps that :meth:`OrcaSolver.velocities` does not overwrite), so one built again gives
+    the same velocities as the one freed: only the cost of building it (its obstacles) is paid again.
+    """
+
+    def __init__(self, size: int = SOLVERS_KEPT):
+        self.size = size
+        self._solvers: OrderedDict[int, OrcaSolver] = OrderedDict()
+
+    def __len__(self) -> int:
+        return len(self._solvers)
+
+    def get(self, count: int, build: Callable[[int], OrcaSolver]) -> OrcaSolver:
+        """The solver for ``count`` agents: the kept one, or ``build(count)`` (then the least recently used beyond the size is freed)."""
+        solver = self._solvers.get(count)
+        if solver is not None:
+            self._solvers.move_to_end(count)
+            return solver
+        while len(self._solvers) >= self.size:  # freed before building: at most ``size`` solvers alive at once
+            self._solvers.popitem(last=False)
+        solver = self._solvers[count] = build(count)
+        return solver
+
+
 def toward_goal(to_goal: np.ndarray, speed: np.ndarray | float, dt: float) -> np.ndarray:
     """Preferred velocity: ``speed`` towards the goal, slowed so as not to pass it within one step (complex, m/s)."""
     distance = np.abs(to_goal)
@@ -137,7 +171,8 @@ class OrcaCrowd:
         self._orca_groups = orca_groups
         self.all_orca = bool(orca_groups.all())
         """Whether every walking group follows ORCA (standing members are counted in: they never move)."""
-        self._solvers: dict[int, OrcaSolver] = {}
+        self._solvers = SolverCache()
+        """The solvers of the last few episodes' agent counts."""
         self._robots = 1
         self.mask = np.zeros(0, dtype=bool)
         pyrvo_module("orca")  # fail at load, not at the first step
@@ -151,10 +186,7 @@ class OrcaCrowd:
         robot_speeds = np.atleast_1d(robot_max_speed)
         self._robots = len(robot_speeds)
         count = len(human_group) + self._see_robot * self._robots
-        solver = self._solvers.get(count)
-        if solver is None:
-            solver = self._solvers[count] = OrcaSolver(self._rings, self._params, self._dt, count, "orca")
-        self._solver = solver
+        self._solver = solver = self._solvers.get(count, lambda size: OrcaSolver(self._rings, self._params, self._dt, size, "orca"))
         if self._see_robot:
             solver.configure(radii, np.concatenate([robot_speeds, human_max_speed]))
         else:

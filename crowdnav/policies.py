@@ -16,7 +16,9 @@ from typing import TypeAlias
 import numpy as np
 
 from crowdnav import social_force as sf
-from crowdnav.orca import OrcaSolver, obstacle_rings, pyrvo_module, toward_goal
+from crowdnav.orca import OrcaSolver, SolverCache, obstacle_rings, pyrvo_module, toward_goal
+from crowdnav.planning.oracle import OraclePlanner
+from crowdnav.planning.predictive import PredictivePlanner
 from crowdnav.robot_view import RobotWorld
 from crowdnav.world import CompiledWorld
 
@@ -94,6 +96,10 @@ class SocialForceRobot:
         return velocity_to_action(sim, velocity)
 
 
+WORLDS_KEPT = 8
+"""Worlds one :class:`OrcaRobot` keeps solvers for (the first seen freed first)."""
+
+
 class OrcaRobot:
     """ORCA for the robot: the velocity nearest to full speed at the goal that stays collision-free.
 
@@ -107,18 +113,18 @@ class OrcaRobot:
 
     def __init__(self) -> None:
         pyrvo_module("the ORCA robot (baseline:orca)")
-        self._worlds: dict[int, tuple[CompiledWorld, list[list[tuple[float, float]]], dict[int, OrcaSolver]]] = {}
-        """id(world) -> (world, its obstacles as RVO2 rings, agent count -> solver): one policy may drive many envs."""
+        self._worlds: dict[int, tuple[CompiledWorld, list[list[tuple[float, float]]], SolverCache]] = {}
+        """id(world) -> (world, its obstacles as RVO2 rings, the solvers of its last few agent counts): one policy may drive many envs."""
 
     def __call__(self, sim: RobotWorld) -> np.ndarray:
         cached = self._worlds.get(id(sim.world))
         if cached is None or cached[0] is not sim.world:  # (the tuple holds the world, so its id is not reused while cached)
-            cached = self._worlds[id(sim.world)] = (sim.world, obstacle_rings(sim.obstacles), {})
+            while len(self._worlds) >= WORLDS_KEPT:  # the oldest world's solvers freed: one policy over many worlds stays bounded
+                del self._worlds[next(iter(self._worlds))]
+            cached = self._worlds[id(sim.world)] = (sim.world, obstacle_rings(sim.obstacles), SolverCache())
         _, rings, solvers = cached
         robot, count = sim.scenario.robot, sim.n_humans + 1
-        solver = solvers.get(count)
-        if solver is None:
-            solver = solvers[count] = OrcaSolver(rings, sim.scenario.humans.orca, sim.dt, count, "the ORCA robot")
+        solver = solvers.get(count, lambda size: OrcaSolver(rings, sim.scenario.humans.orca, sim.dt, size, "the ORCA robot"))
         if solver.episode is not sim.human_max_speed:  # a new array at every reset: another episode (or env) than last time
             solver.configure(sim.radii, np.concatenate([[robot.max_speed], sim.human_max_speed]))
             solver.episode = sim.human_max_speed
@@ -130,5 +136,6 @@ class OrcaRobot:
 
 SCRIPTED_POLICIES: dict[str, Callable[..., ScriptedPolicy]] = {
     "social-force": SocialForceRobot, "straight": StraightToGoal, "random": RandomPolicy, "orca": OrcaRobot,
+    "oracle": OraclePlanner, "predictive": PredictivePlanner,
 }
 """Names accepted by ``crowdnav render --policy`` -> the policy's class (``random`` takes a seed, the others nothing)."""
