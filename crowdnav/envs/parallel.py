@@ -9,7 +9,7 @@ import numpy as np
 from gymnasium import spaces
 from pettingzoo import ParallelEnv
 
-from crowdnav.envs.core import EnvCore, ScenarioSource, real_array, step_info
+from crowdnav.envs.core import EnvCore, ScenarioSource, checked_robot_action, real_array, step_info
 from crowdnav.envs.human_observation import HumanObservations
 from crowdnav.envs.multi_agent import HumanExit, HumanReward, flat_spaces, flatten_batch, global_state, state_space
 from crowdnav.rendering.episode_view import RENDER_MODES
@@ -49,7 +49,7 @@ class CrowdNavParallelEnv(ParallelEnv):  # type: ignore[misc]  # pettingzoo has 
     **Robot.** Observation: the same Dict as :class:`crowdnav.envs.single.CrowdNavEnv` (one
     key per modality); action: Box(-1, 1, (2,), float32), (vx, vy) in the robot frame times the
     robot's max speed (holonomic) or (v, omega) (unicycle); out-of-range values are clipped;
-    NaN or inf raises ValueError. Reward: the terms of :mod:`crowdnav.envs.reward`, listed in
+    NaN, inf or None raises ValueError (naming the robot). Reward: the terms of :mod:`crowdnav.envs.reward`, listed in
     ``infos["robot"]["reward_terms"]``; at the episode end ``infos["robot"]`` also holds
     ``outcome``, ``is_success`` and, after a collision, ``collision_kind`` / ``collision_partner``.
 
@@ -200,7 +200,7 @@ class CrowdNavParallelEnv(ParallelEnv):  # type: ignore[misc]  # pettingzoo has 
         """:meth:`step` with several robots: each its own outcome; the episode ends when every robot's has."""
         robots, fixed = self._robot_names, self.fixed_agents
         was_active = list(self._active_robots)
-        results = self.core.step_robots([actions[name] if name in was_active else None for name in robots], human_actions)
+        results = self.core.step_robots([self._robot_action(actions, name) if name in was_active else None for name in robots], human_actions)
         agents = self.agents
         ended = [name for name, result in zip(robots, results, strict=True) if result is not None and result[0].terminated]
         still = [name for name in was_active if name not in ended]
@@ -244,6 +244,17 @@ class CrowdNavParallelEnv(ParallelEnv):  # type: ignore[misc]  # pettingzoo has 
             if not fixed:
                 self.agents = [agent for agent in self.agents if agent not in ended]
         return observations, rewards, terminations, truncations, infos
+
+    @staticmethod
+    def _robot_action(actions: Mapping[str, Any], name: str) -> np.ndarray:
+        """An active robot's action, checked before the step (None is refused: only a robot that left has no action)."""
+        action = actions[name]
+        if action is None:
+            raise ValueError(f"the action of {name} is None; an active robot needs 2 numbers in [-1, 1] (to stand still: [0, 0])")
+        try:
+            return checked_robot_action(action)
+        except ValueError as error:
+            raise ValueError(f"the action of {name}: {error}") from None
 
     def _step_humans(self, rewards: dict[str, float], terminations: dict[str, bool], infos: Infos,
                      terminated: bool, truncated: bool) -> None:
