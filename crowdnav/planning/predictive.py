@@ -1,0 +1,194 @@
+"""A receding-horizon planner over constant-velocity predictions (``baseline:predictive``).
+
+At every step it predicts each human to keep its current velocity for ``horizon`` seconds,
+searches the space-time lattice of :mod:`crowdnav.planning.lattice` around the robot (the moves
+it can make, ``cells_per_step`` cells per step), keeps the cells that touch no predicted human
+(contact distance plus ``human_margin``) and no wall or furniture (plus ``static_margin``), and
+takes the first move of the best plan: the earliest that reaches the goal if one does within the
+horizon, otherwise the one that survives longest and ends nearest the goal by the geodesic
+distance around the furniture (the map). If every move touches a prediction at the next step,
+it takes the move that keeps the most room.
+
+What it reads is a :class:`CrowdEstimate`: from the simulator (:meth:`CrowdEstimate.from_sim`:
+the true current state of every human; the baseline is privileged that far) or from a robot's
+own observation (:mod:`crowdnav.planning.observed`: the humans its tracker reports). It never
+reads the future. Worlds are batched: one call plans K worlds of one map with the same arrays.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from crowdnav.planning.lattice import Lattice, SearchLayers, disc_cells, search
+from crowdnav.planning.oracle import EPSILON, check_plannable, to_action
+from crowdnav.planning.static_map import GeodesicField, StaticMap
+from crowdnav.robot_view import RobotWorld
+from crowdnav.world import CompiledWorld
+
+
+@dataclass
+class CrowdEstimate:
+    """What a planner knows of K worlds now (world frame, m and m/s); absent humans have ``present`` False."""
+
+    robot: np.ndarray
+    """(K,) complex robot positions."""
+    goal: np.ndarray
+    """(K,) complex robot goals."""
+    humans: np.ndarray
+    """(K, n) complex human positions."""
+    velocities: np.ndarray
+    """(K, n) complex human velocities."""
+    radii: np.ndarray
+    """(K, n) human body radii."""
+    present: np.ndarray
+    """(K, n) bool: which rows are humans (a tracker reports fewer than n)."""
+
+    @classmethod
+    def from_sim(cls, sim: RobotWorld) -> CrowdEstimate:
+        """The true current state of one world (every human, and other robots as moving discs)."""
+        positions, velocities, radii = sim.positions[1:], sim.velocities[1:], sim.radii[1:]
+        return cls(np.array([sim.robot_position]), np.array([sim.robot_goal]), positions[None].astype(complex),
+                   velocities[None].astype(complex), radii[None].astype(float), np.ones((1, len(positions)), dtype=bool))
+
+
+@dataclass(frozen=True)
+class PlannerSettings:
+    """The predictive planner's parameters (docs/agents.md#the-predictive-planner)."""
+
+    horizon: float = 2.0
+    """Seconds of constant-velocity prediction searched at every step."""
+    cells_per_step: int = 2
+    """Lattice cells per full-speed step (2: 0.1 m cells at 1 m/s and 0.2 s, 13 moves)."""
+    human_margin: float = 0.1
+    """Metres kept from each predicted human beyond contact (prediction error room)."""
+    static_margin: float = 0.02
+    """Metres kept from walls and furniture beyond contact."""
+    map_spacing: float = 0.1
+    """Grid spacing (m) of the geodesic distance to the goal."""
+
+    def __post_init__(self) -> None:
+        for name in ("horizon", "human_margin", "static_margin", "map_spacing"):
+            value = getattr(self, name)
+            if not (isinstance(value, (int, float)) and math.isfinite(value) and value >= 0):
+                raise ValueError(f"{name} must be a finite number >= 0, got {value!r}")
+        if self.map_spacing <= 0 or self.horizon <= 0:
+            raise ValueError(f"horizon and map_spacing must be > 0, got {self.horizon!r} and {self.map_spacing!r}")
+        if not isinstance(self.cells_per_step, int) or not 1 <= self.cells_per_step <= 8:
+            raise ValueError(f"cells_per_step must be an integer in [1, 8], got {self.cells_per_step!r}")
+
+
+class PredictivePlanner:
+    """Constant-velocity prediction + lattice search, replanned every step (see the module docstring).
+
+    As a scripted policy (``policy(sim) -> action``) it reads the true current state; a learned
+    agent calls :meth:`plan` with what it observed. ``settings``: :class:`PlannerSettings`.
+    """
+
+    label = "predictive planner: current state + map, constant-velocity prediction (privileged)"
+
+    def __init__(self, settings: PlannerSettings | None = None, **overrides: float):
+        self.settings = settings or PlannerSettings(**overrides)  # type: ignore[arg-type]
+        self._maps: dict[int, tuple[CompiledWorld, StaticMap]] = {}
+        self._fields: dict[tuple[int, complex], GeodesicField] = {}
+
+    def __call__(self, sim: RobotWorld) -> np.ndarray:
+        check_plannable(sim, "the predictive planner", needs_fixed_future=False)
+        move = self.plan(sim.world, sim.dt, CrowdEstimate.from_sim(sim))[0]
+        return to_action(sim, complex(move))
+
+    def static_map(self, world: CompiledWorld) -> StaticMap:
+        """The map of ``world`` for its robot (built once per world)."""
+        cached = self._maps.get(id(world))
+        if cached is None or cached[0] is not world:
+            cached = self._maps[id(world)] = (world, StaticMap(world, world.scenario.robot.radius, self.settings.static_margin))
+        return cached[1]
+
+    def field(self, world: CompiledWorld, goal: complex) -> GeodesicField:
+        """The geodesic distance to ``goal`` in ``world`` (computed once per goal; the last 256 kept)."""
+        key = (id(world), complex(goal))
+        found = self._fields.get(key)
+        if found is None or found.world is not world:
+            if len(self._fields) >= 256:
+                self._fields.pop(next(iter(self._fields)))
+            found = self._fields[key] = self.static_map(world).geodesic(goal, self.settings.map_spacing)
+        return found
+
+    def plan(self, world: CompiledWorld, dt: float, crowd: CrowdEstimate) -> np.ndarray:
+        """(K,) complex: the displacement (m, world frame) each world's robot should make this step."""
+        s, robot = self.settings, world.scenario.robot
+        lattice = Lattice(s.cells_per_step, robot.max_speed * dt / s.cells_per_step)
+        steps = max(1, int(round(s.horizon / dt)))
+        reach_cells = steps * s.cells_per_step
+        side = 2 * reach_cells + 1
+        k = len(crowd.robot)
+        span = np.arange(-reach_cells, reach_cells + 1) * lattice.spacing
+        local = span[:, None] + 1j * span[None, :]
+        cells = crowd.robot[:, None, None] + local  # (K, side, side)
+        origin = cells[:, 0, 0]
+        static_free = self.static_map(world).free(cells)
+        ahead = np.arange(1, steps + 1)[:, None, None] * dt
+        predicted = crowd.humans[None] + crowd.velocities[None] * ahead  # (T, K, n)
+        reach = np.where(crowd.present, robot.radius + crowd.radii + s.human_margin + EPSILON, -1.0)
+        blocked = disc_cells(predicted, np.broadcast_to(reach, predicted.shape), np.broadcast_to(origin, (steps, k)),
+                             lattice.spacing, (side, side)).reshape(steps, k, side, side)
+        free = static_free[None] & ~blocked
+        start = np.zeros((k, side, side), dtype=bool)
+        start[:, reach_cells, reach_cells] = True
+        goal = np.abs(cells - crowd.goal[:, None, None]) <= robot.goal_radius - EPSILON
+        layers = search(start, free, lattice.moves, stop=goal)
+        cost = np.stack([self.field(world, g)(c) for g, c in zip(crowd.goal.tolist(), cells, strict=True)])
+        first = _first_moves(layers, lattice.moves, goal, cost)
+        stuck = first < 0
+        if stuck.any():  # every move touches a prediction next step: keep the most room
+            first[stuck] = _roomiest(crowd, lattice, dt, static_free, reach_cells, reach)[stuck]
+        displacement: np.ndarray = lattice.displacements[first]
+        return displacement
+
+
+def _first_moves(layers: SearchLayers, moves: np.ndarray, goal: np.ndarray, cost: np.ndarray) -> np.ndarray:
+    """(K,) the first move of each world's best plan (-1 where the robot cannot survive one step)."""
+    k = len(goal)
+    depth = len(layers.reached) - 1
+    chosen_t = np.zeros(k, dtype=np.int64)
+    chosen = np.full(k, -1, dtype=np.int64)  # flat cell index
+    done = np.zeros(k, dtype=bool)
+    for t in range(1, depth + 1):  # the earliest arrival at the goal
+        hit = (layers.reached[t] & goal).reshape(k, -1)
+        new = hit.any(1) & ~done
+        if new.any():
+            chosen[new] = np.argmax(hit[new], 1)
+            chosen_t[new] = t
+            done |= new
+    for t in range(depth, 0, -1):  # otherwise: the deepest layer, nearest the goal around obstacles
+        now = layers.reached[t].reshape(k, -1)
+        new = now.any(1) & ~done
+        if new.any():
+            scored = np.where(now[new], cost.reshape(k, -1)[new], np.inf)
+            chosen[new] = np.argmin(scored, 1)
+            chosen_t[new] = t
+            done |= new
+    side = goal.shape[-1]
+    i, j = chosen // side, chosen % side
+    first = np.full(k, -1, dtype=np.int64)
+    for t in range(depth, 0, -1):  # walk back to the first move, all worlds at once
+        on = (chosen_t >= t) & done
+        if not on.any():
+            continue
+        move = layers.parent[t - 1][np.flatnonzero(on), i[on], j[on]].astype(np.int64)
+        first[on] = move
+        i[on] -= moves[move, 0]
+        j[on] -= moves[move, 1]
+    return first
+
+
+def _roomiest(crowd: CrowdEstimate, lattice: Lattice, dt: float, static_free: np.ndarray, centre: int, reach: np.ndarray) -> np.ndarray:
+    """(K,) the move whose cell keeps the most room from every human predicted one step ahead (statically free)."""
+    moves = lattice.moves
+    targets = crowd.robot[:, None] + lattice.displacements[None]  # (K, M)
+    next_humans = crowd.humans + crowd.velocities * dt
+    room = (np.abs(targets[:, :, None] - next_humans[:, None, :]) - reach[:, None, :]).min(2, initial=np.inf)
+    ok = static_free[:, centre + moves[:, 0], centre + moves[:, 1]]
+    return np.argmax(np.where(ok, room, -np.inf), 1)
