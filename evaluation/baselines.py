@@ -50,6 +50,8 @@ BASELINES: dict[str, str] = {
     "straight": "straight to goal (scripted)",
     "social_force": "social force, privileged (scripted)",
     "orca": "ORCA, privileged (scripted)",
+    "predictive": "predictive planner, privileged: state + map (scripted)",
+    "oracle": "oracle, privileged: knows the future (ceiling)",
 }
 """Baseline name (``baseline:NAME``) -> label in tables and figures."""
 
@@ -65,9 +67,9 @@ def is_baseline(configuration: str) -> bool:
 def scripted_policy(name: str) -> Any:
     """The scripted robot policy of a baseline name (``straight``, ``social_force``, ``orca``; the last one
     raises :class:`crowdnav.orca.OrcaUnavailableError`, one line, without pyrvo)."""
-    from crowdnav.policies import OrcaRobot, SocialForceRobot, StraightToGoal
+    from crowdnav.policies import SCRIPTED_POLICIES
 
-    return {"straight": StraightToGoal, "social_force": SocialForceRobot, "orca": OrcaRobot}[name]()
+    return SCRIPTED_POLICIES[name.replace("_", "-")]()
 
 
 def baseline_env_options(train: Mapping[str, Any]) -> dict[str, Any]:
