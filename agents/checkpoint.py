@@ -211,6 +211,11 @@ def load_policy(path: str | Path, device: str = "cpu", *, trusted: bool = False,
     """
     folder = find_checkpoint(path)
     info = read_policy_info(folder)
+    if info.get("agents") == "robots":  # crowdnav.agents.marl's shared policy: not one robot's policy, whatever its zip holds
+        raise SharedRobotPolicyError(f"{folder} is a shared robot policy (agents: robots), one network driving every robot of its "
+                                     "scenario at once, not one robot's policy: "
+                                     "play it with `crowdnav render`, rank it in an experiment with agents: robots, or load it "
+                                     "with crowdnav.agents.load_robots_policy (docs/agents.md#several-robots-shared-parameter-ppo)")
     encoder = None
     if info.get("leog_encoder"):
         from crowdnav.agents.pretrain import load_encoder
@@ -218,6 +223,10 @@ def load_policy(path: str | Path, device: str = "cpu", *, trusted: bool = False,
         encoder, _ = load_encoder(folder / info["leog_encoder"])  # torch.load with weights_only=True
     model = load_model(folder, device=device) if trusted else model_from_parameters(folder, info, encoder, device, config)
     return AgentPolicy(model, info, encoder)
+
+
+class SharedRobotPolicyError(CrowdNavError, ValueError):
+    """A shared robot policy (``agents: robots``) given where one robot's policy is expected."""
 
 
 class UntrustedCheckpointError(CrowdNavError, ValueError):

@@ -30,7 +30,14 @@ import numpy as np
 import torch
 import yaml
 from crowdnav.agents.callbacks import EpisodeRecord
-from crowdnav.agents.checkpoint import MODEL_FILE, check_network_size, load_parameters, read_policy_info, save_checkpoint
+from crowdnav.agents.checkpoint import (
+    MODEL_FILE,
+    check_network_size,
+    find_checkpoint,
+    load_parameters,
+    read_policy_info,
+    save_checkpoint,
+)
 from crowdnav.agents.config import ConfigError, TrainConfig, config_from_mapping, config_to_dict
 from crowdnav.agents.episode_log import EpisodeLogWriter, prepare_log
 from crowdnav.agents.factory import LinearDecay, env_options, hyperparameters
@@ -228,12 +235,12 @@ class RobotsPolicy:
 
 
 def load_robots_policy(path: str | Path, device: str = "cpu", *, config: TrainConfig | None = None) -> RobotsPolicy:
-    """A checkpoint or snapshot folder of :func:`train_robots` as a :class:`RobotsPolicy`.
+    """A run, checkpoint or snapshot folder of :func:`train_robots` as a :class:`RobotsPolicy`.
 
     The network is rebuilt from the run's config (sizes checked first) and gets the zip's
     tensors; nothing in the zip is unpickled. ``config``: the run's TrainConfig, if the caller has it.
     """
-    folder = Path(path)
+    folder = find_checkpoint(path)  # a run folder means its checkpoint/
     info = read_policy_info(folder)
     if info.get("agents") != ROBOTS_KIND:
         raise ConfigError(f"{folder}: not a shared robot policy (agents: robots); load it with crowdnav.agents.load_policy")

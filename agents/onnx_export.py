@@ -99,7 +99,8 @@ def export_onnx(policy_path: str | Path, out: str | Path, *, opset: int = OPSET)
     try:
         policy = load_policy(path)
     except (FileNotFoundError, ValueError) as error:
-        raise ExportError(f"{policy_path}: {str(error).splitlines()[0]}") from None
+        line = str(error).splitlines()[0]  # most messages name the checkpoint already
+        raise ExportError(line if line.startswith((str(policy_path), str(path))) else f"{policy_path}: {line}") from None
     env = policy.make_env()
     try:
         raw = dict_space(env.observation_space)

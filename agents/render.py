@@ -7,6 +7,7 @@ business, so it happens here, and torch is imported only when a checkpoint is lo
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
@@ -76,12 +77,14 @@ def _is_robots_checkpoint(policy: str) -> bool:
 
 
 def render_robots_policy(scenario: str, policy: str, *, seed: int = 0, episodes: int = 3, out: str | Path = "videos",
-                         video_format: str = "mp4", progress: bool = True, **options: Any) -> list[Path]:
+                         video_format: str = "mp4", progress: bool = True, render_options: Mapping[str, Any] | None = None,
+                         **options: Any) -> list[Path]:
     """Videos of a shared robot policy (``agents: robots``) driving every robot; one file per episode (seeds ``seed``, ...).
 
     Each file is named by the scenario, the checkpoint, the seed and how many robots reached their
-    goal (``..._seed7_2of3_success.mp4``). The policy plays the world it was trained in: scenario
-    overrides, reward weights and render options are refused in one line.
+    goal (``..._seed7_2of3_arrived.mp4``). ``render_options`` as for :func:`render_episodes`. The
+    policy plays the world it was trained in: scenario overrides and reward weights are refused in
+    one line.
     """
     from crowdnav.paths import inside
     from crowdnav.rendering.video import VideoWriter
@@ -93,11 +96,15 @@ def render_robots_policy(scenario: str, policy: str, *, seed: int = 0, episodes:
     from crowdnav.agents.marl import load_robots_policy
     from crowdnav.agents.marl_env import robots_env
 
-    trained = load_robots_policy(policy)
+    try:
+        trained = load_robots_policy(policy)
+    except Exception as error:  # a damaged checkpoint can fail in many ways; report one clear line
+        message = str(error).splitlines()[0] if str(error) else ""
+        raise PolicyLoadError(f"cannot load shared robot policy {policy}: {type(error).__name__}{': ' + message if message else ''}") from None
     if scenario != trained.env_options["scenario"]:
         raise PolicyLoadError(f"{policy} drives the robots of {trained.env_options['scenario']!r}, not {scenario!r}")
 
-    env = robots_env({**trained.env_options, "render_mode": "rgb_array"})
+    env = robots_env({**trained.env_options, "render_mode": "rgb_array", "render_options": render_options})
     label, paths = Path(policy).stem, []
     fps = env.metadata["render_fps"]
     assert isinstance(fps, float)  # PettingZoo types its metadata as a dict of objects
@@ -113,18 +120,22 @@ def render_robots_policy(scenario: str, policy: str, *, seed: int = 0, episodes:
             path = inside(Path(out), f"{env.scenario.name}_{label}_seed{seed + episode}{suffix}")
             observations, infos = env.reset(seed=seed + episode)
             outcomes: dict[str, str] = {}
-            with VideoWriter(path, fps=fps) as writer:
-                writer.append(frame())
-                while env.agents:
-                    observations, _, terminations, truncations, infos = env.step(trained.act(observations, infos))
+            try:
+                with VideoWriter(path, fps=fps) as writer:
                     writer.append(frame())
-                    for name, info in infos.items():  # the outcome of the step a robot ended (later steps: inactive)
-                        if "outcome" in info:
-                            outcomes.setdefault(name, info["outcome"])
-                    if all(terminations.values()) or all(truncations.values()):
-                        break
+                    while env.agents:
+                        observations, _, terminations, truncations, infos = env.step(trained.act(observations, infos))
+                        writer.append(frame())
+                        for name, info in infos.items():  # the outcome of the step a robot ended (later steps: inactive)
+                            if "outcome" in info:
+                                outcomes.setdefault(name, info["outcome"])
+                        if all(terminations.values()) or all(truncations.values()):
+                            break
+            except BaseException:  # an interrupt: no unfinished video is left behind
+                path.unlink(missing_ok=True)
+                raise
             reached = sum(outcome == "success" for outcome in outcomes.values())
-            named = inside(Path(out), f"{env.scenario.name}_{label}_seed{seed + episode}_{reached}of{len(trained.robots)}_success{suffix}")
+            named = inside(Path(out), f"{env.scenario.name}_{label}_seed{seed + episode}_{reached}of{len(trained.robots)}_arrived{suffix}")
             path.replace(named)
             paths.append(named)
             if progress:

@@ -29,12 +29,21 @@ def export_command(args: argparse.Namespace) -> int:
         raise CliError(f"--out {args.out}: expected a file name ending in .onnx")
     if out.exists() and not args.force:
         raise CliError(f"{out} exists; pass --force to replace it")
-    if not Path(args.policy).exists():
+    policy = Path(args.policy)
+    if not policy.exists():
         raise CliError(f"{args.policy}: no such run folder or checkpoint (export takes a crowdnav training run or checkpoint)")
+    from crowdnav.agents.run_folder import POLICY_FILE
+
+    if policy.is_file() and policy.suffix == ".zip":
+        if not (policy.parent / POLICY_FILE).is_file():  # `crowdnav evaluate` and `render` take it with --scenario / --modalities
+            raise CliError(f"{args.policy} is an SB3 model .zip without crowdnav's {POLICY_FILE}: an exported graph needs the "
+                           "scenario, sensor settings and observation scaling a crowdnav checkpoint records; export the crowdnav "
+                           "run folder or checkpoint that holds it (docs/deploy.md)")
+        policy = policy.parent  # a crowdnav checkpoint's own model.zip: its folder is the checkpoint
     from crowdnav.agents.onnx_export import ExportError, export_onnx
 
     try:
-        path = export_onnx(args.policy, out)
+        path = export_onnx(policy, out)
     except ExportError as error:
         raise CliError(str(error)) from None
     print(f"wrote {path}")

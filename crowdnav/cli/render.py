@@ -35,6 +35,7 @@ def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) ->
     parser.add_argument("--hide", metavar="OVERLAYS", default="",
                         help="overlays to leave out, comma-separated: " + ", ".join(HIDEABLE) + " (default: draw them all)")
     parser.add_argument("--no-progress", action="store_true", help="hide the progress bar")
+    parser.add_argument("--traceback", action="store_true", help="show the full traceback when a module:function policy raises")
     add_override_option(parser)
     add_reward_options(parser)
     parser.set_defaults(handler=run)
@@ -100,10 +101,17 @@ def _render_foreign(args: argparse.Namespace) -> int:
         name, _, act, privileged, env_options = resolve_policy(args.policy, options)
 
         def play(env: CrowdNavEnv, observation: Mapping[str, np.ndarray]) -> np.ndarray:  # one episode at a time: a batch of one
-            if privileged:
-                action: np.ndarray = act(env.simulator)
-            else:
-                action = np.asarray(act({key: np.asarray(value)[None] for key, value in observation.items()}))[0]
+            try:
+                if privileged:
+                    action: np.ndarray = act(env.simulator)
+                else:
+                    action = np.asarray(act({key: np.asarray(value)[None] for key, value in observation.items()}))[0]
+            except PolicyError:
+                raise
+            except (Exception, SystemExit) as error:  # the user's policy failed: one line, as `crowdnav evaluate` says it
+                message = str(error).splitlines()[0] if str(error) else ""
+                raise PolicyError(f"{args.policy} raised {type(error).__name__}{': ' + message if message else ''} while acting "
+                                  "(--traceback shows where)") from error
             return action
 
         extra = {key: value for key, value in env_options.items() if key not in ("scenario", "overrides")}
@@ -112,6 +120,10 @@ def _render_foreign(args: argparse.Namespace) -> int:
                                 reward_weights=reward_options(args), render_options=_render_options(args),
                                 progress=not args.no_progress)
     except (PolicyError, ScenarioError, OutputPathError, ValueError) as error:
+        if args.traceback and error.__cause__ is not None:
+            import traceback
+
+            traceback.print_exception(error.__cause__)
         raise CliError(str(error).splitlines()[0]) from None
     for path in paths:
         print(f"wrote {path}")

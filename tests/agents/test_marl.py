@@ -209,7 +209,7 @@ def test_a_shared_robot_checkpoint_renders_every_robot_to_a_video_named_by_how_m
     checkpoint = str(tmp_path / "run" / "checkpoint")
     paths = render_policy(HALL, checkpoint, seed=3, episodes=2, out=tmp_path / "videos", video_format="gif", progress=True)
     assert [path.name.rsplit("_", 2)[0] for path in paths] == [f"{HALL}_checkpoint_seed3", f"{HALL}_checkpoint_seed4"]
-    assert all(path.name.endswith("of3_success.gif") and path.stat().st_size > 0 for path in paths)
+    assert all(path.name.endswith("of3_arrived.gif") and path.stat().st_size > 0 for path in paths)
     printed = capsys.readouterr().out.splitlines()
     assert [line.split(":")[0] for line in printed] == [path.name for path in paths]
     assert all(name in printed[0] for name in ("east_bound", "west_bound", "north_bound"))
