@@ -41,7 +41,7 @@ class Lattice:
         return (moves[:, 0] + 1j * moves[:, 1]) * self.spacing
 
 
-def _shifted(grid: np.ndarray, di: int, dj: int) -> np.ndarray:
+def shifted(grid: np.ndarray, di: int, dj: int) -> np.ndarray:
     """``grid`` (K, W, H) moved by (di, dj) cells, cells shifted in from outside False."""
     out = np.zeros_like(grid)
     w, h = grid.shape[1:]
@@ -88,7 +88,7 @@ def search(start: np.ndarray, free: np.ndarray, moves: np.ndarray, stop: np.ndar
         now = np.zeros_like(before)
         into = np.full(before.shape, -1, dtype=np.int8)
         for k, (di, dj) in enumerate(moves.tolist()):
-            new = _shifted(before, di, dj) & free[t] & ~now
+            new = shifted(before, di, dj) & free[t] & ~now
             into[new] = k
             now |= new
         reached.append(now)

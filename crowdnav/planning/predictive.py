@@ -22,7 +22,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from crowdnav.planning.lattice import Lattice, SearchLayers, disc_cells, search
+from crowdnav.planning.lattice import Lattice, SearchLayers, disc_cells, search, shifted
 from crowdnav.planning.oracle import EPSILON, check_plannable, to_action
 from crowdnav.planning.static_map import GeodesicField, StaticMap
 from crowdnav.robot_view import RobotWorld
@@ -116,36 +116,85 @@ class PredictivePlanner:
             found = self._fields[key] = self.static_map(world).geodesic(goal, self.settings.map_spacing)
         return found
 
-    def plan(self, world: CompiledWorld, dt: float, crowd: CrowdEstimate) -> np.ndarray:
-        """(K,) complex: the displacement (m, world frame) each world's robot should make this step."""
+    def layers(self, world: CompiledWorld, dt: float, crowd: CrowdEstimate) -> Layers:
+        """The local lattice of K worlds around their robots and its free cells at each predicted step."""
         s, robot = self.settings, world.scenario.robot
         lattice = Lattice(s.cells_per_step, robot.max_speed * dt / s.cells_per_step)
         steps = max(1, int(round(s.horizon / dt)))
-        reach_cells = steps * s.cells_per_step
-        side = 2 * reach_cells + 1
+        centre = steps * s.cells_per_step
+        side = 2 * centre + 1
         k = len(crowd.robot)
-        span = np.arange(-reach_cells, reach_cells + 1) * lattice.spacing
-        local = span[:, None] + 1j * span[None, :]
-        cells = crowd.robot[:, None, None] + local  # (K, side, side)
-        origin = cells[:, 0, 0]
+        span = np.arange(-centre, centre + 1) * lattice.spacing
+        cells = crowd.robot[:, None, None] + (span[:, None] + 1j * span[None, :])  # (K, side, side)
         static_free = self.static_map(world).free(cells)
         ahead = np.arange(1, steps + 1)[:, None, None] * dt
         predicted = crowd.humans[None] + crowd.velocities[None] * ahead  # (T, K, n)
         reach = np.where(crowd.present, robot.radius + crowd.radii + s.human_margin + EPSILON, -1.0)
-        blocked = disc_cells(predicted, np.broadcast_to(reach, predicted.shape), np.broadcast_to(origin, (steps, k)),
+        blocked = disc_cells(predicted, np.broadcast_to(reach, predicted.shape), np.broadcast_to(cells[:, 0, 0], (steps, k)),
                              lattice.spacing, (side, side)).reshape(steps, k, side, side)
-        free = static_free[None] & ~blocked
-        start = np.zeros((k, side, side), dtype=bool)
-        start[:, reach_cells, reach_cells] = True
         goal = np.abs(cells - crowd.goal[:, None, None]) <= robot.goal_radius - EPSILON
-        layers = search(start, free, lattice.moves, stop=goal)
-        cost = np.stack([self.field(world, g)(c) for g, c in zip(crowd.goal.tolist(), cells, strict=True)])
-        first = _first_moves(layers, lattice.moves, goal, cost)
+        return Layers(lattice, centre, cells, static_free, static_free[None] & ~blocked, goal, predicted, reach)
+
+    def plan(self, world: CompiledWorld, dt: float, crowd: CrowdEstimate) -> np.ndarray:
+        """(K,) complex: the displacement (m, world frame) each world's robot should make this step."""
+        grid = self.layers(world, dt, crowd)
+        start = np.zeros(grid.goal.shape, dtype=bool)
+        start[:, grid.centre, grid.centre] = True
+        found = search(start, grid.free, grid.lattice.moves, stop=grid.goal)
+        cost = np.stack([self.field(world, g)(c) for g, c in zip(crowd.goal.tolist(), grid.cells, strict=True)])
+        first = _first_moves(found, grid.lattice.moves, grid.goal, cost)
         stuck = first < 0
         if stuck.any():  # every move touches a prediction next step: keep the most room
-            first[stuck] = _roomiest(crowd, lattice, dt, static_free, reach_cells, reach)[stuck]
-        displacement: np.ndarray = lattice.displacements[first]
+            first[stuck] = grid.roomiest()[stuck]
+        displacement: np.ndarray = grid.lattice.displacements[first]
         return displacement
+
+
+@dataclass
+class Layers:
+    """K worlds' local lattices (centred on their robots) and where the robot may be at each predicted step."""
+
+    lattice: Lattice
+    centre: int
+    """Index of the robot's cell on both axes."""
+    cells: np.ndarray
+    """(K, side, side) complex cell positions."""
+    static_free: np.ndarray
+    """(K, side, side) bool: clear of walls and furniture."""
+    free: np.ndarray
+    """(T, K, side, side) bool: clear of everything at predicted step t + 1."""
+    goal: np.ndarray
+    """(K, side, side) bool: within the goal radius."""
+    predicted: np.ndarray
+    """(T, K, n) complex predicted human positions."""
+    reach: np.ndarray
+    """(K, n) contact distance plus margin to each human (-1: absent)."""
+
+    def safe_moves(self) -> np.ndarray:
+        """(K, M) bool: the moves after which the robot can stay clear of every prediction to the horizon (or reach the goal).
+
+        One backward pass: a cell is safe at step t if it is free then and one move leads to a safe
+        cell at t + 1 (every cell free at the horizon is safe; a free goal cell is safe at any t).
+        """
+        moves = self.lattice.moves
+        safe = self.free[-1].copy()
+        for t in range(len(self.free) - 2, -1, -1):
+            onward = np.zeros_like(safe)
+            for di, dj in moves.tolist():
+                onward |= shifted(safe, -di, -dj)
+            safe = self.free[t] & (onward | self.goal)
+        c = self.centre
+        out: np.ndarray = safe[:, c + moves[:, 0], c + moves[:, 1]]
+        return out
+
+    def roomiest(self) -> np.ndarray:
+        """(K,) the statically free move that keeps the most room from every human predicted one step ahead."""
+        moves, c = self.lattice.moves, self.centre
+        targets = self.cells[:, c + moves[:, 0], c + moves[:, 1]]  # (K, M)
+        room = (np.abs(targets[:, :, None] - self.predicted[0][:, None, :]) - self.reach[:, None, :]).min(2, initial=np.inf)
+        ok = self.static_free[:, c + moves[:, 0], c + moves[:, 1]]
+        out: np.ndarray = np.argmax(np.where(ok, room, -np.inf), 1)
+        return out
 
 
 def _first_moves(layers: SearchLayers, moves: np.ndarray, goal: np.ndarray, cost: np.ndarray) -> np.ndarray:
@@ -182,13 +231,3 @@ def _first_moves(layers: SearchLayers, moves: np.ndarray, goal: np.ndarray, cost
         i[on] -= moves[move, 0]
         j[on] -= moves[move, 1]
     return first
-
-
-def _roomiest(crowd: CrowdEstimate, lattice: Lattice, dt: float, static_free: np.ndarray, centre: int, reach: np.ndarray) -> np.ndarray:
-    """(K,) the move whose cell keeps the most room from every human predicted one step ahead (statically free)."""
-    moves = lattice.moves
-    targets = crowd.robot[:, None] + lattice.displacements[None]  # (K, M)
-    next_humans = crowd.humans + crowd.velocities * dt
-    room = (np.abs(targets[:, :, None] - next_humans[:, None, :]) - reach[:, None, :]).min(2, initial=np.inf)
-    ok = static_free[:, centre + moves[:, 0], centre + moves[:, 1]]
-    return np.argmax(np.where(ok, room, -np.inf), 1)
