@@ -17,7 +17,7 @@ from __future__ import annotations
 import json
 import os
 import re
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
@@ -187,26 +187,54 @@ def writing(folder: str | Path) -> Iterator[None]:
     when its holder exits in any way, kill included. Where ``fcntl`` does not exist (Windows) no
     lock is taken.
     """
+    folder = Path(folder)
+    folder.mkdir(parents=True, exist_ok=True)
+    with hold_lock(folder / LOCK_FILE, lambda holder: f"{folder} is being written by another process (PID {holder}); "
+                                                      "wait for it to finish or stop it, then resume"):
+        yield
+
+
+@contextmanager
+def hold_lock(path: str | Path, busy: Callable[[str], str], *, remove: bool = False) -> Iterator[None]:
+    """Hold the OS lock (``flock``) of the file ``path``; :class:`RunBusyError` with ``busy(holder's PID)`` if another has it.
+
+    The file keeps the holder's PID; the lock goes with its holder's process, however it ends.
+    ``remove``: the file is deleted on release (while still held; a process that locked the
+    deleted file meanwhile sees it is no longer ``path`` and takes the new one). Where ``fcntl``
+    does not exist (Windows) no lock is taken.
+    """
     try:
         import fcntl
     except ImportError:  # pragma: no cover - Windows
         yield
         return
-    folder = Path(folder)
-    folder.mkdir(parents=True, exist_ok=True)
-    with open(folder / LOCK_FILE, "a+", encoding="utf-8") as handle:
+    path = Path(path)
+    while True:
+        handle = open(path, "a+", encoding="utf-8")  # noqa: SIM115 - closed below, after the lock's whole life
         try:
             fcntl.flock(handle, fcntl.LOCK_EX | fcntl.LOCK_NB)
         except BlockingIOError:
             handle.seek(0)
             holder = handle.read().strip() or "unknown"
-            raise RunBusyError(f"{folder} is being written by another process (PID {holder}); wait for it to finish or stop it, "
-                               "then resume") from None
+            handle.close()
+            raise RunBusyError(busy(holder)) from None
+        try:
+            current = os.stat(path).st_ino
+        except FileNotFoundError:
+            current = None
+        if current == os.fstat(handle.fileno()).st_ino:
+            break
+        handle.close()  # removed by the holder that just let go: lock the file now at ``path``
+    with handle:
         handle.seek(0)
         handle.truncate()
         handle.write(f"{os.getpid()}\n")
         handle.flush()
-        yield
+        try:
+            yield
+        finally:
+            if remove:
+                path.unlink(missing_ok=True)
 
 
 def training_run(path: str | Path) -> Path:

@@ -81,10 +81,20 @@ def _load_sb3_zip(path: Path, options: Mapping[str, Any]) -> Act:
     return act
 
 
-def resolve_policy(spec: str, env_options: Mapping[str, Any]) -> tuple[str, str, Act, bool, dict[str, Any]]:
+def is_code_policy(spec: str) -> bool:
+    """True for a POLICY that :func:`resolve_policy` would import as ``module:function`` (it runs that module's code)."""
+    return not spec.startswith("baseline:") and not Path(spec).exists() and _CALLABLE.fullmatch(spec) is not None
+
+
+_CALLABLE = re.compile(r"[A-Za-z_][\w.]*:[A-Za-z_]\w*")
+
+
+def resolve_policy(spec: str, env_options: Mapping[str, Any], *, allow_import: bool = True) -> tuple[str, str, Act, bool, dict[str, Any]]:
     """(configuration name, label, act, privileged, env options) for a POLICY string.
 
-    ``act`` maps stacked observations (or, with ``privileged``, a simulator) to actions.
+    ``act`` maps stacked observations (or, with ``privileged``, a simulator) to actions. A
+    ``module:function`` imports that module from the current folder or ``sys.path`` (it runs its
+    code); with ``allow_import=False`` (a POLICY read from a file) it is refused instead.
     """
     options = dict(env_options)
     if spec.startswith("baseline:"):
@@ -118,7 +128,9 @@ def resolve_policy(spec: str, env_options: Mapping[str, Any]) -> tuple[str, str,
             trained["scenario"] = options["scenario"]  # the same observations, in another scenario
             trained["overrides"] = dict(options.get("overrides", {}))
         return _safe(_run_name(Path(spec))), _run_name(Path(spec)), policy, False, trained
-    if re.fullmatch(r"[A-Za-z_][\w.]*:[A-Za-z_]\w*", spec):
+    if _CALLABLE.fullmatch(spec):
+        if not allow_import:
+            raise PolicyError(f"{spec[:200]}: a module:function read from a file is never imported; name it on the command line")
         module_name, function_name = spec.split(":")
         if os.getcwd() not in sys.path and "" not in sys.path:
             sys.path.insert(0, os.getcwd())  # as `python -m` does: a module next to where the command runs imports
@@ -203,7 +215,7 @@ def evaluate_policy(spec: str, scenario: str, out: str | Path, *, modalities: Se
     from crowdnav.evaluation.protocol import Protocol
     from crowdnav.evaluation.provenance import git_commit, package_versions
     from crowdnav.evaluation.rollout import HeldOutEpisodes
-    from crowdnav.evaluation.storage import META_FILE, TEST_FILE, atomic_write_csv, atomic_write_json, evaluated_run_name
+    from crowdnav.evaluation.storage import META_FILE, evaluated_run_name, install_result, result_lock, write_result
     from crowdnav.evaluation.unit_spec import RUN_COLUMNS
 
     from crowdnav.paths import inside
@@ -216,42 +228,43 @@ def evaluate_policy(spec: str, scenario: str, out: str | Path, *, modalities: Se
     configuration = f"{_safe(name) if name else configuration}--{scenario_key(scenario, options.get('overrides', {}))}"
     label = name or label  # --name names the row in tables and figures too
     folder = inside(out, f"{EXPERIMENT}/{evaluated_run_name(configuration, test_seed_base, test_seed_base + episodes - 1)}")
-    if not force and (folder / META_FILE).exists():  # meta.json is written last: without it, a stopped evaluation's leftovers
-        raise ResultsExistError(f"{folder} already holds this policy's results on this scenario and test set; "
-                                "pass --force (force=True) to replace them, or --out another folder")
-    protocol = Protocol(train_episodes=1, eval_every=1, test_episodes=episodes, seeds=1, test_seed_base=test_seed_base, final_evaluations=1)
-    started = time.perf_counter()
-    held_out = HeldOutEpisodes(env_options, protocol.test_seeds)
-    bar = None
-    if progress:
-        from tqdm import tqdm
+    with result_lock(folder):  # one writer at a time; a second one is refused at once, naming this one's PID
+        if not force and (folder / META_FILE).exists():
+            raise ResultsExistError(f"{folder} already holds this policy's results on this scenario and test set; "
+                                    "pass --force (force=True) to replace them, or --out another folder")
+        protocol = Protocol(train_episodes=1, eval_every=1, test_episodes=episodes, seeds=1, test_seed_base=test_seed_base,
+                            final_evaluations=1)
+        started = time.perf_counter()
+        held_out = HeldOutEpisodes(env_options, protocol.test_seeds)
+        bar = None
+        if progress:
+            from tqdm import tqdm
 
-        bar = tqdm(total=episodes, unit="ep", desc=f"evaluate {label}", leave=False)
-    try:
-        rows = held_out.run(_guarded(act, spec), privileged=privileged, on_end=bar.update if bar is not None else None)
-    except PolicyError:
-        raise
-    except (ValueError, TypeError) as error:  # an action of the wrong shape or type, from the user's policy
-        raise PolicyError(f"{spec}: {str(error).splitlines()[0]}") from error
-    finally:
-        held_out.close()
-        if bar is not None:
-            bar.close()
-    frame = pd.DataFrame(rows)
-    for position, (column, value) in enumerate(zip((*RUN_COLUMNS, "training_episodes", "evaluation"),
-                                                   (EXPERIMENT, configuration, label, 0, 0, 0), strict=True)):
-        frame.insert(position, column, value)
-    atomic_write_csv(frame, folder / TEST_FILE)
-    steps = int(frame["steps"].sum())
-    meta = {
-        "experiment": EXPERIMENT, "configuration": configuration, "label": label, "seed": 0, "status": "complete",
-        "kind": "evaluated", "policy": spec, "scenario": scenario, "env": env_options, "protocol": protocol.to_dict(),
-        # where it came from, so a replay (crowdnav trajectories) finds it from any folder
-        "policy_source": str(Path(spec).resolve()) if Path(spec).exists() else spec, "cwd": os.getcwd(),
-        "versions": package_versions(),
-        "git_commit": git_commit(), "wall_time_s": round(time.perf_counter() - started, 3),
-        "env_steps": {"train": 0, "test": steps, "total": steps}, "training_episodes": 0, "test_episodes": len(frame),
-        "resumed": False, "final": {outcome: round(float((frame["outcome"] == outcome).mean()), 6) for outcome in OUTCOMES},
-    }
-    atomic_write_json(folder / META_FILE, meta)
-    return folder
+            bar = tqdm(total=episodes, unit="ep", desc=f"evaluate {label}", leave=False)
+        try:
+            rows = held_out.run(_guarded(act, spec), privileged=privileged, on_end=bar.update if bar is not None else None)
+        except PolicyError:
+            raise
+        except (ValueError, TypeError) as error:  # an action of the wrong shape or type, from the user's policy
+            raise PolicyError(f"{spec}: {str(error).splitlines()[0]}") from error
+        finally:
+            held_out.close()
+            if bar is not None:
+                bar.close()
+        frame = pd.DataFrame(rows)
+        for position, (column, value) in enumerate(zip((*RUN_COLUMNS, "training_episodes", "evaluation"),
+                                                       (EXPERIMENT, configuration, label, 0, 0, 0), strict=True)):
+            frame.insert(position, column, value)
+        steps = int(frame["steps"].sum())
+        meta = {
+            "experiment": EXPERIMENT, "configuration": configuration, "label": label, "seed": 0, "status": "complete",
+            "kind": "evaluated", "policy": spec, "scenario": scenario, "env": env_options, "protocol": protocol.to_dict(),
+            # what to load again for a replay (crowdnav trajectories): a file by its absolute path; a module:function is
+            # imported again only when the user names it on the command line (docs/security.md)
+            "policy_source": str(Path(spec).resolve()) if Path(spec).exists() else spec,
+            "versions": package_versions(),
+            "git_commit": git_commit(), "wall_time_s": round(time.perf_counter() - started, 3),
+            "env_steps": {"train": 0, "test": steps, "total": steps}, "training_episodes": 0, "test_episodes": len(frame),
+            "resumed": False, "final": {outcome: round(float((frame["outcome"] == outcome).mean()), 6) for outcome in OUTCOMES},
+        }
+        return install_result(folder, lambda staging: write_result(staging, frame, meta))

@@ -49,8 +49,7 @@ from __future__ import annotations
 
 import json
 import math
-import sys
-from collections.abc import Iterable, Mapping, Sequence
+from collections.abc import Collection, Iterable, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -198,15 +197,17 @@ def _play(env_options: Mapping[str, Any], seeds: Sequence[int], act: Any, privil
         held_out.close()
 
 
-def replay_evaluation(run_dir: str | Path, evaluation: int | None = None) -> list[dict[str, Any]]:
+def replay_evaluation(run_dir: str | Path, evaluation: int | None = None, *, imports: Collection[str] = ()) -> list[dict[str, Any]]:
     """The test episodes of evaluation ``evaluation`` (default: the last) of a finished result, recorded.
 
     ``run_dir``: a folder with ``meta.json`` and ``test_episodes.csv``: a benchmark run
     ``<experiment>/<configuration>/seed_<n>`` (its policy snapshot for that evaluation is played),
     a scripted baseline ``<experiment>/baseline_<name>/baseline`` (the same at every evaluation),
-    or a ``crowdnav evaluate`` result (its POLICY, as meta.json names it, loaded again: a relative
-    path is read from the current folder). Raises :class:`ReplayMismatchError` unless every
-    episode's outcome matches the recorded one.
+    or a ``crowdnav evaluate`` result (its POLICY, as meta.json names it, loaded again: a file by
+    the absolute path recorded). No code a results folder names is run: a ``module:function``
+    POLICY is imported only if ``imports`` names it too (the command line's ``--import``), from
+    the current folder or ``sys.path``, never from a folder meta.json records. Raises
+    :class:`ReplayMismatchError` unless every episode's outcome matches the recorded one.
     """
     import pandas as pd
     from crowdnav.evaluation.protocol import Protocol
@@ -222,16 +223,23 @@ def replay_evaluation(run_dir: str | Path, evaluation: int | None = None) -> lis
     if kind == "baseline":  # the same at every evaluation: ``evaluation`` changes nothing
         from crowdnav.evaluation.baselines import scripted_policy
 
-        rows = _play(meta["env"], protocol.test_seeds, scripted_policy(meta["policy"]), True, meta["policy"])
+        try:
+            scripted = scripted_policy(meta["policy"])
+        except KeyError:
+            raise ResultsError(f"{run_dir}: its meta.json names no scripted baseline ({str(meta['policy'])[:60]!r})") from None
+        rows = _play(meta["env"], protocol.test_seeds, scripted, True, meta["policy"])
         expected = recorded.drop_duplicates("test_episode").set_index("test_episode")["outcome"]
     elif kind == "evaluated":  # one evaluation only
-        from crowdnav.evaluation.evaluate import PolicyError, resolve_policy
+        from crowdnav.evaluation.evaluate import PolicyError, is_code_policy, resolve_policy
 
-        source = meta.get("policy_source", meta["policy"])
-        if meta.get("cwd") and ":" in source and not Path(source).exists() and meta["cwd"] not in sys.path:
-            sys.path.append(meta["cwd"])  # a module:function next to where `crowdnav evaluate` ran
+        source = str(meta.get("policy_source", meta["policy"]))
+        named = is_code_policy(source) and source in imports  # code runs only when the user names it again
+        if is_code_policy(source) and not named:
+            raise ResultsError(f"{run_dir}: it scored the module:function policy {source[:200]}, and crowdnav never imports code "
+                               f"a results folder names; to replay it, pass --import {source[:200]} (imports=[...] in Python), "
+                               "imported from the current folder or PYTHONPATH")
         try:
-            _, _, act, privileged, env_options = resolve_policy(source, meta["env"])
+            _, _, act, privileged, env_options = resolve_policy(source, meta["env"], allow_import=named)
         except PolicyError as error:
             raise ResultsError(f"{run_dir}: cannot load the policy it scored ({error})") from None
         rows = _play(env_options, protocol.test_seeds, act, privileged, meta["policy"])
@@ -277,7 +285,7 @@ def result_label(run_dir: str | Path, evaluation: int | None = None) -> str:
 
 def finished_results(root: str | Path) -> list[Path]:
     """Every finished result under ``root`` (``root`` itself when it is one): folders whose meta.json is complete."""
-    from crowdnav.evaluation.storage import META_FILE, TEST_FILE, ResultsError, read_json
+    from crowdnav.evaluation.storage import META_FILE, TEST_FILE, ResultsError, is_set_aside, read_json
 
     root = Path(root)
     candidates = [root / META_FILE] if (root / META_FILE).is_file() else sorted(root.rglob(META_FILE))
@@ -286,6 +294,8 @@ def finished_results(root: str | Path) -> list[Path]:
         try:
             meta = read_json(path)
         except (ResultsError, OSError, ValueError):
+            continue
+        if is_set_aside(path.parent, root):  # a result being written or replaced (hidden), or one set aside
             continue
         if isinstance(meta, dict) and meta.get("status") == "complete" and "protocol" in meta and (path.parent / TEST_FILE).is_file():
             found.append(path.parent)

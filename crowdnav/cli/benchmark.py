@@ -189,6 +189,7 @@ def leaderboard_command(args: argparse.Namespace) -> int:
 
 
 def evaluate_command(args: argparse.Namespace) -> int:
+    from crowdnav.agents.run_folder import RunBusyError
     from crowdnav.evaluation.evaluate import PolicyError, ResultsExistError, evaluate_policy
     from crowdnav.scenario import ScenarioError
 
@@ -208,7 +209,7 @@ def evaluate_command(args: argparse.Namespace) -> int:
 
                 traceback.print_exception(error.__cause__)
             raise CliError(str(error).splitlines()[0]) from None
-        except (ResultsExistError, ScenarioError, ValueError) as error:
+        except (ResultsExistError, RunBusyError, ScenarioError, ValueError) as error:
             raise CliError(str(error).splitlines()[0]) from None
         except KeyboardInterrupt:
             print("crowdnav: interrupted before the results were written; run the same command again", file=sys.stderr)

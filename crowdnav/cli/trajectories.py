@@ -15,7 +15,8 @@ def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) ->
         "trajectories", help="export test episodes (of results or of any policy): per-step CSV and TrajNet++ ndjson",
         description="SOURCE is a results folder or a POLICY. A results folder (one run, an experiment, or a whole "
                     "results folder of `crowdnav benchmark` and `crowdnav evaluate`): each finished result's test episodes "
-                    "are played again from what it scored (test episodes are deterministic; a replay whose outcomes differ "
+                    "are played again from what it scored (a module:function POLICY only when --import names it: no code a results "
+                    "folder names runs otherwise; test episodes are deterministic; a replay whose outcomes differ "
                     "from the recorded ones is an error) and written to RUN/trajectories/evaluation_K (benchmark runs), "
                     "baseline or evaluate (.csv and .ndjson). A POLICY (any form `crowdnav evaluate` takes) plays the "
                     "--scenario's test episodes, written to OUT/<policy>__<scenario>__seeds<A>-<B>. Every respawned human "
@@ -23,6 +24,10 @@ def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) ->
     )
     traj.add_argument("source", metavar="SOURCE", help="a results folder, or a POLICY (run folder or checkpoint, SB3 .zip, "
                                                        "module:function, baseline:NAME)")
+    traj.add_argument("--import", dest="imports", action="append", default=[], metavar="MODULE:FUNCTION",
+                      help="results: a module:function POLICY a `crowdnav evaluate` result scored, to import again for its replay "
+                           "(from the current folder or PYTHONPATH; it runs that code). Never imported otherwise: crowdnav runs "
+                           "no code a results folder names (repeatable)")
     traj.add_argument("--evaluation", type=int, metavar="K", help="results: which evaluation of a benchmark run, 0-based (default: the last)")
     traj.add_argument("--scenario", metavar="NAME_OR_PATH", help="POLICY: library scenario name or YAML file (default: a crowdnav run's own)")
     traj.add_argument("--modalities", metavar="KEYS", help="POLICY: comma-separated observation keys (default: the scenario's)")
@@ -44,24 +49,30 @@ def trajectories_command(args: argparse.Namespace) -> int:
         if policy_options or args.overrides:
             raise CliError(f"{source} is a results folder: its results replay with their own settings "
                            f"({', '.join(policy_options or ['--override'])} is for a POLICY)")
-        return _replay(results, args.evaluation)
+        return _replay(results, args.evaluation, args.imports)
     if source.is_dir() and (source / META_FILE).is_file():
         raise CliError(f"{source}: an unfinished run (meta.json without a complete status or test_episodes.csv); finish it first")
     if args.evaluation is not None:
         raise CliError(f"--evaluation is for results folders; {args.source} is not one (no finished run in it)")
+    if args.imports:
+        raise CliError(f"--import is for results folders; {args.source} is not one (a POLICY given here is imported as named)")
     return _record(args)
 
 
-def _replay(results: list[Path], evaluation: int | None) -> int:
-    from crowdnav.evaluation.storage import ResultsError
+def _replay(results: list[Path], evaluation: int | None, imports: list[str]) -> int:
+    from crowdnav.evaluation.storage import META_FILE, ResultsError, read_json
     from crowdnav.evaluation.trajectories import ReplayMismatchError, replay_evaluation, result_label, write_trajectories
     from crowdnav.paths import OutputPathError, inside
 
+    scored = {str(read_json(run / META_FILE).get("policy_source")) for run in results}
+    unused = [name for name in imports if name not in scored]
+    if unused:
+        raise CliError(f"--import {unused[0]}: no result here scored it (a `crowdnav evaluate` result's POLICY, as its meta.json names it)")
     for run in results:
         try:
             # inside the run folder for real: a planted trajectories/ symlink must not send the files elsewhere
             stem = inside(run, f"trajectories/{result_label(run, evaluation)}")
-            episodes = replay_evaluation(run, evaluation)
+            episodes = replay_evaluation(run, evaluation, imports=imports)
         except (ResultsError, ReplayMismatchError, OutputPathError) as error:
             raise CliError(str(error)) from None
         for path in write_trajectories(episodes, stem):

@@ -132,7 +132,7 @@ def test_trajectories_of_evaluate_results_replay_what_was_scored(tmp_path, modul
 
     from crowdnav import CrowdNavEnv
 
-    monkeypatch.chdir(tmp_path)  # evaluate records where the POLICY came from: a replay finds it from any folder
+    monkeypatch.chdir(tmp_path)  # evaluate records where a POLICY file came from: a replay finds it from any folder
     PPO("MultiInputPolicy", CrowdNavEnv("corridor", modalities=["goal"]), n_steps=32, batch_size=16, seed=0).save("my_ppo.zip")
     for policy in ("baseline:straight", f"{module_on_path}:toward_goal", "my_ppo.zip"):
         assert main(["evaluate", policy, "--scenario", "corridor", "--modalities", "goal", "--episodes", "2", "--out", "results"]) == 0
@@ -140,7 +140,8 @@ def test_trajectories_of_evaluate_results_replay_what_was_scored(tmp_path, modul
     assert len(runs) == 3
     (tmp_path / "elsewhere").mkdir()
     monkeypatch.chdir(tmp_path / "elsewhere")  # the relative zip path resolves where evaluate ran, not here
-    assert main(["trajectories", str(tmp_path / "results")]) == 0
+    # the module:function is imported again only because the command line names it (it is on sys.path here)
+    assert main(["trajectories", str(tmp_path / "results"), "--import", f"{module_on_path}:toward_goal"]) == 0
     monkeypatch.chdir(tmp_path)
     for run in runs:
         table = pd.read_csv(run / "trajectories" / "evaluate.csv")
@@ -165,7 +166,7 @@ def test_trajectories_of_a_policy_are_the_episodes_evaluate_scores(tmp_path, mod
     folder = evaluate_policy(policy, "hotel_lobby", tmp_path / "results", modalities=["goal"], episodes=2, test_seed_base=5)
     scored = pd.read_csv(folder / "test_episodes.csv")
     assert [e["outcome"] for e in episodes] == list(scored["outcome"]) and [e["test_seed"] for e in episodes] == [5, 6]
-    assert replay_evaluation(folder)[0]["frames"]["positions"].tobytes() == episodes[0]["frames"]["positions"].tobytes()
+    assert replay_evaluation(folder, imports=[policy])[0]["frames"]["positions"].tobytes() == episodes[0]["frames"]["positions"].tobytes()
     out = tmp_path / "exported"
     assert main(["trajectories", "baseline:social_force", "--scenario", "station_hall", "--episodes", "1", "--out", str(out)]) == 0
     table = pd.read_csv(out / "baseline_social_force__station_hall__seeds0-0.csv")
