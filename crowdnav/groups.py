@@ -71,37 +71,77 @@ def first_goals(sim: Any, spawn: list[np.ndarray]) -> list[np.ndarray]:
     return goals
 
 
-def apply_goal_rules(state: SimState, sim: Any) -> bool:
-    """After a step: humans of ``state`` at their goals follow their group's ``on_goal`` and ``goal_rule``.
+def apply_goal_rules(state: SimState, sim: Any, stalled: np.ndarray | None = None) -> bool:
+    """After a step: humans of ``state`` at their goals follow their group's ``on_goal`` and ``goal_rule``; stalled ones take a new goal.
 
-    ``state`` is changed in place (``human_arrived``, ``human_stopped``, ``human_goals``, and for
-    respawns ``positions``, ``velocities``, ``human_respawns``); draws come from ``sim.rng``.
-    Returns whether anyone respawned (moved): the caller then measures the new geometry.
+    ``state`` is changed in place (``human_arrived``, ``human_stopped``, ``human_goals``, the stall
+    fields, and for respawns ``positions``, ``velocities``, ``human_respawns``); draws come from
+    ``sim.rng``. ``stalled``: (n,) bool, the humans a stall check found (the batched simulator
+    checks every world at once, :func:`stalled_humans`); None: check here when one is due
+    (:func:`stall_check`). A stalled human takes a new goal by its group's ``goal_rule`` (sample:
+    drawn from the goal regions; mirror: the mirror image, so it turns back), whatever its
+    ``on_goal``. Returns whether anyone respawned (moved): the caller then measures the new geometry.
     """
-    arrived = np.abs(state.human_goals - state.positions[1:]) <= sim.scenario.humans.social_force.goal_tolerance
+    distance = np.abs(state.human_goals - state.positions[1:])
+    arrived = distance <= sim.scenario.humans.social_force.goal_tolerance
     np.logical_and(arrived, ~state.human_stopped, out=state.human_arrived)
+    if stalled is None:
+        stalled = stall_check(state, sim, distance)
+    if stalled is not None and stalled.any():
+        state.human_stalls[stalled] += 1
+    else:
+        stalled = None
     single, moved = len(sim.groups) == 1, False
     for g, (group, places) in enumerate(zip(sim.groups, sim.placement.groups, strict=True)):
         if group.standing or group.max_count == 0:
             continue
         mine = arrived if single else arrived & (state.human_group == g)
+        stuck_here = _NONE if stalled is None else np.flatnonzero(stalled if single else stalled & (state.human_group == g))
         if group.on_goal == "stop":
             state.human_stopped |= mine
             state.velocities[1:][state.human_stopped] = 0.0
+            index = stuck_here
+        else:
+            index = np.flatnonzero(mine) if mine.any() else _NONE
+            if group.on_goal == "respawn" and len(index):
+                index = _respawn(state, sim, index, group, places)
+                moved = moved or len(index) > 0
+            if len(stuck_here):  # never arrived ones: the two sets are apart
+                index = np.union1d(index, stuck_here)
+        if len(index) == 0:
             continue
-        if not mine.any():
-            continue
-        index = np.flatnonzero(mine)
-        if group.on_goal == "respawn":
-            index = _respawn(state, sim, index, group, places)
-            if len(index) == 0:
-                continue
-            moved = True
         if group.goal_rule == "mirror":
             state.human_goals[index] = 2 * mirror_center(group, sim.scenario) - state.human_goals[index]
         else:
             state.human_goals[index] = places.goal.draw(sim.rng, len(index), replace=True)
+        state.human_stall_mark[index] = np.inf  # a new goal: the next check only starts its window
     return moved
+
+
+_NONE = np.zeros(0, dtype=np.intp)
+
+
+def stall_window(scenario: Any) -> int:
+    """Steps between stall checks (``humans.stall.time`` rounded to whole steps, at least 1); 0: no stall checks."""
+    time = scenario.humans.stall.time
+    return 0 if time is None else max(1, round(time / scenario.time_step))
+
+
+def stall_check(state: SimState, sim: Any, distance: np.ndarray) -> np.ndarray | None:
+    """One world's stall check when one is due (every ``sim.stall_window`` steps): the stalled humans, the marks moved on; else None."""
+    window = sim.stall_window
+    if not window or state.step_count % window:
+        return None
+    stalled = stalled_humans(distance, state.human_stall_mark, state.human_stopped | state.human_arrived, sim.scenario.humans.stall.progress)
+    state.human_stall_mark[...] = distance
+    return stalled
+
+
+def stalled_humans(distance: np.ndarray, mark: np.ndarray, resting: np.ndarray, progress: float) -> np.ndarray:
+    """The stall kernel (any leading world axes): humans not ``resting`` (stopped or just arrived) that came less than
+    ``progress`` m closer to their goal since the last check (``mark``: their distance then, inf for a newer goal)."""
+    stalled: np.ndarray = (mark - distance < progress) & ~resting
+    return stalled
 
 
 def _respawn(state: SimState, sim: Any, index: np.ndarray, group: Any, places: Any) -> np.ndarray:

@@ -63,6 +63,10 @@ class SimState:
     """(n,) bool: humans that reached their goal in the last step (under ``on_goal: stop``: on arrival only)."""
     human_respawns: np.ndarray
     """(n,) int64: times each human respawned this episode (``on_goal: respawn``); after one it is a new pedestrian."""
+    human_stall_mark: np.ndarray
+    """(n,) float64, m: each human's distance to its goal at the last stall check (inf: a goal newer than that check)."""
+    human_stalls: np.ndarray
+    """(n,) int64: times each human stalled this episode (``humans.stall``), each time taking a new goal."""
 
     @property
     def n_humans(self) -> int:
@@ -161,6 +165,16 @@ class StateFields:
     def human_respawns(self) -> np.ndarray:
         """(n,) int: :attr:`SimState.human_respawns`."""
         return self._state.human_respawns
+
+    @property
+    def human_stall_mark(self) -> np.ndarray:
+        """(n,) float (m): :attr:`SimState.human_stall_mark`."""
+        return self._state.human_stall_mark
+
+    @property
+    def human_stalls(self) -> np.ndarray:
+        """(n,) int: :attr:`SimState.human_stalls`."""
+        return self._state.human_stalls
 
 
 @dataclass(frozen=True, eq=False)

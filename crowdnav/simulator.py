@@ -49,7 +49,7 @@ import numpy as np
 from crowdnav import social_force as sf
 from crowdnav.contacts import goal_distance
 from crowdnav.events import OUTCOMES, Collision, SimulationError, StepEvents  # noqa: F401  (re-exported: their public home)
-from crowdnav.groups import apply_goal_rules, first_goals, place_groups
+from crowdnav.groups import apply_goal_rules, first_goals, place_groups, stall_window
 from crowdnav.orca import OrcaCrowd, OrcaUnavailableError
 from crowdnav.placement import JITTER_REACH
 from crowdnav.robot_view import RobotAccessors, robot_scenario
@@ -99,6 +99,8 @@ class Simulator(StateFields, RobotAccessors, SimGeometry):
         self.relaxation = min(1.0, self.dt / force.relaxation_time)
         """``min(1, dt / relaxation_time)``: the share of the way to its desired velocity a human goes in one step."""
         self._static_count = self.obstacles.polygon_count + self.obstacles.disc_count
+        self.stall_window = stall_window(scenario)
+        """Steps between stall checks (``humans.stall``; 0: none): :func:`crowdnav.groups.apply_goal_rules`."""
         world = scenario.world
         self.bounds: tuple[float, float, float, float] | None = (
             None if world.boundary_walls else (float(world.min[0]), float(world.min[1]), float(world.max[0]), float(world.max[1])))
@@ -199,8 +201,9 @@ class Simulator(StateFields, RobotAccessors, SimGeometry):
         preferred_speed = np.concatenate([np.zeros(0), *(_preferred_speeds(rng, group, count)
                                                          for group, count in zip(self.groups, counts, strict=True))])
         max_speed = preferred_speed * self._force.max_speed_factor
+        positions = np.concatenate([start, *spawn])
         self._state = SimState(
-            positions=np.concatenate([start, *spawn]),
+            positions=positions,
             velocities=np.zeros(n + 1, dtype=complex),
             robot_goal=complex(goal),
             robot_heading=heading,
@@ -214,6 +217,8 @@ class Simulator(StateFields, RobotAccessors, SimGeometry):
             human_stopped=standing.copy(),
             human_arrived=np.zeros(n, dtype=bool),
             human_respawns=np.zeros(n, dtype=np.int64),
+            human_stall_mark=np.abs(human_goals - positions[1:]),  # the first stall window counts from the start
+            human_stalls=np.zeros(n, dtype=np.int64),
         )
         self._use_pair_constants(n)
         if self.orca is not None:

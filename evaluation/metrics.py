@@ -31,7 +31,7 @@ intrusions into: the intimate zone, the space a stranger should not enter."""
 METRIC_COLUMNS = (
     "steps", "time_to_goal", "path_length", "straight_line_distance", "spl", "stl", "min_human_distance",
     "intimate_share", "personal_share", "social_share", "psc", "mean_speed", "max_speed", "mean_acceleration",
-    "max_acceleration", "mean_jerk", "max_jerk", "min_time_to_collision", "social_force",
+    "max_acceleration", "mean_jerk", "max_jerk", "min_time_to_collision", "social_force", "human_stalls",
 )
 """The keys of :func:`episode_metrics`, in column order."""
 
@@ -54,6 +54,8 @@ class Trajectory:
     """(T,) magnitude of the humans' social force on the robot after each step (the reward's social term / w_social)."""
     max_speed: float
     """The robot's maximum speed (m/s): the fastest time to the goal is the straight line at this speed."""
+    human_stalls: int = 0
+    """Times a human stalled during the episode (``humans.stall``; the simulator's ``human_stalls`` summed at the end)."""
 
     @property
     def steps(self) -> int:
@@ -202,4 +204,5 @@ def episode_metrics(trajectory: Trajectory, success: bool) -> dict[str, float]:
     metrics["mean_jerk"], metrics["max_jerk"] = _mean_max(jerk)
     metrics["min_time_to_collision"] = min_time_to_collision(positions, trajectory.radii, dt)
     metrics["social_force"] = cumulative_social_force(trajectory.social_force, dt)
+    metrics["human_stalls"] = trajectory.human_stalls  # the crowd's health, not the robot's: a stall-free crowd has 0
     return metrics

@@ -95,7 +95,7 @@ class RobotEpisodes:
             positions = np.stack([track[: len(tracks[k][0])] for track in tracks[k]])
             trajectory = Trajectory(positions=positions, radii=radii[k], goal=complex(views[k].robot_goal),
                                     goal_radius=float(specs[k].goal_radius), dt=float(sim.dt), social_force=np.asarray(forces[k]),
-                                    max_speed=float(specs[k].max_speed))
+                                    max_speed=float(specs[k].max_speed), human_stalls=int(sim.human_stalls.sum()))
             rows.append({"test_episode": i, "test_seed": seed, "robot": name, "outcome": info["outcome"],
                          "collision_kind": info.get("collision_kind") or "", "return": returns[name],
                          **episode_metrics(trajectory, info["outcome"] == "success")})

@@ -114,7 +114,7 @@ class HeldOutEpisodes:
         trajectory = Trajectory(
             positions=np.stack(positions), radii=np.asarray(sim.radii, dtype=float).copy(), goal=complex(sim.robot_goal),
             goal_radius=float(sim.scenario.robot.goal_radius), dt=float(sim.dt), social_force=np.asarray(forces),
-            max_speed=float(sim.scenario.robot.max_speed),
+            max_speed=float(sim.scenario.robot.max_speed), human_stalls=int(sim.human_stalls.sum()),
         )
         outcome = info["outcome"]
         return {

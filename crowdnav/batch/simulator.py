@@ -11,9 +11,9 @@ never over worlds, humans, pairs or edges.
 
 A bucket's episode state is one :class:`crowdnav.batch.stacked_state.StackedState` (SimState's fields with a leading world axis),
 its geometry the same arrays a :class:`crowdnav.Simulator` measures, stacked. Resets, and the
-goal rules of worlds where a human reached its goal, draw from each world's own generator: they
-run per world. A reset draws on the world's own :class:`crowdnav.Simulator` (its *slot*) and its
-state is copied into the stack; the goal rules (:func:`crowdnav.groups.apply_goal_rules`) change
+goal rules of worlds where a human reached its goal or stalled, draw from each world's own generator: they
+run per world (the arrival and stall checks themselves run on all worlds at once). A reset draws on the world's own
+:class:`crowdnav.Simulator` (its *slot*) and its state is copied into the stack; the goal rules (:func:`crowdnav.groups.apply_goal_rules`) change
 the world's row of the stack in place, drawing from the slot's generator. Crowds large enough for the neighbour grid
 (``Simulator.grid_from`` humans) are not batched. ORCA humans (``model: orca``) get their velocities
 from each world's own solver (its slot's :class:`crowdnav.orca.OrcaCrowd`), one world at a time:
@@ -33,7 +33,7 @@ from crowdnav.batch.stacked_state import StackedState
 from crowdnav.batch.state import BatchState, BoolArray, ComplexArray, FloatArray, IntArray
 from crowdnav.contacts import deepest_contact, goal_distance, outside, push_humans_apart, push_out_of_obstacles, touching
 from crowdnav.events import Collision, SimulationError
-from crowdnav.groups import apply_goal_rules
+from crowdnav.groups import apply_goal_rules, stalled_humans
 from crowdnav.obstacles import EdgeSet, nearest_on_edges
 from crowdnav.sim_state import SELF_DISTANCE, PairConstants, SimState
 from crowdnav.simulator import Simulator
@@ -95,6 +95,8 @@ class Bucket:
     human_stopped: BoolArray
     human_arrived: BoolArray
     human_respawns: IntArray
+    human_stall_mark: FloatArray
+    human_stalls: IntArray
     # the geometry (_GEOMETRY), one row per world: absent until the first refresh creates it
     pair_offset: ComplexArray
     pair_distance: FloatArray
@@ -178,6 +180,7 @@ class BatchSimulator:
         self._labels = obstacles.labels + obstacles.disc_labels
         self._force, self._relax, self._bounds = self.scenario.humans.social_force, first.relaxation, first.bounds
         self._orca = first.orca
+        self._stall_window = first.stall_window
         """The first world's ORCA crowd, for what all worlds share (None: social force only)."""
         robot = self.scenario.robot
         self._unicycle = robot.kinematics != "holonomic"
@@ -397,16 +400,26 @@ class BatchSimulator:
         result.goal_reached[worlds] = goal_distance(bucket.state.robot_goal[rows], robot) <= self.scenario.robot.goal_radius
 
     def _goal_rules(self, bucket: Bucket, rows: np.ndarray) -> None:
-        """:func:`crowdnav.groups.apply_goal_rules`: vectorized where nobody arrived, per world where someone did."""
+        """:func:`crowdnav.groups.apply_goal_rules`: the arrival and stall checks vectorized, the rules per world where someone
+        arrived or stalled."""
         tolerance, state = self.scenario.humans.social_force.goal_tolerance, bucket.state
-        arrived = np.abs(state.human_goals[rows] - state.positions[rows, 1:]) <= tolerance
+        distance = np.abs(state.human_goals[rows] - state.positions[rows, 1:])
+        arrived = distance <= tolerance
         arrived &= ~state.human_stopped[rows]
         state.human_arrived[rows] = arrived
+        stalled = np.zeros_like(arrived)
+        if self._stall_window:
+            due = state.step_count[rows] % self._stall_window == 0
+            if due.any():  # crowdnav.groups.stall_check for the worlds whose check is due
+                check = rows[due]
+                stalled[due] = stalled_humans(distance[due], state.human_stall_mark[check], state.human_stopped[check] | arrived[due],
+                                              self.scenario.humans.stall.progress)
+                state.human_stall_mark[check] = distance[due]
         moved = []
-        for k in np.flatnonzero(arrived.any(1)):  # per arrival event: the rules draw from the world's generator
+        for k in np.flatnonzero(arrived.any(1) | stalled.any(1)):  # per event: the rules draw from the world's generator
             row = rows[k]
             # on the world's row of the stack, in place (views), with its slot's groups and generator
-            if apply_goal_rules(state.row(row), self.slots[bucket.world[row]]):
+            if apply_goal_rules(state.row(row), self.slots[bucket.world[row]], stalled[k]):
                 moved.append(row)
         if moved:  # respawned humans: the geometry of the new positions, as the single simulator's refresh
             self._refresh(bucket, np.array(moved))

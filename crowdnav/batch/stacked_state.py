@@ -51,6 +51,10 @@ class StackedState:
     """(K, n) bool: ``SimState.human_arrived`` of every world."""
     human_respawns: IntArray
     """(K, n) int64: ``SimState.human_respawns`` of every world."""
+    human_stall_mark: FloatArray
+    """(K, n) float64, m: ``SimState.human_stall_mark`` of every world."""
+    human_stalls: IntArray
+    """(K, n) int64: ``SimState.human_stalls`` of every world."""
 
     @classmethod
     def stack(cls, states: Sequence[SimState]) -> StackedState:

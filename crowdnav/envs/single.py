@@ -69,7 +69,8 @@ class CrowdNavEnv(gym.Env):
     ``"truncated"`` and False, the outcome of an episode cut there (at ``max_steps``, or by a
     ``TimeLimit`` wrapper that the env cannot see); after a collision also ``collision_kind``
     (``"human" | "static"``) and ``collision_partner`` (``human_<i>`` or the obstacle's scenario
-    path). Calling step() after the end raises RuntimeError.
+    path). ``human_stalls`` (int, every step): how many times a human stalled so far this episode
+    (``humans.stall``, docs/simulator.md#stalled-humans). Calling step() after the end raises RuntimeError.
 
     **Options.** ``scenario``: library name, YAML path or :class:`crowdnav.Scenario`;
     ``modalities``; ``sensors`` (``{"lidar": {"beams": 180}}``); ``reward_weights``
@@ -126,6 +127,7 @@ class CrowdNavEnv(gym.Env):
         terminated = events.terminated
         truncated = events.truncated and not terminated
         info = step_info(events, terms)
+        info["human_stalls"] = int(self.simulator.human_stalls.sum())
         observation = self.core.observe()  # a robot that ends this step is still seen; it leaves after (as in parallel_env)
         if self._other_names:
             info["other_robots"] = self._others_after_step(terminated or truncated)

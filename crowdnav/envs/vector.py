@@ -48,8 +48,8 @@ class CrowdNavVectorEnv(VectorEnv):
     **Infos** follow Gymnasium's vector convention (a key's values in an array, ``_key`` marking
     the worlds that have it): ``reward_terms`` (a dict of per-term arrays) for every world that
     stepped; ``outcome``, ``is_success`` for every world that stepped (``"truncated"`` / False for
-    a world still running, as :class:`crowdnav.envs.single.CrowdNavEnv`);
-    ``collision_kind`` and ``collision_partner`` after collisions.
+    a world still running, as :class:`crowdnav.envs.single.CrowdNavEnv`); ``human_stalls``
+    (int64) for every world that stepped; ``collision_kind`` and ``collision_partner`` after collisions.
 
     **Autoreset** (``autoreset_mode``, Gymnasium's :class:`AutoresetMode`):
 
@@ -247,6 +247,10 @@ class CrowdNavVectorEnv(VectorEnv):
             kind[i], partner[i] = hit.kind, hit.partner
         infos["outcome"], infos["_outcome"] = outcome, stepping.copy()
         infos["is_success"], infos["_is_success"] = outcome == "success", stepping.copy()
+        stalls = np.zeros(b, dtype=np.int64)
+        for bucket in self.batch.buckets.values():  # per crowd size
+            stalls[bucket.world] = bucket.state.human_stalls.sum(1)
+        infos["human_stalls"], infos["_human_stalls"] = np.where(stepping, stalls, 0), stepping.copy()
         if collided.any():
             infos["collision_kind"], infos["_collision_kind"] = kind, collided
             infos["collision_partner"], infos["_collision_partner"] = partner, collided.copy()

@@ -94,6 +94,16 @@ class SocialForce(StrictModel):
     goal_tolerance: PositiveFloat = Field(default=0.3, description="A human has reached its goal within this distance (m).")
 
 
+class Stall(StrictModel):
+    """When a walking human counts as stalled, and then takes a new goal (docs/simulator.md#stalled-humans)."""
+
+    time: PositiveFloat | None = Field(
+        default=60.0, description="Window (s): a walking human that came less than `progress` m closer to its goal over a whole window "
+        "has stalled and takes a new goal by its group's goal rule (checked every window; null: never)."
+    )
+    progress: PositiveFloat = Field(default=0.5, description="Progress (m) toward its goal a human must make per stall window.")
+
+
 HumanModel = Literal["social_force", "orca"]
 """How walking humans choose their velocity: the social force, or ORCA (optimal reciprocal collision avoidance)."""
 
@@ -245,6 +255,7 @@ class Humans(StrictModel):
         description="How walking humans choose their velocity: social_force or orca (needs pip install 'crowdnav[orca]'); groups may override.",
     )
     social_force: SocialForce = Field(default_factory=SocialForce, description="Social-force model parameters.")
+    stall: Stall = Field(default_factory=Stall, description="Stalled humans: no progress toward their goal for a while gives them a new goal.")
     orca: Orca = Field(default_factory=Orca, description="ORCA parameters (humans with model: orca, the ORCA robot baseline).")
 
     @model_validator(mode="after")

@@ -27,6 +27,7 @@ from crowdnav.scenario.crowd import (  # noqa: F401  (re-exported: the schema's 
     Humans,
     Orca,
     SocialForce,
+    Stall,
 )
 from crowdnav.scenario.fields import (  # noqa: F401  (re-exported: the schema's public names)
     MAX_HUMANS,

@@ -47,14 +47,19 @@ def test_scalar_math_reproduces_python_remainder_cos_sin_and_complex_products():
     ("station_hall", None),  # groups: standing circles, respawns
     ("cafe", {"robot.kinematics": "unicycle", "robot.max_angular_speed": 1.5}),
     ("open_space", {"humans.count": [0, 6]}),  # crowd sizes differ across worlds, including none
+    ("doorway", {"humans.stall.time": 2.0}),  # stalls (mirror rule): humans pinned at the wall beside the door turn back
+    ("station_hall", {"humans.stall.time": 1.0}),  # stalls with groups: sample, respawn and stop rules, standing circles
 ])
 def test_batched_simulator_worlds_equal_single_simulators_bit_for_bit(scenario, overrides):
-    check_batch_equals_singles(load_world(scenario, overrides), worlds=5, first_seed=20, steps=120, rng_seed=1, scale=1.2)
+    stalls = check_batch_equals_singles(load_world(scenario, overrides), worlds=5, first_seed=20, steps=120, rng_seed=1, scale=1.2)
+    assert stalls > 0 if overrides and "humans.stall.time" in overrides else stalls == 0  # the default window (60 s) never ends inside
 
 
-def check_batch_equals_singles(world, worlds: int, first_seed: int, steps: int, rng_seed: int, scale: float) -> None:
+def check_batch_equals_singles(world, worlds: int, first_seed: int, steps: int, rng_seed: int, scale: float) -> int:
     """Step a BatchSimulator and one Simulator per world with the same random actions: every world's state and
-    events equal its single simulator's, bit for bit, across episode ends (also used by tests/core/test_orca.py)."""
+    events equal its single simulator's, bit for bit, across episode ends (also used by tests/core/test_orca.py).
+    Returns how many stalls the episodes had."""
+    stalls = 0
     batch, singles = BatchSimulator(world, worlds), [Simulator(world) for _ in range(worlds)]
     batch.reset(range(worlds), [first_seed + i for i in range(worlds)])
     for i, sim in enumerate(singles):
@@ -70,11 +75,16 @@ def check_batch_equals_singles(world, worlds: int, first_seed: int, steps: int, 
             assert bucket.velocities[row].tobytes() == sim.velocities.tobytes()
             assert bucket.repulsion[row].tobytes() == sim._repulsion.tobytes()
             assert bucket.robot_heading[row] == sim.robot_heading
+            assert bucket.human_goals[row].tobytes() == sim.human_goals.tobytes()
+            assert bucket.human_stall_mark[row].tobytes() == sim.state.human_stall_mark.tobytes()
+            assert bucket.human_stalls[row].tobytes() == sim.human_stalls.tobytes()
             assert result.collisions.get(i) == events.collision and result.goal_reached[i] == events.goal_reached
             assert result.left_world[i] == events.left_world and result.truncated[i] == events.truncated
             if events.terminated or events.truncated:
+                stalls += int(sim.human_stalls.sum())
                 batch.reset([i], [None])
                 sim.reset()
+    return stalls + sum(int(sim.human_stalls.sum()) for sim in singles)
 
 
 def _compare_with_sync(scenario, mode, steps, num_envs=4, seed=7, **options):

@@ -163,3 +163,18 @@ def test_held_out_episodes_of_a_policy_fleeing_the_goal_end_out_of_bounds_with_z
     assert all(row["outcome"] == "out_of_bounds" and row["collision_kind"] == "" for row in rows)
     assert all(row["spl"] == 0.0 and math.isnan(row["time_to_goal"]) for row in rows)
     assert all(row["steps"] < 150 for row in rows)  # ended when it left the world, not at the time limit
+
+
+def test_test_episodes_count_the_crowd_s_stalls_single_and_batched():
+    """human_stalls: the episode's stalls (humans.stall), the same whether the episodes run one env each or as one batch."""
+    from crowdnav.evaluation.rollout import HeldOutEpisodes
+
+    from crowdnav.policies import StraightToGoal
+
+    options = {"scenario": "open_space", "modalities": ["goal"], "overrides": {"humans.count": 8, "humans.stall.time": 1.0}}
+    scripted = HeldOutEpisodes(options, [3, 4]).run(StraightToGoal(), privileged=True)
+    assert all(row["human_stalls"] == int(row["human_stalls"]) for row in scripted) and sum(row["human_stalls"] for row in scripted) > 0
+    still = HeldOutEpisodes(options, [3, 4])
+    batched, single = still.run(lambda obs: np.zeros((len(obs["goal"]), 2))), still.run(lambda obs: np.zeros((len(obs["goal"]), 2)), batched=False)
+    assert [row["human_stalls"] for row in batched] == [row["human_stalls"] for row in single]
+    assert sum(row["human_stalls"] for row in batched) > 0
