@@ -24,10 +24,12 @@ import numpy as np
 
 from crowdnav.errors import CrowdNavError
 from crowdnav.planning.lattice import Lattice, disc_cells, search
-from crowdnav.planning.static_map import StaticMap
+from crowdnav.planning.static_map import MapCache, StaticMap
 from crowdnav.robot_view import RobotWorld
 
 STILL = np.zeros(2, dtype=np.float32)
+MAX_EPISODES = 1024
+"""Plans an oracle keeps at once (one per episode it drives; the oldest dropped)."""
 EPSILON = 1e-9
 """Metres kept on the safe side of every contact and goal test: lattice sums and the simulator's may differ by rounding."""
 
@@ -73,27 +75,26 @@ class OraclePlanner:
         if not (math.isfinite(margin) and margin >= 0.0):
             raise ValueError(f"margin must be a finite number >= 0, got {margin!r}")
         self.cells_per_step, self.margin = cells_per_step, float(margin)
-        self._plan: dict[int, complex] = {}  # step -> where the robot should be after it
-        self._episode: object = None
-        self._maps: dict[int, tuple[object, StaticMap]] = {}
+        self._plans: dict[int, tuple[object, dict[int, complex]]] = {}
+        """id(episode state) -> (that state, step -> where the robot should be after it): one oracle may drive many envs."""
+        self.maps = MapCache(self.margin)
 
     def __call__(self, sim: RobotWorld) -> np.ndarray:
         state = getattr(sim, "state", None)
         if state is None or not hasattr(sim, "clone"):
             raise PlannerUnavailable("the oracle reads a crowdnav.Simulator (it plays the crowd forward on a clone)")
         step = state.step_count
-        if state is not self._episode or abs(self._plan.get(step, math.inf) - sim.robot_position) > 1e-6:
-            self._episode = state
-            self._plan = self.plan(sim)
-        target = self._plan.get(step + 1)
+        found = self._plans.get(id(state))
+        if found is None or found[0] is not state or abs(found[1].get(step, math.inf) - sim.robot_position) > 1e-6:
+            if found is None and len(self._plans) >= MAX_EPISODES:
+                self._plans.pop(next(iter(self._plans)))
+            found = self._plans[id(state)] = (state, self.plan(sim))
+        target = found[1].get(step + 1)
         return STILL.copy() if target is None else to_action(sim, target - sim.robot_position)
 
     def static_map(self, sim: RobotWorld) -> StaticMap:
-        """The map of ``sim``'s world for this robot (built once per world)."""
-        cached = self._maps.get(id(sim.world))
-        if cached is None or cached[0] is not sim.world:
-            cached = self._maps[id(sim.world)] = (sim.world, StaticMap(sim.world, sim.scenario.robot.radius, self.margin))
-        return cached[1]
+        """The map of ``sim``'s world for this robot (one per scenario)."""
+        return self.maps.map(sim.world)
 
     def future(self, sim: RobotWorld) -> np.ndarray:
         """(T, n) complex: the humans' positions after each of the episode's remaining steps (the robot standing still)."""

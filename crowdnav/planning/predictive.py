@@ -24,7 +24,7 @@ import numpy as np
 
 from crowdnav.planning.lattice import Lattice, SearchLayers, disc_cells, search, shifted
 from crowdnav.planning.oracle import EPSILON, check_plannable, to_action
-from crowdnav.planning.static_map import GeodesicField, StaticMap
+from crowdnav.planning.static_map import MapCache, StaticMap
 from crowdnav.robot_view import RobotWorld
 from crowdnav.world import CompiledWorld
 
@@ -91,8 +91,7 @@ class PredictivePlanner:
 
     def __init__(self, settings: PlannerSettings | None = None, **overrides: float):
         self.settings = settings or PlannerSettings(**overrides)  # type: ignore[arg-type]
-        self._maps: dict[int, tuple[CompiledWorld, StaticMap]] = {}
-        self._fields: dict[tuple[int, complex], GeodesicField] = {}
+        self.maps = MapCache(self.settings.static_margin, self.settings.map_spacing)
 
     def __call__(self, sim: RobotWorld) -> np.ndarray:
         check_plannable(sim, "the predictive planner", needs_fixed_future=False)
@@ -100,21 +99,8 @@ class PredictivePlanner:
         return to_action(sim, complex(move))
 
     def static_map(self, world: CompiledWorld) -> StaticMap:
-        """The map of ``world`` for its robot (built once per world)."""
-        cached = self._maps.get(id(world))
-        if cached is None or cached[0] is not world:
-            cached = self._maps[id(world)] = (world, StaticMap(world, world.scenario.robot.radius, self.settings.static_margin))
-        return cached[1]
-
-    def field(self, world: CompiledWorld, goal: complex) -> GeodesicField:
-        """The geodesic distance to ``goal`` in ``world`` (computed once per goal; the last 256 kept)."""
-        key = (id(world), complex(goal))
-        found = self._fields.get(key)
-        if found is None or found.world is not world:
-            if len(self._fields) >= 256:
-                self._fields.pop(next(iter(self._fields)))
-            found = self._fields[key] = self.static_map(world).geodesic(goal, self.settings.map_spacing)
-        return found
+        """The map of ``world`` for its robot (one per scenario)."""
+        return self.maps.map(world)
 
     def layers(self, world: CompiledWorld, dt: float, crowd: CrowdEstimate) -> Layers:
         """The local lattice of K worlds around their robots and its free cells at each predicted step."""
@@ -126,7 +112,7 @@ class PredictivePlanner:
         k = len(crowd.robot)
         span = np.arange(-centre, centre + 1) * lattice.spacing
         cells = crowd.robot[:, None, None] + (span[:, None] + 1j * span[None, :])  # (K, side, side)
-        static_free = self.static_map(world).free(cells)
+        static_free = self.static_map(world).free(cells, exact=False)
         ahead = np.arange(1, steps + 1)[:, None, None] * dt
         predicted = crowd.humans[None] + crowd.velocities[None] * ahead  # (T, K, n)
         reach = np.where(crowd.present, robot.radius + crowd.radii + s.human_margin + EPSILON, -1.0)
@@ -141,7 +127,7 @@ class PredictivePlanner:
         start = np.zeros(grid.goal.shape, dtype=bool)
         start[:, grid.centre, grid.centre] = True
         found = search(start, grid.free, grid.lattice.moves, stop=grid.goal)
-        cost = np.stack([self.field(world, g)(c) for g, c in zip(crowd.goal.tolist(), grid.cells, strict=True)])
+        cost = np.stack([self.maps.field(world, g)(c) for g, c in zip(crowd.goal.tolist(), grid.cells, strict=True)])
         first = _first_moves(found, grid.lattice.moves, grid.goal, cost)
         stuck = first < 0
         if stuck.any():  # every move touches a prediction next step: keep the most room

@@ -81,7 +81,7 @@ class Shield:
         safe = grid.safe_moves()  # (K, M)
         nearest = np.argmin(np.abs(lattice.displacements[None] - wanted[:, None]), 1)
         target = robot + wanted
-        clear_now = (np.abs(target[:, None] - grid.predicted[0]) > grid.reach).all(1) & self.planner.static_map(self.world).free(target)
+        clear_now = (np.abs(target[:, None] - grid.predicted[0]) > grid.reach).all(1) & self.planner.static_map(self.world).free(target, exact=False)
         keep = safe[np.arange(len(robot)), nearest] & clear_now
         distance = np.where(safe, np.abs(lattice.displacements[None] - wanted[:, None]), np.inf)
         replacement = np.where(safe.any(1), np.argmin(distance, 1), grid.roomiest())

@@ -15,6 +15,8 @@ import numpy as np
 from crowdnav.obstacles import nearest_on_edges
 from crowdnav.world import CompiledWorld
 
+RASTER = 0.05
+"""Spacing (m) of the clearance raster the per-step planners read (:meth:`StaticMap.free` with ``exact=False``)."""
 POINT_CHUNK = 4096
 """Points per nearest-point query: bounds the (points x obstacles x edges) temporary to a few MB."""
 
@@ -29,6 +31,7 @@ class StaticMap:
         self._surface_radius = obstacles.surface_radius
         box = world.scenario.world
         self.bounds = (float(box.min[0]), float(box.min[1]), float(box.max[0]), float(box.max[1]))
+        self._raster: np.ndarray | None = None
 
     def clearance(self, points: np.ndarray) -> np.ndarray:
         """Surface gap (m) from a robot centred at each point to the nearest wall or furniture (inf without any)."""
@@ -41,23 +44,84 @@ class StaticMap:
                 gap[lo:lo + POINT_CHUNK] = (distance - self._surface_radius).min(1) - self.radius
         return gap.reshape(np.shape(points))
 
-    def free(self, points: np.ndarray) -> np.ndarray:
-        """Whether a robot centred at each point is inside the world and clear of walls and furniture by ``margin``."""
+    def free(self, points: np.ndarray, exact: bool = True) -> np.ndarray:
+        """Whether a robot centred at each point is inside the world and clear of walls and furniture by ``margin``.
+
+        ``exact=False`` reads a raster of clearances (``RASTER`` m, built on first use) instead of
+        the exact kernel: the clearance at the nearest raster point minus the distance to it, a lower
+        bound (the clearance is 1-Lipschitz), so it never calls a touching point free and is at most
+        ``RASTER / sqrt(2)`` m stricter than exact. The per-step planners use it; the oracle does not.
+        """
         x0, y0, x1, y1 = self.bounds
         points = np.asarray(points, dtype=complex)
         inside = (points.real >= x0) & (points.real <= x1) & (points.imag >= y0) & (points.imag <= y1)
-        return inside & (self.clearance(points) > self.margin)
+        if exact:
+            return inside & (self.clearance(points) > self.margin)
+        if self._raster is None:
+            w, h = int(math.ceil((x1 - x0) / RASTER)) + 1, int(math.ceil((y1 - y0) / RASTER)) + 1
+            ii, jj = np.meshgrid(np.arange(w), np.arange(h), indexing="ij")
+            self._raster = self.clearance(complex(x0, y0) + (ii + 1j * jj) * RASTER)
+        w, h = self._raster.shape
+        i = np.clip(np.rint((points.real - x0) / RASTER).astype(np.int64), 0, w - 1)
+        j = np.clip(np.rint((points.imag - y0) / RASTER).astype(np.int64), 0, h - 1)
+        nearest = complex(x0, y0) + (i + 1j * j) * RASTER
+        return inside & (self._raster[i, j] - np.abs(points - nearest) > self.margin)
 
     def geodesic(self, goal: complex, spacing: float) -> GeodesicField:
         """The distance (m) to ``goal`` around obstacles, on a ``spacing`` grid over the world."""
         return GeodesicField(self, complex(goal), spacing)
 
 
+class MapCache:
+    """A planner's maps and goal distances, shared by every world of the same scenario (100 test envs load 100 worlds).
+
+    Keyed by the scenario's content, so a planner driving many envs of one scenario builds one
+    map; at most ``MAX_MAPS`` maps and ``MAX_FIELDS`` goal distances are kept (oldest dropped).
+    """
+
+    MAX_MAPS, MAX_FIELDS, MAX_WORLDS = 8, 512, 4096
+
+    def __init__(self, margin: float, spacing: float = 0.1):
+        self.margin, self.spacing = float(margin), float(spacing)
+        self._keys: dict[int, tuple[CompiledWorld, str]] = {}
+        self._maps: dict[str, StaticMap] = {}
+        self._fields: dict[tuple[str, complex], GeodesicField] = {}
+
+    def key(self, world: CompiledWorld) -> str:
+        """The content key of ``world``'s scenario (computed once per world object)."""
+        found = self._keys.get(id(world))
+        if found is None or found[0] is not world:
+            _bounded(self._keys, self.MAX_WORLDS)
+            found = self._keys[id(world)] = (world, world.scenario.model_dump_json())
+        return found[1]
+
+    def map(self, world: CompiledWorld) -> StaticMap:
+        """The map of ``world`` for its robot."""
+        key = self.key(world)
+        if key not in self._maps:
+            _bounded(self._maps, self.MAX_MAPS)
+            self._maps[key] = StaticMap(world, world.scenario.robot.radius, self.margin)
+        return self._maps[key]
+
+    def field(self, world: CompiledWorld, goal: complex) -> GeodesicField:
+        """The geodesic distance to ``goal`` in ``world``."""
+        key = (self.key(world), complex(goal))
+        if key not in self._fields:
+            _bounded(self._fields, self.MAX_FIELDS)
+            self._fields[key] = self.map(world).geodesic(goal, self.spacing)
+        return self._fields[key]
+
+
+def _bounded(cache: dict, size: int) -> None:  # type: ignore[type-arg]
+    """Drop the oldest entries of ``cache`` so one more fits in ``size``."""
+    while len(cache) >= size:
+        cache.pop(next(iter(cache)))
+
+
 class GeodesicField:
     """Shortest-path distance to one goal over a map's free cells (8-connected grid, computed at construction)."""
 
     def __init__(self, static_map: StaticMap, goal: complex, spacing: float):
-        self.world = static_map.world
         x0, y0, x1, y1 = static_map.bounds
         self.origin, self.spacing = complex(x0, y0), float(spacing)
         w, h = int(math.ceil((x1 - x0) / spacing)) + 1, int(math.ceil((y1 - y0) / spacing)) + 1
