@@ -33,13 +33,15 @@ are the documented examples; by default humans get 0 and stay until the episode 
 
 from __future__ import annotations
 
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
 from typing import cast
 
 import numpy as np
 from gymnasium import spaces
 
+from crowdnav.errors import CrowdNavError
 from crowdnav.simulator import Simulator
+from crowdnav.suggest import did_you_mean
 
 STATE_COLUMNS = ("x", "y", "vx", "vy", "gx", "gy", "radius", "active")
 
@@ -116,3 +118,34 @@ def flatten_batch(space: spaces.Dict, batch: Mapping[str, np.ndarray], n: int) -
     One concatenation for all humans instead of one ``spaces.flatten`` call per human.
     """
     return np.concatenate([np.asarray(batch[key], dtype=np.float32).reshape(n, -1) for key in space.spaces], axis=1)
+
+
+class UnknownAgentError(CrowdNavError, KeyError):
+    """An agent name the env does not have: a KeyError, as the dict lookup it replaces, with a one-line message."""
+
+    def __str__(self) -> str:  # KeyError would show the message quoted
+        return str(self.args[0]) if self.args else ""
+
+
+def unknown_agent(name: object, valid: Sequence[str]) -> UnknownAgentError:
+    """``unknown agent 'robot'; did you mean 'robot_0'? the agents are: robot_0, robot_1, human_0 .. human_9``."""
+    return UnknownAgentError(f"unknown agent {name!r}{did_you_mean(name, valid) or ';'} the agents are: {agent_list(valid)}")
+
+
+def agent_list(names: Sequence[str]) -> str:
+    """Agent names for a message: the robots by name, each run of consecutive humans as ``human_0 .. human_9``."""
+    out: list[str] = []
+    run: list[int] = []
+    for name in [*names, ""]:  # "" flushes the last run
+        number = name[len("human_") :] if name.startswith("human_") else ""
+        if number.isdigit() and (not run or int(number) == run[-1] + 1):
+            run.append(int(number))
+            continue
+        if run:
+            out.extend([f"human_{i}" for i in run] if len(run) <= 2 else [f"human_{run[0]} .. human_{run[-1]}"])
+            run = []
+        if number.isdigit():
+            run = [int(number)]
+        elif name:
+            out.append(name)
+    return ", ".join(out) or "none"

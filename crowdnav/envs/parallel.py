@@ -11,7 +11,16 @@ from pettingzoo import ParallelEnv
 
 from crowdnav.envs.core import EnvCore, ScenarioSource, checked_robot_action, real_array, step_info
 from crowdnav.envs.human_observation import HumanObservations
-from crowdnav.envs.multi_agent import HumanExit, HumanReward, flat_spaces, flatten_batch, global_state, state_space
+from crowdnav.envs.multi_agent import (
+    HumanExit,
+    HumanReward,
+    agent_list,
+    flat_spaces,
+    flatten_batch,
+    global_state,
+    state_space,
+    unknown_agent,
+)
 from crowdnav.rendering.episode_view import RENDER_MODES
 
 ROBOT = "robot"
@@ -148,9 +157,15 @@ class CrowdNavParallelEnv(ParallelEnv):  # type: ignore[misc]  # pettingzoo has 
         return global_state(self.simulator, self.scenario.humans.max_count)
 
     def observation_space(self, agent: str) -> spaces.Space[Any]:
+        """``agent``'s observation space (an unknown name: a one-line KeyError listing the agents)."""
+        if agent not in self.observation_spaces:
+            raise unknown_agent(agent, self.possible_agents)
         return self.observation_spaces[agent]
 
     def action_space(self, agent: str) -> spaces.Space[Any]:
+        """``agent``'s action space (an unknown name: a one-line KeyError listing the agents)."""
+        if agent not in self.action_spaces:
+            raise unknown_agent(agent, self.possible_agents)
         return self.action_spaces[agent]
 
     def reset(self, seed: int | None = None, options: dict[str, Any] | None = None) -> tuple[dict[str, AgentObservation], Infos]:
@@ -341,9 +356,8 @@ class CrowdNavParallelEnv(ParallelEnv):  # type: ignore[misc]  # pettingzoo has 
         if len(actions) != len(self.agents) or not all(name in actions for name in self.agents):
             missing = [agent for agent in self.agents if agent not in actions]
             unknown = [agent for agent in actions if agent not in self.agents]
-            raise ValueError(
-                f"expected exactly one action per agent in env.agents; missing: {missing}, not in env.agents: {unknown}"
-            )
+            raise ValueError(f"expected exactly one action per agent in env.agents; missing: {missing}, not in env.agents: {unknown}; "
+                             f"env.agents: {agent_list(self.agents)}")
         if not humans:
             return np.zeros((self.simulator.n_humans, 2))
         arrays = [real_array(actions[name], f"the action of {name}") for name in humans]
