@@ -16,7 +16,7 @@ from typing import Any
 
 import numpy as np
 import torch
-from crowdnav.agents.config import ConfigError
+from crowdnav.agents.config import ConfigError, DemonstrationConfig, config_from_mapping
 from stable_baselines3 import SAC, TD3
 from stable_baselines3.common.base_class import BaseAlgorithm
 from stable_baselines3.common.distributions import DiagGaussianDistribution
@@ -207,6 +207,7 @@ def behaviour_cloning(model: BaseAlgorithm, demonstrations: Demonstrations, *, e
     ``action_mse``: mean over the demonstrations of the squared error per action value between
     the policy's deterministic action (clipped to [-1, 1], as the env applies it) and the expert's.
     """
+    _check_settings(epochs=epochs, batch_size=batch_size, learning_rate=learning_rate, action_std=action_std)
     heads = _Heads(model, action_std)
     data = _tensors(model, demonstrations, gamma, reward_scale)
     action_before, value_before = _evaluate(heads, data, value_pretraining)
@@ -231,3 +232,17 @@ def behaviour_cloning(model: BaseAlgorithm, demonstrations: Demonstrations, *, e
     if value_pretraining:
         report.update(value_mse_before=value_before, value_mse_after=value_after)
     return report
+
+
+def _check_settings(**settings: Any) -> None:
+    """ConfigError (one line) unless the settings are within :class:`~crowdnav.agents.config.DemonstrationConfig`'s bounds.
+
+    A config file's are checked when it loads; this checks a direct call before any work (``learning_rate: 1e300``
+    or ``action_std: 1e-300`` would otherwise end in a NaN deep inside torch).
+    """
+    from pydantic import ValidationError
+
+    try:
+        DemonstrationConfig.model_validate(settings)
+    except ValidationError:
+        config_from_mapping({"demonstrations": settings}, "behaviour_cloning")  # raises the ConfigError naming the field

@@ -18,6 +18,7 @@ from collections.abc import Mapping
 from pathlib import Path, PurePath
 from typing import TYPE_CHECKING, Annotated, Any, Literal
 
+from crowdnav.agents.seeding import DEMONSTRATION_EPISODES, MAX_SEED, MAX_TRAIN_EPISODES
 from pydantic import AfterValidator, BaseModel, BeforeValidator, ConfigDict, Field, Strict, ValidationError, field_validator, model_validator
 
 from crowdnav.config_errors import ConfigIssue, FieldProblems, YamlProblem, format_issues, read_yaml, validation_issues, yaml_line
@@ -113,19 +114,28 @@ class EncoderConfig(_Section):
     precompute: Bool = option(True, "Frozen only: encode the grid once per env step in a wrapper, so the replay buffer stores latents.")
 
 
+MIN_ACTION_STD, MAX_ACTION_STD = 1e-4, 10.0
+"""Bounds of ``demonstrations.action_std``: actions lie in [-1, 1]; beyond, its log is a NaN or an infinity in the making."""
+MAX_CLONING_EPOCHS = 10_000
+
+
 class DemonstrationConfig(_Section):
     """A warm start from the privileged social-force robot before RL (docs/agents.md#demonstrations-warm-start); off by default."""
 
-    episodes: Int = option(0, "Episodes of the social-force robot cloned before training starts (0: off, pure RL).", ge=0)
-    epochs: Int = option(30, "Passes of behaviour cloning over the demonstrations (each DAgger round too).", ge=1)
+    episodes: Int = option(0, "Episodes of the social-force robot cloned before training starts (0: off, pure RL); with DAgger, "
+                              f"episodes x (1 + dagger_rounds) at most {DEMONSTRATION_EPISODES:,} (the seed band's quarter).",
+                           ge=0, le=DEMONSTRATION_EPISODES)
+    epochs: Int = option(30, "Passes of behaviour cloning over the demonstrations (each DAgger round too).", ge=1, le=MAX_CLONING_EPOCHS)
     batch_size: Int = option(256, "Minibatch of behaviour cloning.", ge=1, le=1_000_000)
-    learning_rate: Float = option(1e-3, "Adam learning rate of behaviour cloning (a fresh optimizer; the algorithm's own is untouched).", gt=0)
-    action_std: Float = option(0.3, "Gaussian std after cloning: PPO/A2C's log_std is set to it, SAC's log-std head is cloned towards it.", gt=0)
+    learning_rate: Float = option(1e-3, "Adam learning rate of behaviour cloning (a fresh optimizer; the algorithm's own is untouched).",
+                                  gt=0, le=1)
+    action_std: Float = option(0.3, "Gaussian std after cloning, in action units: PPO/A2C's log_std is set to it, SAC's log-std head "
+                                    "is cloned towards it.", ge=MIN_ACTION_STD, le=MAX_ACTION_STD)
     value_pretraining: Bool = option(True, "Also fit the value function (PPO/A2C) or the critics at the demonstrated actions "
                                            "(SAC/TD3/DDPG) to the demonstrations' discounted returns.")
     into_replay_buffer: Bool = option(True, "Off-policy: store the demonstration transitions in the replay buffer (ordinary transitions).")
     dagger_rounds: Int = option(0, "DAgger rounds after cloning: the clone drives `episodes` more episodes, the expert labels them, "
-                                   "cloning goes on over all of them.", ge=0)
+                                   "cloning goes on over all of them.", ge=0, le=DEMONSTRATION_EPISODES - 1)
 
 
 class TrainConfig(_Section):
@@ -144,14 +154,17 @@ class TrainConfig(_Section):
                  "PPO policy through SuperSuit (docs/agents.md#several-robots-shared-parameter-ppo).")
     agent_identity: Bool = option(True, "agents: robots: append a one-hot of the robot's index to its observation, so the shared "
                                         "network can tell robots of different kinematics apart.")
-    episodes: Int = option(700, "Training length in episodes (the paper trains for 700); ignored when timesteps is set.", ge=1)
+    episodes: Int = option(700, "Training length in episodes (the paper trains for 700); ignored when timesteps is set. At most "
+                                f"{MAX_TRAIN_EPISODES:,}: a run's training seeds end there (crowdnav.agents.seeding).",
+                           ge=1, le=MAX_TRAIN_EPISODES)
     timesteps: Int | None = option(None, "Training length in env steps, counted over all worlds (None: the episodes budget).", ge=1)
     num_envs: Int = option(32, "Worlds collected from at once (the native vector env, docs/agents.md#batched-training); "
                                "1: one env, as the published single-env results were trained.", ge=1, le=4096)
     updates_per_step: Float | None = option(None, "Off-policy with num_envs > 1: gradient steps per env step, the update-to-data "
                                                   "ratio (None: per-algorithm default).", gt=0, le=16)
     n_steps: Int | None = option(None, "On-policy: steps per world in each rollout (None: per-algorithm default).", ge=1, le=1_000_000)
-    seed: Int = option(0, "Seed of the networks and of the training episodes (episode i uses seed train_seed(seed, i)).")
+    seed: Int = option(0, "Seed of the networks and of the training episodes (episode i uses seed train_seed(seed, i)).",
+                       ge=0, le=MAX_SEED)
     out: Text = option("runs/train", "Output folder: checkpoint, snapshots, episode log, resolved config.")
     net_arch: Sizes | None = option(None, "Hidden layers of the actor and critic heads on top of the latent (None: per-algorithm default).")
     learning_rate: Float | None = option(None, "Optimizer learning rate (None: per-algorithm default).", gt=0)
@@ -211,6 +224,14 @@ def cross_field_problems(config: TrainConfig) -> list[tuple[str, str]]:
         problems.append(("checkpoint_every_steps", "applies to a budget in env steps; set timesteps too (or use checkpoint_every)"))
     if config.updates_per_step is not None and config.num_envs == 1:
         problems.append(("updates_per_step", "applies to batched training (num_envs > 1); one env takes algo_kwargs.train_freq / gradient_steps"))
+    optimizer = config.policy_kwargs.get("optimizer_class")
+    if optimizer is not None and not callable(optimizer):
+        problems.append(("policy_kwargs.optimizer_class", f"a torch optimizer class, which only Python can pass (got {str(optimizer)[:60]!r}); "
+                         "leave it out for SB3's Adam and set its options in policy_kwargs.optimizer_kwargs"))
+    demonstrations = config.demonstrations
+    if demonstrations.episodes * (1 + demonstrations.dagger_rounds) > DEMONSTRATION_EPISODES:
+        problems.append(("demonstrations.dagger_rounds", f"{demonstrations.episodes:,} episodes x (1 + {demonstrations.dagger_rounds:,} "
+                         f"rounds) exceed the {DEMONSTRATION_EPISODES:,} demonstration seeds of a run (crowdnav.agents.seeding)"))
     problems.extend(robots_problems(config))
     extractor = config.extractor
     if not (len(extractor.leog_channels) == len(extractor.leog_kernels) == len(extractor.leog_strides)) or not extractor.leog_channels:

@@ -257,6 +257,9 @@ def make_model(config: TrainConfig, env: GymEnv, saved_encoder: dict[str, Any] |
     architecture = saved_encoder["architecture"] if saved_encoder is not None else None
     if architecture is not None and not precomputes_leog(config):
         check_leog_shape(config, architecture, env.observation_space)
+    from crowdnav.agents.network_size import check_model  # counted before anything is allocated
+
+    check_model(config, env.observation_space, env.action_space, "config", architecture)
     try:
         model = (SB3_ALGORITHMS if reference else ALGORITHMS)[config.algo](
             "MultiInputPolicy", env, policy_kwargs=policy_kwargs(config, architecture, reference), seed=config.seed,

@@ -80,9 +80,23 @@ def _ppo(config: TrainConfig, vec: Any) -> PPO:
     schedule = LinearDecay(rate) if chosen["learning_rate_schedule"] == "linear" else rate
     kwargs = {"n_steps": chosen["n_steps"], "batch_size": min(chosen["batch_size"], chosen["n_steps"] * vec.num_envs),
               "gamma": chosen["gamma"], "learning_rate": schedule, **config.algo_kwargs}
+    robots_network_size(config, int(np.prod(vec.observation_space.shape)), "config")
     set_random_seed(config.seed)  # SB3's own seeding calls env.seed, which SuperSuit's vector env lacks
-    return PPO("MlpPolicy", vec, policy_kwargs={"net_arch": list(chosen["net_arch"]), **config.policy_kwargs},
-               device=config.device, verbose=0, **kwargs)
+    try:
+        return PPO("MlpPolicy", vec, policy_kwargs={"net_arch": list(chosen["net_arch"]), **config.policy_kwargs},
+                   device=config.device, verbose=0, **kwargs)
+    except TypeError as error:  # an algo_kwargs / policy_kwargs key PPO or its policy does not take
+        raise ConfigError(f"algo_kwargs / policy_kwargs for ppo: {str(error).splitlines()[0][:200]}") from None
+
+
+def robots_network_size(config: TrainConfig, inputs: int, label: str) -> int:
+    """Parameters of the shared robot network (an MLP policy on ``inputs`` values), refused above the limit before it is built."""
+    from crowdnav.agents.network_size import check_parameters, describe_layers, heads
+
+    options = {name: bool(config.policy_kwargs[name]) for name in ("share_features_extractor", "full_std") if name in config.policy_kwargs}
+    net_arch = hyperparameters(config)["net_arch"]
+    total = heads("actor_critic", inputs, 0, 2, net_arch, use_sde=bool(config.algo_kwargs.get("use_sde", False)), **options)
+    return check_parameters(total, label, f"{inputs:,} inputs, net_arch {describe_layers(net_arch)}")
 
 
 class _RobotEpisodes(BaseCallback):
@@ -244,19 +258,68 @@ def load_robots_policy(path: str | Path, device: str = "cpu", *, config: TrainCo
     info = read_policy_info(folder)
     if info.get("agents") != ROBOTS_KIND:
         raise ConfigError(f"{folder}: not a shared robot policy (agents: robots); load it with crowdnav.agents.load_policy")
+    label = str(folder / "policy.json")
+    check_robots_info(info, label)
     if config is None:
-        config = config_from_mapping({**info["config"], "device": device}, str(folder / "policy.json"))
+        config = config_from_mapping({**info["config"], "device": device}, label)
     check_network_size(config, str(folder))
     width = len(info["robots"]["offset"]) + (len(info["robots"]["robots"]) if info["robots"]["identity"] else 0)
-    if not 0 < width <= MAX_INPUTS:  # checked before the network is built: a hostile policy.json cannot make it allocate gigabytes
-        raise ConfigError(f"{folder}: policy.json declares {width:,} inputs; expected 1 to {MAX_INPUTS:,}")
+    robots_network_size(config, width, str(folder))
     from gymnasium import spaces
 
-    network = ActorCriticPolicy(spaces.Box(-np.inf, np.inf, (width,), np.float32), spaces.Box(-1.0, 1.0, (2,), np.float32),
-                                lambda _: 0.0, net_arch=list(hyperparameters(config)["net_arch"]), **config.policy_kwargs)
+    try:
+        network = ActorCriticPolicy(spaces.Box(-np.inf, np.inf, (width,), np.float32), spaces.Box(-1.0, 1.0, (2,), np.float32),
+                                    lambda _: 0.0, net_arch=list(hyperparameters(config)["net_arch"]), **config.policy_kwargs)
+    except (TypeError, ValueError) as error:
+        raise ConfigError(f"{folder}: cannot rebuild its network from policy_kwargs ({str(error).splitlines()[0][:200]})") from None
     try:
         network.load_state_dict(read_model_zip(folder / MODEL_FILE, device).parameters["policy"])
     except (RuntimeError, KeyError) as error:
         raise ConfigError(f"{folder}: its parameters do not fit the network its config describes ({str(error).splitlines()[0][:200]})") from None
     network.set_training_mode(False)
     return RobotsPolicy(network.to(device), info)
+
+
+def check_robots_info(info: Mapping[str, Any], label: str) -> None:
+    """ConfigError (one line, naming the field) unless a robots ``policy.json`` holds what :class:`RobotsPolicy` reads.
+
+    ``robots``: ``robots`` (1 to 8 names), ``identity`` (a boolean), ``offset`` and ``scale`` (as many
+    finite numbers, every scale positive: an input divided by zero or NaN would reach the network
+    as NaN); ``env`` and ``config`` mappings; ``algo`` a name.
+    """
+    import math
+
+    def refuse(field: str, expected: str) -> None:
+        raise ConfigError(f"{label}: {field}: expected {expected}")
+
+    for key in ("env", "config"):
+        if not isinstance(info.get(key), Mapping):
+            refuse(key, "a mapping (the run's environment options and training config)")
+    if not isinstance(info.get("algo"), str):
+        refuse("algo", "the algorithm's name")
+    inputs = info.get("robots")
+    if not isinstance(inputs, Mapping):
+        refuse("robots", "a mapping of robots, identity, offset and scale (the inputs' settings the run stored)")
+        return
+    names = inputs.get("robots")
+    if not isinstance(names, list) or not 1 <= len(names) <= 8 or not all(isinstance(name, str) and name for name in names) \
+            or len(set(names)) != len(names):
+        refuse("robots.robots", "a list of 1 to 8 distinct robot names")
+    if not isinstance(inputs.get("identity"), bool):
+        refuse("robots.identity", "true or false")
+    if not isinstance(inputs.get("offset"), list):
+        refuse("robots.offset", "a list of numbers")
+    width = len(inputs["offset"]) + (len(names) if inputs["identity"] else 0)
+    if not 0 < width <= MAX_INPUTS:  # checked before the network is built: a hostile policy.json cannot make it allocate gigabytes
+        raise ConfigError(f"{label}: declares {width:,} inputs; expected 1 to {MAX_INPUTS:,}")
+    numbers = {}
+    for key in ("offset", "scale"):
+        values = inputs.get(key)
+        if not isinstance(values, list) or not values or len(values) > MAX_INPUTS or not all(
+                isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) for v in values):
+            refuse(f"robots.{key}", f"a list of 1 to {MAX_INPUTS:,} finite numbers")
+        numbers[key] = values
+    if len(numbers["offset"]) != len(numbers["scale"]):
+        refuse("robots.scale", f"as many values as robots.offset ({len(numbers['offset']):,}), got {len(numbers['scale']):,}")
+    if not all(v > 0 for v in numbers["scale"]):
+        refuse("robots.scale", "positive numbers (each input is divided by its scale)")

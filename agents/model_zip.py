@@ -23,12 +23,17 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
 from crowdnav.errors import CrowdNavError
 
 MAX_MEMBERS = 64
 """SB3 writes 5-8 members."""
 MAX_MEMBER_BYTES = 1 << 30
-"""A member's uncompressed size (the parameters of the biggest network the bounds below allow fit easily)."""
+"""A member's uncompressed size."""
+MAX_TOTAL_BYTES = 1 << 30
+"""All members' uncompressed sizes together, checked before any is read: the checkpoint of the biggest model
+:data:`crowdnav.agents.network_size.MAX_PARAMETERS` allows (its parameters and Adam's two moments) is under 700 MB."""
 MAX_DATA_BYTES = 16 << 20
 MAX_UNITS = 4096
 """Widest hidden layer a loaded network may declare."""
@@ -75,6 +80,10 @@ def read_model_zip(path: str | Path, device: str = "cpu") -> ModelZip:
                 limit = MAX_DATA_BYTES if member.filename == "data" else MAX_MEMBER_BYTES
                 if member.file_size > limit:
                     raise ModelZipError(f"{path}: entry {member.filename} is {member.file_size:,} bytes (at most {limit:,})")
+            total = sum(member.file_size for member in members)  # the sizes zipfile will read at most, whatever is compressed
+            if total > MAX_TOTAL_BYTES:
+                raise ModelZipError(f"{path}: its {len(members)} entries hold {total:,} bytes uncompressed, more than a model zip "
+                                    f"may ({MAX_TOTAL_BYTES:,}, crowdnav.agents.model_zip)")
             names = archive.namelist()
             if "data" not in names or "policy.pth" not in names:
                 raise ModelZipError(f"{path}: not an SB3 model zip (no data or policy.pth entry)")
@@ -139,6 +148,7 @@ def zip_policy(path: str | Path, observation_space: Any,
     shapes = observation_shapes(model)
     if shapes is not None and shapes != {key: tuple(space.shape) for key, space in observation_space.spaces.items()}:
         return None, shapes  # the caller says which modalities differ before anything is built
+    _check_size(path, cls, kwargs, observation_space, action_space)
     try:
         policy = cls(observation_space, action_space, lambda _: 0.0, **kwargs)
     except (TypeError, ValueError) as error:
@@ -195,6 +205,47 @@ def _policy_kwargs(model: ModelZip) -> dict[str, Any]:
         else:
             raise ModelZipError(f"{model.path}: policy_kwargs {key!r} cannot be rebuilt from parameters")
     return kwargs
+
+
+def _check_size(path: str | Path, cls: type, kwargs: Mapping[str, Any], observation_space: Any, action_space: Any) -> None:
+    """ModelZipError if the policy the zip describes would hold more than the parameters a model may (counted, not built)."""
+    from crowdnav.agents.network_size import NetworkSizeError, check_parameters, describe_layers
+
+    total, net_arch = zip_parameters(cls, kwargs, observation_space, action_space)
+    try:
+        critics = f", n_critics {kwargs['n_critics']}" if "n_critics" in kwargs else ""
+        check_parameters(total, str(path), f"net_arch {describe_layers(net_arch)}{critics}")
+    except NetworkSizeError as error:
+        raise ModelZipError(str(error)) from None
+
+
+def zip_parameters(cls: type, kwargs: Mapping[str, Any], observation_space: Any, action_space: Any) -> tuple[int, Any]:
+    """(parameters, net_arch) of SB3's policy ``cls`` built with ``kwargs`` on these spaces, counted by arithmetic."""
+    from crowdnav.agents.network_size import heads, mlp
+
+    kind = {"stable_baselines3.common.policies": "actor_critic", "stable_baselines3.sac.policies": "sac"}.get(cls.__module__, "td3")
+    defaults: Any = {"actor_critic": {"pi": [64, 64], "vf": [64, 64]}, "sac": [256, 256], "td3": [400, 300]}[kind]
+    net_arch = kwargs.get("net_arch", defaults)
+    extractor = features = 0
+    for space in observation_space.spaces.values():  # SB3's CombinedExtractor: NatureCNN for images, flattened otherwise
+        if _is_image(space, kwargs.get("normalize_images", True)):
+            channels, height, width = space.shape
+            convs = channels * 32 * 64 + 32 + 32 * 64 * 16 + 64 + 64 * 64 * 9 + 64
+            height, width = ((height - 8) // 4 + 1 - 4) // 2 + 1 - 2, ((width - 8) // 4 + 1 - 4) // 2 + 1 - 2
+            extractor += convs + mlp(64 * max(height, 0) * max(width, 0), [256])[0]
+            features += 256
+        else:
+            features += int(np.prod(space.shape))
+    options = {name: bool(kwargs[name]) for name in ("share_features_extractor", "use_sde", "full_std") if name in kwargs}
+    total = heads(kind, features, extractor, int(np.prod(action_space.shape)), net_arch, n_critics=int(kwargs.get("n_critics", 2)),
+                  **options)
+    return total, net_arch
+
+
+def _is_image(space: Any, normalize_images: bool) -> bool:
+    from stable_baselines3.common.preprocessing import is_image_space
+
+    return bool(is_image_space(space, normalized_image=not normalize_images))
 
 
 _BOX = re.compile(r"'([^']+)': Box\(.*?, \(([0-9, ]*)\), \w+\)")

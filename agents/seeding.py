@@ -40,6 +40,9 @@ DEMONSTRATION_EPISODES = TRAIN_SEED_BASE - DEMONSTRATION_SEED_OFFSET
 MAX_TRAIN_EPISODES = DATASET_SEED_OFFSET
 """Training episodes a run may start (500,000): beyond, their seeds would be grid-collection seeds."""
 
+MAX_SEED = 2**31 - 1
+"""Largest run seed: numpy's and torch's generators take it, and every episode seed derived from it fits in 64 bits."""
+
 
 def demonstration_seed(seed: int, episode: int) -> int:
     """Seed of demonstration episode ``episode`` (0-based) of the scripted expert, for a run with seed ``seed``.
@@ -84,3 +87,21 @@ class EpisodeSeedCounter:
             seeds.append(train_seed(self.run_seed, self.next_episode))
             self.next_episode += 1
         return seeds
+
+
+def check_test_seeds(first: int, episodes: int) -> None:
+    """ValueError (one line) unless held-out test seeds ``first`` .. ``first + episodes - 1`` lie below :data:`TRAIN_SEED_BASE`.
+
+    Every seed from :data:`TRAIN_SEED_BASE` on belongs to some run seed's band (its training,
+    grid-collection and demonstration episodes), so a policy of unknown run seed (``crowdnav
+    evaluate POLICY``) is tested only below it: the benchmark refuses the same overlap for its runs
+    (``Protocol.check_disjoint``).
+    """
+    if first < 0:
+        raise ValueError(f"test seeds must be non-negative, got a first seed of {first:,}")
+    last = first + episodes - 1
+    if last >= TRAIN_SEED_BASE:
+        shared = max(first, TRAIN_SEED_BASE)
+        run_seed = shared // TRAIN_SEED_BASE - 1
+        raise ValueError(f"test seeds {first:,}-{last:,} include {shared:,}, a seed of run seed {run_seed:,}'s training, grid and "
+                         f"demonstration episodes (crowdnav.agents.seeding); held-out test seeds lie below {TRAIN_SEED_BASE:,}")

@@ -196,6 +196,12 @@ def evaluate_command(args: argparse.Namespace) -> int:
     modalities = [key.strip() for key in args.modalities.split(",") if key.strip()] if args.modalities else None
     if args.episodes < 1:
         raise CliError(f"--episodes must be at least 1, got {args.episodes}")
+    from crowdnav.agents.seeding import check_test_seeds
+
+    try:
+        check_test_seeds(args.test_seed_base, args.episodes)
+    except ValueError as error:
+        raise CliError(f"--test-seed-base / --episodes: {error}") from None
     from crowdnav.cli.signals import interrupt_on_sigterm
 
     with interrupt_on_sigterm() as stopped:  # SIGTERM stops it as Ctrl-C does: one line, nothing half-written

@@ -129,18 +129,18 @@ class CrowdNavVectorEnv(VectorEnv):
         self, *, seed: int | Sequence[int | None] | None = None, options: dict[str, Any] | None = None
     ) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
         """Reset every world (or those of ``options["reset_mask"]``); ``seed``: None, an int s (world i gets s + i) or one per world."""
-        super().reset(seed=seed if isinstance(seed, int) else None)
         b = self.num_envs
         if seed is None:
             seeds: list[int | None] = [None] * b
-        elif isinstance(seed, bool):
-            raise ValueError(f"seed must be None, an int or a list of one per world, got {seed!r}")
-        elif isinstance(seed, (int, np.integer)):
+        elif _is_seed(seed):
             seeds = [int(seed) + i for i in range(b)]
-        else:
-            seeds = list(seed)
+        elif isinstance(seed, (list, tuple, np.ndarray)) and all(s is None or _is_seed(s) for s in seed):
+            seeds = [None if s is None else int(s) for s in seed]
             if len(seeds) != b:
                 raise ValueError(f"seed: a list of seeds needs one per world ({b}), got {len(seeds)}")
+        else:  # as the single env refuses them: floats, negatives, booleans, strings
+            raise ValueError(f"seed must be None, an int or a list of one per world, got {str(seed)[:80]} (seeds are non-negative integers)")
+        super().reset(seed=seed if isinstance(seed, int) else None)
         mask = np.ones(b, dtype=bool)
         if options and "reset_mask" in options:
             mask = np.asarray(options["reset_mask"])
@@ -358,3 +358,8 @@ def _restricted(infos: dict[str, Any], keep: np.ndarray) -> dict[str, Any]:
             value[~mask] = None if value.dtype == object else 0
         out[key], out[f"_{key}"] = value, mask
     return out
+
+
+def _is_seed(value: object) -> bool:
+    """A non-negative integer (numpy's too), not a boolean."""
+    return isinstance(value, (int, np.integer)) and not isinstance(value, bool) and value >= 0
