@@ -101,25 +101,43 @@ def search(start: np.ndarray, free: np.ndarray, moves: np.ndarray, stop: np.ndar
     return SearchLayers(reached, parent)
 
 
-def disc_cells(centres: np.ndarray, reach: np.ndarray, origin: np.ndarray, spacing: float, shape: tuple[int, int]) -> np.ndarray:
-    """Flat cell indices within ``reach`` of each centre: the cells a human at ``centres`` blocks.
+DENSE_LIMIT = 4_000_000
+"""Most (row x human x cell) tests :func:`disc_cells` makes densely; bigger grids (the oracle's) are rasterised per human."""
 
-    ``centres``: (..., n) complex positions; ``reach``: (n,) or broadcastable contact distance
-    (touching counts: a cell at exactly ``reach`` is blocked); ``origin``: (...,) complex position
-    of cell (0, 0) per leading index. Returns a bool mask (..., W * H) of blocked cells.
+
+def disc_cells(centres: np.ndarray, reach: np.ndarray, origin: np.ndarray, spacing: float, shape: tuple[int, int]) -> np.ndarray:
+    """The cells humans block: those within ``reach`` of each centre (touching counts).
+
+    ``centres``: (..., n) complex positions; ``reach``: broadcastable to ``centres``, the contact
+    distance (a negative reach blocks nothing: an absent human); ``origin``: (...,) complex position
+    of cell (0, 0) per leading index. Returns a bool mask (..., W * H). A small grid (a planner's
+    local window) is tested densely, the squared distance separable in x and y; a large one (the
+    oracle's room) only around each human whose disc meets it. No loop over humans or cells.
     """
     w, h = shape
-    radius = int(np.ceil(float(np.max(reach, initial=0.0)) / spacing)) + 1
-    span = np.arange(-radius, radius + 1)
-    si, sj = np.meshgrid(span, span, indexing="ij")
-    si, sj = si.ravel(), sj.ravel()
-    rel = (centres - origin[..., None]) / spacing  # in cells
-    ci = np.rint(rel.real).astype(np.int64)[..., None] + si
-    cj = np.rint(rel.imag).astype(np.int64)[..., None] + sj
-    gap = np.abs((ci + 1j * cj) * spacing - (centres - origin[..., None])[..., None])
-    hit = (gap <= np.broadcast_to(reach, centres.shape)[..., None]) & (ci >= 0) & (ci < w) & (cj >= 0) & (cj < h)
     lead = centres.shape[:-1]
-    blocked = np.zeros((int(np.prod(lead, dtype=np.int64)), w * h), dtype=bool)
-    rows = np.broadcast_to(np.arange(blocked.shape[0]).reshape(lead + (1, 1)), hit.shape)
-    blocked[rows[hit], (ci * h + cj)[hit]] = True
+    rows = int(np.prod(lead, dtype=np.int64))
+    reach = np.broadcast_to(reach, centres.shape).reshape(rows, -1)
+    rel = (centres - origin[..., None]).reshape(rows, -1) / spacing  # in cells
+    r = reach / spacing
+    if rel.size * w * h <= DENSE_LIMIT:
+        dx = (np.arange(w) - rel.real[..., None]) ** 2  # (rows, n, W)
+        dy = (np.arange(h) - rel.imag[..., None]) ** 2  # (rows, n, H)
+        inside = dx[..., :, None] + dy[..., None, :] <= np.where(r >= 0, r * r, -1.0)[..., None, None]
+        return inside.any(1).reshape(lead + (w * h,))
+    blocked = np.zeros((rows, w * h), dtype=bool)
+    meets = (r >= 0) & (rel.real >= -r) & (rel.real <= w - 1 + r) & (rel.imag >= -r) & (rel.imag <= h - 1 + r)
+    row, human = np.nonzero(meets)
+    if len(row):
+        x, y, r = rel.real[row, human], rel.imag[row, human], r[row, human]
+        radius = int(np.ceil(r.max())) + 1
+        span = np.arange(-radius, radius + 1)
+        si, sj = np.meshgrid(span, span, indexing="ij")
+        keep = si * si + sj * sj <= (radius + 1) ** 2  # the stencil's disc: its corners are never within reach
+        si, sj = si[keep], sj[keep]
+        ci = np.rint(x).astype(np.int64)[:, None] + si
+        cj = np.rint(y).astype(np.int64)[:, None] + sj
+        dx, dy = ci - x[:, None], cj - y[:, None]
+        hit = (dx * dx + dy * dy <= (r * r)[:, None]) & (ci >= 0) & (ci < w) & (cj >= 0) & (cj < h)
+        blocked[np.broadcast_to(row[:, None], hit.shape)[hit], (ci * h + cj)[hit]] = True
     return blocked.reshape(lead + (w * h,))
