@@ -6,10 +6,11 @@ different points (with their random jitter) can never overlap. A reset then only
 distinct lattice points, so it costs the same at any density, and a region that cannot
 hold the requested crowd is reported when the scenario loads instead of looping forever.
 
-Three modules: this one assembles a scenario's sets (:func:`build_placement`: each robot's
+Four modules: this one assembles a scenario's sets (:func:`build_placement`: each robot's
 start and goal, each group's spawns and goals); :mod:`crowdnav.placement_regions` declares the sets and turns one
 region into a :class:`CandidateSet` and draws from it; :mod:`crowdnav.placement_checks` holds
-the load-time capacity and reachability checks. The names users import live on here.
+the load-time capacity and reachability checks; :mod:`crowdnav.placement_team` the fine sets of
+several robots and the check that they all fit together. The names users import live on here.
 """
 
 from __future__ import annotations
@@ -40,6 +41,7 @@ from crowdnav.placement_regions import GroupPlacement as GroupPlacement
 from crowdnav.placement_regions import Placement as Placement
 from crowdnav.placement_regions import PlacementError as PlacementError
 from crowdnav.placement_regions import clear_of, merge_candidates, region_candidates
+from crowdnav.placement_team import check_team, team_fallback
 from crowdnav.scenario.schema import HumanGroup, Robot, Scenario
 
 
@@ -49,6 +51,10 @@ def build_placement(scenario: Scenario, obstacles: StaticObstacles) -> Placement
     occupied = obstacles.union
     robots = [_robot_placement(robot, path, world_box, occupied)
               for robot, path in zip(scenario.robot_specs, scenario.robot_paths, strict=True)]
+    for robot, places in zip(scenario.robot_specs[1:], robots[1:], strict=True):
+        places.fallback = team_fallback(robot, places, world_box, occupied)
+    if len(robots) > 1:
+        check_team(scenario, robots)
     groups = [_group_placement(scenario, path, group, world_box, occupied) for path, group in humans.crowd]
     first = robots[0]
     check_capacity(scenario, first.robot_start, first.robot_goal, groups, robots[1:])

@@ -24,7 +24,8 @@ def check_capacity(scenario: Scenario, robot_start: CandidateSet, robot_goal: Ca
                     other_robots: list[Placement] | None = None) -> None:
     """Every group finds room at reset whatever the robots' starts and the groups placed before it.
 
-    ``other_robots``: the sets of the robots after the first (``robots:``); each blocks as the first does.
+    ``other_robots``: the sets of the robots after the first (``robots:``); each blocks as the first does,
+    from its lattice or its fine set (:mod:`crowdnav.placement_team`).
 
     Groups are placed in file order. Each agent placed earlier blocks at most ``_max_blocked``
     of a group's candidates, so subtracting the worst case of all of them is a sufficient bound
@@ -41,9 +42,9 @@ def check_capacity(scenario: Scenario, robot_start: CandidateSet, robot_goal: Ca
             capacity -= _blocked(placement.spawn, robot_goal, robot.radius + ring + humans.radius + GAP + slack)
         for spec, sets in zip(scenario.robot_specs[1:], other_robots or [], strict=True):
             reach = spec.radius + ring + humans.radius + GAP + slack
-            capacity -= _blocked(placement.spawn, sets.robot_start, reach)
+            capacity -= _blocked_by_robot(placement.spawn, sets.robot_start, sets.fallback.start if sets.fallback else None, reach)
             if group.standing:
-                capacity -= _blocked(placement.spawn, sets.robot_goal, reach)
+                capacity -= _blocked_by_robot(placement.spawn, sets.robot_goal, sets.fallback.goal if sets.fallback else None, reach)
         for earlier, other in zip(groups[:k], crowd[:k], strict=False):
             if other.max_count == 0:
                 continue
@@ -121,6 +122,11 @@ def _blocked(spawn: CandidateSet, blockers: CandidateSet, reach: float) -> int:
     # a rotating spawn ring meets a disc in one arc, which holds at most one candidate more than at any fixed rotation
     extra = 1 if spawn.ring_center is not None and len(spawn.points) else 0
     return _max_blocked(spawn.points, positions, reach + margin) + extra
+
+
+def _blocked_by_robot(spawn: CandidateSet, lattice: CandidateSet, fine: CandidateSet | None, reach: float) -> int:
+    """:func:`_blocked` for a robot drawn from its ``lattice`` or, when that is blocked, from its ``fine`` set (crowdnav.placement_team)."""
+    return max(_blocked(spawn, lattice, reach), _blocked(spawn, fine, reach) if fine is not None else 0)
 
 
 def check_ring_start_goal(start: CandidateSet, goal: CandidateSet, min_distance: float, path: str = "robot") -> None:

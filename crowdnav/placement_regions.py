@@ -120,6 +120,8 @@ class Placement:
     """Free-space component of each robot goal candidate (None: all starts and goals share one)."""
     other_robots: list[Placement] = field(default_factory=list)
     """Scenarios with ``robots:``: the robot sets (start, goal, pairs, components) of robots 1, 2, ... (their ``groups`` empty)."""
+    fallback: Any = None
+    """Robots after the first: their :class:`crowdnav.placement_team.Fallback` (fine sets drawn from when the lattice is blocked)."""
 
 
 CHUNK = 512  # rows per block of the pairwise distance tables built at load time
@@ -154,13 +156,13 @@ def region_candidates(region: AnyRegion, path: str, radius: float, world_box: Sh
         angles = 2 * math.pi * np.arange(count) / count
         center = complex(*region.center)
         return CandidateSet(center + region.radius * np.exp(1j * angles), 0.0, ring_center=center)
-    shape = _region_polygon(region, path)
+    shape = region_polygon(region, path)
     if not shape.within(world_box.buffer(1e-9)):
         raise GeometryError(path, _outside_message(world_box))
-    free_area = shape if occupied.is_empty else shape.difference(_grown(occupied, clearance))
+    free_area = shape if occupied.is_empty else shape.difference(grown(occupied, clearance))
     if free_area.is_empty or free_area.area < 1e-9:
         raise GeometryError(path, "region is entirely covered by obstacles (with the agent's radius); expected some free space")
-    points = _best_lattice(free_area, _bounded_spacing(free_area, spacing))
+    points = best_lattice(free_area, _bounded_spacing(free_area, spacing))
     if len(points) == 0:
         rep = free_area.representative_point()
         points = np.array([complex(rep.x, rep.y)])
@@ -171,7 +173,7 @@ def region_candidates(region: AnyRegion, path: str, radius: float, world_box: Sh
 _GROWN: list[Any] = [None, {}]  # [the world's obstacle union, {clearance: buffered union}]
 
 
-def _grown(occupied: BaseGeometry, clearance: float) -> BaseGeometry:
+def grown(occupied: BaseGeometry, clearance: float) -> BaseGeometry:
     """``occupied.buffer(clearance)``, computed once per world and clearance (buffering thousands
     of obstacles is the slowest step of loading; a world's regions share one or two clearances)."""
     if _GROWN[0] is not occupied:
@@ -182,7 +184,7 @@ def _grown(occupied: BaseGeometry, clearance: float) -> BaseGeometry:
     return grown[clearance]
 
 
-def _region_polygon(region: AnyRegion, path: str) -> ShapelyPolygon:
+def region_polygon(region: AnyRegion, path: str) -> ShapelyPolygon:
     if isinstance(region, RectangleRegion):
         return box(region.min[0], region.min[1], region.max[0], region.max[1])
     if isinstance(region, CircleRegion):
@@ -206,7 +208,7 @@ def _bounded_spacing(area: BaseGeometry, spacing: float) -> float:
     return spacing * math.sqrt(factor)
 
 
-def _best_lattice(area: BaseGeometry, spacing: float) -> np.ndarray:
+def best_lattice(area: BaseGeometry, spacing: float) -> np.ndarray:
     """Hexagonal lattice points inside ``area``; the best of a few offsets."""
     minx, miny, maxx, maxy = area.bounds
     row = spacing * math.sqrt(3) / 2

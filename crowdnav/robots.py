@@ -133,28 +133,38 @@ class Team:
         """Draw the other robots' starts, goals and headings after the ego robot's; returns every robot's (R,) starts and goals.
 
         Each start keeps clear of the robots drawn before it, each goal of their goals; both respect
-        the robot's own start-goal rules as the ego robot's draw does.
+        the robot's own start-goal rules as the ego robot's draw does. A draw takes a point of the
+        robot's lattice when one is free (so what always drew the same still does), else a point of
+        its fine set, which the load-time check (:func:`crowdnav.placement_team.check_team`) proves is there.
         """
         starts, goals, headings = [start], [goal], []
         radii = self.all_radii
         for j, (robot, places) in enumerate(zip(self.specs, self.placements, strict=True), start=1):
             clear = radii[j] + radii[:j] + GAP + 2 * JITTER_REACH
+            fallback = places.fallback
+            component = 0
             try:
                 begin = places.robot_start.draw(rng, 1, allowed=places.start_goal_ok.any(1), away_from=np.array(starts), min_distance=clear)[0]
-            except PlacementError:
-                raise PlacementError(f"robots.{j}.start: no start is clear of the robots drawn before it this episode; "
-                                     "expected start regions with room for every robot") from None
-            reachable = None
-            if places.start_component is not None:
                 nearest = int(np.argmin(np.abs(places.robot_start.points - begin)))
-                reachable = places.goal_component == places.start_component[nearest]
+                component = fallback.lattice_component(nearest)
+                reachable = None if places.start_component is None else places.goal_component == places.start_component[nearest]
+            except PlacementError:
+                try:  # every lattice start is blocked by the robots before it: the fine set
+                    begin, component = fallback.draw_start(rng, np.array(starts), radii[j] + radii[:j] + GAP)  # no jitter: no slack
+                except PlacementError:
+                    raise PlacementError(f"robots.{j}.start: no start is clear of the robots drawn before it this episode; "
+                                         "expected start regions with room for every robot") from None
+                reachable = fallback.lattice_goals(component)
             away = np.array([begin, *goals])
             near = np.concatenate([[robot.min_start_goal_distance + JITTER_REACH], clear])
             try:
                 end = places.robot_goal.draw(rng, 1, allowed=reachable, away_from=away, min_distance=near)[0]
             except PlacementError:
-                raise PlacementError(f"robots.{j}.goal: no goal is clear of the other robots' goals this episode (and "
-                                     f"min_start_goal_distance from its start); expected goal regions with room for every robot") from None
+                try:
+                    end = fallback.draw_goal(rng, component, away, np.concatenate([[fallback.goal_distance], radii[j] + radii[:j] + GAP]))
+                except PlacementError:
+                    raise PlacementError(f"robots.{j}.goal: no goal is clear of the other robots' goals this episode (and "
+                                         f"min_start_goal_distance from its start); expected goal regions with room for every robot") from None
             headings.append(first_heading(robot, rng, begin, end))
             starts.append(begin)
             goals.append(end)

@@ -197,14 +197,12 @@ def test_the_crowd_capacity_check_counts_every_robots_start():
         load_world({**document, "robots": robots})
 
 
-def test_robots_sharing_one_start_point_fail_at_reset_naming_the_robot():
-    from crowdnav.placement import PlacementError
-
+def test_robots_sharing_one_start_point_are_refused_at_validation_naming_both_regions():
     same = {"type": "points", "points": [[-4, 0]]}
-    sim = Simulator(hall(robots=[{"start": same, "goal": {"type": "points", "points": [[4, 0]]}},
-                                 {"start": same, "goal": {"type": "points", "points": [[4, 2]]}}]))
-    with pytest.raises(PlacementError, match=r"^robots.1.start: no start is clear of the robots drawn before it"):
-        sim.reset(seed=0)
+    with pytest.raises(ScenarioError, match=r"^<mapping>: robots.1.start: no start is sure to be left for this robot \(radius 0.3 m\): "
+                       r"the robots drawn before it \(robots.0.start\) can leave none of its 1 start position free; expected"):
+        load_world(hall(robots=[{"start": same, "goal": {"type": "points", "points": [[4, 0]]}},
+                                {"start": same, "goal": {"type": "points", "points": [[4, 2]]}}]))
 
 
 def test_social_force_robots_driving_head_on_feel_each_other_and_do_not_collide():
