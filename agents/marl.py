@@ -13,10 +13,12 @@ robots adds three rows, each with that robot's outcome, return and length), ``ch
 :func:`load_robots_policy`). Budgets and checkpoints count what SB3 counts: ``timesteps`` are
 robot steps (one per robot row per world step), ``episodes`` robot episodes.
 
-A folder that holds a run is refused unless ``resume``; a resume loads the checkpoint's
-parameters and optimizer and starts new episodes in every world (the numbering carries on, so
-no seed repeats). It is a close resume, not a bit-exact one: the worlds' unfinished episodes
-and the PPO rollout in progress are not stored.
+A folder that holds a run is refused unless ``resume``. A resume is exact: the checkpoint after
+each point is taken at the end of the PPO rollout it falls in, with the rollout, the worlds
+mid-episode and every random stream (:mod:`crowdnav.agents.marl_resume`), so a run killed
+anywhere and resumed is the run never killed, bit for bit. The final checkpoint (inside the step
+that spent the budget) keeps no worlds: resumed with a larger budget, every world starts a new
+episode (the numbering carries on, so no seed repeats).
 """
 
 from __future__ import annotations
@@ -42,8 +44,10 @@ from crowdnav.agents.config import ConfigError, TrainConfig, config_from_mapping
 from crowdnav.agents.episode_log import EpisodeLogWriter, prepare_log
 from crowdnav.agents.factory import LinearDecay, env_options, hyperparameters
 from crowdnav.agents.marl_env import RobotObservations, RobotsTrainingEnv, robots_env
+from crowdnav.agents.marl_resume import has_state, load_state, pending_update, save_resumable
 from crowdnav.agents.model_zip import read_model_zip
-from crowdnav.agents.run_folder import checkpoint_dir, episode_log, snapshot_dir, writing
+from crowdnav.agents.resume_state import STATE_FILE, restore_training_state
+from crowdnav.agents.run_folder import checkpoint_dir, episode_log, recover_checkpoint, snapshot_dir, writing
 from crowdnav.agents.train_result import TrainResult
 from stable_baselines3 import PPO
 from stable_baselines3.common.callbacks import BaseCallback
@@ -100,7 +104,12 @@ def robots_network_size(config: TrainConfig, inputs: int, label: str) -> int:
 
 
 class _RobotEpisodes(BaseCallback):
-    """Logs every robot episode, takes snapshots at the budget's points and stops at the budget."""
+    """Logs every robot episode, takes snapshots at the budget's points and stops at the budget.
+
+    The resumable checkpoint follows a point at the end of the rollout it falls in (the one moment a
+    run can be stored exactly, :mod:`crowdnav.agents.marl_resume`); a resumed run's first act is the
+    update that checkpoint preceded (``pending``).
+    """
 
     def __init__(self, config: TrainConfig, out: Path, first_episode: int, successes: int, save: Callable[[], None],
                  snapshot: Callable[[int], None]):
@@ -115,6 +124,19 @@ class _RobotEpisodes(BaseCallback):
         self.returns: np.ndarray | None = None
         self.lengths: np.ndarray | None = None
         self.point = 0
+        self.due = False
+        """A point passed in this rollout: checkpoint at its end."""
+        self.pending: Callable[[], None] | None = None
+
+    def _on_training_start(self) -> None:
+        if self.pending is not None:
+            self.pending()
+            self.pending = None
+
+    def _on_rollout_end(self) -> None:
+        if self.due:  # the rollout is complete and not yet trained on
+            self.due = False
+            self.save_checkpoint()
 
     def _on_step(self) -> bool:
         infos, rewards = self.locals["infos"], self.locals["rewards"]
@@ -131,7 +153,7 @@ class _RobotEpisodes(BaseCallback):
         if self.unit == "steps" and self.num_timesteps >= self.point + self.every:
             self.point = self.num_timesteps // self.every * self.every
             self.snapshot(self.point)
-            self.save_checkpoint()
+            self.due = True
         budget = self.config.timesteps
         return self.num_timesteps < budget if budget is not None else self.done < self.config.episodes
 
@@ -145,7 +167,7 @@ class _RobotEpisodes(BaseCallback):
         self.successes += record.outcome == "success"
         if self.unit == "episodes" and self.done % self.every == 0:
             self.snapshot(self.done)
-            self.save_checkpoint()
+            self.due = True
 
 
 def train_robots(config: TrainConfig, *, resume: bool = False, on_checkpoint: Callable[[int], None] | None = None) -> TrainResult:
@@ -162,6 +184,8 @@ def _train(config: TrainConfig, resume: bool, on_checkpoint: Callable[[int], Non
     checkpoint = checkpoint_dir(out)
     if not resume and checkpoint.exists():
         raise ConfigError(f"{out} already holds a run (checkpoint/); resume it with --resume or choose another --out")
+    if resume:
+        recover_checkpoint(out)  # a kill during a checkpoint swap leaves a complete .partial or .old
     state = read_policy_info(checkpoint) if resume and checkpoint.exists() else None
     first_episode = int(state["episodes"]) if state else 0
     out.mkdir(parents=True, exist_ok=True)
@@ -187,13 +211,23 @@ def _train(config: TrainConfig, resume: bool, on_checkpoint: Callable[[int], Non
     def snapshot(point: int) -> None:
         save_checkpoint(model, snapshot_dir(out, point, callback.unit), info())
 
-    def save() -> None:
+    def save(resumable: bool = False) -> None:
         callback.log.sync()  # the log holds every episode the checkpoint counts
-        save_checkpoint(model, checkpoint, info())
+        if resumable:  # at a rollout's end: the worlds, the rollout and the random streams, for an exact resume
+            save_resumable(model, checkpoint, info(), _worlds(vec), {"returns": callback.returns, "lengths": callback.lengths})
+        else:  # the budget's end, inside a step: a resume with a larger budget starts new episodes
+            save_checkpoint(model, checkpoint, info())
         if on_checkpoint is not None:
             on_checkpoint(callback.done)
 
-    callback = _RobotEpisodes(config, out, first_episode, int(state["successes"]) if state else 0, save, snapshot)
+    callback = _RobotEpisodes(config, out, first_episode, int(state["successes"]) if state else 0, lambda: save(True), snapshot)
+    callback.returns, callback.lengths = np.zeros(vec.num_envs), np.zeros(vec.num_envs, dtype=int)
+    if state and has_state(checkpoint):
+        sums = {"returns": callback.returns, "lengths": callback.lengths}
+        load_state(checkpoint, model, _worlds(vec), sums)
+        callback.returns, callback.lengths = sums["returns"], sums["lengths"]
+        restore_training_state(model, checkpoint / STATE_FILE)  # counters and every random stream, last
+        callback.pending = pending_update(model)
     callback.point = model.num_timesteps // callback.every * callback.every if callback.unit == "steps" else 0
     started, start_steps = time.perf_counter(), model.num_timesteps
     rows = vec.num_envs

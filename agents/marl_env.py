@@ -125,6 +125,9 @@ class RobotsTrainingEnv(ParallelEnv):  # type: ignore[misc]  # pettingzoo is unt
         self.run_seed, self.first_episode = int(run_seed), int(first_episode)
         self.world, self.worlds, self.played = 0, 1, 0
         self.episode_seed: int | None = None
+        self.actions: list[np.ndarray] | None = []
+        """Every robot's action (rows in ``possible_agents`` order) at each step since this episode's reset, what a
+        resumable checkpoint replays (:mod:`crowdnav.agents.marl_resume`); None after a step that did not act for every robot."""
 
     def assign_world(self, world: int, worlds: int) -> None:
         """This copy is world ``world`` of ``worlds`` (set on every copy SuperSuit's concat_vec_envs_v1 made, before the first reset)."""
@@ -150,13 +153,30 @@ class RobotsTrainingEnv(ParallelEnv):  # type: ignore[misc]  # pettingzoo is unt
         self.episode_seed = train_seed(self.run_seed, episode)
         observations, infos = self.env.reset(seed=self.episode_seed)
         self.agents = list(self.env.agents)
+        self.actions = []
         return self._inputs(observations, infos), infos  # no episode_seed here: SuperSuit merges an autoreset's infos over the last step's
 
     def step(self, actions: Mapping[str, Any]) -> tuple[dict[str, Any], dict[str, Any], dict[str, Any], dict[str, Any], dict[str, Any]]:
+        if self.actions is not None and all(name in actions for name in self.possible_agents):
+            self.actions.append(np.stack([actions[name] for name in self.possible_agents]))
+        else:  # SuperSuit acts for every robot each step (fixed agents); another caller may not, and cannot be replayed
+            self.actions = None
         observations, rewards, terminations, truncations, infos = self.env.step(actions)
         self.agents = list(self.env.agents)
         truncated = any(truncations.values()) and not all(terminations.values())
         return self._inputs(observations, infos), rewards, terminations, truncations, self._tag(infos, truncated)
+
+    def replay(self, first_episode: int, played: int, actions: np.ndarray) -> dict[str, np.ndarray]:
+        """Rebuild this world mid-episode: its counters as they were, its episode's reset, then ``actions`` (steps, robots, 2).
+
+        The simulator's generator, seeded at reset, is an episode's only randomness, so this is the
+        world bit for bit; returns the observations the last step gave (the reset's for no steps).
+        """
+        self.first_episode, self.played = int(first_episode), int(played) - 1
+        observations, _ = self.reset()
+        for step in actions:
+            observations = self.step({name: step[k] for k, name in enumerate(self.possible_agents)})[0]
+        return observations
 
     def _inputs(self, observations: Mapping[str, np.ndarray], infos: Mapping[str, Mapping[str, Any]]) -> dict[str, np.ndarray]:
         return {name: self.inputs(k, observations[name], bool(infos[name].get("active", True)))
