@@ -27,7 +27,7 @@ def check_capacity(scenario: Scenario, robot_start: CandidateSet, robot_goal: Ca
     ``other_robots``: the sets of the robots after the first (``robots:``); each blocks as the first does,
     from its lattice or its fine set (:mod:`crowdnav.placement_team`).
 
-    Groups are placed in file order. Each agent placed earlier blocks at most ``_max_blocked``
+    Groups are placed in file order. Each agent placed earlier blocks at most ``max_blocked``
     of a group's candidates, so subtracting the worst case of all of them is a sufficient bound
     (for one group it is the robot start's block only).
     """
@@ -101,7 +101,7 @@ _RING_STEP = 0.02
 """Arc length (m) between the samples that stand for every rotation of a ring (a circle perimeter) in load-time checks."""
 
 
-def _ring_samples(candidates: CandidateSet) -> tuple[np.ndarray, float]:
+def ring_samples(candidates: CandidateSet) -> tuple[np.ndarray, float]:
     """Positions a draw from ``candidates`` can give, and how far a real one can be from the nearest of them.
 
     A ring rotates by any angle at each draw, so it is sampled densely (at most 20,000 samples);
@@ -118,10 +118,10 @@ def _ring_samples(candidates: CandidateSet) -> tuple[np.ndarray, float]:
 
 def _blocked(spawn: CandidateSet, blockers: CandidateSet, reach: float) -> int:
     """The most ``spawn`` candidates one agent drawn from ``blockers`` can block, whatever the rings' rotations."""
-    positions, margin = _ring_samples(blockers)
+    positions, margin = ring_samples(blockers)
     # a rotating spawn ring meets a disc in one arc, which holds at most one candidate more than at any fixed rotation
     extra = 1 if spawn.ring_center is not None and len(spawn.points) else 0
-    return _max_blocked(spawn.points, positions, reach + margin) + extra
+    return max_blocked(spawn.points, positions, reach + margin) + extra
 
 
 def _blocked_by_robot(spawn: CandidateSet, lattice: CandidateSet, fine: CandidateSet | None, reach: float) -> int:
@@ -131,7 +131,7 @@ def _blocked_by_robot(spawn: CandidateSet, lattice: CandidateSet, fine: Candidat
 
 def check_ring_start_goal(start: CandidateSet, goal: CandidateSet, min_distance: float, path: str = "robot") -> None:
     """Every start a rotating ring can give has a goal at least ``min_distance`` away (as the draw asks), for every rotation."""
-    starts, margin = _ring_samples(start)
+    starts, margin = ring_samples(start)
     needed = min_distance + JITTER_REACH + math.sqrt(2) * start.jitter + margin  # the draw's margin, and the start's own jitter
     if goal.ring_center is not None:
         # the farthest of K evenly spaced ring points is within pi/K of the opposite direction
@@ -151,7 +151,7 @@ def check_ring_start_goal(start: CandidateSet, goal: CandidateSet, min_distance:
 
 def ring_mirror_free(ring: CandidateSet, center: complex, clearance: float, world_box: ShapelyPolygon, occupied: BaseGeometry) -> bool:
     """Whether every rotation of ``ring`` mirrors through ``center`` onto free floor (then it may keep rotating)."""
-    samples, margin = _ring_samples(ring)
+    samples, margin = ring_samples(ring)
     mirrored = 2 * center - samples
     return bool((clear_of(mirrored, clearance + margin, occupied) & inside_floor(mirrored, world_box, margin)).all())
 
@@ -163,7 +163,7 @@ def inside_floor(points: np.ndarray, world_box: ShapelyPolygon, margin: float) -
     return inside
 
 
-def _max_blocked(spawn: np.ndarray, starts: np.ndarray, reach: float) -> int:
+def max_blocked(spawn: np.ndarray, starts: np.ndarray, reach: float) -> int:
     """The most ``spawn`` candidates one agent on any of ``starts`` (with jitter in ``reach``) can block."""
     if len(spawn) == 0 or len(starts) == 0:
         return 0

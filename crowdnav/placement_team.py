@@ -27,7 +27,7 @@ from shapely.geometry import Polygon as ShapelyPolygon
 from shapely.geometry.base import BaseGeometry
 
 from crowdnav.obstacles import GeometryError
-from crowdnav.placement_checks import _max_blocked, _ring_samples, component_of, free_components
+from crowdnav.placement_checks import component_of, free_components, max_blocked, ring_samples
 from crowdnav.placement_regions import (
     CHUNK,
     GAP,
@@ -153,14 +153,14 @@ def _goal_counts(starts: np.ndarray, margin: float, goals: np.ndarray, min_dista
 def _lattice_positions(lattice: CandidateSet, allowed: np.ndarray | None = None) -> tuple[np.ndarray, float]:
     """Where a lattice draw can put a robot, and how far from those points (jitter or the ring's rotation)."""
     if lattice.ring_center is not None:
-        return _ring_samples(lattice)
+        return ring_samples(lattice)
     points = lattice.points if allowed is None else lattice.points[allowed]
     return points, math.sqrt(2) * lattice.jitter
 
 
 def _blocked(target: np.ndarray, positions: list[tuple[np.ndarray, float]], clear: float) -> int:
     """The most ``target`` points one robot at any of ``positions`` (each within its margin) keeps a drawn robot from."""
-    return max((_max_blocked(target, points, clear + margin) for points, margin in positions
+    return max((max_blocked(target, points, clear + margin) for points, margin in positions
                 if len(points) and len(target) and _box_gap(target, points) < clear + margin), default=0)
 
 
@@ -177,7 +177,8 @@ def check_team(scenario: Scenario, robots: list[Placement]) -> None:
     starts: list[list[tuple[np.ndarray, float]]] = []
     goals: list[list[tuple[np.ndarray, float]]] = []
     for j, (spec, places) in enumerate(zip(specs, robots, strict=True)):
-        lattice_starts = _lattice_positions(places.robot_start, places.start_goal_ok.any(1))
+        allowed: np.ndarray = np.asarray(places.start_goal_ok.any(1), dtype=bool)
+        lattice_starts = _lattice_positions(places.robot_start, allowed)
         starts.append([lattice_starts])
         goals.append([_lattice_positions(places.robot_goal)])
         fallback = places.fallback
@@ -198,7 +199,7 @@ def check_team(scenario: Scenario, robots: list[Placement]) -> None:
             continue
         # its goal: the fewest goals any start leaves, less what the goals drawn before can block
         components = fallback.components
-        lattice_component = components[0][places.start_goal_ok.any(1)] if components is not None else None
+        lattice_component = components[0][allowed] if components is not None else None
         if places.robot_start.ring_center is not None:
             lattice_component = None
         fine_start_component = components[2][fallback.start_ok] if components is not None else None
