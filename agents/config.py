@@ -148,6 +148,8 @@ class TrainConfig(_Section):
     sensors: dict[str, Any] = option({}, "Sensor-setting overrides, e.g. {lidar: {beams: 180}}.")
     overrides: dict[str, Any] = option({}, "Dotted scenario overrides, e.g. {humans.count: 5}.")
     reward_weights: dict[str, Any] = option({}, "Reward preset and weight overrides, e.g. {preset: paper, social: -50} (docs/agents.md#reward).")
+    shield: bool | dict[str, Any] = option(False, "Action-time safety shield from the robot's tracker, pose and map: true, false or "
+                                                  "planner settings, e.g. {horizon: 2.0} (docs/agents.md#the-safety-shield).")
     algo: Algorithm = option("sac", "Stable-Baselines3 algorithm (crowdnav.registry.ALGORITHMS).")
     agents: Literal["robot", "robots"] = option(
         "robot", "robot: the Gymnasium env's first robot learns; robots: every robot of a multi-robot scenario learns one shared "

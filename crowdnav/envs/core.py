@@ -18,6 +18,7 @@ import numpy as np
 from gymnasium import spaces
 
 from crowdnav.envs.reward import Reward
+from crowdnav.planning.shield import validate_shield
 from crowdnav.rendering.episode_view import RENDER_MODES, EpisodeView, RenderOptions
 from crowdnav.robot_view import RobotView
 from crowdnav.scenario import ScenarioIssue, library
@@ -138,7 +139,8 @@ class EnvCore:
     ``modalities``: observation keys (default ``scenario.sensors.modalities``); ``sensors``:
     sensor-setting overrides (``{"lidar": {"beams": 180}}``); ``reward_weights``: reward-weight
     overrides (``{"social": -50}``); ``overrides``: dotted scenario paths to values
-    (``{"humans.count": 10}``). All of them are validated like the scenario file.
+    (``{"humans.count": 10}``). All of them are validated like the scenario file. ``shield``:
+    the action-time safety shield (:mod:`crowdnav.planning.shield`; True or its settings).
     """
 
     def __init__(
@@ -151,12 +153,16 @@ class EnvCore:
         overrides: Mapping[str, Any] | None = None,
         render_mode: str | None = None,
         render_options: RenderOptions | Mapping[str, Any] | None = None,
+        shield: bool | Mapping[str, Any] | None = None,
     ):
         if render_mode is not None and render_mode not in RENDER_MODES:
             raise ValueError(f"render_mode={render_mode!r} is not supported; expected None or one of {RENDER_MODES}")
         world, self.modalities = load_env_world(scenario, option_overrides(modalities, sensors, reward_weights, overrides))
         self.scenario = world.scenario
         self.simulator = Simulator(world)
+        self.shield = validate_shield(dict(shield) if isinstance(shield, Mapping) else shield, world)
+        self.shielded = False
+        """Whether the shield replaced the last step's action (docs/agents.md#the-safety-shield)."""
         self.observation_space = spaces.Dict({key: modality.space() for key, modality in self.modalities.items()})
         self.action_space = spaces.Box(-1.0, 1.0, shape=(2,), dtype=np.float32)
         self.reward = Reward(self.scenario.reward)
@@ -247,7 +253,10 @@ class EnvCore:
         """
         if not self._running:
             raise RuntimeError("the episode is over or has not started: call reset() before step()")
-        events = self.simulator.step(checked_robot_action(action), human_actions, other_robot_actions)
+        action = checked_robot_action(action)
+        if self.shield is not None:
+            action, self.shielded = self.shield.single(self.simulator, action)
+        events = self.simulator.step(action, human_actions, other_robot_actions)
         reward, terms = self.reward(self.simulator, events)
         if events.terminated or events.truncated:
             self._running = False

@@ -80,6 +80,11 @@ class CrowdNavEnv(gym.Env):
     window updated at every reset and step, at ``metadata["render_fps"]`` = 1 / time_step);
     ``render_options`` (:class:`crowdnav.rendering.RenderOptions` or a mapping of its fields:
     overlays for the LIDAR, LEOG inset, closest obstacle, humans' goals, frame size).
+    ``shield``: None (default), True or a mapping of
+    :class:`crowdnav.planning.predictive.PlannerSettings` fields: before each step, an action
+    that the robot's own tracker (``humans`` sensor settings), its pose, the map and a
+    constant-velocity prediction call unsafe is replaced by the nearest safe move
+    (:mod:`crowdnav.planning.shield`); ``info["shielded"]`` says whether it was. Holonomic, one robot.
 
     **Several robots** (a scenario with ``robots:``): the agent is the first robot (its own
     modalities; its range sensors see the other robots, its ``humans`` modality the humans only).
@@ -128,6 +133,8 @@ class CrowdNavEnv(gym.Env):
         truncated = events.truncated and not terminated
         info = step_info(events, terms)
         info["human_stalls"] = int(self.simulator.human_stalls.sum())
+        if self.core.shield is not None:
+            info["shielded"] = self.core.shielded
         observation = self.core.observe()  # a robot that ends this step is still seen; it leaves after (as in parallel_env)
         if self._other_names:
             info["other_robots"] = self._others_after_step(terminated or truncated)

@@ -21,6 +21,7 @@ from crowdnav.contacts import goal_distance
 from crowdnav.envs.core import ScenarioSource, load_env_world, option_overrides, real_array
 from crowdnav.envs.reward import REWARD_TERMS, reward_terms
 from crowdnav.events import outcomes
+from crowdnav.planning.shield import validate_shield
 
 if TYPE_CHECKING:
     from crowdnav.simulator import Simulator
@@ -91,6 +92,7 @@ class CrowdNavVectorEnv(VectorEnv):
         render_mode: str | None = None,
         keep_freed_memory: bool = True,
         episode_seeds: Callable[[np.ndarray], Sequence[int | None]] | None = None,
+        shield: bool | Mapping[str, Any] | None = None,
     ):
         if render_mode is not None:
             raise ValueError("the vector env does not render; render a single env (gymnasium.make(..., render_mode=...))")
@@ -104,6 +106,7 @@ class CrowdNavVectorEnv(VectorEnv):
         self.episode_seeds = episode_seeds
         _check_agents(num_envs, world.scenario.humans.max_count)
         self.batch = BatchSimulator(world, num_envs)
+        self.shield = validate_shield(dict(shield) if isinstance(shield, Mapping) else shield, world)
         if keep_freed_memory:
             _keep_freed_memory()
         self.num_envs = self.batch.num_worlds
@@ -187,6 +190,9 @@ class CrowdNavVectorEnv(VectorEnv):
         if not stepping.any():  # every world is waiting (DISABLED) or was just reset
             self._observe_all()
             return self._copy_observations(), rewards, *self._waiting_flags(), infos
+        if self.shield is not None:  # every stepping world's flag (the vector infos' mask convention)
+            actions, infos["shielded"] = self._shielded(actions)
+            infos["_shielded"] = stepping.copy()
         result = self.batch.step(actions, None if stepping.all() else stepping)
         terminated = result.terminated & stepping
         truncated = result.truncated & stepping & ~terminated
@@ -211,6 +217,18 @@ class CrowdNavVectorEnv(VectorEnv):
         if self.autoreset_mode is AutoresetMode.SAME_STEP and ended.any():
             infos = self._same_step_reset(infos, ended)
         return self._copy_observations(), rewards, terminated, truncated, infos
+
+    def _shielded(self, actions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Every world's action through the shield (as the single env's, world by world bit for bit), and which it replaced."""
+        assert self.shield is not None
+        out, replaced = actions.copy(), np.zeros(self.num_envs, dtype=bool)
+        for bucket in self.batch.buckets.values():
+            rows, size = np.arange(len(bucket)), self.batch.chunk_size(bucket.n)
+            for start in range(0, len(rows), size):
+                chunk = rows[start : start + size]
+                worlds = bucket.world[chunk]
+                out[worlds], replaced[worlds] = self.shield.batch(self.batch.state(bucket, chunk), actions[worlds])
+        return out, replaced
 
     def _waiting_flags(self) -> tuple[np.ndarray, np.ndarray]:
         """(terminated, truncated) when no world stepped: waiting worlds repeat theirs (DISABLED), others are False."""
