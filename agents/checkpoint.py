@@ -133,7 +133,42 @@ def read_policy_info(path: str | Path) -> dict[str, Any]:
         check_format(info.get("format") if isinstance(info, dict) else None, POLICY_FORMAT)
     except ValueError as error:
         raise ValueError(f"{file}: unsupported policy {error}") from None
+    check_policy_fields(info, file)
     return info
+
+
+class PolicyFileError(CrowdNavError, ValueError):
+    """A ``policy.json`` whose fields are not what crowdnav writes (damaged or edited); one line naming the field."""
+
+
+def check_policy_fields(info: Mapping[str, Any], file: Path) -> None:
+    """PolicyFileError unless the fields every loader reads have the kinds crowdnav writes (checked before any is used).
+
+    ``algo`` a name; ``env`` a mapping whose ``scenario`` is a library name or a file's path (a text),
+    its other options mappings or lists; ``config`` and ``observation_normalization`` mappings or
+    null; ``leog_encoder`` a file name or null.
+    """
+    def refuse(field: str, expected: str, value: Any) -> None:
+        raise PolicyFileError(f"{file}: {field}: expected {expected}, got {str(value)[:60]!r}")
+
+    if not isinstance(info.get("algo"), str):
+        refuse("algo", "the algorithm's name", info.get("algo"))
+    env = info.get("env")
+    if not isinstance(env, Mapping):
+        refuse("env", "a mapping of environment options", env)
+        return
+    if "scenario" in env and (not isinstance(env["scenario"], str) or not env["scenario"].strip()):
+        refuse("env.scenario", "a library scenario name or a scenario file's path", env.get("scenario"))
+    for key in ("sensors", "overrides", "reward_weights"):
+        if key in env and not isinstance(env[key], Mapping):
+            refuse(f"env.{key}", "a mapping", env[key])
+    if "modalities" in env and not (isinstance(env["modalities"], list) and all(isinstance(key, str) for key in env["modalities"])):
+        refuse("env.modalities", "a list of modality names", env["modalities"])
+    for key in ("config", "observation_normalization"):
+        if info.get(key) is not None and not isinstance(info[key], Mapping):
+            refuse(key, "a mapping or null", info[key])
+    if info.get("leog_encoder") is not None and not isinstance(info["leog_encoder"], str):
+        refuse("leog_encoder", "a file name or null", info["leog_encoder"])
 
 
 def load_model(path: str | Path, env: Any = None, device: str = "cpu") -> BaseAlgorithm:

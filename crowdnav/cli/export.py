@@ -41,10 +41,11 @@ def export_command(args: argparse.Namespace) -> int:
                            "run folder or checkpoint that holds it (docs/deploy.md)")
         policy = policy.parent  # a crowdnav checkpoint's own model.zip: its folder is the checkpoint
     from crowdnav.agents.onnx_export import ExportError, export_onnx
+    from crowdnav.errors import CrowdNavError
 
     try:
         path = export_onnx(policy, out)
-    except ExportError as error:
-        raise CliError(str(error)) from None
+    except (ExportError, CrowdNavError, ValueError) as error:  # a damaged checkpoint or its scenario: one line, as evaluate says it
+        raise CliError(str(error).splitlines()[0]) from None
     print(f"wrote {path}")
     return 0
