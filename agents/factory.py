@@ -260,7 +260,7 @@ def make_model(config: TrainConfig, env: GymEnv, saved_encoder: dict[str, Any] |
         check_leog_shape(config, architecture, env.observation_space)
     from crowdnav.agents.network_size import check_model  # counted before anything is allocated
 
-    check_model(config, env.observation_space, env.action_space, "config", architecture)
+    check_model(config, hyper["net_arch"], env.observation_space, env.action_space, "config", architecture)
     try:
         model = (SB3_ALGORITHMS if reference else ALGORITHMS)[config.algo](
             "MultiInputPolicy", env, policy_kwargs=policy_kwargs(config, architecture, reference), seed=config.seed,

@@ -9,8 +9,6 @@ tensor exists (:func:`check_parameters`). The counts are exact for crowdnav's ex
 SB3's own heads and extractors (``tests/agents/test_network_size.py`` compares them with built
 models); an encoder registered with :func:`crowdnav.agents.register_encoder` is user code and
 counts as nothing.
-
-Free of torch: only shapes are read.
 """
 
 from __future__ import annotations
@@ -24,10 +22,6 @@ from crowdnav.agents.config import ConfigError
 MAX_PARAMETERS = 50_000_000
 """Most parameters one model may hold, all its networks together (actor, critics, targets): 200 MB of float32.
 crowdnav's default networks hold about 100,000; a checkpoint of the biggest allowed model is under 1 GiB."""
-
-LOWDIM_MAX = 16
-"""As :data:`crowdnav.agents.extractor.LOWDIM_MAX` (vectors up to this long take the RBF branch); a test keeps them equal."""
-
 
 class NetworkSizeError(ConfigError):
     """A model whose networks would hold more than :data:`MAX_PARAMETERS` parameters; one line, raised before building it."""
@@ -106,7 +100,7 @@ def extractor_size(shapes: Mapping[str, tuple[int, ...]], settings: Mapping[str,
     ``settings``: :class:`~crowdnav.agents.config.ExtractorConfig`'s fields; the branch of each key is
     chosen as the extractor chooses it. Keys with a registered encoder count as nothing.
     """
-    from crowdnav.agents.extractor import ENCODERS
+    from crowdnav.agents.extractor import ENCODERS, LOWDIM_MAX
 
     total = width = 0
     for key, shape in shapes.items():
@@ -152,17 +146,19 @@ def _leog_encoder(architecture: Mapping[str, Any]) -> tuple[int, int]:
     return total + flat * latent + latent + 2 * latent, latent
 
 
-def model_parameters(config: Any, observation_space: Any, action_space: Any, leog_architecture: Mapping[str, Any] | None = None) -> int:
-    """Parameters of the model :func:`crowdnav.agents.factory.make_model` builds for ``config`` on these spaces."""
-    from crowdnav.agents.factory import hyperparameters, precomputes_leog
+def model_parameters(config: Any, net_arch: Any, observation_space: Any, action_space: Any,
+                     leog_architecture: Mapping[str, Any] | None = None) -> int:
+    """Parameters of the model :func:`crowdnav.agents.factory.make_model` builds for ``config`` on these spaces.
 
+    ``net_arch``: the heads' layers the factory chose (``hyperparameters(config)["net_arch"]``).
+    """
+    precomputed = config.encoder.mode == "frozen" and config.encoder.precompute  # the factory's precomputes_leog
     shapes = {key: tuple(space.shape) for key, space in observation_space.spaces.items()}
-    extractor, features = extractor_size(shapes, config.extractor.model_dump(), leog_architecture, precomputes_leog(config))
+    extractor, features = extractor_size(shapes, config.extractor.model_dump(), leog_architecture, precomputed)
     options = _head_options(config.policy_kwargs, 1 if config.algo == "ddpg" else 2)
     if "use_sde" in config.algo_kwargs:  # an algorithm option SB3 hands to its policy
         options["use_sde"] = bool(config.algo_kwargs["use_sde"])
-    return heads(kind_of(config.algo), features, extractor, int(np.prod(action_space.shape)), hyperparameters(config)["net_arch"],
-                 **options)
+    return heads(kind_of(config.algo), features, extractor, int(np.prod(action_space.shape)), net_arch, **options)
 
 
 def _head_options(policy_kwargs: Mapping[str, Any], critics_by_default: int = 2) -> dict[str, Any]:
@@ -178,14 +174,12 @@ def _head_options(policy_kwargs: Mapping[str, Any], critics_by_default: int = 2)
     return options
 
 
-def check_model(config: Any, observation_space: Any, action_space: Any, label: str,
+def check_model(config: Any, net_arch: Any, observation_space: Any, action_space: Any, label: str,
                 leog_architecture: Mapping[str, Any] | None = None) -> int:
     """:func:`model_parameters`, refused above :data:`MAX_PARAMETERS` (:class:`NetworkSizeError`) before anything is built."""
-    from crowdnav.agents.factory import hyperparameters
-
-    total = model_parameters(config, observation_space, action_space, leog_architecture)
+    total = model_parameters(config, net_arch, observation_space, action_space, leog_architecture)
     critics = f", {config.policy_kwargs['n_critics']} critics" if "n_critics" in config.policy_kwargs else ""
-    return check_parameters(total, label, f"{config.algo}, net_arch {describe_layers(hyperparameters(config)['net_arch'])}{critics}")
+    return check_parameters(total, label, f"{config.algo}, net_arch {describe_layers(net_arch)}{critics}")
 
 
 def describe_layers(layers: Any) -> str:

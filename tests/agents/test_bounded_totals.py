@@ -16,7 +16,7 @@ import zipfile
 import pytest
 from crowdnav.agents.checkpoint import POLICY_FORMAT
 from crowdnav.agents.config import config_from_mapping, config_to_dict
-from crowdnav.agents.factory import env_options, make_env, make_model
+from crowdnav.agents.factory import env_options, hyperparameters, make_env, make_model
 from crowdnav.agents.model_zip import MAX_TOTAL_BYTES, zip_parameters
 from crowdnav.agents.network_size import MAX_PARAMETERS, NetworkSizeError, model_parameters
 
@@ -80,7 +80,7 @@ def test_the_counted_parameters_are_those_the_built_model_holds(tmp_path, algo, 
     config = config_from_mapping(tiny_config(tmp_path, algo=algo, **fields))
     env = make_env(config)
     built = sum(parameter.numel() for parameter in make_model(config, env).policy.parameters())
-    assert model_parameters(config, env.observation_space, env.action_space) == built
+    assert model_parameters(config, hyperparameters(config)["net_arch"], env.observation_space, env.action_space) == built
 
 
 @pytest.mark.parametrize(("algo", "fields"), [("sac", {"policy_kwargs": {"n_critics": 3}}), ("td3", {"policy_kwargs": {"n_critics": 4}}),
@@ -90,7 +90,7 @@ def test_critics_and_state_dependent_noise_are_counted(tmp_path, algo, fields):
     config = config_from_mapping(tiny_config(tmp_path, algo=algo, modalities=["lidar"], **fields))
     env = make_env(config)
     built = sum(parameter.numel() for parameter in make_model(config, env).policy.parameters())
-    assert model_parameters(config, env.observation_space, env.action_space) == built
+    assert model_parameters(config, hyperparameters(config)["net_arch"], env.observation_space, env.action_space) == built
 
 
 @pytest.mark.parametrize("algo", ["ppo", "sac", "td3", "ddpg"])
@@ -194,9 +194,3 @@ def test_a_zip_with_more_members_than_allowed_is_refused(tmp_path):
             archive.writestr(f"m{index}.pth", b"")
     with pytest.raises(ModelZipError, match=rf"{MAX_MEMBERS + 1} entries, more than an SB3 model zip holds \({MAX_MEMBERS}\)"):
         read_model_zip(path)
-
-
-def test_the_size_module_branches_as_the_extractor_does():
-    from crowdnav.agents import extractor, network_size
-
-    assert network_size.LOWDIM_MAX == extractor.LOWDIM_MAX
