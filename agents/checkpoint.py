@@ -27,7 +27,7 @@ import json
 import shutil
 from collections.abc import Mapping
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, NoReturn
 
 import numpy as np
 from crowdnav.agents.model_zip import ModelZipError, check_layers, read_model_zip
@@ -148,7 +148,7 @@ def check_policy_fields(info: Mapping[str, Any], file: Path) -> None:
     its other options mappings or lists; ``config`` and ``observation_normalization`` mappings or
     null; ``leog_encoder`` a file name or null.
     """
-    def refuse(field: str, expected: str, value: Any) -> None:
+    def refuse(field: str, expected: str, value: Any) -> NoReturn:
         raise PolicyFileError(f"{file}: {field}: expected {expected}, got {str(value)[:60]!r}")
 
     if not isinstance(info.get("algo"), str):
@@ -156,7 +156,6 @@ def check_policy_fields(info: Mapping[str, Any], file: Path) -> None:
     env = info.get("env")
     if not isinstance(env, Mapping):
         refuse("env", "a mapping of environment options", env)
-        return
     if "scenario" in env and (not isinstance(env["scenario"], str) or not env["scenario"].strip()):
         refuse("env.scenario", "a library scenario name or a scenario file's path", env.get("scenario"))
     for key in ("sensors", "overrides", "reward_weights"):

@@ -26,7 +26,7 @@ from __future__ import annotations
 import time
 from collections.abc import Callable, Mapping
 from pathlib import Path
-from typing import Any
+from typing import Any, NoReturn
 
 import numpy as np
 import torch
@@ -323,7 +323,7 @@ def check_robots_info(info: Mapping[str, Any], label: str) -> None:
     """
     import math
 
-    def refuse(field: str, expected: str) -> None:
+    def refuse(field: str, expected: str) -> NoReturn:
         raise ConfigError(f"{label}: {field}: expected {expected}")
 
     for key in ("env", "config"):
@@ -334,7 +334,6 @@ def check_robots_info(info: Mapping[str, Any], label: str) -> None:
     inputs = info.get("robots")
     if not isinstance(inputs, Mapping):
         refuse("robots", "a mapping of robots, identity, offset and scale (the inputs' settings the run stored)")
-        return
     names = inputs.get("robots")
     if not isinstance(names, list) or not 1 <= len(names) <= 8 or not all(isinstance(name, str) and name for name in names) \
             or len(set(names)) != len(names):

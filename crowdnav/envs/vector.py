@@ -8,7 +8,7 @@ returns a :class:`CrowdNavVectorEnv`; ``vectorization_mode="sync"`` still gives 
 from __future__ import annotations
 
 from collections.abc import Callable, Mapping, Sequence
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, TypeGuard
 
 import numpy as np
 from gymnasium import spaces
@@ -378,6 +378,6 @@ def _restricted(infos: dict[str, Any], keep: np.ndarray) -> dict[str, Any]:
     return out
 
 
-def _is_seed(value: object) -> bool:
+def _is_seed(value: object) -> TypeGuard[int | np.integer[Any]]:
     """A non-negative integer (numpy's too), not a boolean."""
-    return isinstance(value, (int, np.integer)) and not isinstance(value, bool) and value >= 0
+    return isinstance(value, (int, np.integer)) and not isinstance(value, bool) and bool(value >= 0)
