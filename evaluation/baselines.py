@@ -55,8 +55,10 @@ BASELINES: dict[str, str] = {
 }
 """Baseline name (``baseline:NAME``) -> label in tables and figures."""
 
-EXPERIMENT_BASELINES = ("straight", "social_force")
-"""The baselines every experiment plays (those the core install runs; ``orca`` needs pyrvo)."""
+EXPERIMENT_BASELINES = ("straight", "social_force", "predictive", "oracle")
+"""The baselines every experiment plays (those the core install runs; ``orca`` needs pyrvo). Where the
+oracle or the predictive planner refuses a scenario (the crowd reacts to the robot, several robots,
+a unicycle), the experiment says so in one line and goes on without it."""
 
 
 def is_baseline(configuration: str) -> bool:

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import pandas as pd
 import pytest
-from crowdnav.evaluation.baselines import BASELINES, evaluate_baseline, experiment_baselines, is_baseline
+from crowdnav.evaluation.baselines import BASELINES, EXPERIMENT_BASELINES, evaluate_baseline, experiment_baselines, is_baseline
 from crowdnav.evaluation.curves import curves_figure
 from crowdnav.evaluation.experiment import ExperimentError, experiment_from_mapping
 from crowdnav.evaluation.leaderboard import leaderboard_table
@@ -51,11 +51,12 @@ def test_a_finished_baseline_is_not_played_again(tmp_path):
 
 def test_an_experiment_gets_one_pair_of_baselines_per_distinct_environment():
     experiment = experiment_from_mapping(tiny_experiment_document())
-    assert [name for name, _, _ in experiment_baselines(experiment)] == ["baseline_straight", "baseline_social_force"]
+    assert [name for name, _, _ in experiment_baselines(experiment)] == ["baseline_straight", "baseline_social_force",
+                                                                         "baseline_predictive", "baseline_oracle"]
     document = tiny_experiment_document()
     document["configurations"][1]["train"]["scenario"] = "room_furniture"
     names = [name for name, _, _ in experiment_baselines(experiment_from_mapping(document))]
-    assert names == ["baseline_straight_lidar", "baseline_social_force_lidar", "baseline_straight_closest", "baseline_social_force_closest"]
+    assert names == [f"baseline_{name}_{first}" for first in ("lidar", "closest") for name in ("straight", "social_force", "predictive", "oracle")]
 
 
 def test_configuration_names_starting_with_baseline_are_refused():
@@ -70,13 +71,13 @@ def test_benchmark_results_rank_the_baselines_and_draw_them_as_horizontal_lines(
     tests, _, metas = load_results([results])
     table = leaderboard_table(tests, metas)
     baselines = table[table["kind"] == "baseline"]
-    assert sorted(baselines["configuration"]) == ["baseline_social_force", "baseline_straight"]
+    assert sorted(baselines["configuration"]) == ["baseline_oracle", "baseline_predictive", "baseline_social_force", "baseline_straight"]
     assert (baselines["seeds"] == 1).all() and all(map(is_baseline, baselines["configuration"]))
     figure = curves_figure(tests, window=3)
     # one dashed / dotted horizontal line per baseline in every outcome panel
     for axis in figure.axes:
         horizontal = [line for line in axis.get_lines() if len(set(line.get_ydata())) == 1 and line.get_linestyle() in ("--", ":")]
-        assert len(horizontal) == 2
+        assert len(horizontal) == len(EXPERIMENT_BASELINES)
 
 
 def test_a_baseline_that_cannot_be_played_is_reported_and_the_others_are_played(tmp_path):
@@ -91,5 +92,6 @@ def test_a_baseline_that_cannot_be_played_is_reported_and_the_others_are_played(
     experiment = experiment_from_mapping(document)
     scenario.unlink()
     done = evaluate_experiment_baselines(experiment, tmp_path / "results")
-    assert [isinstance(item, str) for item in done] == [False, False, True, True]
-    assert "gone.yaml" in done[2] and done[2].startswith("baseline straight to goal (scripted) [closest] skipped: ")
+    assert [isinstance(item, str) for item in done] == [False] * len(EXPERIMENT_BASELINES) + [True] * len(EXPERIMENT_BASELINES)
+    first_skipped = done[len(EXPERIMENT_BASELINES)]
+    assert "gone.yaml" in first_skipped and first_skipped.startswith("baseline straight to goal (scripted) [closest] skipped: ")
