@@ -124,7 +124,8 @@ def disc_cells(centres: np.ndarray, reach: np.ndarray, origin: np.ndarray, spaci
         dx = (np.arange(w) - rel.real[..., None]) ** 2  # (rows, n, W)
         dy = (np.arange(h) - rel.imag[..., None]) ** 2  # (rows, n, H)
         inside = dx[..., :, None] + dy[..., None, :] <= np.where(r >= 0, r * r, -1.0)[..., None, None]
-        return inside.any(1).reshape(lead + (w * h,))
+        dense: np.ndarray = inside.any(1).reshape(lead + (w * h,))
+        return dense
     blocked = np.zeros((rows, w * h), dtype=bool)
     meets = (r >= 0) & (rel.real >= -r) & (rel.real <= w - 1 + r) & (rel.imag >= -r) & (rel.imag <= h - 1 + r)
     row, human = np.nonzero(meets)

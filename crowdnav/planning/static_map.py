@@ -65,7 +65,8 @@ class StaticMap:
         i = np.clip(np.rint((points.real - x0) / RASTER).astype(np.int64), 0, w - 1)
         j = np.clip(np.rint((points.imag - y0) / RASTER).astype(np.int64), 0, h - 1)
         nearest = complex(x0, y0) + (i + 1j * j) * RASTER
-        return inside & (self._raster[i, j] - np.abs(points - nearest) > self.margin)
+        free: np.ndarray = inside & (self._raster[i, j] - np.abs(points - nearest) > self.margin)
+        return free
 
     def geodesic(self, goal: complex, spacing: float) -> GeodesicField:
         """The distance (m) to ``goal`` around obstacles, on a ``spacing`` grid over the world."""
