@@ -121,8 +121,9 @@ class _RobotEpisodes(BaseCallback):
         self.records: list[EpisodeRecord] = []
         self.log = EpisodeLogWriter(episode_log(out))
         self.started = time.perf_counter()
-        self.returns: np.ndarray | None = None
-        self.lengths: np.ndarray | None = None
+        self.returns = np.zeros(0)
+        self.lengths = np.zeros(0, dtype=int)
+        """Each robot row's return and length in its current episode (set to the run's rows before ``learn``)."""
         self.point = 0
         self.due = False
         """A point passed in this rollout: checkpoint at its end."""
@@ -141,7 +142,7 @@ class _RobotEpisodes(BaseCallback):
     def _on_step(self) -> bool:
         infos, rewards = self.locals["infos"], self.locals["rewards"]
         dones = np.asarray(self.locals["dones"], dtype=bool)  # SuperSuit's are uint8: as an index they would pick rows 0 and 1
-        if self.returns is None or self.lengths is None:
+        if len(self.returns) != len(infos):
             self.returns, self.lengths = np.zeros(len(infos)), np.zeros(len(infos), dtype=int)
         self.returns += rewards
         for row, info in enumerate(infos):
