@@ -7,6 +7,11 @@ on the state it is given (the simulator's own, or one world's row of a batch: a
 without ``humans.groups`` is one group: it draws the same random numbers in the same order as
 before groups existed, so its episodes did not change. Loops run over groups (a scenario's
 constant), never over humans.
+
+A group with ``walk_together`` (Moussaïd et al. 2010, PLoS ONE 5(4): e10047; the forces are
+:func:`crowdnav.social_force.group_force`) starts on a small circle like a standing one, shares
+one goal, has arrived when its walking members' centre of mass is within the goal tolerance
+(:func:`arrivals`), and takes its next goal as a whole, also when one member stalled.
 """
 
 from __future__ import annotations
@@ -16,6 +21,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from crowdnav import social_force as sf
 from crowdnav.placement import GAP, JITTER_REACH, PlacementError
 
 if TYPE_CHECKING:
@@ -39,7 +45,14 @@ def place_groups(sim: Any, start: np.ndarray, goal: complex | np.ndarray, counts
             continue
         humans_placed = np.concatenate(placed[1:]) if len(placed) > 1 else np.zeros(0, dtype=complex)
         ring = places.circle_radius
-        if group.standing:  # keep the robot's goal reachable: no circle around it
+        if group.walk_together:  # one centre away from the robots and the groups before; members on a circle around it
+            away = np.concatenate([start, humans_placed])
+            near = np.full(len(away), ring + 2 * radius + margin)
+            near[:robots] = robot_radius + ring + radius + margin
+            centre = places.spawn.draw(rng, 1, away_from=away, min_distance=near)[0]
+            phase = rng.uniform(0, 2 * math.pi)
+            members = centre + ring * np.exp(1j * (phase + 2 * math.pi * np.arange(count) / count))
+        elif group.standing:  # keep the robot's goal reachable: no circle around it
             away = np.concatenate([start, [goal] if team is None else goal, humans_placed])
             near = np.full(len(away), ring + 2 * radius + margin)
             near[: 2 * robots] = robot_radius + ring + radius + margin if team is None else np.tile(robot_radius + ring + radius + margin, 2)
@@ -64,6 +77,9 @@ def first_goals(sim: Any, spawn: list[np.ndarray]) -> list[np.ndarray]:
     for group, places, members in zip(sim.groups, sim.placement.groups, spawn, strict=True):
         if len(members) == 0 or group.standing:
             goals.append(members.copy())  # standing members' goal is where they stand
+        elif group.walk_together:  # one goal for the group: the mirror of its centre, or one draw
+            goal = 2 * mirror_center(group, sim.scenario) - members.mean() if group.goal_rule == "mirror" else places.goal.draw(sim.rng, 1)[0]
+            goals.append(np.full(len(members), goal, dtype=complex))
         elif group.goal_rule == "mirror":
             goals.append(2 * mirror_center(group, sim.scenario) - members)
         else:
@@ -83,7 +99,7 @@ def apply_goal_rules(state: SimState, sim: Any, stalled: np.ndarray | None = Non
     ``on_goal``. Returns whether anyone respawned (moved): the caller then measures the new geometry.
     """
     distance = np.abs(state.human_goals - state.positions[1:])
-    arrived = distance <= sim.scenario.humans.social_force.goal_tolerance
+    arrived = arrivals(distance, state.positions[1:], state.human_goals, state.human_group, state.human_stopped, sim)
     np.logical_and(arrived, ~state.human_stopped, out=state.human_arrived)
     if stalled is None:
         stalled = stall_check(state, sim, distance)
@@ -108,10 +124,14 @@ def apply_goal_rules(state: SimState, sim: Any, stalled: np.ndarray | None = Non
                 moved = moved or len(index) > 0
             if len(stuck_here):  # never arrived ones: the two sets are apart
                 index = np.union1d(index, stuck_here)
+        if group.walk_together and len(index):  # one arrived (all did) or stalled: the group's walking members take one goal
+            index = np.flatnonzero((state.human_group == g) & ~state.human_stopped)
         if len(index) == 0:
             continue
         if group.goal_rule == "mirror":
             state.human_goals[index] = 2 * mirror_center(group, sim.scenario) - state.human_goals[index]
+        elif group.walk_together:
+            state.human_goals[index] = places.goal.draw(sim.rng, 1)[0]
         else:
             state.human_goals[index] = places.goal.draw(sim.rng, len(index), replace=True)
         state.human_stall_mark[index] = np.inf  # a new goal: the next check only starts its window
@@ -119,6 +139,34 @@ def apply_goal_rules(state: SimState, sim: Any, stalled: np.ndarray | None = Non
 
 
 _NONE = np.zeros(0, dtype=np.intp)
+
+
+def together_table(groups: list[Any]) -> np.ndarray | None:
+    """(G,) bool: which groups walk together; None when none does (the crowd's step is then the one it always was)."""
+    table = np.array([bool(getattr(group, "walk_together", False)) for group in groups], dtype=bool)
+    return table if table.any() else None
+
+
+def arrivals(distance: np.ndarray, humans: np.ndarray, goals: np.ndarray, group: np.ndarray, stopped: np.ndarray, sim: Any) -> np.ndarray:
+    """The arrival kernel (any leading world axes, last axis the n humans): who is at its goal after this step.
+
+    A human whose ``distance`` to its goal is within ``goal_tolerance`` (stopped ones too: the caller
+    masks them); in a group that walks together, a walking member when the centre of mass of the
+    group's walking members is within it of the group's goal (all of them arrive together), a
+    stopped one never. ``sim``: the simulator (its scenario and ``together`` table).
+    """
+    tolerance = sim.scenario.humans.social_force.goal_tolerance
+    arrived: np.ndarray = distance <= tolerance
+    table = sim.together
+    if table is None:
+        return arrived
+    in_group = table[group]
+    arrived &= ~(in_group & stopped)
+    index, key, bins = sf.member_keys(in_group & ~stopped, group, len(table))
+    if len(index):
+        _, centres = sf.group_centroids(humans.reshape(-1)[index], key, bins)
+        arrived.reshape(-1)[index] = np.abs(goals.reshape(-1)[index] - centres[key]) <= tolerance
+    return arrived
 
 
 def stall_window(scenario: Any) -> int:

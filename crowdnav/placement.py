@@ -110,18 +110,23 @@ def _group_placement(scenario: Scenario, path: str, group: HumanGroup, world_box
     empty = CandidateSet(np.zeros(0, dtype=complex), 0.0)
     if group.max_count == 0:
         return GroupPlacement(path, empty, None)
-    if group.standing:
+    ring = 0.0
+    if group.on_circle:  # a standing circle, or a group that walks together: members start around one drawn centre
         ring = group.circle_radius_for(humans.radius)
         # the circle is one disc of radius ring + radius for obstacles; its members stay in the world too
-        sets = [region_candidates(r, f"{path}.spawn.{i}", ring + humans.radius, world_box, occupied) for i, r in enumerate(group.spawn)]
-        centres = merge_candidates(sets, spacing=0.0)
+        spawn_sets = [region_candidates(r, f"{path}.spawn.{i}", ring + humans.radius, world_box, occupied) for i, r in enumerate(group.spawn)]
+        centres = merge_candidates(spawn_sets, spacing=0.0)
         inside = shapely.contains_xy(world_box.buffer(-ring - JITTER_REACH), centres.points.real, centres.points.imag)
         if not inside.any():
-            raise GeometryError(f"{path}.spawn", f"no centre leaves the standing circle (radius {ring:.2f} m) inside the world; "
+            what = "standing circle" if group.standing else "walking group's starting circle"
+            raise GeometryError(f"{path}.spawn", f"no centre leaves the {what} (radius {ring:.2f} m) inside the world; "
                                 "expected a region further from the world's edge")
-        return GroupPlacement(path, CandidateSet(centres.points[inside], centres.jitter, centres.ring_center), None, ring)
-    spawn_sets = [region_candidates(r, f"{path}.spawn.{i}", humans.radius, world_box, occupied) for i, r in enumerate(group.spawn)]
-    spawn = merge_candidates(spawn_sets, spacing=2 * humans.radius + GAP + slack)
+        spawn = CandidateSet(centres.points[inside], centres.jitter, centres.ring_center)
+        if group.standing:
+            return GroupPlacement(path, spawn, None, ring)
+    else:
+        spawn_sets = [region_candidates(r, f"{path}.spawn.{i}", humans.radius, world_box, occupied) for i, r in enumerate(group.spawn)]
+        spawn = merge_candidates(spawn_sets, spacing=2 * humans.radius + GAP + slack)
     goal = None
     if group.goal_rule == "mirror":
         center = complex(*(group.mirror_center or scenario.world_center))
@@ -144,4 +149,4 @@ def _group_placement(scenario: Scenario, path: str, group: HumanGroup, world_box
         goal_sets = [region_candidates(r, f"{path}.goal.{i}", humans.radius, world_box, occupied) for i, r in enumerate(group.goal)]
         goal = merge_candidates(goal_sets, spacing=0.0)
         check_human_reachability(path, humans.radius, world_box, occupied, spawn_sets, goal_sets)
-    return GroupPlacement(path, spawn, goal)
+    return GroupPlacement(path, spawn, goal, ring)

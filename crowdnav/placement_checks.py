@@ -49,12 +49,13 @@ def check_capacity(scenario: Scenario, robot_start: CandidateSet, robot_goal: Ca
             if other.max_count == 0:
                 continue
             reach = ring + earlier.circle_radius + 2 * humans.radius + GAP + slack
-            capacity -= (1 if other.standing else other.max_count) * _blocked(placement.spawn, earlier.spawn, reach)
-        needed = 1 if group.standing else group.max_count
+            capacity -= (1 if other.on_circle else other.max_count) * _blocked(placement.spawn, earlier.spawn, reach)
+        needed = 1 if group.on_circle else group.max_count
         if capacity < needed:
             path = placement.path
-            if group.standing:
-                raise GeometryError(f"{path}.spawn", "no room is sure to be left for the standing circle next to the robot and the "
+            if group.on_circle:
+                what = "standing circle" if group.standing else "walking group's starting circle"
+                raise GeometryError(f"{path}.spawn", f"no room is sure to be left for the {what} next to the robot and the "
                                     "groups listed before it; expected larger spawn regions or the group listed earlier")
             field = f"{path}.count"
             raise GeometryError(

@@ -97,11 +97,11 @@ class GroupPlacement:
     path: str
     """Where the group is written in the file (``humans`` or ``humans.groups.<i>``), for error messages."""
     spawn: CandidateSet
-    """Walking groups: member start positions; standing groups: centres of the circle."""
+    """Walking groups: member start positions; standing groups and groups that walk together: centres of the circle."""
     goal: CandidateSet | None
     """Goal candidates; None for the mirror rule, standing groups and empty groups."""
     circle_radius: float = 0.0
-    """Radius (m) of a standing group's circle of member centres (0 for walking groups)."""
+    """Radius (m) of the circle of member centres a standing group or a group that walks together starts on (0 for other groups)."""
 
 
 @dataclass

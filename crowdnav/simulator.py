@@ -49,7 +49,7 @@ import numpy as np
 from crowdnav import social_force as sf
 from crowdnav.contacts import goal_distance
 from crowdnav.events import OUTCOMES, Collision, SimulationError, StepEvents  # noqa: F401  (re-exported: their public home)
-from crowdnav.groups import apply_goal_rules, first_goals, place_groups, stall_window
+from crowdnav.groups import apply_goal_rules, first_goals, place_groups, stall_window, together_table
 from crowdnav.orca import OrcaCrowd, OrcaUnavailableError
 from crowdnav.placement import JITTER_REACH
 from crowdnav.robot_view import RobotAccessors, robot_scenario
@@ -93,6 +93,8 @@ class Simulator(StateFields, RobotAccessors, SimGeometry):
         self.dt = scenario.time_step
         self.groups = [group for _, group in scenario.humans.crowd]
         """The crowd's groups in file order (one, named ``crowd``, for a file without ``humans.groups``)."""
+        self.together = together_table(self.groups)
+        """(G,) bool: the groups that walk together (``walk_together``; :func:`crowdnav.social_force.group_force`); None: none does."""
         self.max_humans = scenario.humans.max_count
         force = scenario.humans.social_force
         self._force = force
@@ -355,7 +357,18 @@ class Simulator(StateFields, RobotAccessors, SimGeometry):
         to_goal = state.human_goals - state.positions[1:]
         total = sf.goal_force(to_goal, force.goal_weight, force.goal_saturation_distance)
         total += self._repulsion[1:]
+        if self.together is not None:  # the walking groups' terms (Moussaïd et al. 2010)
+            total += self.group_terms(state.positions[1:], state.velocities[1:], state.human_preferred_speed, state.human_group,
+                                      state.human_stopped)
         return sf.velocity_command(total, state.velocities[1:], state.human_preferred_speed, state.command_cap, self.relaxation)
+
+    def group_terms(self, humans: np.ndarray, velocities: np.ndarray, preferred_speed: np.ndarray, group: np.ndarray,
+                    stopped: np.ndarray) -> np.ndarray:
+        """:func:`crowdnav.social_force.group_force` on the humans (any leading world axes) of a scenario with walking groups."""
+        assert self.together is not None
+        member = self.together[group] & ~stopped
+        return sf.group_force(humans, velocities, preferred_speed, member, group, len(self.together), self.scenario.humans.group_force,
+                              self._force.relaxation_time)
 
     def _robot_velocity(self, action: np.ndarray) -> complex:
         a0, a1 = float(action[0]), float(action[1])

@@ -33,7 +33,7 @@ from crowdnav.batch.stacked_state import StackedState
 from crowdnav.batch.state import BatchState, BoolArray, ComplexArray, FloatArray, IntArray
 from crowdnav.contacts import deepest_contact, goal_distance, outside, push_humans_apart, push_out_of_obstacles, touching
 from crowdnav.events import Collision, SimulationError
-from crowdnav.groups import apply_goal_rules, stalled_humans
+from crowdnav.groups import apply_goal_rules, arrivals, stalled_humans
 from crowdnav.obstacles import EdgeSet, nearest_on_edges
 from crowdnav.sim_state import SELF_DISTANCE, PairConstants, SimState
 from crowdnav.simulator import Simulator
@@ -180,8 +180,10 @@ class BatchSimulator:
         self._labels = obstacles.labels + obstacles.disc_labels
         self._force, self._relax, self._bounds = self.scenario.humans.social_force, first.relaxation, first.bounds
         self._orca = first.orca
-        self._stall_window = first.stall_window
         """The first world's ORCA crowd, for what all worlds share (None: social force only)."""
+        self._stall_window = first.stall_window
+        self._together = first.together is not None
+        """Some groups walk together: the group terms and the groups' arrivals (the first world's tables, shared by all)."""
         robot = self.scenario.robot
         self._unicycle = robot.kinematics != "holonomic"
         self.buckets: dict[int, Bucket] = {}
@@ -269,6 +271,9 @@ class BatchSimulator:
                 to_goal = state.human_goals[rows] - positions[:, 1:]
                 total = sf.goal_force(to_goal, force.goal_weight, force.goal_saturation_distance)
                 total += bucket.repulsion[rows, 1:]
+                if self._together:  # the walking groups' terms, every world's at once
+                    total += self.slots[0].group_terms(positions[:, 1:], velocities[:, 1:], state.human_preferred_speed[rows],
+                                                       state.human_group[rows], state.human_stopped[rows])
                 commands = sf.velocity_command(total, velocities[:, 1:], state.human_preferred_speed[rows], state.command_cap[rows], self._relax)
             if self._orca is not None:
                 commands = self._orca_commands(bucket, rows, positions, velocities, commands)
@@ -404,7 +409,11 @@ class BatchSimulator:
         arrived or stalled."""
         tolerance, state = self.scenario.humans.social_force.goal_tolerance, bucket.state
         distance = np.abs(state.human_goals[rows] - state.positions[rows, 1:])
-        arrived = distance <= tolerance
+        if self._together:  # groups that walk together arrive by their centre: crowdnav.groups.arrivals on every row at once
+            arrived = arrivals(distance, state.positions[rows, 1:], state.human_goals[rows], state.human_group[rows],
+                               state.human_stopped[rows], self.slots[0])
+        else:
+            arrived = distance <= tolerance
         arrived &= ~state.human_stopped[rows]
         state.human_arrived[rows] = arrived
         stalled = np.zeros_like(arrived)

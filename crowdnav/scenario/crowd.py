@@ -11,6 +11,11 @@ Walking humans move by a **model**: the social force (the default) or ORCA (``hu
 a group's own ``model`` overrides; ORCA needs the optional package pyrvo).
 A group with ``behaviour: stand`` is a standing conversation circle: its members stand still
 all episode, evenly spaced on a circle whose centre is drawn from the group's ``spawn``.
+A walking group with ``walk_together: true`` is a social group (friends, a family): its members
+start on a small circle, share one goal (reached when the group's centre is within the goal
+tolerance) and are kept together by the group terms of Moussaïd, Perozo, Garnier, Helbing and
+Theraulaz (2010), "The walking behaviour of pedestrian social groups and its impact on crowd
+dynamics", PLoS ONE 5(4): e10047, whose parameters are ``humans.group_force``.
 """
 
 from __future__ import annotations
@@ -48,7 +53,7 @@ IMPLICIT_GROUP = "crowd"
 _COLOUR = re.compile(r"^#[0-9A-Fa-f]{6}$")
 _GROUP_ONLY = ("count", "spawn", "goal_rule", "goal", "mirror_center", "on_goal")
 """Top-level crowd fields that belong to each group once ``humans.groups`` is used."""
-_WALKING_ONLY = ("preferred_speed", "goal_rule", "goal", "mirror_center", "on_goal", "model")
+_WALKING_ONLY = ("preferred_speed", "goal_rule", "goal", "mirror_center", "on_goal", "model", "walk_together")
 """A group's fields that a standing group must leave at their defaults."""
 
 
@@ -58,10 +63,11 @@ def _changed(model: StrictModel, fields: tuple[str, ...]) -> list[str]:
     return [f for f in fields if getattr(model, f) != type(model).model_fields[f].get_default(call_default_factory=True)]
 
 
-def _field_error(field: str, value: object, message: str) -> ValidationError:
-    """A validation error located at ``field`` (a model validator's own errors sit at the model)."""
+def _field_error(field: str | tuple[str | int, ...], value: object, message: str) -> ValidationError:
+    """A validation error located at ``field`` (a name or a path; a model validator's own errors sit at the model)."""
     error = PydanticCustomError("value_error", "Value error, {message}", {"message": message})  # worded like a ValueError
-    return ValidationError.from_exception_data("Humans", [InitErrorDetails(type=error, loc=(field,), input=value)])
+    loc = (field,) if isinstance(field, str) else field
+    return ValidationError.from_exception_data("Humans", [InitErrorDetails(type=error, loc=loc, input=value)])
 
 
 class SocialForce(StrictModel):
@@ -102,6 +108,28 @@ class Stall(StrictModel):
         "has stalled and takes a new goal by its group's goal rule (checked every window; null: never)."
     )
     progress: PositiveFloat = Field(default=0.5, description="Progress (m) toward its goal a human must make per stall window.")
+
+
+class GroupForce(StrictModel):
+    """The group terms of Moussaïd et al. (2010), PLoS ONE 5(4): e10047, for groups with ``walk_together``; defaults: the paper's
+    calibrated values (docs/simulator.md#walking-groups)."""
+
+    gaze_strength: NonNegativeFloat = Field(
+        default=4.0, description="beta_1 (1/s): slows a member who must turn its head more than vision_angle to see the group's centre."
+    )
+    attraction_strength: NonNegativeFloat = Field(
+        default=3.0, description="beta_2 (m/s^2): pull toward the group's centre of mass, on a member farther than the spread from it."
+    )
+    attraction_spread: NonNegativeFloat = Field(
+        default=0.5, description="Metres per member beyond the first: the attraction acts beyond (N - 1) * this from the centre."
+    )
+    repulsion_strength: NonNegativeFloat = Field(
+        default=1.0, description="beta_3 (m/s^2): push apart from each fellow member closer than repulsion_distance."
+    )
+    repulsion_distance: PositiveFloat = Field(default=0.8, description="d_0 (m): fellow members closer than this (centre to centre) push apart.")
+    vision_angle: Annotated[float, Field(gt=0.0, le=180.0, allow_inf_nan=False)] = Field(
+        default=90.0, description="phi (degrees): half-angle of the vision field about the walking direction."
+    )
 
 
 HumanModel = Literal["social_force", "orca"]
@@ -179,6 +207,9 @@ class HumanGroup(StrictModel):
         description=f"Radius (m) of the standing circle's member centres (stand only; default: {CIRCLE_SPACING:g} m between neighbours).",
     )
     colour: str | None = Field(default=None, description="Drawing colour '#rrggbb' (default: one of the renderer's group colours).")
+    walk_together: bool = Field(
+        default=False, description="Members walk as one social group: one shared goal, kept together by humans.group_force (walk only)."
+    )
 
     @field_validator("name")
     @classmethod
@@ -202,6 +233,8 @@ class HumanGroup(StrictModel):
                 raise ValueError(f"a standing group does not walk; remove {', '.join(walking)} (or set behaviour: walk)")
         elif self.circle_radius is not None:
             raise ValueError("circle_radius only applies to standing groups; remove it or set behaviour: stand")
+        elif self.walk_together and self.on_goal == "respawn":
+            raise ValueError("a group that walks together cannot respawn one by one; expected on_goal: new_goal or stop")
         return self
 
     @property
@@ -216,8 +249,13 @@ class HumanGroup(StrictModel):
     def standing(self) -> bool:
         return self.behaviour == "stand"
 
+    @property
+    def on_circle(self) -> bool:
+        """Members start on a circle around one drawn centre: a standing circle, or a group that walks together."""
+        return self.behaviour == "stand" or self.walk_together
+
     def circle_radius_for(self, human_radius: float) -> float:
-        """Radius (m) of the standing circle: the given one, or neighbours CIRCLE_SPACING apart at the largest count."""
+        """Radius (m) of the circle members start on: the given one, or neighbours CIRCLE_SPACING apart at the largest count."""
         if self.circle_radius is not None:
             return self.circle_radius
         n = self.max_count
@@ -255,6 +293,9 @@ class Humans(StrictModel):
         description="How walking humans choose their velocity: social_force or orca (needs pip install 'crowdnav[orca]'); groups may override.",
     )
     social_force: SocialForce = Field(default_factory=SocialForce, description="Social-force model parameters.")
+    group_force: GroupForce = Field(
+        default_factory=GroupForce, description="Group terms (Moussaid et al. 2010) of the groups with walk_together: true."
+    )
     stall: Stall = Field(default_factory=Stall, description="Stalled humans: no progress toward their goal for a while gives them a new goal.")
     orca: Orca = Field(default_factory=Orca, description="ORCA parameters (humans with model: orca, the ORCA robot baseline).")
 
@@ -272,6 +313,10 @@ class Humans(StrictModel):
                 raise ValueError(f"expected unique group names, got {', '.join(map(repr, repeated))} more than once")
             if sum(group.max_count for group in self.groups) > MAX_HUMANS:
                 raise ValueError(f"expected at most {MAX_HUMANS:,} humans over all groups")
+            for i, group in enumerate(self.groups):
+                if group.walk_together and (group.model or self.model) == "orca":
+                    raise _field_error(("groups", i, "walk_together"), True, "a group walks together by the social-force group "
+                                       "terms; expected model: social_force for it (or walk_together: false)")
         return self
 
     @property
