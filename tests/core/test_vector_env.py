@@ -49,6 +49,9 @@ def test_scalar_math_reproduces_python_remainder_cos_sin_and_complex_products():
     ("open_space", {"humans.count": [0, 6]}),  # crowd sizes differ across worlds, including none
     ("doorway", {"humans.stall.time": 2.0}),  # stalls (mirror rule): humans pinned at the wall beside the door turn back
     ("station_hall", {"humans.stall.time": 1.0}),  # stalls with groups: sample, respawn and stop rules, standing circles
+    # a group that walks together (Moussaid et al.'s group terms, shared goals by the group's centre) among the pillars,
+    # its size drawn per episode so worlds of one crowd size hold it at different sizes, stalls giving the whole group a goal
+    ("station_hall", {"humans.groups.1.walk_together": True, "humans.groups.1.count": [2, 5], "humans.stall.time": 1.0}),
 ])
 def test_batched_simulator_worlds_equal_single_simulators_bit_for_bit(scenario, overrides):
     stalls = check_batch_equals_singles(load_world(scenario, overrides), worlds=5, first_seed=20, steps=120, rng_seed=1, scale=1.2)
