@@ -55,7 +55,7 @@ from crowdnav.simulator import OUTCOMES
 BOOTSTRAP_RESAMPLES = 2000
 BOOTSTRAP_SEED = 0
 SOCIAL_MEANS = ("spl", "stl", "path_length", "time_to_goal", "min_human_distance", "intimate_share", "personal_share", "psc",
-                "mean_jerk", "social_force")
+                "mean_jerk", "social_force", "group_intrusions")
 """Metrics averaged over the final test episodes (time_to_goal over the successful ones)."""
 
 
@@ -198,7 +198,7 @@ def _one_table(table: Any) -> str:
     header = (["experiment"] if several else []) + [
         "configuration", "seeds", *(["budget"] if column else []), *(f"{o} [95% CI]" for o in OUTCOMES),
         "hit a human / an obstacle", "success IQM [95% CI]", "success AUC", "SPL", "STL", "PSC", "min human dist. (m)",
-        "social force", "env steps", "wall time (s)",
+        "social force", "group intrusions", "env steps", "wall time (s)",
     ]
     lines = ["| " + " | ".join(header) + " |", "|" + "|".join(["---"] * len(header)) + "|"]
     for row in table.to_dict("records"):
@@ -210,7 +210,7 @@ def _one_table(table: Any) -> str:
             f"{_number(row['success_iqm'])} [{_number(row['success_iqm_low'])}, {_number(row['success_iqm_high'])}]" if runs else "-",
             f"{_number(row['success_auc_mean'])} ± {_number(row['success_auc_std'])}" if runs else _number(row["success_auc_mean"]),
             _number(row["spl"]), _number(row["stl"]), _number(row["psc"]), _number(row["min_human_distance"]),
-            _number(row["social_force"]), _number(row["env_steps"], 0), _number(row["wall_time_s"], 0),
+            _number(row["social_force"]), _number(row["group_intrusions"]), _number(row["env_steps"], 0), _number(row["wall_time_s"], 0),
         ]
         lines.append("| " + " | ".join(cells) + " |")
     intervals = sorted(set(table["interval"]))

@@ -31,7 +31,7 @@ intrusions into: the intimate zone, the space a stranger should not enter."""
 METRIC_COLUMNS = (
     "steps", "time_to_goal", "path_length", "straight_line_distance", "spl", "stl", "min_human_distance",
     "intimate_share", "personal_share", "social_share", "psc", "mean_speed", "max_speed", "mean_acceleration",
-    "max_acceleration", "mean_jerk", "max_jerk", "min_time_to_collision", "social_force", "human_stalls",
+    "max_acceleration", "mean_jerk", "max_jerk", "min_time_to_collision", "social_force", "human_stalls", "group_intrusions",
 )
 """The keys of :func:`episode_metrics`, in column order."""
 
@@ -56,6 +56,8 @@ class Trajectory:
     """The robot's maximum speed (m/s): the fastest time to the goal is the straight line at this speed."""
     human_stalls: int = 0
     """Times a human stalled during the episode (``humans.stall``; the simulator's ``human_stalls`` summed at the end)."""
+    walking_group: np.ndarray | None = None
+    """(n,) int: each human's walking group (a group with ``walk_together``), -1 for the others; None: no such group."""
 
     @property
     def steps(self) -> int:
@@ -173,6 +175,39 @@ def cumulative_social_force(force: np.ndarray, dt: float) -> float:
     return float(np.sum(np.abs(force)) * dt)
 
 
+GROUP_LINK = 2.0
+"""Members of a walking group at most this far apart (m, centre to centre) are linked: a robot between them splits the group."""
+
+
+def group_intrusions(robot: np.ndarray, humans: np.ndarray, walking_group: np.ndarray | None, robot_radius: float,
+                     link: float = GROUP_LINK) -> int:
+    """Steps in which the robot cuts through a walking group.
+
+    ``robot`` (T,) and ``humans`` (T, n) complex: the states after each step; ``walking_group`` (n,):
+    each human's walking group, -1 for none. A step counts when, for two members i and j of one
+    walking group whose centres are at most ``link`` apart, the robot's body touches the segment
+    joining their centres strictly between them: the foot of the perpendicular from the robot's
+    centre falls inside the segment (not at or beyond either member) and lies less than the robot's
+    radius from that centre.
+    """
+    if walking_group is None or len(robot) == 0:
+        return 0
+    label = np.asarray(walking_group)
+    first, second = np.triu_indices(len(label), 1)
+    paired = (label[first] == label[second]) & (label[first] >= 0)
+    first, second = first[paired], second[paired]
+    if len(first) == 0:
+        return 0
+    a, b = humans[:, first], humans[:, second]  # (T, P): the pairs of fellow members
+    span = b - a
+    length2 = np.abs(span) ** 2
+    with np.errstate(invalid="ignore", divide="ignore"):  # two members on one point: no segment, never counted
+        along = ((robot[:, None] - a) * np.conj(span)).real / length2
+    between = (along > 0.0) & (along < 1.0) & (length2 <= link * link)
+    crossing = between & (np.abs(robot[:, None] - (a + along * span)) < robot_radius)
+    return int(crossing.any(axis=1).sum())
+
+
 def _mean_max(values: np.ndarray) -> tuple[float, float]:
     if len(values) == 0:
         return float("nan"), float("nan")
@@ -205,4 +240,5 @@ def episode_metrics(trajectory: Trajectory, success: bool) -> dict[str, float]:
     metrics["min_time_to_collision"] = min_time_to_collision(positions, trajectory.radii, dt)
     metrics["social_force"] = cumulative_social_force(trajectory.social_force, dt)
     metrics["human_stalls"] = trajectory.human_stalls  # the crowd's health, not the robot's: a stall-free crowd has 0
+    metrics["group_intrusions"] = group_intrusions(after[:, 0], after[:, 1:], trajectory.walking_group, float(trajectory.radii[0]))
     return metrics

@@ -115,6 +115,7 @@ class HeldOutEpisodes:
             positions=np.stack(positions), radii=np.asarray(sim.radii, dtype=float).copy(), goal=complex(sim.robot_goal),
             goal_radius=float(sim.scenario.robot.goal_radius), dt=float(sim.dt), social_force=np.asarray(forces),
             max_speed=float(sim.scenario.robot.max_speed), human_stalls=int(sim.human_stalls.sum()),
+            walking_group=walking_groups(sim),
         )
         outcome = info["outcome"]
         return {
@@ -163,6 +164,15 @@ class _Log:
                 episode["frames"] = {"dt": float(sim.dt), "groups": groups, "agents": names,
                                      **{key: np.stack([s[key] for s in states]) for key in states[0]}}
         return out
+
+
+def walking_groups(sim: Any) -> np.ndarray | None:
+    """(n,) each human's group if that group walks together (``walk_together``), else -1; None without such groups."""
+    together = getattr(sim, "together", None)
+    if together is None:
+        return None
+    labels: np.ndarray = np.where(together[sim.human_group], sim.human_group, -1)
+    return labels
 
 
 def _world_state(env: Any, i: int) -> dict[str, np.ndarray]:
