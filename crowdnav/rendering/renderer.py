@@ -23,6 +23,7 @@ from typing import TYPE_CHECKING, Any, cast
 
 import numpy as np
 
+from crowdnav.rendering.group_links import draw_group_links
 from crowdnav.simulator import Simulator
 
 if TYPE_CHECKING:
@@ -256,6 +257,7 @@ class Renderer:
             _cross(surface, palette.goal, goal, max(5.0, goal_px * 0.6))
         radius = sim.scenario.humans.radius * scale
         colours = self._group_colours
+        draw_group_links(surface, sim, colours, self.to_pixels)  # who walks together, under the discs
         for position, velocity, group in zip(self.to_pixels(sim.human_positions), sim.human_velocities, sim.human_group, strict=True):
             pygame.draw.circle(surface, colours[group], _xy(position), radius)
             pygame.draw.circle(surface, palette.outline, _xy(position), radius, 1)
@@ -338,7 +340,7 @@ class Renderer:
             entries = [("disc", name, self.robot_colour(k)) for k, name in enumerate(self.sim.team.names)]
             entries.append(("goal", "first robot's goal", palette.goal))
         if self.sim.scenario.humans.groups:  # one entry per named group
-            entries += [("disc", f"{group.name}{' (standing)' if group.standing else ''}", colour)
+            entries += [("disc", f"{group.name}{' (standing)' if group.standing else ' (together)' if group.walk_together else ''}", colour)
                         for group, colour in zip(self.sim.groups, self._group_colours, strict=True)]
         else:
             entries.append(("disc", "human", palette.human))

@@ -166,3 +166,20 @@ def test_library_groups_that_walk_together_start_on_their_circle_with_one_goal(n
             assert len(set(sim.human_goals[mine].tolist())) == 1
             members = sim.human_positions[mine]
             assert np.abs(members - members.mean()).max() < 1.0
+
+
+def test_the_renderer_links_the_members_of_a_group_that_walks_together_in_its_darkened_colour():
+    pytest.importorskip("pygame")
+    from crowdnav.rendering.group_links import group_links
+    from crowdnav.rendering.renderer import Renderer
+
+    sim = Simulator("station_hall", {"humans.groups.1.walk_together": True, "humans.groups.1.count": 2, "humans.groups.1.colour": "#ff0000"})
+    sim.reset(seed=0)
+    renderer = Renderer(sim)
+    links = group_links(sim, renderer._group_colours)
+    assert len(links) == 1 and links[0][0] == (153, 0, 0) and not links[0][2]  # two members: one open segment
+    a, b = links[0][1]
+    frame = renderer.frame()
+    x, y = np.round(renderer.to_pixels((a + b) / 2)).astype(int)  # the middle of the link, between the two discs
+    assert (frame[y - 1 : y + 2, x - 1 : x + 2] == (153, 0, 0)).all(axis=-1).any()
+    assert group_links(Simulator("station_hall"), renderer._group_colours) == []  # no group walks together: nothing linked
