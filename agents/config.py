@@ -150,6 +150,8 @@ class TrainConfig(_Section):
     reward_weights: dict[str, Any] = option({}, "Reward preset and weight overrides, e.g. {preset: paper, social: -50} (docs/agents.md#reward).")
     shield: bool | dict[str, Any] = option(False, "Action-time safety shield from the robot's tracker, pose and map: true, false or "
                                                   "planner settings, e.g. {horizon: 2.0} (docs/agents.md#the-safety-shield).")
+    residual: Bool = option(False, "The policy's action corrects the predictive planner's move (the plan modality must be "
+                                   "observed): a residual agent (docs/agents.md#agents-that-anticipate-the-crowd).")
     algo: Algorithm = option("sac", "Stable-Baselines3 algorithm (crowdnav.registry.ALGORITHMS).")
     agents: Literal["robot", "robots"] = option(
         "robot", "robot: the Gymnasium env's first robot learns; robots: every robot of a multi-robot scenario learns one shared "

@@ -103,7 +103,7 @@ def env_options(config: TrainConfig) -> dict[str, Any]:
     """Keyword arguments of :class:`crowdnav.envs.CrowdNavEnv` for this run (stored with checkpoints)."""
     return {"scenario": config.scenario, "modalities": list(config.modalities), "sensors": dict(config.sensors),
             "overrides": dict(config.overrides), "reward_weights": dict(config.reward_weights),
-            **({"shield": config.shield} if config.shield else {})}
+            **({"shield": config.shield} if config.shield else {}), **({"residual": True} if config.residual else {})}
 
 
 def make_env(config: TrainConfig, encoder: LeogEncoder | None = None, first_episode: int = 0,

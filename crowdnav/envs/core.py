@@ -120,6 +120,15 @@ def real_array(value: Any, what: str) -> np.ndarray:
     return raw.astype(np.float64, copy=False)
 
 
+def checked_residual(residual: Any, modalities: Mapping[str, Any]) -> bool:
+    """The env option ``residual`` (a bool; it needs the ``plan`` modality among the observation keys)."""
+    if not isinstance(residual, bool):
+        raise ValueError(f"residual must be true or false, got {residual!r}")
+    if residual and "plan" not in modalities:
+        raise ValueError(f"residual: the action corrects the planner's move, so the observation keys must include plan; got {sorted(modalities)}")
+    return residual
+
+
 def checked_robot_action(action: Any) -> np.ndarray:
     """The robot action as a (2,) float64 array; a clear ValueError for a wrong type or shape, NaN or inf.
 
@@ -140,7 +149,8 @@ class EnvCore:
     sensor-setting overrides (``{"lidar": {"beams": 180}}``); ``reward_weights``: reward-weight
     overrides (``{"social": -50}``); ``overrides``: dotted scenario paths to values
     (``{"humans.count": 10}``). All of them are validated like the scenario file. ``shield``:
-    the action-time safety shield (:mod:`crowdnav.planning.shield`; True or its settings).
+    the action-time safety shield (:mod:`crowdnav.planning.shield`; True or its settings);
+    ``residual``: the executed action is the ``plan`` observation plus the policy's action.
     """
 
     def __init__(
@@ -154,6 +164,7 @@ class EnvCore:
         render_mode: str | None = None,
         render_options: RenderOptions | Mapping[str, Any] | None = None,
         shield: bool | Mapping[str, Any] | None = None,
+        residual: bool = False,
     ):
         if render_mode is not None and render_mode not in RENDER_MODES:
             raise ValueError(f"render_mode={render_mode!r} is not supported; expected None or one of {RENDER_MODES}")
@@ -163,6 +174,7 @@ class EnvCore:
         self.shield = validate_shield(dict(shield) if isinstance(shield, Mapping) else shield, world)
         self.shielded = False
         """Whether the shield replaced the last step's action (docs/agents.md#the-safety-shield)."""
+        self.residual = checked_residual(residual, self.modalities)
         self.observation_space = spaces.Dict({key: modality.space() for key, modality in self.modalities.items()})
         self.action_space = spaces.Box(-1.0, 1.0, shape=(2,), dtype=np.float32)
         self.reward = Reward(self.scenario.reward)
@@ -254,6 +266,8 @@ class EnvCore:
         if not self._running:
             raise RuntimeError("the episode is over or has not started: call reset() before step()")
         action = checked_robot_action(action)
+        if self.residual:  # the policy's action corrects the plan it observed
+            action = action + self._observation["plan"]
         if self.shield is not None:
             action, self.shielded = self.shield.single(self.simulator, action)
         events = self.simulator.step(action, human_actions, other_robot_actions)

@@ -85,6 +85,9 @@ class CrowdNavEnv(gym.Env):
     that the robot's own tracker (``humans`` sensor settings), its pose, the map and a
     constant-velocity prediction call unsafe is replaced by the nearest safe move
     (:mod:`crowdnav.planning.shield`); ``info["shielded"]`` says whether it was. Holonomic, one robot.
+    ``residual``: False (default) or True: the executed action is the ``plan`` observation (the
+    predictive planner's move from the robot's own sensing; the key must be observed) plus the
+    policy's action, clipped like any action (then shielded, if the shield is on).
 
     **Several robots** (a scenario with ``robots:``): the agent is the first robot (its own
     modalities; its range sensors see the other robots, its ``humans`` modality the humans only).

@@ -18,7 +18,7 @@ from gymnasium.vector.utils import batch_space
 from crowdnav.batch.memory import keep_freed_memory as _keep_freed_memory
 from crowdnav.batch.simulator import BatchSimulator, StepResult
 from crowdnav.contacts import goal_distance
-from crowdnav.envs.core import ScenarioSource, load_env_world, option_overrides, real_array
+from crowdnav.envs.core import ScenarioSource, checked_residual, load_env_world, option_overrides, real_array
 from crowdnav.envs.reward import REWARD_TERMS, reward_terms
 from crowdnav.events import outcomes
 from crowdnav.planning.shield import validate_shield
@@ -93,6 +93,7 @@ class CrowdNavVectorEnv(VectorEnv):
         keep_freed_memory: bool = True,
         episode_seeds: Callable[[np.ndarray], Sequence[int | None]] | None = None,
         shield: bool | Mapping[str, Any] | None = None,
+        residual: bool = False,
     ):
         if render_mode is not None:
             raise ValueError("the vector env does not render; render a single env (gymnasium.make(..., render_mode=...))")
@@ -107,6 +108,7 @@ class CrowdNavVectorEnv(VectorEnv):
         _check_agents(num_envs, world.scenario.humans.max_count)
         self.batch = BatchSimulator(world, num_envs)
         self.shield = validate_shield(dict(shield) if isinstance(shield, Mapping) else shield, world)
+        self.residual = checked_residual(residual, self.modalities)
         if keep_freed_memory:
             _keep_freed_memory()
         self.num_envs = self.batch.num_worlds
@@ -190,6 +192,8 @@ class CrowdNavVectorEnv(VectorEnv):
         if not stepping.any():  # every world is waiting (DISABLED) or was just reset
             self._observe_all()
             return self._copy_observations(), rewards, *self._waiting_flags(), infos
+        if self.residual:  # each policy action corrects the plan its world observed
+            actions = actions + self._observations["plan"]
         if self.shield is not None:  # every stepping world's flag (the vector infos' mask convention)
             actions, infos["shielded"] = self._shielded(actions)
             infos["_shielded"] = stepping.copy()

@@ -47,6 +47,17 @@ class CrowdEstimate:
     """(K, n) bool: which rows are humans (a tracker reports fewer than n)."""
 
     @classmethod
+    def from_tracker(cls, robot: np.ndarray, heading: np.ndarray, velocity: np.ndarray, goal: np.ndarray,
+                     rows: np.ndarray) -> CrowdEstimate:
+        """K robots' poses, own velocities (world frame) and goals, and their trackers' rows (K, count, 6) of
+        :class:`crowdnav.sensors.humans.HumansModality` (robot-frame position and relative velocity, radius, presence)."""
+        rotation = np.exp(1j * np.asarray(heading, dtype=float))[:, None]
+        return cls(np.asarray(robot, dtype=complex), np.asarray(goal, dtype=complex),
+                   robot[:, None] + rotation * (rows[..., 0] + 1j * rows[..., 1]),
+                   velocity[:, None] + rotation * (rows[..., 2] + 1j * rows[..., 3]),
+                   rows[..., 4].astype(float), rows[..., 5] > 0.5)
+
+    @classmethod
     def from_sim(cls, sim: RobotWorld) -> CrowdEstimate:
         """The true current state of one world (every human, and other robots as moving discs)."""
         positions, velocities, radii = sim.positions[1:], sim.velocities[1:], sim.radii[1:]

@@ -66,12 +66,7 @@ class Shield:
     def filter(self, robot: np.ndarray, heading: np.ndarray, velocity: np.ndarray, goal: np.ndarray,
                rows: np.ndarray, actions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """The kernel: K robots' poses, velocities, goals, tracker rows (K, count, 6) and actions (K, 2)."""
-        rotation = np.exp(1j * heading)[:, None]
-        present = rows[..., 5] > 0.5
-        crowd = CrowdEstimate(robot.astype(complex), goal.astype(complex),
-                              robot[:, None] + rotation * (rows[..., 0] + 1j * rows[..., 1]),
-                              velocity[:, None] + rotation * (rows[..., 2] + 1j * rows[..., 3]),
-                              rows[..., 4].astype(float), present)
+        crowd = CrowdEstimate.from_tracker(robot, heading, velocity, goal, rows)
         grid = self.planner.layers(self.world, self.dt, crowd)
         lattice = grid.lattice
         max_speed = self.world.scenario.robot.max_speed

@@ -2,7 +2,7 @@
 
 ``build_modalities(names, world, sensors)`` returns ``{key: Modality}``; each modality has a
 fixed ``space()`` (a gymnasium Box) and ``observe(sim)``. Built-in keys: ``goal``,
-``closest_obstacle``, ``lidar``, ``leog``, ``velocity``, ``humans``. See docs/sensors.md.
+``closest_obstacle``, ``lidar``, ``leog``, ``velocity``, ``humans``, ``plan``. See docs/sensors.md.
 """
 
 from crowdnav.sensors.base import MODALITIES, Modality, build_modalities, register_modality
@@ -11,6 +11,7 @@ from crowdnav.sensors.goal import GoalModality
 from crowdnav.sensors.humans import HumansModality
 from crowdnav.sensors.leog import LeogModality
 from crowdnav.sensors.lidar import LidarModality
+from crowdnav.sensors.plan import PlanModality
 from crowdnav.sensors.velocity import VelocityModality
 
 __all__ = [
@@ -21,6 +22,7 @@ __all__ = [
     "LeogModality",
     "LidarModality",
     "Modality",
+    "PlanModality",
     "VelocityModality",
     "build_modalities",
     "register_modality",
