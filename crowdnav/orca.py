@@ -1,7 +1,7 @@
 """ORCA (optimal reciprocal collision avoidance) through the optional package pyrvo (RVO2's bindings).
 
-Used by the humans of groups with ``model: orca`` (:class:`OrcaCrowd`, owned by each
-:class:`crowdnav.Simulator`) and by the ORCA robot baseline (:class:`crowdnav.policies.OrcaRobot`).
+Used by the humans of groups with ``model: orca`` (the crowd model :class:`crowdnav.crowd.orca.OrcaModel`,
+one per :class:`crowdnav.Simulator`) and by the ORCA robot baseline (:class:`crowdnav.policies.OrcaRobot`).
 The core install does not need pyrvo: it is imported only when something asks for ORCA, and its
 absence is one line saying ``pip install 'crowdnav[orca]'``.
 
@@ -153,49 +153,3 @@ def toward_goal(to_goal: np.ndarray, speed: np.ndarray | float, dt: float) -> np
     distance = np.abs(to_goal)
     velocity: np.ndarray = to_goal * (speed / np.maximum(np.maximum(distance, np.multiply(speed, dt)), 1e-12))
     return velocity
-
-
-class OrcaCrowd:
-    """The ORCA part of one simulator's crowd: which humans follow ORCA, and their solver this episode.
-
-    Every human is an ORCA agent (so ORCA humans also avoid social-force and standing ones), and
-    so is the robot when the humans see it (``humans.see_robot``), at its current velocity; only
-    the velocities of the ORCA humans are used.
-    """
-
-    def __init__(self, world: Any, dt: float, orca_groups: np.ndarray):
-        self._rings = obstacle_rings(world.obstacles)
-        self._params = world.scenario.humans.orca
-        self._dt = dt
-        self._see_robot = world.scenario.humans.see_robot
-        self._orca_groups = orca_groups
-        self.all_orca = bool(orca_groups.all())
-        """Whether every walking group follows ORCA (standing members are counted in: they never move)."""
-        self._solvers = SolverCache()
-        """The solvers of the last few episodes' agent counts."""
-        self._robots = 1
-        self.mask = np.zeros(0, dtype=bool)
-        pyrvo_module("orca")  # fail at load, not at the first step
-
-    def start_episode(self, human_group: np.ndarray, radii: np.ndarray, robot_max_speed: float | np.ndarray, human_max_speed: np.ndarray) -> None:
-        """Pick (or build) the solver for this episode's agents and set their radii and max speeds.
-
-        ``radii``: the robots first, then the humans; ``robot_max_speed``: the robot's, or (R,) every robot's (``robots:``).
-        """
-        self.mask = self._orca_groups[human_group]
-        robot_speeds = np.atleast_1d(robot_max_speed)
-        self._robots = len(robot_speeds)
-        count = len(human_group) + self._see_robot * self._robots
-        self._solver = solver = self._solvers.get(count, lambda size: OrcaSolver(self._rings, self._params, self._dt, size, "orca"))
-        if self._see_robot:
-            solver.configure(radii, np.concatenate([robot_speeds, human_max_speed]))
-        else:
-            solver.configure(radii[self._robots :], human_max_speed)
-
-    def velocities(self, positions: np.ndarray, velocities: np.ndarray, goals: np.ndarray, preferred_speed: np.ndarray) -> np.ndarray:
-        """(n,) complex: every human's ORCA velocity (the robots first in ``positions`` / ``velocities``; goals and speeds per human)."""
-        robots = self._robots
-        preferred = toward_goal(goals - positions[robots:], preferred_speed, self._dt)
-        if self._see_robot:  # the robots keep their course, as far as ORCA's humans can tell
-            return self._solver.velocities(positions, velocities, np.concatenate([velocities[:robots], preferred]))[robots:]
-        return self._solver.velocities(positions[robots:], velocities[robots:], preferred)

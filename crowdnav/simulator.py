@@ -8,8 +8,9 @@ whatever the crowd size: there is no Python loop over humans, pairs or edges. Up
 human-human force's reach, found with a grid of cells (:mod:`crowdnav.crowd_grid`, the same model
 within a stated tolerance).
 
-Humans of groups with ``model: orca`` take their velocity from ORCA (:mod:`crowdnav.orca`, the
-optional package pyrvo) instead of the social force; everything after the command is the same.
+Each walking group's humans take their velocity commands from the group's crowd model (the
+social force, ORCA, ...: :mod:`crowdnav.crowd`, held as :attr:`Simulator.crowd`); everything
+after the command is the same.
 
 Step order: humans' commands (social force or ORCA, or given actions) and robot kinematics ->
 integrate -> measure the new geometry once (pairwise distances, nearest obstacle points) ->
@@ -48,13 +49,13 @@ import numpy as np
 
 from crowdnav import social_force as sf
 from crowdnav.contacts import goal_distance
+from crowdnav.crowd import Crowd
+from crowdnav.crowd.views import WorldView
 from crowdnav.events import OUTCOMES, Collision, SimulationError, StepEvents  # noqa: F401  (re-exported: their public home)
 from crowdnav.groups import apply_goal_rules, first_goals, place_groups, stall_window, together_table
-from crowdnav.orca import OrcaCrowd, OrcaUnavailableError
 from crowdnav.placement import JITTER_REACH
 from crowdnav.robot_view import RobotAccessors, robot_scenario
 from crowdnav.robots import PARKED, Team, first_heading, robot_kinematics
-from crowdnav.scenario.errors import ScenarioError, ScenarioIssue
 from crowdnav.scenario.loader import Overrides
 from crowdnav.scenario.schema import HumanGroup
 from crowdnav.sim_geometry import SimGeometry
@@ -114,28 +115,10 @@ class Simulator(StateFields, RobotAccessors, SimGeometry):
         self._robot_scenarios = [robot_scenario(scenario, k) for k in range(len(scenario.robot_specs))]
         self.robot_events: list[StepEvents | None] = []
         """Every robot's events of the last step, the ego robot first (None: it had left); one robot: ``[events]``."""
-        self.orca = self._orca_crowd()
-        """The ORCA part of the crowd (None when every walking group follows the social force)."""
+        self.crowd = Crowd(self.world)
+        """The crowd models of the walking groups (:mod:`crowdnav.crowd`); a model that cannot run (ORCA without pyrvo)
+        fails here, at load, in one line naming the scenario field that asked for it."""
         self._ready = False
-
-    def _orca_crowd(self) -> OrcaCrowd | None:
-        """The crowd's ORCA humans, or None; a scenario asking for ORCA without pyrvo fails here, at load, in one line."""
-        humans = self.scenario.humans
-        if humans.groups:  # where the file asks for it: a group's own model, or the crowd's default
-            asked = [f"humans.groups.{i}.model" if group.model else "humans.model" for i, group in enumerate(humans.groups)
-                     if not group.standing and (group.model or humans.model) == "orca"]
-        else:
-            asked = ["humans.model"] if humans.model == "orca" else []
-        if not asked:
-            return None
-        field = asked[0]
-        orca = np.array([group.standing or group.model == "orca" for _, group in humans.crowd])  # standing members never move
-        try:
-            return OrcaCrowd(self.world, self.dt, orca)
-        except OrcaUnavailableError as error:  # "FILE:LINE: humans.model: orca needs the optional package pyrvo ..."
-            issue = ScenarioIssue(field, str(error))
-            source = self.world.source
-            raise (source.error([issue]) if source is not None else ScenarioError("scenario", [issue])) from None
 
     # ----------------------------------------------------------------- state views
 
@@ -223,13 +206,8 @@ class Simulator(StateFields, RobotAccessors, SimGeometry):
             human_stalls=np.zeros(n, dtype=np.int64),
         )
         self._use_pair_constants(n)
-        if self.orca is not None:
-            if self.team is None:
-                self.orca.start_episode(self._state.human_group, self.radii, robot.max_speed, max_speed)
-            else:  # every robot an ORCA agent, the robots first
-                speeds = np.concatenate([[robot.max_speed], self.team.max_speeds])
-                self.orca.start_episode(self._state.human_group, np.concatenate([self.team.all_radii, self.radii[1:]]), speeds, max_speed)
         self._ready = True
+        self.crowd.start_episode(WorldView(self))
 
     def pair_constants(self, n: int) -> PairConstants:
         """The repulsion constants of a crowd of ``n`` humans (:func:`crowdnav.sim_state.pair_constants`, cached per ``n``)."""
@@ -339,17 +317,7 @@ class Simulator(StateFields, RobotAccessors, SimGeometry):
 
     def crowd_commands(self) -> np.ndarray:
         """(n_humans,) complex velocity commands (m/s) of the crowd's models in the current state (stopped humans not zeroed)."""
-        if self.orca is None:
-            return self.social_force_commands()
-        state = self._state
-        positions, velocities = state.positions, state.velocities
-        if self.team is not None:  # the robots first: the ego robot, then the others
-            positions = np.concatenate([positions[:1], self.team.state.positions, positions[1:]])
-            velocities = np.concatenate([velocities[:1], self.team.state.velocities, velocities[1:]])
-        commands = self.orca.velocities(positions, velocities, state.human_goals, state.human_preferred_speed)
-        if self.orca.all_orca:
-            return commands
-        return np.where(self.orca.mask, commands, self.social_force_commands())
+        return self.crowd.commands(WorldView(self))
 
     def social_force_commands(self) -> np.ndarray:
         """(n_humans,) complex velocity commands (m/s) of the social-force model in the current state."""

@@ -15,9 +15,9 @@ goal rules of worlds where a human reached its goal or stalled, draw from each w
 run per world (the arrival and stall checks themselves run on all worlds at once). A reset draws on the world's own
 :class:`crowdnav.Simulator` (its *slot*) and its state is copied into the stack; the goal rules (:func:`crowdnav.groups.apply_goal_rules`) change
 the world's row of the stack in place, drawing from the slot's generator. Crowds large enough for the neighbour grid
-(``Simulator.grid_from`` humans) are not batched. ORCA humans (``model: orca``) get their velocities
-from each world's own solver (its slot's :class:`crowdnav.orca.OrcaCrowd`), one world at a time:
-pyrvo steps one world per call.
+(``Simulator.grid_from`` humans) are not batched. The humans' commands come from the crowd models
+(:mod:`crowdnav.crowd`) through :meth:`crowdnav.crowd.Crowd.commands_batch`, each world with its
+slot's own model instances (ORCA: the slot's solver, one world per pyrvo call).
 """
 
 from __future__ import annotations
@@ -32,6 +32,7 @@ from crowdnav.batch.scalar_math import TWO_PI, cmul, remainder
 from crowdnav.batch.stacked_state import StackedState
 from crowdnav.batch.state import BatchState, BoolArray, ComplexArray, FloatArray, IntArray
 from crowdnav.contacts import deepest_contact, goal_distance, outside, push_humans_apart, push_out_of_obstacles, touching
+from crowdnav.crowd.views import BatchView
 from crowdnav.events import Collision, SimulationError
 from crowdnav.groups import apply_goal_rules, arrivals, stalled_humans
 from crowdnav.obstacles import EdgeSet, nearest_on_edges
@@ -179,8 +180,11 @@ class BatchSimulator:
         self._static_count = obstacles.polygon_count + obstacles.disc_count
         self._labels = obstacles.labels + obstacles.disc_labels
         self._force, self._relax, self._bounds = self.scenario.humans.social_force, first.relaxation, first.bounds
-        self._orca = first.orca
-        """The first world's ORCA crowd, for what all worlds share (None: social force only)."""
+        self._crowd = first.crowd
+        """The first world's crowd models, for what all worlds share (which models, which groups)."""
+        self._crowds = np.empty(self.num_worlds, dtype=object)
+        self._crowds[:] = [slot.crowd for slot in self.slots]
+        """Each world's own crowd models (its slot's), indexed by world."""
         self._stall_window = first.stall_window
         self._together = first.together is not None
         """Some groups walk together: the group terms and the groups' arrivals (the first world's tables, shared by all)."""
@@ -264,20 +268,10 @@ class BatchSimulator:
         positions = state.positions[rows]
         velocities = state.velocities[rows]
         robot_re, robot_im, heading = self._robot_velocity(actions, state.robot_heading[rows])
-        force = self._force
         if n:
-            commands = None
-            if self._orca is None or not self._orca.all_orca:
-                to_goal = state.human_goals[rows] - positions[:, 1:]
-                total = sf.goal_force(to_goal, force.goal_weight, force.goal_saturation_distance)
-                total += bucket.repulsion[rows, 1:]
-                if self._together:  # the walking groups' terms, every world's at once
-                    total += self.slots[0].group_terms(positions[:, 1:], velocities[:, 1:], state.human_preferred_speed[rows],
-                                                       state.human_group[rows], state.human_stopped[rows])
-                commands = sf.velocity_command(total, velocities[:, 1:], state.human_preferred_speed[rows], state.command_cap[rows], self._relax)
-            if self._orca is not None:
-                commands = self._orca_commands(bucket, rows, positions, velocities, commands)
-            assert commands is not None  # without ORCA the social force gave them
+            view = BatchView(state, rows, positions, velocities, bucket.radii, self.scenario.robot.max_speed,
+                             lambda: self.social_force_commands(bucket, rows, positions, velocities))
+            commands = self._crowd.commands_batch(view, self._crowds[bucket.world[rows]])
             stopped = state.human_stopped[rows]
             if stopped.any():  # np.where picks the command itself where not stopped: exact for the others
                 commands = np.where(stopped, 0.0, commands)
@@ -299,15 +293,18 @@ class BatchSimulator:
             self._goal_rules(bucket, rows)
         result.truncated[bucket.world[rows]] = state.step_count[rows] >= self.scenario.max_steps
 
-    def _orca_commands(self, bucket: Bucket, rows: np.ndarray, positions: np.ndarray, velocities: np.ndarray,
-                       social: np.ndarray | None) -> np.ndarray:
-        """:meth:`Simulator.crowd_commands` with ORCA humans: ORCA's velocities where a world's human follows it, else ``social``."""
-        commands = np.empty((len(rows), bucket.n), dtype=complex)
-        goals, speeds = bucket.state.human_goals[rows], bucket.state.human_preferred_speed[rows]
-        for k, world in enumerate(bucket.world[rows]):  # per world: a pyrvo solver holds one world's agents
-            crowd = self.slots[world].orca
-            orca = crowd.velocities(positions[k], velocities[k], goals[k], speeds[k])
-            commands[k] = orca if social is None else np.where(crowd.mask, orca, social[k])
+    def social_force_commands(self, bucket: Bucket, rows: np.ndarray, positions: np.ndarray, velocities: np.ndarray) -> np.ndarray:
+        """(K, n) :meth:`Simulator.social_force_commands` of ``rows``, every world's at once (``positions`` and ``velocities``:
+        the step's (K, n+1) copies of the rows)."""
+        force, state = self._force, bucket.state
+        to_goal = state.human_goals[rows] - positions[:, 1:]
+        total = sf.goal_force(to_goal, force.goal_weight, force.goal_saturation_distance)
+        total += bucket.repulsion[rows, 1:]
+        if self._together:  # the walking groups' terms, every world's at once
+            total += self.slots[0].group_terms(positions[:, 1:], velocities[:, 1:], state.human_preferred_speed[rows],
+                                               state.human_group[rows], state.human_stopped[rows])
+        commands: np.ndarray = sf.velocity_command(total, velocities[:, 1:], state.human_preferred_speed[rows], state.command_cap[rows],
+                                                   self._relax)
         return commands
 
     def _robot_velocity(self, actions: np.ndarray, heading: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

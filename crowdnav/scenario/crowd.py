@@ -24,7 +24,7 @@ import math
 import re
 from typing import Annotated, Literal
 
-from pydantic import AfterValidator, BeforeValidator, Field, ValidationError, field_validator, model_validator
+from pydantic import AfterValidator, BeforeValidator, Field, ValidationError, WithJsonSchema, field_validator, model_validator
 from pydantic_core import InitErrorDetails, PydanticCustomError
 
 from crowdnav.paths import SAFE_NAME_EXPECTATION, is_safe_name
@@ -132,8 +132,22 @@ class GroupForce(StrictModel):
     )
 
 
-HumanModel = Literal["social_force", "orca"]
-"""How walking humans choose their velocity: the social force, or ORCA (optimal reciprocal collision avoidance)."""
+CROWD_MODEL_NAMES: tuple[str, ...] = ("social_force", "orca")
+"""The crowd models a scenario may name (``humans.model``, a group's ``model``), the default first: one per class of
+:data:`crowdnav.crowd.CROWD_MODELS`, in the same order (importing :mod:`crowdnav.crowd` checks it). A new model adds its name here."""
+
+
+def _known_model(value: object) -> object:
+    """A crowd model's name, read from :data:`CROWD_MODEL_NAMES` when validated (the message is the one a ``Literal`` gives)."""
+    if not isinstance(value, str) or value not in CROWD_MODEL_NAMES:
+        names = [repr(name) for name in CROWD_MODEL_NAMES]
+        expected = " or ".join(names) if len(names) < 3 else f"{', '.join(names[:-1])} or {names[-1]}"
+        raise PydanticCustomError("literal_error", "Input should be {expected}", {"expected": expected})
+    return value
+
+
+HumanModel = Annotated[str, BeforeValidator(_known_model), WithJsonSchema({"enum": list(CROWD_MODEL_NAMES), "type": "string"})]
+"""How walking humans choose their velocity: a name of :data:`CROWD_MODEL_NAMES` (the social force, ORCA, ...)."""
 
 
 class Orca(StrictModel):

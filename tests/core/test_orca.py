@@ -14,6 +14,7 @@ import numpy as np
 import pytest
 
 from crowdnav.cli import main
+from crowdnav.crowd.views import WorldView
 from crowdnav.orca import OrcaUnavailableError
 from crowdnav.scenario import ScenarioError
 from crowdnav.scenario.library import library_names
@@ -47,7 +48,7 @@ def _episode(sim: Simulator, seed: int, steps: int = 80) -> bytes:
 def test_every_library_scenario_keeps_the_social_force_and_builds_no_orca_crowd(no_pyrvo):
     for name in library_names():
         sim = Simulator(name)
-        assert sim.orca is None
+        assert list(sim.crowd.models) == ["social_force"]
         assert {group.model for _, group in sim.scenario.humans.crowd if not group.standing} <= {"social_force"}
 
 
@@ -109,7 +110,7 @@ def test_orca_humans_choose_velocities_that_never_overlap_in_a_head_on_crossing(
     worst = {}
     for model in ("orca", "social_force"):
         sim = Simulator("perpendicular_crossing", {"humans.model": model})
-        assert (sim.orca is not None) == (model == "orca")
+        assert list(sim.crowd.models) == [model]
         worst[model] = 0.0
         for seed in range(5):
             sim.reset(seed=seed)
@@ -151,16 +152,18 @@ def test_a_group_with_model_orca_mixes_with_social_force_and_standing_groups():
     sim = Simulator("station_hall", {"humans.groups.0.model": "orca"})
     sim.reset(seed=5)
     commuters = sim.human_group == 0
-    assert (sim.orca.mask == commuters | (sim.human_group >= 2)).all() and not sim.orca.all_orca
+    standing = np.array([group.standing for group in sim.groups])[sim.human_group]
+    mask = sim.crowd.moved_by("orca", sim.human_group)
+    assert (mask == commuters | standing).all() and list(sim.crowd.models) == ["social_force", "orca"]
     sim.step(np.zeros(2))
     social = sim.social_force_commands()
-    orca = sim.orca.velocities(sim.positions, sim.velocities, sim.human_goals, sim.human_preferred_speed)
+    orca = sim.crowd.models["orca"].commands(WorldView(sim))
     commands = sim.crowd_commands()
-    assert np.array_equal(commands[~sim.orca.mask], social[~sim.orca.mask]) and np.array_equal(commands[commuters], orca[commuters])
-    standing = sim.human_positions[sim.human_group >= 2].copy()
+    assert np.array_equal(commands[~mask], social[~mask]) and np.array_equal(commands[commuters], orca[commuters])
+    still = sim.human_positions[standing].copy()
     for _ in range(30):
         sim.step(np.zeros(2))
-    assert np.array_equal(sim.human_positions[sim.human_group >= 2], standing)
+    assert np.array_equal(sim.human_positions[standing], still)
 
 
 @pytest.mark.parametrize(("scenario", "overrides"), [

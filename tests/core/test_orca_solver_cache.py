@@ -41,7 +41,7 @@ def test_an_orca_crowd_of_varying_size_keeps_a_bounded_number_of_solvers_over_ma
     for seed in range(120):
         sim.reset(seed=seed)
         sizes.add(sim.n_humans)
-        assert len(sim.orca._solvers) <= SOLVERS_KEPT
+        assert len(sim.crowd.models["orca"]._solvers) <= SOLVERS_KEPT  # type: ignore[attr-defined]
     assert len(sizes) > 3 * SOLVERS_KEPT  # the counts did vary: a cache per count would have grown past the bound
 
 
