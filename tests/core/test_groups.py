@@ -161,7 +161,7 @@ def test_the_multi_agent_env_names_each_humans_group_in_its_infos():
     env = parallel_env("station_hall", modalities=["goal"])
     _, infos = env.reset(seed=0)
     groups = {infos[name]["group"] for name in env.agents if name != "robot"}
-    assert groups == {"commuters", "shoppers", "talking", "meeting"}
+    assert groups == {"commuters", "shoppers", "talking", "meeting", "friends"}
     _, _, _, _, infos = env.step({agent: env.action_space(agent).sample() * 0 for agent in env.agents})
     assert {"group", "goal_reached"} <= set(infos["human_0"])
 

@@ -173,7 +173,9 @@ def test_the_renderer_links_the_members_of_a_group_that_walks_together_in_its_da
     from crowdnav.rendering.group_links import group_links
     from crowdnav.rendering.renderer import Renderer
 
-    sim = Simulator("station_hall", {"humans.groups.1.walk_together": True, "humans.groups.1.count": 2, "humans.groups.1.colour": "#ff0000"})
+    alone = {"humans.groups.4.walk_together": False}  # station_hall's friends walk alone here: only the shoppers are linked
+    sim = Simulator("station_hall", {**alone, "humans.groups.1.walk_together": True, "humans.groups.1.count": 2,
+                                     "humans.groups.1.colour": "#ff0000"})
     sim.reset(seed=0)
     renderer = Renderer(sim)
     links = group_links(sim, renderer._group_colours)
@@ -182,4 +184,4 @@ def test_the_renderer_links_the_members_of_a_group_that_walks_together_in_its_da
     frame = renderer.frame()
     x, y = np.round(renderer.to_pixels((a + b) / 2)).astype(int)  # the middle of the link, between the two discs
     assert (frame[y - 1 : y + 2, x - 1 : x + 2] == (153, 0, 0)).all(axis=-1).any()
-    assert group_links(Simulator("station_hall"), renderer._group_colours) == []  # no group walks together: nothing linked
+    assert group_links(Simulator("station_hall", alone), renderer._group_colours) == []  # no group walks together: nothing linked
