@@ -203,29 +203,57 @@ def _safe(name: str) -> str:
     return cleaned or "policy"
 
 
-def evaluate_policy(spec: str, scenario: str, out: str | Path, *, modalities: Sequence[str] | None = None,
+def evaluate_policy(spec: str, scenario: str | None, out: str | Path, *, modalities: Sequence[str] | None = None,
                     episodes: int = 20, test_seed_base: int = 0, overrides: Mapping[str, Any] | None = None,
-                    name: str | None = None, force: bool = False, progress: bool = False) -> Path:
+                    name: str | None = None, force: bool = False, progress: bool = False, track: Any = None) -> Path:
     """Play POLICY on ``episodes`` fixed test episodes of ``scenario``; returns the run folder written.
 
     Raises :class:`ResultsExistError` when this (policy, scenario, test set) has results in
     ``out`` already and ``force`` is False; ``progress`` shows a bar over the episodes.
+    ``track`` (a :class:`crowdnav.evaluation.track.Track`) replaces the scenario, overrides, episodes
+    and seeds with the track's, refuses observation keys it does not allow, and records its name and
+    version in ``meta.json`` (the folder is ``<name>--track-<track>-v<version>``). Torch-free for the
+    scripted baselines and ``module:function`` policies (no pandas either).
     """
-    import pandas as pd
     from crowdnav.evaluation.protocol import Protocol
     from crowdnav.evaluation.provenance import git_commit, package_versions
     from crowdnav.evaluation.rollout import HeldOutEpisodes
-    from crowdnav.evaluation.storage import META_FILE, evaluated_run_name, install_result, result_lock, write_result
+    from crowdnav.evaluation.storage import (
+        META_FILE,
+        TEST_FILE,
+        atomic_write_json,
+        atomic_write_text,
+        evaluated_run_name,
+        install_result,
+        result_lock,
+    )
     from crowdnav.evaluation.unit_spec import RUN_COLUMNS
 
     from crowdnav.paths import inside
     from crowdnav.simulator import OUTCOMES
 
+    if track is not None:
+        if overrides:
+            raise PolicyError(f"--set changes the scenario, which track {track.name} fixes; leave it out, or evaluate with --scenario")
+        scenario, episodes, test_seed_base = track.scenario, track.test_episodes, track.test_seed_base
+        overrides = track.env_options()["overrides"]
+    if scenario is None:
+        raise PolicyError("name a scenario (--scenario) or a track (--track)")
     options: dict[str, Any] = {"scenario": scenario, "modalities": list(modalities) if modalities else None,
                                "overrides": dict(overrides or {})}
     options = {key: value for key, value in options.items() if value is not None}
     configuration, label, act, privileged, env_options = resolve_policy(spec, options)
-    configuration = f"{_safe(name) if name else configuration}--{scenario_key(scenario, options.get('overrides', {}))}"
+    declared: list[str] | str = "privileged: the simulator's state" if privileged else _observation_keys(env_options)
+    if track is not None:
+        env_options = {**env_options, "scenario": track.scenario, "overrides": dict(options["overrides"])}  # a run's own settings never win
+        if not privileged:
+            track.check_observations(declared)
+        from crowdnav.evaluation.track import track_key
+
+        environment = track_key(track)
+    else:
+        environment = scenario_key(scenario, options.get("overrides", {}))
+    configuration = f"{_safe(name) if name else configuration}--{environment}"
     label = name or label  # --name names the row in tables and figures too
     folder = inside(out, f"{EXPERIMENT}/{evaluated_run_name(configuration, test_seed_base, test_seed_base + episodes - 1)}")
     with result_lock(folder):  # one writer at a time; a second one is refused at once, naming this one's PID
@@ -251,11 +279,9 @@ def evaluate_policy(spec: str, scenario: str, out: str | Path, *, modalities: Se
             held_out.close()
             if bar is not None:
                 bar.close()
-        frame = pd.DataFrame(rows)
-        for position, (column, value) in enumerate(zip((*RUN_COLUMNS, "training_episodes", "evaluation"),
-                                                       (EXPERIMENT, configuration, label, 0, 0, 0), strict=True)):
-            frame.insert(position, column, value)
-        steps = int(frame["steps"].sum())
+        leading = dict(zip((*RUN_COLUMNS, "training_episodes", "evaluation"), (EXPERIMENT, configuration, label, 0, 0, 0), strict=True))
+        table = episode_csv([{**leading, **row} for row in rows])
+        steps = sum(int(row["steps"]) for row in rows)
         meta = {
             "experiment": EXPERIMENT, "configuration": configuration, "label": label, "seed": 0, "status": "complete",
             "kind": "evaluated", "policy": spec, "scenario": scenario, "env": env_options, "protocol": protocol.to_dict(),
@@ -264,7 +290,47 @@ def evaluate_policy(spec: str, scenario: str, out: str | Path, *, modalities: Se
             "policy_source": str(Path(spec).resolve()) if Path(spec).exists() else spec,
             "versions": package_versions(),
             "git_commit": git_commit(), "wall_time_s": round(time.perf_counter() - started, 3),
-            "env_steps": {"train": 0, "test": steps, "total": steps}, "training_episodes": 0, "test_episodes": len(frame),
-            "resumed": False, "final": {outcome: round(float((frame["outcome"] == outcome).mean()), 6) for outcome in OUTCOMES},
+            "env_steps": {"train": 0, "test": steps, "total": steps}, "training_episodes": 0, "test_episodes": len(rows),
+            "resumed": False, "final": {outcome: round(sum(row["outcome"] == outcome for row in rows) / len(rows), 6) for outcome in OUTCOMES},
+            "observations": declared,
         }
-        return install_result(folder, lambda staging: write_result(staging, frame, meta))
+        if track is not None:
+            meta["track"] = track.identity()
+        return install_result(folder, lambda staging: (atomic_write_text(staging / TEST_FILE, table), atomic_write_json(staging / META_FILE, meta)))
+
+
+def _observation_keys(env_options: Mapping[str, Any]) -> list[str]:
+    """The observation keys a policy reads in ``env_options`` (its modalities, or the scenario's default ones)."""
+    if env_options.get("modalities"):
+        return list(env_options["modalities"])
+    from crowdnav.envs import CrowdNavEnv
+
+    env = CrowdNavEnv(**env_options)
+    try:
+        return list(env.observation_space.keys())  # type: ignore[attr-defined]
+    finally:
+        env.close()
+
+
+def _cell(value: Any) -> str:
+    """A CSV cell as pandas writes it (``nan`` for missing numbers; floats at full precision)."""
+    if isinstance(value, (bool, np.bool_)):
+        return str(bool(value))
+    if isinstance(value, (int, np.integer)):
+        return str(int(value))
+    if isinstance(value, (float, np.floating)):
+        return "nan" if value != value else repr(float(value))
+    return "" if value is None else str(value)
+
+
+def episode_csv(rows: Sequence[Mapping[str, Any]]) -> str:
+    """Per-episode rows (dicts with the same keys, in order) as the result table's CSV text, without pandas."""
+    import csv
+    import io
+
+    buffer = io.StringIO()
+    writer = csv.writer(buffer, lineterminator="\n")
+    columns = list(rows[0]) if rows else []
+    writer.writerow(columns)
+    writer.writerows([_cell(row[column]) for column in columns] for row in rows)
+    return buffer.getvalue()

@@ -17,8 +17,8 @@ import os
 import sys
 from collections.abc import Callable, Sequence
 
-from crowdnav.cli import benchmark, export, render, scenario, schema, train, trajectories
-from crowdnav.cli.common import CliError
+from crowdnav.cli import benchmark, export, leaderboard, render, scenario, schema, track, train, trajectories
+from crowdnav.errors import CrowdNavError
 
 # Packages that only an extra installs (pyproject.toml), so a command run on the core install
 # names the extra to add instead of failing with a traceback.
@@ -30,8 +30,9 @@ EXTRA_OF_COMMAND = {"train": "train", "collect-dataset": "train", "pretrain-enco
 # otherwise each fail on the missing import, after the command had already begun.
 NEEDS = {"train": ("torch", "stable_baselines3"), "collect-dataset": ("torch",), "pretrain-encoder": ("torch", "matplotlib"),
          "benchmark": ("torch", "stable_baselines3", "pandas", "seaborn", "matplotlib"), "plot": ("pandas", "seaborn", "matplotlib"),
-         "leaderboard": ("pandas",), "trajectories": ("torch", "stable_baselines3", "pandas"),
-         "evaluate": ("torch", "stable_baselines3", "pandas"), "export": ("torch", "stable_baselines3", "onnx")}
+         "trajectories": ("torch", "stable_baselines3", "pandas"), "export": ("torch", "stable_baselines3", "onnx")}
+# `evaluate` and `leaderboard` check on their own path: scripted policies evaluate and rank a track in the core install
+# (+ orca for baseline:orca), a learned policy loads torch when it loads, a benchmark leaderboard reads pandas.
 
 
 def _require(modules: Sequence[str]) -> None:
@@ -43,7 +44,8 @@ def _require(modules: Sequence[str]) -> None:
 
 def command_groups() -> tuple[Callable[[argparse._SubParsersAction[argparse.ArgumentParser]], None], ...]:
     """Registration functions of the command groups, in the order ``--help`` lists them."""
-    return (scenario.register, train.register, render.register, benchmark.register, trajectories.register, export.register, schema.register)
+    return (scenario.register, train.register, render.register, benchmark.register, leaderboard.register, track.register,
+            trajectories.register, export.register, schema.register)
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -65,6 +67,11 @@ _FILE_SYSTEM_ERRORS = {errno.EACCES, errno.EPERM, errno.EROFS, errno.ENOTDIR, er
 """Errors of the output location rather than of crowdnav: reported in one line by every command."""
 
 
+def one_line(error: BaseException) -> str:
+    """``str(error)`` on one line: a report of several lines (a scenario's issues) joined with '; '."""
+    return "; ".join(line.strip() for line in str(error).splitlines() if line.strip()) or type(error).__name__
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """Run the command line; returns the exit status (0 ok, 1 failure, 2 usage error)."""
     parser = build_parser()
@@ -76,8 +83,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         _require(NEEDS.get(args.command, ()))
         status: int = args.handler(args)  # every leaf command sets a handler (args) -> int
         return status
-    except CliError as error:
-        print(f"crowdnav: error: {error}", file=sys.stderr)
+    except CrowdNavError as error:  # CliError, and whatever crowdnav raises on purpose that a command let through: one line
+        print(f"crowdnav: error: {one_line(error)}", file=sys.stderr)
         return 1
     except ModuleNotFoundError as error:
         extra = EXTRA_OF_MODULE.get((error.name or "").split(".")[0])

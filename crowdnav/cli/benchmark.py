@@ -1,4 +1,4 @@
-"""``crowdnav benchmark``, ``crowdnav plot`` and ``crowdnav leaderboard``: the evaluation protocol and its report."""
+"""``crowdnav benchmark`` and ``crowdnav plot``: the evaluation protocol and its curves (``leaderboard`` and ``evaluate``: leaderboard.py)."""
 
 from __future__ import annotations
 
@@ -7,7 +7,7 @@ import os
 import sys
 from pathlib import Path
 
-from crowdnav.cli.common import CliError, add_override_option, parse_overrides
+from crowdnav.cli.common import CliError
 
 
 def _shipped() -> list[str]:
@@ -19,7 +19,7 @@ def _shipped() -> list[str]:
 
 
 def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
-    """Add ``benchmark``, ``plot`` and ``leaderboard``."""
+    """Add ``benchmark`` and ``plot``."""
     parser = subparsers.add_parser(
         "benchmark", help="train and evaluate every configuration x seed of an experiment (resumable)",
         description="Run an experiment (the paper's protocol: evaluate on held-out test episodes every N training "
@@ -65,35 +65,6 @@ def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) ->
                       help="band around the mean over seeds: one standard deviation (the paper's style) or the 95%% bootstrap CI "
                            "of the mean (default: %(default)s)")
     plot.set_defaults(handler=plot_command)
-
-    board = subparsers.add_parser(
-        "leaderboard", help="rank the configurations of results folders (markdown and CSV)",
-        description="One row per configuration: final rates, IQM of final success with a bootstrap CI, area under "
-                    "the success curve, social metrics, env steps and wall time. The same results give the same files.",
-    )
-    board.add_argument("results", nargs="+", metavar="RESULTS_DIR", help="folders written by `crowdnav benchmark`")
-    board.add_argument("--out", metavar="PATH", help="output path without extension (default: RESULTS_DIR/leaderboard, first folder)")
-    board.set_defaults(handler=leaderboard_command)
-
-    evaluate = subparsers.add_parser(
-        "evaluate", help="evaluate any policy on a scenario's fixed test episodes, ranked by `crowdnav leaderboard`",
-        description="POLICY: a crowdnav run folder or checkpoint, an SB3 model .zip, module:function (one observation dict "
-                    "-> 2 numbers), or baseline:straight / baseline:social_force. Plays the test episodes with seeds "
-                    "--test-seed-base, +1, ... and writes OUT/evaluate/<name>--<scenario>/seeds_<first>-<last>/ in the "
-                    "protocol's format (docs/evaluate.md); existing results are kept unless --force.",
-    )
-    evaluate.add_argument("policy", metavar="POLICY")
-    evaluate.add_argument("--scenario", required=True, metavar="NAME_OR_PATH", help="library scenario name or YAML file")
-    evaluate.add_argument("--modalities", metavar="KEYS", help="comma-separated observation keys (default: the scenario's)")
-    evaluate.add_argument("--episodes", type=int, default=20, metavar="N", help="test episodes (default: %(default)s; 500 for final rankings)")
-    evaluate.add_argument("--test-seed-base", type=int, default=0, metavar="S", help="seed of the first test episode (default: %(default)s)")
-    evaluate.add_argument("--name", metavar="NAME", help="configuration name in the results (default: from POLICY)")
-    evaluate.add_argument("--out", default="results", metavar="DIR", help="results folder (default: %(default)s)")
-    evaluate.add_argument("--force", action="store_true", help="replace this policy's results on this scenario and test set")
-    evaluate.add_argument("--traceback", action="store_true", help="show the full traceback when the policy raises")
-    evaluate.add_argument("--no-progress", action="store_true", help="hide the progress bar")
-    add_override_option(evaluate)
-    evaluate.set_defaults(handler=evaluate_command)
 
 
 def benchmark(args: argparse.Namespace) -> int:
@@ -169,60 +140,4 @@ def plot_command(args: argparse.Namespace) -> int:
         raise CliError(str(error)) from None
     for path in paths:
         print(f"wrote {path}")
-    return 0
-
-
-def leaderboard_command(args: argparse.Namespace) -> int:
-    from crowdnav.evaluation.leaderboard import write_leaderboard
-    from crowdnav.evaluation.storage import ResultsError
-
-    out = Path(args.out) if args.out else Path(args.results[0]) / "leaderboard"
-    try:
-        table, paths = write_leaderboard([Path(path) for path in args.results], out)
-    except (ResultsError, OSError) as error:
-        raise CliError(str(error)) from None
-    for path in paths:
-        print(f"wrote {path}")
-    for gap in table.attrs.get("missing", []):  # named under the markdown table too
-        print(f"crowdnav: not in the leaderboard: {gap.describe(folder=True)}", file=sys.stderr)
-    return 0
-
-
-def evaluate_command(args: argparse.Namespace) -> int:
-    from crowdnav.agents.run_folder import RunBusyError
-    from crowdnav.evaluation.evaluate import PolicyError, ResultsExistError, evaluate_policy
-    from crowdnav.scenario import ScenarioError
-
-    modalities = [key.strip() for key in args.modalities.split(",") if key.strip()] if args.modalities else None
-    if args.episodes < 1:
-        raise CliError(f"--episodes must be at least 1, got {args.episodes}")
-    from crowdnav.agents.seeding import check_test_seeds
-
-    try:
-        check_test_seeds(args.test_seed_base, args.episodes)
-    except ValueError as error:
-        raise CliError(f"--test-seed-base / --episodes: {error}") from None
-    from crowdnav.cli.signals import interrupt_on_sigterm
-
-    with interrupt_on_sigterm() as stopped:  # SIGTERM stops it as Ctrl-C does: one line, nothing half-written
-        try:
-            folder = evaluate_policy(args.policy, args.scenario, args.out, modalities=modalities, episodes=args.episodes,
-                                     test_seed_base=args.test_seed_base, overrides=parse_overrides(args.overrides), name=args.name,
-                                     force=args.force, progress=not args.no_progress)
-        except PolicyError as error:
-            if args.traceback and error.__cause__ is not None:
-                import traceback
-
-                traceback.print_exception(error.__cause__)
-            raise CliError(str(error).splitlines()[0]) from None
-        except (ResultsExistError, RunBusyError, ScenarioError, ValueError) as error:
-            raise CliError(str(error).splitlines()[0]) from None
-        except KeyboardInterrupt:
-            print("crowdnav: interrupted before the results were written; run the same command again", file=sys.stderr)
-            return stopped.exit_status
-    from crowdnav.evaluation.storage import META_FILE, read_json
-
-    final = read_json(folder / META_FILE)["final"]
-    print(f"{args.policy}: " + ", ".join(f"{outcome} {rate:.0%}" for outcome, rate in final.items()) + f" on {args.episodes} test episodes")
-    print(f"wrote {folder}; rank with: crowdnav leaderboard {args.out}")
     return 0

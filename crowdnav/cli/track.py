@@ -1,0 +1,97 @@
+"""``crowdnav track list | show NAME | check [NAME...] | reference NAME``: the named, versioned test sets to rank on."""
+
+from __future__ import annotations
+
+import argparse
+from typing import TYPE_CHECKING
+
+from crowdnav.cli.common import CliError
+
+if TYPE_CHECKING:
+    from crowdnav.evaluation.track import Track
+
+
+def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
+    """Add ``track`` and its subcommands."""
+    parser = subparsers.add_parser(
+        "track", help="the tracks: named, versioned test sets (scenario, time limit, test seeds, allowed observations)",
+        description="A track fixes what a policy is ranked on: the scenario and its overrides, the time limit, the test "
+                    "episodes and seeds, the observation keys allowed, and a version (docs/evaluation.md#tracks). "
+                    "Evaluate with `crowdnav evaluate POLICY --track NAME`, rank with `crowdnav leaderboard --track NAME`.",
+    )
+    commands = parser.add_subparsers(dest="track_command", metavar="SUBCOMMAND", required=True)
+    listing = commands.add_parser("list", help="the shipped tracks, one line each")
+    listing.set_defaults(handler=list_command)
+    show = commands.add_parser("show", help="everything a track fixes")
+    show.add_argument("name", metavar="NAME")
+    show.set_defaults(handler=show_command)
+    check = commands.add_parser("check", help="play each track's fingerprint episodes and compare with the stored fingerprint",
+                                description="Exit 1 when a track's episodes changed: bump its version and store the printed fingerprint.")
+    check.add_argument("names", nargs="*", metavar="NAME", help="default: every shipped track")
+    check.set_defaults(handler=check_command)
+    reference = commands.add_parser(
+        "reference", help="play every scripted baseline on a track and write small per-episode CSVs to publish",
+        description="Writes OUT/<track>/baseline_<name>.csv and reference.json (straight, social_force, orca where pyrvo is "
+                    "installed, predictive, oracle where it does not refuse the track). Resumable and idempotent: a baseline "
+                    "this commit already wrote is kept. Refuses a checkout with uncommitted changes.",
+    )
+    reference.add_argument("name", metavar="NAME")
+    reference.add_argument("--out", default="docs/results/tracks", metavar="DIR", help="default: %(default)s")
+    reference.add_argument("--force", action="store_true", help="play every baseline again")
+    reference.add_argument("--allow-dirty", action="store_true", help="write from a checkout with uncommitted changes (marked +dirty)")
+    reference.set_defaults(handler=reference_command)
+
+
+def _track(name: str) -> Track:
+    from crowdnav.evaluation.track import TrackError, load_track
+
+    try:
+        return load_track(name)
+    except TrackError as error:
+        raise CliError(str(error)) from None
+
+
+def list_command(args: argparse.Namespace) -> int:
+    from crowdnav.evaluation.track import load_track, shipped_tracks
+
+    tracks = [load_track(name) for name in shipped_tracks()]
+    width = max(len(track.label) for track in tracks)
+    for track in tracks:
+        print(f"{track.label:<{width}}  {track.test_episodes:>4} episodes  {track.description}")
+    return 0
+
+
+def show_command(args: argparse.Namespace) -> int:
+    track = _track(args.name)
+    for line in track.describe():
+        print(line)
+    return 0
+
+
+def check_command(args: argparse.Namespace) -> int:
+    from crowdnav.evaluation.track import fingerprint, shipped_tracks
+
+    changed = 0
+    for name in args.names or shipped_tracks():
+        track = _track(name)
+        now = fingerprint(track)
+        if now == track.fingerprint:
+            print(f"{track.label}: fingerprint {now} unchanged")
+        else:
+            changed += 1
+            print(f"{track.label}: its episodes changed (fingerprint {now}, stored {track.fingerprint}): bump version to "
+                  f"{track.version + 1} and set fingerprint: \"{now}\" in {track.source}, then regenerate its reference results")
+    return 1 if changed else 0
+
+
+def reference_command(args: argparse.Namespace) -> int:
+    from crowdnav.evaluation.track import TrackError
+    from crowdnav.evaluation.track_reference import write_reference
+
+    track = _track(args.name)
+    try:
+        folder = write_reference(track, args.out, allow_dirty=args.allow_dirty, force=args.force, log=lambda line: print(line, flush=True))
+    except TrackError as error:
+        raise CliError(str(error)) from None
+    print(f"wrote {folder}; rank against it with: crowdnav leaderboard --track {track.name} --reference {folder} RESULTS")
+    return 0

@@ -1,0 +1,94 @@
+"""A track's leaderboard: evaluate --track results and reference results ranked, paired by McNemar's exact test; versions kept apart."""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+import pytest
+from crowdnav.evaluation.evaluate import evaluate_policy
+from crowdnav.evaluation.storage import META_FILE, read_json
+from crowdnav.evaluation.track import TrackError, load_track
+from crowdnav.evaluation.track_leaderboard import Entry, mcnemar_exact, paired, rank, read_entries, to_markdown
+from crowdnav.evaluation.track_reference import write_reference
+
+
+def test_mcnemar_exact_matches_the_binomial_by_hand():
+    assert mcnemar_exact(0, 0) == 1.0 and mcnemar_exact(3, 3) == 1.0
+    assert mcnemar_exact(0, 5) == pytest.approx(2 / 32) and mcnemar_exact(5, 0) == mcnemar_exact(0, 5)
+    assert mcnemar_exact(1, 9) == pytest.approx(2 * (1 + 10) / 2 ** 10)
+    assert 0 < mcnemar_exact(0, 3000) < 1e-300 or mcnemar_exact(0, 3000) == 0.0  # thousands of episodes: no overflow
+
+
+def _entry(name, outcomes, reference=True, kind="scripted, privileged"):
+    return Entry(name, name, kind, "-", None, dict(enumerate(outcomes)), reference=reference)
+
+
+def test_paired_statistics_use_the_shared_episodes_and_the_user_policy_is_the_challenger():
+    track = load_track("figure4")
+    mine = _entry("mine", ["success"] * 8 + ["collision"] * 2, reference=False)
+    straight = _entry("straight", ["success"] * 2 + ["collision"] * 8)
+    oracle = _entry("oracle", ["success"] * 10, kind="ceiling")
+    board = rank(track, [straight, oracle, mine])
+    assert [entry.name for entry in board.rows] == ["oracle", "mine", "straight"] and board.challenger is mine
+    shared, delta, p = paired(mine, straight)
+    assert (shared, delta, p) == (10, pytest.approx(0.6), pytest.approx(mcnemar_exact(6, 0)))
+    text = to_markdown(board)
+    assert f"Track figure4 v{track.version}" in text and "| ceiling | oracle" in text and "| 1 | mine *" in text and "McNemar" in text
+    with pytest.raises(TrackError, match="nothing to rank on track figure4"):
+        rank(track, [])
+
+
+def test_an_evaluated_policy_ranks_among_the_reference_results_and_another_version_is_refused(tmp_path):
+    track = load_track("figure4")
+    short = track.__class__(**{**track.__dict__, "test_episodes": 6})  # the same track, fewer episodes: a quick test
+    reference = write_reference(short, tmp_path / "ref", allow_dirty=True, log=lambda line: None)
+    index = read_json(reference / "reference.json")
+    assert {entry["name"] for entry in index["entries"]} >= {"baseline_straight", "baseline_social_force", "baseline_predictive", "baseline_oracle"}
+    assert index["track"] == short.identity() and index["git_commit"].endswith("+dirty")
+    folder = evaluate_policy("baseline:straight", None, tmp_path / "res", track=short, name="mine")
+    meta = read_json(folder / META_FILE)
+    assert meta["track"] == short.identity() and meta["test_episodes"] == 6 and folder.parent.name == f"mine--track-figure4-v{short.version}"
+    board = rank(short, read_entries(short, [reference, tmp_path / "res"]))
+    mine = next(entry for entry in board.rows if not entry.reference)
+    straight = next(entry for entry in board.rows if entry.name == "baseline_straight" and entry.reference)
+    assert board.challenger is mine and mine.outcomes == straight.outcomes  # the same episodes, bit for bit
+    meta["track"]["version"] = short.version + 1
+    (folder / META_FILE).write_text(json.dumps(meta))
+    with pytest.raises(TrackError, match=f"measured on track figure4 v{short.version + 1}, and the track is v{short.version} now"):
+        read_entries(short, [reference, tmp_path / "res"])
+
+
+def test_reference_results_are_resumable_and_idempotent(tmp_path):
+    track = load_track("figure4")
+    short = track.__class__(**{**track.__dict__, "test_episodes": 3})
+    lines: list[str] = []
+    folder = write_reference(short, tmp_path, allow_dirty=True, log=lines.append)
+    first = {path.name: path.read_bytes() for path in folder.iterdir()}
+    (folder / "baseline_social_force.csv").unlink()  # killed before this one was written
+    lines.clear()
+    write_reference(short, tmp_path, allow_dirty=True, log=lines.append)
+    assert sum("kept" in line for line in lines) == len(first) - 2 and any("baseline_social_force success" in line for line in lines)
+    assert {path.name: path.read_bytes() for path in folder.iterdir()} == first
+    assert all(not math.isnan(float(line.split(",")[0])) for line in (folder / "baseline_straight.csv").read_text().splitlines()[1:])
+
+
+def test_reference_results_refuse_a_checkout_with_changes(tmp_path, monkeypatch):
+    import subprocess
+
+    from crowdnav.evaluation import track_reference
+
+    changes = [" M crowdnav/simulator.py", "?? docs/results/tracks/figure4/x.csv"]
+
+    def fake_run(command, **kwargs):
+        out = "abc123\n" if command[1] == "rev-parse" else "".join(line + "\n" for line in changes)
+        return subprocess.CompletedProcess(command, 0, out, "")
+
+    monkeypatch.setattr(track_reference.subprocess, "run", fake_run)
+    out = Path(track_reference.__file__).resolve().parents[1] / "docs" / "results" / "tracks"
+    with pytest.raises(TrackError, match=r"uncommitted changes \(1 paths, e.g. crowdnav/simulator.py\): reference results are published "
+                                         "from a clean commit"):
+        track_reference.source_state(out)
+    changes.pop(0)  # what it writes itself is no change of the source
+    assert track_reference.source_state(out) == "abc123"
