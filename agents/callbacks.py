@@ -10,41 +10,9 @@ from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
 
-from crowdnav.agents.episode_log import DISCARDED_SUFFIX, EpisodeLogWriter, prepare_log
+from crowdnav.agents.episode_log import EpisodeLogWriter, prepare_log
 from crowdnav.agents.resume_point import ResumePoint
 from stable_baselines3.common.callbacks import BaseCallback
-
-DISCARDED_LOG_SUFFIX = DISCARDED_SUFFIX
-"""``episodes.csv.discarded`` keeps the rows of episodes that a resume trained again."""
-
-
-def set_aside_episodes_from(log_path: Path, first_episode: int) -> int:
-    """Move the rows of episodes >= ``first_episode`` out of ``log_path``; returns how many moved.
-
-    A resumed run restarts from its last checkpoint, so the episodes logged after it belong to
-    a training history that was thrown away and are trained again. Their rows go to
-    ``<log>.discarded`` (appended, nothing is deleted) and the log keeps one row per episode.
-    """
-    lines = log_path.read_text(encoding="utf-8").splitlines()
-    if not lines:
-        return 0
-    header = lines[0]
-    kept: list[str] = []
-    moved: list[str] = []
-    for row in lines[1:]:
-        (kept if int(row.split(",", 1)[0]) < first_episode else moved).append(row)
-    if not moved:
-        return 0
-    discarded = log_path.with_name(log_path.name + DISCARDED_LOG_SUFFIX)
-    with open(discarded, "a", encoding="utf-8") as file:
-        if file.tell() == 0:
-            file.write(header + "\n")
-        file.write("\n".join(moved) + "\n")
-    # written beside the log and renamed over it, so a crash leaves the old or the new log whole
-    temporary = log_path.with_name(log_path.name + ".tmp")
-    temporary.write_text("\n".join([header, *kept]) + "\n", encoding="utf-8")
-    temporary.replace(log_path)
-    return len(moved)
 
 
 @dataclass

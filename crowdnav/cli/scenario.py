@@ -3,11 +3,11 @@
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 from pathlib import Path
 
 from crowdnav.cli.common import CliError, add_override_option, format_table, parse_overrides
+from crowdnav.cli.schema import schema_command
 
 
 def register(groups: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
@@ -35,7 +35,7 @@ def register(groups: argparse._SubParsersAction[argparse.ArgumentParser]) -> Non
 
     schema = commands.add_parser("schema", help="print the JSON Schema of scenario files (for editors)")
     schema.add_argument("--output", "-o", type=Path, metavar="FILE", help="write the schema to FILE instead of stdout")
-    schema.set_defaults(handler=schema_command)
+    schema.set_defaults(handler=schema_command, kind="scenario")  # the same command as `crowdnav schema scenario`
 
 
 def list_command(args: argparse.Namespace) -> int:
@@ -116,19 +116,4 @@ def describe_command(args: argparse.Namespace) -> int:
     except ScenarioError as error:
         raise CliError(str(error).splitlines()[0]) from None
     print("\n".join(describe_lines(world)))
-    return 0
-
-
-def schema_command(args: argparse.Namespace) -> int:
-    from crowdnav.scenario.schema import scenario_json_schema
-
-    text = json.dumps(scenario_json_schema(), indent=2) + "\n"
-    if args.output is None:
-        sys.stdout.write(text)
-        return 0
-    try:
-        args.output.write_text(text, encoding="utf-8")
-    except OSError as error:
-        raise CliError(f"cannot write {args.output}: {error.strerror or error}") from None
-    print(f"wrote {args.output}", file=sys.stderr)
     return 0

@@ -19,7 +19,6 @@ from crowdnav.cli.common import CliError
 if TYPE_CHECKING:
     from pydantic import BaseModel
 
-JSON_SCHEMA_DIALECT = "https://json-schema.org/draft/2020-12/schema"
 KINDS = {
     "scenario": "a scenario file (scenarios/*.yaml)",
     "train": "a training config (crowdnav train --config)",
@@ -40,9 +39,9 @@ def register(groups: argparse._SubParsersAction[argparse.ArgumentParser]) -> Non
 
 def json_schema(kind: str) -> dict[str, Any]:
     """The JSON Schema of file kind ``kind`` (one of :data:`KINDS`)."""
-    if kind == "scenario":
-        from crowdnav.scenario.schema import scenario_json_schema
+    from crowdnav.scenario.schema import JSON_SCHEMA_DIALECT, scenario_json_schema
 
+    if kind == "scenario":
         return scenario_json_schema()
     model: type[BaseModel]
     if kind == "train":
@@ -61,6 +60,7 @@ def json_schema(kind: str) -> dict[str, Any]:
 
 
 def schema_command(args: argparse.Namespace) -> int:
+    """Print (or write to ``args.output``) the JSON Schema of ``args.kind``: ``crowdnav schema KIND`` and ``crowdnav scenario schema``."""
     text = json.dumps(json_schema(args.kind), indent=2) + "\n"
     if args.output is None:
         sys.stdout.write(text)

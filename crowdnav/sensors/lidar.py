@@ -23,7 +23,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 from gymnasium import spaces
 
-from crowdnav.batch.scalar_math import remainder
+from crowdnav.batch.scalar_math import TWO_PI, remainder
 from crowdnav.scenario.schema import LidarSensor
 from crowdnav.sensors.base import Modality, RadiiConstants, register_modality
 from crowdnav.sensors.runs import expand_runs
@@ -33,9 +33,6 @@ if TYPE_CHECKING:
     from crowdnav.batch.state import BatchState
     from crowdnav.simulator import Simulator
     from crowdnav.world import CompiledWorld
-
-TWO_PI = 2.0 * math.pi
-
 
 @register_modality
 class LidarModality(Modality):

@@ -8,7 +8,6 @@ import shutil
 import numpy as np
 import pytest
 from crowdnav.agents import ConfigError, load_policy, train, train_seed
-from crowdnav.agents.callbacks import set_aside_episodes_from
 
 from tests.agents.agents_tiny import tiny_config
 
@@ -90,16 +89,6 @@ def test_the_snapshot_is_saved_before_the_checkpoint_and_a_missing_one_is_restor
     train(tiny_config(tmp_path, episodes=3, max_steps=20, checkpoint_every=2), resume=True)
     assert saved[0] == "snapshots/episode_00002"
     assert json.loads((tmp_path / "snapshots" / "episode_00002" / "policy.json").read_text())["episodes"] == 2
-
-
-def test_set_aside_keeps_the_log_untouched_when_nothing_comes_after_the_checkpoint(tmp_path):
-    log = tmp_path / "episodes.csv"
-    log.write_text("episode,seed\n0,10\n1,11\n")
-    assert set_aside_episodes_from(log, 2) == 0
-    assert log.read_text() == "episode,seed\n0,10\n1,11\n" and not (tmp_path / "episodes.csv.discarded").exists()
-    assert set_aside_episodes_from(log, 1) == 1 and set_aside_episodes_from(log, 0) == 1
-    assert log.read_text() == "episode,seed\n"
-    assert (tmp_path / "episodes.csv.discarded").read_text() == "episode,seed\n1,11\n0,10\n"
 
 
 def test_models_saved_by_sb3s_own_classes_load_into_crowdnavs_and_the_other_way_round(tmp_path):
