@@ -1,8 +1,10 @@
 """CI: the core install alone (``pip install crowdnav``, no extras) runs the environments.
 
 Run in a fresh virtual environment holding only crowdnav's core dependencies. It steps a
-Gymnasium env and a PettingZoo env, renders an ``rgb_array`` frame, runs ``crowdnav --help`` and
-checks that none of the extras' packages were installed or imported on the way.
+Gymnasium env and a PettingZoo env, renders an ``rgb_array`` frame, runs ``crowdnav --help``,
+evaluates a scripted baseline and a numpy ``module:function`` policy on a track, ranks them
+(``crowdnav leaderboard --track``) and renders a scripted policy's video, and checks that none of the
+extras' packages were installed or imported on the way.
 """
 
 from __future__ import annotations
@@ -10,6 +12,8 @@ from __future__ import annotations
 import importlib.util
 import subprocess
 import sys
+import tempfile
+from pathlib import Path
 
 EXTRAS = ("torch", "stable_baselines3", "pandas", "matplotlib", "seaborn", "ray")
 
@@ -46,4 +50,18 @@ subprocess.run(["crowdnav", "--help"], check=True, capture_output=True)
 # a command of an extra names the extra to install, in one line, instead of a traceback
 hint = subprocess.run(["crowdnav", "benchmark"], capture_output=True, text=True)
 assert hint.returncode == 1 and hint.stderr.strip().endswith("pip install 'crowdnav[bench]'"), hint.stderr
-print(f"core install: Gymnasium env, PettingZoo env ({len(observations)} agents) and an rgb_array frame {frame.shape} without {', '.join(EXTRAS)}")
+# scripted policies evaluate, rank and render without torch or pandas (the numpy callable: docs/evaluate.md's)
+work = Path(tempfile.mkdtemp())
+(work / "my_policies.py").write_text("import numpy as np\n\n\ndef toward_goal(observation):\n    distance, sin, cos = observation['goal']\n"
+                                     "    return np.array([cos, sin], dtype=np.float32)\n")
+for policy in ("baseline:straight", "my_policies:toward_goal"):
+    done = subprocess.run(["crowdnav", "evaluate", policy, "--track", "figure4", "--modalities", "goal", "--out", "results", "--no-progress"],
+                          cwd=work, capture_output=True, text=True)
+    assert done.returncode == 0 and "success 23%" in done.stdout and "100 test episodes of track figure4" in done.stdout, (policy, done.stderr)
+board = subprocess.run(["crowdnav", "leaderboard", "--track", "figure4", "results"], cwd=work, capture_output=True, text=True)
+assert board.returncode == 0 and "## Track figure4 v" in board.stdout and "my_policies:toward_goal *" in board.stdout, board.stderr
+video = subprocess.run(["crowdnav", "render", "room_furniture", "--policy", "straight", "--episodes", "1", "--out", "videos", "--no-progress"],
+                       cwd=work, capture_output=True, text=True)
+assert video.returncode == 0 and list((work / "videos").glob("*.mp4")), video.stderr
+print(f"core install: Gymnasium env, PettingZoo env ({len(observations)} agents) and an rgb_array frame {frame.shape}; scripted policies "
+      f"evaluated, ranked on a track and rendered; without {', '.join(EXTRAS)}")
