@@ -2,8 +2,9 @@
 
 ``crowdnav evaluate POLICY --scenario NAME`` and :func:`evaluate_policy`. POLICY is one of:
 
-* ``baseline:straight`` / ``baseline:social_force``: the scripted robots (privileged: they read
-  the simulator);
+* ``baseline:NAME`` (:data:`crowdnav.evaluation.baselines.BASELINES`: straight, social_force, orca,
+  predictive, oracle): the scripted robots (privileged: they read the simulator; the oracle
+  even the humans' future, docs/planning.md);
 * ``module:function``: a Python callable ``function(observation) -> action`` taking one
   observation dict of :class:`crowdnav.envs.CrowdNavEnv` (raw units) and returning 2 numbers.
   This imports and runs that module: code by request (docs/security.md);
@@ -150,8 +151,10 @@ def resolve_policy(spec: str, env_options: Mapping[str, Any], *, allow_import: b
             return np.stack(actions).astype(np.float32)
 
         return _safe(f"{module_name}_{function_name}"), spec, act, False, options
+    from crowdnav.evaluation.baselines import BASELINES
+
     raise PolicyError(f"{spec}: expected a run folder or checkpoint, an SB3 model .zip, module:function, or baseline:NAME "
-                      "(baseline:straight, baseline:social_force)")
+                      f"({', '.join(f'baseline:{name}' for name in BASELINES)})")
 
 
 def _zip_modalities(path: Path) -> list[str] | None:

@@ -23,7 +23,7 @@ def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) ->
     parser.add_argument(
         "--policy",
         default="social-force",
-        help="social-force, straight, random, a crowdnav checkpoint or run folder, or any POLICY of `crowdnav evaluate`: "
+        help="social-force, straight, random, orca, predictive, oracle, a crowdnav checkpoint or run folder, or any POLICY of `crowdnav evaluate`: "
              "baseline:NAME, module:function, an SB3 model .zip (default: social-force)",
     )
     parser.add_argument("--modalities", metavar="KEYS", help="observation keys a module:function or SB3 zip policy reads (default: the scenario's)")

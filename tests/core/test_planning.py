@@ -145,3 +145,26 @@ def test_geodesic_distance_goes_around_furniture_and_is_straight_in_the_open():
     behind = np.array([0.5 - 0.6j])  # south of the table: the way goes around it
     assert field(open_point)[0] == pytest.approx(1.5, abs=0.05)
     assert field(behind)[0] > 2.6 + 0.3
+
+
+def test_one_oracle_drives_many_lock_stepped_envs_as_it_drives_each_alone():
+    seeds = [0, 1, 2]
+    envs = [CrowdNavEnv(scenario="room_furniture", modalities=["goal"], overrides=FIGURE4) for _ in seeds]
+    shared, alone = OraclePlanner(), [OraclePlanner() for _ in seeds]
+    twins = [CrowdNavEnv(scenario="room_furniture", modalities=["goal"], overrides=FIGURE4) for _ in seeds]
+    for env, twin, seed in zip(envs, twins, seeds, strict=True):
+        env.reset(seed=seed)
+        twin.reset(seed=seed)
+    running = list(range(len(seeds)))
+    while running:  # as the evaluation plays scripted policies: one step of every running episode in turn
+        still = []
+        for i in running:
+            action = shared(envs[i].simulator)
+            assert np.array_equal(action, alone[i](twins[i].simulator))
+            _, _, terminated, truncated, info = envs[i].step(action)
+            twins[i].step(action)
+            if terminated or truncated:
+                assert info["outcome"] == "success"
+            else:
+                still.append(i)
+        running = still
