@@ -65,6 +65,10 @@ class CrowdEstimate:
                    velocities[None].astype(complex), radii[None].astype(float), np.ones((1, len(positions)), dtype=bool))
 
 
+PREDICTIONS = ("constant_velocity", "frozen")
+"""How a planner may predict the humans (:attr:`PlannerSettings.prediction`)."""
+
+
 @dataclass(frozen=True)
 class PlannerSettings:
     """The predictive planner's parameters (docs/agents.md#the-predictive-planner)."""
@@ -73,6 +77,8 @@ class PlannerSettings:
     """Seconds of constant-velocity prediction searched at every step."""
     cells_per_step: int = 2
     """Lattice cells per full-speed step (2: 0.1 m cells at 1 m/s and 0.2 s, 13 moves)."""
+    prediction: str = "constant_velocity"
+    """How the humans move over the horizon: ``constant_velocity``, or ``frozen`` (where they stand now; an ablation)."""
     human_margin: float = 0.1
     """Metres kept from each predicted human beyond contact (prediction error room)."""
     static_margin: float = 0.02
@@ -87,6 +93,8 @@ class PlannerSettings:
                 raise ValueError(f"{name} must be a finite number >= 0, got {value!r}")
         if self.map_spacing <= 0 or self.horizon <= 0:
             raise ValueError(f"horizon and map_spacing must be > 0, got {self.horizon!r} and {self.map_spacing!r}")
+        if self.prediction not in PREDICTIONS:
+            raise ValueError(f"prediction must be one of {PREDICTIONS}, got {self.prediction!r}")
         if not isinstance(self.cells_per_step, int) or not 1 <= self.cells_per_step <= 8:
             raise ValueError(f"cells_per_step must be an integer in [1, 8], got {self.cells_per_step!r}")
 
@@ -125,7 +133,8 @@ class PredictivePlanner:
         cells = crowd.robot[:, None, None] + (span[:, None] + 1j * span[None, :])  # (K, side, side)
         static_free = self.static_map(world).free(cells, exact=False)
         ahead = np.arange(1, steps + 1)[:, None, None] * dt
-        predicted = crowd.humans[None] + crowd.velocities[None] * ahead  # (T, K, n)
+        moving = crowd.velocities if s.prediction == "constant_velocity" else np.zeros_like(crowd.velocities)
+        predicted = crowd.humans[None] + moving[None] * ahead  # (T, K, n)
         reach = np.where(crowd.present, robot.radius + crowd.radii + s.human_margin + EPSILON, -1.0)
         blocked = disc_cells(predicted, np.broadcast_to(reach, predicted.shape), np.broadcast_to(cells[:, 0, 0], (steps, k)),
                              lattice.spacing, (side, side)).reshape(steps, k, side, side)
