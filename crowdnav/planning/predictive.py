@@ -18,6 +18,7 @@ reads the future. Worlds are batched: one call plans K worlds of one map with th
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -147,7 +148,14 @@ class PredictivePlanner:
         start = np.zeros(grid.goal.shape, dtype=bool)
         start[:, grid.centre, grid.centre] = True
         found = search(start, grid.free, grid.lattice.moves, stop=grid.goal)
-        cost = np.stack([self.maps.field(world, g)(c) for g, c in zip(crowd.goal.tolist(), grid.cells, strict=True)])
+        flat_cells = grid.cells.reshape(len(grid.cells), -1)
+
+        def cost(rows: np.ndarray, mask: np.ndarray) -> np.ndarray:  # only where a plan may end
+            out = np.full(mask.shape, np.inf)
+            owner, cell = np.nonzero(mask)
+            out[owner, cell] = self.maps.cost(world, crowd.goal[rows], flat_cells[rows[owner], cell], owner)
+            return out
+
         first = _first_moves(found, grid.lattice.moves, grid.goal, cost)
         stuck = first < 0
         if stuck.any():  # every move touches a prediction next step: keep the most room
@@ -203,8 +211,12 @@ class Layers:
         return out
 
 
-def _first_moves(layers: SearchLayers, moves: np.ndarray, goal: np.ndarray, cost: np.ndarray) -> np.ndarray:
-    """(K,) the first move of each world's best plan (-1 where the robot cannot survive one step)."""
+def _first_moves(layers: SearchLayers, moves: np.ndarray, goal: np.ndarray,
+                 cost: Callable[[np.ndarray, np.ndarray], np.ndarray]) -> np.ndarray:
+    """(K,) the first move of each world's best plan (-1 where the robot cannot survive one step).
+
+    ``cost(rows, mask)``: the distance to the goal of worlds ``rows`` at their cells ``mask`` (inf elsewhere).
+    """
     k = len(goal)
     depth = len(layers.reached) - 1
     chosen_t = np.zeros(k, dtype=np.int64)
@@ -221,8 +233,7 @@ def _first_moves(layers: SearchLayers, moves: np.ndarray, goal: np.ndarray, cost
         now = layers.reached[t].reshape(k, -1)
         new = now.any(1) & ~done
         if new.any():
-            scored = np.where(now[new], cost.reshape(k, -1)[new], np.inf)
-            chosen[new] = np.argmin(scored, 1)
+            chosen[new] = np.argmin(cost(np.flatnonzero(new), now[new]), 1)
             chosen_t[new] = t
             done |= new
     side = goal.shape[-1]

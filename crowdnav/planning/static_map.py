@@ -70,7 +70,7 @@ class StaticMap:
 
     def geodesic(self, goal: complex, spacing: float) -> GeodesicField:
         """The distance (m) to ``goal`` around obstacles, on a ``spacing`` grid over the world."""
-        return GeodesicField(self, complex(goal), spacing)
+        return GeodesicField(GoalGrid(self, spacing), complex(goal))
 
 
 class MapCache:
@@ -87,6 +87,7 @@ class MapCache:
         self._keys: dict[int, tuple[CompiledWorld, str]] = {}
         self._maps: dict[str, StaticMap] = {}
         self._fields: dict[tuple[str, complex], GeodesicField] = {}
+        self._grids: dict[str, GoalGrid] = {}
 
     def key(self, world: CompiledWorld) -> str:
         """The content key of ``world``'s scenario (computed once per world object)."""
@@ -109,8 +110,17 @@ class MapCache:
         key = (self.key(world), complex(goal))
         if key not in self._fields:
             _bounded(self._fields, self.MAX_FIELDS)
-            self._fields[key] = self.map(world).geodesic(goal, self.spacing)
+            grid = self._grids.get(key[0])
+            if grid is None:
+                _bounded(self._grids, self.MAX_MAPS)
+                grid = self._grids[key[0]] = GoalGrid(self.map(world), self.spacing)
+            self._fields[key] = GeodesicField(grid, complex(goal))
         return self._fields[key]
+
+    def cost(self, world: CompiledWorld, goals: np.ndarray, points: np.ndarray, owner: np.ndarray) -> np.ndarray:
+        """Geodesic distance from each point (P,) to the goal of its world ``owner`` (P,), ``goals`` (K,): one lookup."""
+        fields = [self.field(world, goal) for goal in np.asarray(goals).tolist()]
+        return fields[0].grid.lookup(np.stack([f.distance for f in fields]), points, owner)
 
 
 def _bounded(cache: dict, size: int) -> None:  # type: ignore[type-arg]
@@ -119,49 +129,70 @@ def _bounded(cache: dict, size: int) -> None:  # type: ignore[type-arg]
         cache.pop(next(iter(cache)))
 
 
-class GeodesicField:
-    """Shortest-path distance to one goal over a map's free cells (8-connected grid, computed at construction)."""
+class GoalGrid:
+    """The grid goal distances live on: cells over the world and where the robot's centre may be (built once per map)."""
 
-    def __init__(self, static_map: StaticMap, goal: complex, spacing: float):
+    def __init__(self, static_map: StaticMap, spacing: float):
         x0, y0, x1, y1 = static_map.bounds
         self.origin, self.spacing = complex(x0, y0), float(spacing)
         w, h = int(math.ceil((x1 - x0) / spacing)) + 1, int(math.ceil((y1 - y0) / spacing)) + 1
         ii, jj = np.meshgrid(np.arange(w), np.arange(h), indexing="ij")
         self.cells = self.origin + (ii + 1j * jj) * spacing
-        free = static_map.free(self.cells)
-        gi = min(max(int(round((goal.real - x0) / spacing)), 0), w - 1)
-        gj = min(max(int(round((goal.imag - y0) / spacing)), 0), h - 1)
-        distance = np.full((w, h), np.inf)
-        distance[gi, gj] = abs(self.cells[gi, gj] - goal)
-        free[gi, gj] = True  # the goal's own cell seeds the wave even when it sits in the margin
-        self.distance = _relax(distance, free, spacing)
+        self.free = static_map.free(self.cells)
+        blocked = np.where(self.free, 0.0, np.inf)
+        # per neighbour: (where it lands, where it comes from, the cost of entering each landing cell)
+        self.steps = []
+        for di, dj in _NEIGHBOURS:
+            dst = (slice(max(0, di), w + min(0, di)), slice(max(0, dj), h + min(0, dj)))
+            src = (slice(max(0, -di), w + min(0, -di)), slice(max(0, -dj), h + min(0, -dj)))
+            self.steps.append((dst, src, blocked[dst] + spacing * math.hypot(di, dj)))
 
-    def __call__(self, points: np.ndarray) -> np.ndarray:
-        """Distance (m) to the goal from each point: the best of its four surrounding cells plus the straight step to it."""
-        rel = (np.asarray(points, dtype=complex) - self.origin) / self.spacing
-        w, h = self.distance.shape
+    def index(self, point: complex) -> tuple[int, int]:
+        """The cell nearest ``point`` (clipped to the grid)."""
+        w, h = self.free.shape
+        rel = (point - self.origin) / self.spacing
+        return min(max(int(round(rel.real)), 0), w - 1), min(max(int(round(rel.imag)), 0), h - 1)
+
+    def lookup(self, distance: np.ndarray, points: np.ndarray, world: np.ndarray) -> np.ndarray:
+        """Distances (K, W, H) read at ``points`` of worlds ``world`` (same shape): the best of the four surrounding
+        cells plus the straight step to it."""
+        points = np.asarray(points, dtype=complex)
+        rel = (points - self.origin) / self.spacing
+        w, h = self.free.shape
         i0 = np.clip(np.floor(rel.real).astype(np.int64), 0, w - 2)
         j0 = np.clip(np.floor(rel.imag).astype(np.int64), 0, h - 2)
         best = np.full(rel.shape, np.inf)
         for di in (0, 1):
             for dj in (0, 1):
                 i, j = i0 + di, j0 + dj
-                best = np.minimum(best, self.distance[i, j] + np.abs(self.cells[i, j] - points))
+                best = np.minimum(best, distance[world, i, j] + np.abs(self.cells[i, j] - points))
         return best
+
+
+class GeodesicField:
+    """Shortest-path distance to one goal over a grid's free cells (8-connected, computed at construction)."""
+
+    def __init__(self, grid: GoalGrid, goal: complex):
+        self.grid = grid
+        gi, gj = grid.index(goal)
+        distance = np.full(grid.free.shape, np.inf)
+        distance[gi, gj] = abs(grid.cells[gi, gj] - goal)  # the goal's own cell seeds the wave even when it sits in the margin
+        self.distance = _relax(distance, grid)
+
+    def __call__(self, points: np.ndarray) -> np.ndarray:
+        """Distance (m) to the goal from each point."""
+        points = np.asarray(points, dtype=complex)
+        return self.grid.lookup(self.distance[None], points, np.zeros(points.shape, dtype=np.int64))
 
 
 _NEIGHBOURS = [(di, dj) for di in (-1, 0, 1) for dj in (-1, 0, 1) if di or dj]
 
 
-def _relax(distance: np.ndarray, free: np.ndarray, spacing: float) -> np.ndarray:
-    """Bellman-Ford on the 8-connected grid of ``free`` cells, whole-array updates until nothing changes."""
-    w, h = distance.shape
+def _relax(distance: np.ndarray, grid: GoalGrid) -> np.ndarray:
+    """Bellman-Ford on the 8-connected grid of free cells, whole-array updates until nothing changes."""
     while True:
         before = distance.copy()
-        for di, dj in _NEIGHBOURS:
-            step = spacing * math.hypot(di, dj)
-            dst = (slice(max(0, di), w + min(0, di)), slice(max(0, dj), h + min(0, dj)))
-            src = (slice(max(0, -di), w + min(0, -di)), slice(max(0, -dj), h + min(0, -dj)))
-            np.minimum(distance[dst], np.where(free[dst], distance[src] + step, np.inf), out=distance[dst])
+        for dst, src, enter in grid.steps:
+            np.minimum(distance[dst], distance[src] + enter, out=distance[dst])
         if np.array_equal(before, distance):
             return distance
