@@ -50,8 +50,10 @@ class PlanModality(Modality):
 
     def observe(self, sim: Simulator) -> np.ndarray:
         rows = self.tracker.observe(sim)[None]
-        return self._actions(np.array([sim.robot_position]), np.array([sim.robot_heading]), np.array([complex(sim.velocities[0])]),
-                             np.array([sim.robot_goal]), rows)[0]
+        actions = self._actions(np.array([sim.robot_position]), np.array([sim.robot_heading]), np.array([complex(sim.velocities[0])]),
+                                np.array([sim.robot_goal]), rows)
+        one: np.ndarray = actions[0]
+        return one
 
     def observe_batch(self, state: BatchState) -> np.ndarray:
         rows = self.tracker.observe_batch(state)
