@@ -9,7 +9,7 @@ scenario's walking groups use and their composition (docs/architecture.md, "How 
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
 from typing import overload
 
 import numpy as np
@@ -106,6 +106,10 @@ class _Instances(Sequence[CrowdModel]):
 
     def __len__(self) -> int:
         return len(self._worlds)
+
+    def __iter__(self) -> Iterator[CrowdModel]:
+        name = self._name
+        return (crowd.models[name] for crowd in self._worlds)
 
     @overload
     def __getitem__(self, k: int) -> CrowdModel: ...

@@ -3,11 +3,13 @@
 Every human is an ORCA agent (so ORCA humans also avoid social-force and standing ones), and so
 is each robot when the humans see it (``humans.see_robot``), at its current velocity; the
 commands of every human come back, and the crowd uses those of its ORCA groups. A pyrvo solver
-holds one world's agents, so a batch steps its worlds one by one, each with its own instance
-(the default :meth:`crowdnav.crowd.base.CrowdModel.commands_batch`).
+holds one world's agents, so a batch steps its worlds one by one, each with its own instance.
 """
 
 from __future__ import annotations
+
+from collections.abc import Sequence
+from typing import cast
 
 import numpy as np
 
@@ -42,8 +44,18 @@ class OrcaModel(CrowdModel):
             solver.configure(view.agent_radii[robots:], view.human_max_speed)
 
     def commands(self, view: CrowdView) -> np.ndarray:
+        return self._velocities(view.robot_count, view.agent_positions, view.agent_velocities, view.human_goals, view.human_preferred_speed)
+
+    def commands_batch(self, view: CrowdView, worlds: Sequence[CrowdModel]) -> np.ndarray:
+        """World by world (a pyrvo solver holds one world's agents), each world's own solver on its row."""
         robots, positions, velocities = view.robot_count, view.agent_positions, view.agent_velocities
-        preferred = toward_goal(view.human_goals - positions[robots:], view.human_preferred_speed, self.dt)
+        goals, speeds = view.human_goals, view.human_preferred_speed
+        return np.stack([cast(OrcaModel, model)._velocities(robots, positions[k], velocities[k], goals[k], speeds[k])
+                         for k, model in enumerate(worlds)])
+
+    def _velocities(self, robots: int, positions: np.ndarray, velocities: np.ndarray, goals: np.ndarray, speeds: np.ndarray) -> np.ndarray:
+        """(n,) ORCA velocities of one world's humans (agents: the robots first)."""
+        preferred = toward_goal(goals - positions[robots:], speeds, self.dt)
         if self._see_robot:  # the robots keep their course, as far as ORCA's humans can tell
             return self._solver.velocities(positions, velocities, np.concatenate([velocities[:robots], preferred]))[robots:]
         return self._solver.velocities(positions[robots:], velocities[robots:], preferred)

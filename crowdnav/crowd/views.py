@@ -7,7 +7,6 @@ the social force's commands are computed once per view, on first use.
 from __future__ import annotations
 
 from collections.abc import Callable
-from functools import cached_property
 from typing import TYPE_CHECKING, Protocol
 
 import numpy as np
@@ -126,33 +125,40 @@ class BatchView:
         self.agent_radii = radii
         self.robot_max_speeds = np.atleast_1d(robot_max_speed)
         self._social_force = social_force
+        self._rows_of: dict[str, np.ndarray] = {}
 
-    @cached_property
+    def _field(self, name: str) -> np.ndarray:
+        """The rows of the state's field ``name``, taken once per view."""
+        value = self._rows_of.get(name)
+        if value is None:
+            value = self._rows_of[name] = _take(getattr(self._state, name), self._rows)
+        return value
+
+    @property
     def human_goals(self) -> np.ndarray:
-        return _take(self._state.human_goals, self._rows)
+        return self._field("human_goals")
 
-    @cached_property
+    @property
     def human_preferred_speed(self) -> np.ndarray:
-        return _take(self._state.human_preferred_speed, self._rows)
+        return self._field("human_preferred_speed")
 
-    @cached_property
+    @property
     def human_max_speed(self) -> np.ndarray:
-        return _take(self._state.human_max_speed, self._rows)
+        return self._field("human_max_speed")
 
-    @cached_property
+    @property
     def human_group(self) -> np.ndarray:
-        return _take(self._state.human_group, self._rows)
+        return self._field("human_group")
 
-    @cached_property
+    @property
     def step_count(self) -> np.ndarray:
-        return _take(self._state.step_count, self._rows)
-
-    @cached_property
-    def _social(self) -> np.ndarray:
-        return self._social_force()
+        return self._field("step_count")
 
     def social_force(self) -> np.ndarray:
-        return self._social
+        value = self._rows_of.get("social_force")
+        if value is None:
+            value = self._rows_of["social_force"] = self._social_force()
+        return value
 
     def world(self, k: int) -> RowView:
         return RowView(self, k)
