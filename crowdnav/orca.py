@@ -22,6 +22,7 @@ from __future__ import annotations
 import math
 from collections import OrderedDict
 from collections.abc import Callable, Sequence
+from itertools import chain
 from typing import Any
 
 import numpy as np
@@ -95,6 +96,8 @@ class OrcaSolver:
         self._margin = params.safety_margin
         list(map(sim.add_agent, [(0.0, 0.0)] * count))
         self._vector = pyrvo.Vector2.to_tuple
+        self._held: np.ndarray | None = None
+        """(2 count,) int64: the bits of the velocities RVO2 holds (those it last returned, as float64), None before the first step."""
         self.episode: object = None
         """A caller's token for the episode the agents were last configured for."""
 
@@ -105,13 +108,27 @@ class OrcaSolver:
         list(map(sim.set_agent_max_speed, self._ids, np.asarray(max_speeds, dtype=float).tolist()))
 
     def velocities(self, positions: np.ndarray, velocities: np.ndarray, preferred: np.ndarray) -> np.ndarray:
-        """(count,) complex: ORCA's new velocity of every agent (m/s) from their positions, velocities and preferred velocities."""
+        """(count,) complex: ORCA's new velocity of every agent (m/s) from their positions, velocities and preferred velocities.
+
+        A velocity is set only where it differs, bit for bit, from the one RVO2 holds (its answer of
+        the step before, which agents moved by it keep): the same inputs reach RVO2 in fewer calls.
+        """
         sim, ids = self._sim, self._ids
         list(map(sim.set_agent_position, ids, _pairs(positions)))
-        list(map(sim.set_agent_velocity, ids, _pairs(velocities)))
+        velocities = np.ascontiguousarray(velocities, dtype=np.complex128)
+        held, self._held = self._held, None  # unknown until RVO2 answers (if a call below raised)
+        if held is None:
+            list(map(sim.set_agent_velocity, ids, _pairs(velocities)))
+        else:
+            differs = velocities.view(np.int64) != held  # x, y, x, y, ...
+            stale = np.flatnonzero(differs[0::2] | differs[1::2])
+            if len(stale):
+                list(map(sim.set_agent_velocity, stale.tolist(), _pairs(velocities[stale])))
         list(map(sim.set_agent_pref_velocity, ids, _pairs(preferred)))
         sim.do_step()
-        xy = np.array(list(map(self._vector, map(sim.get_agent_velocity, ids))), dtype=float).reshape(self.count, 2)
+        xy = np.fromiter(chain.from_iterable(map(self._vector, map(sim.get_agent_velocity, ids))), dtype=float, count=2 * self.count)
+        self._held = xy.view(np.int64)
+        xy = xy.reshape(self.count, 2)
         return xy[:, 0] + 1j * xy[:, 1]
 
 
