@@ -207,7 +207,10 @@ class Simulator(StateFields, RobotAccessors, SimGeometry):
         )
         self._use_pair_constants(n)
         self._ready = True
-        self.crowd.start_episode(WorldView(self))
+        self.crowd.start_episode(WorldView(self), rng)
+        if self.crowd.places:  # recorded people where the recording has them, stopped humans for the whole episode
+            for index, _, _ in self._place_humans():
+                self._state.human_stopped[index] = True
 
     def pair_constants(self, n: int) -> PairConstants:
         """The repulsion constants of a crowd of ``n`` humans (:func:`crowdnav.sim_state.pair_constants`, cached per ``n``)."""
@@ -295,6 +298,9 @@ class Simulator(StateFields, RobotAccessors, SimGeometry):
         if n and self._humans_touch:  # a human touches someone or something
             self._resolve_human_overlaps()
             self.refresh()
+        if n and self.crowd.places:  # after the pushes: placed humans are exactly where their model puts them
+            self._place_humans()
+            self.refresh()
         truncated = state.step_count >= self.scenario.max_steps
         collision = self.robot_collision()
         left_world = self.robot_left_world()
@@ -318,6 +324,15 @@ class Simulator(StateFields, RobotAccessors, SimGeometry):
     def crowd_commands(self) -> np.ndarray:
         """(n_humans,) complex velocity commands (m/s) of the crowd's models in the current state (stopped humans not zeroed)."""
         return self.crowd.commands(WorldView(self))
+
+    def _place_humans(self) -> list[tuple[np.ndarray, np.ndarray, np.ndarray]]:
+        """Put the humans of placing models (:attr:`crowdnav.crowd.Crowd.places`) where they say; returns what they said."""
+        placed = self.crowd.place(WorldView(self))
+        state = self._state
+        for index, positions, velocities in placed:
+            state.positions[1:][index] = positions
+            state.velocities[1:][index] = velocities
+        return placed
 
     def social_force_commands(self) -> np.ndarray:
         """(n_humans,) complex velocity commands (m/s) of the social-force model in the current state."""

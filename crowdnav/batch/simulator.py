@@ -288,10 +288,24 @@ class BatchSimulator:
             if len(touch):
                 self._resolve_overlaps(bucket, touch)
                 self._refresh(bucket, touch)
+            if self._crowd.places:  # after the pushes, as Simulator.step: placed humans where their model puts them
+                self._place(bucket, rows)
+                self._refresh(bucket, rows)
         self._robot_events(bucket, rows, result)
         if n:
             self._goal_rules(bucket, rows)
         result.truncated[bucket.world[rows]] = state.step_count[rows] >= self.scenario.max_steps
+
+    def _place(self, bucket: Bucket, rows: np.ndarray) -> None:
+        """:meth:`Simulator._place_humans` for ``rows``, world by world (each world's own model instances, e.g. its recording window)."""
+        state = bucket.state
+        positions, velocities = state.positions[rows], state.velocities[rows]
+        view = BatchView(state, rows, positions, velocities, bucket.radii, self.scenario.robot.max_speed,
+                         lambda: self.social_force_commands(bucket, rows, positions, velocities))
+        for k, row in enumerate(rows):  # per world
+            for index, placed, moving in self._crowds[bucket.world[row]].place(view.world(k)):
+                state.positions[row, 1:][index] = placed
+                state.velocities[row, 1:][index] = moving
 
     def social_force_commands(self, bucket: Bucket, rows: np.ndarray, positions: np.ndarray, velocities: np.ndarray) -> np.ndarray:
         """(K, n) :meth:`Simulator.social_force_commands` of ``rows``, every world's at once (``positions`` and ``velocities``:

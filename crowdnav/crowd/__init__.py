@@ -16,15 +16,16 @@ import numpy as np
 
 from crowdnav.crowd.base import CrowdModel, CrowdView
 from crowdnav.crowd.orca import OrcaModel
+from crowdnav.crowd.replay import ReplayModel
 from crowdnav.crowd.social_force import SocialForceModel
 from crowdnav.errors import CrowdNavError
 from crowdnav.scenario import crowd as crowd_schema
 from crowdnav.scenario.errors import ScenarioError, ScenarioIssue
 from crowdnav.world import CompiledWorld
 
-__all__ = ["CROWD_MODELS", "Crowd", "CrowdModel", "CrowdView", "OrcaModel", "SocialForceModel"]
+__all__ = ["CROWD_MODELS", "Crowd", "CrowdModel", "CrowdView", "OrcaModel", "ReplayModel", "SocialForceModel"]
 
-CROWD_MODELS: dict[str, type[CrowdModel]] = {model.name: model for model in (SocialForceModel, OrcaModel)}
+CROWD_MODELS: dict[str, type[CrowdModel]] = {model.name: model for model in (SocialForceModel, OrcaModel, ReplayModel)}
 """Model name -> class: every crowd model a scenario may name; the first is the default (``humans.model``'s)."""
 
 if tuple(CROWD_MODELS) != crowd_schema.CROWD_MODEL_NAMES:
@@ -59,6 +60,9 @@ class Crowd:
                 issue = ScenarioIssue(_field_asking(world, name), str(error))
                 raise (world.source.error([issue]) if world.source is not None else ScenarioError("scenario", [issue])) from None
         self._only = next(iter(self.models.values())) if len(self.models) == 1 else None
+        self._placing = [model for model in self.models.values() if model.places]
+        self.places = bool(self._placing)
+        """Whether a model puts its humans where they are (after the step's pushes; :meth:`place`)."""
         self._covers = {name: np.array([group.standing or group.model == name for group in groups]) for name in self.models}
         """Model name -> (groups,) whether each group's humans take that model's command (standing ones: every model)."""
 
@@ -71,10 +75,14 @@ class Crowd:
         covers: np.ndarray = self._covers[name][human_group]
         return covers
 
-    def start_episode(self, view: CrowdView) -> None:
-        """Every model's :meth:`CrowdModel.start_episode` for the episode just drawn."""
+    def start_episode(self, view: CrowdView, rng: np.random.Generator) -> None:
+        """Every model's :meth:`CrowdModel.start_episode` for the episode just drawn (``rng``: the episode's generator)."""
         for model in self.models.values():
-            model.start_episode(view)
+            model.start_episode(view, rng)
+
+    def place(self, view: CrowdView) -> list[tuple[np.ndarray, np.ndarray, np.ndarray]]:
+        """(index, positions, velocities) of every model that :attr:`CrowdModel.places` its humans (one world)."""
+        return [model.place(view) for model in self._placing]
 
     def commands(self, view: CrowdView) -> np.ndarray:
         """(n,) complex: every human's command in one world, from its group's model."""

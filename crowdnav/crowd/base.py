@@ -95,6 +95,8 @@ class CrowdModel:
 
     name: ClassVar[str]
     """The model's name in a scenario (``humans.model`` / a group's ``model``) and in :data:`crowdnav.crowd.CROWD_MODELS`."""
+    places: ClassVar[bool] = False
+    """Whether the model puts its humans where they are (:meth:`place`) instead of commanding their velocity."""
 
     def __init__(self, world: CompiledWorld):
         """Read what the model needs from the compiled world (parameters, obstacles).
@@ -105,8 +107,9 @@ class CrowdModel:
         self.world = world
         self.dt = world.scenario.time_step
 
-    def start_episode(self, view: CrowdView) -> None:
-        """A new episode was drawn (one-world ``view``): set any per-episode state (default: none)."""
+    def start_episode(self, view: CrowdView, rng: np.random.Generator) -> None:
+        """A new episode was drawn (one-world ``view``; ``rng``: the episode's generator, for any draw): set any
+        per-episode state (default: none)."""
 
     def commands(self, view: CrowdView) -> np.ndarray:
         """(n,) complex: a velocity command (m/s) for every human of the one-world ``view``; only those of the
@@ -117,3 +120,9 @@ class CrowdModel:
         """(K, n) complex: :meth:`commands` of every world of the K-world ``view``; ``worlds[k]`` is world k's own
         instance of this model. Default: world by world (each world's instance on its row)."""
         return np.stack([model.commands(view.world(k)) for k, model in enumerate(worlds)])
+
+    def place(self, view: CrowdView) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """For a model that :attr:`places`: (index, positions, velocities), its humans (indices among the humans) and where
+        they are now, after the step's moves and pushes (one-world ``view``; its ``step_count`` already counts this step).
+        Its humans are stopped humans for the simulator (no command, goal rule or stall check)."""
+        raise NotImplementedError(f"{type(self).__name__} places its humans and must implement place(view)")

@@ -32,7 +32,7 @@ class OrcaModel(CrowdModel):
         self._solvers = SolverCache()
         """The solvers of the last few episodes' agent counts."""
 
-    def start_episode(self, view: CrowdView) -> None:
+    def start_episode(self, view: CrowdView, rng: np.random.Generator) -> None:
         """Pick (or build) the solver for this episode's agents and set their radii and max speeds."""
         robots = view.robot_count
         n = len(view.human_max_speed)

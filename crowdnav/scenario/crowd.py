@@ -132,7 +132,7 @@ class GroupForce(StrictModel):
     )
 
 
-CROWD_MODEL_NAMES: tuple[str, ...] = ("social_force", "orca")
+CROWD_MODEL_NAMES: tuple[str, ...] = ("social_force", "orca", "replay")
 """The crowd models a scenario may name (``humans.model``, a group's ``model``), the default first: one per class of
 :data:`crowdnav.crowd.CROWD_MODELS`, in the same order (importing :mod:`crowdnav.crowd` checks it). A new model adds its name here."""
 
@@ -164,6 +164,22 @@ class Orca(StrictModel):
         default=2.0, description="Velocities are chosen collision-free with walls and furniture for this long (s)."
     )
     safety_margin: NonNegativeFloat = Field(default=0.01, description="Added to every body radius ORCA sees (m).")
+
+
+class Replay(StrictModel):
+    """The recording that humans with ``model: replay`` follow (docs/simulator.md#recorded-crowds)."""
+
+    file: str = Field(
+        min_length=1, max_length=4096, description="The recording: an ETH/UCY obsmat.txt, a 'frame id x y' text file or TrajNet++ ndjson; "
+        "a relative path is read from the scenario file's folder and must stay inside it.",
+    )
+    format: Literal["auto", "obsmat", "frames", "trajnet"] = Field(
+        default="auto", description="The file's layout; auto: TrajNet++ for .ndjson/.json or JSON lines, else by the column count (8 or 4)."
+    )
+    annotation_step: PositiveFloat = Field(
+        default=0.4, description="Seconds between two annotations (ETH/UCY: 0.4); a TrajNet++ file's scene fps overrides it."
+    )
+    offset: Point = Field(default=(0.0, 0.0), description="Added to every recorded position [x, y] (m), to place the recording in the world.")
 
 
 def _check_count(count: int | tuple[int, int]) -> int | tuple[int, int]:
@@ -312,6 +328,26 @@ class Humans(StrictModel):
     )
     stall: Stall = Field(default_factory=Stall, description="Stalled humans: no progress toward their goal for a while gives them a new goal.")
     orca: Orca = Field(default_factory=Orca, description="ORCA parameters (humans with model: orca, the ORCA robot baseline).")
+    replay: Replay | None = Field(default=None, description="The recording humans with model: replay follow (null: none).")
+
+    @model_validator(mode="after")
+    def _replay_has_a_recording(self) -> Humans:
+        replaying = [(path, group) for path, group in self.crowd if not group.standing and group.model == "replay"]
+        if not replaying:
+            return self
+        path = replaying[0][0]
+        where = "model" if path == "humans" else f"{path.removeprefix('humans.')}.model"
+        if self.replay is None:
+            raise _field_error(tuple(where.split(".")) if "." in where else where, "replay",
+                               "model replay needs a recording: add humans.replay with its file")
+        if len(replaying) > 1:
+            raise _field_error(tuple(replaying[1][0].removeprefix("humans.").split(".")) + ("model",), "replay",
+                               "one group may replay the recording; expected model replay on one group only")
+        if isinstance(replaying[0][1].count, tuple):
+            raise _field_error(tuple(path.removeprefix("humans.").split(".")) + ("count",) if path != "humans" else "count",
+                               list(replaying[0][1].count), "the replaying group's count is its number of places for recorded "
+                               "people (those present at once); expected one number, not a range")
+        return self
 
     @model_validator(mode="after")
     def _one_way_to_describe_the_crowd(self) -> Humans:

@@ -55,10 +55,10 @@ def toy_models(monkeypatch):
 
 
 def test_the_registry_and_the_schema_name_the_same_models_in_the_same_order():
-    assert tuple(CROWD_MODELS) == crowd_schema.CROWD_MODEL_NAMES == ("social_force", "orca")
+    assert tuple(CROWD_MODELS) == crowd_schema.CROWD_MODEL_NAMES == ("social_force", "orca", "replay")
     assert all(cls.name == name for name, cls in CROWD_MODELS.items())
     schema = json.dumps(Scenario.model_json_schema())
-    assert '"enum": ["social_force", "orca"]' in schema  # humans.model and a group's model list the registered names
+    assert '"enum": ["social_force", "orca", "replay"]' in schema  # humans.model and a group's model list the registered names
 
 
 @pytest.mark.usefixtures("toy_models")
@@ -100,7 +100,7 @@ def test_a_toy_model_mixes_with_the_social_force_group_by_group_in_both_simulato
 
 
 def test_an_unknown_model_is_refused_by_the_schema_and_a_name_without_a_class_at_load(monkeypatch):
-    with pytest.raises(ScenarioError, match=r"humans.model: expected one of 'social_force', 'orca', got 'toward_goal'"):
+    with pytest.raises(ScenarioError, match=r"humans.model: expected one of 'social_force', 'orca', 'replay', got 'toward_goal'"):
         load_world("open_space", {"humans.model": "toward_goal"})
     monkeypatch.setattr(crowd_schema, "CROWD_MODEL_NAMES", (*crowd_schema.CROWD_MODEL_NAMES, "toward_goal"))  # the schema only
     world = load_world("open_space", {"humans.model": "toward_goal"})

@@ -59,7 +59,7 @@ def test_writing_model_social_force_gives_the_default_episode_bit_for_bit():
 def test_an_unknown_model_name_is_one_line_naming_the_field_and_the_choices():
     with pytest.raises(ScenarioError) as error:
         load_world("open_space", {"humans.model": "rvo"})
-    assert "humans.model: expected one of 'social_force', 'orca', got 'rvo'" in str(error.value)
+    assert "humans.model: expected one of 'social_force', 'orca', 'replay', got 'rvo'" in str(error.value)
     assert len(str(error.value).splitlines()) == 1
 
 
