@@ -181,7 +181,9 @@ def test_the_native_vector_env_with_orca_humans_equals_the_sync_one():
 
     import crowdnav  # noqa: F401  (registers the ids)
 
-    options = {"num_envs": 3, "modalities": ["goal", "lidar"], "overrides": {**ORCA, "humans.see_robot": True}}
+    together = [i for i, group in enumerate(load_world("station_hall").scenario.humans.groups) if group.walk_together]
+    apart = {f"humans.groups.{i}.walk_together": False for i in together}  # walking together is social force's (refused with ORCA)
+    options = {"num_envs": 3, "modalities": ["goal", "lidar"], "overrides": {**ORCA, **apart, "humans.see_robot": True}}
     native = gym.make_vec("crowdnav/StationHall-v0", vectorization_mode="vector_entry_point", **options)
     sync = gym.make_vec("crowdnav/StationHall-v0", vectorization_mode="sync", **options)
     first, second = native.reset(seed=3), sync.reset(seed=3)
