@@ -120,8 +120,8 @@ class OrcaSolver:
         if held is None:
             list(map(sim.set_agent_velocity, ids, _pairs(velocities)))
         else:
-            differs = velocities.view(np.int64) != held  # x, y, x, y, ...
-            stale = np.flatnonzero(differs[0::2] | differs[1::2])
+            # one byte per x and per y, read two at a time: an agent whose x or y differs
+            stale = np.flatnonzero(np.not_equal(velocities.view(np.int64), held).view(np.int16))
             if len(stale):
                 list(map(sim.set_agent_velocity, stale.tolist(), _pairs(velocities[stale])))
         list(map(sim.set_agent_pref_velocity, ids, _pairs(preferred)))
