@@ -31,10 +31,9 @@ import platform
 import statistics
 import time
 from importlib.metadata import version
+from typing import Any
 
 import numpy as np
-from navground import core
-from navground import sim as nav
 
 from crowdnav import Simulator
 from crowdnav.batch.simulator import BatchSimulator
@@ -57,8 +56,11 @@ def overrides(n: int) -> dict:
             "robot.goal": {"type": "points", "points": [[corner - 1.0, corner]]}, "max_steps": 100_000}
 
 
-def navground_world(simulator: Simulator) -> nav.World:
+def navground_world(simulator: Simulator) -> Any:
     """navground's world with the humans of ``simulator``'s current state (positions, goals, speeds) and its ORCA parameters."""
+    from navground import core
+    from navground import sim as nav
+
     params, tolerance = simulator.scenario.humans.orca, simulator.scenario.humans.social_force.goal_tolerance
     world = nav.World()
     for position, goal, speed, top in zip(simulator.human_positions, simulator.human_goals, simulator.human_preferred_speed,
@@ -113,7 +115,7 @@ def time_batch(batch: BatchSimulator, steps: int, seed: int) -> float:
     return time.perf_counter() - start
 
 
-def time_navground(world: nav.World, steps: int) -> float:
+def time_navground(world: Any, steps: int) -> float:
     update = world.update
     start = time.perf_counter()
     for _ in range(steps):
