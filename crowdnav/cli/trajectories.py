@@ -87,6 +87,12 @@ def _record(args: argparse.Namespace) -> int:
 
     if args.episodes < 1:
         raise CliError(f"--episodes must be at least 1, got {args.episodes}")
+    from crowdnav.agents.seeding import check_test_seeds
+
+    try:  # the held-out seeds evaluate plays: never a run's training seeds
+        check_test_seeds(args.test_seed_base, args.episodes)
+    except ValueError as error:
+        raise CliError(f"--test-seed-base / --episodes: {error}") from None
     modalities = [key.strip() for key in args.modalities.split(",") if key.strip()] if args.modalities else None
     try:
         episodes = record_policy(args.source, args.scenario, modalities=modalities, episodes=args.episodes,

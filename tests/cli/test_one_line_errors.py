@@ -195,3 +195,13 @@ def test_the_vector_env_refuses_seeds_the_single_env_refuses(seed):
     assert "\n" not in str(caught.value)
     env.reset(seed=np.int64(3))  # numpy integers and lists of them are seeds
     env.reset(seed=[4, None])
+
+
+def test_trajectories_of_a_policy_refuses_training_seeds_in_one_line(capsys):
+    from crowdnav.cli import main
+
+    code = main(["trajectories", "baseline:straight", "--scenario", "open_space", "--test-seed-base", "999990", "--episodes", "20",
+                 "--out", "unused"])
+    error = capsys.readouterr().err.strip()
+    assert code != 0 and "Traceback" not in error and len(error.splitlines()) == 1
+    assert "999,990-1,000,009" in error and "training" in error
