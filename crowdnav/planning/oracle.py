@@ -28,6 +28,10 @@ from crowdnav.planning.static_map import MapCache, StaticMap
 from crowdnav.robot_view import RobotWorld
 
 STILL = np.zeros(2, dtype=np.float32)
+MAX_CELLS = 50_000_000
+"""Most lattice cells the oracle searches over an episode (remaining steps x cells over the world, about 4 bytes each):
+the largest library scenario needs 3.3 million; a bigger world, a finer lattice or a longer episode is refused in one line
+(:class:`PlannerUnavailable`) before the crowd is played forward or anything is allocated."""
 MAX_EPISODES = 1024
 """Plans an oracle keeps at once (one per episode it drives; the oldest dropped)."""
 EPSILON = 1e-9
@@ -109,11 +113,16 @@ class OraclePlanner:
 
     def plan(self, sim: RobotWorld) -> dict[int, complex]:
         """Step -> planned robot position, from the current step to the goal (empty: no collision-free arrival exists)."""
-        future = self.future(sim)
+        check_plannable(sim, "the oracle", needs_fixed_future=True)
         robot, step0 = sim.scenario.robot, sim.state.step_count  # type: ignore[attr-defined]
         lattice = Lattice(self.cells_per_step, robot.max_speed * sim.dt / self.cells_per_step)
         x0, y0, x1, y1 = self.static_map(sim).bounds
         here, h = sim.robot_position, lattice.spacing
+        remaining = max(1, sim.scenario.max_steps - step0)
+        if remaining * ((x1 - x0) / h + 3) * ((y1 - y0) / h + 3) > MAX_CELLS:
+            raise PlannerUnavailable(f"the oracle: {remaining} steps on a {x1 - x0:g} m x {y1 - y0:g} m world at {h:g} m cells "
+                                     f"(cells_per_step {self.cells_per_step}) exceed its limit of {MAX_CELLS:,} lattice cells")
+        future = self.future(sim)
         lo_i, lo_j = math.floor((x0 - here.real) / h), math.floor((y0 - here.imag) / h)
         w, hh = math.ceil((x1 - here.real) / h) - lo_i + 1, math.ceil((y1 - here.imag) / h) - lo_j + 1
         origin = here + complex(lo_i, lo_j) * h

@@ -25,7 +25,7 @@ import numpy as np
 
 from crowdnav.planning.lattice import Lattice, SearchLayers, disc_cells, search, shifted
 from crowdnav.planning.oracle import EPSILON, check_plannable, to_action
-from crowdnav.planning.static_map import MapCache, StaticMap
+from crowdnav.planning.static_map import RASTER, MapCache, StaticMap, grid_shape
 from crowdnav.robot_view import RobotWorld
 from crowdnav.world import CompiledWorld
 
@@ -66,6 +66,10 @@ class CrowdEstimate:
                    velocities[None].astype(complex), radii[None].astype(float), np.ones((1, len(positions)), dtype=bool))
 
 
+MAX_WINDOW_CELLS = 4_000_000
+"""Most cells of one world's local lattice over the horizon (steps x side x side, side = 2 * steps * cells_per_step + 1):
+e.g. a 10 s horizon at 2 cells per step and dt 0.2 s; bigger settings are refused in one line before any allocation."""
+
 PREDICTIONS = ("constant_velocity", "frozen")
 """How a planner may predict the humans (:attr:`PlannerSettings.prediction`)."""
 
@@ -90,14 +94,24 @@ class PlannerSettings:
     def __post_init__(self) -> None:
         for name in ("horizon", "human_margin", "static_margin", "map_spacing"):
             value = getattr(self, name)
-            if not (isinstance(value, (int, float)) and math.isfinite(value) and value >= 0):
+            if isinstance(value, bool) or not (isinstance(value, (int, float)) and math.isfinite(value) and value >= 0):
                 raise ValueError(f"{name} must be a finite number >= 0, got {value!r}")
         if self.map_spacing <= 0 or self.horizon <= 0:
             raise ValueError(f"horizon and map_spacing must be > 0, got {self.horizon!r} and {self.map_spacing!r}")
         if self.prediction not in PREDICTIONS:
             raise ValueError(f"prediction must be one of {PREDICTIONS}, got {self.prediction!r}")
-        if not isinstance(self.cells_per_step, int) or not 1 <= self.cells_per_step <= 8:
+        if isinstance(self.cells_per_step, bool) or not isinstance(self.cells_per_step, int) or not 1 <= self.cells_per_step <= 8:
             raise ValueError(f"cells_per_step must be an integer in [1, 8], got {self.cells_per_step!r}")
+
+    def window(self, dt: float) -> tuple[int, int]:
+        """``(steps, centre)`` of the local lattice at time step ``dt``; a one-line ValueError over :data:`MAX_WINDOW_CELLS`."""
+        steps = max(1, int(round(min(self.horizon / dt, 1e12))))
+        side = 2 * steps * self.cells_per_step + 1
+        if steps * side * side > MAX_WINDOW_CELLS:
+            raise ValueError(f"planner settings: horizon {self.horizon:g} s at cells_per_step {self.cells_per_step} and time step {dt:g} s "
+                             f"is a {steps}-step lattice of {side} x {side} cells per step, over the limit of {MAX_WINDOW_CELLS:,} "
+                             "cells (a shorter horizon or fewer cells per step)")
+        return steps, steps * self.cells_per_step
 
 
 class PredictivePlanner:
@@ -115,6 +129,7 @@ class PredictivePlanner:
 
     def __call__(self, sim: RobotWorld) -> np.ndarray:
         check_plannable(sim, "the predictive planner", needs_fixed_future=False)
+        self.check(sim.world, sim.dt)
         move = self.plan(sim.world, sim.dt, CrowdEstimate.from_sim(sim))[0]
         return to_action(sim, complex(move))
 
@@ -122,12 +137,19 @@ class PredictivePlanner:
         """The map of ``world`` for its robot (one per scenario)."""
         return self.maps.map(world)
 
+    def check(self, world: CompiledWorld, dt: float) -> None:
+        """Refuse in one line, before anything is allocated, settings or a world too large to plan in (the lattice, the maps)."""
+        self.settings.window(dt)
+        box = world.scenario.world
+        bounds = (float(box.min[0]), float(box.min[1]), float(box.max[0]), float(box.max[1]))
+        grid_shape(bounds, RASTER, "the planners' clearance raster")
+        grid_shape(bounds, self.settings.map_spacing, "the goal-distance grid (map_spacing)")
+
     def layers(self, world: CompiledWorld, dt: float, crowd: CrowdEstimate) -> Layers:
         """The local lattice of K worlds around their robots and its free cells at each predicted step."""
         s, robot = self.settings, world.scenario.robot
         lattice = Lattice(s.cells_per_step, robot.max_speed * dt / s.cells_per_step)
-        steps = max(1, int(round(s.horizon / dt)))
-        centre = steps * s.cells_per_step
+        steps, centre = s.window(dt)
         side = 2 * centre + 1
         k = len(crowd.robot)
         span = np.arange(-centre, centre + 1) * lattice.spacing

@@ -100,4 +100,6 @@ def validate_shield(option: Any, world: CompiledWorld) -> Shield | None:
         raise ValueError(f"shield: plans lattice moves for a holonomic robot; this scenario's robot is {world.scenario.robot.kinematics}")
     if not math.isfinite(settings.horizon):
         raise ValueError("shield: horizon must be finite")
-    return Shield(world, settings)
+    shield = Shield(world, settings)
+    shield.planner.check(world, shield.dt)
+    return shield

@@ -12,6 +12,7 @@ import math
 
 import numpy as np
 
+from crowdnav.errors import CrowdNavError
 from crowdnav.obstacles import nearest_on_edges
 from crowdnav.world import CompiledWorld
 
@@ -19,6 +20,23 @@ RASTER = 0.05
 """Spacing (m) of the clearance raster the per-step planners read (:meth:`StaticMap.free` with ``exact=False``)."""
 POINT_CHUNK = 4096
 """Points per nearest-point query: bounds the (points x obstacles x edges) temporary to a few MB."""
+MAX_MAP_CELLS = 1_000_000
+"""Most cells of a planner's grid over the world (the clearance raster, the goal-distance grid): a 50 m x 50 m world at
+``RASTER``; a bigger world (or a finer ``map_spacing``) is refused in one line before anything is allocated."""
+
+
+class MapTooLarge(CrowdNavError, ValueError):
+    """A planner's grid over the world would exceed :data:`MAX_MAP_CELLS` (one line: the world, the spacing, the limit)."""
+
+
+def grid_shape(bounds: tuple[float, float, float, float], spacing: float, what: str) -> tuple[int, int]:
+    """``(W, H)`` of a ``spacing`` grid over ``bounds``, or a one-line :class:`MapTooLarge` over ``MAX_MAP_CELLS``."""
+    x0, y0, x1, y1 = bounds
+    cells = ((x1 - x0) / spacing + 2) * ((y1 - y0) / spacing + 2)  # float first: a tiny spacing overflows to inf, not an int
+    if not cells <= MAX_MAP_CELLS:
+        raise MapTooLarge(f"{what}: a {x1 - x0:g} m x {y1 - y0:g} m world on a {spacing:g} m grid is {cells:,.0f} cells, "
+                          f"over the planners' limit of {MAX_MAP_CELLS:,} (a smaller world or a coarser grid)")
+    return int(math.ceil((x1 - x0) / spacing)) + 1, int(math.ceil((y1 - y0) / spacing)) + 1
 
 
 class StaticMap:
@@ -58,7 +76,7 @@ class StaticMap:
         if exact:
             return inside & (self.clearance(points) > self.margin)
         if self._raster is None:
-            w, h = int(math.ceil((x1 - x0) / RASTER)) + 1, int(math.ceil((y1 - y0) / RASTER)) + 1
+            w, h = grid_shape(self.bounds, RASTER, "the planners' clearance raster")
             ii, jj = np.meshgrid(np.arange(w), np.arange(h), indexing="ij")
             self._raster = self.clearance(complex(x0, y0) + (ii + 1j * jj) * RASTER)
         w, h = self._raster.shape
@@ -133,9 +151,9 @@ class GoalGrid:
     """The grid goal distances live on: cells over the world and where the robot's centre may be (built once per map)."""
 
     def __init__(self, static_map: StaticMap, spacing: float):
-        x0, y0, x1, y1 = static_map.bounds
+        x0, y0 = static_map.bounds[:2]
         self.origin, self.spacing = complex(x0, y0), float(spacing)
-        w, h = int(math.ceil((x1 - x0) / spacing)) + 1, int(math.ceil((y1 - y0) / spacing)) + 1
+        w, h = grid_shape(static_map.bounds, spacing, "the goal-distance grid (map_spacing)")
         ii, jj = np.meshgrid(np.arange(w), np.arange(h), indexing="ij")
         self.cells = self.origin + (ii + 1j * jj) * spacing
         self.free = static_map.free(self.cells)

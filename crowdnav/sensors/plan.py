@@ -42,6 +42,7 @@ class PlanModality(Modality):
         if robot.kinematics != "holonomic":
             raise ValueError(f"modality 'plan' plans lattice moves for a holonomic robot; this robot is {robot.kinematics}")
         self.planner = PredictivePlanner()
+        self.planner.check(world, float(world.scenario.time_step))  # a world too large for the planner's maps: one line now
         self.tracker = HumansModality(world, world.scenario.sensors.humans)
         self.dt, self.max_speed = float(world.scenario.time_step), float(robot.max_speed)
 
