@@ -250,6 +250,7 @@ class Simulator(StateFields, RobotAccessors, SimGeometry):
         """
         twin = copy.copy(self)
         twin._rng = copy.deepcopy(self._rng)
+        twin.crowd = self.crowd.copy()  # a model's episode state (recorded people reacting) is the twin's own
         if self.team is not None:  # its own robots (the constants stay shared)
             twin.team = copy.copy(self.team)
             twin.team.state = self.team.state.copy()

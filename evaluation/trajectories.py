@@ -15,7 +15,9 @@ reset state first, and how often each human respawned so far). Two ways to get t
 **Tracks.** A human of a group with ``on_goal: respawn`` that reaches its goal reappears at a
 spawn point: for a trajectory predictor that is a new pedestrian, not a jump. Each life of a
 human is its own track (TrajNet++'s convention): no track moves further in one step than its
-agent's speed allows.
+agent's speed allows. A recorded crowd (``humans.model: replay``) holds its people in places
+that wait empty, parked far outside the world, between two people: an empty place has no row and
+no track line, and a person entering a place starts a new track (``respawned`` True on its first row).
 
 **Tidy table**, one row per agent and step, world frame, metres, m/s and seconds:
 
@@ -55,6 +57,7 @@ from typing import Any
 
 import numpy as np
 
+from crowdnav.crowd.replay import empty_places
 from crowdnav.errors import CrowdNavError
 
 TIDY_COLUMNS = ("test_episode", "test_seed", "outcome", "step", "time_s", "agent", "track", "respawned", "group",
@@ -69,11 +72,14 @@ def agent_names(count: int) -> list[str]:
 
 
 def _respawn_steps(states: Mapping[str, Any]) -> np.ndarray:
-    """(steps, agents) bool: True where an agent's new life starts by a respawn (the robot never respawns)."""
+    """(steps, agents) bool: True where an agent's new life starts by a respawn, or by a recorded person entering an empty place
+    (the robot never respawns)."""
     steps, agents = states["positions"].shape
     counts = np.asarray(states.get("respawns", np.zeros((steps, agents - 1), dtype=np.int64)))
     out = np.zeros((steps, agents), dtype=bool)
     out[1:, 1 : 1 + counts.shape[1]] = np.diff(counts, axis=0) > 0  # at most one respawn per human and step (other robots: never)
+    empty = empty_places(states["positions"])
+    out[1:] |= empty[:-1] & ~empty[1:]
     return out
 
 
@@ -109,14 +115,16 @@ def tidy_table(episodes: Iterable[Mapping[str, Any]]) -> Any:
         positions, velocities, goals = states["positions"], states["velocities"], states["goals"]
         steps, agents = positions.shape
         tracks, respawned = track_ids(states, episode["test_episode"], stride)
-        frames.append(pd.DataFrame({
+        table = pd.DataFrame({
             "test_episode": episode["test_episode"], "test_seed": episode["test_seed"], "outcome": episode["outcome"],
             "step": np.repeat(np.arange(steps), agents), "time_s": np.repeat(np.arange(steps) * states["dt"], agents),
             "agent": np.tile(states.get("agents", agent_names(agents)), steps), "track": tracks.ravel(), "respawned": respawned.ravel(),
             "group": np.tile(states.get("groups", ["robot", *["crowd"] * (agents - 1)]), steps),
             "x": positions.real.ravel(), "y": positions.imag.ravel(), "vx": velocities.real.ravel(), "vy": velocities.imag.ravel(),
             "goal_x": goals.real.ravel(), "goal_y": goals.imag.ravel(),
-        }))
+        })
+        empty = empty_places(positions).ravel()
+        frames.append(table[~empty].reset_index(drop=True) if empty.any() else table)
     return pd.concat(frames, ignore_index=True) if frames else pd.DataFrame(columns=list(TIDY_COLUMNS))
 
 
@@ -135,7 +143,8 @@ def trajnet_lines(episodes: Iterable[Mapping[str, Any]]) -> list[str]:
         lines.append(json.dumps({"scene": scene}))
         xs, ys = np.round(positions.real, 4).tolist(), np.round(positions.imag, 4).tolist()
         ids = tracks.tolist()
-        there = np.isfinite(positions).tolist()  # a robot that left the world (several robots) has no more track lines
+        # a robot that left the world (several robots) has no more track lines, an empty place of a recorded crowd none
+        there = (np.isfinite(positions) & ~empty_places(positions)).tolist()
         for step in range(steps):  # text output: one line per agent and frame
             lines.extend(json.dumps({"track": {"f": first_frame + step, "p": ids[step][a], "x": xs[step][a], "y": ys[step][a]}})
                          for a in range(agents) if there[step][a])

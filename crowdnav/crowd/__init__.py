@@ -9,6 +9,7 @@ scenario's walking groups use and their composition (docs/architecture.md, "How 
 
 from __future__ import annotations
 
+import copy
 from collections.abc import Iterator, Sequence
 from typing import overload
 
@@ -65,6 +66,14 @@ class Crowd:
         """Whether a model puts its humans where they are (after the step's pushes; :meth:`place`)."""
         self._covers = {name: np.array([group.standing or group.model == name for group in groups]) for name in self.models}
         """Model name -> (groups,) whether each group's humans take that model's command (standing ones: every model)."""
+
+    def copy(self) -> Crowd:
+        """This crowd for a clone of its simulator: each model's :meth:`CrowdModel.copy` (its own episode state)."""
+        twin = copy.copy(self)
+        twin.models = {name: model.copy() for name, model in self.models.items()}
+        twin._only = next(iter(twin.models.values())) if len(twin.models) == 1 else None
+        twin._placing = [model for model in twin.models.values() if model.places]
+        return twin
 
     def model(self, name: str) -> CrowdModel | None:
         """This simulator's instance of model ``name``, or None when no walking group uses it."""

@@ -107,6 +107,11 @@ class CrowdModel:
         self.world = world
         self.dt = world.scenario.time_step
 
+    def copy(self) -> CrowdModel:
+        """This model for a clone of its simulator (:meth:`crowdnav.Simulator.clone`): a model whose state changes during an
+        episode returns a copy holding its own state; default: the same instance (state set at every step, or none)."""
+        return self
+
     def start_episode(self, view: CrowdView, rng: np.random.Generator) -> None:
         """A new episode was drawn (one-world ``view``; ``rng``: the episode's generator, for any draw): set any
         per-episode state (default: none)."""

@@ -180,6 +180,13 @@ class Replay(StrictModel):
         default=0.4, description="Seconds between two annotations (ETH/UCY: 0.4); a TrajNet++ file's scene fps overrides it."
     )
     offset: Point = Field(default=(0.0, 0.0), description="Added to every recorded position [x, y] (m), to place the recording in the world.")
+    react_within: PositiveFloat | None = Field(
+        default=None, description="null: pure replay (people ignore the robot). A distance (m): a recorded person whose centre comes "
+        "within it of a robot's switches to the social force toward its recorded future position for the rest of its track.",
+    )
+    react_lookahead: PositiveFloat = Field(
+        default=2.0, description="Seconds ahead on its own recording that a reacting person walks toward (with react_within).",
+    )
 
 
 def _check_count(count: int | tuple[int, int]) -> int | tuple[int, int]:

@@ -112,7 +112,7 @@ def test_what_replay_needs_is_refused_in_one_line(recording):
         load_world("open_space", {"humans.model": "replay"})
     with pytest.raises(ScenarioError, match="humans.count: the replaying group's count is its number of places"):
         load_world("open_space", {**_replay(recording), "humans.count": [2, 3]})
-    with pytest.raises(ScenarioError, match=r"humans.model: model replay: the recording .* shows up to 3 people at once.*expected count >= 3"):
+    with pytest.raises(ScenarioError, match=r"humans.model: model replay: the recording .* needs 3 places .*expected count >= 3"):
         Simulator("open_space", {**_replay(recording), "humans.count": 2})
 
 
