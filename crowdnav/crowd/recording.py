@@ -23,8 +23,9 @@ first annotation to their last: a person is present exactly while the recording 
 
 **Checks.** The path: a relative one is resolved in the folder of the file that names it and
 must stay inside it (after ``..`` and symbolic links); the file must be a regular UTF-8 file of at
-most :data:`MAX_BYTES` bytes and :data:`MAX_ROWS` rows. Every malformed row is refused in one
-line, ``FILE:LINE: what is wrong`` (the row's content is not quoted).
+most :data:`MAX_BYTES` bytes and :data:`MAX_ROWS` rows, positions within :data:`MAX_COORDINATE` m.
+Every malformed row is refused in one line, ``FILE:LINE: what is wrong`` (the row's content is not
+quoted).
 """
 
 from __future__ import annotations
@@ -50,6 +51,8 @@ MAX_ROWS = 2_000_000
 """At most this many annotations (rows) in a recording."""
 MAX_GRID_POINTS = 20_000_000
 """At most this many (person, time step) positions after resampling (a smaller time step costs more)."""
+MAX_COORDINATE = 1_000_000.0
+"""Largest |x| or |y| (m) of a recorded position: far below where the replay parks absent people, and squared distances stay finite."""
 DEFAULT_ANNOTATION_STEP = 0.4
 """Seconds between two annotations of ETH/UCY (2.5 Hz), used unless the file says otherwise."""
 _SEPARATORS = re.compile(r"[\s,]+")
@@ -106,6 +109,8 @@ class Recording:
     """(R,) int64 person ids."""
     positions: np.ndarray
     """(R,) complex metres."""
+    format: str = "auto"
+    """The layout read (obsmat, frames or trajnet)."""
 
     @property
     def duration(self) -> float:
@@ -171,9 +176,13 @@ def read_recording(path: str | Path, fmt: RecordingFormat = "auto", annotation_s
         raise RecordingError(f"{source}: person {people[k]} has two positions at frame {frames[k]}; expected one per frame")
     distinct = np.unique(frames)
     gaps = np.diff(distinct)
-    frame_step = int(np.bincount(gaps).argmax()) if len(gaps) else 1
+    if len(gaps):  # the most common gap (the smallest of equals), counted over the distinct gaps: frames may be far apart
+        values, counts = np.unique(gaps, return_counts=True)
+        frame_step = int(values[np.argmax(counts)])
+    else:
+        frame_step = 1
     times = (frames - distinct[0]) / frame_step * step
-    return Recording(source, times.astype(float), people, positions)
+    return Recording(source, times.astype(float), people, positions, fmt)
 
 
 _FORMAT_WORDS = {"obsmat": "8 numbers (frame id x z y vx vz vy)", "frames": "4 numbers (frame id x y)",
@@ -246,6 +255,8 @@ def _parse_columns(text: str, source: str, width: int) -> tuple[np.ndarray, np.n
             raise RecordingError(f"{source}:{number}: a column is not a number; expected {width} numbers") from None
         if not all(math.isfinite(value) for value in values):
             raise RecordingError(f"{source}:{number}: a column is not finite (nan or inf); expected finite numbers")
+        if abs(values[2]) > MAX_COORDINATE or abs(values[y_column]) > MAX_COORDINATE:
+            raise RecordingError(f"{source}:{number}: a position beyond {MAX_COORDINATE:g} m; expected coordinates in metres")
         if not (_integer(values[0]) and _integer(values[1])):
             raise RecordingError(f"{source}:{number}: the frame and the id must be whole numbers")
         frames.append(int(values[0]))
@@ -269,8 +280,8 @@ def _parse_trajnet(text: str, source: str) -> tuple[np.ndarray, np.ndarray, np.n
         if kind == "scene":
             rate = body.get("fps")
             if rate is not None:
-                if isinstance(rate, bool) or not isinstance(rate, int | float) or not (math.isfinite(rate) and rate > 0):
-                    raise RecordingError(f"{source}:{number}: scene fps must be a number > 0")
+                if isinstance(rate, bool) or not isinstance(rate, int | float) or not 0 < rate <= 1e6:  # no float() of 10**400
+                    raise RecordingError(f"{source}:{number}: scene fps must be a number > 0 and at most 1e6")
                 if fps is not None and float(rate) != fps:
                     raise RecordingError(f"{source}:{number}: scene fps {rate:g} differs from an earlier scene's {fps:g}; expected one rate")
                 fps = float(rate)
@@ -280,9 +291,11 @@ def _parse_trajnet(text: str, source: str) -> tuple[np.ndarray, np.ndarray, np.n
         frame, person, x, y = (body.get(key) for key in ("f", "p", "x", "y"))
         if any(isinstance(v, bool) or not isinstance(v, int) for v in (frame, person)):
             raise RecordingError(f'{source}:{number}: a track needs whole numbers "f" (frame) and "p" (person)')
-        if any(isinstance(v, bool) or not isinstance(v, int | float) or not math.isfinite(v) for v in (x, y)):
+        if any(isinstance(v, bool) or not isinstance(v, int | float) or (isinstance(v, float) and not math.isfinite(v)) for v in (x, y)):
             raise RecordingError(f'{source}:{number}: a track needs finite numbers "x" and "y" (metres)')
         assert isinstance(frame, int) and isinstance(person, int) and isinstance(x, int | float) and isinstance(y, int | float)
+        if abs(x) > MAX_COORDINATE or abs(y) > MAX_COORDINATE:  # an int may be any size (10**400 has no float)
+            raise RecordingError(f"{source}:{number}: a position beyond {MAX_COORDINATE:g} m; expected coordinates in metres")
         if abs(frame) >= 2**53 or abs(person) >= 2**63:
             raise RecordingError(f"{source}:{number}: frame or person id out of range")
         frames.append(frame)

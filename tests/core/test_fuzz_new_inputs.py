@@ -197,3 +197,102 @@ def _shielded_residual_env() -> CrowdNavEnv:
     if env.simulator.state.step_count >= env.scenario.max_steps - 1 or env.core._running is False:
         env.reset(seed=1)
     return env
+
+
+# ----------------------------------------------------------------- recordings (humans.model: replay): the reader
+
+from crowdnav.crowd.recording import MAX_BYTES, RecordingError, read_recording  # noqa: E402
+
+GOOD_ROW = "0\t1\t0.5\t1.5"
+
+
+@pytest.mark.parametrize(("name", "text", "expected"), [
+    ("frames.txt", "0 1 0 0\n1000000000000000 1 1 1\n", None),  # frames far apart: once a 7 PiB bincount
+    ("frames.txt", "0 1 1e300 0\n10 1 1e300 0\n", "beyond"),  # a position the simulator would square into inf
+    ("frames.txt", "0 1 0 -1e7\n", "beyond"),
+    ("eth.ndjson", '{"track": {"f": 0, "p": 1, "x": ' + "9" * 400 + ', "y": 0}}\n', "beyond"),  # an int with no float
+    ("eth.ndjson", '{"scene": {"id": 0, "fps": ' + "9" * 400 + '}}\n{"track": {"f": 0, "p": 1, "x": 0, "y": 0}}\n', "fps"),
+    ("eth.ndjson", '{"scene": {"id": 0, "fps": NaN}}\n', "fps"),
+    ("eth.ndjson", '{"scene": {"id": 0, "fps": -2.5}}\n', "fps"),
+    ("eth.ndjson", '{"track": {"f": 0, "p": 1, "x": NaN, "y": 0}}\n', "finite"),
+    ("eth.ndjson", '{"track": {"f": 0.5, "p": 1, "x": 0, "y": 0}}\n', "whole numbers"),
+    ("eth.ndjson", '{"track": {"f": 0, "p": true, "x": 0, "y": 0}}\n', "whole numbers"),
+    ("eth.ndjson", '{"track": {"f": 0, "p": 1, "x": "0", "y": 0}}\n', "finite numbers"),
+    ("eth.ndjson", "[" * 100_000 + "\n", "not a JSON object"),
+    ("eth.ndjson", '{"track": {"f": 0, "p": 1, "x": 0, "y": 0}, "scene": {}}\n', "expected"),
+    ("eth.ndjson", '{"person": {}}\n', "unknown line kind"),
+    ("eth.ndjson", "", "no annotation"),
+    ("frames.txt", "\n# only a comment\n\n", "no annotation"),
+    ("frames.txt", "0 1 0\n", "3 columns"),
+    ("frames.txt", "0 1 x 0\n", "not a number"),
+    ("frames.txt", "0 1 inf 0\n", "not finite"),
+    ("frames.txt", "0.5 1 0 0\n", "whole numbers"),
+    ("frames.txt", "1e300 1 0 0\n", "whole numbers"),
+    ("frames.txt", "0 1 0 0\n0 1 1 1\n", "two positions"),
+    ("frames.txt", GOOD_ROW + "\n0 1 2 3 4\n", "5 columns"),
+    ("obsmat.txt", "0 1 0 0 0 0 0\n", "7 columns"),
+])
+def test_malformed_or_extreme_recordings_read_or_fail_in_one_line_naming_file_and_line(tmp_path, name, text, expected):
+    path = tmp_path / name
+    path.write_text(text)
+    done = run_capped(f"""
+        from crowdnav.crowd.recording import RecordingError, read_recording
+        try:
+            read_recording({str(path)!r})
+        except RecordingError as error:
+            print("REFUSED", error)
+        else:
+            print("READ")
+    """, limit_mb=1024)
+    out = done.stdout.strip()
+    assert done.returncode == 0 and len(out.splitlines()) == 1, done.stdout + done.stderr
+    if expected is None:
+        assert out == "READ"
+    else:
+        assert out.startswith("REFUSED") and expected in out and name in out, out
+
+
+def test_a_recording_that_is_not_utf8_a_folder_missing_or_too_big_is_refused(tmp_path):
+    (tmp_path / "latin.txt").write_bytes(b"0 1 0 0\n0 2 \xe9 0\n")
+    (tmp_path / "folder.txt").mkdir()
+    with open(tmp_path / "huge.txt", "wb") as stream:  # sparse: no disk used
+        stream.truncate(MAX_BYTES + 1)
+    for name, words in [("latin.txt", "latin.txt:2: not UTF-8"), ("folder.txt", "not a regular file"),
+                        ("missing.txt", "cannot read"), ("huge.txt", "more than")]:
+        with pytest.raises(RecordingError, match=words) as caught:
+            read_recording(tmp_path / name)
+        one_line(caught.value)
+
+
+def test_a_relative_recording_path_may_not_escape_the_naming_folder(tmp_path):
+    inside = tmp_path / "scenarios"
+    inside.mkdir()
+    (tmp_path / "secret.txt").write_text(GOOD_ROW + "\n")
+    (inside / "link.txt").symlink_to(tmp_path / "secret.txt")
+    for escape in ("../secret.txt", "link.txt", "./../scenarios/../secret.txt"):
+        with pytest.raises(RecordingError, match="must stay inside") as caught:
+            read_recording(escape, folder=inside)
+        one_line(caught.value)
+
+
+ROW_TEXT = st.lists(st.one_of(
+    st.tuples(st.integers(-5, 10**6), st.integers(-3, 3), st.floats(-1e7, 1e7), st.floats(-1e7, 1e7)).map(
+        lambda r: "\t".join(map(repr, r))),
+    st.text(alphabet="0123456789 .,-e\tnaif#\n{}[]\"", max_size=30),
+), max_size=12)
+
+
+@FUZZ
+@given(ROW_TEXT, st.sampled_from(["auto", "frames", "obsmat", "trajnet"]))
+def test_fuzzed_recordings_read_and_resample_or_fail_in_one_line(tmp_path_factory, rows, fmt):
+    path = tmp_path_factory.mktemp("rec") / "walk.txt"
+    path.write_text("\n".join(rows) + "\n")
+    try:
+        recording = read_recording(path, fmt)
+    except RecordingError as error:
+        assert "walk.txt" in one_line(error)
+        return
+    assert np.isfinite(recording.times).all() and np.isfinite(recording.positions).all()
+    grid = recording.resample(0.25) if recording.duration < 1e5 else None
+    if grid is not None:
+        assert all(np.isfinite(track.positions).all() for track in grid.tracks)
