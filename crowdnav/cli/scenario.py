@@ -6,6 +6,7 @@ import argparse
 import sys
 from pathlib import Path
 
+from crowdnav.cli import scenario_recording as from_recording
 from crowdnav.cli.common import CliError, add_override_option, format_table, parse_overrides
 from crowdnav.cli.schema import schema_command
 
@@ -32,6 +33,8 @@ def register(groups: argparse._SubParsersAction[argparse.ArgumentParser]) -> Non
     describe.add_argument("scenario", metavar="FILE_OR_NAME", help="a YAML file or a library scenario name")
     add_override_option(describe)
     describe.set_defaults(handler=describe_command)
+
+    from_recording.register(commands)
 
     schema = commands.add_parser("schema", help="print the JSON Schema of scenario files (for editors)")
     schema.add_argument("--output", "-o", type=Path, metavar="FILE", help="write the schema to FILE instead of stdout")
