@@ -174,6 +174,12 @@ def load_track(name_or_path: str | Path) -> Track:
             load_scenario(parsed.scenario, {**parsed.overrides, "max_steps": parsed.time_limit_steps})
         except ScenarioError as error:
             issues.append(ConfigIssue("overrides", str(error).splitlines()[0], yaml_line(root, "overrides")))
+    from crowdnav.agents.seeding import check_test_seeds
+
+    try:  # a track's test seeds are held out: below every run's training, grid and demonstration seeds
+        check_test_seeds(parsed.test_seed_base, parsed.test_episodes)
+    except ValueError as error:
+        issues.append(ConfigIssue("test_seed_base", str(error), yaml_line(root, "test_seed_base")))
     if parsed.observations != ANY:
         from crowdnav.registry import modality_names
 
