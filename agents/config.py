@@ -148,7 +148,7 @@ class TrainConfig(_Section):
     sensors: dict[str, Any] = option({}, "Sensor-setting overrides, e.g. {lidar: {beams: 180}}.")
     overrides: dict[str, Any] = option({}, "Dotted scenario overrides, e.g. {humans.count: 5}.")
     reward_weights: dict[str, Any] = option({}, "Reward preset and weight overrides, e.g. {preset: paper, social: -50} (docs/agents.md#reward).")
-    shield: bool | dict[str, Any] = option(False, "Action-time safety shield from the robot's tracker, pose and map: true, false or "
+    shield: Bool | dict[str, Any] = option(False, "Action-time safety shield from the robot's tracker, pose and map: true, false or "
                                                   "planner settings, e.g. {horizon: 2.0} (docs/agents.md#the-safety-shield).")
     residual: Bool = option(False, "The policy's action corrects the predictive planner's move (the plan modality must be "
                                    "observed): a residual agent (docs/agents.md#agents-that-anticipate-the-crowd).")
@@ -237,9 +237,24 @@ def cross_field_problems(config: TrainConfig) -> list[tuple[str, str]]:
         problems.append(("demonstrations.dagger_rounds", f"{demonstrations.episodes:,} episodes x (1 + {demonstrations.dagger_rounds:,} "
                          f"rounds) exceed the {DEMONSTRATION_EPISODES:,} demonstration seeds of a run (crowdnav.agents.seeding)"))
     problems.extend(robots_problems(config))
+    problems.extend(planner_problems(config))
     extractor = config.extractor
     if not (len(extractor.leog_channels) == len(extractor.leog_kernels) == len(extractor.leog_strides)) or not extractor.leog_channels:
         problems.append(("extractor", "leog_channels, leog_kernels and leog_strides must be non-empty lists of the same length"))
+    return problems
+
+
+def planner_problems(config: TrainConfig) -> list[tuple[str, str]]:
+    """The shield's settings and the residual's plan modality, checked as the env will (before any run folder is written)."""
+    from crowdnav.planning.shield import shield_settings
+
+    problems = []
+    try:
+        shield_settings(config.shield)
+    except ValueError as error:
+        problems.append(("shield", str(error).removeprefix("shield: ")))
+    if config.residual and "plan" not in config.modalities:
+        problems.append(("residual", f"the action corrects the planner's move, so modalities must include plan; got {config.modalities}"))
     return problems
 
 
