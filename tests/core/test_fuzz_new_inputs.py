@@ -296,3 +296,30 @@ def test_fuzzed_recordings_read_and_resample_or_fail_in_one_line(tmp_path_factor
     grid = recording.resample(0.25) if recording.duration < 1e5 else None
     if grid is not None:
         assert all(np.isfinite(track.positions).all() for track in grid.tracks)
+
+
+# ----------------------------------------------------------------- walking groups and stalls in scenario YAML
+
+from crowdnav.scenario import ScenarioError  # noqa: E402
+from crowdnav.simulator import Simulator  # noqa: E402
+
+ODD = st.one_of(st.none(), st.booleans(), st.integers(-10**6, 10**6), st.floats(allow_nan=True, allow_infinity=True),
+                st.just(1e300), st.just(-1e-300), st.text(max_size=4), st.lists(st.floats(-2, 2), max_size=3))
+
+
+@settings(max_examples=30, derandomize=True, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(st.dictionaries(st.sampled_from(["humans.stall.time", "humans.stall.progress", "humans.stall.speed",
+                                        "humans.group_force.gaze_strength", "humans.group_force.attraction_strength",
+                                        "humans.group_force.attraction_spread", "humans.group_force.repulsion_strength",
+                                        "humans.walk_together"]), ODD, min_size=1, max_size=3))
+def test_stall_and_group_force_settings_load_and_step_finitely_or_fail_in_one_line_naming_the_field(overrides):
+    try:
+        sim = Simulator("station_hall", overrides)
+    except ScenarioError as error:
+        message = one_line(error) if "\n" not in str(error) else str(error).splitlines()[0]
+        assert any(key.split(".")[-1] in str(error) for key in overrides), message
+        return
+    sim.reset(seed=0)
+    for _ in range(5):
+        sim.step(np.zeros(2))
+    assert np.isfinite(sim.human_positions).all()
