@@ -6,8 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from benchmarks.fit_social_force import (DEFAULT, Params, constant_velocity, cut_windows, errors, fit, main, rollout,
-                                         write_synthetic_obsmat)
+from benchmarks.fit_social_force import DEFAULT, Params, constant_velocity, cut_windows, errors, fit, main, rollout, write_synthetic_obsmat
 
 
 @pytest.fixture(scope="module")
