@@ -95,6 +95,6 @@ def test_the_tidy_table_names_each_humans_group():
     finally:
         episodes.close()
     groups = table[table["step"] == 0].set_index("agent")["group"]
-    assert groups["robot"] == "robot" and set(groups.drop("robot")) == {"commuters", "shoppers", "talking", "meeting"}
+    assert groups["robot"] == "robot" and set(groups.drop("robot")) == {"commuters", "shoppers", "friends", "talking", "meeting"}
     plain = tidy_table(_recorded())
     assert set(plain["group"]) == {"robot", "crowd"}
