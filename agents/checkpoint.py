@@ -45,8 +45,11 @@ from crowdnav.agents.wrappers import ObservationScales, agent_observation, scale
 from stable_baselines3.common.base_class import BaseAlgorithm
 
 from crowdnav.errors import CrowdNavError
+from crowdnav.registry import ALGORITHM_SPECS, is_off_policy
 
 if TYPE_CHECKING:
+    from crowdnav.agents.algorithm_protocol import Algorithm
+
     from crowdnav.envs import CrowdNavEnv
 
 POLICY_FORMAT = "crowdnav-policy/1"
@@ -74,10 +77,7 @@ def save_checkpoint(
     ``rollout_state``: :meth:`ResumePoint.rollout_state`'s dict, written as ``rollout_state.npz``.
     """
     folder = Path(folder)
-    staging = folder.with_name(folder.name + ".partial")
-    if staging.exists():
-        shutil.rmtree(staging)
-    staging.mkdir(parents=True)
+    staging = staging_folder(folder)
     model.save(staging / MODEL_FILE)
     buffer = getattr(model, "replay_buffer", None)  # off-policy models only
     if replay_buffer and buffer is not None:
@@ -92,6 +92,21 @@ def save_checkpoint(
         shutil.copyfile(encoder_file, staging / ENCODER_FILE)
     document = {"format": POLICY_FORMAT, **info, "leog_encoder": ENCODER_FILE if encoder_file is not None else None}
     (staging / POLICY_FILE).write_text(json.dumps(document, indent=2, default=str) + "\n", encoding="utf-8")
+    replace_folder(staging, folder)
+    return folder
+
+
+def staging_folder(folder: Path) -> Path:
+    """A new empty ``<folder>.partial`` to write a checkpoint into (:func:`replace_folder` then swaps it in)."""
+    staging = folder.with_name(folder.name + ".partial")
+    if staging.exists():
+        shutil.rmtree(staging)
+    staging.mkdir(parents=True)
+    return staging
+
+
+def replace_folder(staging: Path, folder: Path) -> None:
+    """Put the complete ``staging`` folder in ``folder``'s place (a kill leaves a complete ``.partial`` or ``.old``)."""
     if folder.exists():
         old = folder.with_name(folder.name + ".old")
         if old.exists():
@@ -101,7 +116,6 @@ def save_checkpoint(
         shutil.rmtree(old)
     else:
         staging.rename(folder)
-    return folder
 
 
 def find_checkpoint(path: str | Path) -> Path:
@@ -200,8 +214,12 @@ class AgentPolicy:
     batch).
     """
 
-    def __init__(self, model: BaseAlgorithm, info: Mapping[str, Any], encoder: Any = None):
+    def __init__(self, model: BaseAlgorithm | Algorithm, info: Mapping[str, Any], encoder: Any = None):
+        from crowdnav.agents.algorithm_protocol import as_algorithm
+
         self.model = model
+        """The SB3 model, or a registered algorithm's agent (crowdnav.agents.algorithm_protocol)."""
+        self.algorithm = as_algorithm(model)
         self.info = dict(info)
         self.env_options: dict[str, Any] = dict(info["env"])
         """Keyword arguments of CrowdNavEnv that give the observations this policy expects."""
@@ -219,7 +237,7 @@ class AgentPolicy:
         return agent_observation(observation, self.scales, self.encoder)
 
     def __call__(self, observation: Mapping[str, np.ndarray]) -> np.ndarray:
-        action, _ = self.model.predict(self.preprocess(observation), deterministic=True)
+        action = self.algorithm.predict(self.preprocess(observation), deterministic=True)
         return action.astype(np.float32, copy=False)
 
     def make_env(self, **extra: Any) -> CrowdNavEnv:
@@ -255,6 +273,11 @@ def load_policy(path: str | Path, device: str = "cpu", *, trusted: bool = False,
         from crowdnav.agents.pretrain import load_encoder
 
         encoder, _ = load_encoder(folder / info["leog_encoder"])  # torch.load with weights_only=True
+    spec = ALGORITHM_SPECS.get(info["algo"])
+    if spec is not None and not spec.sb3:  # a registered algorithm: its own load (arrays and JSON, no pickle)
+        from crowdnav.agents.algorithm_protocol import load_algorithm
+
+        return AgentPolicy(load_algorithm(folder, info["algo"]), info, encoder)
     model = load_model(folder, device=device) if trusted else model_from_parameters(folder, info, encoder, device, config)
     return AgentPolicy(model, info, encoder)
 
@@ -290,7 +313,7 @@ def model_from_parameters(folder: Path, info: Mapping[str, Any], encoder: Any = 
         small = {key: value for key, value in config.algo_kwargs.items() if key not in ("n_steps", "buffer_size", "batch_size")}
         config = config.model_copy(update={"device": device, "progress": False, "tensorboard": False, "num_envs": 1,
                                            "updates_per_step": None, "n_steps": None, "algo_kwargs": small})
-        off_policy = "buffer_size" in type(config).model_fields and config.algo in ("sac", "td3", "ddpg")
+        off_policy = "buffer_size" in type(config).model_fields and is_off_policy(config.algo)
         config = config.model_copy(update={"buffer_size": 1, "learning_starts": 0} if off_policy else
                                    {"n_steps": 8, **({"batch_size": 8} if config.algo == "ppo" else {})})
         check_network_size(config, str(folder))

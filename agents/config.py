@@ -19,11 +19,23 @@ from pathlib import Path, PurePath
 from typing import TYPE_CHECKING, Annotated, Any, Literal
 
 from crowdnav.agents.seeding import DEMONSTRATION_EPISODES, MAX_SEED, MAX_TRAIN_EPISODES
-from pydantic import AfterValidator, BaseModel, BeforeValidator, ConfigDict, Field, Strict, ValidationError, field_validator, model_validator
+from pydantic import (
+    AfterValidator,
+    BaseModel,
+    BeforeValidator,
+    ConfigDict,
+    Field,
+    PlainValidator,
+    Strict,
+    ValidationError,
+    field_validator,
+    model_validator,
+)
+from pydantic_core import PydanticCustomError
 
 from crowdnav.config_errors import ConfigIssue, FieldProblems, YamlProblem, format_issues, read_yaml, validation_issues, yaml_line
 from crowdnav.errors import CrowdNavError
-from crowdnav.registry import ALGORITHM_NAMES, ENCODER_MODES, modality_names, unknown_name_message
+from crowdnav.registry import ALGORITHM_NAMES, ENCODER_MODES, algorithm_names, modality_names, unknown_name_message
 from crowdnav.yaml_input import MAX_DEPTH, YamlLimitError, check_value, read_text_file
 
 __all__ = ["ALGORITHM_NAMES", "ENCODER_MODES", "ConfigError", "DemonstrationConfig", "EncoderConfig", "ExtractorConfig", "TrainConfig",
@@ -46,6 +58,19 @@ def _known_modality(name: str) -> str:
     if name not in (names := modality_names()):  # read at validation time: users register modalities of their own
         raise ValueError(unknown_name_message("modality", name, names))
     return name
+
+
+def _known_algorithm(name: Any) -> str:
+    """An algorithm name of the registry, read at validation time (:func:`crowdnav.registry.register_algorithm` adds names)."""
+    names = algorithm_names()
+    if not isinstance(name, str) or name not in names:  # the wording of a Literal's error: "expected one of 'sac', ..."
+        raise PydanticCustomError("literal_error", "Input should be {expected}", {"expected": ", ".join(repr(n) for n in names)})
+    return name
+
+
+def _algorithm_enum(schema: dict[str, Any]) -> None:
+    """The JSON Schema lists the algorithms registered when it is printed."""
+    schema.update(type="string", enum=list(algorithm_names()))
 
 
 def _modality_enum(schema: dict[str, Any]) -> None:
@@ -74,7 +99,7 @@ if TYPE_CHECKING:  # a Literal built from the registry at run time is no static 
     Algorithm = str
     EncoderMode = str
 else:  # the registry's names: choices, schema enum and errors agree
-    Algorithm = Literal[ALGORITHM_NAMES]
+    Algorithm = Annotated[str, PlainValidator(_known_algorithm)]
     EncoderMode = Literal[tuple(ENCODER_MODES)]
 ModalityName = Annotated[str, Strict(), AfterValidator(_known_modality)]
 
@@ -152,7 +177,8 @@ class TrainConfig(_Section):
                                                   "planner settings, e.g. {horizon: 2.0} (docs/agents.md#the-safety-shield).")
     residual: Bool = option(False, "The policy's action corrects the predictive planner's move (the plan modality must be "
                                    "observed): a residual agent (docs/agents.md#agents-that-anticipate-the-crowd).")
-    algo: Algorithm = option("sac", "Stable-Baselines3 algorithm (crowdnav.registry.ALGORITHMS).")
+    algo: Algorithm = option("sac", "Learning algorithm: a Stable-Baselines3 one or a registered one (crowdnav.registry.ALGORITHM_SPECS).",
+                             json_schema_extra=_algorithm_enum)
     agents: Literal["robot", "robots"] = option(
         "robot", "robot: the Gymnasium env's first robot learns; robots: every robot of a multi-robot scenario learns one shared "
                  "PPO policy through SuperSuit (docs/agents.md#several-robots-shared-parameter-ppo).")

@@ -1,8 +1,10 @@
 """The agent factory: a :class:`~crowdnav.agents.config.TrainConfig` -> wrapped environment + SB3 model.
 
 Every algorithm gets the same :class:`~crowdnav.agents.extractor.MultiModalExtractor` (the shared
-latent), then SB3's own actor/critic heads (``net_arch``) on top of it. To plug in another
-algorithm, add it to :data:`ALGORITHMS` (and its defaults to :data:`ALGORITHM_DEFAULTS`).
+latent), then SB3's own actor/critic heads (``net_arch``) on top of it. To plug in another SB3
+algorithm, add its entry to :data:`crowdnav.registry.ALGORITHM_SPECS`, its class to :data:`ALGORITHMS` and its
+defaults to :data:`ALGORITHM_DEFAULTS`; an algorithm outside SB3 implements
+:mod:`crowdnav.agents.algorithm_protocol` instead (docs/architecture.md, "Adding a learning algorithm").
 """
 
 from __future__ import annotations
@@ -33,7 +35,7 @@ from stable_baselines3.common.monitor import Monitor
 from stable_baselines3.common.noise import NormalActionNoise
 from stable_baselines3.common.type_aliases import GymEnv
 
-from crowdnav.registry import OFF_POLICY_ALGORITHMS
+from crowdnav.registry import OFF_POLICY_ALGORITHMS, algorithm_spec
 
 ALGORITHMS: dict[str, type[BaseAlgorithm]] = {"sac": CrowdNavSAC, "td3": CrowdNavTD3, "ddpg": CrowdNavDDPG, "a2c": A2C, "ppo": PPO}
 """Config name (those of :data:`crowdnav.registry.ALGORITHMS`) -> algorithm class: SB3's,
@@ -43,6 +45,7 @@ SB3_ALGORITHMS: dict[str, type[BaseAlgorithm]] = {"sac": SAC, "td3": TD3, "ddpg"
 """Config name -> Stable-Baselines3's own class (``make_model(..., reference=True)``: benchmarks/bench_train.py's reference)."""
 
 OFF_POLICY = OFF_POLICY_ALGORITHMS
+"""The SB3 algorithms with a replay buffer (the registry entries' ``off_policy``)."""
 
 ALGORITHM_DEFAULTS: dict[str, dict[str, Any]] = {
     # gamma 0.95 (a 4 s horizon at the 0.2 s step) and 5-step returns: with the default reward's
@@ -243,7 +246,7 @@ def make_model(config: TrainConfig, env: GymEnv, saved_encoder: dict[str, Any] |
         kwargs["train_freq"] = 1
         # half up, not Python's round-half-even (4 worlds at 0.125 would give 1 update, double the ratio asked)
         kwargs["gradient_steps"] = max(1, int(hyper["updates_per_step"] * config.num_envs * frequency + 0.5))
-    if config.algo in ("td3", "ddpg") and config.action_noise > 0:
+    if algorithm_spec(config.algo).exploration_noise and config.action_noise > 0:
         dims = action_box(env.action_space).shape[0]
         kwargs["action_noise"] = NormalActionNoise(np.zeros(dims), np.full(dims, config.action_noise))
     clash = sorted(set(config.algo_kwargs) & {"policy", "env", "policy_kwargs", "seed", "device", "tensorboard_log"})

@@ -221,9 +221,9 @@ def _check_size(path: str | Path, cls: type, kwargs: Mapping[str, Any], observat
 
 def zip_parameters(cls: type, kwargs: Mapping[str, Any], observation_space: Any, action_space: Any) -> tuple[int, Any]:
     """(parameters, net_arch) of SB3's policy ``cls`` built with ``kwargs`` on these spaces, counted by arithmetic."""
-    from crowdnav.agents.network_size import heads, mlp
+    from crowdnav.agents.network_size import heads, mlp, policy_kind
 
-    kind = {"stable_baselines3.common.policies": "actor_critic", "stable_baselines3.sac.policies": "sac"}.get(cls.__module__, "td3")
+    kind = policy_kind(cls)
     defaults: Any = {"actor_critic": {"pi": [64, 64], "vf": [64, 64]}, "sac": [256, 256], "td3": [400, 300]}[kind]
     net_arch = kwargs.get("net_arch", defaults)
     extractor = features = 0

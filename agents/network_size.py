@@ -19,6 +19,8 @@ from typing import Any
 import numpy as np
 from crowdnav.agents.config import ConfigError
 
+from crowdnav.registry import algorithm_spec
+
 MAX_PARAMETERS = 50_000_000
 """Most parameters one model may hold, all its networks together (actor, critics, targets): 200 MB of float32.
 crowdnav's default networks hold about 100,000; a checkpoint of the biggest allowed model is under 1 GiB."""
@@ -82,8 +84,22 @@ def heads(kind: str, features: int, extractor: int, actions: int, net_arch: Any,
 
 
 def kind_of(algo: str) -> str:
-    """The policy kind of crowdnav's algorithm name."""
-    return {"ppo": "actor_critic", "a2c": "actor_critic", "sac": "sac", "td3": "td3", "ddpg": "td3"}[algo]
+    """The policy kind of an SB3 algorithm's name, from its registry entry: on-policy actor-critic, off-policy with a
+    deterministic actor (TD3's heads) or with a stochastic one (SAC's)."""
+    spec = algorithm_spec(algo)
+    return "actor_critic" if not spec.off_policy else "td3" if spec.exploration_noise else "sac"
+
+
+def policy_kind(cls: type) -> str:
+    """``actor_critic`` (PPO, A2C), ``sac`` or ``td3`` (TD3, DDPG): the head layout of an SB3 policy class."""
+    from stable_baselines3.common.policies import ActorCriticPolicy
+    from stable_baselines3.sac.policies import SACPolicy
+    from stable_baselines3.td3.policies import TD3Policy
+
+    for base, kind in ((ActorCriticPolicy, "actor_critic"), (SACPolicy, "sac"), (TD3Policy, "td3")):
+        if issubclass(cls, base):
+            return kind
+    raise ValueError(f"{cls.__name__}: not a policy of a Stable-Baselines3 algorithm crowdnav trains")
 
 
 # ------------------------------------------------------------------ crowdnav's multi-modal extractor

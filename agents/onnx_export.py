@@ -95,12 +95,17 @@ def export_onnx(policy_path: str | Path, out: str | Path, *, opset: int = OPSET)
     from crowdnav.agents.checkpoint import load_policy
     from crowdnav.agents.run_folder import training_run
 
+    from crowdnav.registry import algorithm_spec
+
     path = training_run(policy_path)
     try:
         policy = load_policy(path)
     except (FileNotFoundError, ValueError) as error:
         line = str(error).splitlines()[0]  # most messages name the checkpoint already
         raise ExportError(line if line.startswith((str(policy_path), str(path))) else f"{policy_path}: {line}") from None
+    if algorithm_spec(policy.algo).builder is not None:
+        raise ExportError(f"{policy_path}: ONNX export covers the Stable-Baselines3 algorithms; {policy.algo!r} is a registered "
+                          "algorithm with its own predict() (crowdnav.agents.algorithm_protocol)")
     env = policy.make_env()
     try:
         raw = dict_space(env.observation_space)

@@ -14,6 +14,9 @@ Output folder (``config.out``):
 model and (if saved) the replay buffer carry on; the budget is still ``config.episodes`` (or
 ``config.timesteps``) in all. With ``num_envs > 1`` the run collects from that many worlds of the
 native vector env (:func:`crowdnav.agents.factory.make_vec_env`); a resume needs the same number.
+
+This module trains the Stable-Baselines3 algorithms; a registered algorithm outside SB3
+(:mod:`crowdnav.agents.algorithm_protocol`) goes to :func:`crowdnav.agents.protocol_training.train_registered`.
 """
 
 from __future__ import annotations
@@ -75,6 +78,8 @@ from crowdnav.agents.wrappers import scales_from_json, scales_to_json
 from stable_baselines3.common.base_class import BaseAlgorithm
 from stable_baselines3.common.vec_env import DummyVecEnv, VecEnv
 
+from crowdnav.registry import algorithm_spec
+
 
 def train(config: TrainConfig | Mapping[str, Any] | str | Path, *, resume: bool = False,
           on_checkpoint: Callable[[int], None] | None = None, trust_pickle: bool = False) -> TrainResult:
@@ -95,6 +100,12 @@ def train(config: TrainConfig | Mapping[str, Any] | str | Path, *, resume: bool 
 
         return train_robots(config, resume=resume, on_checkpoint=on_checkpoint)
     torch.set_num_threads(config.torch_threads)
+    if algorithm_spec(config.algo).builder is not None:  # a registered algorithm: crowdnav.agents.algorithm_protocol
+        from crowdnav.agents.protocol_training import check_supported, train_registered
+
+        check_supported(config)
+        with writing(config.out):
+            return train_registered(config, resume, on_checkpoint)
     with writing(config.out):  # one process writes a run at a time
         return _train(config, resume, on_checkpoint, trust_pickle)
 

@@ -14,26 +14,100 @@ registry sits at the top of the environment core (it reads the sensors): modules
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass
 from types import MappingProxyType
+from typing import Any
 
 from crowdnav.scenario.reward_presets import REWARD_PRESETS
 from crowdnav.sensors import MODALITIES  # numpy and gymnasium only; registers the built-in modalities
 from crowdnav.suggest import did_you_mean, unknown_name_message  # noqa: F401  (re-exported: the one wording)
 
-ALGORITHMS: Mapping[str, str] = MappingProxyType({
-    "sac": "Soft Actor-Critic: off-policy, entropy-regularised (crowdnav's default).",
-    "td3": "Twin Delayed DDPG: off-policy, deterministic policy with Gaussian exploration noise.",
-    "ddpg": "Deep Deterministic Policy Gradient: off-policy, deterministic policy with Gaussian exploration noise.",
-    "a2c": "Advantage Actor-Critic: on-policy, synchronous.",
-    "ppo": "Proximal Policy Optimization: on-policy, clipped updates.",
-})
-"""Algorithm name (``algo`` in a training config, ``crowdnav train --algo``) -> one-line description."""
+
+@dataclass(frozen=True)
+class AlgorithmSpec:
+    """What crowdnav knows about a learning algorithm: the properties the training code branches on.
+
+    The code reads these instead of lists of names, so adding an algorithm is one entry here (or
+    one :func:`register_algorithm` call) and its class: see docs/architecture.md, "Adding a
+    learning algorithm".
+    """
+
+    description: str
+    """One line for ``--help``, the docs and the JSON Schema."""
+    off_policy: bool = False
+    """A replay buffer (buffer_size, learning_starts, n_step_returns, save_replay_buffer apply)."""
+    exploration_noise: bool = False
+    """Deterministic actor explored with Gaussian action noise (the config's ``action_noise``)."""
+    builder: Callable[..., Any] | None = None
+    """None: a Stable-Baselines3 algorithm (class in :data:`crowdnav.agents.factory.ALGORITHMS`). Otherwise the
+    class (or factory) of an :class:`crowdnav.agents.algorithm_protocol.Algorithm`: ``builder(env, config)`` makes a new one,
+    ``builder.load(folder, env, config)`` a saved one (docs/architecture.md, "Adding a learning algorithm")."""
+
+    @property
+    def sb3(self) -> bool:
+        """Whether Stable-Baselines3 implements it (crowdnav's SB3 path: callbacks, exact resume, ONNX export)."""
+        return self.builder is None
+
+
+_ALGORITHM_SPECS: dict[str, AlgorithmSpec] = {
+    "sac": AlgorithmSpec("Soft Actor-Critic: off-policy, entropy-regularised (crowdnav's default).", off_policy=True),
+    "td3": AlgorithmSpec("Twin Delayed DDPG: off-policy, deterministic policy with Gaussian exploration noise.",
+                         off_policy=True, exploration_noise=True),
+    "ddpg": AlgorithmSpec("Deep Deterministic Policy Gradient: off-policy, deterministic policy with Gaussian exploration noise.",
+                          off_policy=True, exploration_noise=True),
+    "a2c": AlgorithmSpec("Advantage Actor-Critic: on-policy, synchronous."),
+    "ppo": AlgorithmSpec("Proximal Policy Optimization: on-policy, clipped updates."),
+}
+
+ALGORITHM_SPECS: Mapping[str, AlgorithmSpec] = MappingProxyType(_ALGORITHM_SPECS)
+"""Algorithm name (``algo`` in a training config, ``crowdnav train --algo``) -> its :class:`AlgorithmSpec` (read live:
+:func:`register_algorithm` adds to it)."""
+
+ALGORITHMS: Mapping[str, str] = MappingProxyType({name: spec.description for name, spec in _ALGORITHM_SPECS.items()})
+"""The built-in algorithms: name -> one-line description (``crowdnav train --algo`` choices)."""
 
 ALGORITHM_NAMES: tuple[str, ...] = tuple(ALGORITHMS)
+"""The built-in algorithm names; :func:`algorithm_names` adds registered ones."""
 
-OFF_POLICY_ALGORITHMS: tuple[str, ...] = ("sac", "td3", "ddpg")
-"""Algorithms with a replay buffer (buffer_size, learning_starts, n_step_returns apply)."""
+OFF_POLICY_ALGORITHMS: tuple[str, ...] = tuple(name for name, spec in _ALGORITHM_SPECS.items() if spec.off_policy)
+"""The built-in algorithms with a replay buffer (derived from their specs)."""
+
+
+def register_algorithm(name: str, spec: AlgorithmSpec) -> None:
+    """Make ``name`` a valid ``algo`` (config validation reads the registry each time); ValueError if taken by another spec."""
+    if not name.isidentifier() or name != name.lower():
+        raise ValueError(f"algorithm name {name!r}: use a lowercase identifier, e.g. 'sarl'")
+    if _ALGORITHM_SPECS.get(name, spec) is not spec:
+        raise ValueError(f"algorithm {name!r} is registered already")
+    _ALGORITHM_SPECS[name] = spec
+
+
+def unregister_algorithm(name: str) -> None:
+    """Remove an algorithm :func:`register_algorithm` added (the built-in ones stay)."""
+    if name in ALGORITHMS:
+        raise ValueError(f"algorithm {name!r} is built in")
+    _ALGORITHM_SPECS.pop(name, None)
+
+
+def algorithm_names() -> tuple[str, ...]:
+    """Every algorithm a config may name now: the built-in ones, then the registered ones."""
+    return tuple(_ALGORITHM_SPECS)
+
+
+def algorithm_spec(name: str) -> AlgorithmSpec:
+    """The spec of ``name``; ValueError with the registry's "unknown name" wording."""
+    try:
+        return _ALGORITHM_SPECS[name]
+    except KeyError:
+        raise ValueError(unknown_name_message("algorithm", name, tuple(_ALGORITHM_SPECS))) from None
+
+
+def is_off_policy(name: str) -> bool:
+    """Whether the algorithm ``name`` keeps a replay buffer (an unknown name: False)."""
+    spec = _ALGORITHM_SPECS.get(name)
+    return spec is not None and spec.off_policy
+
 
 ENCODER_MODES: Mapping[str, str] = MappingProxyType({
     "scratch": "random start, trained with the agent",

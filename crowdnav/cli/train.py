@@ -14,7 +14,7 @@ from pathlib import Path
 from typing import Any
 
 from crowdnav.cli.common import CliError, add_override_option, add_reward_options, parse_overrides, reward_options
-from crowdnav.registry import ALGORITHM_NAMES, ENCODER_MODES
+from crowdnav.registry import ALGORITHM_NAMES, ENCODER_MODES, algorithm_names
 
 ALGOS = ALGORITHM_NAMES  # the registry's names (also the config's and the factory's)
 MODES = tuple(ENCODER_MODES)
@@ -60,7 +60,7 @@ def register_train(groups: argparse._SubParsersAction[argparse.ArgumentParser]) 
     # "{field}" in a help text is the config field's default, read only when help is printed
     parser.add_argument("--config", type=Path, metavar="CONFIG.yaml", help="training config (default: all defaults)")
     parser.add_argument("--scenario", metavar="NAME_OR_PATH", help="library scenario name or scenario YAML file (default: {scenario})")
-    parser.add_argument("--algo", choices=ALGOS, help="RL algorithm (default: {algo})")
+    parser.add_argument("--algo", choices=algorithm_names(), help="RL algorithm (default: {algo})")
     parser.add_argument("--agents", choices=("robot", "robots"),
                         help="robot: the first robot learns; robots: every robot of a multi-robot scenario, one shared PPO policy "
                              "(default: {agents})")

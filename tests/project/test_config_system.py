@@ -150,6 +150,10 @@ def test_factory_algorithm_classes_cover_exactly_the_registry_names():
 
     assert tuple(CLASSES) == tuple(SB3_ALGORITHMS) == tuple(ALGORITHM_DEFAULTS) == ALGORITHM_NAMES == tuple(ALGORITHMS)
     assert set(OFF_POLICY) <= set(ALGORITHM_NAMES)
+    from crowdnav.agents.network_size import kind_of, policy_kind
+
+    # the head layout the network-size count reads from a registry entry is the one of SB3's policy class
+    assert all(kind_of(name) == policy_kind(CLASSES[name].policy_aliases["MultiInputPolicy"]) for name in ALGORITHM_NAMES)
     assert all(description.endswith(".") for description in ALGORITHMS.values())
 
 
@@ -158,12 +162,44 @@ def test_config_and_cli_choices_read_the_registry():
 
     from crowdnav.agents.config import EncoderConfig, TrainConfig
 
-    assert typing.get_args(TrainConfig.model_fields["algo"].annotation) == ALGORITHM_NAMES
+    assert TrainConfig.model_json_schema()["properties"]["algo"]["enum"] == list(ALGORITHM_NAMES)
+    assert all(TrainConfig(algo=name).algo == name for name in ALGORITHM_NAMES)
     assert typing.get_args(EncoderConfig.model_fields["mode"].annotation) == tuple(ENCODER_MODES)
     train = build_parser()._subparsers._group_actions[0].choices["train"]
     choices = {action.dest: action.choices for action in train._actions if action.choices}
     assert tuple(choices["algo"]) == ALGORITHM_NAMES and tuple(choices["encoder"]) == tuple(ENCODER_MODES)
     assert tuple(choices["reward"]) == reward_preset_names()
+
+
+def test_algorithm_properties_come_from_the_registry_entries_and_registered_names_validate():
+    from crowdnav.agents.config import ConfigError, config_from_mapping
+
+    from crowdnav.registry import (
+        ALGORITHM_SPECS,
+        OFF_POLICY_ALGORITHMS,
+        AlgorithmSpec,
+        algorithm_names,
+        is_off_policy,
+        register_algorithm,
+        unregister_algorithm,
+    )
+
+    assert OFF_POLICY_ALGORITHMS == tuple(name for name, spec in ALGORITHM_SPECS.items() if spec.off_policy) == ("sac", "td3", "ddpg")
+    assert [name for name, spec in ALGORITHM_SPECS.items() if spec.exploration_noise] == ["td3", "ddpg"]
+    with pytest.raises(ConfigError, match="algo: expected one of 'sac', 'td3', 'ddpg', 'a2c', 'ppo', got 'walker'"):
+        config_from_mapping({"algo": "walker"})
+    spec = AlgorithmSpec("A test walker.", off_policy=True, builder=object)
+    register_algorithm("walker", spec)
+    try:
+        assert algorithm_names()[-1] == "walker" and is_off_policy("walker") and not spec.sb3
+        assert config_from_mapping({"algo": "walker"}).algo == "walker"
+        with pytest.raises(ValueError, match="registered already"):
+            register_algorithm("walker", AlgorithmSpec("Another."))
+    finally:
+        unregister_algorithm("walker")
+    assert "walker" not in algorithm_names()
+    with pytest.raises(ValueError, match="built in"):
+        unregister_algorithm("sac")
 
 
 def test_modality_names_follow_the_sensor_registry_including_user_modalities(monkeypatch):

@@ -1,0 +1,112 @@
+"""The algorithm seam: an algorithm outside SB3 (tests/agents/toy_algorithm.py) registered by name trains through
+``crowdnav train``, is checkpointed without pickle, resumes exactly and is evaluated by ``crowdnav evaluate RUN``."""
+
+from __future__ import annotations
+
+import csv
+
+import numpy as np
+import pytest
+import yaml
+
+from crowdnav.cli import main
+from crowdnav.registry import register_algorithm, unregister_algorithm
+from tests.agents.toy_algorithm import SPEC
+
+pytestmark = pytest.mark.filterwarnings("ignore::DeprecationWarning")
+
+
+@pytest.fixture
+def random_search():
+    register_algorithm("random_search", SPEC)
+    yield "random_search"
+    unregister_algorithm("random_search")
+
+
+def toy_config(out, **fields):
+    """Goal-only observations in an empty room: a linear policy can learn to drive to the goal in a few dozen episodes."""
+    config = {"algo": "random_search", "scenario": "open_space", "modalities": ["goal"], "num_envs": 1, "episodes": 60,
+              "seed": 0, "out": str(out), "overrides": {"max_steps": 40, "humans.count": 0}, "checkpoint_every": 20,
+              "progress": False, "algo_kwargs": {"step_size": 0.005, "noise": 0.3}}
+    config.update(fields)
+    return config
+
+
+def write_config(tmp_path, config, name="toy.yaml"):
+    path = tmp_path / name
+    path.write_text(yaml.safe_dump(config), encoding="utf-8")
+    return path
+
+
+def rows(run):
+    with open(run / "episodes.csv", encoding="utf-8") as file:
+        return [{key: value for key, value in row.items() if key != "seconds"} for row in csv.DictReader(file)]
+
+
+def mean_return(policy, seeds):
+    env = policy.make_env(overrides={"max_steps": 40, "humans.count": 0})
+    total = 0.0
+    for seed in seeds:
+        observation, _ = env.reset(seed=seed)
+        done = False
+        while not done:
+            observation, reward, terminated, truncated, _ = env.step(policy(observation))
+            total += float(reward)
+            done = terminated or truncated
+    return total / len(seeds)
+
+
+def test_registered_algorithm_trains_through_crowdnav_train_without_pickle_and_learns(tmp_path, random_search):
+    from crowdnav.agents import load_policy
+    from crowdnav.agents.seeding import train_seed
+
+    run = tmp_path / "run"
+    assert main(["train", "--config", str(write_config(tmp_path, toy_config(run)))]) == 0
+    logged = rows(run)
+    assert [int(row["episode"]) for row in logged] == list(range(60))
+    assert [int(row["seed"]) for row in logged] == [train_seed(0, episode) for episode in range(60)]
+    files = sorted(path.relative_to(run / "checkpoint").as_posix() for path in (run / "checkpoint").rglob("*") if path.is_file())
+    assert files == ["algorithm/state.json", "algorithm/weights.npz", "policy.json"]  # arrays and JSON only
+    assert sorted(path.name for path in (run / "snapshots").iterdir()) == [f"episode_{n:05d}" for n in (20, 40, 60)]
+    policy = load_policy(run)
+    assert policy.algo == "random_search" and not np.all(policy.model.weights == 0)
+    untrained = load_policy(run)
+    untrained.model.weights = np.zeros_like(untrained.model.weights)
+    seeds = range(100, 110)  # held-out episodes: zero action scores -4 (time penalty); seeds 0-5 of the run reach 5 to 45
+    assert mean_return(policy, seeds) > mean_return(untrained, seeds) + 5.0  # it learned to make progress to the goal
+
+
+def test_registered_algorithm_resumes_to_the_uninterrupted_run(tmp_path, random_search):
+    from crowdnav.agents import load_policy, train
+
+    whole, cut = tmp_path / "whole", tmp_path / "cut"
+    train(toy_config(whole, episodes=12, checkpoint_every=3))
+    first = train(toy_config(cut, episodes=7, checkpoint_every=3))  # checkpointed at 6 and at its end, 7 (mid-pair)
+    assert first.episodes == 7
+    resumed = train(toy_config(cut, episodes=12, checkpoint_every=3), resume=True)
+    assert resumed.episodes == 12 and len(resumed.records) == 5
+    assert rows(cut) == rows(whole)
+    np.testing.assert_array_equal(load_policy(cut).model.weights, load_policy(whole).model.weights)
+
+
+def test_crowdnav_evaluate_plays_a_registered_algorithms_run_and_export_refuses_it(tmp_path, capsys, random_search):
+    run = tmp_path / "run"
+    config = toy_config(run, episodes=2, checkpoint_every=1)
+    del config["algo"]  # named on the command line: --algo's choices read the registry too
+    assert main(["train", "--config", str(write_config(tmp_path, config)), "--algo", "random_search"]) == 0
+    results = tmp_path / "results"
+    assert main(["evaluate", str(run), "--scenario", "open_space", "--episodes", "2", "--out", str(results), "--no-progress"]) == 0
+    assert list(results.glob("evaluate/*/seeds_*/*"))
+    capsys.readouterr()
+    assert main(["export", str(run), "--out", str(tmp_path / "p.onnx")]) == 1
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "ONNX export covers the Stable-Baselines3 algorithms" in err
+
+
+def test_registered_algorithm_refuses_settings_of_the_sb3_path_in_one_line(tmp_path, random_search):
+    from crowdnav.agents import train
+    from crowdnav.agents.config import ConfigError
+
+    with pytest.raises(ConfigError, match="^num_envs: algorithm 'random_search' trains on one env; set num_envs: 1$"):
+        train(toy_config(tmp_path / "run", num_envs=4))
+    assert not (tmp_path / "run").exists()

@@ -1,0 +1,97 @@
+"""A learning algorithm outside Stable-Baselines3, for the algorithm-seam tests (docs/architecture.md's recipe).
+
+A linear policy ``tanh(W [x, 1])`` on the flattened observation, trained by antithetic random search: each
+update plays one episode with ``W + noise * delta`` and one with ``W - noise * delta`` and moves ``W`` along
+``delta`` by the difference of their returns. Everything it learns from, its random stream included, is saved
+as ``weights.npz`` (read with ``allow_pickle=False``) and ``state.json``: a resumed run continues exactly.
+"""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Callable, Mapping
+from pathlib import Path
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+
+from crowdnav.registry import AlgorithmSpec
+
+
+class RandomSearchAgent:
+    """Implements crowdnav.agents.algorithm_protocol.Algorithm; ``RandomSearchAgent(env, config)`` is the builder."""
+
+    def __init__(self, env: gym.Env, config: Any):
+        spaces = env.observation_space.spaces
+        self.shapes = {key: list(spaces[key].shape) for key in sorted(spaces)}
+        inputs = sum(int(np.prod(shape)) for shape in self.shapes.values()) + 1
+        self.weights = np.zeros((int(np.prod(env.action_space.shape)), inputs))
+        self.step_size = float(config.algo_kwargs.get("step_size", 0.005))
+        self.noise = float(config.algo_kwargs.get("noise", 0.3))
+        self.rng = np.random.default_rng(config.seed)
+        self.delta: np.ndarray | None = None
+        self.plus_return: float | None = None
+        """The return of ``W + noise * delta``, once its episode is played (then ``W - noise * delta`` is next)."""
+
+    # ------------------------------------------------------------------ the protocol
+
+    def learn(self, env: gym.Env, keep_going: Callable[[], bool]) -> None:
+        while True:
+            if self.delta is None:
+                self.delta = self.rng.standard_normal(self.weights.shape)
+            sign = 1.0 if self.plus_return is None else -1.0
+            episode_return = self._play(env, self.weights + sign * self.noise * self.delta)
+            if self.plus_return is None:
+                self.plus_return = episode_return
+            else:
+                self.weights += self.step_size * (self.plus_return - episode_return) / 2 * self.delta
+                self.delta, self.plus_return = None, None
+            if not keep_going():
+                return
+
+    def predict(self, observation: Mapping[str, np.ndarray], deterministic: bool = True) -> np.ndarray:
+        return self._act(self.weights, observation)
+
+    def save(self, folder: Path) -> None:
+        arrays = {"weights": self.weights, **({"delta": self.delta} if self.delta is not None else {})}
+        np.savez(folder / "weights.npz", **arrays)
+        state = {"shapes": self.shapes, "step_size": self.step_size, "noise": self.noise, "plus_return": self.plus_return,
+                 "rng": self.rng.bit_generator.state}
+        (folder / "state.json").write_text(json.dumps(state), encoding="utf-8")
+
+    @classmethod
+    def load(cls, folder: Path) -> RandomSearchAgent:
+        agent = cls.__new__(cls)
+        state = json.loads((folder / "state.json").read_text(encoding="utf-8"))
+        with np.load(folder / "weights.npz", allow_pickle=False) as arrays:
+            agent.weights = arrays["weights"]
+            agent.delta = arrays["delta"] if "delta" in arrays else None
+        agent.shapes, agent.step_size, agent.noise = state["shapes"], state["step_size"], state["noise"]
+        agent.plus_return = state["plus_return"]
+        agent.rng = np.random.default_rng()
+        agent.rng.bit_generator.state = state["rng"]
+        return agent
+
+    # ------------------------------------------------------------------ helpers
+
+    def _act(self, weights: np.ndarray, observation: Mapping[str, np.ndarray]) -> np.ndarray:
+        first = next(iter(self.shapes))
+        batched = np.ndim(observation[first]) > len(self.shapes[first])
+        rows = [np.asarray(observation[key], dtype=np.float64).reshape((-1, int(np.prod(shape))) if batched else -1)
+                for key, shape in self.shapes.items()]
+        features = np.concatenate([*rows, np.ones((rows[0].shape[0], 1)) if batched else np.ones(1)], axis=-1)
+        return np.tanh(features @ weights.T).astype(np.float32)
+
+    def _play(self, env: gym.Env, weights: np.ndarray) -> float:
+        observation, _ = env.reset()
+        total, done = 0.0, False
+        while not done:
+            observation, reward, terminated, truncated, _ = env.step(self._act(weights, observation))
+            total += float(reward)
+            done = terminated or truncated
+        return total
+
+
+SPEC = AlgorithmSpec("Linear policy trained by antithetic random search (a test algorithm outside SB3).", builder=RandomSearchAgent)
+"""What a test registers: ``register_algorithm("random_search", SPEC)``."""
