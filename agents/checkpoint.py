@@ -45,7 +45,7 @@ from crowdnav.agents.wrappers import ObservationScales, agent_observation, scale
 from stable_baselines3.common.base_class import BaseAlgorithm
 
 from crowdnav.errors import CrowdNavError
-from crowdnav.registry import ALGORITHM_SPECS, is_off_policy
+from crowdnav.registry import algorithm_spec, is_off_policy
 
 if TYPE_CHECKING:
     from crowdnav.agents.algorithm_protocol import Algorithm
@@ -273,8 +273,11 @@ def load_policy(path: str | Path, device: str = "cpu", *, trusted: bool = False,
         from crowdnav.agents.pretrain import load_encoder
 
         encoder, _ = load_encoder(folder / info["leog_encoder"])  # torch.load with weights_only=True
-    spec = ALGORITHM_SPECS.get(info["algo"])
-    if spec is not None and not spec.sb3:  # a registered algorithm: its own load (arrays and JSON, no pickle)
+    try:
+        spec = algorithm_spec(info["algo"])
+    except ValueError as error:  # e.g. an algorithm registered by a module this process has not imported
+        raise PolicyFileError(f"{folder}: trained with {error.args[0]} (register it, or install the package that provides it)") from None
+    if not spec.sb3:  # a registered algorithm: its own load (arrays and JSON, no pickle)
         from crowdnav.agents.algorithm_protocol import load_algorithm
 
         return AgentPolicy(load_algorithm(folder, info["algo"]), info, encoder)

@@ -61,8 +61,8 @@ _ALGORITHM_SPECS: dict[str, AlgorithmSpec] = {
 }
 
 ALGORITHM_SPECS: Mapping[str, AlgorithmSpec] = MappingProxyType(_ALGORITHM_SPECS)
-"""Algorithm name (``algo`` in a training config, ``crowdnav train --algo``) -> its :class:`AlgorithmSpec` (read live:
-:func:`register_algorithm` adds to it)."""
+"""Algorithm name (``algo`` in a training config, ``crowdnav train --algo``) -> its :class:`AlgorithmSpec` (a live view:
+:func:`register_algorithm` adds to it; installed plug-ins appear once :func:`algorithm_names` or :func:`algorithm_spec` ran)."""
 
 ALGORITHMS: Mapping[str, str] = MappingProxyType({name: spec.description for name, spec in _ALGORITHM_SPECS.items()})
 """The built-in algorithms: name -> one-line description (``crowdnav train --algo`` choices)."""
@@ -72,6 +72,30 @@ ALGORITHM_NAMES: tuple[str, ...] = tuple(ALGORITHMS)
 
 OFF_POLICY_ALGORITHMS: tuple[str, ...] = tuple(name for name, spec in _ALGORITHM_SPECS.items() if spec.off_policy)
 """The built-in algorithms with a replay buffer (derived from their specs)."""
+
+
+PLUGIN_GROUP = "crowdnav.algorithms"
+"""Entry-point group of installed algorithms: ``name = "package.module:SPEC"`` (an :class:`AlgorithmSpec`), registered
+the first time the registry is read, so ``crowdnav train`` and ``crowdnav evaluate`` find them in a new process."""
+
+_plugins_loaded = False
+
+
+def _load_plugins() -> None:
+    """Register the installed packages' algorithms (:data:`PLUGIN_GROUP`), once per process."""
+    global _plugins_loaded
+    if _plugins_loaded:
+        return
+    _plugins_loaded = True
+    from importlib.metadata import entry_points
+
+    for point in entry_points(group=PLUGIN_GROUP):
+        if point.name in _ALGORITHM_SPECS:
+            continue
+        spec = point.load()
+        if not isinstance(spec, AlgorithmSpec):
+            raise TypeError(f"entry point {point.name} = {point.value} ({PLUGIN_GROUP}) is {type(spec).__name__}, not an AlgorithmSpec")
+        register_algorithm(point.name, spec)
 
 
 def register_algorithm(name: str, spec: AlgorithmSpec) -> None:
@@ -91,12 +115,15 @@ def unregister_algorithm(name: str) -> None:
 
 
 def algorithm_names() -> tuple[str, ...]:
-    """Every algorithm a config may name now: the built-in ones, then the registered ones."""
+    """Every algorithm a config may name now: the built-in ones, then the registered and installed ones."""
+    _load_plugins()
     return tuple(_ALGORITHM_SPECS)
 
 
 def algorithm_spec(name: str) -> AlgorithmSpec:
     """The spec of ``name``; ValueError with the registry's "unknown name" wording."""
+    if name not in _ALGORITHM_SPECS:
+        _load_plugins()
     try:
         return _ALGORITHM_SPECS[name]
     except KeyError:
@@ -105,6 +132,8 @@ def algorithm_spec(name: str) -> AlgorithmSpec:
 
 def is_off_policy(name: str) -> bool:
     """Whether the algorithm ``name`` keeps a replay buffer (an unknown name: False)."""
+    if name not in _ALGORITHM_SPECS:
+        _load_plugins()
     spec = _ALGORITHM_SPECS.get(name)
     return spec is not None and spec.off_policy
 

@@ -110,3 +110,32 @@ def test_registered_algorithm_refuses_settings_of_the_sb3_path_in_one_line(tmp_p
     with pytest.raises(ConfigError, match="^num_envs: algorithm 'random_search' trains on one env; set num_envs: 1$"):
         train(toy_config(tmp_path / "run", num_envs=4))
     assert not (tmp_path / "run").exists()
+
+
+def test_a_run_of_an_algorithm_this_process_has_not_registered_is_refused_in_one_line(tmp_path, capsys, random_search):
+    from crowdnav.agents import train
+
+    run = tmp_path / "run"
+    train(toy_config(run, episodes=1))
+    unregister_algorithm("random_search")
+    argv = ["evaluate", str(run), "--scenario", "open_space", "--episodes", "1", "--out", str(tmp_path / "r"), "--no-progress"]
+    assert main(argv) == 1
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "trained with unknown algorithm 'random_search'" in err and "register it" in err
+
+
+def test_an_installed_algorithm_is_registered_from_its_entry_point(monkeypatch):
+    import importlib.metadata
+
+    from crowdnav.agents.config import config_from_mapping
+
+    import crowdnav.registry as registry
+
+    point = importlib.metadata.EntryPoint("random_search", "tests.agents.toy_algorithm:SPEC", registry.PLUGIN_GROUP)
+    monkeypatch.setattr(importlib.metadata, "entry_points", lambda group: [point] if group == registry.PLUGIN_GROUP else [])
+    monkeypatch.setattr(registry, "_plugins_loaded", False)
+    try:
+        assert config_from_mapping(toy_config("unused")).algo == "random_search"  # validation reads the registry, plug-ins too
+        assert registry.ALGORITHM_SPECS["random_search"] is SPEC
+    finally:
+        unregister_algorithm("random_search")
