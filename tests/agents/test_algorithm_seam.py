@@ -139,3 +139,21 @@ def test_an_installed_algorithm_is_registered_from_its_entry_point(monkeypatch):
         assert registry.ALGORITHM_SPECS["random_search"] is SPEC
     finally:
         unregister_algorithm("random_search")
+
+
+def test_an_experiment_trains_and_ranks_a_registered_algorithm_by_the_evaluation_protocol(tmp_path, random_search):
+    from crowdnav.evaluation.benchmark import run_experiment
+    from crowdnav.evaluation.experiment import experiment_from_mapping
+
+    protocol = {"train_episodes": 4, "eval_every": 2, "test_episodes": 3, "seeds": 2, "window": 3, "final_evaluations": 1}
+    train = {key: value for key, value in toy_config("unused").items() if key not in ("out", "episodes", "checkpoint_every", "seed", "progress")}
+    document = {"name": "toy", "description": "a registered algorithm", "protocol": protocol, "defaults": train,
+                "configurations": [{"name": "rs", "label": "random search", "train": {}}]}
+    report = run_experiment(experiment_from_mapping(document), tmp_path, workers=1, progress=False, video=False, log=lambda line: None)
+    assert not report.failures
+    for seed in (0, 1):
+        run = report.folder / "rs" / f"seed_{seed}"
+        assert sorted(path.name for path in (run / "evaluations").iterdir()) == ["evaluation_000.csv", "evaluation_001.csv"]
+        with open(run / "test_episodes.csv", encoding="utf-8") as file:
+            assert len(list(csv.DictReader(file))) == 2 * 3  # two evaluations of the 3 test episodes
+    assert "| random search | 2 |" in (report.folder / "leaderboard.md").read_text(encoding="utf-8")
