@@ -15,9 +15,10 @@ Then ``crowdnav train`` trains it (:mod:`crowdnav.agents.protocol_training`: epi
 no pickle: :meth:`Algorithm.save` writes arrays (``.npz`` read with ``allow_pickle=False``, or safetensors) and
 JSON. ONNX export (:mod:`crowdnav.agents.onnx_export`) and ``agents: robots`` are for SB3 algorithms only.
 
-The built-in algorithms are Stable-Baselines3's; :class:`SB3Algorithm` is one seen as an :class:`Algorithm` (how
-policies predict). Their training keeps SB3's own loop (:mod:`crowdnav.agents.training`: callbacks, replay buffers
-and rollouts restored mid-episode for an exact resume).
+The built-in algorithms are Stable-Baselines3's: their policies predict through the same :class:`Predictor` side
+(:class:`SB3Predictor`), their training keeps SB3's own loop (:mod:`crowdnav.agents.training`: callbacks, replay
+buffers and rollouts restored mid-episode for an exact resume) and their checkpoints SB3's ``model.zip``, read back
+as tensors only.
 """
 
 from __future__ import annotations
@@ -34,7 +35,15 @@ ALGORITHM_FOLDER = "algorithm"
 
 
 @runtime_checkable
-class Algorithm(Protocol):
+class Predictor(Protocol):
+    """What a trained agent does in evaluation, rendering and experiments (:class:`crowdnav.agents.checkpoint.AgentPolicy`)."""
+
+    def predict(self, observation: Mapping[str, np.ndarray], deterministic: bool = True) -> np.ndarray:
+        """Actions for one observation (float (2,)) or a batch of them stacked per key (float (N, 2))."""
+
+
+@runtime_checkable
+class Algorithm(Predictor, Protocol):
     """A learning agent crowdnav can train, checkpoint, resume and evaluate (module docstring: how it is registered)."""
 
     def learn(self, env: gym.Env, keep_going: Callable[[], bool]) -> None:
@@ -46,38 +55,29 @@ class Algorithm(Protocol):
         end before the next reset: crowdnav seeds each training episode itself, whatever seed ``reset`` is given.
         """
 
-    def predict(self, observation: Mapping[str, np.ndarray], deterministic: bool = True) -> np.ndarray:
-        """Actions for one observation (float (2,)) or a batch of them stacked per key (float (N, 2))."""
-
     def save(self, folder: Path) -> None:
         """Write the agent into the empty ``folder``: arrays and JSON, no pickle; ``builder.load(folder)`` gives it back."""
 
 
-class SB3Algorithm:
-    """A Stable-Baselines3 model seen as an :class:`Algorithm` where policies use it: ``predict`` without SB3's state tuple."""
+class SB3Predictor:
+    """A Stable-Baselines3 model seen as a :class:`Predictor`: ``predict`` without SB3's recurrent-state tuple."""
 
     def __init__(self, model: Any):
         self.model = model
-
-    def learn(self, env: gym.Env, keep_going: Callable[[], bool]) -> None:
-        raise NotImplementedError("SB3 algorithms train through crowdnav.agents.training (SB3's own loop and callbacks)")
 
     def predict(self, observation: Mapping[str, np.ndarray], deterministic: bool = True) -> np.ndarray:
         action, _ = self.model.predict(observation, deterministic=deterministic)
         return np.asarray(action)
 
-    def save(self, folder: Path) -> None:
-        raise NotImplementedError("SB3 algorithms are saved by crowdnav.agents.checkpoint.save_checkpoint (model.zip)")
 
-
-def as_algorithm(model: Any) -> Algorithm:
-    """``model`` as an :class:`Algorithm`: a registered algorithm's agent as it is, an SB3 model through :class:`SB3Algorithm`."""
+def as_predictor(model: Any) -> Predictor:
+    """``model`` as a :class:`Predictor`: a registered algorithm's agent as it is, an SB3 model through :class:`SB3Predictor`."""
     from stable_baselines3.common.base_class import BaseAlgorithm
 
     if isinstance(model, BaseAlgorithm):
-        return SB3Algorithm(model)
-    if not isinstance(model, Algorithm):
-        raise TypeError(f"{type(model).__name__} is neither an SB3 model nor an Algorithm (learn, predict, save)")
+        return SB3Predictor(model)
+    if not isinstance(model, Predictor):
+        raise TypeError(f"{type(model).__name__} is neither an SB3 model nor a Predictor (predict)")
     return model
 
 

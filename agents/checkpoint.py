@@ -215,11 +215,11 @@ class AgentPolicy:
     """
 
     def __init__(self, model: BaseAlgorithm | Algorithm, info: Mapping[str, Any], encoder: Any = None):
-        from crowdnav.agents.algorithm_protocol import as_algorithm
+        from crowdnav.agents.algorithm_protocol import as_predictor
 
         self.model = model
         """The SB3 model, or a registered algorithm's agent (crowdnav.agents.algorithm_protocol)."""
-        self.algorithm = as_algorithm(model)
+        self.predictor = as_predictor(model)
         self.info = dict(info)
         self.env_options: dict[str, Any] = dict(info["env"])
         """Keyword arguments of CrowdNavEnv that give the observations this policy expects."""
@@ -237,7 +237,7 @@ class AgentPolicy:
         return agent_observation(observation, self.scales, self.encoder)
 
     def __call__(self, observation: Mapping[str, np.ndarray]) -> np.ndarray:
-        action = self.algorithm.predict(self.preprocess(observation), deterministic=True)
+        action = self.predictor.predict(self.preprocess(observation), deterministic=True)
         return action.astype(np.float32, copy=False)
 
     def make_env(self, **extra: Any) -> CrowdNavEnv:
