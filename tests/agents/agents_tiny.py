@@ -4,6 +4,8 @@ from __future__ import annotations
 
 from typing import Any
 
+from crowdnav.registry import is_off_policy
+
 TINY_EXTRACTOR = {"leog_channels": [4, 8], "leog_kernels": [4, 3], "leog_strides": [4, 2], "leog_latent": 8,
                   "lidar_hidden": [16], "rbf_centres": 4, "lowdim_hidden": [8]}
 """A 2-layer CNN that fits the 30x30 test grids, and small fully connected layers."""
@@ -27,7 +29,7 @@ def tiny_config(out, *, algo: str = "sac", modalities=("lidar", "goal"), episode
         "net_arch": [16], "extractor": dict(TINY_EXTRACTOR), "progress": False, "checkpoint_every": 2,
         "num_envs": 1,
     }
-    if algo in ("sac", "td3", "ddpg"):
+    if is_off_policy(algo):
         config.update(batch_size=16, buffer_size=2_000, learning_starts=30, algo_kwargs={"train_freq": 4})
     elif algo == "a2c":
         config.update(algo_kwargs={"n_steps": 16})
