@@ -51,7 +51,15 @@ from pathlib import Path
 
 import torch
 from crowdnav.agents.config import EncoderConfig, TrainConfig
-from crowdnav.agents.factory import OFF_POLICY, load_leog_weights, make_env, make_model, make_vec_env, precomputes_leog
+from crowdnav.agents.factory import (
+    OFF_POLICY,
+    SB3_ALGORITHMS,
+    load_leog_weights,
+    make_env,
+    make_model,
+    make_vec_env,
+    precomputes_leog,
+)
 from stable_baselines3 import SAC
 from stable_baselines3.common.monitor import Monitor
 
@@ -161,7 +169,7 @@ def buffer_bytes(model) -> int:
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("--algos", nargs="+", default=["sac", "td3", "ddpg", "a2c"], choices=["sac", "td3", "ddpg", "a2c", "ppo"])
+    parser.add_argument("--algos", nargs="+", default=["sac", "td3", "ddpg", "a2c"], choices=SB3_ALGORITHMS)
     parser.add_argument("--cases", nargs="+", default=list(CASES), choices=list(CASES))
     parser.add_argument("--steps", type=int, default=1000)
     parser.add_argument("--warmup", type=int, default=300)
