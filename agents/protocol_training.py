@@ -66,7 +66,7 @@ def train_registered(config: TrainConfig, resume: bool, on_checkpoint: Callable[
     seconds = time.perf_counter() - started
     return TrainResult(out=out, checkpoint=checkpoint, episodes=session.done, timesteps=env.steps, successes=session.successes,
                        seconds=seconds, steps_per_second=(env.steps - start_steps) / seconds if seconds > 0 else 0.0,
-                       records=session.records)
+                       records=session.records, model=agent)
 
 
 class EpisodeEnds(gym.Wrapper):

@@ -4,9 +4,13 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from crowdnav.agents.callbacks import EpisodeRecord
 from stable_baselines3.common.base_class import BaseAlgorithm
+
+if TYPE_CHECKING:
+    from crowdnav.agents.algorithm_protocol import Algorithm
 
 
 @dataclass
@@ -26,8 +30,8 @@ class TrainResult:
     """Env steps per second in this session, gradient updates included."""
     records: list[EpisodeRecord] = field(default_factory=list)
     """The episodes of this session."""
-    model: BaseAlgorithm | None = field(default=None, repr=False)
-    """The trained SB3 model."""
+    model: BaseAlgorithm | Algorithm | None = field(default=None, repr=False)
+    """The trained SB3 model, or a registered algorithm's agent (crowdnav.agents.algorithm_protocol)."""
 
     @property
     def success_rate(self) -> float:

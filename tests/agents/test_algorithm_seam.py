@@ -11,7 +11,7 @@ import yaml
 
 from crowdnav.cli import main
 from crowdnav.registry import register_algorithm, unregister_algorithm
-from tests.agents.toy_algorithm import SPEC
+from tests.agents.toy_algorithm import SPEC, RandomSearchAgent
 
 pytestmark = pytest.mark.filterwarnings("ignore::DeprecationWarning")
 
@@ -84,7 +84,7 @@ def test_registered_algorithm_resumes_to_the_uninterrupted_run(tmp_path, random_
     first = train(toy_config(cut, episodes=7, checkpoint_every=3))  # checkpointed at 6 and at its end, 7 (mid-pair)
     assert first.episodes == 7
     resumed = train(toy_config(cut, episodes=12, checkpoint_every=3), resume=True)
-    assert resumed.episodes == 12 and len(resumed.records) == 5
+    assert resumed.episodes == 12 and len(resumed.records) == 5 and isinstance(resumed.model, RandomSearchAgent)
     assert rows(cut) == rows(whole)
     np.testing.assert_array_equal(load_policy(cut).model.weights, load_policy(whole).model.weights)
 
