@@ -210,7 +210,8 @@ def _one_table(table: Any) -> str:
             f"{_number(row['success_iqm'])} [{_number(row['success_iqm_low'])}, {_number(row['success_iqm_high'])}]" if runs else "-",
             f"{_number(row['success_auc_mean'])} ± {_number(row['success_auc_std'])}" if runs else _number(row["success_auc_mean"]),
             _number(row["spl"]), _number(row["stl"]), _number(row["psc"]), _number(row["min_human_distance"]),
-            _number(row["social_force"]), _number(row["group_intrusions"]), _number(row["env_steps"], 0), _number(row["wall_time_s"], 0),
+            _number(row["social_force"]), _number(row.get("group_intrusions", float("nan"))),  # "-" in tables made before the metric
+            _number(row["env_steps"], 0), _number(row["wall_time_s"], 0),
         ]
         lines.append("| " + " | ".join(cells) + " |")
     intervals = sorted(set(table["interval"]))

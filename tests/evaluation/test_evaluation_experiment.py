@@ -22,7 +22,8 @@ def write(tmp_path, document, name="experiment.yaml"):
 
 def test_shipped_experiments_cover_figure_4_the_default_and_the_reference_agents():
     assert set(shipped_experiments()) == {"default", "encoders", "modalities", "modalities_paper", "fusion", "paradigms", "learning_check",
-                                          "reference_figure4", "reference_room", "modalities_steps", "paradigms_steps", "robots"}
+                                          "reference_figure4", "reference_room", "modalities_steps", "paradigms_steps", "robots",
+                                          "anticipate", "anticipate_room", "anticipate_circle"}
     labels = {name: [c.name for c in load_experiment(name).configurations] for name in shipped_experiments()}
     assert labels["encoders"] == ["frozen", "finetune", "scratch"]
     assert labels["modalities"] == labels["modalities_paper"] == ["leog", "lidar", "closest_obstacle"]
@@ -75,8 +76,9 @@ def test_the_main_job_learns_from_the_batched_defaults_in_the_furnished_room_wit
     protocol = experiment.protocol
     assert protocol.seeds >= 2 and protocol.unit == "steps" and protocol.test_episodes >= 100 and protocol.evaluations >= 10
     for configuration in experiment.configurations:
-        # nothing beyond the setting, the algorithm and the input: the curve is the defaults' own (batched, pure RL)
-        assert set(configuration.train) <= {"scenario", "overrides", "algo", "modalities"}
+        # nothing beyond the setting, the algorithm, the input and the shield: the curve is the defaults' own (batched RL;
+        # the shield and the plan input read only the robot's own sensing and the map, docs/planning.md)
+        assert set(configuration.train) <= {"scenario", "overrides", "algo", "modalities", "shield"}
         env = CrowdNavEnv(configuration.train["scenario"], modalities=configuration.train["modalities"],
                           overrides=configuration.train["overrides"])
         assert env.scenario.name == "room_furniture" and env.scenario.humans.min_count >= 5

@@ -5,6 +5,7 @@ from __future__ import annotations
 import shutil
 
 import nbformat
+from crowdnav.evaluation.baselines import EXPERIMENT_BASELINES
 from nbclient import NotebookClient
 
 from tests.evaluation.evaluation_tiny import tiny_results
@@ -34,4 +35,4 @@ def test_the_notebook_started_in_notebooks_finds_results_beside_it_without_confi
     notebook.cells = notebook.cells[:2]  # the loading cell is what this checks
     NotebookClient(notebook, timeout=120, kernel_name="python3", resources={"metadata": {"path": str(tmp_path / "notebooks")}}).execute()
     printed = "".join(output.get("text", "") for output in notebook.cells[1].outputs)
-    assert printed.startswith("6 runs") and printed.rstrip().endswith(str(tmp_path / "results" / "default"))
+    assert printed.startswith(f"{4 + len(EXPERIMENT_BASELINES)} runs") and printed.rstrip().endswith(str(tmp_path / "results" / "default"))

@@ -19,6 +19,7 @@ from pathlib import Path
 
 import pandas as pd
 import pytest
+from crowdnav.evaluation.baselines import EXPERIMENT_BASELINES
 from crowdnav.evaluation.benchmark import run_experiment
 from crowdnav.evaluation.executors import ExecutorError, make_executor
 from crowdnav.evaluation.experiment import experiment_from_mapping
@@ -135,8 +136,8 @@ def test_ray_on_a_running_cluster_gives_row_for_row_the_local_executors_results(
     assert files == sorted(str(path.relative_to(ray)) for path in ray.rglob("*") if path.is_file())  # the same layout, less the
     # replay buffers (resume state, not transferred)
     local_tables, ray_tables = _tables(local), _tables(ray)
-    # per run: 2 evaluations, test and training episodes, agents' log; 2 baselines' test episodes; leaderboard, evaluation rates
-    assert len(local_tables) == 4 * 5 + 2 + 2
+    # per run: 2 evaluations, test and training episodes, agents' log; each baseline's test episodes; leaderboard, evaluation rates
+    assert len(local_tables) == 4 * 5 + len(EXPERIMENT_BASELINES) + 2
     for name, frame in local_tables.items():
         pd.testing.assert_frame_equal(ray_tables[name], frame, obj=name)
     for meta in local.rglob("meta.json"):
