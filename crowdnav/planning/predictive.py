@@ -186,6 +186,15 @@ class PredictivePlanner:
         return displacement
 
 
+def moves_to_actions(moves: np.ndarray, heading: np.ndarray, step: float) -> np.ndarray:
+    """(K, 2) float32 holonomic actions (robot frame) that make each world's ``moves`` (K,) complex, world frame, m)
+    in one step; ``step``: the robot's full-speed displacement per step (``max_speed * dt``)."""
+    local = moves / step * np.exp(-1j * np.asarray(heading, dtype=float))
+    local /= np.maximum(np.abs(local), 1.0)  # rounding: a full-speed move may come out a hair over 1
+    actions: np.ndarray = np.stack([local.real, local.imag], -1).astype(np.float32)
+    return actions
+
+
 @dataclass
 class Layers:
     """K worlds' local lattices (centred on their robots) and where the robot may be at each predicted step."""

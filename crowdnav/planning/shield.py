@@ -17,12 +17,11 @@ same policy unshielded (``info["shielded"]``: whether the shield replaced this s
 
 from __future__ import annotations
 
-import math
 from typing import Any
 
 import numpy as np
 
-from crowdnav.planning.predictive import CrowdEstimate, PlannerSettings, PredictivePlanner
+from crowdnav.planning.predictive import CrowdEstimate, PlannerSettings, PredictivePlanner, moves_to_actions
 from crowdnav.sensors.humans import HumansModality
 from crowdnav.world import CompiledWorld
 
@@ -82,10 +81,7 @@ class Shield:
         replacement = np.where(safe.any(1), np.argmin(distance, 1), grid.roomiest())
         out = np.array(actions, dtype=np.float32, copy=True)
         if (~keep).any():
-            move = lattice.displacements[replacement[~keep]]
-            local = move / (max_speed * self.dt) * np.exp(-1j * heading[~keep])
-            local /= np.maximum(np.abs(local), 1.0)
-            out[~keep] = np.stack([local.real, local.imag], 1).astype(np.float32)
+            out[~keep] = moves_to_actions(lattice.displacements[replacement[~keep]], heading[~keep], max_speed * self.dt)
         return out, ~keep
 
 
@@ -98,8 +94,6 @@ def validate_shield(option: Any, world: CompiledWorld) -> Shield | None:
         raise ValueError("shield: shields one robot; a scenario with robots: is not supported")
     if world.scenario.robot.kinematics != "holonomic":
         raise ValueError(f"shield: plans lattice moves for a holonomic robot; this scenario's robot is {world.scenario.robot.kinematics}")
-    if not math.isfinite(settings.horizon):
-        raise ValueError("shield: horizon must be finite")
     shield = Shield(world, settings)
     shield.planner.check(world, shield.dt)
     return shield

@@ -15,7 +15,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 from gymnasium import spaces
 
-from crowdnav.planning.predictive import CrowdEstimate, PredictivePlanner
+from crowdnav.planning.predictive import CrowdEstimate, PredictivePlanner, moves_to_actions
 from crowdnav.sensors.base import Modality, register_modality
 from crowdnav.sensors.humans import HumansModality
 
@@ -63,6 +63,4 @@ class PlanModality(Modality):
     def _actions(self, robot: np.ndarray, heading: np.ndarray, velocity: np.ndarray, goal: np.ndarray, rows: np.ndarray) -> np.ndarray:
         crowd = CrowdEstimate.from_tracker(robot, heading, velocity, goal, rows)
         move = self.planner.plan(self.world, self.dt, crowd)
-        local = move / (self.max_speed * self.dt) * np.exp(-1j * heading)
-        local /= np.maximum(np.abs(local), 1.0)  # rounding: a full-speed move may come out a hair over 1
-        return np.stack([local.real, local.imag], -1).astype(np.float32)
+        return moves_to_actions(move, heading, self.max_speed * self.dt)
