@@ -104,8 +104,9 @@ def test_predictive_planner_ignores_absent_humans_and_steers_around_a_present_on
     world, dt = env.simulator.world, env.simulator.dt
     robot, goal = np.array([0j]), np.array([4 + 0j])
     human = np.array([[0.75 + 0j]])  # standing on the straight line, 0.15 m beyond contact
-    free = PredictivePlanner().plan(world, dt, CrowdEstimate(robot, goal, human, np.zeros((1, 1), complex), np.full((1, 1), 0.3), np.zeros((1, 1), bool)))
-    blocked = PredictivePlanner().plan(world, dt, CrowdEstimate(robot, goal, human, np.zeros((1, 1), complex), np.full((1, 1), 0.3), np.ones((1, 1), bool)))
+    still, radius = np.zeros((1, 1), complex), np.full((1, 1), 0.3)
+    free = PredictivePlanner().plan(world, dt, CrowdEstimate(robot, goal, human, still, radius, np.zeros((1, 1), bool)))
+    blocked = PredictivePlanner().plan(world, dt, CrowdEstimate(robot, goal, human, still, radius, np.ones((1, 1), bool)))
     assert free[0] == pytest.approx(0.2)  # nobody there: full speed at the goal
     assert abs(0.75 - blocked[0]) > 0.6 + 0.1  # someone there: never within contact + human_margin
 
