@@ -5,26 +5,17 @@ from __future__ import annotations
 
 import gc
 
-import numpy as np
 import pytest
 
 from crowdnav.orca import SOLVERS_KEPT, SolverCache
 from crowdnav.policies import WORLDS_KEPT, OrcaRobot
 from crowdnav.simulator import Simulator
 from crowdnav.world import load_world
+from tests.core.test_orca import _episode
 
 pytest.importorskip("pyrvo")
 
 VARYING = {"humans.model": "orca", "humans.count": [1, 40]}
-
-
-def _episode(sim: Simulator, seed: int, steps: int = 30) -> bytes:
-    sim.reset(seed=seed)
-    trace = [sim.positions.tobytes()]
-    for k in range(steps):
-        sim.step(np.array([np.cos(k / 7), np.sin(k / 5)]))
-        trace.append(sim.positions.tobytes() + sim.velocities.tobytes())
-    return b"".join(trace)
 
 
 def test_the_cache_keeps_the_most_recently_used_counts_and_frees_the_oldest():
@@ -46,13 +37,13 @@ def test_an_orca_crowd_of_varying_size_keeps_a_bounded_number_of_solvers_over_ma
 
 
 def test_an_orca_episode_after_its_solver_was_freed_and_rebuilt_equals_the_first_bit_for_bit():
-    fresh = [_episode(Simulator("open_space", VARYING), seed) for seed in (3, 4)]
+    fresh = [_episode(Simulator("open_space", VARYING), seed, 30) for seed in (3, 4)]
     sim = Simulator("open_space", VARYING)
-    first = _episode(sim, 3)
+    first = _episode(sim, 3, 30)
     for seed in range(100, 130):  # other crowd sizes push the first one's solver out
         sim.reset(seed=seed)
     gc.collect()
-    assert first == fresh[0] and _episode(sim, 3) == fresh[0] and _episode(sim, 4) == fresh[1]
+    assert first == fresh[0] and _episode(sim, 3, 30) == fresh[0] and _episode(sim, 4, 30) == fresh[1]
 
 
 def test_the_orca_robot_keeps_a_bounded_number_of_solvers_and_worlds():

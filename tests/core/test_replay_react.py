@@ -12,7 +12,7 @@ from crowdnav.crowd.recording import read_recording
 from crowdnav.crowd.replay import START_CLEARANCE, ReplayModel, empty_places
 from crowdnav.simulator import Simulator
 from crowdnav.world import load_world
-from tests.core.test_replay import _replay, _write
+from tests.core.test_replay import _replay, _write, native_equals_sync
 from tests.core.test_vector_env import check_batch_equals_singles
 
 
@@ -128,23 +128,7 @@ def test_batched_reacting_worlds_equal_single_simulators_bit_for_bit(recording, 
 
 
 def test_the_native_vector_env_with_reacting_people_equals_the_sync_one(recording, reactions):
-    import gymnasium as gym
-
-    import crowdnav  # noqa: F401  (registers the ids)
-
-    options = {"num_envs": 3, "modalities": ["goal", "humans", "lidar"],
-               "overrides": {**_replay(recording, react_within=4.0), "max_steps": 30}}
-    native = gym.make_vec("crowdnav/OpenSpace-v0", vectorization_mode="vector_entry_point", **options)
-    sync = gym.make_vec("crowdnav/OpenSpace-v0", vectorization_mode="sync", **options)
-    first, second = native.reset(seed=3), sync.reset(seed=3)
-    assert all(np.array_equal(first[0][key], second[0][key]) for key in first[0])
-    rng, ends = np.random.default_rng(3), 0
-    for _ in range(70):
-        actions = rng.uniform(-1, 1, (3, 2)).astype(np.float32)
-        mine, theirs = native.step(actions), sync.step(actions)
-        assert all(mine[0][key].tobytes() == theirs[0][key].tobytes() for key in mine[0])
-        assert mine[1].tobytes() == theirs[1].tobytes() and (mine[2] == theirs[2]).all() and (mine[3] == theirs[3]).all()
-        ends += int((mine[2] | mine[3]).sum())
+    ends = native_equals_sync(_replay(recording, react_within=4.0))
     assert ends > 0 and sum(reactions) > 20
 
 
