@@ -15,7 +15,6 @@ from typing import Any
 
 import numpy as np
 from crowdnav.agents.resume_state import _ROLLOUT, ActionLog, ResumeStateError, _fill, _position, _read_npz, _write_npz
-from crowdnav.agents.seeding import train_seed
 from crowdnav.agents.vec_env import CrowdNavSB3VecEnv
 from crowdnav.agents.wrappers import EpisodeSeeds
 from stable_baselines3.common.vec_env import DummyVecEnv
@@ -84,7 +83,8 @@ def _world_state(env: Any) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
         counter = inner.episode_seeds
         if counter is None:  # training always gives the batched env its counter (make_vec_env)
             raise ResumeStateError("the run's vector env has no episode counter to store")
-        arrays.update({"worlds/returns": inner._returns.copy(), "worlds/episode_lengths": inner._lengths.copy()})
+        returns, lengths = inner.world_counts()
+        arrays.update({"worlds/returns": returns, "worlds/episode_lengths": lengths})
         return arrays, {"kind": "vector", "run_seed": counter.run_seed, "next_episode": counter.next_episode,
                         "episode_of": [counter.episode_of[i] for i in range(inner.num_envs)],
                         "ended_of": {str(k): v for k, v in counter.ended_of.items()}}
@@ -110,9 +110,7 @@ def _restore_worlds(path: Path, env: ActionLog, arrays: Mapping[str, np.ndarray]
         raise ResumeStateError(f"{path}: its worlds' actions do not fit the run's {n} worlds")
     inner = env.venv
     if meta["kind"] == "vector" and isinstance(inner, CrowdNavSB3VecEnv):
-        observation = _replay_vector(inner, actions, lengths, meta)
-        for name, key in (("_returns", "worlds/returns"), ("_lengths", "worlds/episode_lengths")):
-            _fill(path, inner, name, arrays, key)
+        observation = _replay_vector(inner, actions, lengths, meta, arrays["worlds/returns"], arrays["worlds/episode_lengths"])
     elif meta["kind"] == "single" and isinstance(inner, DummyVecEnv):
         observation = _replay_single(inner, actions, lengths, meta)
     else:
@@ -126,24 +124,15 @@ def _restore_worlds(path: Path, env: ActionLog, arrays: Mapping[str, np.ndarray]
     env.lengths = lengths.copy()
 
 
-def _replay_vector(inner: CrowdNavSB3VecEnv, actions: np.ndarray, lengths: np.ndarray, meta: Mapping[str, Any]) -> dict[str, np.ndarray]:
-    counter, vector = inner.episode_seeds, inner.env
+def _replay_vector(inner: CrowdNavSB3VecEnv, actions: np.ndarray, lengths: np.ndarray, meta: Mapping[str, Any],
+                   returns: np.ndarray, episode_lengths: np.ndarray) -> dict[str, np.ndarray]:
+    counter = inner.episode_seeds
     if counter is None or int(meta["run_seed"]) != counter.run_seed:
         raise ValueError(f"the worlds were seeded by run seed {meta['run_seed']}, the run's config has {getattr(counter, 'run_seed', None)}")
     counter.next_episode = int(meta["next_episode"])
     counter.episode_of = {i: int(episode) for i, episode in enumerate(meta["episode_of"])}
     counter.ended_of = {int(k): int(v) for k, v in meta["ended_of"].items()}
-    vector.reset(seed=[train_seed(counter.run_seed, counter.episode_of[i]) for i in range(inner.num_envs)])
-    # each world steps only through its own episode's actions (the batch leaves inactive worlds exactly as they are)
-    for step in range(int(lengths.max(initial=0))):
-        active = lengths > step
-        vector.batch.step(vector._checked_actions(actions[:, step]), None if active.all() else active)
-    # what the vector env's reward code keeps after a step: the robot-goal distance it measured
-    vector._previous_distance[:] = vector._goal_distance(np.arange(inner.num_envs))
-    vector._observe_all()
-    inner._reset_seeds()  # SB3 seeded the new env; its worlds are seeded by the counter
-    inner._seed = None
-    return inner._observe(vector._copy_observations())
+    return inner.restore_worlds([counter.episode_of[i] for i in range(inner.num_envs)], actions, lengths, returns, episode_lengths)
 
 
 def _replay_single(inner: DummyVecEnv, actions: np.ndarray, lengths: np.ndarray, meta: Mapping[str, Any]) -> Any:

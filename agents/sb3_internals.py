@@ -148,7 +148,7 @@ SB3_INTERNALS: tuple[Internal, ...] = (
     Internal(_DUMMY, "envs", "attribute", "agents/resume_worlds.py (_episode_seeds)"),
     Internal(_DUMMY, "_save_obs", "method", "agents/resume_worlds.py (_replay_single)", ("env_idx", "obs")),
     Internal(_DUMMY, "_obs_from_buf", "method", "agents/resume_worlds.py (_replay_single)"),
-    Internal(_DUMMY, "_reset_seeds", "method", "agents/resume_worlds.py (_replay_single, _replay_vector)"),
+    Internal(_DUMMY, "_reset_seeds", "method", "agents/resume_worlds.py (_replay_single), agents/vec_env.py (restore_worlds)"),
 )
 
 

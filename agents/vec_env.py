@@ -91,6 +91,32 @@ class CrowdNavSB3VecEnv(VecEnv):
         self._lengths[:] = 0
         return self._observe(observation)
 
+    def world_counts(self) -> tuple[np.ndarray, np.ndarray]:
+        """Each world's return and length so far in its episode (what ``infos[i]["episode"]`` will report), as copies."""
+        return self._returns.copy(), self._lengths.copy()
+
+    def restore_worlds(self, episodes: Sequence[int], actions: np.ndarray, lengths: np.ndarray,
+                       returns: np.ndarray, episode_lengths: np.ndarray) -> dict[str, np.ndarray]:
+        """A training resume: world ``i`` back in training episode ``episodes[i]`` after its first ``lengths[i]`` actions.
+
+        The worlds are rebuilt by :meth:`CrowdNavVectorEnv.restore_worlds` with the episodes' seeds
+        (``episode_seeds``, whose counter the caller has set to the checkpoint's); ``returns`` and
+        ``episode_lengths`` are :meth:`world_counts` as saved. Returns the (normalised) observation.
+        """
+        counter = self.episode_seeds
+        if counter is None:
+            raise ValueError("restore_worlds needs the training episode counter (episode_seeds) that numbered the episodes")
+        for name, value, kind in (("returns", returns, "f"), ("episode_lengths", episode_lengths, "i")):
+            if np.shape(value) != (self.num_envs,) or np.asarray(value).dtype.kind != kind:
+                raise ValueError(f"restore_worlds: {name} must be one {'float' if kind == 'f' else 'integer'} per world "
+                                 f"({self.num_envs}), got {np.asarray(value).dtype}{np.shape(value)}")
+        observation = self.env.restore_worlds([train_seed(counter.run_seed, int(e)) for e in episodes], actions, lengths)
+        self._returns[:] = returns
+        self._lengths[:] = episode_lengths
+        self._reset_seeds()  # SB3 seeded the new env; its worlds are seeded by the counter
+        self._seed = None
+        return self._observe(observation)
+
     def step_async(self, actions: np.ndarray) -> None:
         self._actions = np.asarray(actions)
 

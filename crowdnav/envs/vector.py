@@ -20,6 +20,7 @@ from crowdnav.batch.simulator import BatchSimulator, StepResult
 from crowdnav.contacts import goal_distance
 from crowdnav.envs.core import ScenarioSource, checked_residual, load_env_world, option_overrides, real_array
 from crowdnav.envs.reward import REWARD_TERMS, reward_terms
+from crowdnav.envs.vector_team import TeamWorlds
 from crowdnav.events import outcomes
 from crowdnav.planning.shield import validate_shield
 
@@ -66,6 +67,13 @@ class CrowdNavVectorEnv(VectorEnv):
     (:mod:`crowdnav.batch.simulator`); resets and goal-rule draws run per world that needs one.
     Crowds of ``Simulator.grid_from`` humans or more are refused (use the sync mode).
 
+    **Several robots** (a scenario with ``robots:``): world ``i`` is :class:`crowdnav.envs.CrowdNavEnv`
+    with the same ``other_robots`` option (the first robot learns, the others follow their scripted
+    policy); its infos gain ``other_robots`` (a dict of per-robot arrays, as ``SyncVectorEnv`` lays out the
+    single env's dict). The worlds are then a group of per-world simulators stepped in one call
+    (:class:`crowdnav.envs.vector_team.TeamWorlds`), not one stacked batch: the same episodes, at about the
+    single env's speed per world. The shield is refused there, as by the single env.
+
     **Episode seeds.** ``episode_seeds(worlds)`` (optional) gives the seeds of the episodes an
     autoreset starts, for ``worlds`` in ascending order (training numbers its episodes this way,
     :class:`crowdnav.agents.seeding.EpisodeSeedCounter`); without it an autoreset continues each
@@ -94,6 +102,7 @@ class CrowdNavVectorEnv(VectorEnv):
         episode_seeds: Callable[[np.ndarray], Sequence[int | None]] | None = None,
         shield: bool | Mapping[str, Any] | None = None,
         residual: bool = False,
+        other_robots: str | Callable[..., Any] = "social-force",
     ):
         if render_mode is not None:
             raise ValueError("the vector env does not render; render a single env (gymnasium.make(..., render_mode=...))")
@@ -106,8 +115,13 @@ class CrowdNavVectorEnv(VectorEnv):
         self.scenario = world.scenario
         self.episode_seeds = episode_seeds
         _check_agents(num_envs, world.scenario.humans.max_count)
-        self.batch = BatchSimulator(world, num_envs)
         self.shield = validate_shield(dict(shield) if isinstance(shield, Mapping) else shield, world)
+        self.batch: BatchSimulator | TeamWorlds
+        if world.scenario.robots is None:
+            self.batch = BatchSimulator(world, num_envs)
+        else:  # several robots: one single env per world, stepped in one call (crowdnav.envs.vector_team)
+            self.batch = TeamWorlds(world, num_envs, other_robots)
+            self.modalities = self.batch.modalities  # the first robot's own (robots.0.modalities)
         self.residual = checked_residual(residual, self.modalities)
         if keep_freed_memory:
             _keep_freed_memory()
@@ -170,6 +184,9 @@ class CrowdNavVectorEnv(VectorEnv):
 
     def _goal_distance(self, worlds: np.ndarray) -> np.ndarray:
         """The robot-goal distance of ``worlds``: :func:`crowdnav.contacts.goal_distance`, the single simulator's kernel."""
+        if isinstance(self.batch, TeamWorlds):
+            team: np.ndarray = self.batch.goal_distance()[worlds]
+            return team
         out = np.zeros(self.num_envs)
         for bucket in self.batch.buckets.values():
             out[bucket.world] = goal_distance(bucket.robot_goal, bucket.positions[:, 0])
@@ -192,11 +209,9 @@ class CrowdNavVectorEnv(VectorEnv):
         if not stepping.any():  # every world is waiting (DISABLED) or was just reset
             self._observe_all()
             return self._copy_observations(), rewards, *self._waiting_flags(), infos
-        if self.residual:  # each policy action corrects the plan its world observed
-            actions = actions + self._observations["plan"]
-        if self.shield is not None:  # every stepping world's flag (the vector infos' mask convention)
-            actions, infos["shielded"] = self._shielded(actions)
-            infos["_shielded"] = stepping.copy()
+        actions, shielded = self._executed(actions)
+        if shielded is not None:  # every stepping world's flag (the vector infos' mask convention)
+            infos["shielded"], infos["_shielded"] = shielded, stepping.copy()
         result = self.batch.step(actions, None if stepping.all() else stepping)
         terminated = result.terminated & stepping
         truncated = result.truncated & stepping & ~terminated
@@ -222,9 +237,44 @@ class CrowdNavVectorEnv(VectorEnv):
             infos = self._same_step_reset(infos, ended)
         return self._copy_observations(), rewards, terminated, truncated, infos
 
+    def _executed(self, actions: np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:
+        """The actions the robots execute: the plan plus the policy's action (``residual``), through the shield (and which it replaced)."""
+        if self.residual:  # each policy action corrects the plan its world observed
+            actions = actions + self._observations["plan"]
+        if self.shield is None:
+            return actions, None
+        return self._shielded(actions)
+
+    def restore_worlds(self, seeds: Sequence[int | None], actions: Any, lengths: Any) -> dict[str, np.ndarray]:
+        """Rebuild every world mid-episode (a training resume): world ``i`` reset with ``seeds[i]``, then stepped with ``actions[i, :lengths[i]]``.
+
+        The simulator's generator, seeded at reset, is an episode's only randomness, so this gives the
+        worlds bit for bit as they were after those policy actions (residual and shield applied as in
+        ``step``); a world steps only through its own actions (the batch leaves the others as they are).
+        Returns the observations, as ``reset`` does. No rewards, infos or autoresets: the episodes are
+        replayed, not played.
+        """
+        b = self.num_envs
+        lengths = np.asarray(lengths)
+        actions = real_array(actions, "the restored worlds' actions")
+        if lengths.shape != (b,) or lengths.dtype.kind not in "iu" or (lengths < 0).any() \
+                or actions.ndim != 3 or actions.shape[0] != b or actions.shape[2] != 2 or lengths.max(initial=0) > actions.shape[1]:
+            raise ValueError(f"restore_worlds: lengths must be ({b},) non-negative integers and actions ({b}, >= max length, 2), "
+                             f"got lengths {lengths.dtype}{lengths.shape} and actions {actions.shape}")
+        self.reset(seed=list(seeds))
+        for step in range(int(lengths.max(initial=0))):
+            active = lengths > step
+            executed, _ = self._executed(self._checked_actions(actions[:, step]))
+            self.batch.step(executed, None if active.all() else active)
+            if self.residual:  # the next plan is observed after this step
+                self._observe_all()
+        self._previous_distance[:] = self._goal_distance(np.arange(b))  # what a step's reward code keeps
+        self._observe_all()
+        return self._copy_observations()
+
     def _shielded(self, actions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Every world's action through the shield (as the single env's, world by world bit for bit), and which it replaced."""
-        assert self.shield is not None
+        assert self.shield is not None and isinstance(self.batch, BatchSimulator)  # the shield refuses several robots
         out, replaced = actions.copy(), np.zeros(self.num_envs, dtype=bool)
         for bucket in self.batch.buckets.values():
             rows, size = np.arange(len(bucket)), self.batch.chunk_size(bucket.n)
@@ -253,6 +303,10 @@ class CrowdNavVectorEnv(VectorEnv):
     def _rewards(self, outcome: np.ndarray, stepping: np.ndarray) -> tuple[np.ndarray, dict[str, np.ndarray]]:
         """:func:`crowdnav.envs.reward.reward_terms` (the single env's kernel) for the stepping worlds."""
         worlds = np.flatnonzero(stepping)
+        if isinstance(self.batch, TeamWorlds):  # each world's single env computed them (the same kernel)
+            self._previous_distance[worlds] = self._goal_distance(worlds)
+            terms = {term: np.array([self.batch.terms[i][term] for i in worlds], dtype=float) for term in REWARD_TERMS}
+            return self.batch.rewards[worlds], terms
         distance = self._goal_distance(worlds)
         previous = self._previous_distance[worlds]
         self._previous_distance[worlds] = distance
@@ -270,8 +324,13 @@ class CrowdNavVectorEnv(VectorEnv):
         infos["outcome"], infos["_outcome"] = outcome, stepping.copy()
         infos["is_success"], infos["_is_success"] = outcome == "success", stepping.copy()
         stalls = np.zeros(b, dtype=np.int64)
-        for bucket in self.batch.buckets.values():  # per crowd size
-            stalls[bucket.world] = bucket.state.human_stalls.sum(1)
+        if isinstance(self.batch, TeamWorlds):
+            stalls = self.batch.stalls()
+            for i in np.flatnonzero(stepping):  # per world: its robots' outcomes, laid out as SyncVectorEnv lays out a dict
+                self._add_info(infos, {"other_robots": self.batch.other_robots[int(i)]}, int(i))
+        else:
+            for bucket in self.batch.buckets.values():  # per crowd size
+                stalls[bucket.world] = bucket.state.human_stalls.sum(1)
         infos["human_stalls"], infos["_human_stalls"] = np.where(stepping, stalls, 0), stepping.copy()
         if collided.any():
             infos["collision_kind"], infos["_collision_kind"] = kind, collided
@@ -298,6 +357,11 @@ class CrowdNavVectorEnv(VectorEnv):
     # ----------------------------------------------------------- observations
 
     def _observe_all(self) -> None:
+        if isinstance(self.batch, TeamWorlds):  # each world's single env observed its first robot
+            for i, observation in enumerate(self.batch.observations):
+                for key, values in self._observations.items():
+                    values[i] = observation[key]
+            return
         for bucket in self.batch.buckets.values():
             rows, size = np.arange(len(bucket)), self.batch.chunk_size(bucket.n)
             for start in range(0, len(rows), size):  # chunks of worlds, as the simulator steps them
@@ -313,6 +377,8 @@ class CrowdNavVectorEnv(VectorEnv):
 
     def robot_social_force(self) -> np.ndarray:
         """(num_envs,) complex: the humans' social-force repulsion on each robot (the reward's social term reads its length)."""
+        if isinstance(self.batch, TeamWorlds):
+            return self.batch.social_force()
         out = np.zeros(self.num_envs, dtype=complex)
         for bucket in self.batch.buckets.values():
             out[bucket.world] = bucket.repulsion[:, 0]
@@ -335,11 +401,15 @@ class CrowdNavVectorEnv(VectorEnv):
         return self._row("human_respawns", world)
 
     def _row(self, name: str, world: int) -> np.ndarray:
+        if isinstance(self.batch, TeamWorlds):
+            return self.batch.row(name, world)
         bucket, row = self.batch.locate(world)
         values: np.ndarray = getattr(bucket, name)[row].copy()
         return values
 
     def robot_goal(self, world: int) -> complex:
+        if isinstance(self.batch, TeamWorlds):
+            return complex(self.batch.envs[world].simulator.robot_goal)
         bucket, row = self.batch.locate(world)
         return complex(bucket.robot_goal[row])
 
