@@ -160,9 +160,9 @@ class BatchSimulator:
     def __init__(self, world: CompiledWorld, num_worlds: int):
         if isinstance(num_worlds, bool) or not isinstance(num_worlds, (int, np.integer)) or num_worlds < 1:
             raise ValueError(f"num_worlds must be a positive integer, got {num_worlds!r}")
-        if world.scenario.robots is not None:  # one robot per world row; the team's per-robot work is not batched
+        if world.scenario.robots is not None:  # one robot per world row; the team's per-robot work is not stacked
             raise ValueError(f"the batched simulator holds one robot per world; this scenario declares {len(world.scenario.robots)} "
-                             "(robots:): train with num_envs: 1, or step it with gymnasium.make_vec(..., vectorization_mode='sync')")
+                             "(robots:): step its worlds with crowdnav.envs.vector.CrowdNavVectorEnv (crowdnav.envs.vector_team.TeamWorlds)")
         self.num_worlds = int(num_worlds)
         self.slots = [Simulator(world) for _ in range(self.num_worlds)]
         """One single simulator per world: its resets and goal rules (each world's own generator)."""

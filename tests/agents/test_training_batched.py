@@ -17,7 +17,6 @@ from crowdnav.agents.seeding import TRAIN_SEED_BASE, EpisodeSeedCounter, train_s
 from crowdnav.agents.vec_env import CrowdNavSB3VecEnv
 
 from crowdnav.scenario.library import library_names
-from crowdnav.scenario.loader import load_scenario
 from tests.agents.agents_tiny import TINY_EXTRACTOR, tiny_config
 
 WORLDS = 4
@@ -321,10 +320,6 @@ def test_a_linear_learning_rate_schedule_decays_to_zero_over_the_budget_and_surv
 def test_batched_training_runs_in_every_library_scenario_with_the_humans_modality(tmp_path, scenario):
     config = {"scenario": scenario, "algo": "ppo", "modalities": ["humans", "closest_obstacle", "goal"], "num_envs": 4,
               "n_steps": 16, "timesteps": 128, "out": str(tmp_path), "progress": False, "net_arch": [16]}
-    if load_scenario(scenario).robots is not None:  # several robots: the batched simulator refuses, in one line
-        with pytest.raises(ValueError, match=r"^the batched simulator holds one robot per world; this scenario declares \d+ \(robots:\)"):
-            train(config)
-        return
     result = train(config)
     assert result.timesteps == 128
     logged = _log(tmp_path)
