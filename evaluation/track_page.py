@@ -33,6 +33,8 @@ def _act(entry: Entry, options: dict[str, Any]) -> tuple[Any, bool, str]:
 
     if entry.name.startswith(BASELINE_PREFIX):
         return scripted_policy(entry.name.removeprefix(BASELINE_PREFIX)), True, "last frame of the first test episode"
+    if entry.reference:  # a shipped reference agent: its episodes are shipped, its policy is not
+        return None, False, "the episode's start (a reference agent ships its episodes, not its policy)"
     meta = read_json(Path(entry.source) / META_FILE) if (Path(entry.source) / META_FILE).is_file() else {}
     source = str(meta.get("policy_source", ""))
     if not source or not Path(source).exists():

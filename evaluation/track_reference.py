@@ -10,7 +10,9 @@
 
 Nothing in them depends on the time or the machine, so playing the same commit again writes the
 same bytes. It is resumable: a baseline already written by this commit for this version of the
-track is kept (``force`` plays it again), and ``reference.json`` is rewritten after each one.
+track is kept (``force`` plays it again), and ``reference.json`` is rewritten after each one. The
+reference agents' entries (``crowdnav track reference NAME --agents``, :mod:`crowdnav.evaluation.track_agents`)
+are kept as they are while the track's version is the same.
 Results are published only from a clean checkout: with ``git status --porcelain`` listing anything
 outside DIR, it refuses in one line (``allow_dirty`` for tests), and it records the exact commit.
 """
@@ -29,6 +31,8 @@ from crowdnav.evaluation.track_leaderboard import CEILING, REFERENCE_FILE
 REFERENCE_BASELINES = ("straight", "social_force", "orca", "predictive", "oracle")
 COLUMNS = ("test_seed", "outcome", "collision_kind", "steps", "return", "time_to_goal", "path_length", "spl", "min_human_distance", "psc")
 PRIVILEGED = "privileged: the simulator's state"
+AGENT_PREFIX = "agent_"
+"""Entries of reference agents (:mod:`crowdnav.evaluation.track_agents`), which playing the baselines again keeps."""
 
 
 def source_state(out: Path) -> str:
@@ -61,7 +65,7 @@ def _cell(value: Any) -> str:
     return "nan" if number != number else f"{number:.4f}"
 
 
-def _csv(rows: list[dict[str, Any]]) -> str:
+def reference_csv(rows: list[dict[str, Any]]) -> str:
     import csv
     import io
 
@@ -93,11 +97,18 @@ def write_reference(track: Track, out: str | Path, *, allow_dirty: bool = False,
 
         commit = (git_commit() or "unknown").removesuffix("+dirty") + "+dirty"
     index = folder / REFERENCE_FILE
-    previous = read_json(index) if index.is_file() and not force else {}
+    recorded = read_json(index) if index.is_file() else {}
+    previous = recorded if not force else {}
     same = previous.get("track") == track.identity() and previous.get("git_commit") == commit
     kept = {entry["name"]: entry for entry in previous.get("entries", []) if same and (folder / entry["file"]).is_file()}
+    agents = [entry for entry in recorded.get("entries", []) if entry["name"].startswith(AGENT_PREFIX)  # their rows are no baseline's
+              and recorded.get("track") == track.identity() and (folder / entry["file"]).is_file()]
     document: dict[str, Any] = {"track": track.identity(), "git_commit": commit, "crowdnav": __version__, "test_episodes": track.test_episodes,
                                 "entries": [], "skipped": []}
+
+    def index_text() -> str:
+        return json.dumps({**document, "entries": document["entries"] + agents}, indent=2, sort_keys=True) + "\n"
+
     for name in REFERENCE_BASELINES:
         configuration = f"{BASELINE_PREFIX}{name}"
         if configuration in kept:
@@ -118,13 +129,13 @@ def write_reference(track: Track, out: str | Path, *, allow_dirty: bool = False,
             continue
         file = f"{configuration}.csv"
         folder.mkdir(parents=True, exist_ok=True)
-        atomic_write_text(folder / file, _csv(rows))
+        atomic_write_text(folder / file, reference_csv(rows))
         success = sum(row["outcome"] == "success" for row in rows) / len(rows)
         document["entries"].append({"name": configuration, "label": BASELINES[name], "policy": f"baseline:{name}",
                                     "kind": CEILING if name == "oracle" else "scripted, privileged", "observations": PRIVILEGED,
                                     "file": file, "episodes": len(rows), "success": round(success, 4)})
-        atomic_write_text(index, json.dumps(document, indent=2, sort_keys=True) + "\n")  # after each one: resumable
+        atomic_write_text(index, index_text())  # after each one: resumable
         log(f"{track.name}: {configuration} success {success:.0%} on {len(rows)} episodes")
     folder.mkdir(parents=True, exist_ok=True)
-    atomic_write_text(index, json.dumps(document, indent=2, sort_keys=True) + "\n")
+    atomic_write_text(index, index_text())
     return folder

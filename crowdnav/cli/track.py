@@ -1,4 +1,4 @@
-"""``crowdnav track list | show NAME | check [NAME...] | reference NAME``: the named, versioned test sets to rank on."""
+"""``crowdnav track list | show NAME | check [NAME...] | reference NAME [--agents DIR]``: the named, versioned test sets to rank on."""
 
 from __future__ import annotations
 
@@ -30,14 +30,20 @@ def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) ->
     check.add_argument("names", nargs="*", metavar="NAME", help="default: every shipped track")
     check.set_defaults(handler=check_command)
     reference = commands.add_parser(
-        "reference", help="play every scripted baseline on a track and write small per-episode CSVs to publish",
+        "reference", help="play every scripted baseline on a track, or add trained reference agents, as small per-episode CSVs to publish",
         description="Writes OUT/<track>/baseline_<name>.csv and reference.json (straight, social_force, orca where pyrvo is "
                     "installed, predictive, oracle where it does not refuse the track). Resumable and idempotent: a baseline "
-                    "this commit already wrote is kept. Refuses a checkout with uncommitted changes.",
+                    "this commit already wrote is kept. Refuses a checkout with uncommitted changes. With --agents, plays "
+                    "nothing: it adds each training seed of a finished `crowdnav benchmark` configuration (its final "
+                    "evaluation's episodes) as agent_<experiment>_<configuration>_seed<K>.csv, after checking that the "
+                    "experiment ran the track's setting, from a clean commit, with every seed finished (at least 3).",
     )
     reference.add_argument("name", metavar="NAME")
+    reference.add_argument("--agents", action="append", default=[], metavar="RESULTS_DIR/CONFIGURATION",
+                           help="add this experiment configuration's seeds as reference agents (repeatable); the baselines "
+                                "already there are kept")
     reference.add_argument("--out", default="docs/results/tracks", metavar="DIR", help="default: %(default)s")
-    reference.add_argument("--force", action="store_true", help="play every baseline again")
+    reference.add_argument("--force", action="store_true", help="play every baseline again (with --agents: replace a different result)")
     reference.add_argument("--allow-dirty", action="store_true", help="write from a checkout with uncommitted changes (marked +dirty)")
     reference.set_defaults(handler=reference_command)
 
@@ -86,11 +92,16 @@ def check_command(args: argparse.Namespace) -> int:
 
 def reference_command(args: argparse.Namespace) -> int:
     from crowdnav.evaluation.track import TrackError
+    from crowdnav.evaluation.track_agents import write_agents
     from crowdnav.evaluation.track_reference import write_reference
 
     track = _track(args.name)
     try:
-        folder = write_reference(track, args.out, allow_dirty=args.allow_dirty, force=args.force, log=lambda line: print(line, flush=True))
+        if args.agents:
+            folder = write_agents(track, args.agents, args.out, allow_dirty=args.allow_dirty, force=args.force,
+                                  log=lambda line: print(line, flush=True))
+        else:
+            folder = write_reference(track, args.out, allow_dirty=args.allow_dirty, force=args.force, log=lambda line: print(line, flush=True))
     except TrackError as error:
         raise CliError(str(error)) from None
     print(f"wrote {folder}; rank against it with: crowdnav leaderboard --track {track.name} --reference {folder} RESULTS")
