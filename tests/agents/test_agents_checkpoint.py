@@ -75,7 +75,7 @@ def test_resume_sets_aside_episodes_and_snapshots_saved_after_the_checkpoint(tmp
 
 
 def test_the_snapshot_is_saved_before_the_checkpoint_and_a_missing_one_is_restored_on_resume(tmp_path, monkeypatch):
-    import crowdnav.agents.training as training_module
+    import crowdnav.agents.training_session as training_module
 
     saved = []
     original = training_module.save_checkpoint
