@@ -10,3 +10,12 @@ is one line meant for the person running crowdnav (the command line prints it wi
 
 class CrowdNavError(Exception):
     """Base of every crowdnav exception (see the module docstring)."""
+
+
+def install_line(extra: str) -> str:
+    """How to install the optional ``extra``, as error messages and help say it: crowdnav is on no package index, so from a clone.
+
+    ``pip install -e ".[orca]" in crowdnav's clone`` (the README's Install section); never the
+    package's name with the extra in brackets, which no index can answer.
+    """
+    return f'pip install -e ".[{extra}]" in crowdnav\'s clone'

@@ -3,7 +3,7 @@
 Used by the humans of groups with ``model: orca`` (the crowd model :class:`crowdnav.crowd.orca.OrcaModel`,
 one per :class:`crowdnav.Simulator`) and by the ORCA robot baseline (:class:`crowdnav.policies.OrcaRobot`).
 The core install does not need pyrvo: it is imported only when something asks for ORCA, and its
-absence is one line saying ``pip install 'crowdnav[orca]'``.
+absence is one line saying ``pip install -e ".[orca]"`` (in crowdnav's clone).
 
 ORCA chooses, for every agent, the velocity closest to its *preferred* velocity that stays
 collision-free for ``time_horizon`` seconds with the other agents (each assumed to take half of
@@ -28,11 +28,11 @@ from typing import Any
 import numpy as np
 from shapely.geometry.polygon import orient
 
-from crowdnav.errors import CrowdNavError
+from crowdnav.errors import CrowdNavError, install_line
 from crowdnav.obstacles import StaticObstacles
 from crowdnav.scenario.schema import Orca
 
-INSTALL = "pip install 'crowdnav[orca]'"
+INSTALL = install_line("orca")
 DISC_SIDES = 16
 """Round furniture is given to ORCA as the regular polygon with this many sides around the disc."""
 

@@ -108,7 +108,7 @@ class OrcaRobot:
     keep it (its preferred velocity), and the static obstacles. As in ORCA everywhere, the robot
     takes only half of the avoidance of each human, the other half being the human's: against
     humans that do not see it (``humans.see_robot: false``) it can still be hit. Needs the
-    optional package pyrvo (``pip install 'crowdnav[orca]'``).
+    optional package pyrvo (``pip install -e ".[orca]"`` in crowdnav's clone).
     """
 
     def __init__(self) -> None:

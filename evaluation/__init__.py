@@ -7,7 +7,7 @@ learning curves and a leaderboard.
 * :func:`run_unit` (crowdnav.evaluation.runner): one (configuration, seed) run, idempotent and resumable;
   :func:`run_experiment` (crowdnav.evaluation.benchmark): all of them through an executor, then the report;
 * :func:`make_executor` (crowdnav.evaluation.executors): ``serial``, ``local`` (process pool) or ``ray``
-  (crowdnav.evaluation.ray_executor, needs ``crowdnav[ray]``);
+  (crowdnav.evaluation.ray_executor, needs the ray extra);
 * :mod:`crowdnav.evaluation.metrics`: per-episode metrics from a trajectory (pure functions);
 * :func:`plot_curves`, :func:`write_leaderboard`, :func:`load_results`: any results folder.
 

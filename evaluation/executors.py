@@ -6,7 +6,7 @@ one outcome per job as the runs finish, in any order:
 * ``serial``: one run after the other in this process (for debugging: breakpoints, tracebacks);
 * ``local`` (the default): a pool of ``workers`` spawned processes on this machine;
 * ``ray``: one Ray task per run, on a local Ray or an existing cluster
-  (:mod:`crowdnav.evaluation.ray_executor`, needs ``pip install "crowdnav[ray]"``).
+  (:mod:`crowdnav.evaluation.ray_executor`, needs the ray extra, ``pip install -e ".[ray]"``).
 
 An outcome is :func:`crowdnav.evaluation.runner.run_unit`'s summary (``status`` ``"done"`` or
 ``"skipped"``) or a failure record (``status`` ``"failed"``, ``error``: one line, ``log``: the
@@ -35,6 +35,8 @@ from crowdnav.evaluation.jobs import (  # Executor, ExecutorError, Job and run_n
     run_guarded,
     run_name,
 )
+
+from crowdnav.errors import install_line
 
 __all__ = ["EXECUTORS", "Executor", "ExecutorError", "Job", "LocalExecutor", "SerialExecutor", "make_executor", "run_name"]
 
@@ -105,7 +107,7 @@ def make_executor(kind: str = "local", *, workers: int | None = None, address: s
     except ImportError as error:
         if error.name is None or error.name.split(".")[0] != "ray":
             raise
-        raise ExecutorError("the ray executor needs Ray, which is not installed: pip install 'crowdnav[ray]'") from None
+        raise ExecutorError(f"the ray executor needs Ray, which is not installed: {install_line('ray')}") from None
     return RayExecutor(workers=workers, address=address, storage=storage, gpus_per_run=gpus_per_run or 0.0,
                        retries=3 if retries is None else retries)
 

@@ -1,6 +1,6 @@
 """The Ray executor: every (configuration, seed) run is one Ray task, on a local Ray or an existing cluster.
 
-This is the only module that imports Ray (``pip install "crowdnav[ray]"``); the rest of crowdnav
+This is the only module that imports Ray (the ray extra: ``pip install -e ".[ray]"``); the rest of crowdnav
 never does. Without ``address`` it starts a local Ray (``workers`` CPUs, default: all cores);
 with one (``HOST:PORT`` of a head started by ``ray start --head``) it joins that cluster.
 crowdnav must be importable by the cluster's workers (installed on every node).

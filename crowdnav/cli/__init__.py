@@ -18,7 +18,7 @@ import sys
 from collections.abc import Callable, Sequence
 
 from crowdnav.cli import benchmark, export, leaderboard, render, scenario, schema, track, train, trajectories
-from crowdnav.errors import CrowdNavError
+from crowdnav.errors import CrowdNavError, install_line
 
 # Packages that only an extra installs (pyproject.toml), so a command run on the core install
 # names the extra to add instead of failing with a traceback.
@@ -93,7 +93,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         if extra != "ray":  # benchmark needs bench even where torch is the first thing missing
             extra = EXTRA_OF_COMMAND.get(args.command, extra)
         print(f"crowdnav: error: `crowdnav {args.command}` needs {error.name}, which the core install leaves out: "
-              f"pip install 'crowdnav[{extra}]'", file=sys.stderr)
+              f"{install_line(extra)}", file=sys.stderr)
         return 1
     except BrokenPipeError:  # output piped into `head` and the like, which stopped reading
         # Python flushes stdout again at exit; send that flush to devnull so it cannot fail too.

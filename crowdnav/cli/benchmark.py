@@ -36,7 +36,7 @@ def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) ->
                              "with --executor ray --address: as many as the cluster's CPUs allow)")
     parser.add_argument("--executor", choices=("local", "serial", "ray"), default="local",
                         help="where the runs happen: local (default): a pool of --workers processes; serial: one after the "
-                             "other in this process (debugging); ray: one Ray task per run (pip install 'crowdnav[ray]'; "
+                             "other in this process (debugging); ray: one Ray task per run (pip install -e \".[ray]\" in crowdnav's clone; "
                              "see docs/cluster.md)")
     parser.add_argument("--address", metavar="HOST:PORT",
                         help="ray: join the Ray cluster whose head is at HOST:PORT (default: start a local Ray)")

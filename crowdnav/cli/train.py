@@ -80,7 +80,7 @@ def register_train(groups: argparse._SubParsersAction[argparse.ArgumentParser]) 
     add_reward_options(parser)  # --reward PRESET, --reward-weight TERM=VALUE: into reward_weights
     parser.add_argument("--resume", action="store_true", help="continue the run in --out from its checkpoint")
     parser.add_argument("--tensorboard", action="store_true",
-                        help="write TensorBoard logs to OUT/tensorboard (pip install 'crowdnav[tensorboard]')")
+                        help="write TensorBoard logs to OUT/tensorboard (pip install -e \".[tensorboard]\" in crowdnav's clone)")
     parser.add_argument("--trust-pickle", action="store_true",
                         help="with --resume: accept a checkpoint of an older crowdnav, whose pickled state can run code "
                              "(only for runs you trust; docs/security.md)")

@@ -327,7 +327,8 @@ class Humans(StrictModel):
     see_robot: bool = Field(default=False, description="Whether humans avoid the robot (off as in the paper).")
     model: HumanModel = Field(
         default="social_force",
-        description="How walking humans choose their velocity: social_force or orca (needs pip install 'crowdnav[orca]'); groups may override.",
+        description="How walking humans choose their velocity: social_force or orca (needs the orca extra: "
+                    "pip install -e \".[orca]\" in crowdnav's clone); groups may override.",
     )
     social_force: SocialForce = Field(default_factory=SocialForce, description="Social-force model parameters.")
     group_force: GroupForce = Field(

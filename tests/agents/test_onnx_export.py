@@ -11,7 +11,7 @@ from crowdnav.agents import load_policy, train
 from crowdnav.cli import main
 from tests.agents.agents_tiny import tiny_config
 
-ort = pytest.importorskip("onnxruntime", reason="the onnx extra (pip install 'crowdnav[onnx]') runs the exported policies")
+ort = pytest.importorskip("onnxruntime", reason='the onnx extra (pip install -e ".[onnx]") runs the exported policies')
 
 
 def _recorded_observations(policy, steps: int = 40) -> dict[str, np.ndarray]:

@@ -175,7 +175,8 @@ def test_command_of_a_missing_extra_names_the_extra_to_install(monkeypatch, caps
         action.set_defaults(handler=handler)
     assert main([command]) == 1
     err = capsys.readouterr().err.strip()
-    assert err.startswith(f"crowdnav: error: `crowdnav {command}` needs {missing}") and err.endswith(f"pip install 'crowdnav[{extra}]'")
+    assert err.startswith(f"crowdnav: error: `crowdnav {command}` needs {missing}")
+    assert err.endswith(f'pip install -e ".[{extra}]" in crowdnav\'s clone')
 
 
 def test_unrelated_missing_module_is_not_hidden(monkeypatch):
@@ -199,7 +200,7 @@ def test_a_command_whose_extra_is_missing_stops_before_its_handler_starts(monkey
     monkeypatch.setattr("crowdnav.cli.build_parser", lambda: parser)
     parser._subparsers._group_actions[0].choices["benchmark"].set_defaults(handler=lambda args: started.append(1) or 0)
     assert main(["benchmark"]) == 1 and not started
-    assert capsys.readouterr().err.strip().endswith("needs pandas, which the core install leaves out: pip install 'crowdnav[bench]'")
+    assert capsys.readouterr().err.strip().endswith('needs pandas, which the core install leaves out: pip install -e ".[bench]" in crowdnav\'s clone')
 
 
 def test_train_help_shows_the_config_defaults_and_set_merges_scenario_overrides(capsys, tmp_path):

@@ -12,7 +12,7 @@ from crowdnav.scenario.errors import ScenarioIssue
 
 
 @pytest.mark.parametrize("error", [
-    OrcaUnavailableError("orca needs the optional package pyrvo: pip install 'crowdnav[orca]'"),
+    OrcaUnavailableError("orca needs the optional package pyrvo: pip install -e \".[orca]\" in crowdnav's clone"),
     ScenarioError("my.yaml", [ScenarioIssue("humans.count", "expected a count"), ScenarioIssue("robot.radius", "expected a number > 0")]),
 ])
 def test_a_crowdnav_error_a_command_lets_through_is_one_line_on_stderr_and_exit_status_1(monkeypatch, capsys, error):
