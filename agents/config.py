@@ -279,9 +279,22 @@ def planner_problems(config: TrainConfig) -> list[tuple[str, str]]:
         shield_settings(config.shield)
     except ValueError as error:
         problems.append(("shield", str(error).removeprefix("shield: ")))
+    else:
+        if config.shield and _declares_robots(config):
+            problems.append(("shield", f"shields one robot; {config.scenario!r} declares several (robots:): train it without the shield"))
     if config.residual and "plan" not in config.modalities:
         problems.append(("residual", f"the action corrects the planner's move, so modalities must include plan; got {config.modalities}"))
     return problems
+
+
+def _declares_robots(config: TrainConfig) -> bool:
+    """Whether the config's scenario (with its overrides) has ``robots:``; False when it does not load (the env reports that)."""
+    from crowdnav.scenario.loader import load_scenario
+
+    try:
+        return load_scenario(config.scenario, config.overrides).robots is not None
+    except (CrowdNavError, OSError, ValueError):
+        return False
 
 
 def robots_problems(config: TrainConfig) -> list[tuple[str, str]]:

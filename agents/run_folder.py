@@ -186,12 +186,46 @@ def writing(folder: str | Path) -> Iterator[None]:
     otherwise interleave rows in the same logs. The lock is the OS's (``flock``), so it is released
     when its holder exits in any way, kill included. Where ``fcntl`` does not exist (Windows) no
     lock is taken.
+
+    A refusal leaves no run folder behind: when the body raises a :class:`CrowdNavError` (a bad
+    scenario, config or option, reported in one line) in a folder this call created, and the folder
+    holds nothing trained yet (only ``config.yaml``, an ``episodes.csv`` without rows and the lock),
+    the folder and the parents this call created are removed.
     """
     folder = Path(folder)
+    created = next((path for path in reversed([folder, *folder.parents]) if not path.exists()), None)
     folder.mkdir(parents=True, exist_ok=True)
-    with hold_lock(folder / LOCK_FILE, lambda holder: f"{folder} is being written by another process (PID {holder}); "
-                                                      "wait for it to finish or stop it, then resume"):
-        yield
+    try:
+        with hold_lock(folder / LOCK_FILE, lambda holder: f"{folder} is being written by another process (PID {holder}); "
+                                                          "wait for it to finish or stop it, then resume"):
+            yield
+    except CrowdNavError:
+        if created is not None:
+            _remove_untrained(folder, created)
+        raise
+
+
+_SETUP_FILES = frozenset({LOCK_FILE, "config.yaml", EPISODE_LOG})
+"""What a run folder holds before its first episode is logged (the header-only log included)."""
+
+
+def _remove_untrained(folder: Path, created: Path) -> None:
+    """Remove ``folder`` if it holds only setup files and no logged episode, then its empty parents up to ``created``."""
+    entries = list(folder.iterdir())
+    if any(entry.name not in _SETUP_FILES or not entry.is_file() for entry in entries):
+        return
+    log = folder / EPISODE_LOG
+    if log.is_file() and len(log.read_text(encoding="utf-8").splitlines()) > 1:
+        return
+    for entry in entries:
+        entry.unlink(missing_ok=True)
+    for path in [folder, *folder.parents]:
+        try:
+            path.rmdir()
+        except OSError:  # not empty (another writer's files), or gone
+            return
+        if path == created:
+            return
 
 
 @contextmanager
