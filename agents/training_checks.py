@@ -24,6 +24,8 @@ from crowdnav.agents.run_folder import episode_log, snapshot_folders
 from crowdnav.agents.seeding import EpisodeSeedCounter
 from stable_baselines3.common.base_class import BaseAlgorithm
 
+from crowdnav.errors import install_line
+
 
 @dataclass(frozen=True)
 class ResumeInfo:
@@ -150,5 +152,5 @@ def tensorboard_folder(config: TrainConfig, out: Path) -> str | None:
     if not config.tensorboard:
         return None
     if importlib.util.find_spec("tensorboard") is None:
-        raise ConfigError("tensorboard: true needs the tensorboard package, which is not installed: pip install 'crowdnav[tensorboard]'")
+        raise ConfigError(f"tensorboard: true needs the tensorboard package, which is not installed: {install_line('tensorboard')}")
     return str(out / "tensorboard")

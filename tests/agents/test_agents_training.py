@@ -95,7 +95,7 @@ def test_progress_bar_and_tensorboard_option(tmp_path, capsys, monkeypatch):
         assert any((tmp_path / "tb" / "tensorboard").iterdir())
     real = importlib.util.find_spec
     monkeypatch.setattr(importlib.util, "find_spec", lambda name, *args: None if name == "tensorboard" else real(name, *args))
-    with pytest.raises(ConfigError, match=r"pip install 'crowdnav\[tensorboard\]'"):
+    with pytest.raises(ConfigError, match=r'pip install -e "\.\[tensorboard\]" in crowdnav\'s clone$'):
         train(tiny_config(tmp_path / "tb2", episodes=1, tensorboard=True))
 
 

@@ -9,8 +9,6 @@ from tests.paths import REPO
 
 UNPUBLISHED = re.compile(r"pip3? install\s+(-U\s+)?['\"]?crowdnav\b|\bcrowdnav\[[a-z_,]+\]")
 """``pip install crowdnav``, ``pip install 'crowdnav[orca]'``, ``"crowdnav[ray]"``: the forms no index answers."""
-PENDING = ("tensorboard: true needs the tensorboard package",)
-"""Messages in agents/training.py (or what it was split into), edited elsewhere at the time, still to bring true."""
 
 
 def _offences() -> dict[str, list[str]]:
@@ -26,12 +24,6 @@ def _offences() -> dict[str, list[str]]:
 
 def test_no_message_or_help_recommends_installing_crowdnav_from_an_index():
     offences = _offences()
-    for text in PENDING:  # strict: an entry goes as soon as its message is fixed
-        holders = [path for path, lines in offences.items() if any(text in line for line in lines)]
-        assert holders, f"no message says {text!r} with pip install 'crowdnav[...]' any more: drop it from PENDING"
-        for path in holders:
-            offences[path] = [line for line in offences[path] if text not in line]
-    offences = {path: lines for path, lines in offences.items() if lines}
     assert not offences, f"say {install_line('EXTRA')} instead (crowdnav.errors.install_line): {offences}"
 
 
