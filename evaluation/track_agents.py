@@ -240,6 +240,10 @@ def write_agents(track: Track, folders: list[str | Path], out: str | Path, *, al
         raise TrackError(f"{index} holds results of track {recorded.get('name')} v{recorded.get('version')}, not {track.label}: "
                          f"write the baselines of this version first (crowdnav track reference {track.name} --force)")
     agents = [pair for folder in folders for pair in read_agents(track, folder, log=log)]  # every check before any write
+    names = [entry["name"] for entry, _ in agents]
+    twice = sorted({name for name in names if names.count(name) > 1})
+    if twice:
+        raise TrackError(f"two of the configurations named are the same experiment and configuration ({twice[0]}): name each once")
     current = {entry["name"]: entry for entry in document["entries"]}
     def same(entry: dict[str, Any], text: str) -> bool | None:
         """True: this result is there already; False: a different one is; None: nothing is."""

@@ -93,6 +93,9 @@ def test_each_training_seed_is_ranked_beside_the_baselines_with_its_final_evalua
     seeds = [entry for entry in board.rows if entry.kind == "policy"]
     assert len(seeds) == 3 and all(entry.reference and len(entry.outcomes) == EPISODES for entry in seeds)
     assert board.rows[0].kind == "ceiling"
+    from crowdnav.evaluation.track_page import entry_frame
+
+    assert "a reference agent ships its episodes, not its policy" in entry_frame(board, seeds[0])[1]
 
 
 def test_adding_agents_again_keeps_them_and_playing_the_baselines_again_keeps_the_agents(tmp_path):
@@ -116,6 +119,8 @@ def test_a_different_result_under_the_same_name_is_refused_unless_forced(tmp_pat
     with pytest.raises(TrackError, match=r"agent_exp_planned_seed0.csv already holds a different result of agent_exp_planned_seed0 .*--force"):
         write_agents(track, [other], tmp_path / "ref", allow_dirty=True, log=lambda line: None)
     folder = write_agents(track, [other], tmp_path / "ref", allow_dirty=True, force=True, log=lambda line: None)
+    with pytest.raises(TrackError, match=r"the same experiment and configuration \(agent_exp_planned_seed0\): name each once"):
+        write_agents(track, [other, tmp_path / "a" / "exp" / "planned"], tmp_path / "ref", allow_dirty=True, log=lambda line: None)
     assert {entry["experiment_commit"] for entry in json.loads((folder / "reference.json").read_text())["entries"]} == {"f" * 40}
 
 
