@@ -1,0 +1,243 @@
+"""The SARL-style agent: a value network over joint states, acting by a one-step lookahead over 81 actions.
+
+Acting (:meth:`SarlAgent.predict`): for every action of :func:`~crowdnav.agents.sarl.lookahead.action_set` the
+robot and the tracked humans move one step (the humans at their observed velocities) and the action scores
+``r + gamma^(dt * v_pref) * V(next)`` with ``r`` the reward the agent predicts for that step (0 for ``V`` after a
+predicted collision or goal); the best action is taken. All actions of all observations go through the network
+in one forward pass.
+
+Learning (:meth:`SarlAgent.learn`, deep V-learning as in Chen et al. 2019): epsilon-greedy episodes (epsilon
+decays linearly with the episodes played) fill a replay memory of observed transitions; after every episode a
+few minibatches regress ``V(s)`` on ``r + gamma^(dt * v_pref) * V_target(s')`` (``r`` the env's reward, no
+bootstrap after the episode ended), and every ``target_update_every`` episodes the target network copies the
+value network. By default the agent learns from its own episodes only (pure RL); ``imitation_episodes: N`` first
+plays N episodes of a scripted teacher (:mod:`~crowdnav.agents.sarl.imitation`, RL + demonstrations) and
+regresses V on their discounted returns for ``imitation_epochs`` passes before V-learning starts (epsilon decays
+from there).
+
+Options (``algo_kwargs``): :data:`DEFAULTS`. ``gamma`` (default 0.9) is the discount per second at full speed,
+as SARL's; ``learning_rate`` (default 1e-3) Adam's.
+"""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Callable, Mapping
+from pathlib import Path
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+import torch
+from crowdnav.agents.config import ConfigError
+from crowdnav.agents.factory import observation_normalization
+from crowdnav.agents.sarl.imitation import Demonstrations, make_teacher
+from crowdnav.agents.sarl.lookahead import REQUIRED_KEYS, Physics, action_set, decode, features, lookahead
+from crowdnav.agents.sarl.memory import ReplayMemory
+from crowdnav.agents.sarl.network import ValueNetwork, evaluate
+
+DEFAULTS: dict[str, Any] = {
+    "width": 64,  # hidden layer size of every MLP of the value network
+    "batch_size": 100,
+    "updates_per_episode": 25,  # minibatches after each episode
+    "target_update_every": 50,  # episodes between copies into the target network
+    "memory_size": 50_000,  # transitions
+    "epsilon_start": 0.5,
+    "epsilon_end": 0.1,
+    "epsilon_decay_episodes": 1000,
+    "imitation_episodes": 0,  # teacher episodes before V-learning (0: pure RL)
+    "imitation_teacher": "predictive",  # crowdnav.agents.sarl.imitation.TEACHERS
+    "imitation_epochs": 50,  # passes of the value regression over the demonstrations
+}
+"""The agent's options (``algo_kwargs``) and their defaults."""
+GAMMA = 0.9
+LEARNING_RATE = 1e-3
+
+
+class SarlAgent:
+    """Implements crowdnav.agents.algorithm_protocol.Algorithm; ``SarlAgent(env, config)`` is the builder."""
+
+    def __init__(self, env: gym.Env, config: Any):
+        name = config.algo
+        spaces = env.observation_space.spaces
+        missing = [key for key in REQUIRED_KEYS if key not in spaces]
+        if missing:
+            raise ConfigError(f"modalities: algorithm {name!r} reads humans, goal and velocity; add {', '.join(missing)}")
+        if env.unwrapped.scenario.robot.kinematics != "holonomic":
+            raise ConfigError(f"scenario: algorithm {name!r} drives a holonomic robot; set robot.kinematics: holonomic")
+        unknown = sorted(set(config.algo_kwargs) - set(DEFAULTS))
+        if unknown:
+            raise ConfigError(f"algo_kwargs: {name!r} has no option {unknown[0]!r}; its options: {', '.join(DEFAULTS)}")
+        self.options = {**DEFAULTS, **config.algo_kwargs}
+        if int(self.options["imitation_episodes"]):
+            make_teacher(str(self.options["imitation_teacher"]))  # an unknown teacher is refused before the run starts
+        self.physics = Physics.of_env(env, config.reward_scale)
+        scales = observation_normalization(env) or {}
+        self.scales = {key: (np.asarray(offset, dtype=np.float64), np.asarray(scale, dtype=np.float64))
+                       for key, (offset, scale) in scales.items() if key in REQUIRED_KEYS}
+        self.humans = int(spaces["humans"].shape[0])
+        self.gamma = float(config.gamma if config.gamma is not None else GAMMA)
+        self.learning_rate = float(config.learning_rate if config.learning_rate is not None else LEARNING_RATE)
+        self.episodes = 0
+        self.rng = np.random.default_rng(config.seed)
+        with torch.random.fork_rng():
+            torch.manual_seed(config.seed)
+            self.network = ValueNetwork(int(self.options["width"]))
+            self.target = ValueNetwork(int(self.options["width"]))
+        self._setup(ReplayMemory(int(self.options["memory_size"]), self.humans), Demonstrations())
+        self.target.load_state_dict(self.network.state_dict())
+
+    def _setup(self, memory: ReplayMemory, demonstrations: Demonstrations) -> None:
+        self.memory, self.demonstrations = memory, demonstrations
+        self.teacher: Any = None
+        self.actions = action_set(self.physics.max_speed)
+        self.discount = self.gamma ** (self.physics.time_step * self.physics.max_speed)
+        self.optimizer = torch.optim.Adam(self.network.parameters(), lr=self.learning_rate)
+
+    # ------------------------------------------------------------------ acting
+
+    @property
+    def epsilon(self) -> float:
+        """The exploration rate of the next training episode."""
+        o = self.options
+        progress = min(1.0, max(self.episodes - int(o["imitation_episodes"]), 0) / max(int(o["epsilon_decay_episodes"]), 1))
+        return float(o["epsilon_start"] + (o["epsilon_end"] - o["epsilon_start"]) * progress)
+
+    def scores(self, observation: Mapping[str, np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
+        """(scores (B, 81), env actions (B, 81, 2)) of a batch of observations (leading axis B)."""
+        state = decode(observation, self.scales)
+        ahead = lookahead(state, self.physics, self.actions)
+        robot, humans = features(ahead["next"], self.physics.radius)
+        values = evaluate(self.network, robot, humans)
+        return ahead["reward"] + self.discount * values * ~ahead["done"], ahead["commands"]
+
+    def predict(self, observation: Mapping[str, np.ndarray], deterministic: bool = True) -> np.ndarray:
+        batched = np.ndim(observation["humans"]) == 3
+        batch = observation if batched else {key: np.asarray(value)[None] for key, value in observation.items()}
+        scores, commands = self.scores(batch)
+        choice = np.argmax(scores, axis=1)
+        if not deterministic:
+            explore = self.rng.random(len(choice)) < self.epsilon
+            choice = np.where(explore, self.rng.integers(0, len(self.actions), size=len(choice)), choice)
+        actions = commands[np.arange(len(choice)), choice]
+        return actions if batched else actions[0]
+
+    # ------------------------------------------------------------------ learning
+
+    def learn(self, env: gym.Env, keep_going: Callable[[], bool]) -> None:
+        threads = torch.get_num_threads()
+        torch.set_num_threads(1)  # a small network: more threads only contend (25x slower on a busy 2-core machine)
+        try:
+            self._learn(env, keep_going)
+        finally:
+            torch.set_num_threads(threads)
+
+    def _learn(self, env: gym.Env, keep_going: Callable[[], bool]) -> None:
+        while True:
+            demonstrating = self.episodes < int(self.options["imitation_episodes"])
+            self._play(env, demonstrating)
+            if not demonstrating:
+                self._train()
+            elif self.episodes + 1 == int(self.options["imitation_episodes"]):
+                self._imitate()
+                self.target.load_state_dict(self.network.state_dict())
+            self.episodes += 1
+            if self.episodes % int(self.options["target_update_every"]) == 0:
+                self.target.load_state_dict(self.network.state_dict())
+            if not keep_going():
+                return
+
+    def _observed(self, observation: Mapping[str, np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
+        return features(decode(observation, self.scales), self.physics.radius)
+
+    def _play(self, env: gym.Env, demonstrating: bool) -> None:
+        """One training episode into the replay memory; ``demonstrating``: the teacher drives and its returns are kept."""
+        if demonstrating and self.teacher is None:
+            self.teacher = make_teacher(str(self.options["imitation_teacher"]))
+        observation, _ = env.reset()
+        robot, humans = self._observed(observation)
+        visited: tuple[list[np.ndarray], list[np.ndarray], list[float]] = ([], [], [])
+        done = False
+        while not done:
+            if demonstrating:  # the teacher reads the simulator: demonstrations only
+                action = np.asarray(self.teacher(env.unwrapped.simulator), dtype=np.float32)
+            else:
+                action = self.predict(observation, deterministic=False)
+            observation, reward, terminated, truncated, _ = env.step(action)
+            next_robot, next_humans = self._observed(observation)
+            self.memory.add(robot, humans, float(reward), next_robot, next_humans, bool(terminated))
+            for items, item in zip(visited, (robot, humans, float(reward)), strict=True):
+                items.append(item)  # type: ignore[arg-type]
+            robot, humans = next_robot, next_humans
+            done = terminated or truncated
+        if demonstrating:
+            self.demonstrations.add_episode(*visited, self.discount)
+
+    def _imitate(self) -> None:
+        """Regress V on the demonstrations' discounted returns (``imitation_epochs`` shuffled passes)."""
+        robot, humans, returns = (torch.from_numpy(array) for array in self.demonstrations.arrays())
+        size = int(self.options["batch_size"])
+        for _ in range(int(self.options["imitation_epochs"])):
+            order = torch.from_numpy(self.rng.permutation(len(returns)))
+            for start in range(0, len(order), size):
+                index = order[start:start + size]
+                self._step(torch.nn.functional.mse_loss(self.network(robot[index], humans[index]), returns[index]))
+
+    def _step(self, loss: torch.Tensor) -> None:
+        self.optimizer.zero_grad()
+        loss.backward()
+        self.optimizer.step()
+
+    def _train(self) -> None:
+        size = int(self.options["batch_size"])
+        if self.memory.size < size:
+            return
+        for _ in range(int(self.options["updates_per_episode"])):
+            batch = {key: torch.from_numpy(value) for key, value in self.memory.sample(self.rng, size).items()}
+            with torch.no_grad():
+                target = batch["reward"] + self.discount * (1.0 - batch["terminal"]) * self.target(batch["next_robot"], batch["next_humans"])
+            self._step(torch.nn.functional.mse_loss(self.network(batch["robot"], batch["humans"]), target))
+
+    # ------------------------------------------------------------------ checkpoints
+
+    def save(self, folder: Path) -> None:
+        arrays = {f"network.{key}": value.numpy() for key, value in self.network.state_dict().items()}
+        arrays.update({f"target.{key}": value.numpy() for key, value in self.target.state_dict().items()})
+        optimizer = self.optimizer.state_dict()
+        for index, state in optimizer["state"].items():
+            arrays.update({f"adam.{index}.{key}": torch.as_tensor(value).numpy() for key, value in state.items()})
+        np.savez(folder / "weights.npz", **arrays)
+        self.memory.save(folder / "memory.npz")
+        self.demonstrations.save(folder / "demonstrations.npz")
+        document = {"options": self.options, "physics": self.physics.to_json(), "humans": self.humans, "gamma": self.gamma,
+                    "learning_rate": self.learning_rate, "episodes": self.episodes, "rng": self.rng.bit_generator.state,
+                    "scales": {key: {"offset": offset.tolist(), "scale": scale.tolist()} for key, (offset, scale) in self.scales.items()},
+                    "adam_groups": [{key: value for key, value in group.items() if key != "params"} for group in optimizer["param_groups"]]}
+        (folder / "state.json").write_text(json.dumps(document), encoding="utf-8")
+
+    @classmethod
+    def load(cls, folder: Path) -> SarlAgent:
+        document = json.loads((folder / "state.json").read_text(encoding="utf-8"))
+        agent = cls.__new__(cls)
+        agent.options, agent.humans = dict(document["options"]), int(document["humans"])
+        agent.physics = Physics.from_json(document["physics"])
+        agent.gamma, agent.learning_rate, agent.episodes = float(document["gamma"]), float(document["learning_rate"]), int(document["episodes"])
+        agent.scales = {key: (np.asarray(item["offset"], dtype=np.float64), np.asarray(item["scale"], dtype=np.float64))
+                        for key, item in document["scales"].items()}
+        agent.rng = np.random.default_rng()
+        agent.rng.bit_generator.state = document["rng"]
+        agent.network, agent.target = ValueNetwork(int(agent.options["width"])), ValueNetwork(int(agent.options["width"]))
+        with np.load(folder / "weights.npz", allow_pickle=False) as arrays:
+            for prefix, network in (("network.", agent.network), ("target.", agent.target)):
+                network.load_state_dict({key[len(prefix):]: torch.from_numpy(arrays[key].copy()) for key in arrays.files if key.startswith(prefix)})
+            adam: dict[int, dict[str, torch.Tensor]] = {}
+            for key in arrays.files:
+                if key.startswith("adam."):
+                    _, index, name = key.split(".", 2)
+                    adam.setdefault(int(index), {})[name] = torch.from_numpy(arrays[key].copy())
+        agent._setup(ReplayMemory.load(folder / "memory.npz"), Demonstrations.load(folder / "demonstrations.npz"))
+        groups = agent.optimizer.state_dict()["param_groups"]
+        for group, saved in zip(groups, document["adam_groups"], strict=True):
+            group.update({key: tuple(value) if isinstance(value, list) else value for key, value in saved.items()})
+        agent.optimizer.load_state_dict({"state": adam, "param_groups": groups})
+        return agent

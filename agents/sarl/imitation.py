@@ -1,0 +1,77 @@
+"""The optional imitation warm start of the SARL-style agent (RL + demonstrations, reported apart from pure RL).
+
+As in Chen et al. 2019, the value network first regresses the discounted returns of a scripted teacher's
+episodes, then deep V-learning goes on from there. The teacher is one of crowdnav's scripted robots
+(:data:`TEACHERS`) and reads the simulator, to produce the demonstrations only: the agent's own acting never
+does. Its episodes are training episodes of the run (logged and seeded like every other one).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from crowdnav.agents.config import ConfigError
+
+TEACHERS = ("predictive", "orca", "oracle")
+"""Scripted robots that may teach: the predictive planner (true current state), the ORCA robot, the oracle (future)."""
+
+
+def make_teacher(name: str) -> Any:
+    """The scripted robot ``name`` as a callable ``teacher(simulator) -> action``."""
+    if name not in TEACHERS:
+        raise ConfigError(f"algo_kwargs.imitation_teacher: {name!r} is not one of {', '.join(TEACHERS)}")
+    from crowdnav.policies import SCRIPTED_POLICIES
+
+    return SCRIPTED_POLICIES[name]()
+
+
+def discounted_returns(rewards: list[float], discount: float) -> np.ndarray:
+    """Per step, the discounted sum of the episode's rewards from that step on (nothing after its end)."""
+    returns = np.zeros(len(rewards), dtype=np.float32)
+    total = 0.0
+    for index in range(len(rewards) - 1, -1, -1):
+        total = rewards[index] + discount * total
+        returns[index] = total
+    return returns
+
+
+class Demonstrations:
+    """The teacher's visited states (value-network features) and their discounted returns."""
+
+    def __init__(self) -> None:
+        self.robot: list[np.ndarray] = []
+        self.humans: list[np.ndarray] = []
+        self.returns: list[np.ndarray] = []
+
+    def add_episode(self, robot: list[np.ndarray], humans: list[np.ndarray], rewards: list[float], discount: float) -> None:
+        self.robot.append(np.stack(robot))
+        self.humans.append(np.stack(humans))
+        self.returns.append(discounted_returns(rewards, discount))
+
+    def arrays(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        return np.concatenate(self.robot), np.concatenate(self.humans), np.concatenate(self.returns)
+
+    def __len__(self) -> int:
+        return sum(len(item) for item in self.returns)
+
+    def save(self, path: Path) -> None:
+        lengths = np.array([len(item) for item in self.returns], dtype=np.int64)
+        if len(lengths):
+            robot, humans, returns = self.arrays()
+            np.savez_compressed(path, robot=robot, humans=humans, returns=returns, lengths=lengths)
+        else:
+            np.savez_compressed(path, lengths=lengths)
+
+    @classmethod
+    def load(cls, path: Path) -> Demonstrations:
+        demonstrations = cls()
+        with np.load(path, allow_pickle=False) as arrays:
+            lengths = arrays["lengths"]
+            if len(lengths):
+                splits = np.cumsum(lengths)[:-1]
+                demonstrations.robot = list(np.split(arrays["robot"], splits))
+                demonstrations.humans = list(np.split(arrays["humans"], splits))
+                demonstrations.returns = list(np.split(arrays["returns"], splits))
+        return demonstrations
