@@ -176,7 +176,11 @@ def walking_groups(sim: Any) -> np.ndarray | None:
 
 
 def _world_state(env: Any, i: int) -> dict[str, np.ndarray]:
-    """:func:`_state` of world ``i`` of a vector env."""
+    """:func:`_state` of world ``i`` of a vector env (several robots: its own simulator's, the other robots included)."""
+    from crowdnav.envs.vector_team import TeamWorlds
+
+    if isinstance(env.batch, TeamWorlds):
+        return _state(env.batch.envs[i].simulator)
     return {"positions": env.positions(i), "velocities": env.velocities(i),
             "goals": np.concatenate([[env.robot_goal(i)], env.human_goals(i)]), "respawns": env.human_respawns(i)}
 

@@ -92,3 +92,19 @@ def test_world_accessors_and_snapshots_read_each_worlds_first_robot():
 def test_the_shield_is_refused_in_one_line_for_several_robots():
     with pytest.raises(ValueError, match=r"^shield: shields one robot; a scenario with robots: is not supported$"):
         CrowdNavVectorEnv(SCENARIO, 2, shield=True)
+
+
+def test_held_out_episodes_of_a_robots_scenario_batched_equal_one_env_per_seed_with_the_other_robots_recorded():
+    from crowdnav.evaluation.rollout import HeldOutEpisodes
+
+    def policy(batch):  # towards the goal (polar goal: distance, sin, cos)
+        goal = batch["goal"]
+        return np.stack([goal[:, 2], goal[:, 1]], axis=1)
+
+    episodes = HeldOutEpisodes({"scenario": SCENARIO}, seeds=range(200, 204))
+    batched, single = episodes.run(policy, record=True), episodes.run(policy, record=True, batched=False)
+    for a, b in zip(batched, single, strict=True):
+        frames_a, frames_b = a.pop("frames"), b.pop("frames")
+        assert a.keys() == b.keys() and all(a[k] == b[k] or (a[k] != a[k] and b[k] != b[k]) for k in a)  # NaN: no time to goal
+        assert frames_a["positions"].shape[1] == 1 + 10 + 2  # the first robot, the humans, the other robots (NaN once gone)
+        assert all(np.array_equal(frames_a[k], frames_b[k], equal_nan=True) for k in ("positions", "velocities", "goals"))
