@@ -23,7 +23,8 @@ def write(tmp_path, document, name="experiment.yaml"):
 def test_shipped_experiments_cover_figure_4_the_default_and_the_reference_agents():
     assert set(shipped_experiments()) == {"default", "encoders", "modalities", "modalities_paper", "fusion", "paradigms", "learning_check",
                                           "reference_figure4", "reference_room", "modalities_steps", "paradigms_steps", "robots",
-                                          "anticipate", "anticipate_room", "anticipate_circle"}
+                                          "anticipate", "anticipate_room", "anticipate_circle", "anticipate_circle_rl",
+                                          "track_crowded_open_space", "track_station_hall", "track_robots_crossing_hall"}
     labels = {name: [c.name for c in load_experiment(name).configurations] for name in shipped_experiments()}
     assert labels["encoders"] == ["frozen", "finetune", "scratch"]
     assert labels["modalities"] == labels["modalities_paper"] == ["leog", "lidar", "closest_obstacle"]
@@ -32,6 +33,19 @@ def test_shipped_experiments_cover_figure_4_the_default_and_the_reference_agents
     assert labels["robots"] == ["shared_ppo", "shared_ppo_anonymous"]
     assert labels["modalities_steps"] == labels["modalities"] and labels["paradigms_steps"] == [*labels["paradigms"], "ppo"]
     assert load_experiment(None).name == "default"
+
+
+def test_track_experiments_run_their_tracks_setting():
+    """Each track_<name> experiment trains the reference agent of track <name>: same scenario, overrides, test episodes."""
+    from crowdnav.evaluation.track import load_track
+
+    for name in [n for n in shipped_experiments() if n.startswith("track_")]:
+        experiment, track = load_experiment(name), load_track(name.removeprefix("track_"))
+        assert experiment.protocol.test_episodes == track.test_episodes
+        assert experiment.protocol.seeds >= 3
+        for configuration in experiment.configurations:
+            assert configuration.train["scenario"] == track.scenario
+            assert dict(configuration.train.get("overrides") or {}) == dict(track.overrides)
 
 
 def test_figure_4_under_env_step_budgets_trains_batched_with_5_seeds_and_the_frozen_pretrained_encoder():
