@@ -4,8 +4,9 @@
 the other robots still in the world, with the attribute names the sensors, the reward and the
 scripted policies read from a simulator, so all of them work for any robot unchanged.
 :class:`RobotWorld` is the type of that shared reading (a :class:`typing.Protocol` both match).
-:class:`RobotAccessors` is the mixin of :class:`crowdnav.Simulator` that reads every robot at
-once (one robot: the first and only). Nothing here writes a state.
+:func:`robot_positions`, :func:`robot_goals`, ... read every robot of a simulator at once (one
+robot: the first and only); :class:`crowdnav.Simulator` shows them as its attributes
+(``sim.robot_positions``). Nothing here writes a state.
 """
 
 from __future__ import annotations
@@ -18,7 +19,9 @@ from crowdnav.sim_state import SELF_DISTANCE
 
 if TYPE_CHECKING:
     from crowdnav.obstacles import StaticObstacles
+    from crowdnav.robots import Team
     from crowdnav.scenario.schema import Scenario
+    from crowdnav.sim_state import SimState
     from crowdnav.world import CompiledWorld
 
 
@@ -166,57 +169,45 @@ def robot_scenario(scenario: Any, index: int) -> Any:
     return scenario.model_copy(update={"robot": scenario.robot_specs[index]})  # no validation: robots stays as written
 
 
-class RobotAccessors:
-    """Every robot's name, view, centre, goal and heading: the mixin of :class:`crowdnav.Simulator` (``team``: None for one robot)."""
-
-    team: Any
-    _state: Any  # the simulator's SimState
-    _robot_scenarios: list[Scenario]
+class Robots(Protocol):
+    """What the robot readers below need of a simulator: its state (the ego robot) and its other robots (None: one robot)."""
 
     @property
-    def robot_count(self) -> int:
-        """R: the scenario's robots (1 without ``robots:``)."""
-        return 1 if self.team is None else self.team.count
-
-    def robot_scenario(self, index: int) -> Scenario:
-        """The scenario as robot ``index`` sees it: its own spec as ``robot`` (the scenario itself for the ego robot)."""
-        return self._robot_scenarios[index]
-
-    def robot_view(self, index: int, with_robots: bool = True) -> Any:
-        """The world from robot ``index`` (:class:`RobotView`), what its sensors, reward and scripted policy read.
-
-        ``with_robots=False``: the other robots left out (what a people tracker sees). One robot: the simulator itself.
-        """
-        if self.team is None:
-            return self
-        return RobotView(self, index, with_robots)
-
+    def state(self) -> SimState: ...
     @property
-    def other_robot_discs(self) -> slice:
-        """Which entries of ``positions`` are other robots: none for the simulator itself (a view lists them after the humans)."""
-        return slice(len(self._state.positions), None)
+    def team(self) -> Team | None: ...
 
-    @property
-    def robot_positions(self) -> np.ndarray:
-        """(R,) complex (m): every robot's centre, the ego robot first (:data:`crowdnav.robots.PARKED` once it left)."""
-        first: np.ndarray = self._state.positions[:1]
-        return first.copy() if self.team is None else np.concatenate([first, self.team.state.positions])
 
-    @property
-    def robot_goals(self) -> np.ndarray:
-        """(R,) complex (m): every robot's goal, the ego robot first."""
-        if self.team is None:
-            return np.array([self._state.robot_goal])
-        return np.concatenate([[self._state.robot_goal], self.team.state.goals])
+def robot_count(sim: Robots) -> int:
+    """R: the scenario's robots (1 without ``robots:``)."""
+    return 1 if sim.team is None else sim.team.count
 
-    @property
-    def robot_headings(self) -> np.ndarray:
-        """(R,) float (rad): every robot's heading, the ego robot first."""
-        if self.team is None:
-            return np.array([self._state.robot_heading])
-        return np.concatenate([[self._state.robot_heading], self.team.state.headings])
 
-    @property
-    def robots_active(self) -> np.ndarray:
-        """(R,) bool: robots still in the world (one robot: always ``[True]``)."""
-        return np.ones(1, dtype=bool) if self.team is None else self.team.state.active.copy()
+def other_robot_discs(sim: Robots) -> slice:
+    """Which entries of ``positions`` are other robots: none for the simulator itself (a view lists them after the humans)."""
+    return slice(len(sim.state.positions), None)
+
+
+def robot_positions(sim: Robots) -> np.ndarray:
+    """(R,) complex (m): every robot's centre, the ego robot first (:data:`crowdnav.robots.PARKED` once it left)."""
+    first: np.ndarray = sim.state.positions[:1]
+    return first.copy() if sim.team is None else np.concatenate([first, sim.team.state.positions])
+
+
+def robot_goals(sim: Robots) -> np.ndarray:
+    """(R,) complex (m): every robot's goal, the ego robot first."""
+    if sim.team is None:
+        return np.array([sim.state.robot_goal])
+    return np.concatenate([[sim.state.robot_goal], sim.team.state.goals])
+
+
+def robot_headings(sim: Robots) -> np.ndarray:
+    """(R,) float (rad): every robot's heading, the ego robot first."""
+    if sim.team is None:
+        return np.array([sim.state.robot_heading])
+    return np.concatenate([[sim.state.robot_heading], sim.team.state.headings])
+
+
+def robots_active(sim: Robots) -> np.ndarray:
+    """(R,) bool: robots still in the world (one robot: always ``[True]``)."""
+    return np.ones(1, dtype=bool) if sim.team is None else sim.team.state.active.copy()

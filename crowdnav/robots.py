@@ -35,7 +35,7 @@ from crowdnav.contacts import deepest_contact, goal_distance, outside, touching
 from crowdnav.events import Collision, StepEvents
 from crowdnav.obstacles import nearest_on_edges
 from crowdnav.placement import GAP, JITTER_REACH, PlacementError
-from crowdnav.sim_state import SELF_DISTANCE
+from crowdnav.sim_state import SELF_DISTANCE, SimState
 
 PARKED = complex(1.0e7, 1.0e7)
 """Where a robot that left the world is kept (m): every exponential repulsion and contact test of it is exactly 0 / False."""
@@ -59,6 +59,14 @@ def robot_kinematics(robot: Any, heading: float, a0: float, a1: float, dt: float
     else:
         displacement = speed * dt * cmath.exp(1j * heading)
     return displacement / dt, math.remainder(new_heading, 2 * math.pi)
+
+
+def clipped_action(action: np.ndarray) -> tuple[float, float]:
+    """A robot's 2-value ``action`` as Python floats clipped to [-1, 1] (refused, in one line, unless finite)."""
+    a0, a1 = float(action[0]), float(action[1])
+    if not (math.isfinite(a0) and math.isfinite(a1)):
+        raise ValueError(f"robot action must be finite, got {list(np.asarray(action).tolist())}")
+    return min(1.0, max(-1.0, a0)), min(1.0, max(-1.0, a1))
 
 
 def first_heading(robot: Any, rng: np.random.Generator, start: complex, goal: complex) -> float:
@@ -259,6 +267,27 @@ class Team:
                                                 gaps[j, : 1 + m], self.names)
             events.append(StepEvents(goal_reached=bool(reached[j]), collision=collision, truncated=truncated, left_world=bool(left[j])))
         return events
+
+
+def retire_robots(team: Team, ego: SimState, index: np.ndarray | list[int]) -> None:
+    """Robots ``index`` (0: the ego robot, whose centre is in ``ego``, its world's state) leave for the rest of the episode.
+
+    Each is moved to :data:`PARKED` and stops; the caller measures the new geometry.
+    """
+    state = team.state
+    index = np.asarray(index, dtype=int).reshape(-1)
+    if ((index < 0) | (index >= len(state.active))).any():
+        raise ValueError(f"robot indices must be in [0, {len(state.active) - 1}], got {index.tolist()}")
+    for k in index.tolist():
+        if not state.active[k]:
+            continue
+        state.active[k] = False
+        if k == 0:
+            state.left_at[0] = ego.positions[0]
+            ego.positions[0], ego.velocities[0] = PARKED, 0.0
+        else:
+            state.left_at[k] = state.positions[k - 1]
+            state.positions[k - 1], state.velocities[k - 1] = PARKED, 0.0
 
 
 def _with_robot_contact(collision: Collision | None, to_robots: np.ndarray, robot_names: list[str]) -> Collision | None:

@@ -14,7 +14,9 @@ recomputed from the positions by ``refresh`` and never written by anyone else.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, fields
+from operator import attrgetter
 from typing import Any
 
 import numpy as np
@@ -81,100 +83,35 @@ class SimState:
         return [(f.name, getattr(self, f.name)) for f in fields(self)]
 
 
-class StateFields:
-    """A :class:`SimState`'s fields read as the owner's attributes (``sim.positions``): the mixin of :class:`crowdnav.Simulator`.
+def read_through(path: str, convert: Callable[[Any], Any] | None = None, doc: str | None = None) -> Any:
+    """A property of an owner that reads one of its parts' attributes: ``owner.<path>`` (``path`` dotted, ``"_state.positions"``).
 
-    Each returns the state's own array (read it; the simulator's methods change it). The four with
-    a setter may be replaced to stage a scene by hand (tests, scripted set-ups; then ``refresh()``).
+    How :class:`crowdnav.Simulator` shows its :class:`SimState`'s fields and its measured geometry
+    as its own attributes without declaring them again: its class body annotates each name with
+    the part's type and assigns this. The getter is :func:`operator.attrgetter` (no Python frame
+    per read). ``convert``: the property is settable too, ``convert(value)`` written into the part
+    (tests and scripted set-ups stage a scene that way); None: read only.
     """
+    getter = attrgetter(path)
+    if convert is None:
+        return property(getter, doc=doc)
+    part_path, name = path.rsplit(".", 1)
+    part = attrgetter(part_path)
 
-    _state: SimState
+    def setter(owner: object, value: Any) -> None:
+        setattr(part(owner), name, convert(value))
 
-    @property
-    def positions(self) -> np.ndarray:
-        """(n+1,) complex (m): :attr:`SimState.positions`, robot then humans."""
-        return self._state.positions
+    return property(getter, setter, doc=doc)
 
-    @positions.setter
-    def positions(self, value: np.ndarray) -> None:
-        self._state.positions = value
 
-    @property
-    def velocities(self) -> np.ndarray:
-        """(n+1,) complex (m/s): :attr:`SimState.velocities`."""
-        return self._state.velocities
+def read_with(read: Callable[[Any], object]) -> Any:
+    """A read-only property computed by the module function ``read`` from its owner (its docstring too)."""
+    return property(read, doc=read.__doc__)
 
-    @velocities.setter
-    def velocities(self, value: np.ndarray) -> None:
-        self._state.velocities = value
 
-    @property
-    def robot_goal(self) -> complex:
-        """complex (m): :attr:`SimState.robot_goal`."""
-        return self._state.robot_goal
-
-    @robot_goal.setter
-    def robot_goal(self, value: complex) -> None:
-        self._state.robot_goal = complex(value)
-
-    @property
-    def robot_heading(self) -> float:
-        """float (rad): :attr:`SimState.robot_heading`."""
-        return self._state.robot_heading
-
-    @robot_heading.setter
-    def robot_heading(self, value: float) -> None:
-        self._state.robot_heading = float(value)
-
-    @property
-    def step_count(self) -> int:
-        """:attr:`SimState.step_count`."""
-        return self._state.step_count
-
-    @property
-    def human_group(self) -> np.ndarray:
-        """(n,) int: :attr:`SimState.human_group`, indices into the simulator's ``groups``."""
-        return self._state.human_group
-
-    @property
-    def human_goals(self) -> np.ndarray:
-        """(n,) complex (m): :attr:`SimState.human_goals`."""
-        return self._state.human_goals
-
-    @property
-    def human_preferred_speed(self) -> np.ndarray:
-        """(n,) float (m/s): :attr:`SimState.human_preferred_speed`."""
-        return self._state.human_preferred_speed
-
-    @property
-    def human_max_speed(self) -> np.ndarray:
-        """(n,) float (m/s): :attr:`SimState.human_max_speed`."""
-        return self._state.human_max_speed
-
-    @property
-    def human_stopped(self) -> np.ndarray:
-        """(n,) bool: :attr:`SimState.human_stopped`."""
-        return self._state.human_stopped
-
-    @property
-    def human_arrived(self) -> np.ndarray:
-        """(n,) bool: :attr:`SimState.human_arrived`."""
-        return self._state.human_arrived
-
-    @property
-    def human_respawns(self) -> np.ndarray:
-        """(n,) int: :attr:`SimState.human_respawns`."""
-        return self._state.human_respawns
-
-    @property
-    def human_stall_mark(self) -> np.ndarray:
-        """(n,) float (m): :attr:`SimState.human_stall_mark`."""
-        return self._state.human_stall_mark
-
-    @property
-    def human_stalls(self) -> np.ndarray:
-        """(n,) int: :attr:`SimState.human_stalls`."""
-        return self._state.human_stalls
+def state_field(name: str, convert: Callable[[Any], Any] | None = None) -> Any:
+    """:func:`read_through` of :class:`SimState` field ``name`` of the owner's ``_state`` (``convert``: settable)."""
+    return read_through(f"_state.{name}", convert, f":attr:`crowdnav.sim_state.SimState.{name}` of this world.")
 
 
 @dataclass(frozen=True, eq=False)

@@ -1,72 +1,62 @@
 """The crowd simulator: one robot and a crowd of social-force (or ORCA) humans among static obstacles.
 
 State lives in numpy arrays indexed by agent, robot first: ``positions[0]`` is the robot,
-``positions[1:]`` the active humans. Points and velocities are complex numbers
-(``x + 1j*y``, metres and m/s, world frame). A step costs a fixed number of array operations
-whatever the crowd size: there is no Python loop over humans, pairs or edges. Up to
-``grid_from`` humans every pair is measured; larger crowds measure only pairs within the
-human-human force's reach, found with a grid of cells (:mod:`crowdnav.crowd_grid`, the same model
-within a stated tolerance).
+``positions[1:]`` the active humans; points and velocities are complex (``x + 1j*y``, m and m/s,
+world frame). A step costs a fixed number of array operations whatever the crowd size (no Python
+loop over humans, pairs or edges). Up to ``grid_from`` humans every pair is measured; larger
+crowds only pairs within the force's reach (:mod:`crowdnav.crowd_grid`, the same model within a
+stated tolerance). Each walking group's humans take their commands from the group's crowd model
+(:mod:`crowdnav.crowd`, held as :attr:`Simulator.crowd`); everything after the command is the same.
 
-Each walking group's humans take their velocity commands from the group's crowd model (the
-social force, ORCA, ...: :mod:`crowdnav.crowd`, held as :attr:`Simulator.crowd`); everything
-after the command is the same.
+Step order: humans' commands (a crowd model, or given actions) and robot kinematics -> integrate
+-> measure the new geometry once -> keep humans out of walls and of each other -> robot
+collision, world-exit and goal checks -> humans at their goals follow the scenario's ``on_goal``
+rule. The simulator is made of parts, not base classes: the measuring and what is read from it
+(overlap pushes, collision, world exit) are :class:`crowdnav.sim_geometry.Geometry`
+(:attr:`Simulator.geometry`), an episode's first draws :func:`crowdnav.episode_draw.draw_state`,
+every robot's readings :mod:`crowdnav.robot_view`; this module steps the episode.
 
-Step order: humans' commands (social force or ORCA, or given actions) and robot kinematics ->
-integrate -> measure the new geometry once (pairwise distances, nearest obstacle points) ->
-keep humans out of walls and of each other -> robot collision, world-exit and goal checks ->
-humans at their goals follow the scenario's ``on_goal`` rule.
-The measuring and what is read from it (``refresh``, the overlap pushes, the robot's collision
-and world-exit checks) live in :mod:`crowdnav.sim_geometry` (:class:`crowdnav.sim_geometry.SimGeometry`,
-a mixin of this class); this module draws episodes and steps them.
-
-The robot cannot escape the task: leaving the world (its centre outside the scenario's
-``world.min`` / ``world.max`` rectangle) is either impossible (``world.boundary_walls``: the
-walls are obstacles, touching them is a collision) or ends the episode with the outcome
-``out_of_bounds`` (open space).
+The robot cannot escape the task: leaving the world (its centre outside ``world.min`` /
+``world.max``) is impossible with ``world.boundary_walls`` (touching them is a collision) and
+otherwise ends the episode with the outcome ``out_of_bounds``.
 
 The episode's state is one declared :class:`crowdnav.sim_state.SimState` the simulator owns
-(:attr:`Simulator.state`); its fields read as the simulator's attributes (``sim.positions``,
-``sim.human_goals``, ...: :class:`crowdnav.sim_state.StateFields`). Only the simulator's
-methods change it (:meth:`Simulator.step`, :meth:`Simulator.stop_humans`, the goal rules it
-runs); staging a scene by hand (tests, scripted set-ups) writes those arrays and then calls
-:meth:`Simulator.refresh`.
-
-A scenario with ``robots:`` has several robots: agent 0 stays the first (ego) robot and the
-others live in :attr:`Simulator.team` (:mod:`crowdnav.robots`; None for one robot, whose step
-is unchanged); :attr:`Simulator.robot_events` holds every robot's events of the last step.
-
-Randomness comes only from the generator seeded by :meth:`Simulator.reset`.
+(:attr:`Simulator.state`); its fields, the measured geometry's and every robot's read as the
+simulator's attributes (``sim.positions``, ``sim.robot_offset``, ``sim.robot_positions``:
+:func:`crowdnav.sim_state.read_through`). Only the simulator's methods change the state
+(:meth:`Simulator.step`, :meth:`Simulator.stop_humans`, the goal rules it runs); staging a scene
+by hand (tests, scripted set-ups) writes those arrays and then calls :meth:`Simulator.refresh`.
+A scenario with ``robots:`` keeps the robots after the first (ego, agent 0) in
+:attr:`Simulator.team` (:mod:`crowdnav.robots`; None for one robot); :attr:`Simulator.robot_events`
+holds every robot's events of the last step. Randomness comes only from the generator seeded by
+:meth:`Simulator.reset`.
 """
-
 from __future__ import annotations
 
 import copy
-import math
-from typing import cast
+from typing import Any
 
 import numpy as np
 
+from crowdnav import robot_view as robots_read
 from crowdnav import social_force as sf
 from crowdnav.contacts import goal_distance
 from crowdnav.crowd import Crowd
+from crowdnav.crowd.base import action_commands
 from crowdnav.crowd.views import WorldView
+from crowdnav.episode_draw import draw_state
 from crowdnav.events import OUTCOMES, Collision, SimulationError, StepEvents  # noqa: F401  (re-exported: their public home)
-from crowdnav.groups import apply_goal_rules, first_goals, place_groups, stall_window, together_table
-from crowdnav.placement import JITTER_REACH
-from crowdnav.robot_view import RobotAccessors, robot_scenario
-from crowdnav.robots import PARKED, Team, first_heading, robot_kinematics
+from crowdnav.groups import apply_goal_rules, stall_window, together_table
+from crowdnav.robot_view import RobotView, robot_scenario
+from crowdnav.robots import Team, clipped_action, retire_robots, robot_kinematics
 from crowdnav.scenario.loader import Overrides
-from crowdnav.scenario.schema import HumanGroup
-from crowdnav.sim_geometry import SimGeometry
-from crowdnav.sim_state import PairConstants, SimState, StateFields, pair_constants
+from crowdnav.scenario.schema import Scenario
+from crowdnav.sim_geometry import Geometry
+from crowdnav.sim_state import PairConstants, SimState, pair_constants, read_through, read_with, state_field
 from crowdnav.world import CompiledWorld, WorldSource, load_world
 
-_NO_TABLE = np.zeros((0, 0))
-"""The all-pairs tables of a crowd on the neighbour grid, which has none (and never reads them)."""
 
-
-class Simulator(StateFields, RobotAccessors, SimGeometry):
+class Simulator:
     """Vectorized crowd simulator for one scenario.
 
     >>> sim = Simulator("room_furniture")
@@ -80,6 +70,37 @@ class Simulator(StateFields, RobotAccessors, SimGeometry):
     grid_from: int = 200
     """Crowds of at least this many humans use the neighbour grid (:mod:`crowdnav.crowd_grid`) instead of
     all pairs: the same model within a stated tolerance, at a cost that grows with n instead of n^2."""
+
+    # the episode state's fields (SimState, declared there), read as attributes; four may be set to stage a scene
+    positions: np.ndarray = state_field("positions", np.asarray)
+    velocities: np.ndarray = state_field("velocities", np.asarray)
+    robot_goal: complex = state_field("robot_goal", complex)
+    robot_heading: float = state_field("robot_heading", float)
+    step_count: int = state_field("step_count")
+    human_group: np.ndarray = state_field("human_group")
+    human_goals: np.ndarray = state_field("human_goals")
+    human_preferred_speed: np.ndarray = state_field("human_preferred_speed")
+    human_max_speed: np.ndarray = state_field("human_max_speed")
+    command_cap: np.ndarray = state_field("command_cap")
+    human_stopped: np.ndarray = state_field("human_stopped")
+    human_arrived: np.ndarray = state_field("human_arrived")
+    human_respawns: np.ndarray = state_field("human_respawns")
+    human_stall_mark: np.ndarray = state_field("human_stall_mark")
+    human_stalls: np.ndarray = state_field("human_stalls")
+    # what refresh() measured (crowdnav.sim_geometry.Geometry), read as attributes
+    robot_offset: np.ndarray = read_through("geometry.robot_offset", doc="(n+1,) complex (m): from the robot to every agent.")
+    robot_distance: np.ndarray = read_through("geometry.robot_distance", doc="(n+1,) (m): centre distances from the robot, its own huge.")
+    polygon_offset: np.ndarray = read_through("geometry.polygon_offset", doc="(n+1, P) complex (m): to each polygon's nearest point.")
+    polygon_distance: np.ndarray = read_through("geometry.polygon_distance", doc="(n+1, P) (m): their lengths.")
+    disc_offset: np.ndarray = read_through("geometry.disc_offset", doc="(n+1, C) complex (m): to each round obstacle's centre.")
+    disc_distance: np.ndarray = read_through("geometry.disc_distance", doc="(n+1, C) (m): their lengths (centre distance).")
+    # every robot at once (crowdnav.robot_view; one robot: the first and only)
+    robot_count: int = read_with(robots_read.robot_count)
+    other_robot_discs: slice = read_with(robots_read.other_robot_discs)
+    robot_positions: np.ndarray = read_with(robots_read.robot_positions)
+    robot_goals: np.ndarray = read_with(robots_read.robot_goals)
+    robot_headings: np.ndarray = read_with(robots_read.robot_headings)
+    robots_active: np.ndarray = read_with(robots_read.robots_active)
 
     def __init__(self, scenario: WorldSource | CompiledWorld, overrides: Overrides | None = None):
         if isinstance(scenario, CompiledWorld):
@@ -101,18 +122,19 @@ class Simulator(StateFields, RobotAccessors, SimGeometry):
         self._force = force
         self.relaxation = min(1.0, self.dt / force.relaxation_time)
         """``min(1, dt / relaxation_time)``: the share of the way to its desired velocity a human goes in one step."""
-        self._static_count = self.obstacles.polygon_count + self.obstacles.disc_count
         self.stall_window = stall_window(scenario)
         """Steps between stall checks (``humans.stall``; 0: none): :func:`crowdnav.groups.apply_goal_rules`."""
         world = scenario.world
         self.bounds: tuple[float, float, float, float] | None = (
             None if world.boundary_walls else (float(world.min[0]), float(world.min[1]), float(world.max[0]), float(world.max[1])))
         """Open space: ``(x0, y0, x1, y1)`` (m), the rectangle the robot's centre must stay in (None: boundary walls keep it in)."""
+        self.geometry = Geometry(self.obstacles, self.bounds)
+        """What :meth:`refresh` measures from the state (:class:`crowdnav.sim_geometry.Geometry`): not state, never written by others."""
         self._rng = np.random.default_rng()
         self._constants: dict[tuple[int, bool], PairConstants] = {}
         self.team = Team(scenario, self.obstacles, self.placement) if scenario.robots is not None else None
         """The robots after the first (:mod:`crowdnav.robots`) of a scenario with ``robots:``; None for one robot."""
-        self._robot_scenarios = [robot_scenario(scenario, k) for k in range(len(scenario.robot_specs))]
+        self._robot_scenarios: list[Scenario] = [robot_scenario(scenario, k) for k in range(len(scenario.robot_specs))]
         self.robot_events: list[StepEvents | None] = []
         """Every robot's events of the last step, the ego robot first (None: it had left); one robot: ``[events]``."""
         self.crowd = Crowd(self.world)
@@ -142,6 +164,11 @@ class Simulator(StateFields, RobotAccessors, SimGeometry):
         return self._state.velocities[1:]
 
     @property
+    def n_humans(self) -> int:
+        """Active humans this episode."""
+        return len(self._state.positions) - 1
+
+    @property
     def robot_goal_distance(self) -> float:
         distance: float = abs(self._state.robot_goal - self._state.positions[0])
         return distance
@@ -164,47 +191,9 @@ class Simulator(StateFields, RobotAccessors, SimGeometry):
             if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
                 raise ValueError(f"seed must be a non-negative integer or None, got {seed!r}")
             self._rng = np.random.default_rng(seed)
-        rng, robot, placement = self._rng, self.scenario.robot, self.placement
-        counts = [int(rng.integers(group.min_count, group.max_count + 1)) for group in self.groups]
-        n = sum(counts)
-        start = placement.robot_start.draw(rng, 1, allowed=cast(np.ndarray, placement.start_goal_ok.any(1)))
-        reachable = None
-        if placement.start_component is not None:  # walls split the free space: a goal on the start's side
-            nearest = int(np.argmin(np.abs(placement.robot_start.points - start[0])))
-            reachable = placement.goal_component == placement.start_component[nearest]
-        goal = placement.robot_goal.draw(
-            rng, 1, allowed=reachable, away_from=start, min_distance=robot.min_start_goal_distance + JITTER_REACH
-        )[0]
-        heading = first_heading(robot, rng, complex(start[0]), complex(goal))
-        # the other robots after the ego robot's draws, so a one-robot scenario draws what it always drew
-        starts, goals = self.team.draw(rng, complex(start[0]), complex(goal)) if self.team is not None else (start, goal)
-        # groups in file order, each away from the robots and the groups before it; then goals, then speeds
-        # (one group draws exactly what the crowd drew before groups existed: same seed, same episode)
-        spawn = place_groups(self, starts, goals, counts)
-        standing = np.repeat([group.standing for group in self.groups], counts).astype(bool)
-        human_goals = np.concatenate([np.zeros(0, dtype=complex), *first_goals(self, spawn)])
-        preferred_speed = np.concatenate([np.zeros(0), *(_preferred_speeds(rng, group, count)
-                                                         for group, count in zip(self.groups, counts, strict=True))])
-        max_speed = preferred_speed * self._force.max_speed_factor
-        positions = np.concatenate([start, *spawn])
-        self._state = SimState(
-            positions=positions,
-            velocities=np.zeros(n + 1, dtype=complex),
-            robot_goal=complex(goal),
-            robot_heading=heading,
-            step_count=0,
-            human_group=np.repeat(np.arange(len(counts)), counts),
-            human_goals=human_goals,
-            human_preferred_speed=preferred_speed,
-            human_max_speed=max_speed,
-            # standing members have no speed; a cap of 1 keeps the shared command formula free of 0 / 0
-            command_cap=np.where(standing, 1.0, max_speed) if standing.any() else max_speed,
-            human_stopped=standing.copy(),
-            human_arrived=np.zeros(n, dtype=bool),
-            human_respawns=np.zeros(n, dtype=np.int64),
-            human_stall_mark=np.abs(human_goals - positions[1:]),  # the first stall window counts from the start
-            human_stalls=np.zeros(n, dtype=np.int64),
-        )
+        rng = self._rng
+        self._state = draw_state(self, rng)
+        n = self._state.n_humans
         self._use_pair_constants(n)
         self._ready = True
         self.crowd.start_episode(WorldView(self), rng)
@@ -224,11 +213,7 @@ class Simulator(StateFields, RobotAccessors, SimGeometry):
         constants = self.pair_constants(n)
         self.radii = constants.radii
         """(n+1,) body radii (m), robot first."""
-        self._grid = constants.grid
-        if constants.gain is None or constants.decay is None or constants.contact_all is None:
-            self._gain = self._decay = self._contact_all = _NO_TABLE  # a grid crowd: refresh() reads the grid's instead
-        else:
-            self._gain, self._decay, self._contact_all = constants.gain, constants.decay, constants.contact_all
+        self.geometry.use(constants)
 
     def load_state(self, state: SimState) -> None:
         """Make ``state`` (one world's, owned by this simulator from now on) the episode's state and measure its geometry.
@@ -250,12 +235,47 @@ class Simulator(StateFields, RobotAccessors, SimGeometry):
         """
         twin = copy.copy(self)
         twin._rng = copy.deepcopy(self._rng)
+        twin.geometry = self.geometry.copy()  # what the twin measures is its own
         twin.crowd = self.crowd.copy()  # a model's episode state (recorded people reacting) is the twin's own
         if self.team is not None:  # its own robots (the constants stay shared)
             twin.team = copy.copy(self.team)
             twin.team.state = self.team.state.copy()
         twin.load_state((self.state if state is None else state).copy())
         return twin
+
+    # -------------------------------------------------------------------- geometry
+
+    def refresh(self) -> None:
+        """Measure the geometry at the current positions (once per step; after editing ``positions`` by hand).
+
+        What it sets (``robot_offset``, ``pair_distance``, ``polygon_offset``, ``disc_distance``,
+        the repulsion, ...) is described on :class:`crowdnav.sim_geometry.Geometry` and read by the
+        sensors, the reward and the step; ``pair_*`` of crowds of ``grid_from`` or more are built when read.
+        """
+        self.geometry.measure(self._state.positions, self.team)
+
+    @property
+    def pair_offset(self) -> np.ndarray:
+        """(n+1, n+1) complex: from agent i to agent j (all pairs; built on demand for large crowds)."""
+        return self.geometry.pairs(self._state.positions)[0]
+
+    @property
+    def pair_distance(self) -> np.ndarray:
+        """(n+1, n+1): centre distances, the diagonal a huge number (built on demand for large crowds)."""
+        return self.geometry.pairs(self._state.positions)[1]
+
+    @property
+    def robot_social_force(self) -> complex:
+        """Social repulsion the humans exert on the robot (dimensionless force, world frame): row 0 of the fused repulsion."""
+        return complex(self.geometry.repulsion[0])
+
+    def robot_collision(self) -> Collision | None:
+        """The robot's deepest contact in the current state (touching counts), or None."""
+        return self.geometry.robot_collision(len(self._state.positions) - 1)
+
+    def robot_left_world(self) -> bool:
+        """Whether the robot's centre is outside the world rectangle (always False with boundary walls)."""
+        return self.geometry.robot_left_world(complex(self._state.positions[0]))
 
     # ------------------------------------------------------------------------ step
 
@@ -277,7 +297,7 @@ class Simulator(StateFields, RobotAccessors, SimGeometry):
         if human_actions is None:
             commands = self.crowd_commands()
         else:
-            commands = self._scaled_commands(human_actions)
+            commands = action_commands(human_actions, self._state.human_max_speed)
         if state.human_stopped.any():  # standing groups, arrivals under on_goal: stop, humans a multi-agent env let leave
             commands = np.where(state.human_stopped, 0.0, commands)
         velocities, positions = state.velocities, state.positions
@@ -296,15 +316,15 @@ class Simulator(StateFields, RobotAccessors, SimGeometry):
                                   "check the scenario's social_force parameters")
         self.refresh()
         n = len(positions) - 1
-        if n and self._humans_touch:  # a human touches someone or something
-            self._resolve_human_overlaps()
+        if n and self.geometry.humans_touch:  # a human touches someone or something
+            self.geometry.push_humans_apart(positions)
             self.refresh()
         if n and self.crowd.places:  # after the pushes: placed humans are exactly where their model puts them
             self._place_humans()
             self.refresh()
         truncated = state.step_count >= self.scenario.max_steps
-        collision = self.robot_collision()
-        left_world = self.robot_left_world()
+        collision = self.geometry.robot_collision(n)
+        left_world = self.geometry.robot_left_world(complex(positions[0]))
         goal_reached = goal_distance(state.robot_goal, positions[0]) <= self.scenario.robot.goal_radius
         events = StepEvents(goal_reached=bool(goal_reached), collision=collision, truncated=truncated, left_world=left_world)
         if self.team is None:
@@ -340,7 +360,7 @@ class Simulator(StateFields, RobotAccessors, SimGeometry):
         force, state = self._force, self._state
         to_goal = state.human_goals - state.positions[1:]
         total = sf.goal_force(to_goal, force.goal_weight, force.goal_saturation_distance)
-        total += self._repulsion[1:]
+        total += self.geometry.repulsion[1:]
         if self.together is not None:  # the walking groups' terms (Moussaïd et al. 2010)
             total += self.group_terms(state.positions[1:], state.velocities[1:], state.human_preferred_speed, state.human_group,
                                       state.human_stopped)
@@ -355,52 +375,29 @@ class Simulator(StateFields, RobotAccessors, SimGeometry):
                               self._force.relaxation_time)
 
     def _robot_velocity(self, action: np.ndarray) -> complex:
-        a0, a1 = float(action[0]), float(action[1])
-        if not (math.isfinite(a0) and math.isfinite(a1)):
-            raise ValueError(f"robot action must be finite, got {list(np.asarray(action).tolist())}")
-        a0, a1 = min(1.0, max(-1.0, a0)), min(1.0, max(-1.0, a1))
+        a0, a1 = clipped_action(action)
         if self.team is not None and not self.team.state.active[0]:
             return 0j  # the ego robot left the world: it stays parked
         velocity, self._state.robot_heading = robot_kinematics(self.scenario.robot, self._state.robot_heading, a0, a1, self.dt)
         return velocity
 
-    def _scaled_commands(self, actions: np.ndarray) -> np.ndarray:
-        actions = np.asarray(actions, dtype=float)
-        if actions.shape != (self.n_humans, 2):
-            raise ValueError(f"human_actions must have shape ({self.n_humans}, 2), got {actions.shape}")
-        if not np.isfinite(actions).all():
-            raise ValueError("human_actions must be finite")
-        command = np.clip(actions[:, 0], -1, 1) + 1j * np.clip(actions[:, 1], -1, 1)
-        command /= np.maximum(np.abs(command), 1.0)
-        scaled: np.ndarray = command * self._state.human_max_speed
-        return scaled
-
     # ----------------------------------------------------------------- several robots
+
+    def robot_scenario(self, index: int) -> Scenario:
+        """The scenario as robot ``index`` sees it: its own spec as ``robot`` (the scenario itself for the ego robot)."""
+        return self._robot_scenarios[index]
+
+    def robot_view(self, index: int, with_robots: bool = True) -> Any:
+        """The world from robot ``index`` (:class:`crowdnav.robot_view.RobotView`), what its sensors, reward and scripted policy read.
+
+        ``with_robots=False``: the other robots left out (what a people tracker sees). One robot: the simulator itself.
+        """
+        return self if self.team is None else RobotView(self, index, with_robots)
 
     def retire_robots(self, index: np.ndarray | list[int]) -> None:
         """Robots ``index`` (0: the ego robot) leave the world for the rest of the episode (:data:`crowdnav.robots.PARKED`)."""
         if self.team is None:
             raise ValueError("retire_robots needs a scenario with robots:; the one robot's episode ends with it")
-        state = self.team.state
-        index = np.asarray(index, dtype=int).reshape(-1)
-        if ((index < 0) | (index >= len(state.active))).any():
-            raise ValueError(f"robot indices must be in [0, {len(state.active) - 1}], got {index.tolist()}")
-        for k in index.tolist():
-            if not state.active[k]:
-                continue
-            state.active[k] = False
-            if k == 0:
-                state.left_at[0] = self._state.positions[0]
-                self._state.positions[0], self._state.velocities[0] = PARKED, 0.0
-            else:
-                state.left_at[k] = state.positions[k - 1]
-                state.positions[k - 1], state.velocities[k - 1] = PARKED, 0.0
+        retire_robots(self.team, self.state, index)
         self.refresh()
 
-
-def _preferred_speeds(rng: np.random.Generator, group: HumanGroup, count: int) -> np.ndarray:
-    """``count`` preferred speeds (m/s) of ``group``'s members: drawn from its range, 0 for a standing group."""
-    if group.standing:
-        return np.zeros(count)
-    assert group.preferred_speed is not None  # a walking group always has its range (Humans.crowd fills it in)
-    return rng.uniform(*group.preferred_speed, size=count)

@@ -322,7 +322,7 @@ class BatchSimulator:
         return commands
 
     def _robot_velocity(self, actions: np.ndarray, heading: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """:meth:`Simulator._robot_velocity` for every row: (velocity re, im, new heading), in CPython's scalar arithmetic."""
+        """:meth:`crowdnav.Simulator._robot_velocity` for every row: (velocity re, im, new heading), in CPython's scalar arithmetic."""
         robot = self.scenario.robot
         a0 = np.minimum(1.0, np.maximum(-1.0, actions[:, 0]))
         a1 = np.minimum(1.0, np.maximum(-1.0, actions[:, 1]))
@@ -394,7 +394,7 @@ class BatchSimulator:
             stack[rows] = value
 
     def _resolve_overlaps(self, bucket: Bucket, rows: np.ndarray) -> None:
-        """:meth:`Simulator._resolve_human_overlaps` for ``rows`` (worlds where a human touches someone or something)."""
+        """:meth:`crowdnav.sim_geometry.Geometry.push_humans_apart` for ``rows`` (worlds where a human touches someone or something)."""
         n = bucket.n
         positions = bucket.state.positions[rows]
         push_humans_apart(positions, bucket.pair_offset[rows, 1:, 1:], bucket.pair_distance[rows, 1:, 1:], bucket.gap[rows, 1:, 1 : n + 1])

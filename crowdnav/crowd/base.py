@@ -31,6 +31,23 @@ import numpy as np
 from crowdnav.world import CompiledWorld
 
 
+def action_commands(actions: np.ndarray, max_speed: np.ndarray) -> np.ndarray:
+    """The (n,) complex commands (m/s) of humans given (n, 2) ``actions`` in [-1, 1] instead of a model's.
+
+    Each action is clipped per axis, shrunk to length 1 at most and scaled by that human's
+    ``max_speed`` ((n,) m/s): :meth:`crowdnav.Simulator.step` with ``human_actions``.
+    """
+    actions = np.asarray(actions, dtype=float)
+    if actions.shape != (len(max_speed), 2):
+        raise ValueError(f"human_actions must have shape ({len(max_speed)}, 2), got {actions.shape}")
+    if not np.isfinite(actions).all():
+        raise ValueError("human_actions must be finite")
+    command = np.clip(actions[:, 0], -1, 1) + 1j * np.clip(actions[:, 1], -1, 1)
+    command /= np.maximum(np.abs(command), 1.0)
+    scaled: np.ndarray = command * max_speed
+    return scaled
+
+
 class CrowdView(Protocol):
     """The crowd as a model reads it at a step (or at an episode's start): one world, or K worlds with a leading axis.
 

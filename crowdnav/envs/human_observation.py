@@ -188,6 +188,7 @@ class HumanObservations:
 def _nearest_robot(sim: Simulator) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Several robots: each human's nearest active robot by surface distance: (n,) offsets, velocities and radii."""
     team = sim.team
+    assert team is not None  # several robots
     robots = sim.robot_positions
     velocities = np.concatenate([sim.velocities[:1], team.state.velocities])
     offset = robots[None, :] - sim.positions[1:, None]  # (n, R) from each human to each robot

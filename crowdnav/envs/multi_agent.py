@@ -79,6 +79,7 @@ def global_state(sim: Simulator, max_humans: int) -> np.ndarray:
 def _several_robots_state(sim: Simulator, max_humans: int) -> np.ndarray:
     """:func:`global_state` with R robots: R robot rows first (a robot that left: all zero), then the humans."""
     team, n = sim.team, sim.n_humans
+    assert team is not None  # several robots
     robots = team.count
     table = np.zeros((robots + max_humans, len(STATE_COLUMNS)), dtype=np.float32)
     active = team.state.active

@@ -313,6 +313,7 @@ class Renderer:
 
         sim, palette, scale = self.sim, self.palette, self.scale
         team = sim.team
+        assert team is not None  # drawn for several robots only
         active, names = team.state.active, team.names
         path = np.array(self._history.robots) if len(self._history.robots) > 1 else None
         for k, (position, goal, heading) in enumerate(zip(sim.robot_positions, sim.robot_goals, sim.robot_headings, strict=True)):

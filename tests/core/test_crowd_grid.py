@@ -58,7 +58,7 @@ def pair_of_simulators(seed: int) -> tuple[Simulator, Simulator]:
     all_pairs.grid_from, grid.grid_from = 10**9, 0
     all_pairs.reset(seed=seed)
     grid.reset(seed=seed)
-    assert all_pairs._grid is None and grid._grid is not None
+    assert all_pairs.geometry.grid is None and grid.geometry.grid is not None
     return all_pairs, grid
 
 
@@ -67,10 +67,10 @@ def test_the_grid_geometry_is_the_all_pairs_geometry_within_the_stated_tolerance
     all_pairs, grid = pair_of_simulators(seed)
     np.testing.assert_array_equal(all_pairs.positions, grid.positions)
     # each left-out pair pushes less than the tolerance; a human has a few dozen of them here
-    assert np.abs(all_pairs._repulsion - grid._repulsion).max() < 100 * PAIR_FORCE_TOLERANCE
-    np.testing.assert_array_equal(all_pairs._robot_gap, grid._robot_gap)
+    assert np.abs(all_pairs.geometry.repulsion - grid.geometry.repulsion).max() < 100 * PAIR_FORCE_TOLERANCE
+    np.testing.assert_array_equal(all_pairs.geometry.robot_gap, grid.geometry.robot_gap)
     np.testing.assert_allclose(all_pairs.robot_distance, grid.robot_distance)
-    assert all_pairs._humans_touch == grid._humans_touch
+    assert all_pairs.geometry.humans_touch == grid.geometry.humans_touch
     for step in range(20):
         action = np.array([0.8, 0.3 * np.sin(step)])
         assert all_pairs.step(action) == grid.step(action)
@@ -83,8 +83,8 @@ def test_overlapping_humans_are_pushed_apart_the_same_way_in_both_geometries():
     for sim in (all_pairs, grid):
         sim.positions[2] = sim.positions[1] + 0.4  # overlapping by 0.2 m
         sim.refresh()
-        assert sim._humans_touch
-        sim._resolve_human_overlaps()
+        assert sim.geometry.humans_touch
+        sim.geometry.push_humans_apart(sim.positions)
     np.testing.assert_allclose(all_pairs.positions, grid.positions, atol=1e-12)
     assert abs(grid.positions[2] - grid.positions[1]) >= 0.6 - 1e-9
 
@@ -94,10 +94,10 @@ def test_a_crowd_of_a_thousand_steps_with_finite_state_and_pays_its_social_term(
                      "humans": {**HALL["humans"], "count": 1000, "spawn": [{"type": "rectangle", "min": [-29, -29], "max": [29, 29]}],
                                 "goal": [{"type": "rectangle", "min": [-29, -29], "max": [29, 29]}]}})
     sim.reset(seed=0)
-    assert sim._grid is not None
+    assert sim.geometry.grid is not None
     for _ in range(30):
         sim.step(np.array([1.0, 0.0]))
-    assert np.isfinite(sim.positions).all() and np.isfinite(sim._repulsion).all()
+    assert np.isfinite(sim.positions).all() and np.isfinite(sim.geometry.repulsion).all()
     gaps = np.abs(sim.human_positions[:, None] - sim.human_positions[None, :]) + 10 * np.eye(1000)
     assert gaps.min() > 0.6 - 0.05  # overlaps resolved each step (a push can leave a few cm)
 
@@ -108,7 +108,7 @@ def test_the_multi_agent_env_observes_a_grid_crowd_exactly_like_an_all_pairs_one
         env = parallel_env("room_furniture", modalities=["goal", "closest_obstacle"])
         env.simulator.grid_from = grid_from
         observed, _ = env.reset(seed=5)
-        assert (env.simulator._grid is not None) == (grid_from == 0)
+        assert (env.simulator.geometry.grid is not None) == (grid_from == 0)
         observations.append(observed)
     for agent, observed in observations[0].items():
         for key, value in observed.items():

@@ -21,8 +21,8 @@ def _soak(sim: Simulator, steps: int) -> float:
     for step in range(steps):
         events = sim.step(np.zeros(2))
         assert np.isfinite(sim.positions).all() and np.isfinite(sim.velocities).all()
-        if sim._static_count and sim.n_humans:
-            worst = max(worst, -float(sim._gap[1:, sim.n_humans + 1 :].min()))
+        if sim.geometry.static_count and sim.n_humans:
+            worst = max(worst, -float(sim.geometry.gap[1:, sim.n_humans + 1 :].min()))
         if events.collision or events.truncated or events.left_world or events.goal_reached:
             sim.reset(seed=step + 1)
     return worst

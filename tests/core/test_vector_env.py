@@ -76,7 +76,7 @@ def check_batch_equals_singles(world, worlds: int, first_seed: int, steps: int, 
             bucket, row = batch.locate(i)
             assert bucket.positions[row].tobytes() == sim.positions.tobytes()
             assert bucket.velocities[row].tobytes() == sim.velocities.tobytes()
-            assert bucket.repulsion[row].tobytes() == sim._repulsion.tobytes()
+            assert bucket.repulsion[row].tobytes() == sim.geometry.repulsion.tobytes()
             assert bucket.robot_heading[row] == sim.robot_heading
             assert bucket.human_goals[row].tobytes() == sim.human_goals.tobytes()
             assert bucket.human_stall_mark[row].tobytes() == sim.state.human_stall_mark.tobytes()
