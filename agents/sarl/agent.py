@@ -24,7 +24,7 @@ from __future__ import annotations
 import json
 from collections.abc import Callable, Mapping
 from pathlib import Path
-from typing import Any
+from typing import Any, cast
 
 import gymnasium as gym
 import numpy as np
@@ -59,11 +59,12 @@ class SarlAgent:
 
     def __init__(self, env: gym.Env, config: Any):
         name = config.algo
-        spaces = env.observation_space.spaces
+        space, unwrapped = env.observation_space, cast(Any, env.unwrapped)
+        spaces = space.spaces if isinstance(space, gym.spaces.Dict) else {}
         missing = [key for key in REQUIRED_KEYS if key not in spaces]
         if missing:
             raise ConfigError(f"modalities: algorithm {name!r} reads humans, goal and velocity; add {', '.join(missing)}")
-        if env.unwrapped.scenario.robot.kinematics != "holonomic":
+        if unwrapped.scenario.robot.kinematics != "holonomic":
             raise ConfigError(f"scenario: algorithm {name!r} drives a holonomic robot; set robot.kinematics: holonomic")
         unknown = sorted(set(config.algo_kwargs) - set(DEFAULTS))
         if unknown:
@@ -75,7 +76,7 @@ class SarlAgent:
         scales = observation_normalization(env) or {}
         self.scales = {key: (np.asarray(offset, dtype=np.float64), np.asarray(scale, dtype=np.float64))
                        for key, (offset, scale) in scales.items() if key in REQUIRED_KEYS}
-        self.humans = int(spaces["humans"].shape[0])
+        self.humans = int(cast(tuple[int, ...], spaces["humans"].shape)[0])
         self.gamma = float(config.gamma if config.gamma is not None else GAMMA)
         self.learning_rate = float(config.learning_rate if config.learning_rate is not None else LEARNING_RATE)
         self.episodes = 0
@@ -156,22 +157,25 @@ class SarlAgent:
             self.teacher = make_teacher(str(self.options["imitation_teacher"]))
         observation, _ = env.reset()
         robot, humans = self._observed(observation)
-        visited: tuple[list[np.ndarray], list[np.ndarray], list[float]] = ([], [], [])
+        robots: list[np.ndarray] = []
+        crowds: list[np.ndarray] = []
+        rewards: list[float] = []
         done = False
         while not done:
             if demonstrating:  # the teacher reads the simulator: demonstrations only
-                action = np.asarray(self.teacher(env.unwrapped.simulator), dtype=np.float32)
+                action = np.asarray(self.teacher(cast(Any, env.unwrapped).simulator), dtype=np.float32)
             else:
                 action = self.predict(observation, deterministic=False)
             observation, reward, terminated, truncated, _ = env.step(action)
             next_robot, next_humans = self._observed(observation)
             self.memory.add(robot, humans, float(reward), next_robot, next_humans, bool(terminated))
-            for items, item in zip(visited, (robot, humans, float(reward)), strict=True):
-                items.append(item)  # type: ignore[arg-type]
+            robots.append(robot)
+            crowds.append(humans)
+            rewards.append(float(reward))
             robot, humans = next_robot, next_humans
             done = terminated or truncated
         if demonstrating:
-            self.demonstrations.add_episode(*visited, self.discount)
+            self.demonstrations.add_episode(robots, crowds, rewards, self.discount)
 
     def _imitate(self) -> None:
         """Regress V on the demonstrations' discounted returns (``imitation_epochs`` shuffled passes)."""

@@ -117,7 +117,7 @@ def features(state: Mapping[str, np.ndarray], radius: float) -> tuple[np.ndarray
     return robot.astype(np.float32), (humans * present[..., None]).astype(np.float32)
 
 
-def lookahead(state: Mapping[str, np.ndarray], physics: Physics, actions: np.ndarray) -> dict[str, np.ndarray]:
+def lookahead(state: Mapping[str, np.ndarray], physics: Physics, actions: np.ndarray) -> dict[str, Any]:
     """Every action's next joint state, predicted reward and end, for B joint states (leading axis B) and M actions.
 
     ``actions`` (M, 2): velocities in the goal frame (:func:`action_set`). The robot moves at the action's velocity

@@ -8,7 +8,7 @@ import pytest
 import yaml
 
 from crowdnav.cli import build_parser, main
-from crowdnav.registry import ALGORITHM_NAMES, ALGORITHMS, ENCODER_MODES, modality_names, reward_preset_names
+from crowdnav.registry import ALGORITHM_NAMES, ALGORITHMS, ENCODER_MODES, algorithm_names, modality_names, reward_preset_names
 from tests.evaluation.evaluation_tiny import tiny_experiment_document
 
 
@@ -28,7 +28,7 @@ def test_bad_train_config_errors_read_file_line_field_expectation_and_did_you_me
     with pytest.raises(ConfigError) as caught:
         load_config(path)
     lines = str(caught.value).splitlines()
-    assert f"{path}:1: algo: expected one of 'sac', 'td3', 'ddpg', 'a2c', 'ppo', got 'sca'; did you mean 'sac'?" in lines
+    assert f"{path}:1: algo: expected one of 'sac', 'td3', 'ddpg', 'a2c', 'ppo', 'sarl', got 'sca'; did you mean 'sac'?" in lines
     assert any(line.startswith(f"{path}:4: extractor.leog_latnt: unknown key 'leog_latnt'; did you mean 'leog_latent'?")
                for line in lines)
     assert f"{path}:5: seed: expected an integer, got 'many'" in lines
@@ -52,7 +52,7 @@ def test_bad_experiment_file_errors_read_file_line_field_expectation_and_did_you
     line = next(n for n, text in enumerate(path.read_text().splitlines(), 1) if "tdd3" in text)
     with pytest.raises(ExperimentError) as caught:
         load_experiment(path)
-    assert str(caught.value) == (f"{path}:{line}: configurations.0.train.algo: expected one of 'sac', 'td3', 'ddpg', 'a2c', 'ppo', "
+    assert str(caught.value) == (f"{path}:{line}: configurations.0.train.algo: expected one of 'sac', 'td3', 'ddpg', 'a2c', 'ppo', 'sarl', "
                                  "got 'tdd3'; did you mean 'td3'? (configuration 'lidar')")
 
 
@@ -88,7 +88,7 @@ def test_train_schema_lists_the_registry_names_and_the_defaults(capsys):
 
     assert main(["schema", "train"]) == 0
     schema = json.loads(capsys.readouterr().out)
-    assert schema["properties"]["algo"]["enum"] == list(ALGORITHM_NAMES)
+    assert schema["properties"]["algo"]["enum"] == list(algorithm_names())  # the built-in ones and the installed plug-ins (sarl)
     assert schema["properties"]["modalities"]["items"]["enum"] == list(modality_names())
     assert set(schema["properties"]) == set(TrainConfig.model_fields)
     assert schema["properties"]["episodes"]["default"] == TrainConfig().episodes
@@ -162,12 +162,12 @@ def test_config_and_cli_choices_read_the_registry():
 
     from crowdnav.agents.config import EncoderConfig, TrainConfig
 
-    assert TrainConfig.model_json_schema()["properties"]["algo"]["enum"] == list(ALGORITHM_NAMES)
-    assert all(TrainConfig(algo=name).algo == name for name in ALGORITHM_NAMES)
+    assert TrainConfig.model_json_schema()["properties"]["algo"]["enum"] == list(algorithm_names())
+    assert all(TrainConfig(algo=name).algo == name for name in algorithm_names())
     assert typing.get_args(EncoderConfig.model_fields["mode"].annotation) == tuple(ENCODER_MODES)
     train = build_parser()._subparsers._group_actions[0].choices["train"]
     choices = {action.dest: action.choices for action in train._actions if action.choices}
-    assert tuple(choices["algo"]) == ALGORITHM_NAMES and tuple(choices["encoder"]) == tuple(ENCODER_MODES)
+    assert tuple(choices["algo"]) == algorithm_names() and tuple(choices["encoder"]) == tuple(ENCODER_MODES)
     assert tuple(choices["reward"]) == reward_preset_names()
 
 
@@ -186,7 +186,7 @@ def test_algorithm_properties_come_from_the_registry_entries_and_registered_name
 
     assert OFF_POLICY_ALGORITHMS == tuple(name for name, spec in ALGORITHM_SPECS.items() if spec.off_policy) == ("sac", "td3", "ddpg")
     assert [name for name, spec in ALGORITHM_SPECS.items() if spec.exploration_noise] == ["td3", "ddpg"]
-    with pytest.raises(ConfigError, match="algo: expected one of 'sac', 'td3', 'ddpg', 'a2c', 'ppo', got 'walker'"):
+    with pytest.raises(ConfigError, match="algo: expected one of 'sac', 'td3', 'ddpg', 'a2c', 'ppo', 'sarl', got 'walker'"):
         config_from_mapping({"algo": "walker"})
     spec = AlgorithmSpec("A test walker.", off_policy=True, builder=object)
     register_algorithm("walker", spec)
