@@ -8,38 +8,21 @@ seed gives the same episode bit for bit. The simulator then takes the state as i
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING, Protocol, cast
+from typing import TYPE_CHECKING, cast
 
 import numpy as np
 
-from crowdnav.groups import first_goals, place_groups
+from crowdnav.groups import GroupWorld, first_goals, place_groups
 from crowdnav.placement import JITTER_REACH
 from crowdnav.robots import first_heading
 from crowdnav.sim_state import SimState
 
 if TYPE_CHECKING:
-    from crowdnav.placement import Placement
-    from crowdnav.robots import Team
-    from crowdnav.scenario.schema import HumanGroup, Scenario
+    from crowdnav.scenario.schema import HumanGroup
 
 
-class Drawn(Protocol):
-    """What the draws read of a :class:`crowdnav.Simulator` (the groups' places and goals also read its ``rng``)."""
-
-    @property
-    def scenario(self) -> Scenario: ...
-    @property
-    def placement(self) -> Placement: ...
-    @property
-    def groups(self) -> list[HumanGroup]: ...
-    @property
-    def team(self) -> Team | None: ...
-    @property
-    def rng(self) -> np.random.Generator: ...
-
-
-def draw_state(sim: Drawn, rng: np.random.Generator) -> SimState:
-    """A new episode's state of ``sim``'s scenario, drawn from ``rng`` (the episode's generator)."""
+def draw_state(sim: GroupWorld, rng: np.random.Generator) -> SimState:
+    """A new episode's state of ``sim``'s scenario (what the groups read of it), drawn from ``rng`` (the episode's generator)."""
     robot, placement = sim.scenario.robot, sim.placement
     counts = [int(rng.integers(group.min_count, group.max_count + 1)) for group in sim.groups]
     n = sum(counts)

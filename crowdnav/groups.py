@@ -1,6 +1,7 @@
 """What the crowd's groups do: where members start, their first goals, and what they do at a goal.
 
-The simulator calls these with itself (``sim``: its scenario, groups, placements and generator):
+The simulator calls these with itself (``sim``: its scenario, groups, placements and generator,
+what :class:`GroupWorld` declares):
 :func:`place_groups` and :func:`first_goals` at reset, :func:`apply_goal_rules` after each step,
 on the state it is given (the simulator's own, or one world's row of a batch: a
 :class:`crowdnav.sim_state.SimState`, changed in place). Groups are visited in file order, and a file
@@ -17,7 +18,7 @@ one goal, has arrived when its walking members' centre of mass is within the goa
 from __future__ import annotations
 
 import math
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Protocol
 
 import numpy as np
 
@@ -25,10 +26,33 @@ from crowdnav import social_force as sf
 from crowdnav.placement import GAP, JITTER_REACH, PlacementError
 
 if TYPE_CHECKING:
+    from crowdnav.placement import GroupPlacement, Placement
+    from crowdnav.placement_regions import CandidateSet
+    from crowdnav.robots import Team
+    from crowdnav.scenario.schema import HumanGroup, Scenario
     from crowdnav.sim_state import SimState
 
 
-def place_groups(sim: Any, start: np.ndarray, goal: complex | np.ndarray, counts: list[int]) -> list[np.ndarray]:
+class GroupWorld(Protocol):
+    """What the groups' placement and goal rules read of a simulator (:class:`crowdnav.Simulator`; a batch world's slot)."""
+
+    @property
+    def scenario(self) -> Scenario: ...
+    @property
+    def groups(self) -> list[HumanGroup]: ...
+    @property
+    def placement(self) -> Placement: ...
+    @property
+    def team(self) -> Team | None: ...
+    @property
+    def rng(self) -> np.random.Generator: ...
+    @property
+    def together(self) -> np.ndarray | None: ...
+    @property
+    def stall_window(self) -> int: ...
+
+
+def place_groups(sim: GroupWorld, start: np.ndarray, goal: complex | np.ndarray, counts: list[int]) -> list[np.ndarray]:
     """Member positions of every group (complex arrays, file order), each away from the robots and the groups before it.
 
     ``start``: (R,) every robot's start; ``goal``: the robot's goal, or (R,) every robot's (``robots:``).
@@ -71,23 +95,26 @@ def place_groups(sim: Any, start: np.ndarray, goal: complex | np.ndarray, counts
         out.append(members)
     return out
 
-def first_goals(sim: Any, spawn: list[np.ndarray]) -> list[np.ndarray]:
+def first_goals(sim: GroupWorld, spawn: list[np.ndarray]) -> list[np.ndarray]:
     """Every member's first goal, group by group (standing members: where they stand)."""
     goals = []
     for group, places, members in zip(sim.groups, sim.placement.groups, spawn, strict=True):
         if len(members) == 0 or group.standing:
             goals.append(members.copy())  # standing members' goal is where they stand
         elif group.walk_together:  # one goal for the group: the mirror of its centre, or one draw
-            goal = 2 * mirror_center(group, sim.scenario) - members.mean() if group.goal_rule == "mirror" else places.goal.draw(sim.rng, 1)[0]
+            if group.goal_rule == "mirror":
+                goal = 2 * mirror_center(group, sim.scenario) - members.mean()
+            else:
+                goal = _goal_candidates(places).draw(sim.rng, 1)[0]
             goals.append(np.full(len(members), goal, dtype=complex))
         elif group.goal_rule == "mirror":
             goals.append(2 * mirror_center(group, sim.scenario) - members)
         else:
-            goals.append(places.goal.draw(sim.rng, len(members), replace=len(members) > len(places.goal)))
+            goals.append(_goal_candidates(places).draw(sim.rng, len(members), replace=len(members) > len(_goal_candidates(places))))
     return goals
 
 
-def apply_goal_rules(state: SimState, sim: Any, stalled: np.ndarray | None = None) -> bool:
+def apply_goal_rules(state: SimState, sim: GroupWorld, stalled: np.ndarray | None = None) -> bool:
     """After a step: humans of ``state`` at their goals follow their group's ``on_goal`` and ``goal_rule``; stalled ones take a new goal.
 
     ``state`` is changed in place (``human_arrived``, ``human_stopped``, ``human_goals``, the stall
@@ -131,9 +158,9 @@ def apply_goal_rules(state: SimState, sim: Any, stalled: np.ndarray | None = Non
         if group.goal_rule == "mirror":
             state.human_goals[index] = 2 * mirror_center(group, sim.scenario) - state.human_goals[index]
         elif group.walk_together:
-            state.human_goals[index] = places.goal.draw(sim.rng, 1)[0]
+            state.human_goals[index] = _goal_candidates(places).draw(sim.rng, 1)[0]
         else:
-            state.human_goals[index] = places.goal.draw(sim.rng, len(index), replace=True)
+            state.human_goals[index] = _goal_candidates(places).draw(sim.rng, len(index), replace=True)
         state.human_stall_mark[index] = np.inf  # a new goal: the next check only starts its window
     return moved
 
@@ -141,13 +168,13 @@ def apply_goal_rules(state: SimState, sim: Any, stalled: np.ndarray | None = Non
 _NONE = np.zeros(0, dtype=np.intp)
 
 
-def together_table(groups: list[Any]) -> np.ndarray | None:
+def together_table(groups: list[HumanGroup]) -> np.ndarray | None:
     """(G,) bool: which groups walk together; None when none does (the crowd's step is then the one it always was)."""
     table = np.array([bool(getattr(group, "walk_together", False)) for group in groups], dtype=bool)
     return table if table.any() else None
 
 
-def arrivals(distance: np.ndarray, humans: np.ndarray, goals: np.ndarray, group: np.ndarray, stopped: np.ndarray, sim: Any) -> np.ndarray:
+def arrivals(distance: np.ndarray, humans: np.ndarray, goals: np.ndarray, group: np.ndarray, stopped: np.ndarray, sim: GroupWorld) -> np.ndarray:
     """The arrival kernel (any leading world axes, last axis the n humans): who is at its goal after this step.
 
     A human whose ``distance`` to its goal is within ``goal_tolerance`` (stopped ones too: the caller
@@ -169,13 +196,13 @@ def arrivals(distance: np.ndarray, humans: np.ndarray, goals: np.ndarray, group:
     return arrived
 
 
-def stall_window(scenario: Any) -> int:
+def stall_window(scenario: Scenario) -> int:
     """Steps between stall checks (``humans.stall.time`` rounded to whole steps, at least 1); 0: no stall checks."""
     time = scenario.humans.stall.time
     return 0 if time is None else max(1, round(time / scenario.time_step))
 
 
-def stall_check(state: SimState, sim: Any, distance: np.ndarray) -> np.ndarray | None:
+def stall_check(state: SimState, sim: GroupWorld, distance: np.ndarray) -> np.ndarray | None:
     """One world's stall check when one is due (every ``sim.stall_window`` steps): the stalled humans, the marks moved on; else None."""
     window = sim.stall_window
     if not window or state.step_count % window:
@@ -192,12 +219,12 @@ def stalled_humans(distance: np.ndarray, mark: np.ndarray, resting: np.ndarray, 
     return stalled
 
 
-def _respawn(state: SimState, sim: Any, index: np.ndarray, group: Any, places: Any) -> np.ndarray:
+def _respawn(state: SimState, sim: GroupWorld, index: np.ndarray, group: HumanGroup, places: GroupPlacement) -> np.ndarray:
     """Move arrived members to free spawn points of their group; returns those that moved (the rest wait)."""
     radius, robot = sim.scenario.humans.radius, sim.scenario.robot
     others = np.delete(state.positions, index + 1)
     robot_radius = robot.radius
-    team = getattr(sim, "team", None)
+    team = sim.team
     if team is not None:  # keep clear of every robot
         others, robot_radius = np.concatenate([others, team.state.positions]), float(team.all_radii.max())
     reach = max(robot_radius, radius) + radius + GAP + JITTER_REACH
@@ -217,6 +244,12 @@ def _respawn(state: SimState, sim: Any, index: np.ndarray, group: Any, places: A
     return index[:0]
 
 
-def mirror_center(group: Any, scenario: Any) -> complex:
+def _goal_candidates(places: GroupPlacement) -> CandidateSet:
+    """A group's goal candidates (a group whose rule draws its goals has them: :mod:`crowdnav.placement`)."""
+    assert places.goal is not None
+    return places.goal
+
+
+def mirror_center(group: HumanGroup, scenario: Scenario) -> complex:
     """Centre of a group's mirror rule (default: the world's centre)."""
     return complex(*(group.mirror_center or scenario.world_center))

@@ -61,13 +61,13 @@ class CandidateSet:
         *,
         allowed: np.ndarray | None = None,
         away_from: np.ndarray | None = None,
-        min_distance: float = 0.0,
+        min_distance: float | np.ndarray = 0.0,
         replace: bool = False,
     ) -> np.ndarray:
         """``n`` positions from distinct candidates (unless ``replace``).
 
         ``allowed`` masks candidates; ``away_from`` (complex array) excludes candidates closer
-        than ``min_distance`` to any of its points (e.g. agents already placed).
+        than ``min_distance`` (one distance, or one per point) to any of its points (e.g. agents already placed).
         """
         points = self.points
         if self.ring_center is not None:

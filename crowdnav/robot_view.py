@@ -26,10 +26,13 @@ if TYPE_CHECKING:
 
 
 class RobotWorld(Protocol):
-    """What the scripted policies read of the world around one robot: a :class:`crowdnav.Simulator` or a :class:`RobotView`.
+    """The world around one robot as its sensors, its reward and the scripted policies read it: a :class:`crowdnav.Simulator` or a :class:`RobotView`.
 
     Index 0 of the arrays is that robot, then the discs it sees (``positions`` (N+1,) complex m,
-    ``velocities`` (N+1,) complex m/s, ``radii`` (N+1,) m); the obstacle tables are (1, P) / (1, C).
+    ``velocities`` (N+1,) complex m/s, ``radii`` (N+1,) m, ``robot_offset`` / ``robot_distance``
+    (N+1,) from that robot, its own distance a huge number, ``pair_offset`` / ``pair_distance``
+    (N+1, N+1) between any two); the obstacle tables are (1, P) /
+    (1, C) (a simulator's: (n+1, P) / (n+1, C), row 0 the robot's). Read only.
     """
 
     @property
@@ -46,6 +49,8 @@ class RobotWorld(Protocol):
     def robot_position(self) -> complex: ...
     @property
     def robot_goal(self) -> complex: ...
+    @property
+    def robot_goal_distance(self) -> float: ...
     @property
     def robot_heading(self) -> float: ...
     @property
@@ -68,6 +73,14 @@ class RobotWorld(Protocol):
     def disc_offset(self) -> np.ndarray: ...
     @property
     def disc_distance(self) -> np.ndarray: ...
+    @property
+    def robot_offset(self) -> np.ndarray: ...
+    @property
+    def robot_distance(self) -> np.ndarray: ...
+    @property
+    def pair_offset(self) -> np.ndarray: ...
+    @property
+    def pair_distance(self) -> np.ndarray: ...
 
 
 class RobotView:

@@ -34,7 +34,6 @@ holds every robot's events of the last step. Randomness comes only from the gene
 from __future__ import annotations
 
 import copy
-from typing import Any
 
 import numpy as np
 
@@ -47,7 +46,7 @@ from crowdnav.crowd.views import WorldView
 from crowdnav.episode_draw import draw_state
 from crowdnav.events import OUTCOMES, Collision, SimulationError, StepEvents  # noqa: F401  (re-exported: their public home)
 from crowdnav.groups import apply_goal_rules, stall_window, together_table
-from crowdnav.robot_view import RobotView, robot_scenario
+from crowdnav.robot_view import RobotView, RobotWorld, robot_scenario
 from crowdnav.robots import Team, clipped_action, retire_robots, robot_kinematics
 from crowdnav.scenario.loader import Overrides
 from crowdnav.scenario.schema import Scenario
@@ -387,7 +386,7 @@ class Simulator:
         """The scenario as robot ``index`` sees it: its own spec as ``robot`` (the scenario itself for the ego robot)."""
         return self._robot_scenarios[index]
 
-    def robot_view(self, index: int, with_robots: bool = True) -> Any:
+    def robot_view(self, index: int, with_robots: bool = True) -> RobotWorld:
         """The world from robot ``index`` (:class:`crowdnav.robot_view.RobotView`), what its sensors, reward and scripted policy read.
 
         ``with_robots=False``: the other robots left out (what a people tracker sees). One robot: the simulator itself.

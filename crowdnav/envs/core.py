@@ -20,7 +20,7 @@ from gymnasium import spaces
 from crowdnav.envs.reward import Reward
 from crowdnav.planning.shield import validate_shield
 from crowdnav.rendering.episode_view import RENDER_MODES, EpisodeView, RenderOptions
-from crowdnav.robot_view import RobotView
+from crowdnav.robot_view import RobotWorld
 from crowdnav.scenario import ScenarioIssue, library
 from crowdnav.scenario.loader import LoadedScenario
 from crowdnav.sensors import Modality, build_modalities
@@ -219,7 +219,7 @@ class EnvCore:
         self.simulator.reset(seed=seed)
         self.reward.reset(self.simulator)
         for k, reward in enumerate(self.robot_rewards[1:], start=1):
-            reward.reset(self.simulator.robot_view(k))  # a RobotView reads as a simulator
+            reward.reset(self.simulator.robot_view(k))
         self._running = True
         if self.view is not None:
             self.view.on_reset()
@@ -233,14 +233,14 @@ class EnvCore:
         """
         sim = self.simulator
         view = sim.robot_view(index)
-        people: RobotView | Simulator | None = None
+        people: RobotWorld | None = None
         observation = {}
         for key, modality in self._robot_sensors[index]:
             if modality.sees_robots:
                 observation[key] = modality.observe(view)
             else:
                 people = people if people is not None else sim.robot_view(index, with_robots=False)
-                observation[key] = modality.observe(people)  # type: ignore[arg-type]  # a RobotView reads as a simulator
+                observation[key] = modality.observe(people)
         return observation
 
     def observe(self) -> dict[str, np.ndarray]:
@@ -297,7 +297,7 @@ class EnvCore:
             if events is None:
                 results.append(None)
                 continue
-            reward, terms = self.robot_rewards[k](sim.robot_view(k), events)  # a RobotView reads as a simulator
+            reward, terms = self.robot_rewards[k](sim.robot_view(k), events)
             results.append((events, reward, terms))
         if all(result is None or result[0].terminated or result[0].truncated for result in results):
             self._running = False

@@ -27,9 +27,10 @@ from typing import TypeVar
 
 import numpy as np
 
+from crowdnav.events import StepEvents
+from crowdnav.robot_view import RobotWorld
 from crowdnav.scenario.reward_presets import REWARD_TERMS
 from crowdnav.scenario.schema import RewardWeights
-from crowdnav.simulator import Simulator, StepEvents
 
 __all__ = ["REWARD_TERMS", "Reward", "reward_terms"]  # REWARD_TERMS: names in summation order, keys of info["reward_terms"]
 
@@ -74,11 +75,11 @@ class Reward:
         self._weights = {term: float(getattr(weights, term)) for term in REWARD_TERMS}
         self._previous_distance = 0.0
 
-    def reset(self, sim: Simulator) -> None:
+    def reset(self, sim: RobotWorld) -> None:
         """Remember the initial robot-goal distance (the potential of the progress term)."""
         self._previous_distance = float(sim.robot_goal_distance)
 
-    def __call__(self, sim: Simulator, events: StepEvents) -> tuple[float, dict[str, float]]:
+    def __call__(self, sim: RobotWorld, events: StepEvents) -> tuple[float, dict[str, float]]:
         """(reward, terms) for the step the simulator just took; ``terms`` is a new dict."""
         distance = float(sim.robot_goal_distance)
         previous, self._previous_distance = self._previous_distance, distance

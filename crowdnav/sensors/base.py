@@ -24,8 +24,8 @@ from pydantic import BaseModel
 
 if TYPE_CHECKING:  # imported for type hints only: the sensors never build a simulator
     from crowdnav.batch.state import BatchState
+    from crowdnav.robot_view import RobotWorld
     from crowdnav.scenario.schema import Sensors
-    from crowdnav.simulator import Simulator
     from crowdnav.world import CompiledWorld
 
 
@@ -64,8 +64,12 @@ class Modality(abc.ABC):
         """Build the observation space; called once by :meth:`space`."""
 
     @abc.abstractmethod
-    def observe(self, sim: Simulator) -> np.ndarray:
-        """A new array in :meth:`space` describing the simulator's current state."""
+    def observe(self, sim: RobotWorld) -> np.ndarray:
+        """A new array in :meth:`space` describing the world around the robot now.
+
+        ``sim``: what the robot's sensors read (:class:`crowdnav.robot_view.RobotWorld`): the
+        simulator itself for one robot, a :class:`crowdnav.robot_view.RobotView` for each robot of a ``robots:`` scenario.
+        """
 
     def observe_batch(self, state: BatchState) -> np.ndarray:
         """(K, *space.shape) array of the space's dtype: row k is :meth:`observe` of world k, bit for bit.

@@ -20,7 +20,7 @@ from crowdnav.sensors.frames import encode_vector, encode_vectors, to_robot_fram
 
 if TYPE_CHECKING:
     from crowdnav.batch.state import BatchState
-    from crowdnav.simulator import Simulator
+    from crowdnav.robot_view import RobotWorld
     from crowdnav.world import CompiledWorld
 
 
@@ -57,7 +57,7 @@ class ClosestObstacleModality(Modality):
     def make_space(self) -> spaces.Box:
         return vector_space(self.frame, self.max_range)
 
-    def observe(self, sim: Simulator) -> np.ndarray:
+    def observe(self, sim: RobotWorld) -> np.ndarray:
         offset = self.nearest_offset(sim)
         if offset is None or abs(offset) >= self.max_range:
             offset = complex(self.max_range, 0.0)
@@ -65,7 +65,7 @@ class ClosestObstacleModality(Modality):
             offset *= to_robot_frame(sim)
         return encode_vector(offset, self.frame, self.max_range)
 
-    def nearest_offset(self, sim: Simulator) -> complex | None:
+    def nearest_offset(self, sim: RobotWorld) -> complex | None:
         """World-frame vector from the robot's centre to the nearest obstacle point (None: no obstacle)."""
         if not self._has_polygons and not self._has_discs and not sim.n_humans:
             return None

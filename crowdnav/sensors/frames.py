@@ -21,12 +21,12 @@ from crowdnav.batch.scalar_math import cmul
 
 if TYPE_CHECKING:
     from crowdnav.batch.state import BatchState
-    from crowdnav.simulator import Simulator
+    from crowdnav.robot_view import RobotWorld
 
 Frame = Literal["polar", "cartesian"]
 
 
-def to_robot_frame(sim: Simulator) -> complex:
+def to_robot_frame(sim: RobotWorld) -> complex:
     """Unit complex number that rotates world vectors into the robot frame."""
     heading = sim.robot_heading
     return complex(math.cos(heading), -math.sin(heading))

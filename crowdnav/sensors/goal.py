@@ -14,7 +14,7 @@ from crowdnav.sensors.frames import encode_vector, encode_vectors, to_robot_fram
 
 if TYPE_CHECKING:
     from crowdnav.batch.state import BatchState
-    from crowdnav.simulator import Simulator
+    from crowdnav.robot_view import RobotWorld
     from crowdnav.world import CompiledWorld
 
 GOAL_RANGE_FACTOR = 2.0
@@ -48,7 +48,7 @@ class GoalModality(Modality):
         scale = np.array((self.diagonal, 1.0, 1.0) if self.frame == "polar" else (self.diagonal, self.diagonal), dtype=np.float32)
         return np.zeros(shape, dtype=np.float32), scale
 
-    def observe(self, sim: Simulator) -> np.ndarray:
+    def observe(self, sim: RobotWorld) -> np.ndarray:
         rotation, robot = to_robot_frame(sim), complex(sim.positions[0])
         re, im = goal_in_robot_frame(sim.robot_goal.real, sim.robot_goal.imag, robot.real, robot.imag, rotation.real, rotation.imag)
         return encode_vector(complex(re, im), self.frame, self.bound)

@@ -23,7 +23,7 @@ from crowdnav.sensors.frames import to_robot_frame, to_robot_frame_batch
 
 if TYPE_CHECKING:
     from crowdnav.batch.state import BatchState
-    from crowdnav.simulator import Simulator
+    from crowdnav.robot_view import RobotWorld
     from crowdnav.world import CompiledWorld
 
 COLUMNS = ("x", "y", "vx", "vy", "radius", "present")
@@ -75,7 +75,7 @@ class HumansModality(Modality):
         scale = np.tile(np.array([r, r, v, v, 1.0, 1.0], dtype=np.float32), (self.count, 1))
         return np.zeros((self.count, 6), dtype=np.float32), scale
 
-    def observe(self, sim: Simulator) -> np.ndarray:
+    def observe(self, sim: RobotWorld) -> np.ndarray:
         rotation = to_robot_frame(sim)
         return self.nearest(sim.robot_distance, sim.robot_offset, sim.velocities, sim.radii, rotation.real, rotation.imag)
 

@@ -30,7 +30,7 @@ from crowdnav.sensors.static_edges import oriented_edges
 
 if TYPE_CHECKING:
     from crowdnav.batch.state import BatchState
-    from crowdnav.simulator import Simulator
+    from crowdnav.robot_view import RobotWorld
     from crowdnav.world import CompiledWorld
 
 OCCUPIED = 255
@@ -70,7 +70,7 @@ class LeogModality(Modality):
     def make_space(self) -> spaces.Box:
         return spaces.Box(low=0, high=OCCUPIED, shape=(1, self.cells, self.cells), dtype=np.uint8)
 
-    def observe(self, sim: Simulator) -> np.ndarray:
+    def observe(self, sim: RobotWorld) -> np.ndarray:
         n = self.cells
         occupied = self.running_counts(sim.positions, sim.robot_heading, sim.radii) > 0
         grid = occupied.view(np.uint8)  # True/False -> 1/0 without a copy

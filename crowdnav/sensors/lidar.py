@@ -31,7 +31,7 @@ from crowdnav.sensors.static_edges import oriented_edges
 
 if TYPE_CHECKING:
     from crowdnav.batch.state import BatchState
-    from crowdnav.simulator import Simulator
+    from crowdnav.robot_view import RobotWorld
     from crowdnav.world import CompiledWorld
 
 @register_modality
@@ -74,7 +74,7 @@ class LidarModality(Modality):
     def make_space(self) -> spaces.Box:
         return spaces.Box(low=0.0, high=1.0, shape=(self.beams,), dtype=np.float32)
 
-    def observe(self, sim: Simulator) -> np.ndarray:
+    def observe(self, sim: RobotWorld) -> np.ndarray:
         out = np.empty(self.beams, dtype=np.float32)
         # (1 / max_range) / inverse <= 1: the inverse ranges start at 1 / max_range
         np.divide(1.0 / self.max_range, self.inverse_ranges(sim.positions, sim.robot_heading, sim.radii), out=out)
@@ -85,7 +85,7 @@ class LidarModality(Modality):
         np.divide(1.0 / self.max_range, self.inverse_ranges(state.positions, state.robot_heading, state.radii), out=out)
         return out
 
-    def ranges(self, sim: Simulator) -> np.ndarray:
+    def ranges(self, sim: RobotWorld) -> np.ndarray:
         """(B,) float64 distances in metres from the robot's centre, ``max_range`` where nothing is hit."""
         return 1.0 / self.inverse_ranges(sim.positions, sim.robot_heading, sim.radii)
 

@@ -21,7 +21,7 @@ from crowdnav.sensors.humans import HumansModality
 
 if TYPE_CHECKING:
     from crowdnav.batch.state import BatchState
-    from crowdnav.simulator import Simulator
+    from crowdnav.robot_view import RobotWorld
     from crowdnav.world import CompiledWorld
 
 
@@ -49,7 +49,7 @@ class PlanModality(Modality):
     def make_space(self) -> spaces.Box:
         return spaces.Box(-1.0, 1.0, shape=(2,), dtype=np.float32)
 
-    def observe(self, sim: Simulator) -> np.ndarray:
+    def observe(self, sim: RobotWorld) -> np.ndarray:
         rows = self.tracker.observe(sim)[None]
         actions = self._actions(np.array([sim.robot_position]), np.array([sim.robot_heading]), np.array([complex(sim.velocities[0])]),
                                 np.array([sim.robot_goal]), rows)

@@ -13,7 +13,7 @@ from crowdnav.sensors.frames import encode_vector, encode_vectors, to_robot_fram
 
 if TYPE_CHECKING:
     from crowdnav.batch.state import BatchState
-    from crowdnav.simulator import Simulator
+    from crowdnav.robot_view import RobotWorld
     from crowdnav.world import CompiledWorld
 
 
@@ -34,7 +34,7 @@ class VelocityModality(Modality):
     def make_space(self) -> spaces.Box:
         return vector_space("cartesian", self.bound)
 
-    def observe(self, sim: Simulator) -> np.ndarray:
+    def observe(self, sim: RobotWorld) -> np.ndarray:
         rotation, robot = to_robot_frame(sim), complex(sim.velocities[0])
         return encode_vector(complex(*cmul(robot.real, robot.imag, rotation.real, rotation.imag)), "cartesian", self.bound)
 
