@@ -1,10 +1,11 @@
 """What a simulated world is made of: its episode state (:class:`SimState`) and the constants of its crowd size.
 
-One declared structure for both simulators. :class:`crowdnav.Simulator` owns one
-:class:`SimState` of one world; :class:`crowdnav.batch.simulator.BatchSimulator` keeps the
-worlds that have the same number of humans as one
-:class:`crowdnav.batch.stacked_state.StackedState`: the same fields, each with a leading world
-axis (K,) (its rows are :class:`SimState` views). Nothing outside the
+One declared structure for both simulators: :class:`StateFields` declares the fields once, with
+an optional leading world axis. :class:`crowdnav.Simulator` owns one :class:`SimState` of one
+world and reads its fields as its attributes (:func:`read_state_fields`, not listed again);
+:class:`crowdnav.batch.simulator.BatchSimulator` keeps the worlds that have the same number of
+humans as one :class:`crowdnav.batch.stacked_state.StackedState`: the same fields, each with a
+leading world axis (K,) (its rows are :class:`SimState` views). Nothing outside the
 simulators writes into a state: the simulator's methods (:meth:`crowdnav.Simulator.stop_humans`)
 and the goal rules (:func:`crowdnav.groups.apply_goal_rules`, on the state they are given) do.
 
@@ -17,7 +18,7 @@ from __future__ import annotations
 from collections.abc import Callable
 from dataclasses import dataclass, fields
 from operator import attrgetter
-from typing import Any
+from typing import Any, Generic, TypeVar
 
 import numpy as np
 
@@ -30,24 +31,34 @@ SELF_DISTANCE = 1.0e9
 """Stand-in for an agent's distance to itself (m), so it neither repels nor overlaps itself."""
 
 
-@dataclass(eq=False)
-class SimState:
-    """One world's episode state (K worlds': :class:`crowdnav.batch.stacked_state.StackedState`); agent 0 is the robot.
+Goal = TypeVar("Goal")
+Heading = TypeVar("Heading")
+Count = TypeVar("Count")
 
+
+@dataclass(eq=False)
+class StateFields(Generic[Goal, Heading, Count]):
+    """The fields of a world's episode state, declared once for one world and for K; agent 0 is the robot.
+
+    Each field's docstring gives its shape, dtype, unit and meaning for one world
+    (:class:`SimState`); K worlds with the same number of humans
+    (:class:`crowdnav.batch.stacked_state.StackedState`) hold the same fields in the same order,
+    each with a leading world axis (K,). ``Goal``, ``Heading`` and ``Count`` are the types of the
+    robot's goal, heading and step count: Python numbers for one world (the robot's kinematics is
+    Python float math, ~10x faster than numpy on 2-3 numbers), (K,) arrays for K worlds.
     Points and velocities are complex ``x + 1j*y`` (m, m/s, world frame); ``n`` is the episode's
-    number of humans, human ``i`` is agent ``i + 1``. For one world the scalar fields are Python
-    numbers (the robot's kinematics is Python float math, ~10x faster than numpy on 2-3 numbers).
+    number of humans, human ``i`` is agent ``i + 1``.
     """
 
     positions: np.ndarray
     """(n+1,) complex128, m: the robot's centre, then every human's."""
     velocities: np.ndarray
     """(n+1,) complex128, m/s: every agent's velocity over the last step (0 after a reset)."""
-    robot_goal: complex
+    robot_goal: Goal
     """complex, m: the centre of the robot's goal disc."""
-    robot_heading: float
+    robot_heading: Heading
     """float, rad, counter-clockwise from +x, in [-pi, pi]: the robot's heading."""
-    step_count: int
+    step_count: Count
     """int: steps taken this episode."""
     human_group: np.ndarray
     """(n,) int64: each human's group, an index into the scenario's groups (file order)."""
@@ -69,6 +80,12 @@ class SimState:
     """(n,) float64, m: each human's distance to its goal at the last stall check (inf: a goal newer than that check)."""
     human_stalls: np.ndarray
     """(n,) int64: times each human stalled this episode (``humans.stall``), each time taking a new goal."""
+
+
+
+@dataclass(eq=False)
+class SimState(StateFields[complex, float, int]):
+    """One world's episode state: the fields of :class:`StateFields` (K worlds': :class:`crowdnav.batch.stacked_state.StackedState`)."""
 
     @property
     def n_humans(self) -> int:
@@ -109,9 +126,20 @@ def read_with(read: Callable[[Any], object]) -> Any:
     return property(read, doc=read.__doc__)
 
 
-def state_field(name: str, convert: Callable[[Any], Any] | None = None) -> Any:
-    """:func:`read_through` of :class:`SimState` field ``name`` of the owner's ``_state`` (``convert``: settable)."""
-    return read_through(f"_state.{name}", convert, f":attr:`crowdnav.sim_state.SimState.{name}` of this world.")
+STAGED: dict[str, Callable[[Any], Any]] = {"positions": np.asarray, "velocities": np.asarray, "robot_goal": complex, "robot_heading": float}
+"""The fields a test or scripted set-up may replace on a simulator to stage a scene (then ``refresh()``), each with its conversion."""
+
+
+def read_state_fields(owner: type) -> None:
+    """Give ``owner`` (a class holding one world's :class:`SimState` as ``_state``) every field as a property: ``owner.positions``.
+
+    Read from :class:`StateFields`, not listed again: a new field reads as the simulator's
+    attribute too. Each returns the state's own array (read it; the simulator's methods change
+    it); those in :data:`STAGED` may also be set.
+    """
+    for field in fields(SimState):
+        doc = f":attr:`crowdnav.sim_state.StateFields.{field.name}` of this world."
+        setattr(owner, field.name, read_through(f"_state.{field.name}", STAGED.get(field.name), doc))
 
 
 @dataclass(frozen=True, eq=False)

@@ -21,11 +21,12 @@ The robot cannot escape the task: leaving the world (its centre outside ``world.
 otherwise ends the episode with the outcome ``out_of_bounds``.
 
 The episode's state is one declared :class:`crowdnav.sim_state.SimState` the simulator owns
-(:attr:`Simulator.state`); its fields, the measured geometry's and every robot's read as the
-simulator's attributes (``sim.positions``, ``sim.robot_offset``, ``sim.robot_positions``:
-:func:`crowdnav.sim_state.read_through`). Only the simulator's methods change the state
-(:meth:`Simulator.step`, :meth:`Simulator.stop_humans`, the goal rules it runs); staging a scene
-by hand (tests, scripted set-ups) writes those arrays and then calls :meth:`Simulator.refresh`.
+(:attr:`Simulator.state`); its fields (read from the declaration, not listed again:
+:func:`crowdnav.sim_state.read_state_fields`), the measured geometry's and every robot's read as
+the simulator's attributes (``sim.positions``, ``sim.robot_offset``, ``sim.robot_positions``).
+Only the simulator's methods change the state (:meth:`Simulator.step`, :meth:`Simulator.stop_humans`,
+the goal rules it runs); staging a scene by hand (tests, scripted set-ups) writes those arrays
+and then calls :meth:`Simulator.refresh`.
 A scenario with ``robots:`` keeps the robots after the first (ego, agent 0) in
 :attr:`Simulator.team` (:mod:`crowdnav.robots`; None for one robot); :attr:`Simulator.robot_events`
 holds every robot's events of the last step. Randomness comes only from the generator seeded by
@@ -34,6 +35,7 @@ holds every robot's events of the last step. Randomness comes only from the gene
 from __future__ import annotations
 
 import copy
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -51,11 +53,16 @@ from crowdnav.robots import Team, clipped_action, retire_robots, robot_kinematic
 from crowdnav.scenario.loader import Overrides
 from crowdnav.scenario.schema import Scenario
 from crowdnav.sim_geometry import Geometry
-from crowdnav.sim_state import PairConstants, SimState, pair_constants, read_through, read_with, state_field
+from crowdnav.sim_state import PairConstants, SimState, StateFields, pair_constants, read_state_fields, read_through, read_with
 from crowdnav.world import CompiledWorld, WorldSource, load_world
 
+if TYPE_CHECKING:  # the state's fields as the simulator's attributes, for the type checker (read_state_fields adds them)
+    _StateAttributes = StateFields[complex, float, int]
+else:
+    _StateAttributes = object
 
-class Simulator:
+
+class Simulator(_StateAttributes):
     """Vectorized crowd simulator for one scenario.
 
     >>> sim = Simulator("room_furniture")
@@ -70,22 +77,6 @@ class Simulator:
     """Crowds of at least this many humans use the neighbour grid (:mod:`crowdnav.crowd_grid`) instead of
     all pairs: the same model within a stated tolerance, at a cost that grows with n instead of n^2."""
 
-    # the episode state's fields (SimState, declared there), read as attributes; four may be set to stage a scene
-    positions: np.ndarray = state_field("positions", np.asarray)
-    velocities: np.ndarray = state_field("velocities", np.asarray)
-    robot_goal: complex = state_field("robot_goal", complex)
-    robot_heading: float = state_field("robot_heading", float)
-    step_count: int = state_field("step_count")
-    human_group: np.ndarray = state_field("human_group")
-    human_goals: np.ndarray = state_field("human_goals")
-    human_preferred_speed: np.ndarray = state_field("human_preferred_speed")
-    human_max_speed: np.ndarray = state_field("human_max_speed")
-    command_cap: np.ndarray = state_field("command_cap")
-    human_stopped: np.ndarray = state_field("human_stopped")
-    human_arrived: np.ndarray = state_field("human_arrived")
-    human_respawns: np.ndarray = state_field("human_respawns")
-    human_stall_mark: np.ndarray = state_field("human_stall_mark")
-    human_stalls: np.ndarray = state_field("human_stalls")
     # what refresh() measured (crowdnav.sim_geometry.Geometry), read as attributes
     robot_offset: np.ndarray = read_through("geometry.robot_offset", doc="(n+1,) complex (m): from the robot to every agent.")
     robot_distance: np.ndarray = read_through("geometry.robot_distance", doc="(n+1,) (m): centre distances from the robot, its own huge.")
@@ -400,3 +391,5 @@ class Simulator:
         retire_robots(self.team, self.state, index)
         self.refresh()
 
+
+read_state_fields(Simulator)  # sim.positions is sim.state.positions, and so on for every field of SimState

@@ -30,7 +30,7 @@ import numpy as np
 from crowdnav import social_force as sf
 from crowdnav.batch.scalar_math import TWO_PI, cmul, remainder
 from crowdnav.batch.stacked_state import StackedState
-from crowdnav.batch.state import BatchState, BoolArray, ComplexArray, FloatArray, IntArray
+from crowdnav.batch.state import BatchState, BoolArray, ComplexArray, FloatArray
 from crowdnav.contacts import deepest_contact, goal_distance, outside, push_humans_apart, push_out_of_obstacles, touching
 from crowdnav.crowd.views import BatchView
 from crowdnav.events import Collision, SimulationError
@@ -70,34 +70,14 @@ class StepResult:
         return ended
 
 
-def _state_field(name: str) -> property:
-    return property(lambda self: getattr(self.state, name), doc=f"(K, ...) :attr:`StackedState.{name}` of every row (``state.{name}``).")
-
-
 class Bucket:
     """The worlds of a batch that have ``n`` humans this episode, stacked row by row.
 
-    ``state``: their :class:`StackedState` (its fields also read as the bucket's attributes:
-    ``bucket.positions`` is ``bucket.state.positions``); the geometry arrays (``pair_offset``,
-    ``gap``, ``repulsion``, ...) are created by the first refresh.
+    ``state``: their :class:`StackedState` (read as ``bucket.state.positions``: the bucket does not
+    repeat its fields); the geometry arrays (``pair_offset``, ``gap``, ``repulsion``, ...) are
+    created by the first refresh.
     """
 
-    # the state's fields read as the bucket's (properties set after the class)
-    positions: ComplexArray
-    velocities: ComplexArray
-    robot_goal: ComplexArray
-    robot_heading: FloatArray
-    step_count: IntArray
-    human_group: IntArray
-    human_goals: ComplexArray
-    human_preferred_speed: FloatArray
-    human_max_speed: FloatArray
-    command_cap: FloatArray
-    human_stopped: BoolArray
-    human_arrived: BoolArray
-    human_respawns: IntArray
-    human_stall_mark: FloatArray
-    human_stalls: IntArray
     # the geometry (_GEOMETRY), one row per world: absent until the first refresh creates it
     pair_offset: ComplexArray
     pair_distance: FloatArray
@@ -143,10 +123,6 @@ class Bucket:
         self.state = self.state.take(keep)
         for name in (g for g in _GEOMETRY if hasattr(self, g)):
             setattr(self, name, getattr(self, name)[keep])
-
-
-for _name in StackedState.__dataclass_fields__:  # bucket.positions is bucket.state.positions, and so on
-    setattr(Bucket, _name, _state_field(_name))
 
 
 class BatchSimulator:

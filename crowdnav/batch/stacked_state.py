@@ -5,8 +5,8 @@ count an ``int``); the batched simulator keeps the worlds that have the same num
 one :class:`StackedState`, the same fields in the same order, each with a leading world axis (K,).
 Rows move between the two with :meth:`StackedState.stack`, :meth:`StackedState.row`,
 :meth:`StackedState.set_row`, :meth:`StackedState.append` and :meth:`StackedState.take`. The
-meaning, unit and dtype of each field are :class:`crowdnav.sim_state.SimState`'s: declared once
-there; a test keeps the two lists of fields equal.
+meaning, unit and dtype of each field are declared once, in :class:`crowdnav.sim_state.StateFields`,
+the base of both (this module adds no field).
 """
 
 from __future__ import annotations
@@ -17,44 +17,17 @@ from typing import Any
 
 import numpy as np
 
-from crowdnav.batch.state import BoolArray, ComplexArray, FloatArray, IntArray
-from crowdnav.sim_state import SimState
+from crowdnav.batch.state import ComplexArray, FloatArray, IntArray
+from crowdnav.sim_state import SimState, StateFields
 
 
 @dataclass(eq=False)
-class StackedState:
-    """:class:`crowdnav.sim_state.SimState` of K worlds with the same number of humans n, row k being world k."""
+class StackedState(StateFields[ComplexArray, FloatArray, IntArray]):
+    """K worlds with the same number of humans n, row k being world k.
 
-    positions: ComplexArray
-    """(K, n+1) complex128, m: :attr:`SimState.positions <crowdnav.sim_state.SimState.positions>` of every world."""
-    velocities: ComplexArray
-    """(K, n+1) complex128, m/s: ``SimState.velocities`` of every world."""
-    robot_goal: ComplexArray
-    """(K,) complex128, m: ``SimState.robot_goal`` of every world."""
-    robot_heading: FloatArray
-    """(K,) float64, rad: ``SimState.robot_heading`` of every world."""
-    step_count: IntArray
-    """(K,) int64: ``SimState.step_count`` of every world."""
-    human_group: IntArray
-    """(K, n) int64: ``SimState.human_group`` of every world."""
-    human_goals: ComplexArray
-    """(K, n) complex128, m: ``SimState.human_goals`` of every world."""
-    human_preferred_speed: FloatArray
-    """(K, n) float64, m/s: ``SimState.human_preferred_speed`` of every world."""
-    human_max_speed: FloatArray
-    """(K, n) float64, m/s: ``SimState.human_max_speed`` of every world."""
-    command_cap: FloatArray
-    """(K, n) float64, m/s: ``SimState.command_cap`` of every world."""
-    human_stopped: BoolArray
-    """(K, n) bool: ``SimState.human_stopped`` of every world."""
-    human_arrived: BoolArray
-    """(K, n) bool: ``SimState.human_arrived`` of every world."""
-    human_respawns: IntArray
-    """(K, n) int64: ``SimState.human_respawns`` of every world."""
-    human_stall_mark: FloatArray
-    """(K, n) float64, m: ``SimState.human_stall_mark`` of every world."""
-    human_stalls: IntArray
-    """(K, n) int64: ``SimState.human_stalls`` of every world."""
+    Every field of :class:`crowdnav.sim_state.StateFields` with a leading world axis (K,) (the
+    robot's goal, heading and step count: (K,) complex128, float64 and int64 arrays).
+    """
 
     @classmethod
     def stack(cls, states: Sequence[SimState]) -> StackedState:

@@ -189,7 +189,7 @@ class CrowdNavVectorEnv(VectorEnv):
             return team
         out = np.zeros(self.num_envs)
         for bucket in self.batch.buckets.values():
-            out[bucket.world] = goal_distance(bucket.robot_goal, bucket.positions[:, 0])
+            out[bucket.world] = goal_distance(bucket.state.robot_goal, bucket.state.positions[:, 0])
         distances: np.ndarray = out[worlds]
         return distances
 
@@ -404,14 +404,14 @@ class CrowdNavVectorEnv(VectorEnv):
         if isinstance(self.batch, TeamWorlds):
             return self.batch.row(name, world)
         bucket, row = self.batch.locate(world)
-        values: np.ndarray = getattr(bucket, name)[row].copy()
+        values: np.ndarray = getattr(bucket.state, name)[row].copy()
         return values
 
     def robot_goal(self, world: int) -> complex:
         if isinstance(self.batch, TeamWorlds):
             return complex(self.batch.envs[world].simulator.robot_goal)
         bucket, row = self.batch.locate(world)
-        return complex(bucket.robot_goal[row])
+        return complex(bucket.state.robot_goal[row])
 
     def simulator(self, world: int) -> Simulator:
         """A snapshot of ``world`` as a :class:`crowdnav.Simulator`, built on each call: a copy of its current state.

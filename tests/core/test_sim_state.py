@@ -13,7 +13,7 @@ from crowdnav import Simulator
 from crowdnav.batch.simulator import BatchSimulator
 from crowdnav.batch.stacked_state import StackedState
 from crowdnav.envs.vector import CrowdNavVectorEnv
-from crowdnav.sim_state import SimState
+from crowdnav.sim_state import SimState, StateFields
 from crowdnav.world import load_world
 from tests.paths import REPO
 
@@ -31,14 +31,14 @@ def _same_state(sim: Simulator, state: SimState) -> None:
 def test_every_state_field_is_declared_with_shape_dtype_and_meaning():
     source = (ROOT / "crowdnav" / "sim_state.py").read_text()
     tree = ast.parse(source)
-    body = next(node for node in tree.body if isinstance(node, ast.ClassDef) and node.name == "SimState").body
+    body = next(node for node in tree.body if isinstance(node, ast.ClassDef) and node.name == "StateFields").body
     docs = {}
     for field, doc in zip(body, body[1:], strict=False):  # an annotated field, then its docstring
         if isinstance(field, ast.AnnAssign) and isinstance(doc, ast.Expr) and isinstance(doc.value, ast.Constant):
             docs[field.target.id] = doc.value.value
     assert sorted(docs) == sorted(FIELDS)
     for name, doc in docs.items():
-        assert ":" in doc and len(doc) > 20, f"SimState.{name}: say shape, dtype, unit and meaning"
+        assert ":" in doc and len(doc) > 20, f"StateFields.{name}: say shape, dtype, unit and meaning"
 
 
 def test_simulator_attributes_read_its_one_state():
@@ -46,8 +46,7 @@ def test_simulator_attributes_read_its_one_state():
     sim.reset(seed=3)
     state = sim.state
     for name in FIELDS:
-        value = getattr(sim, name) if name != "command_cap" else state.command_cap
-        assert value is getattr(state, name), name
+        assert getattr(sim, name) is getattr(state, name), name
         assert name not in vars(sim), f"{name} lives in the SimState, not on the simulator"
     for _ in range(5):
         sim.step(np.array([0.5, 0.2]))
@@ -163,16 +162,35 @@ def test_batch_buckets_hold_one_stacked_state_whose_rows_are_the_worlds():
         for i, sim in enumerate(singles):
             sim.step(np.full(2, 0.3))
             bucket, row = batch.locate(i)
-            assert isinstance(bucket.state, StackedState) and bucket.positions is bucket.state.positions
+            assert isinstance(bucket.state, StackedState)
             _same_state(sim, bucket.state.row(row))
 
 
-def test_stacked_state_declares_the_fields_of_one_world_state_in_the_same_order():
-    assert [f.name for f in dataclasses.fields(StackedState)] == FIELDS
+def _class_body_names(path: str, name: str) -> set[str]:
+    """The names a class of ``crowdnav/<path>`` declares or assigns in its own body."""
+    tree = ast.parse((ROOT / "crowdnav" / path).read_text())
+    body = next(node for node in ast.walk(tree) if isinstance(node, ast.ClassDef) and node.name == name).body
+    names = {node.target.id for node in body if isinstance(node, ast.AnnAssign) and isinstance(node.target, ast.Name)}
+    names |= {target.id for node in body if isinstance(node, ast.Assign) for target in node.targets if isinstance(target, ast.Name)}
+    return names | {node.name for node in body if isinstance(node, ast.FunctionDef)}
 
 
-def test_a_bucket_declares_for_the_type_checker_every_state_field_with_the_stacked_states_type():
-    from crowdnav.batch.simulator import Bucket
+def test_state_fields_are_declared_once_for_one_world_and_for_k_worlds_in_the_same_order():
+    assert issubclass(SimState, StateFields) and issubclass(StackedState, StateFields)
+    assert [f.name for f in dataclasses.fields(StackedState)] == FIELDS == [f.name for f in dataclasses.fields(StateFields)]
+    for path, name in (("sim_state.py", "SimState"), ("batch/stacked_state.py", "StackedState")):
+        assert not _class_body_names(path, name) & set(FIELDS), f"{name} declares a field again"
 
-    declared = {name: kind for name, kind in Bucket.__annotations__.items() if name in FIELDS}
-    assert declared == {f.name: f.type for f in dataclasses.fields(StackedState)}
+
+def test_neither_simulator_lists_the_state_fields_again_it_reads_them_from_the_declaration():
+    assert not _class_body_names("simulator.py", "Simulator") & set(FIELDS)
+    assert not _class_body_names("batch/simulator.py", "Bucket") & set(FIELDS)
+    assert all(isinstance(getattr(Simulator, name), property) for name in FIELDS)
+    sim = Simulator("room_furniture")
+    sim.reset(seed=1)
+    sim.robot_goal, sim.robot_heading = 2 + 3j, 1  # the staged fields take a new value, converted
+    assert type(sim.state.robot_goal) is complex and type(sim.state.robot_heading) is float and sim.state.robot_heading == 1.0
+    with pytest.raises(AttributeError):
+        sim.human_goals = np.zeros(sim.n_humans, dtype=complex)  # the others change through the simulator's methods only
+
+

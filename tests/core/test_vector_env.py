@@ -74,13 +74,13 @@ def check_batch_equals_singles(world, worlds: int, first_seed: int, steps: int, 
         for i, sim in enumerate(singles):
             events = sim.step(actions[i])
             bucket, row = batch.locate(i)
-            assert bucket.positions[row].tobytes() == sim.positions.tobytes()
-            assert bucket.velocities[row].tobytes() == sim.velocities.tobytes()
+            assert bucket.state.positions[row].tobytes() == sim.positions.tobytes()
+            assert bucket.state.velocities[row].tobytes() == sim.velocities.tobytes()
             assert bucket.repulsion[row].tobytes() == sim.geometry.repulsion.tobytes()
-            assert bucket.robot_heading[row] == sim.robot_heading
-            assert bucket.human_goals[row].tobytes() == sim.human_goals.tobytes()
-            assert bucket.human_stall_mark[row].tobytes() == sim.state.human_stall_mark.tobytes()
-            assert bucket.human_stalls[row].tobytes() == sim.human_stalls.tobytes()
+            assert bucket.state.robot_heading[row] == sim.robot_heading
+            assert bucket.state.human_goals[row].tobytes() == sim.human_goals.tobytes()
+            assert bucket.state.human_stall_mark[row].tobytes() == sim.state.human_stall_mark.tobytes()
+            assert bucket.state.human_stalls[row].tobytes() == sim.human_stalls.tobytes()
             assert result.collisions.get(i) == events.collision and result.goal_reached[i] == events.goal_reached
             assert result.left_world[i] == events.left_world and result.truncated[i] == events.truncated
             if events.terminated or events.truncated:
