@@ -8,6 +8,13 @@ nothing is found exactly on the space-time lattice of :mod:`crowdnav.planning.la
 robot's own moves at full speed, ``cells_per_step`` cells per step, checked against every human
 and every wall at every step with the simulator's contact distance plus ``margin``.
 
+One exception is exact only up to its events: a human who reaches its goal under ``on_goal:
+respawn`` is moved to a spawn point drawn clear of the robot, so where (and with which random
+draws) it reappears depends on where the robot is. The oracle therefore (a) blocks, on the step of
+a respawn, the cells the human could have touched before it was moved (the simulator tests
+contacts first: a disc of its reach plus one step at its max speed around where it was), and (b)
+plans again whenever the crowd departs from the future it planned with.
+
 Where the crowd would react to the robot (``see_robot: true``, several robots) the future is not
 fixed and the oracle refuses the scenario in one line (:class:`PlannerUnavailable`): planning
 through the simulator itself is a different search, which crowdnav does not ship. The same for a
@@ -79,20 +86,23 @@ class OraclePlanner:
         if not (math.isfinite(margin) and margin >= 0.0):
             raise ValueError(f"margin must be a finite number >= 0, got {margin!r}")
         self.cells_per_step, self.margin = cells_per_step, float(margin)
-        self._plans: dict[int, tuple[object, dict[int, complex]]] = {}
-        """id(episode state) -> (that state, step -> where the robot should be after it): one oracle may drive many envs."""
+        self._plans: dict[int, tuple[object, dict[int, complex], dict[int, np.ndarray]]] = {}
+        """id(episode state) -> (that state, step -> where the robot should be after it, step -> where the humans should be):
+        one oracle may drive many envs."""
         self.maps = MapCache(self.margin)
 
     def __call__(self, sim: RobotWorld) -> np.ndarray:
+        check_plannable(sim, "the oracle", needs_fixed_future=True)  # the reason a scenario is refused comes first
         state = getattr(sim, "state", None)
         if state is None or not hasattr(sim, "clone"):
             raise PlannerUnavailable("the oracle reads a crowdnav.Simulator (it plays the crowd forward on a clone)")
         step = state.step_count
         found = self._plans.get(id(state))
-        if found is None or found[0] is not state or abs(found[1].get(step, math.inf) - sim.robot_position) > 1e-6:
+        if found is None or found[0] is not state or abs(found[1].get(step, math.inf) - sim.robot_position) > 1e-6 \
+                or not _crowd_as_planned(found[2].get(step), sim.positions[1:]):
             if found is None and len(self._plans) >= MAX_EPISODES:
                 self._plans.pop(next(iter(self._plans)))
-            found = self._plans[id(state)] = (state, self.plan(sim))
+            found = self._plans[id(state)] = (state, *self._plan_and_crowd(sim))
         target = found[1].get(step + 1)
         return STILL.copy() if target is None else to_action(sim, target - sim.robot_position)
 
@@ -102,17 +112,31 @@ class OraclePlanner:
 
     def future(self, sim: RobotWorld) -> np.ndarray:
         """(T, n) complex: the humans' positions after each of the episode's remaining steps (the robot standing still)."""
+        return self._future(sim)[0]
+
+    def _future(self, sim: RobotWorld) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The humans' positions after each remaining step, and where the respawned ones were before they moved:
+        ((T, n) positions, (T, n) complex last positions before the respawn, (T, n) bool respawned on that step)."""
         check_plannable(sim, "the oracle", needs_fixed_future=True)
         twin = sim.clone()  # type: ignore[attr-defined]  # checked in __call__
         remaining = sim.scenario.max_steps - twin.state.step_count
         out = np.empty((remaining, sim.n_humans), dtype=complex)
+        before = np.empty_like(out)
+        respawned = np.zeros(out.shape, dtype=bool)
         for t in range(remaining):
+            count = twin.state.human_respawns.copy()
+            before[t] = twin.state.positions[1:]
             twin.step(STILL)
             out[t] = twin.state.positions[1:]
-        return out
+            respawned[t] = twin.state.human_respawns != count
+        return out, before, respawned
 
     def plan(self, sim: RobotWorld) -> dict[int, complex]:
         """Step -> planned robot position, from the current step to the goal (empty: no collision-free arrival exists)."""
+        return self._plan_and_crowd(sim)[0]
+
+    def _plan_and_crowd(self, sim: RobotWorld) -> tuple[dict[int, complex], dict[int, np.ndarray]]:
+        """The plan, and step -> the humans' positions it assumed after that step."""
         check_plannable(sim, "the oracle", needs_fixed_future=True)
         robot, step0 = sim.scenario.robot, sim.state.step_count  # type: ignore[attr-defined]
         lattice = Lattice(self.cells_per_step, robot.max_speed * sim.dt / self.cells_per_step)
@@ -122,15 +146,19 @@ class OraclePlanner:
         if remaining * ((x1 - x0) / h + 3) * ((y1 - y0) / h + 3) > MAX_CELLS:
             raise PlannerUnavailable(f"the oracle: {remaining} steps on a {x1 - x0:g} m x {y1 - y0:g} m world at {h:g} m cells "
                                      f"(cells_per_step {self.cells_per_step}) exceed its limit of {MAX_CELLS:,} lattice cells")
-        future = self.future(sim)
+        future, before, respawned = self._future(sim)
+        crowd = {step0 + t + 1: row for t, row in enumerate(future)}
         lo_i, lo_j = math.floor((x0 - here.real) / h), math.floor((y0 - here.imag) / h)
         w, hh = math.ceil((x1 - here.real) / h) - lo_i + 1, math.ceil((y1 - here.imag) / h) - lo_j + 1
         origin = here + complex(lo_i, lo_j) * h
         ii, jj = np.meshgrid(np.arange(w), np.arange(hh), indexing="ij")
         cells = origin + (ii + 1j * jj) * h
         static_free = self.static_map(sim).free(cells)
-        reach = robot.radius + sim.radii[1:] + self.margin + EPSILON
-        blocked = disc_cells(future, reach, np.full(len(future), origin), h, (w, hh)).reshape(len(future), 1, w, hh)
+        reach = np.broadcast_to(robot.radius + sim.radii[1:] + self.margin + EPSILON, future.shape)
+        # contacts are tested before a respawn moves a human: block all it could have touched on its way to the goal
+        ghost_reach = np.where(respawned, reach + sim.state.human_max_speed * sim.dt, -1.0)  # type: ignore[attr-defined]
+        blocked = disc_cells(np.concatenate([future, before], 1), np.concatenate([reach, ghost_reach], 1), np.full(len(future), origin),
+                             h, (w, hh)).reshape(len(future), 1, w, hh)
         free = static_free[None, None] & ~blocked
         start = np.zeros((1, w, hh), dtype=bool)
         start[0, -lo_i, -lo_j] = True
@@ -142,15 +170,20 @@ class OraclePlanner:
                 best = hits[np.argmin(np.abs(cells[hits[:, 0], hits[:, 1]] - sim.robot_goal))]
                 moves = layers.path(0, t, (int(best[0]), int(best[1])), lattice.moves)
                 positions = here + np.cumsum(lattice.displacements[moves])
-                return {step0: here, **{step0 + k + 1: complex(p) for k, p in enumerate(positions)}}
+                return {step0: here, **{step0 + k + 1: complex(p) for k, p in enumerate(positions)}}, crowd
         # no arrival: survive as long as possible, ending nearest the goal (then plan again from there)
         t = len(layers.reached) - 1
         while t > 0 and not layers.reached[t].any():
             t -= 1
         if t == 0:
-            return {}
+            return {}, crowd
         hits = np.argwhere(layers.reached[t][0])
         best = hits[np.argmin(np.abs(cells[hits[:, 0], hits[:, 1]] - sim.robot_goal))]
         moves = layers.path(0, t, (int(best[0]), int(best[1])), lattice.moves)
         positions = here + np.cumsum(lattice.displacements[moves])
-        return {step0: here, **{step0 + k + 1: complex(p) for k, p in enumerate(positions)}}
+        return {step0: here, **{step0 + k + 1: complex(p) for k, p in enumerate(positions)}}, crowd
+
+
+def _crowd_as_planned(planned: np.ndarray | None, now: np.ndarray) -> bool:
+    """Whether the humans stand where the plan assumed (no entry: the plan's first step, nothing to compare)."""
+    return planned is None or (planned.shape == now.shape and bool(np.array_equal(planned, now)))

@@ -55,6 +55,28 @@ def test_oracle_beats_the_social_force_robot_on_the_same_episodes_of_the_room_as
     assert oracle.count("success") >= social.count("success") and oracle.count("collision") == 0
 
 
+def test_oracle_survives_respawning_humans_whose_spawn_point_depends_on_the_robot():
+    """station_hall respawns arrived commuters clear of the robot: test seeds 1 and 6 ended in a collision at steps 86-87
+    (a contact on the respawn step, then a crowd that left the planned future) before the oracle handled both."""
+    env = CrowdNavEnv(scenario="station_hall", modalities=["goal"])
+    oracle = OraclePlanner()
+    assert [_play(env, oracle, seed) for seed in (1, 6)] == ["success", "success"]
+
+
+def test_oracle_plans_again_when_the_crowd_leaves_the_future_it_planned_with():
+    env = CrowdNavEnv(scenario="room_furniture", modalities=["goal"], overrides=FIGURE4)
+    env.reset(seed=0)
+    oracle = OraclePlanner()
+    first = oracle(env.simulator)
+    env.step(first)
+    planned = oracle.plan(env.simulator)
+    env.simulator.state.positions[1] += 0.5  # a human somewhere the plan did not expect
+    oracle(env.simulator)
+    (_, _, crowd), = oracle._plans.values()
+    assert np.array_equal(crowd[env.simulator.state.step_count + 1], oracle._future(env.simulator)[0][0])
+    assert planned  # the unperturbed episode had a plan to compare with
+
+
 @pytest.mark.parametrize("overrides, expected", [
     ({"humans.see_robot": True}, "humans see it"),
     ({"robot.kinematics": "unicycle", "robot.max_angular_speed": 2.0}, "unicycle"),
