@@ -11,7 +11,7 @@ robot: the first and only); :class:`crowdnav.Simulator` shows them as its attrib
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING, Any, Protocol
+from typing import TYPE_CHECKING, Protocol
 
 import numpy as np
 
@@ -83,6 +83,18 @@ class RobotWorld(Protocol):
     def pair_distance(self) -> np.ndarray: ...
 
 
+class Viewed(RobotWorld, Protocol):
+    """What a :class:`RobotView` reads of a :class:`crowdnav.Simulator` of a ``robots:`` scenario: its world and its team."""
+
+    @property
+    def team(self) -> Team | None: ...
+    @property
+    def bounds(self) -> tuple[float, float, float, float] | None: ...
+    @property
+    def step_count(self) -> int: ...
+    def robot_scenario(self, index: int) -> Scenario: ...
+
+
 class RobotView:
     """The world seen from robot ``index`` (0: the ego robot): the simulator's attributes, that robot first.
 
@@ -92,8 +104,10 @@ class RobotView:
     (:meth:`crowdnav.Simulator.robot_view`); reading it does not change the simulator.
     """
 
-    def __init__(self, sim: Any, index: int, with_robots: bool = True):
-        team, state = sim.team, sim.team.state
+    def __init__(self, sim: Viewed, index: int, with_robots: bool = True):
+        team = sim.team
+        assert team is not None  # a view is of one robot among several
+        state = team.state
         self.world, self.obstacles, self.dt, self.bounds = sim.world, sim.obstacles, sim.dt, sim.bounds
         self.scenario = sim.robot_scenario(index)
         others = np.flatnonzero(state.active[1:]) if with_robots else np.zeros(0, dtype=int)
@@ -175,7 +189,7 @@ class RobotView:
         return abs(self.robot_goal - complex(self.positions[0]))
 
 
-def robot_scenario(scenario: Any, index: int) -> Any:
+def robot_scenario(scenario: Scenario, index: int) -> Scenario:
     """``scenario`` as robot ``index`` sees it: its spec as ``robot`` (a shallow copy; the same scenario for the ego robot)."""
     if index == 0:
         return scenario
