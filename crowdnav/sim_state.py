@@ -103,10 +103,10 @@ class SimState(StateFields[complex, float, int]):
 def read_through(path: str, convert: Callable[[Any], Any] | None = None, doc: str | None = None) -> Any:
     """A property of an owner that reads one of its parts' attributes: ``owner.<path>`` (``path`` dotted, ``"_state.positions"``).
 
-    How :class:`crowdnav.Simulator` shows its :class:`SimState`'s fields and its measured geometry
-    as its own attributes without declaring them again: its class body annotates each name with
-    the part's type and assigns this. The getter is :func:`operator.attrgetter` (no Python frame
-    per read). ``convert``: the property is settable too, ``convert(value)`` written into the part
+    How :class:`crowdnav.Simulator` shows its measured geometry as its own attributes (its class
+    body annotates each name with the part's type and assigns this) and, through
+    :func:`read_state_fields`, its :class:`SimState`'s fields. The getter is
+    :func:`operator.attrgetter` (no Python frame per read). ``convert``: the property is settable too, ``convert(value)`` written into the part
     (tests and scripted set-ups stage a scene that way); None: read only.
     """
     getter = attrgetter(path)
