@@ -87,7 +87,7 @@ SB3_INTERNALS: tuple[Internal, ...] = (
     *_attributes(_OFF, "replay_buffer train_freq gradient_steps learning_starts batch_size n_envs",
                  "agents/resume_point.py (ResumePoint.continue_run)"),
     Internal(_OFF, "train", "method", "agents/resume_point.py (ResumePoint.continue_run)", ("gradient_steps", "batch_size")),
-    Internal(_OFF, "load_replay_buffer", "method", "agents/training.py (legacy pickled replay buffer)", ("path",)),
+    Internal(_OFF, "load_replay_buffer", "method", "agents/training_session.py (legacy pickled replay buffer)", ("path",)),
     Internal(_OFF, "learn", "copied", "agents/resume_point.py (ResumePoint.continue_run: the update after a rollout)",
              fingerprints=("4e65b7856177f116",)),
     Internal(_ON, "rollout_buffer", "attribute", "agents/resume_point.py, agents/resume_worlds.py (rollout_state.npz)"),

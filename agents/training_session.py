@@ -72,12 +72,19 @@ class TrainingSession:
         self.trust_pickle = trust_pickle
         self.out = Path(config.out)
         self.checkpoint = checkpoint_dir(self.out)
-        self.batched = config.num_envs > 1  # the native vector env (every algorithm), or one env as the published results were trained
+        self.batched = config.num_envs > 1
+        """Several worlds: their episodes end out of order, so checkpoints keep every world mid-episode (one world: rewound to an episode end)."""
+        self.vector = self.batched
+        """Collect from the native vector env (:func:`make_vec_env`); False: one ``gymnasium.Env`` (:func:`make_env`), as the
+        published ``num_envs: 1`` results were trained. One world through the vector env trains bit for bit alike
+        (tests/agents/test_one_world_stack.py), but the vector env refuses crowds of ``Simulator.grid_from`` humans, which one
+        env takes, and steps one world slower, so the size still picks the stack (docs/architecture.md)."""
         self.off_policy = config.algo in OFF_POLICY
         self.unit = "steps" if config.checkpoint_every_steps is not None else "episodes"  # what snapshots and checkpoints count
         self.state: ResumeInfo | None = None
         self.exact = False
         """A resume that continues the interrupted run bit for bit (rewound to an episode end, or its worlds restored)."""
+        self.built = False
 
     # ---------------------------------------------------------------- restore
 
@@ -144,6 +151,7 @@ class TrainingSession:
             set_aside_snapshots_after(self.out, self.first_episode, self.unit)
             if state and not snapshot_dir(self.out, state.episodes, "episodes").is_dir():
                 self.save_snapshot(state.episodes)  # a run checkpointed by an older crowdnav, killed before its snapshot
+        self.built = True
 
     def _build_env(self, leog: Any) -> None:
         """``env`` (what the observation scales are read from) and ``collecting`` (what the model steps)."""
@@ -155,7 +163,7 @@ class TrainingSession:
         # on-policy and batched checkpoints store the collecting env's worlds mid-episode (crowdnav.agents.resume_worlds)
         self.env: gym.Env | CrowdNavSB3VecEnv
         self.collecting: gym.Env | VecEnv
-        if self.batched:
+        if self.vector:
             vector = make_vec_env(config, leog, first_started, saved_scales)
             self.env, self.collecting = vector, ActionLog(vector)
             self.max_steps = vector.env.scenario.max_steps
@@ -238,7 +246,7 @@ class TrainingSession:
 
     def run(self) -> TrainResult:
         """Restore and build (unless done already), train for the rest of the budget, save the final checkpoint."""
-        if not hasattr(self, "callback"):
+        if not self.built:
             self.restore()
             self.build()
         config, model, callback = self.config, self.model, self.callback

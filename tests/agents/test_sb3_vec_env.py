@@ -69,3 +69,16 @@ def test_calls_aimed_at_some_worlds_or_at_the_autoreset_mode_are_refused_and_who
     assert env.env_method("probe") == ["done"] * 3 and calls == [1]  # one call acts on every world
     assert env.get_attr("num_envs", indices=[0, 2]) == [3, 3]
     env.close()
+
+
+def test_resume_rebuilds_worlds_through_public_methods_and_touches_no_private_member_of_the_vector_env():
+    import ast
+
+    from tests.paths import REPO
+
+    tree = ast.parse((REPO / "agents" / "resume_worlds.py").read_text(encoding="utf-8"))
+    names = {node.attr for node in ast.walk(tree) if isinstance(node, ast.Attribute)}
+    private = {name for name in names if name.startswith("_") and not name.startswith("__")}
+    # only the DummyVecEnv internals of the one-env path, which agents/sb3_internals.py checks against SB3
+    assert private <= {"_save_obs", "_obs_from_buf", "_reset_seeds"}, private
+    assert hasattr(CrowdNavSB3VecEnv, "restore_worlds") and hasattr(CrowdNavSB3VecEnv, "world_counts")
