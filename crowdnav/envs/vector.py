@@ -16,10 +16,12 @@ from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
 from crowdnav.batch.memory import keep_freed_memory as _keep_freed_memory
-from crowdnav.batch.simulator import BatchSimulator, StepResult
+from crowdnav.batch.simulator import BatchSimulator
 from crowdnav.contacts import goal_distance
-from crowdnav.envs.core import ScenarioSource, checked_residual, load_env_world, option_overrides, real_array
+from crowdnav.envs.core import ScenarioSource, checked_residual, load_env_world, option_overrides
 from crowdnav.envs.reward import REWARD_TERMS, reward_terms
+from crowdnav.envs.vector_actions import checked_actions, checked_replay, executed
+from crowdnav.envs.vector_infos import end_infos, reward_term_infos, same_step_infos
 from crowdnav.envs.vector_team import TeamWorlds
 from crowdnav.events import outcomes
 from crowdnav.planning.shield import validate_shield
@@ -199,7 +201,7 @@ class CrowdNavVectorEnv(VectorEnv):
         """Step every running world with its row of ``actions`` ((num_envs, 2), each checked finite); autoreset per the mode."""
         if not self._started.all():
             raise RuntimeError("call reset() before step(): some worlds have not been reset")
-        actions = self._checked_actions(actions)
+        actions = checked_actions(actions, self.num_envs)
         b = self.num_envs
         rewards = np.zeros(b)
         infos: dict[str, Any] = {}
@@ -215,17 +217,12 @@ class CrowdNavVectorEnv(VectorEnv):
         result = self.batch.step(actions, None if stepping.all() else stepping)
         terminated = result.terminated & stepping
         truncated = result.truncated & stepping & ~terminated
-        # every stepping world's outcome, "truncated" where it runs on (the infos' convention, see _end_infos)
+        # every stepping world's outcome, "truncated" where it runs on (the infos' convention, see vector_infos.end_infos)
         outcome = outcomes(result.collided & stepping, result.left_world & stepping, result.goal_reached & stepping, stepping)
         rewards[stepping], terms = self._rewards(outcome, stepping)
-        infos["reward_terms"] = {}
-        for term in REWARD_TERMS:
-            values = np.zeros(b)
-            values[stepping] = terms[term]
-            infos["reward_terms"][term], infos["reward_terms"][f"_{term}"] = values, stepping.copy()
-        infos["_reward_terms"] = stepping.copy()
+        reward_term_infos(infos, terms, stepping)
         ended = terminated | truncated
-        self._end_infos(infos, result, outcome, stepping)
+        end_infos(infos, self.batch, result, outcome, stepping, self._add_info)
         self._observe_all()
         if self.autoreset_mode is AutoresetMode.DISABLED:
             waiting = self._ended.copy()
@@ -239,11 +236,7 @@ class CrowdNavVectorEnv(VectorEnv):
 
     def _executed(self, actions: np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:
         """The actions the robots execute: the plan plus the policy's action (``residual``), through the shield (and which it replaced)."""
-        if self.residual:  # each policy action corrects the plan its world observed
-            actions = actions + self._observations["plan"]
-        if self.shield is None:
-            return actions, None
-        return self._shielded(actions)
+        return executed(actions, self._observations["plan"] if self.residual else None, self.shield, self.batch)
 
     def restore_worlds(self, seeds: Sequence[int | None], actions: Any, lengths: Any) -> dict[str, np.ndarray]:
         """Rebuild every world mid-episode (a training resume): world ``i`` reset with ``seeds[i]``, then stepped with ``actions[i, :lengths[i]]``.
@@ -255,50 +248,23 @@ class CrowdNavVectorEnv(VectorEnv):
         replayed, not played.
         """
         b = self.num_envs
-        lengths = np.asarray(lengths)
-        actions = real_array(actions, "the restored worlds' actions")
-        if lengths.shape != (b,) or lengths.dtype.kind not in "iu" or (lengths < 0).any() \
-                or actions.ndim != 3 or actions.shape[0] != b or actions.shape[2] != 2 or lengths.max(initial=0) > actions.shape[1]:
-            raise ValueError(f"restore_worlds: lengths must be ({b},) non-negative integers and actions ({b}, >= max length, 2), "
-                             f"got lengths {lengths.dtype}{lengths.shape} and actions {actions.shape}")
+        actions, lengths = checked_replay(actions, lengths, b)
         self.reset(seed=list(seeds))
         for step in range(int(lengths.max(initial=0))):
             active = lengths > step
-            executed, _ = self._executed(self._checked_actions(actions[:, step]))
-            self.batch.step(executed, None if active.all() else active)
+            applied, _ = self._executed(checked_actions(actions[:, step], b))
+            self.batch.step(applied, None if active.all() else active)
             if self.residual:  # the next plan is observed after this step
                 self._observe_all()
         self._previous_distance[:] = self._goal_distance(np.arange(b))  # what a step's reward code keeps
         self._observe_all()
         return self._copy_observations()
 
-    def _shielded(self, actions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Every world's action through the shield (as the single env's, world by world bit for bit), and which it replaced."""
-        assert self.shield is not None and isinstance(self.batch, BatchSimulator)  # the shield refuses several robots
-        out, replaced = actions.copy(), np.zeros(self.num_envs, dtype=bool)
-        for bucket in self.batch.buckets.values():
-            rows, size = np.arange(len(bucket)), self.batch.chunk_size(bucket.n)
-            for start in range(0, len(rows), size):
-                chunk = rows[start : start + size]
-                worlds = bucket.world[chunk]
-                out[worlds], replaced[worlds] = self.shield.batch(self.batch.state(bucket, chunk), actions[worlds])
-        return out, replaced
-
     def _waiting_flags(self) -> tuple[np.ndarray, np.ndarray]:
         """(terminated, truncated) when no world stepped: waiting worlds repeat theirs (DISABLED), others are False."""
         if self.autoreset_mode is AutoresetMode.DISABLED:
             return self._last_flags[0] & self._ended, self._last_flags[1] & self._ended
         return np.zeros(self.num_envs, dtype=bool), np.zeros(self.num_envs, dtype=bool)
-
-    def _checked_actions(self, actions: Any) -> np.ndarray:
-        values = real_array(actions, "the robot actions")
-        if values.shape != (self.num_envs, 2):
-            raise ValueError(f"the robot actions must have shape ({self.num_envs}, 2), got shape {values.shape}")
-        bad = ~np.isfinite(values).all(1)
-        if bad.any():
-            i = int(np.flatnonzero(bad)[0])
-            raise ValueError(f"the robot action of world {i} must be finite (no NaN or inf), got {values[i].tolist()}")
-        return values
 
     def _rewards(self, outcome: np.ndarray, stepping: np.ndarray) -> tuple[np.ndarray, dict[str, np.ndarray]]:
         """:func:`crowdnav.envs.reward.reward_terms` (the single env's kernel) for the stepping worlds."""
@@ -313,42 +279,11 @@ class CrowdNavVectorEnv(VectorEnv):
         force = self.robot_social_force()[worlds]
         return reward_terms(self._weights, previous, distance, np.hypot(force.real, force.imag), outcome[worlds])
 
-    def _end_infos(self, infos: dict[str, Any], result: StepResult, outcome: np.ndarray, stepping: np.ndarray) -> None:
-        """``outcome`` / ``is_success`` of every world that stepped, as CrowdNavEnv's info: "truncated" / False unless it terminated."""
-        b = self.num_envs
-        collided = outcome == "collision"
-        kind, partner = np.full(b, None, dtype=object), np.full(b, None, dtype=object)
-        for i in np.flatnonzero(collided):  # per collision event
-            hit = result.collisions[int(i)]
-            kind[i], partner[i] = hit.kind, hit.partner
-        infos["outcome"], infos["_outcome"] = outcome, stepping.copy()
-        infos["is_success"], infos["_is_success"] = outcome == "success", stepping.copy()
-        stalls = np.zeros(b, dtype=np.int64)
-        if isinstance(self.batch, TeamWorlds):
-            stalls = self.batch.stalls()
-            for i in np.flatnonzero(stepping):  # per world: its robots' outcomes, laid out as SyncVectorEnv lays out a dict
-                self._add_info(infos, {"other_robots": self.batch.other_robots[int(i)]}, int(i))
-        else:
-            for bucket in self.batch.buckets.values():  # per crowd size
-                stalls[bucket.world] = bucket.state.human_stalls.sum(1)
-        infos["human_stalls"], infos["_human_stalls"] = np.where(stepping, stalls, 0), stepping.copy()
-        if collided.any():
-            infos["collision_kind"], infos["_collision_kind"] = kind, collided
-            infos["collision_partner"], infos["_collision_partner"] = partner, collided.copy()
-
     def _same_step_reset(self, infos: dict[str, Any], ended: np.ndarray) -> dict[str, Any]:
-        """Reset the ended worlds now; their last observation and info move to ``final_obs`` / ``final_info``.
-
-        As ``SyncVectorEnv`` does: the top-level infos keep the worlds still running, ``final_info``
-        holds the ended worlds' infos (vectorized), ``final_obs`` their observations (one dict each).
-        """
+        """Reset the ended worlds now; their last observation and info move to ``final_obs`` / ``final_info``
+        (as ``SyncVectorEnv`` does: :func:`crowdnav.envs.vector_infos.same_step_infos`)."""
         worlds = np.flatnonzero(ended)
-        final_obs = np.full(self.num_envs, None, dtype=object)
-        for i in worlds:  # per ended episode: its last observation, unbatched (Gymnasium's convention)
-            final_obs[i] = {key: values[i].copy() for key, values in self._observations.items()}
-        out = _restricted(infos, ~ended)
-        out["final_obs"], out["_final_obs"] = final_obs, ended.copy()
-        out["final_info"], out["_final_info"] = _restricted(infos, ended), ended.copy()
+        out = same_step_infos(infos, ended, self._observations)
         self._autoreset(worlds)
         self._ended[worlds] = False
         self._observe_all()
@@ -432,24 +367,6 @@ def _check_agents(num_envs: int, max_humans: int) -> None:
     if agents > MAX_AGENTS:
         raise ValueError(f"num_envs={num_envs} worlds of up to {max_humans:,} humans make {agents:,} agents; "
                          f"expected at most {MAX_AGENTS:,}: fewer worlds or a smaller crowd")
-
-
-def _restricted(infos: dict[str, Any], keep: np.ndarray) -> dict[str, Any]:
-    """Vector ``infos`` for the worlds in ``keep`` only: other entries cleared, keys no kept world has dropped."""
-    out: dict[str, Any] = {}
-    for key, value in infos.items():
-        if key.startswith("_"):
-            continue
-        mask = infos[f"_{key}"] & keep
-        if not mask.any():
-            continue
-        if isinstance(value, dict):
-            value = _restricted(value, keep)
-        else:
-            value = value.copy()
-            value[~mask] = None if value.dtype == object else 0
-        out[key], out[f"_{key}"] = value, mask
-    return out
 
 
 def _is_seed(value: object) -> TypeGuard[int | np.integer[Any]]:

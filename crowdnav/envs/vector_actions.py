@@ -1,0 +1,67 @@
+"""The native vector env's action pipeline: the actions checked, the plan added (residual), the shield.
+
+:class:`crowdnav.envs.vector.CrowdNavVectorEnv` runs every step's actions through here, and so does
+its ``restore_worlds`` when it replays the actions since an episode's reset (a training resume): the
+worlds then execute exactly the actions they executed when the episodes were played.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from crowdnav.batch.simulator import BatchSimulator
+from crowdnav.envs.core import real_array
+from crowdnav.envs.vector_team import TeamWorlds
+from crowdnav.planning.shield import Shield
+
+
+def checked_actions(actions: Any, num_envs: int) -> np.ndarray:
+    """``actions`` as a (num_envs, 2) float array; a one-line ValueError for another shape or a non-finite row."""
+    values = real_array(actions, "the robot actions")
+    if values.shape != (num_envs, 2):
+        raise ValueError(f"the robot actions must have shape ({num_envs}, 2), got shape {values.shape}")
+    bad = ~np.isfinite(values).all(1)
+    if bad.any():
+        i = int(np.flatnonzero(bad)[0])
+        raise ValueError(f"the robot action of world {i} must be finite (no NaN or inf), got {values[i].tolist()}")
+    return values
+
+
+def executed(
+    actions: np.ndarray, plan: np.ndarray | None, shield: Shield | None, batch: BatchSimulator | TeamWorlds
+) -> tuple[np.ndarray, np.ndarray | None]:
+    """The actions the robots execute: ``plan`` (the residual env's observed plans) plus the policy's action, through the
+    shield (and which worlds' actions it replaced; None without a shield)."""
+    if plan is not None:  # each policy action corrects the plan its world observed
+        actions = actions + plan
+    if shield is None:
+        return actions, None
+    return shielded(shield, batch, actions)
+
+
+def shielded(shield: Shield, batch: BatchSimulator | TeamWorlds, actions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Every world's action through the shield (as the single env's, world by world bit for bit), and which it replaced."""
+    assert isinstance(batch, BatchSimulator)  # the shield refuses several robots
+    out, replaced = actions.copy(), np.zeros(batch.num_worlds, dtype=bool)
+    for bucket in batch.buckets.values():
+        rows, size = np.arange(len(bucket)), batch.chunk_size(bucket.n)
+        for start in range(0, len(rows), size):
+            chunk = rows[start : start + size]
+            worlds = bucket.world[chunk]
+            out[worlds], replaced[worlds] = shield.batch(batch.state(bucket, chunk), actions[worlds])
+    return out, replaced
+
+
+def checked_replay(actions: Any, lengths: Any, num_envs: int) -> tuple[np.ndarray, np.ndarray]:
+    """``restore_worlds``' (actions, lengths) as arrays: lengths (num_envs,) non-negative integers, actions
+    (num_envs, >= the longest length, 2) real; a one-line ValueError otherwise."""
+    b = num_envs
+    lengths = np.asarray(lengths)
+    actions = real_array(actions, "the restored worlds' actions")
+    if lengths.shape != (b,) or lengths.dtype.kind not in "iu" or (lengths < 0).any() \
+            or actions.ndim != 3 or actions.shape[0] != b or actions.shape[2] != 2 or lengths.max(initial=0) > actions.shape[1]:
+        raise ValueError(f"restore_worlds: lengths must be ({b},) non-negative integers and actions ({b}, >= max length, 2), "
+                         f"got lengths {lengths.dtype}{lengths.shape} and actions {actions.shape}")
+    return actions, lengths

@@ -1,0 +1,92 @@
+"""The native vector env's infos, in Gymnasium's vector convention (a key's values in an array, ``_key``
+marking the worlds that have it): the reward terms, the outcomes and collisions of a step, and the
+split of a step's infos between the worlds that run on and those a same-step autoreset restarts.
+
+:class:`crowdnav.envs.vector.CrowdNavVectorEnv` documents what each key holds; these are its parts.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from typing import Any
+
+import numpy as np
+
+from crowdnav.batch.simulator import BatchSimulator, StepResult
+from crowdnav.envs.reward import REWARD_TERMS
+from crowdnav.envs.vector_team import TeamWorlds
+
+
+def reward_term_infos(infos: dict[str, Any], terms: dict[str, np.ndarray], stepping: np.ndarray) -> None:
+    """``infos["reward_terms"]``: each term's (num_envs,) values (``terms``' values for the stepping worlds, 0 elsewhere)."""
+    b = len(stepping)
+    infos["reward_terms"] = {}
+    for term in REWARD_TERMS:
+        values = np.zeros(b)
+        values[stepping] = terms[term]
+        infos["reward_terms"][term], infos["reward_terms"][f"_{term}"] = values, stepping.copy()
+    infos["_reward_terms"] = stepping.copy()
+
+
+def end_infos(
+    infos: dict[str, Any],
+    batch: BatchSimulator | TeamWorlds,
+    result: StepResult,
+    outcome: np.ndarray,
+    stepping: np.ndarray,
+    add_info: Callable[[dict[str, Any], dict[str, Any], int], Any],
+) -> None:
+    """``outcome`` / ``is_success`` of every world that stepped, as CrowdNavEnv's info: "truncated" / False unless it terminated;
+    ``human_stalls``, the collisions' ``collision_kind`` / ``collision_partner`` and, with several robots, ``other_robots``
+    (through ``add_info``, the vector env's ``_add_info``)."""
+    b = len(stepping)
+    collided = outcome == "collision"
+    kind, partner = np.full(b, None, dtype=object), np.full(b, None, dtype=object)
+    for i in np.flatnonzero(collided):  # per collision event
+        hit = result.collisions[int(i)]
+        kind[i], partner[i] = hit.kind, hit.partner
+    infos["outcome"], infos["_outcome"] = outcome, stepping.copy()
+    infos["is_success"], infos["_is_success"] = outcome == "success", stepping.copy()
+    stalls = np.zeros(b, dtype=np.int64)
+    if isinstance(batch, TeamWorlds):
+        stalls = batch.stalls()
+        for i in np.flatnonzero(stepping):  # per world: its robots' outcomes, laid out as SyncVectorEnv lays out a dict
+            add_info(infos, {"other_robots": batch.other_robots[int(i)]}, int(i))
+    else:
+        for bucket in batch.buckets.values():  # per crowd size
+            stalls[bucket.world] = bucket.state.human_stalls.sum(1)
+    infos["human_stalls"], infos["_human_stalls"] = np.where(stepping, stalls, 0), stepping.copy()
+    if collided.any():
+        infos["collision_kind"], infos["_collision_kind"] = kind, collided
+        infos["collision_partner"], infos["_collision_partner"] = partner, collided.copy()
+
+
+def same_step_infos(infos: dict[str, Any], ended: np.ndarray, observations: dict[str, np.ndarray]) -> dict[str, Any]:
+    """A same-step autoreset's infos, as ``SyncVectorEnv`` lays them out: the top-level infos keep the worlds still
+    running, ``final_info`` holds the ended worlds' infos (vectorized), ``final_obs`` their last ``observations`` (one
+    dict each). Call it before the ended worlds are reset."""
+    final_obs = np.full(len(ended), None, dtype=object)
+    for i in np.flatnonzero(ended):  # per ended episode: its last observation, unbatched (Gymnasium's convention)
+        final_obs[i] = {key: values[i].copy() for key, values in observations.items()}
+    out = restricted(infos, ~ended)
+    out["final_obs"], out["_final_obs"] = final_obs, ended.copy()
+    out["final_info"], out["_final_info"] = restricted(infos, ended), ended.copy()
+    return out
+
+
+def restricted(infos: dict[str, Any], keep: np.ndarray) -> dict[str, Any]:
+    """Vector ``infos`` for the worlds in ``keep`` only: other entries cleared, keys no kept world has dropped."""
+    out: dict[str, Any] = {}
+    for key, value in infos.items():
+        if key.startswith("_"):
+            continue
+        mask = infos[f"_{key}"] & keep
+        if not mask.any():
+            continue
+        if isinstance(value, dict):
+            value = restricted(value, keep)
+        else:
+            value = value.copy()
+            value[~mask] = None if value.dtype == object else 0
+        out[key], out[f"_{key}"] = value, mask
+    return out
