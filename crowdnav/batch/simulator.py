@@ -6,7 +6,7 @@ values, in the same order, with a leading world axis (see :mod:`crowdnav.batch.s
 the robot's scalar math). Worlds whose crowds differ in size are kept in one stack per size (a
 *bucket*): padding a crowd would change the length of the force sums, and numpy's pairwise
 summation rounds differently for another length, so a padded world would drift from the single
-simulator in the last bits. A step loops over the crowd sizes present (a scenario's count range),
+simulator in the last bits (:class:`crowdnav.batch.bucket.Bucket`). A step loops over the crowd sizes present (a scenario's count range),
 never over worlds, humans, pairs or edges.
 
 A bucket's episode state is one :class:`crowdnav.batch.stacked_state.StackedState` (SimState's fields with a leading world axis),
@@ -28,20 +28,18 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from crowdnav import social_force as sf
+from crowdnav.batch.bucket import Bucket
 from crowdnav.batch.scalar_math import TWO_PI, cmul, remainder
-from crowdnav.batch.stacked_state import StackedState
-from crowdnav.batch.state import BatchState, BoolArray, ComplexArray, FloatArray
+from crowdnav.batch.state import BatchState
 from crowdnav.contacts import deepest_contact, goal_distance, outside, push_humans_apart, push_out_of_obstacles, touching
 from crowdnav.crowd.views import BatchView
 from crowdnav.events import Collision, SimulationError
 from crowdnav.groups import apply_goal_rules, arrivals, stalled_humans
 from crowdnav.obstacles import EdgeSet, nearest_on_edges
-from crowdnav.sim_state import SELF_DISTANCE, PairConstants, SimState
+from crowdnav.sim_state import SELF_DISTANCE
 from crowdnav.simulator import Simulator
 from crowdnav.world import CompiledWorld
 
-_GEOMETRY = ("pair_offset", "pair_distance", "gap", "repulsion", "humans_touch", "polygon_offset", "polygon_distance", "disc_offset", "disc_distance")
-"""What a refresh measures, one row per world in a bucket (created by the first refresh)."""
 CHUNK_ELEMENTS = 65_536
 """Worlds are stepped in chunks of about this many agent-column entries ((n+1) x (n+1+obstacles) per world):
 larger temporaries leave the CPU caches. Measured (benchmarks/bench_vector.py, 64 worlds): 50 humans ran at
@@ -68,61 +66,6 @@ class StepResult:
     def terminated(self) -> np.ndarray:
         ended: np.ndarray = self.goal_reached | self.left_world | self.collided
         return ended
-
-
-class Bucket:
-    """The worlds of a batch that have ``n`` humans this episode, stacked row by row.
-
-    ``state``: their :class:`StackedState` (read as ``bucket.state.positions``: the bucket does not
-    repeat its fields); the geometry arrays (``pair_offset``, ``gap``, ``repulsion``, ...) are
-    created by the first refresh.
-    """
-
-    # the geometry (_GEOMETRY), one row per world: absent until the first refresh creates it
-    pair_offset: ComplexArray
-    pair_distance: FloatArray
-    gap: FloatArray
-    repulsion: ComplexArray
-    humans_touch: BoolArray
-    polygon_offset: ComplexArray
-    polygon_distance: FloatArray
-    disc_offset: ComplexArray
-    disc_distance: FloatArray
-
-    def __init__(self, n: int, constants: PairConstants, world: int, state: SimState):
-        if constants.contact_all is None or constants.gain is None or constants.decay is None:
-            raise ValueError(f"a bucket holds crowds measured by all pairs; {n} humans use the neighbour grid")
-        self.n = n
-        self.radii = constants.radii
-        self.contact_all: FloatArray = constants.contact_all
-        self.gain: FloatArray = constants.gain
-        self.decay: FloatArray = constants.decay
-        self.world = np.array([world], dtype=np.intp)
-        """(K,) the batch index of each row's world."""
-        self.state = StackedState.stack([state])
-
-    def __len__(self) -> int:
-        return len(self.world)
-
-    def add(self, world: int, state: SimState) -> None:
-        """Append ``world`` with its ``state`` after a reset."""
-        self.world = np.append(self.world, world)
-        self.state = self.state.append(state)
-        for name in _GEOMETRY:  # a row for the newcomer, filled by the refresh that follows its reset
-            stack = getattr(self, name, None)
-            if stack is not None:
-                setattr(self, name, np.concatenate([stack, np.zeros((1, *stack.shape[1:]), dtype=stack.dtype)]))
-
-    def replace(self, row: int, state: SimState) -> None:
-        """Overwrite ``row`` with its world's ``state`` after a reset (same crowd size)."""
-        self.state.set_row(row, state)
-
-    def remove(self, row: int) -> None:
-        keep = np.arange(len(self)) != row
-        self.world = self.world[keep]
-        self.state = self.state.take(keep)
-        for name in (g for g in _GEOMETRY if hasattr(self, g)):
-            setattr(self, name, getattr(self, name)[keep])
 
 
 class BatchSimulator:
