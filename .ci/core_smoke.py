@@ -1,4 +1,4 @@
-"""CI: the core install alone (``pip install crowdnav``, no extras) runs the environments.
+"""CI: the core install alone (``pip install .``, no extras) runs the environments.
 
 Run in a fresh virtual environment holding only crowdnav's core dependencies. It steps a
 Gymnasium env and a PettingZoo env, renders an ``rgb_array`` frame, runs ``crowdnav --help``,
@@ -49,7 +49,7 @@ assert not loaded, f"imported extras: {loaded}"
 subprocess.run(["crowdnav", "--help"], check=True, capture_output=True)
 # a command of an extra names the extra to install, in one line, instead of a traceback
 hint = subprocess.run(["crowdnav", "benchmark"], capture_output=True, text=True)
-assert hint.returncode == 1 and hint.stderr.strip().endswith("pip install 'crowdnav[bench]'"), hint.stderr
+assert hint.returncode == 1 and hint.stderr.strip().endswith('pip install -e ".[bench]" in crowdnav\'s clone'), hint.stderr
 # scripted policies evaluate, rank and render without torch or pandas (the numpy callable: docs/evaluate.md's)
 work = Path(tempfile.mkdtemp())
 (work / "my_policies.py").write_text("import numpy as np\n\n\ndef toward_goal(observation):\n    distance, sin, cos = observation['goal']\n"

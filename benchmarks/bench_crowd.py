@@ -8,7 +8,7 @@ it (density 0.28 per square metre at 1,000), the robot driving a fixed action. E
 runs ``--seconds`` of steps after a reset (episodes are long here, so no reset falls inside) and
 the median over ``--repeats`` seeds is reported, in both geometries: all pairs (the default
 below ``Simulator.grid_from`` humans) and the neighbour grid (the default from it on). With
-``--plot``, steps/s against crowd size on log-log axes (needs matplotlib: ``crowdnav[train]``).
+``--plot``, steps/s against crowd size on log-log axes (needs matplotlib: the ``train`` extra).
 """
 
 from __future__ import annotations

@@ -6,7 +6,7 @@ Crowd: microseconds per ``Simulator.step`` (random robot actions, pre-drawn; an 
 ends is reset inside the timed loop) with ``humans.model`` social_force, orca, and orca with
 ``see_robot`` (the robot is one more ORCA agent). Robot: microseconds per call of the scripted
 robot policy (``SocialForceRobot``, ``OrcaRobot``) on the social-force crowd, the step itself not
-counted. Medians over repeats (seeds 0, 1, ...). Needs pyrvo (``pip install 'crowdnav[orca]'``).
+counted. Medians over repeats (seeds 0, 1, ...). Needs pyrvo (``pip install -e ".[orca]"`` in crowdnav's clone).
 """
 
 from __future__ import annotations

@@ -13,7 +13,7 @@ UNPUBLISHED = re.compile(r"pip3? install\s+(-U\s+)?['\"]?crowdnav\b|\bcrowdnav\[
 
 def _offences() -> dict[str, list[str]]:
     found: dict[str, list[str]] = {}
-    for folder in ("crowdnav", "agents", "evaluation"):
+    for folder in ("crowdnav", "agents", "evaluation", "benchmarks", ".ci"):
         for path in sorted((REPO / folder).rglob("*.py")):
             lines = [f"{number}: {line.strip()}" for number, line in enumerate(path.read_text(encoding="utf-8").splitlines(), 1)
                      if UNPUBLISHED.search(line)]
