@@ -12,7 +12,6 @@ from __future__ import annotations
 
 import json
 import time
-import warnings
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any, SupportsFloat
@@ -23,11 +22,12 @@ from crowdnav.agents.algorithm_protocol import ALGORITHM_FOLDER, Algorithm, buil
 from crowdnav.agents.callbacks import EpisodeRecord
 from crowdnav.agents.checkpoint import POLICY_FORMAT, find_checkpoint, read_policy_info, replace_folder, staging_folder
 from crowdnav.agents.config import ConfigError, TrainConfig, config_to_dict
-from crowdnav.agents.episode_log import EpisodeLogError, EpisodeLogWriter, prepare_log
+from crowdnav.agents.episode_log import EpisodeLogWriter
 from crowdnav.agents.factory import env_options, make_env, observation_normalization
 from crowdnav.agents.run_folder import POLICY_FILE, checkpoint_dir, episode_log, recover_checkpoint, snapshot_dir
 from crowdnav.agents.seeding import train_seed
 from crowdnav.agents.train_result import TrainResult
+from crowdnav.agents.training_checks import prepare_episode_log
 from crowdnav.agents.wrappers import scales_from_json, scales_to_json
 
 
@@ -44,12 +44,7 @@ def train_registered(config: TrainConfig, resume: bool, on_checkpoint: Callable[
     out.mkdir(parents=True, exist_ok=True)
     (out / "config.yaml").write_text(yaml.safe_dump(config_to_dict(config), sort_keys=False), encoding="utf-8")
     first = int(info["episodes"]) if info else 0
-    try:
-        repairs = prepare_log(episode_log(out), first)
-    except EpisodeLogError as error:
-        raise ConfigError(str(error)) from None
-    for note in repairs:
-        warnings.warn(f"{out}: {note}", stacklevel=2)
+    prepare_episode_log(out, first, stacklevel=3)  # as before: the warning points at train_registered's caller
     saved = info.get("observation_normalization") if info else None
     inner = make_env(config, None, first, scales_from_json(saved) if saved is not None else None)
     scales = observation_normalization(inner)

@@ -79,14 +79,15 @@ def resume_info(checkpoint: Path, config: TrainConfig, trust_pickle: bool = Fals
                       normalization=normalization, next_episode=info.get("next_episode"), legacy=legacy)
 
 
-def prepare_episode_log(out: Path, first_episode: int) -> None:
-    """Create or repair ``episodes.csv`` (:func:`crowdnav.agents.episode_log.prepare_log`), saying what a kill had left damaged."""
+def prepare_episode_log(out: Path, first_episode: int, stacklevel: int = 4) -> None:
+    """Create or repair ``episodes.csv`` (:func:`crowdnav.agents.episode_log.prepare_log`), saying what a kill had left damaged
+    (warnings at ``stacklevel`` from here: 4 points at the caller of ``train``)."""
     try:
         repairs = prepare_log(episode_log(out), first_episode)
     except EpisodeLogError as error:
         raise ConfigError(str(error)) from None
     for note in repairs:
-        warnings.warn(f"{out}: {note}", stacklevel=4)
+        warnings.warn(f"{out}: {note}", stacklevel=stacklevel)
 
 
 def set_aside_snapshots_after(out: Path, point: int, unit: str) -> None:

@@ -38,11 +38,10 @@ from typing import Any
 
 from crowdnav.evaluation.track import FINGERPRINT_SEEDS, Track, TrackError
 from crowdnav.evaluation.track_leaderboard import REFERENCE_FILE
-from crowdnav.evaluation.track_reference import AGENT_PREFIX, COLUMNS, reference_csv, source_state
+from crowdnav.evaluation.track_reference import AGENT_PREFIX, COLUMNS, DIRTY, publishing_commit, reference_csv
 
 MIN_SEEDS = 3
 """Training seeds a reference agent is published with, at least."""
-DIRTY = "+dirty"
 _INTEGERS = ("test_seed", "steps")
 _TEXT = ("outcome", "collision_kind")
 
@@ -223,14 +222,7 @@ def write_agents(track: Track, folders: list[str | Path], out: str | Path, *, al
     from crowdnav import __version__
 
     target = Path(out) / track.name
-    try:
-        commit = source_state(Path(out))
-    except TrackError:
-        if not allow_dirty:
-            raise
-        from crowdnav.evaluation.provenance import git_commit
-
-        commit = (git_commit() or "unknown").removesuffix(DIRTY) + DIRTY
+    commit = publishing_commit(Path(out), allow_dirty)
     index = target / REFERENCE_FILE
     document: dict[str, Any] = read_json(index) if index.is_file() else {
         "track": track.identity(), "git_commit": commit, "crowdnav": __version__, "test_episodes": track.test_episodes,

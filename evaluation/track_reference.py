@@ -32,6 +32,8 @@ REFERENCE_BASELINES = ("straight", "social_force", "orca", "predictive", "oracle
 COLUMNS = ("test_seed", "outcome", "collision_kind", "steps", "return", "time_to_goal", "path_length", "spl", "min_human_distance", "psc")
 PRIVILEGED = "privileged: the simulator's state"
 AGENT_PREFIX = "agent_"
+DIRTY = "+dirty"
+"""The suffix of a commit with uncommitted changes."""
 """Entries of reference agents (:mod:`crowdnav.evaluation.track_agents`), which playing the baselines again keeps."""
 
 
@@ -55,6 +57,19 @@ def source_state(out: Path) -> str:
                          "from a clean commit; commit or remove them first (--allow-dirty to write them anyway, marked +dirty)")
     return commit
 
+
+
+def publishing_commit(out: Path, allow_dirty: bool) -> str:
+    """The commit results written to ``out`` are published at: :func:`source_state`'s, or with ``allow_dirty`` the
+    checkout's commit marked ``+dirty`` where it has changes (otherwise its :class:`TrackError`)."""
+    try:
+        return source_state(out)
+    except TrackError:
+        if not allow_dirty:
+            raise
+        from crowdnav.evaluation.provenance import git_commit
+
+        return (git_commit() or "unknown").removesuffix(DIRTY) + DIRTY
 
 def _cell(value: Any) -> str:
     if isinstance(value, str):
@@ -88,14 +103,7 @@ def write_reference(track: Track, out: str | Path, *, allow_dirty: bool = False,
     from crowdnav.planning.oracle import PlannerUnavailable
 
     folder = Path(out) / track.name
-    try:
-        commit = source_state(Path(out))
-    except TrackError:
-        if not allow_dirty:
-            raise
-        from crowdnav.evaluation.provenance import git_commit
-
-        commit = (git_commit() or "unknown").removesuffix("+dirty") + "+dirty"
+    commit = publishing_commit(Path(out), allow_dirty)
     index = folder / REFERENCE_FILE
     recorded = read_json(index) if index.is_file() else {}
     previous = recorded if not force else {}
