@@ -15,6 +15,8 @@ torch = pytest.importorskip("torch")
 from crowdnav.agents.sarl.agent import SarlAgent  # noqa: E402
 from crowdnav.agents.sarl.lookahead import Physics, action_set, decode, lookahead  # noqa: E402
 
+from crowdnav.scenario.library import library_names  # noqa: E402
+
 PHYSICS = Physics(radius=0.3, max_speed=1.0, time_step=0.2, goal_radius=0.3, social_strength=2.0, social_range=0.3,
                   weights={"step": -0.1, "goal_progress": 5.0, "social": -1.0, "goal_reached": 25.0, "collision": -25.0})
 EMPTY = {"humans.count": 0, "max_steps": 30, "robot.start": {"type": "points", "points": [[0.0, 0.0]]},
@@ -185,3 +187,25 @@ def test_v_learning_learns_to_reach_a_goal_it_is_only_paid_for_reaching(tmp_path
         torch.nn.init.zeros_(parameter)
     assert greedy_successes(untrained, range(5)) == 0  # V = 0: every move costs the same step, it stands still
     assert greedy_successes(trained, range(5)) == 5
+
+
+@pytest.mark.parametrize("scenario", library_names())
+def test_sarl_trains_and_acts_in_every_library_scenario_or_refuses_in_one_line(tmp_path, scenario):
+    from crowdnav.agents import load_policy, train
+
+    from crowdnav.errors import CrowdNavError
+
+    try:
+        train(config(tmp_path / "run", scenario=scenario, episodes=1, overrides={"max_steps": 10}, checkpoint_every=1))
+    except CrowdNavError as error:  # a robot it cannot drive: one line that says why
+        assert "\n" not in str(error) and "holonomic" in str(error), str(error)
+        return
+    policy = load_policy(tmp_path / "run")
+    env = policy.make_env()
+    obs, _ = env.reset(seed=0)
+    for _ in range(3):
+        action = policy(obs)
+        assert action.shape == (2,) and np.all(np.isfinite(action))
+        obs, _, terminated, truncated, _ = env.step(action)
+        if terminated or truncated:
+            break
