@@ -13,7 +13,9 @@ Then ``crowdnav train`` trains it (:mod:`crowdnav.agents.protocol_training`: epi
 ``episodes.csv`` and seeded as for SB3, checkpoints, snapshots, ``--resume``), and ``crowdnav evaluate RUN``,
 ``crowdnav render`` and the experiment runner load it with :func:`crowdnav.agents.load_policy`. A checkpoint holds
 no pickle: :meth:`Algorithm.save` writes arrays (``.npz`` read with ``allow_pickle=False``, or safetensors) and
-JSON. ONNX export (:mod:`crowdnav.agents.onnx_export`) and ``agents: robots`` are for SB3 algorithms only.
+JSON. ``crowdnav export`` (:mod:`crowdnav.agents.onnx_export`) writes a registered algorithm's agent to ONNX when it
+is :class:`Exportable` (it has ``export_module``; ``sarl`` is) and refuses it in one line otherwise; ``agents: robots``
+is for SB3 algorithms only.
 
 The built-in algorithms are Stable-Baselines3's: their policies predict through the same :class:`Predictor` side
 (:class:`SB3Predictor`), their training keeps SB3's own loop (:mod:`crowdnav.agents.training`: callbacks, replay
@@ -23,12 +25,15 @@ as tensors only.
 
 from __future__ import annotations
 
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
-from typing import Any, Protocol, runtime_checkable
+from typing import TYPE_CHECKING, Any, Protocol, runtime_checkable
 
 import gymnasium as gym
 import numpy as np
+
+if TYPE_CHECKING:
+    from torch import nn
 
 ALGORITHM_FOLDER = "algorithm"
 """Where a registered (non-SB3) algorithm's :meth:`Algorithm.save` writes inside a checkpoint folder."""
@@ -57,6 +62,20 @@ class Algorithm(Predictor, Protocol):
 
     def save(self, folder: Path) -> None:
         """Write the agent into the empty ``folder``: arrays and JSON, no pickle; ``builder.load(folder)`` gives it back."""
+
+
+@runtime_checkable
+class Exportable(Protocol):
+    """An agent ``crowdnav export`` can write to ONNX (optional: an :class:`Algorithm` without it is refused in one line)."""
+
+    def export_module(self, keys: Sequence[str]) -> nn.Module:
+        """:meth:`Predictor.predict` with ``deterministic=True`` as a torch module the TorchScript ONNX exporter traces.
+
+        ``forward`` takes one tensor per observation key, in ``keys`` order, each with a leading batch axis and
+        holding what ``predict`` receives for that key (crowdnav puts the checkpoint's observation normalisation, and
+        a frozen LEOG encoder, before it in the graph), and returns the actions, float32 ``(batch, 2)``. It may ignore
+        keys it does not read.
+        """
 
 
 class SB3Predictor:

@@ -10,7 +10,9 @@ with onnxruntime alone (no torch, no Stable-Baselines3, no crowdnav; docs/deploy
   per key), the frozen LEOG encoder when the model was trained on its latents, the features
   extractor and the actor's deterministic action (SAC: ``tanh`` of the Gaussian's mean; TD3 /
   DDPG: the actor; PPO / A2C: the mean, clipped to [-1, 1]), then SB3's mapping to the action
-  space's bounds;
+  space's bounds; for a registered (non-SB3) algorithm, the module its agent's ``export_module``
+  gives (:class:`crowdnav.agents.algorithm_protocol.Exportable`; ``sarl``: the lookahead, value
+  network and argmax, :mod:`crowdnav.agents.sarl.export`), an agent without one refused in one line;
 * **output** ``action``: float32 ``(batch, 2)`` in [-1, 1], what ``policy(observation)`` returns
   (holonomic ``(vx, vy)`` in the robot frame, or unicycle ``(v, omega)``, times the max speeds).
 
@@ -19,7 +21,8 @@ CrowdNavEnv options, JSON), ``crowdnav.algo`` and ``crowdnav.observation`` (key 
 The TorchScript exporter (``dynamo=False``, still in torch 2.13 though no longer the default) is
 used: the ``torch.export``-based one needs the extra package onnxscript and (torch 2.13) stops at
 a data-dependent guard in SB3's Normal distribution for PPO / A2C. Tests check that onnxruntime
-matches the torch policy to 1e-5 on recorded observations, for SAC, TD3, PPO and the LEOG.
+matches the torch policy to 1e-5 on recorded observations, for SAC, TD3, PPO and the LEOG, and
+SARL's actions in every library scenario it drives (tests/agents/test_sarl_export.py).
 """
 
 from __future__ import annotations
@@ -45,20 +48,43 @@ class ExportError(CrowdNavError, ValueError):
     """A policy that cannot be exported, or an output that cannot be written; one line."""
 
 
-class DeployablePolicy(nn.Module):
-    """Raw observation tensors (in :attr:`keys` order) -> deterministic actions, as :class:`crowdnav.agents.AgentPolicy` computes them."""
+class SB3Actor(nn.Module):
+    """An SB3 policy's deterministic action from the model's input tensors (in ``keys`` order), mapped to the action space."""
 
     low: torch.Tensor  # the action space's bounds (buffers), declared for the type checker
     high: torch.Tensor
 
-    def __init__(self, policy: Any, keys: list[str]):
+    def __init__(self, model: Any, keys: list[str]):
         super().__init__()
         self.keys = list(keys)
-        self.network = policy.model.policy
+        self.network = model.policy
         self.network.set_training_mode(False)
         for module in self.network.modules():  # the plain formulas: no per-batch caches in a traced graph
             if hasattr(module, "reference"):
                 module.reference = True
+        space = model.action_space
+        self.register_buffer("low", torch.as_tensor(space.low, dtype=torch.float32))
+        self.register_buffer("high", torch.as_tensor(space.high, dtype=torch.float32))
+        self.squash = bool(self.network.squash_output)
+
+    def forward(self, *inputs: torch.Tensor) -> torch.Tensor:
+        actions = self.network._predict(dict(zip(self.keys, inputs, strict=True)), deterministic=True)
+        if self.squash:  # SB3's predict: unscale_action, else clip to the action space
+            return self.low + 0.5 * (actions + 1.0) * (self.high - self.low)
+        return torch.clamp(actions, self.low, self.high)
+
+
+class DeployablePolicy(nn.Module):
+    """Raw observation tensors (in :attr:`keys` order) -> deterministic actions, as :class:`crowdnav.agents.AgentPolicy` computes them.
+
+    The checkpoint's observation normalisation and frozen LEOG encoder, then ``actor``: the model's input tensors in
+    :attr:`keys` order -> actions (:class:`SB3Actor`, or a registered algorithm's
+    :meth:`~crowdnav.agents.algorithm_protocol.Exportable.export_module`).
+    """
+
+    def __init__(self, policy: Any, keys: list[str], actor: nn.Module):
+        super().__init__()
+        self.keys = list(keys)
         scales = policy.scales or {}
         self.scaled = [key in scales for key in self.keys]
         for i, key in enumerate(self.keys):
@@ -67,23 +93,38 @@ class DeployablePolicy(nn.Module):
                 self.register_buffer(f"offset_{i}", torch.as_tensor(np.asarray(offset, dtype=np.float32)))
                 self.register_buffer(f"scale_{i}", torch.as_tensor(np.asarray(scale, dtype=np.float32)))
         self.encoder = policy.encoder  # the frozen LEOG encoder whose latents the model was trained on, or None
-        space = policy.model.action_space
-        self.register_buffer("low", torch.as_tensor(space.low, dtype=torch.float32))
-        self.register_buffer("high", torch.as_tensor(space.high, dtype=torch.float32))
-        self.squash = bool(self.network.squash_output)
+        self.actor = actor
 
     def forward(self, *inputs: torch.Tensor) -> torch.Tensor:
-        observation = {}
+        model_inputs = []
         for i, (key, value) in enumerate(zip(self.keys, inputs, strict=True)):
             if self.scaled[i]:  # crowdnav.agents.wrappers.normalize_observation, in float32
                 value = (value.float() - getattr(self, f"offset_{i}")) / getattr(self, f"scale_{i}")
             elif key == "leog" and self.encoder is not None:  # crowdnav.agents.wrappers.encode_grids
                 value = self.encoder((value > 0).float())
-            observation[key] = value
-        actions = self.network._predict(observation, deterministic=True)
-        if self.squash:  # SB3's predict: unscale_action, else clip to the action space
-            return self.low + 0.5 * (actions + 1.0) * (self.high - self.low)
-        return torch.clamp(actions, self.low, self.high)
+            model_inputs.append(value)
+        result: torch.Tensor = self.actor(*model_inputs)
+        return result
+
+
+def actor_of(policy: Any, keys: list[str], policy_path: str | Path) -> nn.Module:
+    """What acts inside the graph: :class:`SB3Actor`, or the module an :class:`~crowdnav.agents.algorithm_protocol.Exportable` agent gives.
+
+    Raises :class:`ExportError` (one line) for a registered algorithm whose agent has no ``export_module``.
+    """
+    from crowdnav.agents.algorithm_protocol import Exportable
+
+    from crowdnav.registry import algorithm_spec
+
+    if algorithm_spec(policy.algo).builder is None:
+        return SB3Actor(policy.model, keys)
+    if not isinstance(policy.model, Exportable):
+        raise ExportError(f"{policy_path}: algorithm {policy.algo!r} has no ONNX export: its agent has no export_module() "
+                          "(crowdnav.agents.algorithm_protocol.Exportable)")
+    try:
+        return policy.model.export_module(keys)
+    except ValueError as error:
+        raise ExportError(f"{policy_path}: {str(error).splitlines()[0]}") from None
 
 
 def export_onnx(policy_path: str | Path, out: str | Path, *, opset: int = OPSET) -> Path:
@@ -95,17 +136,12 @@ def export_onnx(policy_path: str | Path, out: str | Path, *, opset: int = OPSET)
     from crowdnav.agents.checkpoint import load_policy
     from crowdnav.agents.run_folder import training_run
 
-    from crowdnav.registry import algorithm_spec
-
     path = training_run(policy_path)
     try:
         policy = load_policy(path)
     except (FileNotFoundError, ValueError) as error:
         line = str(error).splitlines()[0]  # most messages name the checkpoint already
         raise ExportError(line if line.startswith((str(policy_path), str(path))) else f"{policy_path}: {line}") from None
-    if algorithm_spec(policy.algo).builder is not None:
-        raise ExportError(f"{policy_path}: ONNX export covers the Stable-Baselines3 algorithms; {policy.algo!r} is a registered "
-                          "algorithm with its own predict() (crowdnav.agents.algorithm_protocol)")
     env = policy.make_env()
     try:
         raw = dict_space(env.observation_space)
@@ -113,7 +149,7 @@ def export_onnx(policy_path: str | Path, out: str | Path, *, opset: int = OPSET)
     finally:
         env.close()
     keys = list(raw.spaces)
-    module = DeployablePolicy(policy, keys).eval()
+    module = DeployablePolicy(policy, keys, actor_of(policy, keys, policy_path)).eval()
     inputs = tuple(torch.as_tensor(np.asarray(example[key])[None]) for key in keys)
     out = Path(out)
     out.parent.mkdir(parents=True, exist_ok=True)

@@ -22,7 +22,7 @@ as SARL's; ``learning_rate`` (default 1e-3) Adam's.
 from __future__ import annotations
 
 import json
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from typing import Any, cast
 
@@ -122,6 +122,12 @@ class SarlAgent:
             choice = np.where(explore, self.rng.integers(0, len(self.actions), size=len(choice)), choice)
         actions = commands[np.arange(len(choice)), choice]
         return actions if batched else actions[0]
+
+    def export_module(self, keys: Sequence[str]) -> torch.nn.Module:
+        """:meth:`predict` (deterministic) as a torch module for ONNX export (:mod:`crowdnav.agents.sarl.export`)."""
+        from crowdnav.agents.sarl.export import SarlPolicyModule
+
+        return SarlPolicyModule(self, keys)
 
     # ------------------------------------------------------------------ learning
 

@@ -1,0 +1,151 @@
+"""ONNX export of the SARL-style agent: :meth:`SarlAgent.predict` (deterministic) as one torch module.
+
+:class:`SarlPolicyModule` is what :meth:`crowdnav.agents.sarl.agent.SarlAgent.export_module` returns (the
+``export_module`` side of :class:`crowdnav.agents.algorithm_protocol.Exportable`): the observation as ``predict``
+receives it (crowdnav's normalisation already applied, batch first) in, the action ``(batch, 2)`` float32 out.
+Inside, the numpy of :mod:`~crowdnav.agents.sarl.lookahead` written again in torch, step for step and in the same
+precision (float64, the value network in float32):
+
+* :func:`~crowdnav.agents.sarl.lookahead.decode`: the agent's stored scales undone, a polar goal made cartesian,
+  the humans' absolute velocities;
+* :func:`~crowdnav.agents.sarl.lookahead.lookahead`: the 81 actions, the humans at constant velocity, the closest
+  approach during the step, the predicted reward and end;
+* :func:`~crowdnav.agents.sarl.lookahead.features` and the value network, then ``r + discount * V * (not done)``,
+  the first best action (``argmax`` as numpy's) and its command.
+
+The only differences left are those of the kernels: ``hypot`` is ``sqrt(x * x + y * y)`` here, and onnxruntime's
+float32 matrix products and ``exp`` may round otherwise than torch's. They move a score by about 1e-7 of its size,
+which changes the chosen action only where two actions score that close (tests/agents/test_sarl_export.py).
+"""
+
+from __future__ import annotations
+
+import warnings
+from collections.abc import Sequence
+from typing import Any
+
+import torch
+from crowdnav.agents.sarl.lookahead import FEATURE_SCALE, REQUIRED_KEYS
+from torch import nn
+
+F64 = torch.float64
+
+
+def _norm(vectors: torch.Tensor) -> torch.Tensor:
+    """Length of ``vectors`` (..., 2) (numpy's ``hypot`` of the two components)."""
+    x, y = vectors[..., 0], vectors[..., 1]
+    return torch.sqrt(x * x + y * y)
+
+
+def _rotate(vectors: torch.Tensor, cos: torch.Tensor, sin: torch.Tensor) -> torch.Tensor:
+    """``vectors`` (..., 2) rotated by minus the angle of (cos, sin), as :func:`~crowdnav.agents.sarl.lookahead._rotate`."""
+    x, y = vectors[..., 0], vectors[..., 1]
+    return torch.stack([x * cos + y * sin, y * cos - x * sin], dim=-1)
+
+
+def _direction(goal: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+    """(distance, cos, sin) of goal vectors, as :func:`~crowdnav.agents.sarl.lookahead.goal_direction`."""
+    distance = _norm(goal)
+    far = distance > 1e-9
+    safe = torch.where(far, distance, torch.ones_like(distance))
+    cos = torch.where(far, goal[..., 0] / safe, torch.ones_like(distance))
+    sin = torch.where(far, goal[..., 1] / safe, torch.zeros_like(distance))
+    return distance, cos, sin
+
+
+class SarlPolicyModule(nn.Module):
+    """``forward(*observation)`` (tensors in :attr:`keys` order, batch first) -> the agent's deterministic actions (batch, 2)."""
+
+    actions: torch.Tensor  # (81, 2) goal-frame velocities, float64 (a buffer)
+
+    def __init__(self, agent: Any, keys: Sequence[str]):
+        super().__init__()
+        missing = [key for key in REQUIRED_KEYS if key not in keys]
+        if missing:
+            raise ValueError(f"algorithm 'sarl' reads humans, goal and velocity; the observation has no {', '.join(missing)}")
+        depth = int(agent.options.get("lookahead_depth", 1))
+        if depth != 1:
+            raise ValueError(f"algorithm 'sarl' with lookahead_depth {depth}: ONNX export covers the one-step lookahead "
+                             "(lookahead_depth: 1)")
+        self.keys = list(keys)
+        self.index = {key: self.keys.index(key) for key in REQUIRED_KEYS}
+        self.physics = agent.physics
+        self.discount = float(agent.discount)
+        self.register_buffer("actions", torch.as_tensor(agent.actions, dtype=F64))
+        self.scaled = [key for key in REQUIRED_KEYS if key in agent.scales]
+        for key in self.scaled:
+            offset, scale = agent.scales[key]
+            self.register_buffer(f"offset_{key}", torch.as_tensor(offset, dtype=F64))
+            self.register_buffer(f"scale_{key}", torch.as_tensor(scale, dtype=F64))
+        self.network = agent.network
+
+    def decode(self, inputs: Sequence[torch.Tensor]) -> dict[str, torch.Tensor]:
+        """The joint states (robot frame, float64), as :func:`~crowdnav.agents.sarl.lookahead.decode`."""
+        raw = {key: inputs[self.index[key]].to(F64) for key in REQUIRED_KEYS}
+        for key in self.scaled:
+            raw[key] = raw[key] * getattr(self, f"scale_{key}") + getattr(self, f"offset_{key}")
+        goal = raw["goal"]
+        with warnings.catch_warnings():  # the tracer fixes this branch: only the batch axis of the graph's inputs varies
+            warnings.filterwarnings("ignore", message="Converting a tensor to a Python boolean")  # torch's TracerWarning
+            polar = bool(goal.shape[-1] == 3)
+        if polar:  # distance, sin, cos
+            goal = goal[..., :1] * torch.stack([goal[..., 2], goal[..., 1]], dim=-1)
+        rows, velocity = raw["humans"], raw["velocity"]
+        present = (rows[..., 5] > 0.5).to(F64)
+        return {"goal": goal, "velocity": velocity, "positions": rows[..., 0:2],
+                "velocities": (rows[..., 2:4] + velocity[..., None, :]) * present[..., None], "radii": rows[..., 4],
+                "present": present}
+
+    def forward(self, *inputs: torch.Tensor) -> torch.Tensor:
+        state = self.decode(inputs)
+        p, w = self.physics, self.physics.weights
+        _, cos, sin = _direction(state["goal"])
+        ax, ay = self.actions[None, :, 0], self.actions[None, :, 1]
+        c, s = cos[:, None], sin[:, None]
+        velocity = torch.stack([ax * c - ay * s, ax * s + ay * c], dim=-1)  # (B, M, 2) m/s, robot frame
+        dt = p.time_step
+        goal = state["goal"][:, None, :] - velocity * dt
+        relative = state["velocities"][:, None, :, :] - velocity[:, :, None, :]  # (B, M, k, 2)
+        positions = state["positions"][:, None, :, :]
+        after = positions + relative * dt
+        speed2 = torch.sum(relative * relative, dim=-1)
+        toward = -torch.sum(positions * relative, dim=-1)
+        moving = speed2 > 1e-12
+        t = torch.where(moving, toward / torch.where(moving, speed2, torch.ones_like(speed2)), torch.zeros_like(speed2))
+        t = torch.clamp(t, 0.0, dt)
+        closest = _norm(positions + relative * t[..., None])
+        present = state["present"][:, None, :].expand_as(closest)
+        radii = state["radii"][:, None, :].expand_as(closest)
+        hits = (closest <= p.radius + radii) & (present > 0)
+        collision = hits.to(F64).sum(dim=-1) > 0
+        distance_before = _norm(state["goal"])[:, None]
+        distance_after = _norm(goal)
+        reached = distance_after <= p.goal_radius
+        centre = torch.clamp(_norm(after), min=1e-9)
+        push = p.social_strength * torch.exp((p.radius + radii - centre) / p.social_range) * present / centre
+        social = _norm(-torch.sum(after * push[..., None], dim=-2))
+        reward = w["step"] + w["goal_progress"] * (distance_before - distance_after) + w["social"] * social
+        zero = torch.zeros_like(reward)
+        reward = reward + torch.where(collision, zero + w["collision"], torch.where(reached, zero + w["goal_reached"], zero))
+        reward = reward * p.reward_scale
+        done = collision | reached
+        commands = velocity / p.max_speed
+        commands = (commands / torch.clamp(_norm(commands), min=1.0)[..., None]).to(torch.float32)
+        values = self.value(goal, velocity, after, state["velocities"][:, None, :, :], radii, present)
+        scores = reward + self.discount * values * (~done).to(F64)
+        choice = torch.argmax(scores, dim=1)  # the first best, as numpy's
+        return torch.gather(commands, 1, choice[:, None, None].expand(-1, 1, 2))[:, 0, :]
+
+    def value(self, goal: torch.Tensor, velocity: torch.Tensor, positions: torch.Tensor, velocities: torch.Tensor,
+              radii: torch.Tensor, present: torch.Tensor) -> torch.Tensor:
+        """V of the next joint states (B, M) in float64: :func:`~crowdnav.agents.sarl.lookahead.features`, then the network."""
+        distance, cos, sin = _direction(goal)
+        robot = torch.cat([distance[..., None], _rotate(velocity, cos, sin)], dim=-1) * FEATURE_SCALE
+        c, s = cos[..., None], sin[..., None]
+        gap = _norm(positions) - self.physics.radius - radii
+        humans = torch.cat([_rotate(positions, c, s) * FEATURE_SCALE, _rotate(velocities, c, s) * FEATURE_SCALE,
+                            radii[..., None], gap[..., None] * FEATURE_SCALE, present[..., None]], dim=-1)
+        robot32, humans32 = robot.to(torch.float32), (humans * present[..., None]).to(torch.float32)
+        actions = self.actions.shape[0]
+        values = self.network(robot32.reshape(-1, robot32.shape[-1]), humans32.reshape(-1, *humans32.shape[-2:]))
+        return values.reshape(-1, actions).to(F64)
