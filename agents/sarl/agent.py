@@ -48,6 +48,8 @@ DEFAULTS: dict[str, Any] = {
     "imitation_episodes": 0,  # teacher episodes before V-learning (0: pure RL)
     "imitation_teacher": "predictive",  # crowdnav.agents.sarl.imitation.TEACHERS
     "imitation_epochs": 50,  # passes of the value regression over the demonstrations
+    "lookahead_depth": 1,  # greedy actions (evaluation): 1 step as SARL; 2 refines the best actions one step further
+    "lookahead_width": 8,  # depth 2: how many of the best one-step actions are expanded
 }
 """The agent's options (``algo_kwargs``) and their defaults."""
 GAMMA = 0.9
@@ -70,6 +72,10 @@ class SarlAgent:
         if unknown:
             raise ConfigError(f"algo_kwargs: {name!r} has no option {unknown[0]!r}; its options: {', '.join(DEFAULTS)}")
         self.options = {**DEFAULTS, **config.algo_kwargs}
+        for option, allowed in (("lookahead_depth", range(1, 3)), ("lookahead_width", range(1, len(action_set(1.0)) + 1))):
+            value = self.options[option]
+            if isinstance(value, bool) or not isinstance(value, int) or value not in allowed:
+                raise ConfigError(f"algo_kwargs.{option}: {name!r} takes an integer from {allowed.start} to {allowed.stop - 1}, got {value!r}")
         if int(self.options["imitation_episodes"]):
             make_teacher(str(self.options["imitation_teacher"]))  # an unknown teacher is refused before the run starts
         self.physics = Physics.of_env(env, config.reward_scale)
@@ -104,18 +110,44 @@ class SarlAgent:
         progress = min(1.0, max(self.episodes - int(o["imitation_episodes"]), 0) / max(int(o["epsilon_decay_episodes"]), 1))
         return float(o["epsilon_start"] + (o["epsilon_end"] - o["epsilon_start"]) * progress)
 
-    def scores(self, observation: Mapping[str, np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
-        """(scores (B, 81), env actions (B, 81, 2)) of a batch of observations (leading axis B)."""
+    def scores(self, observation: Mapping[str, np.ndarray], depth: int = 1) -> tuple[np.ndarray, np.ndarray]:
+        """(scores (B, 81), env actions (B, 81, 2)) of a batch of observations (leading axis B), looking ``depth`` steps ahead."""
         state = decode(observation, self.scales)
         ahead = lookahead(state, self.physics, self.actions)
+        scores = self._backup(ahead)
+        if depth > 1:
+            scores = self._deepen(ahead, scores)
+        return scores, ahead["commands"]
+
+    def _backup(self, ahead: Mapping[str, Any]) -> np.ndarray:
+        """``r + discount * V(next)`` of every action (no value after a predicted collision or goal)."""
         robot, humans = features(ahead["next"], self.physics.radius)
-        values = evaluate(self.network, robot, humans)
-        return ahead["reward"] + self.discount * values * ~ahead["done"], ahead["commands"]
+        return ahead["reward"] + self.discount * evaluate(self.network, robot, humans) * ~ahead["done"]
+
+    def _deepen(self, ahead: Mapping[str, Any], scores: np.ndarray) -> np.ndarray:
+        """Depth 2 (as SG-D3QN's pruned tree): the ``lookahead_width`` best actions score ``r + discount * max_a' score'``.
+
+        The other actions score -inf (the choice is among the expanded ones); an expanded action predicted to end
+        the episode keeps its one-step reward.
+        """
+        batch, width = scores.shape[0], min(int(self.options.get("lookahead_width", 8)), scores.shape[1])
+        best = np.argsort(-scores, axis=1, kind="stable")[:, :width]  # (B, w)
+        rows = np.arange(batch)[:, None]
+        chosen = {key: value[rows, best] for key, value in ahead["next"].items()}
+        flat = {key: value.reshape(batch * width, *value.shape[2:]) for key, value in chosen.items()}
+        further = lookahead(flat, self.physics, self.actions)
+        second = self._backup(further).max(axis=1).reshape(batch, width)
+        refined = ahead["reward"][rows, best] + self.discount * second * ~ahead["done"][rows, best]
+        deep = np.full_like(scores, -np.inf)
+        deep[rows, best] = refined
+        return deep
 
     def predict(self, observation: Mapping[str, np.ndarray], deterministic: bool = True) -> np.ndarray:
         batched = np.ndim(observation["humans"]) == 3
         batch = observation if batched else {key: np.asarray(value)[None] for key, value in observation.items()}
-        scores, commands = self.scores(batch)
+        # training episodes (not deterministic) act on the one-step lookahead V-learning is built on; greedy acting
+        # (evaluation, rendering) may search deeper
+        scores, commands = self.scores(batch, int(self.options.get("lookahead_depth", 1)) if deterministic else 1)
         choice = np.argmax(scores, axis=1)
         if not deterministic:
             explore = self.rng.random(len(choice)) < self.epsilon

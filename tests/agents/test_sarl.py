@@ -13,7 +13,8 @@ pytestmark = pytest.mark.filterwarnings("ignore::DeprecationWarning")
 torch = pytest.importorskip("torch")
 
 from crowdnav.agents.sarl.agent import SarlAgent  # noqa: E402
-from crowdnav.agents.sarl.lookahead import Physics, action_set, decode, lookahead  # noqa: E402
+from crowdnav.agents.sarl.lookahead import Physics, action_set, decode, features, lookahead  # noqa: E402
+from crowdnav.agents.sarl.network import evaluate  # noqa: E402
 
 from crowdnav.scenario.library import library_names  # noqa: E402
 
@@ -96,6 +97,38 @@ def test_predict_takes_one_observation_or_a_batch_and_agrees_between_them(tmp_pa
     assert np.all(np.hypot(batch[:, 0], batch[:, 1]) <= 1.0 + 1e-6)
 
 
+def test_depth_two_scores_the_best_one_step_actions_by_their_best_second_step(tmp_path):
+    """lookahead_depth 2: each of the lookahead_width best one-step actions scores r1 + discount * max over a second step
+    (r2 + discount * V), computed here action by action from the one-step lookahead; the others are never chosen."""
+    from crowdnav.agents import load_policy, train
+
+    train(config(tmp_path / "run", episodes=2))
+    agent = load_policy(tmp_path / "run").model
+    agent.scales = {}  # the raw observation below (cartesian goal), not the run's normalised one
+    obs = observation(goal=(3.0, 1.0), velocity=(0.5, 0.0), humans=[(1.2, 0.3, -0.8, 0.0), (2.0, -1.0, 0.0, 0.9)])
+    batch = {key: value[None] for key, value in obs.items()}
+    one, _ = agent.scores(batch)
+    agent.options.update(lookahead_depth=2, lookahead_width=5)
+    two, commands = agent.scores(batch, depth=2)
+    first = lookahead(decode(batch, agent.scales), agent.physics, agent.actions)
+    best = np.argsort(-one[0], kind="stable")[:5]
+    for action in range(81):
+        if action not in best:
+            assert two[0, action] == -np.inf
+            continue
+        state = {key: value[:, action] for key, value in first["next"].items()}
+        further = lookahead(state, agent.physics, agent.actions)
+        values = evaluate(agent.network, *features(further["next"], agent.physics.radius))
+        backup = (further["reward"] + agent.discount * values * ~further["done"]).max()
+        expected = first["reward"][0, action] + (0.0 if first["done"][0, action] else agent.discount * backup)
+        assert two[0, action] == pytest.approx(expected, rel=1e-6, abs=1e-9)
+    assert np.argmax(two[0]) in best
+    np.testing.assert_array_equal(agent.predict(obs), commands[0, np.argmax(two[0])])  # greedy acting searches deeper
+    agent.rng = np.random.default_rng(0)
+    agent.options.update(epsilon_start=0.0, epsilon_end=0.0)  # no random action: the training-time choice
+    np.testing.assert_array_equal(agent.predict(obs, deterministic=False), commands[0, np.argmax(one[0])])  # one step
+
+
 def test_save_and_load_round_trip_without_pickle(tmp_path):
     from crowdnav.agents import load_policy, train
 
@@ -158,6 +191,11 @@ def test_settings_it_cannot_use_are_refused_in_one_line(tmp_path):
         train(config(tmp_path / "b", algo_kwargs={"tau": 0.1}))
     with pytest.raises(ConfigError, match="^algo_kwargs.imitation_teacher: 'nobody' is not one of"):
         train(config(tmp_path / "c", algo_kwargs={"imitation_episodes": 1, "imitation_teacher": "nobody"}))
+    with pytest.raises(ConfigError, match="^algo_kwargs.lookahead_depth: 'sarl' takes an integer from 1 to 2, got 3$"):
+        train(config(tmp_path / "d", algo_kwargs={"lookahead_depth": 3}))
+    with pytest.raises(ConfigError, match="^algo_kwargs.lookahead_width: 'sarl' takes an integer from 1 to 81, got 0.5$"):
+        train(config(tmp_path / "e", algo_kwargs={"lookahead_width": 0.5}))
+    assert not any((tmp_path / name).exists() for name in "abcde")  # refused before a run folder is made
 
 
 def greedy_successes(policy, seeds):
