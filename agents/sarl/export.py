@@ -10,12 +10,14 @@ precision (float64, the value network in float32):
   the humans' absolute velocities;
 * :func:`~crowdnav.agents.sarl.lookahead.lookahead`: the 81 actions, the humans at constant velocity, the closest
   approach during the step, the predicted reward and end;
-* :func:`~crowdnav.agents.sarl.lookahead.features` and the value network, then ``r + discount * V * (not done)``,
-  the first best action (``argmax`` as numpy's) and its command.
+* :func:`~crowdnav.agents.sarl.lookahead.features` and the value network, then ``r + discount * V * (not done)``;
+  with ``lookahead_depth: 2`` the ``lookahead_width`` best actions looked ahead once more (``SarlAgent._deepen``);
+* the first best action (``argmax`` as numpy's) and its command.
 
 The only differences left are those of the kernels: ``hypot`` is ``sqrt(x * x + y * y)`` here, and onnxruntime's
 float32 matrix products and ``exp`` may round otherwise than torch's. They move a score by about 1e-7 of its size,
-which changes the chosen action only where two actions score that close (tests/agents/test_sarl_export.py).
+which changes the chosen action only where two actions score that close (tests/agents/test_sarl_export.py; none
+seen so far: the graph's actions have equalled ``predict``'s bit for bit).
 """
 
 from __future__ import annotations
@@ -63,15 +65,15 @@ class SarlPolicyModule(nn.Module):
         missing = [key for key in REQUIRED_KEYS if key not in keys]
         if missing:
             raise ValueError(f"algorithm 'sarl' reads humans, goal and velocity; the observation has no {', '.join(missing)}")
-        depth = int(agent.options.get("lookahead_depth", 1))
-        if depth != 1:
-            raise ValueError(f"algorithm 'sarl' with lookahead_depth {depth}: ONNX export covers the one-step lookahead "
-                             "(lookahead_depth: 1)")
+        self.depth, self.width = int(agent.options.get("lookahead_depth", 1)), int(agent.options.get("lookahead_width", 8))
+        if self.depth not in (1, 2):
+            raise ValueError(f"algorithm 'sarl' with lookahead_depth {self.depth}: ONNX export covers depths 1 and 2")
         self.keys = list(keys)
         self.index = {key: self.keys.index(key) for key in REQUIRED_KEYS}
         self.physics = agent.physics
         self.discount = float(agent.discount)
         self.register_buffer("actions", torch.as_tensor(agent.actions, dtype=F64))
+        self.count = len(agent.actions)
         self.scaled = [key for key in REQUIRED_KEYS if key in agent.scales]
         for key in self.scaled:
             offset, scale = agent.scales[key]
@@ -97,7 +99,15 @@ class SarlPolicyModule(nn.Module):
                 "present": present}
 
     def forward(self, *inputs: torch.Tensor) -> torch.Tensor:
-        state = self.decode(inputs)
+        ahead = self.lookahead(self.decode(inputs))
+        scores = self.backup(ahead)
+        if self.depth > 1:
+            scores = self.deepen(ahead, scores)
+        choice = torch.argmax(scores, dim=1)  # the first best, as numpy's
+        return torch.gather(ahead["commands"], 1, choice[:, None, None].expand(-1, 1, 2))[:, 0, :]
+
+    def lookahead(self, state: dict[str, torch.Tensor]) -> dict[str, Any]:
+        """Every action's next joint state, reward, end and command, as :func:`~crowdnav.agents.sarl.lookahead.lookahead`."""
         p, w = self.physics, self.physics.weights
         _, cos, sin = _direction(state["goal"])
         ax, ay = self.actions[None, :, 0], self.actions[None, :, 1]
@@ -127,25 +137,46 @@ class SarlPolicyModule(nn.Module):
         reward = w["step"] + w["goal_progress"] * (distance_before - distance_after) + w["social"] * social
         zero = torch.zeros_like(reward)
         reward = reward + torch.where(collision, zero + w["collision"], torch.where(reached, zero + w["goal_reached"], zero))
-        reward = reward * p.reward_scale
-        done = collision | reached
         commands = velocity / p.max_speed
         commands = (commands / torch.clamp(_norm(commands), min=1.0)[..., None]).to(torch.float32)
-        values = self.value(goal, velocity, after, state["velocities"][:, None, :, :], radii, present)
-        scores = reward + self.discount * values * (~done).to(F64)
-        choice = torch.argmax(scores, dim=1)  # the first best, as numpy's
-        return torch.gather(commands, 1, choice[:, None, None].expand(-1, 1, 2))[:, 0, :]
+        velocities = state["velocities"][:, None, :, :].expand_as(after)
+        following = {"goal": goal, "velocity": velocity, "positions": after, "velocities": velocities, "radii": radii,
+                     "present": present}
+        return {"next": following, "reward": reward * p.reward_scale, "done": collision | reached, "commands": commands}
 
-    def value(self, goal: torch.Tensor, velocity: torch.Tensor, positions: torch.Tensor, velocities: torch.Tensor,
-              radii: torch.Tensor, present: torch.Tensor) -> torch.Tensor:
-        """V of the next joint states (B, M) in float64: :func:`~crowdnav.agents.sarl.lookahead.features`, then the network."""
-        distance, cos, sin = _direction(goal)
-        robot = torch.cat([distance[..., None], _rotate(velocity, cos, sin)], dim=-1) * FEATURE_SCALE
+    def backup(self, ahead: dict[str, Any]) -> torch.Tensor:
+        """``r + discount * V(next)`` of every action (B, M), V left out after a predicted end (``SarlAgent.scores``)."""
+        values = self.value(ahead["next"])
+        result: torch.Tensor = ahead["reward"] + self.discount * values * (~ahead["done"]).to(F64)
+        return result
+
+    def deepen(self, ahead: dict[str, Any], scores: torch.Tensor) -> torch.Tensor:
+        """Depth 2: the ``width`` best actions score ``r + discount * max_a' score'``, the others -inf (``SarlAgent._deepen``).
+
+        ``topk`` keeps the lower index of equal scores first in onnxruntime, as numpy's stable sort does (in the graph
+        only which actions are expanded matters, not their order).
+        """
+        width = min(self.width, self.count)
+        best = torch.topk(scores, width, dim=1).indices  # (B, w)
+
+        def take(value: torch.Tensor) -> torch.Tensor:  # value (B, M, ...) -> (B, w, ...) at the best actions
+            index = best.reshape(*best.shape, *([1] * (value.dim() - 2))).expand(-1, -1, *value.shape[2:])
+            return torch.gather(value, 1, index)
+
+        flat = {key: take(value).reshape(-1, *value.shape[2:]) for key, value in ahead["next"].items()}
+        second = self.backup(self.lookahead(flat)).max(dim=1).values.reshape(-1, width)
+        refined = take(ahead["reward"]) + self.discount * second * (~take(ahead["done"])).to(F64)
+        return torch.full_like(scores, float("-inf")).scatter(1, best, refined)
+
+    def value(self, state: dict[str, torch.Tensor]) -> torch.Tensor:
+        """V of joint states (B, M) in float64: :func:`~crowdnav.agents.sarl.lookahead.features`, then the network."""
+        distance, cos, sin = _direction(state["goal"])
+        robot = torch.cat([distance[..., None], _rotate(state["velocity"], cos, sin)], dim=-1) * FEATURE_SCALE
         c, s = cos[..., None], sin[..., None]
+        positions, present, radii = state["positions"], state["present"], state["radii"]
         gap = _norm(positions) - self.physics.radius - radii
-        humans = torch.cat([_rotate(positions, c, s) * FEATURE_SCALE, _rotate(velocities, c, s) * FEATURE_SCALE,
+        humans = torch.cat([_rotate(positions, c, s) * FEATURE_SCALE, _rotate(state["velocities"], c, s) * FEATURE_SCALE,
                             radii[..., None], gap[..., None] * FEATURE_SCALE, present[..., None]], dim=-1)
         robot32, humans32 = robot.to(torch.float32), (humans * present[..., None]).to(torch.float32)
-        actions = self.actions.shape[0]
         values = self.network(robot32.reshape(-1, robot32.shape[-1]), humans32.reshape(-1, *humans32.shape[-2:]))
-        return values.reshape(-1, actions).to(F64)
+        return values.reshape(-1, self.count).to(F64)

@@ -52,7 +52,7 @@ def check_choices(policy, observations, actions):
     Returns the number of such near-ties.
     """
     expected = policy(observations)
-    scores, commands = policy.model.scores(policy.preprocess(observations))
+    scores, commands = policy.model.scores(policy.preprocess(observations), int(policy.model.options["lookahead_depth"]))
     ties = 0
     for row in range(len(actions)):
         chosen = int(np.argmin(np.abs(commands[row] - actions[row]).max(axis=1)))
@@ -116,12 +116,29 @@ def test_the_exported_sarl_acts_as_predict_one_observation_and_a_batch(tmp_path)
     np.testing.assert_array_equal(traced, policy.model.predict(preprocessed))
 
 
-def test_export_refuses_what_it_cannot_write_in_one_line(tmp_path, capsys):
+def test_the_exported_two_step_lookahead_acts_as_predict(tmp_path):
+    """``lookahead_depth: 2``: the best actions expanded one step further (topk, gather, the second lookahead) in the graph."""
+    run = tmp_path / "run"
+    train(config(run, "circle_crossing", algo_kwargs={**config("x")["algo_kwargs"], "lookahead_depth": 2, "lookahead_width": 5}))
+    out = tmp_path / "policy.onnx"
+    assert main(["export", str(run), "--out", str(out)]) == 0
+    policy = load_policy(run)
+    assert policy.model.options["lookahead_depth"] == 2
+    observations = recorded(policy, steps=30)
+    actions = ort.InferenceSession(str(out), providers=["CPUExecutionProvider"]).run(["action"], observations)[0]
+    assert check_choices(policy, observations, actions) == 0
+    np.testing.assert_array_equal(actions, policy(observations))
+    one = load_policy(run)
+    one.model.options["lookahead_depth"] = 1  # the second step changes some choices: the graph did expand it
+    assert not np.array_equal(one(observations), actions)
+
+
+def test_export_refuses_what_it_cannot_write_in_one_line(tmp_path):
     run = tmp_path / "run"
     train(config(run))
     policy = load_policy(run)
-    policy.model.options["lookahead_depth"] = 2
-    with pytest.raises(ValueError, match="^algorithm 'sarl' with lookahead_depth 2: ONNX export covers the one-step lookahead"):
+    policy.model.options["lookahead_depth"] = 3
+    with pytest.raises(ValueError, match="^algorithm 'sarl' with lookahead_depth 3: ONNX export covers depths 1 and 2$"):
         policy.model.export_module(["goal", "humans", "velocity"])
     with pytest.raises(ValueError, match="^algorithm 'sarl' reads humans, goal and velocity; the observation has no velocity$"):
         load_policy(run).model.export_module(["goal", "humans"])
