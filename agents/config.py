@@ -184,6 +184,13 @@ class TrainConfig(_Section):
                  "PPO policy through SuperSuit (docs/agents.md#several-robots-shared-parameter-ppo).")
     agent_identity: Bool = option(True, "agents: robots: append a one-hot of the robot's index to its observation, so the shared "
                                         "network can tell robots of different kinematics apart.")
+    robot_actions: Literal["native", "velocity", "goal_velocity"] = option(
+        "native", "agents: robots: native: the network's 2 values are each robot's own action ((vx, vy) holonomic, (speed, turn "
+                  "rate) unicycle); velocity / goal_velocity: a desired velocity in the robot's own / its goal's frame (x toward "
+                  "the goal) for every robot, which a unicycle tracks (docs/agents.md#several-robots-shared-parameter-ppo).")
+    robot_networks: Literal["shared", "per_kind"] = option(
+        "shared", "agents: robots: shared: one MLP for every robot; per_kind: one MLP (actor and critic layers) per robot kinematics, "
+                  "chosen by the robot one-hot (needs agent_identity).")
     episodes: Int = option(700, "Training length in episodes (the paper trains for 700); ignored when timesteps is set. At most "
                                 f"{MAX_TRAIN_EPISODES:,}: a run's training seeds end there (crowdnav.agents.seeding).",
                            ge=1, le=MAX_TRAIN_EPISODES)
@@ -300,8 +307,15 @@ def _declares_robots(config: TrainConfig) -> bool:
 def robots_problems(config: TrainConfig) -> list[tuple[str, str]]:
     """What shared-parameter robot training (``agents: robots``, crowdnav.agents.marl) cannot take."""
     if config.agents != "robots":
-        return []
+        changed = [(name, value) for name, value in (("robot_actions", config.robot_actions), ("robot_networks", config.robot_networks))
+                   if value != TrainConfig.model_fields[name].default]
+        return [(name, f"{value!r} applies to agents: robots (one policy for every robot); set agents: robots or leave it out")
+                for name, value in changed]
     problems = []
+    if config.robot_actions == "goal_velocity" and "goal" not in config.modalities:
+        problems.append(("robot_actions", f"goal_velocity turns commands by the observed goal direction; add goal to modalities {config.modalities}"))
+    if config.robot_networks == "per_kind" and not config.agent_identity:
+        problems.append(("robot_networks", "per_kind picks each robot's network by its one-hot; set agent_identity: true"))
     if config.algo != "ppo":
         problems.append(("algo", f"agents: robots trains shared-parameter PPO through SuperSuit; set algo: ppo (got {config.algo!r})"))
     if config.demonstrations.episodes:

@@ -43,7 +43,9 @@ from crowdnav.agents.checkpoint import (
 from crowdnav.agents.config import ConfigError, TrainConfig, config_from_mapping, config_to_dict
 from crowdnav.agents.episode_log import EpisodeLogWriter, prepare_log
 from crowdnav.agents.factory import LinearDecay, env_options, hyperparameters
+from crowdnav.agents.marl_actions import RobotActions
 from crowdnav.agents.marl_env import RobotObservations, RobotsTrainingEnv, robots_env
+from crowdnav.agents.marl_networks import KindActorCriticPolicy, robot_kinds
 from crowdnav.agents.marl_resume import has_state, load_state, pending_update, save_resumable
 from crowdnav.agents.model_zip import read_model_zip
 from crowdnav.agents.resume_state import STATE_FILE, restore_training_state
@@ -53,6 +55,8 @@ from stable_baselines3 import PPO
 from stable_baselines3.common.callbacks import BaseCallback
 from stable_baselines3.common.policies import ActorCriticPolicy
 from stable_baselines3.common.utils import set_random_seed
+
+from crowdnav.scenario.loader import load_scenario
 
 MAX_INPUTS = 65_536
 """Most inputs a loaded shared robot network may declare (a 360-beam LIDAR and the goal: 363)."""
@@ -66,7 +70,7 @@ def make_robots_vec_env(config: TrainConfig, first_episode: int = 0) -> Any:
     import supersuit as ss
 
     base = RobotsTrainingEnv(env_options(config), normalize=config.normalize_observations, identity=config.agent_identity,
-                             run_seed=config.seed, first_episode=first_episode)
+                             run_seed=config.seed, first_episode=first_episode, actions=config.robot_actions)
     vec = ss.concat_vec_envs_v1(ss.pettingzoo_env_to_vec_env_v1(base), config.num_envs, base_class="stable_baselines3")
     for world, markov in enumerate(vec.venv.vec_envs):  # SuperSuit copied the env: each copy learns which world it is
         markov.par_env.assign_world(world, config.num_envs)
@@ -84,22 +88,27 @@ def _ppo(config: TrainConfig, vec: Any) -> PPO:
     schedule = LinearDecay(rate) if chosen["learning_rate_schedule"] == "linear" else rate
     kwargs = {"n_steps": chosen["n_steps"], "batch_size": min(chosen["batch_size"], chosen["n_steps"] * vec.num_envs),
               "gamma": chosen["gamma"], "learning_rate": schedule, **config.algo_kwargs}
-    robots_network_size(config, int(np.prod(vec.observation_space.shape)), "config")
+    kinds = robot_kinds(_worlds(vec)[0].env.scenario) if config.robot_networks == "per_kind" else None
+    robots_network_size(config, int(np.prod(vec.observation_space.shape)), "config", len(set(kinds or [0])))
     set_random_seed(config.seed)  # SB3's own seeding calls env.seed, which SuperSuit's vector env lacks
+    policy, extra = ("MlpPolicy", {}) if kinds is None else (KindActorCriticPolicy, {"robot_kinds": kinds})
     try:
-        return PPO("MlpPolicy", vec, policy_kwargs={"net_arch": list(chosen["net_arch"]), **config.policy_kwargs},
+        return PPO(policy, vec, policy_kwargs={"net_arch": list(chosen["net_arch"]), **extra, **config.policy_kwargs},
                    device=config.device, verbose=0, **kwargs)
     except TypeError as error:  # an algo_kwargs / policy_kwargs key PPO or its policy does not take
         raise ConfigError(f"algo_kwargs / policy_kwargs for ppo: {str(error).splitlines()[0][:200]}") from None
 
 
-def robots_network_size(config: TrainConfig, inputs: int, label: str) -> int:
-    """Parameters of the shared robot network (an MLP policy on ``inputs`` values), refused above the limit before it is built."""
+def robots_network_size(config: TrainConfig, inputs: int, label: str, kinds: int = 1) -> int:
+    """Parameters of the shared robot network (an MLP policy on ``inputs`` values), refused above the limit before it is built.
+
+    ``kinds``: robot kinds of ``robot_networks: per_kind``, counted as that many whole networks (a bound: their heads' biases are shared).
+    """
     from crowdnav.agents.network_size import check_parameters, describe_layers, heads
 
     options = {name: bool(config.policy_kwargs[name]) for name in ("share_features_extractor", "full_std") if name in config.policy_kwargs}
     net_arch = hyperparameters(config)["net_arch"]
-    total = heads("actor_critic", inputs, 0, 2, net_arch, use_sde=bool(config.algo_kwargs.get("use_sde", False)), **options)
+    total = kinds * heads("actor_critic", inputs, 0, 2, net_arch, use_sde=bool(config.algo_kwargs.get("use_sde", False)), **options)
     return check_parameters(total, label, f"{inputs:,} inputs, net_arch {describe_layers(net_arch)}")
 
 
@@ -255,7 +264,8 @@ class RobotsPolicy:
 
     ``observations``/``infos`` are what ``crowdnav.parallel_env(**policy.env_options,
     humans_as_agents=False, fixed_agents=True, flat_observations=True)`` returns (raw units);
-    the stored scales and one-hot are applied here. Actions: float32 (2,) per robot, deterministic.
+    the stored scales and one-hot are applied here. Actions: float32 (2,) per robot, deterministic, each robot's
+    env action (with ``robot_actions: velocity``, the network's velocity command as each robot's kinematics take it).
     """
 
     def __init__(self, network: ActorCriticPolicy, info: Mapping[str, Any]):
@@ -265,6 +275,14 @@ class RobotsPolicy:
         self.observe = RobotObservations.from_json(info["robots"])
         """The stored scales and one-hot, applied to each robot's observation as in training."""
         self.robots: list[str] = self.observe.robots
+        mode = str(self.info["config"].get("robot_actions", "native"))  # a run from before the option: native
+        if mode == "native":
+            self.commands = RobotActions(mode, [], 1.0)
+        else:
+            env = self.make_env()
+            self.commands = RobotActions.for_env(mode, env)
+            env.close()
+        """The network's actions -> each robot's env action (the run's ``robot_actions``)."""
 
     @property
     def algo(self) -> str:
@@ -280,7 +298,8 @@ class RobotsPolicy:
 
     def act(self, observations: Mapping[str, np.ndarray], infos: Mapping[str, Mapping[str, Any]]) -> dict[str, np.ndarray]:
         actions, _ = self.network.predict(self.inputs(observations, infos), deterministic=True)
-        return {name: np.asarray(actions[k], np.float32) for k, name in enumerate(self.robots)}
+        chosen = {name: np.asarray(actions[k], np.float32) for k, name in enumerate(self.robots)}
+        return dict(self.commands(chosen, self.robots, observations))
 
 
 def load_robots_policy(path: str | Path, device: str = "cpu", *, config: TrainConfig | None = None) -> RobotsPolicy:
@@ -299,12 +318,18 @@ def load_robots_policy(path: str | Path, device: str = "cpu", *, config: TrainCo
         config = config_from_mapping({**info["config"], "device": device}, label)
     check_network_size(config, str(folder))
     width = len(info["robots"]["offset"]) + (len(info["robots"]["robots"]) if info["robots"]["identity"] else 0)
-    robots_network_size(config, width, str(folder))
+    kinds = None
+    if config.robot_networks == "per_kind":  # the run's scenario says which robot has which kind
+        kinds = robot_kinds(load_scenario(info["env"]["scenario"], info["env"].get("overrides") or None))
+        if len(kinds) != len(info["robots"]["robots"]) or not info["robots"]["identity"]:
+            raise ConfigError(f"{folder}: robot_networks: per_kind needs the robot one-hot of each of its scenario's {len(kinds)} robots")
+    robots_network_size(config, width, str(folder), len(set(kinds or [0])))
     from gymnasium import spaces
 
+    policy_class, extra = (ActorCriticPolicy, {}) if kinds is None else (KindActorCriticPolicy, {"robot_kinds": kinds})
     try:
-        network = ActorCriticPolicy(spaces.Box(-np.inf, np.inf, (width,), np.float32), spaces.Box(-1.0, 1.0, (2,), np.float32),
-                                    lambda _: 0.0, net_arch=list(hyperparameters(config)["net_arch"]), **config.policy_kwargs)
+        network = policy_class(spaces.Box(-np.inf, np.inf, (width,), np.float32), spaces.Box(-1.0, 1.0, (2,), np.float32),
+                               lambda _: 0.0, net_arch=list(hyperparameters(config)["net_arch"]), **extra, **config.policy_kwargs)
     except (TypeError, ValueError) as error:
         raise ConfigError(f"{folder}: cannot rebuild its network from policy_kwargs ({str(error).splitlines()[0][:200]})") from None
     try:

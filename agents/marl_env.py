@@ -9,6 +9,9 @@ the humans follow the scenario's crowd model. What it adds for shared-parameter 
   declares (as the single-agent runs' ``normalize_observations``), then, with
   ``agent_identity``, a one-hot of the robot's index, so one network can act for robots of
   different kinematics or speeds;
+* **actions** through :class:`crowdnav.agents.marl_actions.RobotActions` (``robot_actions``):
+  each robot's own action (native), or a desired velocity in its own or its goal's frame, which
+  a unicycle tracks;
 * **training seeds**: world ``w`` of ``B`` plays its ``k``-th episode with
   :func:`crowdnav.agents.seeding.train_seed` ``(seed, first_episode + k * B + w)``, whatever seed
   SuperSuit passes: the training band, never a held-out test seed, the same for the same seed;
@@ -24,6 +27,7 @@ from typing import Any
 
 import numpy as np
 from crowdnav.agents.config import ConfigError
+from crowdnav.agents.marl_actions import RobotActions
 from crowdnav.agents.seeding import MAX_TRAIN_EPISODES, train_seed
 from crowdnav.agents.wrappers import declared_scales
 from gymnasium import spaces
@@ -116,9 +120,14 @@ class RobotsTrainingEnv(ParallelEnv):  # type: ignore[misc]  # pettingzoo is unt
 
     metadata = {"name": "crowdnav_robots_v0", "is_parallelizable": True}
 
-    def __init__(self, options: Mapping[str, Any], *, normalize: bool, identity: bool, run_seed: int, first_episode: int = 0):
+    def __init__(self, options: Mapping[str, Any], *, normalize: bool, identity: bool, run_seed: int, first_episode: int = 0,
+                 actions: str = "native"):
         self.env = robots_env(options)
         self.inputs = RobotObservations(self.env, normalize=normalize, identity=identity)
+        self.commands = RobotActions.for_env(actions, self.env)
+        """The network's actions -> each robot's env action (``robot_actions``; native: unchanged)."""
+        self.observed: Mapping[str, np.ndarray] = {}
+        """The raw observations the network acts on next (goal_velocity reads each robot's goal direction there)."""
         self.possible_agents = list(self.env.possible_agents)
         self.agents: list[str] = []
         self.render_mode = None
@@ -126,7 +135,7 @@ class RobotsTrainingEnv(ParallelEnv):  # type: ignore[misc]  # pettingzoo is unt
         self.world, self.worlds, self.played = 0, 1, 0
         self.episode_seed: int | None = None
         self.actions: list[np.ndarray] | None = []
-        """Every robot's action (rows in ``possible_agents`` order) at each step since this episode's reset, what a
+        """Every robot's action from the network (rows in ``possible_agents`` order) at each step since this episode's reset, what a
         resumable checkpoint replays (:mod:`crowdnav.agents.marl_resume`); None after a step that did not act for every robot."""
 
     def assign_world(self, world: int, worlds: int) -> None:
@@ -152,6 +161,7 @@ class RobotsTrainingEnv(ParallelEnv):  # type: ignore[misc]  # pettingzoo is unt
         self.played += 1
         self.episode_seed = train_seed(self.run_seed, episode)
         observations, infos = self.env.reset(seed=self.episode_seed)
+        self.observed = observations
         self.agents = list(self.env.agents)
         self.actions = []
         return self._inputs(observations, infos), infos  # no episode_seed here: SuperSuit merges an autoreset's infos over the last step's
@@ -161,7 +171,8 @@ class RobotsTrainingEnv(ParallelEnv):  # type: ignore[misc]  # pettingzoo is unt
             self.actions.append(np.stack([actions[name] for name in self.possible_agents]))
         else:  # SuperSuit acts for every robot each step (fixed agents); another caller may not, and cannot be replayed
             self.actions = None
-        observations, rewards, terminations, truncations, infos = self.env.step(actions)
+        observations, rewards, terminations, truncations, infos = self.env.step(self.commands(actions, self.possible_agents, self.observed))
+        self.observed = observations
         self.agents = list(self.env.agents)
         truncated = any(truncations.values()) and not all(terminations.values())
         return self._inputs(observations, infos), rewards, terminations, truncations, self._tag(infos, truncated)
