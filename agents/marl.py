@@ -91,7 +91,8 @@ def _ppo(config: TrainConfig, vec: Any) -> PPO:
     kinds = robot_kinds(_worlds(vec)[0].env.scenario) if config.robot_networks == "per_kind" else None
     robots_network_size(config, int(np.prod(vec.observation_space.shape)), "config", len(set(kinds or [0])))
     set_random_seed(config.seed)  # SB3's own seeding calls env.seed, which SuperSuit's vector env lacks
-    policy, extra = ("MlpPolicy", {}) if kinds is None else (KindActorCriticPolicy, {"robot_kinds": kinds})
+    extra: dict[str, Any] = {} if kinds is None else {"robot_kinds": kinds}
+    policy: str | type[ActorCriticPolicy] = "MlpPolicy" if kinds is None else KindActorCriticPolicy
     try:
         return PPO(policy, vec, policy_kwargs={"net_arch": list(chosen["net_arch"]), **extra, **config.policy_kwargs},
                    device=config.device, verbose=0, **kwargs)
@@ -326,7 +327,8 @@ def load_robots_policy(path: str | Path, device: str = "cpu", *, config: TrainCo
     robots_network_size(config, width, str(folder), len(set(kinds or [0])))
     from gymnasium import spaces
 
-    policy_class, extra = (ActorCriticPolicy, {}) if kinds is None else (KindActorCriticPolicy, {"robot_kinds": kinds})
+    extra: dict[str, Any] = {} if kinds is None else {"robot_kinds": kinds}
+    policy_class = ActorCriticPolicy if kinds is None else KindActorCriticPolicy
     try:
         network = policy_class(spaces.Box(-np.inf, np.inf, (width,), np.float32), spaces.Box(-1.0, 1.0, (2,), np.float32),
                                lambda _: 0.0, net_arch=list(hyperparameters(config)["net_arch"]), **extra, **config.policy_kwargs)

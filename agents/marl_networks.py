@@ -36,16 +36,20 @@ def robot_kinds(scenario: Any) -> list[int]:
 class KindNetworks(nn.Module):
     """SB3's ``mlp_extractor`` with one ``MlpExtractor`` per robot kind, chosen per row by the robot one-hot (its last columns)."""
 
+    routing: torch.Tensor
+    """(robots, kinds): row k is robot k's kind as a one-hot."""
+
     def __init__(self, feature_dim: int, net_arch: Any, activation_fn: type[nn.Module], device: torch.device | str, kinds: Sequence[int]):
         super().__init__()
         count = max(kinds) + 1
-        self.extractors = nn.ModuleList([MlpExtractor(feature_dim, net_arch, activation_fn, device) for _ in range(count)])
+        extractors = [MlpExtractor(feature_dim, net_arch, activation_fn, device) for _ in range(count)]
+        self.extractors = nn.ModuleList(extractors)
         self.robots = len(kinds)
         routing = torch.zeros(len(kinds), count)
         routing[torch.arange(len(kinds)), torch.as_tensor(list(kinds))] = 1.0
         self.register_buffer("routing", routing.to(device), persistent=False)  # not a parameter: rebuilt from the scenario
-        self.latent_dim_pi = count * self.extractors[0].latent_dim_pi
-        self.latent_dim_vf = count * self.extractors[0].latent_dim_vf
+        self.latent_dim_pi = count * extractors[0].latent_dim_pi
+        self.latent_dim_vf = count * extractors[0].latent_dim_vf
 
     def _route(self, features: torch.Tensor, part: str) -> torch.Tensor:
         mask = features[:, -self.robots :] @ self.routing  # (rows, kinds): the row's kind, from its robot's one-hot
@@ -61,7 +65,7 @@ class KindNetworks(nn.Module):
         return self._route(features, "forward_critic")
 
 
-class KindActorCriticPolicy(ActorCriticPolicy):  # type: ignore[misc]  # SB3's classes are untyped for mypy strict here
+class KindActorCriticPolicy(ActorCriticPolicy):
     """SB3's actor-critic policy whose hidden layers are :class:`KindNetworks` (``robot_kinds``: each robot's kind index)."""
 
     def __init__(self, *args: Any, robot_kinds: Sequence[int], **kwargs: Any):
@@ -69,7 +73,9 @@ class KindActorCriticPolicy(ActorCriticPolicy):  # type: ignore[misc]  # SB3's c
         super().__init__(*args, **kwargs)
 
     def _build_mlp_extractor(self) -> None:
-        self.mlp_extractor = KindNetworks(self.features_dim, self.net_arch, self.activation_fn, self.device, self.robot_kinds)
+        # SB3 declares an MlpExtractor; KindNetworks answers the same calls (forward, forward_actor/critic, latent_dim_pi/vf)
+        self.mlp_extractor = KindNetworks(  # type: ignore[assignment]
+            self.features_dim, self.net_arch, self.activation_fn, self.device, self.robot_kinds)
 
     def _get_constructor_parameters(self) -> dict[str, Any]:
         return {**super()._get_constructor_parameters(), "robot_kinds": self.robot_kinds}

@@ -176,3 +176,27 @@ def test_a_per_kind_velocity_run_stopped_after_a_checkpoint_resumes_bit_for_bit(
     resumed = train(config, resume=True)
     done = len(_episodes(whole)) - len(_episodes(resumed))
     assert _episodes(resumed) == _episodes(whole)[done:] and _weights(resumed) == _weights(whole)
+
+
+@pytest.mark.slow
+def test_goal_frame_commands_make_every_robot_beat_straight_to_goal_on_held_out_episodes(tmp_path):
+    """The docs' claim at its budget: 100,000 robot steps of shared PPO with goal-frame commands (about a minute on one
+    core) lift every robot's success on 50 held-out episodes above straight-to-goal's for that robot on the same
+    episodes, the unicycle included. Measured: 0.88 / 0.94 / 0.28 against 0.14 / 0.16 / 0.06
+    (docs/agents.md#every-robot-learns-goal-frame-commands); the run is deterministic for its seed, and the margin
+    asserted is under half the unicycle's measured one."""
+    from crowdnav.evaluation.baselines import scripted_policy
+    from crowdnav.evaluation.robot_rollout import RobotEpisodes
+
+    config = {"scenario": HALL, "agents": "robots", "algo": "ppo", "num_envs": 8, "timesteps": 100_000, "seed": 0,
+              "modalities": ["goal", "lidar"], "robot_actions": "goal_velocity", "learning_rate_schedule": "constant",
+              "out": str(tmp_path / "run"), "progress": False}
+    train(config)
+    policy = load_robots_policy(tmp_path / "run" / "checkpoint")
+    seeds = list(range(50))
+    rows = {"learned": RobotEpisodes(policy.env_options, seeds).run(policy),
+            "straight": RobotEpisodes({"scenario": HALL, "modalities": ["goal"]}, seeds).run(scripted_policy("straight"), privileged=True)}
+    rate = {(who, robot): np.mean([row["outcome"] == "success" for row in found if row["robot"] == robot])
+            for who, found in rows.items() for robot in policy.robots}
+    for robot in policy.robots:
+        assert rate["learned", robot] >= rate["straight", robot] + 0.1, rate
