@@ -225,34 +225,40 @@ class EnvCore:
             self.view.on_reset()
         return self.observe()
 
-    def observe_robot(self, index: int) -> dict[str, np.ndarray]:
+    def observe_robot(self, index: int, view: RobotWorld | None = None,
+                      given: dict[str, np.ndarray] | None = None) -> dict[str, np.ndarray]:
         """Robot ``index``'s observation of the current state (several robots; new arrays every call).
 
         Its range sensors see the other robots among the humans; a modality that tracks people
-        (``sees_robots`` False, e.g. ``humans``) sees the humans only.
+        (``sees_robots`` False, e.g. ``humans``) sees the humans only. ``view``: ``sim.robot_view(index)``
+        if the caller already made it; ``given``: readings the caller already made of this state
+        (the native vector env's batched LIDAR), taken as they are.
         """
         sim = self.simulator
-        view = sim.robot_view(index)
+        view = view if view is not None else sim.robot_view(index)
         people: RobotWorld | None = None
         observation = {}
         for key, modality in self._robot_sensors[index]:
-            if modality.sees_robots:
+            if given is not None and key in given:
+                observation[key] = given[key]
+            elif modality.sees_robots:
                 observation[key] = modality.observe(view)
             else:
                 people = people if people is not None else sim.robot_view(index, with_robots=False)
                 observation[key] = modality.observe(people)
         return observation
 
-    def observe(self) -> dict[str, np.ndarray]:
+    def observe(self, view: RobotWorld | None = None, given: dict[str, np.ndarray] | None = None) -> dict[str, np.ndarray]:
         """The robot's observation of the current state (new arrays every call).
 
         The envs call it once per reset/step, which is when ``human`` mode draws its window.
+        ``view`` / ``given`` (several robots): as for :meth:`observe_robot`.
         """
         sim = self.simulator
         if sim.team is None:
             self._observation = {key: modality.observe(sim) for key, modality in self._sensors}
         else:
-            self._observation = self.observe_robot(0)
+            self._observation = self.observe_robot(0, view, given)
         if self.render_mode == "human" and self.view is not None:  # (human mode always has a view)
             self.view.render(self._observation)
         return self._observation

@@ -9,8 +9,10 @@ import gymnasium as gym
 import numpy as np
 
 from crowdnav.envs.core import EnvCore, ScenarioSource, step_info
+from crowdnav.events import StepEvents
 from crowdnav.policies import SCRIPTED_POLICIES
 from crowdnav.rendering.episode_view import RENDER_MODES
+from crowdnav.robot_view import RobotWorld
 
 OTHER_ROBOT_POLICIES = tuple(name for name in SCRIPTED_POLICIES if name != "random")
 """Names ``other_robots`` accepts (:data:`crowdnav.policies.SCRIPTED_POLICIES` but ``random``, which has no episode seed)."""
@@ -128,17 +130,28 @@ class CrowdNavEnv(gym.Env):
         return observation, {}
 
     def step(self, action: np.ndarray) -> tuple[dict[str, np.ndarray], float, bool, bool, dict[str, Any]]:
+        return self.finish_step(*self.advance(action))
+
+    def advance(self, action: np.ndarray) -> tuple[StepEvents, float, dict[str, float]]:
+        """The first half of :meth:`step`: move the world (the other robots by their policies); (events, reward, terms)."""
         if self._other_names:
-            events, reward, terms = self.core.step(action, other_robot_actions=self._other_actions())
-        else:
-            events, reward, terms = self.core.step(action)
+            return self.core.step(action, other_robot_actions=self._other_actions())
+        return self.core.step(action)
+
+    def finish_step(self, events: StepEvents, reward: float, terms: dict[str, float], view: RobotWorld | None = None,
+                    given: dict[str, np.ndarray] | None = None) -> tuple[dict[str, np.ndarray], float, bool, bool, dict[str, Any]]:
+        """The second half of :meth:`step`: observe, take out the other robots that ended, the step's tuple.
+
+        ``view`` / ``given``: the robot's view and readings the caller already made of this state
+        (:meth:`crowdnav.envs.core.EnvCore.observe_robot`; the native vector env batches the LIDAR).
+        """
         terminated = events.terminated
         truncated = events.truncated and not terminated
         info = step_info(events, terms)
         info["human_stalls"] = int(self.simulator.human_stalls.sum())
         if self.core.shield is not None:
             info["shielded"] = self.core.shielded
-        observation = self.core.observe()  # a robot that ends this step is still seen; it leaves after (as in parallel_env)
+        observation = self.core.observe(view, given)  # a robot that ends this step is still seen; it leaves after (as in parallel_env)
         if self._other_names:
             info["other_robots"] = self._others_after_step(terminated or truncated)
         if not terminated:

@@ -10,8 +10,9 @@ call. Each world's step is the single env's own, so world ``i`` plays the single
 for bit by construction; the vector env keeps everything around it (autoreset modes, episode seeds,
 reset masks, the infos' layout, SB3's adapter, a training resume) as it is for one-robot worlds.
 Inside a world nothing loops over humans (the simulator's step is array work); the loop is over
-worlds, so a step of K worlds costs about K single steps (docs/environments.md#several-robots
-measures it).
+worlds, except for the first robots' LIDAR scans, made for all the worlds in one batched raycast
+between the two halves of each world's step (the same kernel, row k world k's, bit for bit).
+docs/environments.md#several-robots measures it.
 """
 
 from __future__ import annotations
@@ -23,7 +24,9 @@ import numpy as np
 
 from crowdnav.batch.simulator import StepResult
 from crowdnav.envs.single import CrowdNavEnv
+from crowdnav.robot_view import RobotWorld
 from crowdnav.sensors import Modality
+from crowdnav.sensors.lidar import LidarModality
 from crowdnav.simulator import Simulator
 from crowdnav.world import CompiledWorld
 
@@ -56,14 +59,22 @@ class TeamWorlds:
             self.observations[int(world)], _ = self.envs[int(world)].reset(seed=None if seed is None else int(seed))
 
     def step(self, actions: np.ndarray, active: np.ndarray | None = None) -> StepResult:
-        """Step every world (or those of the bool mask ``active``) with its row of ``actions`` ((num_worlds, 2))."""
+        """Step every world (or those of the bool mask ``active``) with its row of ``actions`` ((num_worlds, 2)).
+
+        Each world's single env steps in two halves (:meth:`CrowdNavEnv.advance`, :meth:`CrowdNavEnv.finish_step`);
+        between them the first robots' LIDAR scans of all the worlds are made in one batched raycast.
+        """
         b = self.num_worlds
         result = StepResult(goal_reached=np.zeros(b, dtype=bool), left_world=np.zeros(b, dtype=bool), truncated=np.zeros(b, dtype=bool))
-        worlds = range(b) if active is None else np.flatnonzero(active)
-        for i in worlds:  # per world: the single env's step (its simulator steps every agent as arrays)
-            i = int(i)
+        worlds = [int(i) for i in (range(b) if active is None else np.flatnonzero(active))]
+        # per world: the single env's step up to its observation (its simulator steps every agent as arrays)
+        stepped = [self.envs[i].advance(actions[i]) for i in worlds]
+        views = [self.envs[i].simulator.robot_view(0) for i in worlds]
+        readings = self._scans(views)
+        for k, i in enumerate(worlds):
             env = self.envs[i]
-            self.observations[i], self.rewards[i], _, _, info = env.step(actions[i])
+            given = {key: rows[k] for key, rows in readings.items()}
+            self.observations[i], self.rewards[i], _, _, info = env.finish_step(*stepped[k], view=views[k], given=given)
             events = env.simulator.robot_events[0]  # the first robot's: it is in the world until its episode ends
             assert events is not None
             result.goal_reached[i], result.left_world[i], result.truncated[i] = events.goal_reached, events.left_world, events.truncated
@@ -72,6 +83,32 @@ class TeamWorlds:
             self.terms[i] = info["reward_terms"]
             self.other_robots[i] = info["other_robots"]
         return result
+
+    def _scans(self, views: list[RobotWorld]) -> dict[str, np.ndarray]:
+        """Each LIDAR modality's readings of ``views`` (the first robots' after a step), row k of ``views[k]``.
+
+        Worlds whose views hold the same discs (the same robots still in the world) share one call of
+        the scan kernel, whose row k depends on world k alone, bit for bit (:meth:`LidarModality.inverse_ranges`).
+        """
+        lidars = [(key, modality) for key, modality in self.modalities.items()
+                  if type(modality) is LidarModality and modality.sees_robots]  # a subclass may observe otherwise
+        if not lidars or not views:
+            return {}
+        groups: dict[bytes, list[int]] = {}
+        for k, view in enumerate(views):
+            groups.setdefault(view.radii.tobytes(), []).append(k)
+        readings = {}
+        for key, lidar in lidars:
+            out = np.empty((len(views), lidar.beams), dtype=np.float32)
+            for members in groups.values():
+                positions = np.stack([views[k].positions for k in members])
+                headings = np.array([views[k].robot_heading for k in members], dtype=float)
+                scans = np.empty((len(members), lidar.beams), dtype=np.float32)
+                # as LidarModality.observe: (1 / max_range) / inverse, into float32
+                np.divide(1.0 / lidar.max_range, lidar.inverse_ranges(positions, headings, views[members[0]].radii), out=scans)
+                out[members] = scans
+            readings[key] = out
+        return readings
 
     def simulators(self) -> list[Simulator]:
         """Each world's simulator (live: read it, do not step it)."""

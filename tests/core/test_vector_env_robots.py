@@ -108,3 +108,27 @@ def test_held_out_episodes_of_a_robots_scenario_batched_equal_one_env_per_seed_w
         assert a.keys() == b.keys() and all(a[k] == b[k] or (a[k] != a[k] and b[k] != b[k]) for k in a)  # NaN: no time to goal
         assert frames_a["positions"].shape[1] == 1 + 10 + 2  # the first robot, the humans, the other robots (NaN once gone)
         assert all(np.array_equal(frames_a[k], frames_b[k], equal_nan=True) for k in ("positions", "velocities", "goals"))
+
+
+def test_batched_lidar_of_worlds_with_different_robots_left_equals_single_envs():
+    """The first robots' LIDAR, made in one batched raycast per set of robots left in the world, equals each single env's scan bit for bit."""
+    k = 6
+    vector = CrowdNavVectorEnv(SCENARIO, k, modalities=["lidar", "goal"])
+    singles = [CrowdNavEnv(SCENARIO, modalities=["lidar", "goal"]) for _ in range(k)]
+    observation, _ = vector.reset(seed=3)
+    for i, env in enumerate(singles):
+        env.reset(seed=3 + i)
+    rng, restart, mixed = np.random.default_rng(1), [False] * k, 0
+    for _ in range(300):
+        actions = rng.uniform(-1, 1, (k, 2))
+        observation, *_ = vector.step(actions)
+        mixed += len({sim.robots_active.tobytes() for sim in vector.batch.simulators()}) > 1
+        for i, env in enumerate(singles):
+            if restart[i]:
+                single_obs, _ = env.reset()
+                restart[i] = False
+            else:
+                single_obs, _, term, trunc, _ = env.step(actions[i])
+                restart[i] = term or trunc
+            assert observation["lidar"][i].tobytes() == single_obs["lidar"].tobytes()
+    assert mixed > 50  # many steps had worlds with different robots left: several groups were scanned
