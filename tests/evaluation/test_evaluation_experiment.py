@@ -24,6 +24,7 @@ def test_shipped_experiments_cover_figure_4_the_default_and_the_reference_agents
     assert set(shipped_experiments()) == {"default", "encoders", "modalities", "modalities_paper", "fusion", "paradigms", "learning_check",
                                           "reference_figure4", "reference_room", "modalities_steps", "paradigms_steps", "robots",
                                           "anticipate", "anticipate_room", "anticipate_circle", "anticipate_circle_sarl", "anticipate_circle_sarl_rl",
+                                          "anticipate_circle_sarl_deep", "robots_goal_frame",
                                           "track_crowded_open_space", "track_station_hall", "track_robots_crossing_hall"}
     labels = {name: [c.name for c in load_experiment(name).configurations] for name in shipped_experiments()}
     assert labels["encoders"] == ["frozen", "finetune", "scratch"]
@@ -31,6 +32,7 @@ def test_shipped_experiments_cover_figure_4_the_default_and_the_reference_agents
     assert labels["fusion"] == ["leog", "lidar", "leog_lidar"]
     assert labels["paradigms"] == ["sac", "td3", "ddpg", "a2c"]
     assert labels["robots"] == ["shared_ppo", "shared_ppo_anonymous"]
+    assert labels["robots_goal_frame"] == ["goal_frame", "goal_frame_per_kind"]
     assert labels["modalities_steps"] == labels["modalities"] and labels["paradigms_steps"] == [*labels["paradigms"], "ppo"]
     assert load_experiment(None).name == "default"
 
