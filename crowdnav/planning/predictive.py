@@ -146,7 +146,22 @@ class PredictivePlanner:
         grid_shape(bounds, self.settings.map_spacing, "the goal-distance grid (map_spacing)")
 
     def layers(self, world: CompiledWorld, dt: float, crowd: CrowdEstimate) -> Layers:
-        """The local lattice of K worlds around their robots and its free cells at each predicted step."""
+        """The local lattice of K worlds around their robots and its free cells at each predicted step.
+
+        The last result is kept for every planner of the process (read-only arrays): with the ``plan``
+        modality and the shield on, both ask for the same state's layers once per step (after the step
+        to observe, before the next to check), and this is two thirds of their cost.
+        """
+        key = _layers_key(self.settings, dt, crowd)
+        if _LAST_LAYERS and _LAST_LAYERS[0][0] is world and _LAST_LAYERS[0][1] == key:
+            return _LAST_LAYERS[0][2]
+        layers = self._layers(world, dt, crowd)
+        for array in (layers.cells, layers.static_free, layers.free, layers.goal, layers.predicted, layers.reach):
+            array.flags.writeable = False
+        _LAST_LAYERS[:] = [(world, key, layers)]  # the world is held, so its id cannot be reused while cached
+        return layers
+
+    def _layers(self, world: CompiledWorld, dt: float, crowd: CrowdEstimate) -> Layers:
         s, robot = self.settings, world.scenario.robot
         lattice = Lattice(s.cells_per_step, robot.max_speed * dt / s.cells_per_step)
         steps, centre = s.window(dt)
@@ -184,6 +199,16 @@ class PredictivePlanner:
             first[stuck] = grid.roomiest()[stuck]
         displacement: np.ndarray = grid.lattice.displacements[first]
         return displacement
+
+
+_LAST_LAYERS: list[tuple[CompiledWorld, tuple[object, ...], Layers]] = []
+"""The last (world, key, layers) any planner computed (:meth:`PredictivePlanner.layers`)."""
+
+
+def _layers_key(settings: PlannerSettings, dt: float, crowd: CrowdEstimate) -> tuple[object, ...]:
+    """Everything :meth:`PredictivePlanner.layers` reads but the world: the settings, the step and the estimate's bytes."""
+    arrays = (crowd.robot, crowd.goal, crowd.humans, crowd.velocities, crowd.radii, crowd.present)
+    return (settings, float(dt), *((a.dtype.str, a.shape, a.tobytes()) for a in map(np.asarray, arrays)))
 
 
 def moves_to_actions(moves: np.ndarray, heading: np.ndarray, step: float) -> np.ndarray:
