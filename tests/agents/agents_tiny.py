@@ -4,6 +4,8 @@ from __future__ import annotations
 
 from typing import Any
 
+import numpy as np
+
 from crowdnav.registry import is_off_policy
 
 TINY_EXTRACTOR = {"leog_channels": [4, 8], "leog_kernels": [4, 3], "leog_strides": [4, 2], "leog_latent": 8,
@@ -37,3 +39,17 @@ def tiny_config(out, *, algo: str = "sac", modalities=("lidar", "goal"), episode
         config.update(batch_size=16, algo_kwargs={"n_steps": 32, "n_epochs": 1})
     config.update(fields)
     return config
+
+
+def recorded_observations(policy: Any, steps: int = 40, seed: int = 0) -> dict[str, np.ndarray]:
+    """Raw observations ``policy`` meets acting in its own env from ``seed`` (episodes restart as they end), stacked per key."""
+    env = policy.make_env()
+    observation, _ = env.reset(seed=seed)
+    seen = [observation]
+    for _ in range(steps):
+        observation, _, terminated, truncated, _ = env.step(policy(observation))
+        if terminated or truncated:
+            observation, _ = env.reset()
+        seen.append(observation)
+    env.close()
+    return {key: np.stack([o[key] for o in seen]) for key in seen[0]}

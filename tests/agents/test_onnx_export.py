@@ -9,23 +9,9 @@ import pytest
 from crowdnav.agents import load_policy, train
 
 from crowdnav.cli import main
-from tests.agents.agents_tiny import tiny_config
+from tests.agents.agents_tiny import recorded_observations, tiny_config
 
 ort = pytest.importorskip("onnxruntime", reason='the onnx extra (pip install -e ".[onnx]") runs the exported policies')
-
-
-def _recorded_observations(policy, steps: int = 40) -> dict[str, np.ndarray]:
-    """Raw observations the torch policy meets acting in its own env (episodes restart as they end), stacked per key."""
-    env = policy.make_env()
-    observation, _ = env.reset(seed=3)
-    seen = [observation]
-    for _ in range(steps):
-        observation, _, terminated, truncated, _ = env.step(policy(observation))
-        if terminated or truncated:
-            observation, _ = env.reset()
-        seen.append(observation)
-    env.close()
-    return {key: np.stack([o[key] for o in seen]) for key in seen[0]}
 
 
 @pytest.mark.parametrize(("algo", "modalities", "frozen_leog"), [
@@ -43,7 +29,7 @@ def test_onnxruntime_matches_the_torch_policy_on_recorded_observations(tmp_path,
     assert main(["export", str(tmp_path / "run"), "--out", str(out)]) == 0
     policy = load_policy(tmp_path / "run")
     assert (policy.encoder is not None) == frozen_leog and policy.scales  # what the graph must apply itself
-    observations = _recorded_observations(policy)
+    observations = recorded_observations(policy, seed=3)
     session = ort.InferenceSession(str(out), providers=["CPUExecutionProvider"])
     assert sorted(i.name for i in session.get_inputs()) == sorted(modalities)
     actions = session.run(["action"], observations)[0]  # the raw env observation, as it comes

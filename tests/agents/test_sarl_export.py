@@ -18,6 +18,7 @@ from crowdnav.agents import load_policy, train  # noqa: E402
 
 from crowdnav.cli import main  # noqa: E402
 from crowdnav.scenario.library import library_names  # noqa: E402
+from tests.agents.agents_tiny import recorded_observations  # noqa: E402
 
 NEAR_TIE = 1e-5
 """A different choice is accepted only where its score is within this (relative) of the best: float32 matrix products
@@ -30,20 +31,6 @@ def config(out, scenario="open_space", **fields):
                 "progress": False, "algo_kwargs": {"batch_size": 4, "updates_per_episode": 2, "width": 16}}
     document.update(fields)
     return document
-
-
-def recorded(policy, steps=40):
-    """Raw observations the agent meets acting in its own env (episodes restart as they end), stacked per key."""
-    env = policy.make_env()
-    observation, _ = env.reset(seed=1)
-    seen = [observation]
-    for _ in range(steps):
-        observation, _, terminated, truncated, _ = env.step(policy(observation))
-        if terminated or truncated:
-            observation, _ = env.reset()
-        seen.append(observation)
-    env.close()
-    return {key: np.stack([o[key] for o in seen]) for key in seen[0]}
 
 
 def check_choices(policy, observations, actions):
@@ -80,7 +67,7 @@ def test_onnxruntime_chooses_predicts_actions_in_every_library_scenario_sarl_dri
     out = tmp_path / "policy.onnx"
     assert main(["export", str(run), "--out", str(out)]) == 0
     policy = load_policy(run)
-    observations = recorded(policy)
+    observations = recorded_observations(policy, seed=1)
     session = ort.InferenceSession(str(out), providers=["CPUExecutionProvider"])
     assert sorted(i.name for i in session.get_inputs()) == sorted(observations)
     actions = session.run(["action"], observations)[0]
@@ -98,7 +85,7 @@ def test_the_exported_sarl_acts_as_predict_one_observation_and_a_batch(tmp_path)
     assert main(["export", str(run), "--out", str(out)]) == 0
     policy = load_policy(run)
     assert policy.scales and policy.model.scales and policy.make_env().observation_space["goal"].shape == (3,)
-    observations = recorded(policy, steps=30)
+    observations = recorded_observations(policy, steps=30, seed=1)
     session = ort.InferenceSession(str(out), providers=["CPUExecutionProvider"])
     batch = session.run(["action"], observations)[0]
     assert check_choices(policy, observations, batch) == 0
@@ -124,7 +111,7 @@ def test_the_exported_two_step_lookahead_acts_as_predict(tmp_path):
     assert main(["export", str(run), "--out", str(out)]) == 0
     policy = load_policy(run)
     assert policy.model.options["lookahead_depth"] == 2
-    observations = recorded(policy, steps=30)
+    observations = recorded_observations(policy, steps=30, seed=1)
     actions = ort.InferenceSession(str(out), providers=["CPUExecutionProvider"]).run(["action"], observations)[0]
     assert check_choices(policy, observations, actions) == 0
     np.testing.assert_array_equal(actions, policy(observations))
