@@ -1,7 +1,7 @@
-"""The learning-algorithm seam: what crowdnav asks of an algorithm, and the SB3 algorithms seen through it.
+"""The learning-algorithm seam: what crowdnav asks of an algorithm, for Stable-Baselines3's and the others alike.
 
 An algorithm is registered by name with :func:`crowdnav.registry.register_algorithm` and an
-:class:`~crowdnav.registry.AlgorithmSpec` whose ``builder`` is a class (or factory) with
+:class:`~crowdnav.registry.AlgorithmSpec` whose ``builder`` (:func:`builder_of`) is a class (or factory) with
 
 * ``builder(env, config) -> Algorithm``: a new agent for the run's env (a :func:`crowdnav.agents.factory.make_env`
   environment: the observation dict as the modalities give it, normalised if the config says so; actions in
@@ -9,23 +9,35 @@ An algorithm is registered by name with :func:`crowdnav.registry.register_algori
 * ``builder.load(folder) -> Algorithm``: the agent :meth:`Algorithm.save` wrote to ``folder``, with everything a
   resumed run continues from (weights, optimiser state, random streams).
 
-Then ``crowdnav train`` trains it (:mod:`crowdnav.agents.protocol_training`: episodes counted, logged in
-``episodes.csv`` and seeded as for SB3, checkpoints, snapshots, ``--resume``), and ``crowdnav evaluate RUN``,
-``crowdnav render`` and the experiment runner load it with :func:`crowdnav.agents.load_policy`. A checkpoint holds
-no pickle: :meth:`Algorithm.save` writes arrays (``.npz`` read with ``allow_pickle=False``, or safetensors) and
-JSON. ``crowdnav export`` (:mod:`crowdnav.agents.onnx_export`) writes a registered algorithm's agent to ONNX when it
-is :class:`Exportable` (it has ``export_module``; ``sarl`` is) and refuses it in one line otherwise; ``agents: robots``
-is for SB3 algorithms only.
+Every algorithm goes through the same three places, which read only its builder:
 
-The built-in algorithms are Stable-Baselines3's: their policies predict through the same :class:`Predictor` side
-(:class:`SB3Predictor`), their training keeps SB3's own loop (:mod:`crowdnav.agents.training`: callbacks, replay
-buffers and rollouts restored mid-episode for an exact resume) and their checkpoints SB3's ``model.zip``, read back
-as tensors only.
+* ``crowdnav train`` (:func:`crowdnav.agents.training.trainer_of`): crowdnav's episode loop around
+  :meth:`Algorithm.learn` (:mod:`crowdnav.agents.protocol_training`: episodes counted, logged in ``episodes.csv`` and
+  seeded, checkpoints, snapshots, ``--resume``), unless the builder is a :class:`RunTrainer`, which runs the whole
+  run itself;
+* ``crowdnav evaluate RUN``, ``crowdnav render`` and the experiment runner (:func:`crowdnav.agents.load_policy`, which
+  calls :func:`load_agent`): ``builder.load(checkpoint / "algorithm")``, or a :class:`RunTrainer`'s
+  ``load_checkpoint``;
+* ``crowdnav export`` (:mod:`crowdnav.agents.onnx_export`): the agent's :meth:`Exportable.export_module`; an agent
+  without one is refused in one line.
+
+A checkpoint holds no pickle: :meth:`Algorithm.save` writes arrays (``.npz`` read with ``allow_pickle=False``, or
+safetensors) and JSON.
+
+The Stable-Baselines3 algorithms (``sac``, ``td3``, ``ddpg``, ``a2c``, ``ppo``, and any spec with an ``sb3_class``) have
+the builder :data:`crowdnav.registry.SB3_BUILDER` (:class:`crowdnav.agents.sb3_algorithm.SB3Builder`): its agents are
+:class:`crowdnav.agents.sb3_algorithm.SB3Algorithm` (``learn``, ``save``, ``predict``, ``export_module``), and it is the
+one :class:`RunTrainer`: ``crowdnav train`` runs their :class:`crowdnav.agents.training_session.TrainingSession`
+(SB3's own loop with crowdnav's callbacks, several worlds at once, replay buffers and rollouts restored
+mid-episode for an exact resume), which a loop that sees the agent only between episodes could not give, and
+their checkpoints are SB3's ``model.zip`` at the checkpoint's top, read back as tensors only.
+``agents: robots`` (shared-parameter PPO, :mod:`crowdnav.agents.marl`) is SB3's PPO only.
 """
 
 from __future__ import annotations
 
 from collections.abc import Callable, Mapping, Sequence
+from importlib import import_module
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Protocol, runtime_checkable
 
@@ -36,7 +48,7 @@ if TYPE_CHECKING:
     from torch import nn
 
 ALGORITHM_FOLDER = "algorithm"
-"""Where a registered (non-SB3) algorithm's :meth:`Algorithm.save` writes inside a checkpoint folder."""
+"""Where :meth:`Algorithm.save` writes inside a checkpoint folder of crowdnav's episode loop (not a :class:`RunTrainer`'s)."""
 
 
 @runtime_checkable
@@ -100,19 +112,61 @@ def as_predictor(model: Any) -> Predictor:
     return model
 
 
+@runtime_checkable
+class RunTrainer(Protocol):
+    """A builder that trains whole runs with a loop of its own and reads the checkpoints that loop writes.
+
+    The Stable-Baselines3 builder (:class:`crowdnav.agents.sb3_algorithm.SB3Builder`) is one: an exact resume needs
+    SB3's buffers, rollouts and worlds restored mid-episode, which :meth:`Algorithm.learn` between episodes cannot
+    give. Other builders leave both to crowdnav (:mod:`crowdnav.agents.protocol_training`, :func:`load_algorithm`).
+    """
+
+    def train_run(self, config: Any, resume: bool, on_checkpoint: Callable[[int], None] | None, trust_pickle: bool) -> Any:
+        """Train ``config`` (a TrainConfig) in ``config.out`` (``resume``: from its checkpoint); the run's TrainResult."""
+
+    def load_checkpoint(self, folder: Path, info: Mapping[str, Any], *, encoder: Any, device: str, trusted: bool,
+                        config: Any) -> Algorithm:
+        """The agent of the checkpoint ``folder`` (``info``: its policy.json) to act with; see :func:`crowdnav.agents.load_policy`."""
+
+
+def import_reference(reference: str) -> Any:
+    """The object a ``"module:attribute"`` text names (a spec's ``builder`` or ``sb3_class``), imported now."""
+    module, _, attribute = reference.partition(":")
+    try:
+        return getattr(import_module(module), attribute)
+    except (ImportError, AttributeError) as error:
+        raise ValueError(f"{reference}: cannot import it ({error})") from None
+
+
 def builder_of(algo: str) -> Any:
-    """The registered ``builder`` of a non-SB3 algorithm (ValueError for an unknown name or an SB3 one)."""
+    """The ``builder`` of the registered algorithm ``algo``, imported if its spec names it (ValueError for an unknown name)."""
     from crowdnav.registry import algorithm_spec
 
-    spec = algorithm_spec(algo)
-    if spec.builder is None:
-        raise ValueError(f"algorithm {algo!r} is a Stable-Baselines3 algorithm, trained and loaded through SB3")
-    return spec.builder
+    builder = algorithm_spec(algo).builder
+    if builder is None:
+        raise ValueError(f"algorithm {algo!r} has no builder: it cannot be trained or loaded")
+    return import_reference(builder) if isinstance(builder, str) else builder
 
 
 def load_algorithm(folder: Path, algo: str) -> Algorithm:
-    """The agent a checkpoint of the registered algorithm ``algo`` holds in ``folder/algorithm/``."""
-    agent = builder_of(algo).load(folder / ALGORITHM_FOLDER)
+    """The agent a checkpoint of crowdnav's episode loop holds in ``folder/algorithm/`` (``builder.load``)."""
+    return _checked(algo, builder_of(algo).load(folder / ALGORITHM_FOLDER))
+
+
+def load_agent(folder: Path, info: Mapping[str, Any], *, encoder: Any = None, device: str = "cpu", trusted: bool = False,
+               config: Any = None) -> Algorithm:
+    """The agent of the checkpoint ``folder`` whose policy.json is ``info``, by its algorithm's builder, whatever the algorithm.
+
+    A :class:`RunTrainer` reads its own checkpoints (``encoder``, ``device``, ``trusted``, ``config``: see
+    :func:`crowdnav.agents.load_policy`); any other builder's agent is ``builder.load(folder / "algorithm")``.
+    """
+    builder = builder_of(info["algo"])
+    if isinstance(builder, RunTrainer):
+        return _checked(info["algo"], builder.load_checkpoint(folder, info, encoder=encoder, device=device, trusted=trusted, config=config))
+    return load_algorithm(folder, info["algo"])
+
+
+def _checked(algo: str, agent: Any) -> Algorithm:
     if not isinstance(agent, Algorithm):
         raise TypeError(f"{algo}: load() returned {type(agent).__name__}, not an Algorithm (learn, predict, save)")
     return agent

@@ -22,8 +22,9 @@ crowdnav's small networks on a CPU (measured in docs/agents.md#performance):
 * the networks read the sampled tensors as they are (:class:`SampledObservations`): no
   ``float() / 255`` copy of the grid per network call.
 
-:data:`crowdnav.agents.factory.ALGORITHMS` maps ``sac``, ``td3`` and ``ddpg`` to these classes. Models saved
-with SB3's own classes load into them (and the other way round).
+The registry entries of ``sac``, ``td3`` and ``ddpg`` name these classes (``model_class`` of
+:class:`crowdnav.registry.AlgorithmSpec`; :func:`crowdnav.agents.factory.model_class`). Models saved with SB3's own
+classes load into them (and the other way round).
 """
 
 from __future__ import annotations

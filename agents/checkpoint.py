@@ -45,7 +45,7 @@ from crowdnav.agents.wrappers import ObservationScales, agent_observation, scale
 from stable_baselines3.common.base_class import BaseAlgorithm
 
 from crowdnav.errors import CrowdNavError
-from crowdnav.registry import algorithm_spec, is_off_policy
+from crowdnav.registry import algorithm_spec
 
 if TYPE_CHECKING:
     from crowdnav.agents.algorithm_protocol import Algorithm
@@ -190,15 +190,14 @@ def load_model(path: str | Path, env: Any = None, device: str = "cpu") -> BaseAl
     That unpickles the zip's ``data``, which can run code: only for checkpoints you trust
     (``load_policy(..., trusted=True)``, ``train(..., trust_pickle=True)``).
     """
-    from crowdnav.agents.factory import ALGORITHMS
+    from crowdnav.agents.factory import model_class
 
     folder = find_checkpoint(path)
     info = read_policy_info(folder)
-    algo = ALGORITHMS.get(info["algo"])
-    if algo is None:
-        from crowdnav.registry import unknown_name_message
-
-        raise ValueError(f"{folder}: {unknown_name_message('algorithm', info['algo'], ALGORITHMS)}")
+    try:
+        algo = model_class(info["algo"])
+    except ValueError as error:  # an unknown name, or an algorithm outside SB3 (ConfigError)
+        raise ValueError(f"{folder}: {error}") from None
     return algo.load(folder / MODEL_FILE, env=env, device=device)
 
 
@@ -215,11 +214,12 @@ class AgentPolicy:
     """
 
     def __init__(self, model: BaseAlgorithm | Algorithm, info: Mapping[str, Any], encoder: Any = None):
-        from crowdnav.agents.algorithm_protocol import as_predictor
+        from crowdnav.agents.algorithm_protocol import SB3Predictor, as_predictor
 
-        self.model = model
-        """The SB3 model, or a registered algorithm's agent (crowdnav.agents.algorithm_protocol)."""
-        self.predictor = as_predictor(model)
+        self.agent = as_predictor(model)
+        """The agent that acts (crowdnav.agents.algorithm_protocol): an SB3 model through its SB3Algorithm (or SB3Predictor)."""
+        self.model = self.agent.model if isinstance(self.agent, SB3Predictor) else self.agent
+        """The SB3 model of an SB3 algorithm, else the agent itself."""
         self.info = dict(info)
         self.env_options: dict[str, Any] = dict(info["env"])
         """Keyword arguments of CrowdNavEnv that give the observations this policy expects."""
@@ -237,7 +237,7 @@ class AgentPolicy:
         return agent_observation(observation, self.scales, self.encoder)
 
     def __call__(self, observation: Mapping[str, np.ndarray]) -> np.ndarray:
-        action = self.predictor.predict(self.preprocess(observation), deterministic=True)
+        action = self.agent.predict(self.preprocess(observation), deterministic=True)
         return action.astype(np.float32, copy=False)
 
     def make_env(self, **extra: Any) -> CrowdNavEnv:
@@ -274,15 +274,13 @@ def load_policy(path: str | Path, device: str = "cpu", *, trusted: bool = False,
 
         encoder, _ = load_encoder(folder / info["leog_encoder"])  # torch.load with weights_only=True
     try:
-        spec = algorithm_spec(info["algo"])
+        algorithm_spec(info["algo"])
     except ValueError as error:  # e.g. an algorithm registered by a module this process has not imported
         raise PolicyFileError(f"{folder}: trained with {error.args[0]} (register it, or install the package that provides it)") from None
-    if not spec.sb3:  # a registered algorithm: its own load (arrays and JSON, no pickle)
-        from crowdnav.agents.algorithm_protocol import load_algorithm
+    from crowdnav.agents.algorithm_protocol import load_agent
 
-        return AgentPolicy(load_algorithm(folder, info["algo"]), info, encoder)
-    model = load_model(folder, device=device) if trusted else model_from_parameters(folder, info, encoder, device, config)
-    return AgentPolicy(model, info, encoder)
+    # every algorithm by its registered builder (arrays and JSON, no pickle unless trusted): SB3's reads model.zip here
+    return AgentPolicy(load_agent(folder, info, encoder=encoder, device=device, trusted=trusted, config=config), info, encoder)
 
 
 class SharedRobotPolicyError(CrowdNavError, ValueError):
@@ -316,9 +314,10 @@ def model_from_parameters(folder: Path, info: Mapping[str, Any], encoder: Any = 
         small = {key: value for key, value in config.algo_kwargs.items() if key not in ("n_steps", "buffer_size", "batch_size")}
         config = config.model_copy(update={"device": device, "progress": False, "tensorboard": False, "num_envs": 1,
                                            "updates_per_step": None, "n_steps": None, "algo_kwargs": small})
-        off_policy = "buffer_size" in type(config).model_fields and is_off_policy(config.algo)
+        spec = algorithm_spec(config.algo)
+        off_policy = "buffer_size" in type(config).model_fields and spec.off_policy
         config = config.model_copy(update={"buffer_size": 1, "learning_starts": 0} if off_policy else
-                                   {"n_steps": 8, **({"batch_size": 8} if config.algo == "ppo" else {})})
+                                   {"n_steps": 8, **({"batch_size": 8} if "batch_size" in spec.defaults else {})})
         check_network_size(config, str(folder))
         saved_encoder = None
         if config.encoder.mode == "finetune":  # the network's LEOG layers take the pre-trained architecture

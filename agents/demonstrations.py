@@ -61,13 +61,15 @@ from crowdnav.agents import wrappers
 from crowdnav.agents.algorithm_kinds import replay_buffer
 from crowdnav.agents.cloning import Demonstrations, behaviour_cloning
 from crowdnav.agents.config import TrainConfig
-from crowdnav.agents.factory import OFF_POLICY, env_options, hyperparameters, load_leog_weights, precomputes_leog
+from crowdnav.agents.factory import env_options, hyperparameters, load_leog_weights, precomputes_leog
 from crowdnav.agents.seeding import demonstration_seed
 from crowdnav.agents.vec_env import CrowdNavSB3VecEnv
 from crowdnav.agents.wrappers import LeogLatentWrapper, NormalizeObservation, ObservationScales, agent_observation
 from stable_baselines3.common.base_class import BaseAlgorithm
 from stable_baselines3.common.buffers import DictReplayBuffer
 from stable_baselines3.common.vec_env import DummyVecEnv, VecEnvWrapper
+
+from crowdnav.registry import is_off_policy
 
 REPORT_FILE = "demonstrations.json"
 EXPERT = "social-force"
@@ -249,7 +251,7 @@ def warm_start(model: BaseAlgorithm, config: TrainConfig) -> dict[str, Any] | No
                        **behaviour_cloning(model, demonstrations, **{**cloning, "seed": config.seed + round_index})})
     report: dict[str, Any] = {"expert": EXPERT, "episodes": demonstrations.episodes, "transitions": len(demonstrations),
                               "expert_success_rate": demonstrations.success_rate(EXPERT), "rounds": rounds, "replay_buffer": 0}
-    if config.algo in OFF_POLICY and settings.into_replay_buffer:
+    if is_off_policy(config.algo) and settings.into_replay_buffer:
         report["replay_buffer"] = add_to_replay_buffer(model, demonstrations, config.reward_scale)
     out = Path(config.out)
     if out.is_dir():

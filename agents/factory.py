@@ -1,20 +1,22 @@
 """The agent factory: a :class:`~crowdnav.agents.config.TrainConfig` -> wrapped environment + SB3 model.
 
 Every algorithm gets the same :class:`~crowdnav.agents.extractor.MultiModalExtractor` (the shared
-latent), then SB3's own actor/critic heads (``net_arch``) on top of it. To plug in another SB3
-algorithm, add its entry to :data:`crowdnav.registry.ALGORITHM_SPECS`, its class to :data:`ALGORITHMS` and its
-defaults to :data:`ALGORITHM_DEFAULTS`; an algorithm outside SB3 implements
-:mod:`crowdnav.agents.algorithm_protocol` instead (docs/architecture.md, "Adding a learning algorithm").
+latent), then SB3's own actor/critic heads (``net_arch``) on top of it. What differs between the
+Stable-Baselines3 algorithms (class, defaults, replay buffer) is read from their
+:class:`crowdnav.registry.AlgorithmSpec`: another SB3 algorithm is one spec there; an algorithm outside
+SB3 implements :mod:`crowdnav.agents.algorithm_protocol` instead (docs/architecture.md, "Adding a learning
+algorithm").
 """
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from functools import partial
 from typing import Any, SupportsFloat
 
 import gymnasium as gym
 import numpy as np
-from crowdnav.agents.algorithms import CrowdNavDDPG, CrowdNavSAC, CrowdNavTD3
+from crowdnav.agents.algorithm_protocol import import_reference
 from crowdnav.agents.config import ConfigError, TrainConfig
 from crowdnav.agents.encoders import LeogEncoder
 from crowdnav.agents.extractor import MultiModalExtractor
@@ -29,49 +31,43 @@ from crowdnav.agents.wrappers import (
     ObservationScales,
     declared_scales,
 )
-from stable_baselines3 import A2C, DDPG, PPO, SAC, TD3
 from stable_baselines3.common.base_class import BaseAlgorithm
 from stable_baselines3.common.monitor import Monitor
 from stable_baselines3.common.noise import NormalActionNoise
 from stable_baselines3.common.type_aliases import GymEnv
 
-from crowdnav.registry import OFF_POLICY_ALGORITHMS, algorithm_spec
+from crowdnav.registry import ALGORITHM_NAMES, ALGORITHM_SPECS, OFF_POLICY_ALGORITHMS, AlgorithmSpec, algorithm_spec
 
-ALGORITHMS: dict[str, type[BaseAlgorithm]] = {"sac": CrowdNavSAC, "td3": CrowdNavTD3, "ddpg": CrowdNavDDPG, "a2c": A2C, "ppo": PPO}
-"""Config name (those of :data:`crowdnav.registry.ALGORITHMS`) -> algorithm class: SB3's,
-with the same updates at less cost per step for SAC/TD3/DDPG (crowdnav.agents.algorithms)."""
 
-SB3_ALGORITHMS: dict[str, type[BaseAlgorithm]] = {"sac": SAC, "td3": TD3, "ddpg": DDPG, "a2c": A2C, "ppo": PPO}
-"""Config name -> Stable-Baselines3's own class (``make_model(..., reference=True)``: benchmarks/bench_train.py's reference)."""
+def model_class(algo: str, reference: bool = False) -> type[BaseAlgorithm]:
+    """The class :func:`make_model` builds for ``algo``: crowdnav's (the spec's ``model_class``) or, ``reference``, SB3's own."""
+    spec = algorithm_spec(algo)
+    name = spec.sb3_class if reference or spec.model_class is None else spec.model_class
+    if name is None:
+        raise ConfigError(f"algo: {algo!r} is not a Stable-Baselines3 algorithm (its spec has no sb3_class)")
+    cls = import_reference(name)
+    if not (isinstance(cls, type) and issubclass(cls, BaseAlgorithm)):
+        raise TypeError(f"algorithm {algo!r}: {name} is not a Stable-Baselines3 algorithm class")
+    return cls
+
+
+_BUILT_IN_SB3: dict[str, AlgorithmSpec] = {name: ALGORITHM_SPECS[name] for name in ALGORITHM_NAMES if ALGORITHM_SPECS[name].sb3}
+
+ALGORITHMS: dict[str, type[BaseAlgorithm]] = {name: model_class(name) for name in _BUILT_IN_SB3}
+"""The built-in SB3 algorithms' classes (read from their specs): SB3's, with the same updates at less cost per
+step for SAC/TD3/DDPG (crowdnav.agents.algorithms)."""
+
+SB3_ALGORITHMS: dict[str, type[BaseAlgorithm]] = {name: model_class(name, reference=True) for name in _BUILT_IN_SB3}
+"""The built-in SB3 algorithms' own Stable-Baselines3 classes (``make_model(..., reference=True)``: benchmarks/bench_train.py's reference)."""
 
 OFF_POLICY = OFF_POLICY_ALGORITHMS
-"""The SB3 algorithms with a replay buffer (the registry entries' ``off_policy``)."""
+"""The built-in algorithms with a replay buffer (the registry entries' ``off_policy``; the code asks :func:`crowdnav.registry.is_off_policy`)."""
 
-ALGORITHM_DEFAULTS: dict[str, dict[str, Any]] = {
-    # gamma 0.95 (a 4 s horizon at the 0.2 s step) and 5-step returns: with the default reward's
-    # dense progress term, avoidance is a short-horizon problem; measured in docs/agents.md#the-main-job.
-    "sac": {"net_arch": [64, 64], "learning_rate": 3e-4, "batch_size": 256, "buffer_size": 100_000, "learning_starts": 1_000, "gamma": 0.95,
-             "n_step_returns": 5},
-    "td3": {"net_arch": [64, 64], "learning_rate": 3e-4, "batch_size": 256, "buffer_size": 100_000, "learning_starts": 1_000, "gamma": 0.95,
-             "n_step_returns": 5},
-    "ddpg": {"net_arch": [64, 64], "learning_rate": 3e-4, "batch_size": 256, "buffer_size": 100_000, "learning_starts": 1_000, "gamma": 0.95,
-             "n_step_returns": 5},
-    "a2c": {"net_arch": [64, 64], "learning_rate": 7e-4, "gamma": 0.95, "n_steps": 5},
-    "ppo": {"net_arch": [64, 64], "learning_rate": 3e-4, "batch_size": 64, "gamma": 0.95, "n_steps": 2048},
-}
-"""crowdnav's defaults for the config fields left at ``None`` (small networks: CPU training)."""
+ALGORITHM_DEFAULTS: Mapping[str, Mapping[str, Any]] = {name: spec.defaults for name, spec in _BUILT_IN_SB3.items()}
+"""The built-in SB3 algorithms' defaults for the config fields left at ``None`` (their specs' ``defaults``)."""
 
-BATCHED_DEFAULTS: dict[str, dict[str, Any]] = {
-    # measured in docs/agents.md#batched-training: one gradient step per 8 env steps on 4x larger batches keeps
-    # SAC/TD3/DDPG learning at several hundred env steps/s on 2 cores; PPO/A2C roll out n_steps per world
-    "sac": {"updates_per_step": 0.125, "batch_size": 512},
-    "td3": {"updates_per_step": 0.125, "batch_size": 512},
-    "ddpg": {"updates_per_step": 0.125, "batch_size": 512},
-    "a2c": {"n_steps": 8},
-    # a constant rate let a 6 M-step run collapse (79% -> 5% held-out success); decaying it did not (docs/agents.md)
-    "ppo": {"n_steps": 64, "batch_size": 512, "learning_rate_schedule": "linear"},
-}
-"""Defaults that replace :data:`ALGORITHM_DEFAULTS` entries when a run collects from ``num_envs > 1`` worlds."""
+BATCHED_DEFAULTS: Mapping[str, Mapping[str, Any]] = {name: spec.batched_defaults for name, spec in _BUILT_IN_SB3.items()}
+"""What replaces :data:`ALGORITHM_DEFAULTS` entries when a run collects from ``num_envs > 1`` worlds (the specs' ``batched_defaults``)."""
 
 
 class LinearDecay:
@@ -86,15 +82,17 @@ class LinearDecay:
 
 def hyperparameters(config: TrainConfig) -> dict[str, Any]:
     """The config's algorithm fields, ``None`` replaced by :data:`ALGORITHM_DEFAULTS` (only those the algorithm takes)."""
-    defaults = dict(ALGORITHM_DEFAULTS[config.algo])
+    spec = algorithm_spec(config.algo)
+    defaults = dict(spec.defaults)
     if config.num_envs > 1:
-        defaults.update(BATCHED_DEFAULTS[config.algo])
+        defaults.update(spec.batched_defaults)
     chosen = {}
     for name, default in defaults.items():
         value = getattr(config, name)
         chosen[name] = default if value is None else value
     chosen["learning_rate_schedule"] = config.learning_rate_schedule or defaults.get("learning_rate_schedule", "constant")
-    if config.num_envs > 1 and config.algo == "ppo" and config.batch_size is None:  # a minibatch no larger than the rollout
+    minibatches = not spec.off_policy and "batch_size" in defaults  # PPO: minibatches of each rollout
+    if config.num_envs > 1 and minibatches and config.batch_size is None:  # a minibatch no larger than the rollout
         chosen["batch_size"] = min(chosen["batch_size"], chosen["n_steps"] * config.num_envs)
     for name in ("batch_size", "buffer_size", "learning_starts", "n_step_returns", "n_steps"):
         if getattr(config, name) is not None and name not in defaults:
@@ -239,20 +237,21 @@ def make_model(config: TrainConfig, env: GymEnv, saved_encoder: dict[str, Any] |
                               if k not in ("net_arch", "n_step_returns", "updates_per_step", "learning_rate_schedule")}
     if hyper["learning_rate_schedule"] == "linear":
         kwargs["learning_rate"] = LinearDecay(kwargs["learning_rate"])
-    if config.algo in OFF_POLICY and config.num_envs > 1:
+    spec = algorithm_spec(config.algo)
+    if spec.off_policy and config.num_envs > 1:
         # one rollout = one step of every world; the update-to-data ratio sets the gradient steps after it
         frequency = config.algo_kwargs.get("train_freq", 1)  # a rollout of several steps of all worlds: as many more updates
         frequency = frequency if isinstance(frequency, int) and frequency > 0 else 1
         kwargs["train_freq"] = 1
         # half up, not Python's round-half-even (4 worlds at 0.125 would give 1 update, double the ratio asked)
         kwargs["gradient_steps"] = max(1, int(hyper["updates_per_step"] * config.num_envs * frequency + 0.5))
-    if algorithm_spec(config.algo).exploration_noise and config.action_noise > 0:
+    if spec.exploration_noise and config.action_noise > 0:
         dims = action_box(env.action_space).shape[0]
         kwargs["action_noise"] = NormalActionNoise(np.zeros(dims), np.full(dims, config.action_noise))
     clash = sorted(set(config.algo_kwargs) & {"policy", "env", "policy_kwargs", "seed", "device", "tensorboard_log"})
     if clash:
         raise ConfigError(f"algo_kwargs: {', '.join(clash)} are set by crowdnav itself; use the config's own fields")
-    if config.algo in OFF_POLICY:
+    if spec.off_policy:
         # crowdnav's buffer: bit-packed grids, and n-step returns for Dict observations (SB3's own refuses those)
         kwargs["replay_buffer_class"] = PackedGridReplayBuffer
         kwargs["replay_buffer_kwargs"] = {"packed_keys": ["leog"] if config.pack_grids else [], "n_steps": hyper["n_step_returns"],
@@ -265,7 +264,7 @@ def make_model(config: TrainConfig, env: GymEnv, saved_encoder: dict[str, Any] |
 
     check_model(config, hyper["net_arch"], env.observation_space, env.action_space, "config", architecture)
     try:
-        model = (SB3_ALGORITHMS if reference else ALGORITHMS)[config.algo](
+        model = model_class(config.algo, reference)(
             "MultiInputPolicy", env, policy_kwargs=policy_kwargs(config, architecture, reference), seed=config.seed,
             device=config.device, tensorboard_log=tensorboard_log, verbose=0, **kwargs,
         )

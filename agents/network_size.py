@@ -171,7 +171,7 @@ def model_parameters(config: Any, net_arch: Any, observation_space: Any, action_
     precomputed = config.encoder.mode == "frozen" and config.encoder.precompute  # the factory's precomputes_leog
     shapes = {key: tuple(space.shape) for key, space in observation_space.spaces.items()}
     extractor, features = extractor_size(shapes, config.extractor.model_dump(), leog_architecture, precomputed)
-    options = _head_options(config.policy_kwargs, 1 if config.algo == "ddpg" else 2)
+    options = _head_options(config.policy_kwargs, algorithm_spec(config.algo).n_critics)
     if "use_sde" in config.algo_kwargs:  # an algorithm option SB3 hands to its policy
         options["use_sde"] = bool(config.algo_kwargs["use_sde"])
     return heads(kind_of(config.algo), features, extractor, int(np.prod(action_space.shape)), net_arch, **options)

@@ -7,12 +7,13 @@ with onnxruntime alone (no torch, no Stable-Baselines3, no crowdnav; docs/deploy
   :class:`crowdnav.envs.CrowdNavEnv` dtype and shape plus a leading batch axis (float32 vectors,
   the LEOG grid as uint8 ``(batch, 1, H, W)``);
 * **inside**: the observation normalisation stored with the checkpoint (``(x - offset) / scale``
-  per key), the frozen LEOG encoder when the model was trained on its latents, the features
-  extractor and the actor's deterministic action (SAC: ``tanh`` of the Gaussian's mean; TD3 /
-  DDPG: the actor; PPO / A2C: the mean, clipped to [-1, 1]), then SB3's mapping to the action
-  space's bounds; for a registered (non-SB3) algorithm, the module its agent's ``export_module``
-  gives (:class:`crowdnav.agents.algorithm_protocol.Exportable`; ``sarl``: the lookahead, value
-  network and argmax, :mod:`crowdnav.agents.sarl.export`), an agent without one refused in one line;
+  per key), the frozen LEOG encoder when the model was trained on its latents, then the module the
+  agent's ``export_module`` gives (:class:`crowdnav.agents.algorithm_protocol.Exportable`, every
+  algorithm alike): for the SB3 algorithms :class:`SB3Actor`, the features extractor and the actor's
+  deterministic action (SAC: ``tanh`` of the Gaussian's mean; TD3 / DDPG: the actor; PPO / A2C: the
+  mean, clipped to [-1, 1]), then SB3's mapping to the action space's bounds; for ``sarl`` the
+  lookahead, value network and argmax (:mod:`crowdnav.agents.sarl.export`). An agent without
+  ``export_module`` is refused in one line;
 * **output** ``action``: float32 ``(batch, 2)`` in [-1, 1], what ``policy(observation)`` returns
   (holonomic ``(vx, vy)`` in the robot frame, or unicycle ``(v, omega)``, times the max speeds).
 
@@ -108,21 +109,18 @@ class DeployablePolicy(nn.Module):
 
 
 def actor_of(policy: Any, keys: list[str], policy_path: str | Path) -> nn.Module:
-    """What acts inside the graph: :class:`SB3Actor`, or the module an :class:`~crowdnav.agents.algorithm_protocol.Exportable` agent gives.
+    """What acts inside the graph: the module the policy's agent gives (:class:`~crowdnav.agents.algorithm_protocol.Exportable`).
 
-    Raises :class:`ExportError` (one line) for a registered algorithm whose agent has no ``export_module``.
+    Every algorithm alike: an SB3 one's agent (:class:`crowdnav.agents.sb3_algorithm.SB3Algorithm`) gives an
+    :class:`SB3Actor`. Raises :class:`ExportError` (one line) for an agent without ``export_module``.
     """
     from crowdnav.agents.algorithm_protocol import Exportable
 
-    from crowdnav.registry import algorithm_spec
-
-    if algorithm_spec(policy.algo).builder is None:
-        return SB3Actor(policy.model, keys)
-    if not isinstance(policy.model, Exportable):
+    if not isinstance(policy.agent, Exportable):
         raise ExportError(f"{policy_path}: algorithm {policy.algo!r} has no ONNX export: its agent has no export_module() "
                           "(crowdnav.agents.algorithm_protocol.Exportable)")
     try:
-        return policy.model.export_module(keys)
+        return policy.agent.export_module(keys)
     except ValueError as error:
         raise ExportError(f"{policy_path}: {str(error).splitlines()[0]}") from None
 

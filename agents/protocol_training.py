@@ -1,4 +1,8 @@
-"""Training a registered (non-SB3) algorithm: :func:`train_registered`, the run folder SB3 runs write too.
+"""crowdnav's episode loop around :meth:`Algorithm.learn <crowdnav.agents.algorithm_protocol.Algorithm.learn>`: :func:`train_registered`.
+
+It trains every algorithm whose registered builder is not a
+:class:`~crowdnav.agents.algorithm_protocol.RunTrainer` (:func:`crowdnav.agents.training.trainer_of`; the built-in
+Stable-Baselines3 algorithms have a loop of their own), into the run folder SB3 runs write too.
 
 The run folder is the one :mod:`crowdnav.agents.training` writes: ``config.yaml``, ``episodes.csv`` (a row per
 training episode, seeded ``train_seed(seed, i)``), ``checkpoint/`` (``policy.json`` and ``algorithm/``, what the

@@ -15,25 +15,25 @@ model and (if saved) the replay buffer carry on; the budget is still ``config.ep
 ``config.timesteps``) in all. With ``num_envs > 1`` the run collects from that many worlds of the
 native vector env (:func:`crowdnav.agents.factory.make_vec_env`); a resume needs the same number.
 
-The Stable-Baselines3 algorithms train in a :class:`crowdnav.agents.training_session.TrainingSession`
-(restore, build, run, save); a registered algorithm outside SB3
-(:mod:`crowdnav.agents.algorithm_protocol`) goes to :func:`crowdnav.agents.protocol_training.train_registered`.
+Which loop trains a run is read from the algorithm's registered builder, for every algorithm alike
+(:func:`trainer_of`): crowdnav's episode loop around the agent's ``learn``
+(:func:`crowdnav.agents.protocol_training.train_registered`), or the builder's own
+(:class:`crowdnav.agents.algorithm_protocol.RunTrainer`): the Stable-Baselines3 builder's
+:class:`crowdnav.agents.training_session.TrainingSession` (restore, build, run, save).
 """
 
 from __future__ import annotations
 
 import json
 from collections.abc import Callable, Mapping
+from functools import partial
 from pathlib import Path
 from typing import Any
 
 import torch
-from crowdnav.agents.config import TrainConfig, config_from_mapping, load_config
+from crowdnav.agents.config import ConfigError, TrainConfig, config_from_mapping, load_config
 from crowdnav.agents.run_folder import snapshot_dir, writing
 from crowdnav.agents.train_result import TrainResult as TrainResult
-from crowdnav.agents.training_session import TrainingSession
-
-from crowdnav.registry import algorithm_spec
 
 
 def train(config: TrainConfig | Mapping[str, Any] | str | Path, *, resume: bool = False,
@@ -55,14 +55,41 @@ def train(config: TrainConfig | Mapping[str, Any] | str | Path, *, resume: bool 
 
         return train_robots(config, resume=resume, on_checkpoint=on_checkpoint)
     torch.set_num_threads(config.torch_threads)
-    if algorithm_spec(config.algo).builder is not None:  # a registered algorithm: crowdnav.agents.algorithm_protocol
-        from crowdnav.agents.protocol_training import check_supported, train_registered
-
-        check_supported(config)
-        with writing(config.out):
-            return train_registered(config, resume, on_checkpoint)
+    trainer = trainer_of(config, trust_pickle)  # before the run folder is touched: refusals leave nothing behind
     with writing(config.out):  # one process writes a run at a time
-        return TrainingSession(config, resume, on_checkpoint, trust_pickle).run()
+        return trainer(config, resume, on_checkpoint)
+
+
+Trainer = Callable[[TrainConfig, bool, "Callable[[int], None] | None"], TrainResult]
+"""``trainer(config, resume, on_checkpoint)``: one run, as :func:`train` calls it."""
+
+
+def trainer_of(config: TrainConfig, trust_pickle: bool = False) -> Trainer:
+    """The loop that trains ``config.algo``, read from its registered builder: the one place that tells them apart.
+
+    A :class:`~crowdnav.agents.algorithm_protocol.RunTrainer` builder (the Stable-Baselines3 one: a TrainingSession,
+    SB3's loop with an exact mid-episode resume) trains the run itself; any other builder's agent learns in
+    crowdnav's episode loop (:func:`crowdnav.agents.protocol_training.train_registered`), after the settings
+    that loop does not take are refused (ConfigError, one line).
+    """
+    from crowdnav.agents.algorithm_protocol import RunTrainer, builder_of
+
+    try:
+        builder = builder_of(config.algo)
+    except ValueError as error:  # e.g. a spec without a builder, or one whose module does not import
+        raise ConfigError(f"algo: {error}") from None
+    if isinstance(builder, RunTrainer):
+        return partial(_own_loop, builder, trust_pickle=trust_pickle)
+    from crowdnav.agents.protocol_training import check_supported, train_registered
+
+    check_supported(config)
+    return train_registered
+
+
+def _own_loop(builder: Any, config: TrainConfig, resume: bool, on_checkpoint: Callable[[int], None] | None,
+              trust_pickle: bool = False) -> TrainResult:
+    result: TrainResult = builder.train_run(config, resume, on_checkpoint, trust_pickle)
+    return result
 
 
 def snapshot_folder(out: Path, point: int, unit: str = "episodes") -> Path:

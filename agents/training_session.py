@@ -1,6 +1,7 @@
 """One Stable-Baselines3 training run as a session: ``restore``, ``build``, ``run``, with ``save`` between.
 
-:func:`crowdnav.agents.training.train` runs ``TrainingSession(config, resume, ...).run()``:
+:func:`crowdnav.agents.training.train` runs ``TrainingSession(config, resume, ...).run()`` for the algorithms whose
+registered builder is the Stable-Baselines3 one (:meth:`crowdnav.agents.sb3_algorithm.SB3SessionBuilder.train_run`):
 
 * :meth:`TrainingSession.restore`: on a resume, what the checkpoint continues from (refused in
   one line when it cannot be); the run folder's ``config.yaml`` and ``episodes.csv``;
@@ -29,7 +30,6 @@ from crowdnav.agents.callbacks import EpisodeCallback
 from crowdnav.agents.checkpoint import ENCODER_FILE, load_model, restore_pickled_rng_state, resume_model, save_checkpoint
 from crowdnav.agents.config import ConfigError, TrainConfig, config_to_dict
 from crowdnav.agents.factory import (
-    OFF_POLICY,
     env_options,
     hyperparameters,
     load_leog_weights,
@@ -60,6 +60,8 @@ from crowdnav.agents.vec_env import CrowdNavSB3VecEnv
 from crowdnav.agents.wrappers import scales_from_json, scales_to_json
 from stable_baselines3.common.vec_env import DummyVecEnv, VecEnv
 
+from crowdnav.registry import algorithm_spec
+
 
 class TrainingSession:
     """One SB3 run of ``config`` in ``config.out`` (``resume``: from its checkpoint); see the module docstring."""
@@ -79,7 +81,7 @@ class TrainingSession:
         published ``num_envs: 1`` results were trained. One world through the vector env trains bit for bit alike
         (tests/agents/test_one_world_stack.py), but the vector env refuses crowds of ``Simulator.grid_from`` humans, which one
         env takes, and steps one world slower, so the size still picks the stack (docs/architecture.md)."""
-        self.off_policy = config.algo in OFF_POLICY
+        self.off_policy = algorithm_spec(config.algo).off_policy
         self.unit = "steps" if config.checkpoint_every_steps is not None else "episodes"  # what snapshots and checkpoints count
         self.state: ResumeInfo | None = None
         self.exact = False

@@ -1,9 +1,11 @@
 """The names a configuration may use: algorithms, encoder modes, observation modalities, reward presets.
 
-One place that the configs (validation and JSON Schema), the command line (``choices``) and the
-docs read, so that a name is added once. This module imports neither torch nor Stable-Baselines3:
-``crowdnav --help`` and config validation stay light. The classes behind the algorithm names live
-in :data:`crowdnav.agents.factory.ALGORITHMS` (a test asserts both name sets are equal).
+One place that the configs (validation and JSON Schema), the command line (``choices``), the agents
+and the docs read, so that a name is added once. This module imports neither torch nor
+Stable-Baselines3: ``crowdnav --help`` and config validation stay light. An algorithm's spec says
+everything the code asks of it (its builder, its Stable-Baselines3 class and defaults, whether it
+keeps a replay buffer); the classes are named as ``"module:attribute"`` texts, imported by the agents
+when first used, as installed plug-ins name theirs (:data:`PLUGIN_GROUP`).
 
 Modalities and reward presets have registries of their own, kept where they are defined
 (:data:`crowdnav.sensors.MODALITIES`, which users extend with ``register_modality``, and
@@ -15,7 +17,7 @@ registry sits at the top of the environment core (it reads the sensors): modules
 from __future__ import annotations
 
 from collections.abc import Callable, Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from types import MappingProxyType
 from typing import Any
 
@@ -23,10 +25,13 @@ from crowdnav.scenario.reward_presets import REWARD_PRESETS
 from crowdnav.sensors import MODALITIES  # numpy and gymnasium only; registers the built-in modalities
 from crowdnav.suggest import did_you_mean, unknown_name_message  # noqa: F401  (re-exported: the one wording)
 
+SB3_BUILDER = "crowdnav.agents.sb3_algorithm:SB3_BUILDER"
+"""The builder of the Stable-Baselines3 algorithms (:class:`crowdnav.agents.sb3_algorithm.SB3Builder`), named, not imported."""
+
 
 @dataclass(frozen=True)
 class AlgorithmSpec:
-    """What crowdnav knows about a learning algorithm: the properties the training code branches on.
+    """What crowdnav knows about a learning algorithm: its builder and the properties the agents code branches on.
 
     The code reads these instead of lists of names, so adding an algorithm is one entry here (or
     one :func:`register_algorithm` call) and its class: see docs/architecture.md, "Adding a
@@ -39,25 +44,59 @@ class AlgorithmSpec:
     """A replay buffer (buffer_size, learning_starts, n_step_returns, save_replay_buffer apply)."""
     exploration_noise: bool = False
     """Deterministic actor explored with Gaussian action noise (the config's ``action_noise``)."""
-    builder: Callable[..., Any] | None = None
-    """None: a Stable-Baselines3 algorithm (class in :data:`crowdnav.agents.factory.ALGORITHMS`). Otherwise the
-    class (or factory) of an :class:`crowdnav.agents.algorithm_protocol.Algorithm`: ``builder(env, config)`` makes a new one,
-    ``builder.load(folder, env, config)`` a saved one (docs/architecture.md, "Adding a learning algorithm")."""
+    builder: Callable[..., Any] | str | None = None
+    """The class (or factory) of an :class:`crowdnav.agents.algorithm_protocol.Algorithm`, or its ``"module:attribute"``
+    (imported when first used: :func:`crowdnav.agents.algorithm_protocol.builder_of`): ``builder(env, config)`` makes a
+    new one, ``builder.load(folder)`` a saved one (docs/architecture.md, "Adding a learning algorithm"). The
+    Stable-Baselines3 algorithms' is :data:`SB3_BUILDER`. None: a name that cannot be trained or loaded."""
+    sb3_class: str | None = None
+    """Stable-Baselines3's class, ``"module:attribute"`` (e.g. ``"stable_baselines3:SAC"``): the reference
+    ``make_model(..., reference=True)`` builds; None for an algorithm outside SB3."""
+    model_class: str | None = None
+    """The class crowdnav trains instead (the same updates at less cost per step, :mod:`crowdnav.agents.algorithms`);
+    None: :attr:`sb3_class` itself."""
+    defaults: Mapping[str, Any] = field(default_factory=dict)
+    """crowdnav's values of the config fields the algorithm takes, for those left at ``None`` (``net_arch``,
+    ``learning_rate``, ``batch_size``, ...; a field not named here is refused: :func:`crowdnav.agents.factory.hyperparameters`)."""
+    batched_defaults: Mapping[str, Any] = field(default_factory=dict)
+    """What replaces :attr:`defaults` entries when a run collects from ``num_envs > 1`` worlds."""
+    n_critics: int = 2
+    """Q-networks an off-policy SB3 policy has unless ``policy_kwargs`` say (DDPG: 1); the network-size count reads it."""
 
     @property
     def sb3(self) -> bool:
-        """Whether Stable-Baselines3 implements it (crowdnav's SB3 path: callbacks, exact resume, ONNX export)."""
-        return self.builder is None
+        """Whether Stable-Baselines3 implements it (:attr:`sb3_class`; its builder trains it with SB3's loop)."""
+        return self.sb3_class is not None
 
+
+# gamma 0.95 (a 4 s horizon at the 0.2 s step) and 5-step returns: with the default reward's dense progress term,
+# avoidance is a short-horizon problem; measured in docs/agents.md#the-main-job. Small networks: CPU training.
+_OFF_POLICY_DEFAULTS = MappingProxyType({"net_arch": [64, 64], "learning_rate": 3e-4, "batch_size": 256, "buffer_size": 100_000,
+                                         "learning_starts": 1_000, "gamma": 0.95, "n_step_returns": 5})
+# measured in docs/agents.md#batched-training: one gradient step per 8 env steps on 4x larger batches keeps
+# SAC/TD3/DDPG learning at several hundred env steps/s on 2 cores; PPO/A2C roll out n_steps per world
+_OFF_POLICY_BATCHED = MappingProxyType({"updates_per_step": 0.125, "batch_size": 512})
 
 _ALGORITHM_SPECS: dict[str, AlgorithmSpec] = {
-    "sac": AlgorithmSpec("Soft Actor-Critic: off-policy, entropy-regularised (crowdnav's default).", off_policy=True),
+    "sac": AlgorithmSpec("Soft Actor-Critic: off-policy, entropy-regularised (crowdnav's default).", off_policy=True,
+                         builder=SB3_BUILDER, sb3_class="stable_baselines3:SAC", model_class="crowdnav.agents.algorithms:CrowdNavSAC",
+                         defaults=_OFF_POLICY_DEFAULTS, batched_defaults=_OFF_POLICY_BATCHED),
     "td3": AlgorithmSpec("Twin Delayed DDPG: off-policy, deterministic policy with Gaussian exploration noise.",
-                         off_policy=True, exploration_noise=True),
+                         off_policy=True, exploration_noise=True,
+                         builder=SB3_BUILDER, sb3_class="stable_baselines3:TD3", model_class="crowdnav.agents.algorithms:CrowdNavTD3",
+                         defaults=_OFF_POLICY_DEFAULTS, batched_defaults=_OFF_POLICY_BATCHED),
     "ddpg": AlgorithmSpec("Deep Deterministic Policy Gradient: off-policy, deterministic policy with Gaussian exploration noise.",
-                          off_policy=True, exploration_noise=True),
-    "a2c": AlgorithmSpec("Advantage Actor-Critic: on-policy, synchronous."),
-    "ppo": AlgorithmSpec("Proximal Policy Optimization: on-policy, clipped updates."),
+                          off_policy=True, exploration_noise=True,
+                          builder=SB3_BUILDER, sb3_class="stable_baselines3:DDPG", model_class="crowdnav.agents.algorithms:CrowdNavDDPG",
+                          defaults=_OFF_POLICY_DEFAULTS, batched_defaults=_OFF_POLICY_BATCHED, n_critics=1),
+    "a2c": AlgorithmSpec("Advantage Actor-Critic: on-policy, synchronous.", builder=SB3_BUILDER, sb3_class="stable_baselines3:A2C",
+                         defaults=MappingProxyType({"net_arch": [64, 64], "learning_rate": 7e-4, "gamma": 0.95, "n_steps": 5}),
+                         batched_defaults=MappingProxyType({"n_steps": 8})),
+    "ppo": AlgorithmSpec("Proximal Policy Optimization: on-policy, clipped updates.", builder=SB3_BUILDER, sb3_class="stable_baselines3:PPO",
+                         defaults=MappingProxyType({"net_arch": [64, 64], "learning_rate": 3e-4, "batch_size": 64, "gamma": 0.95,
+                                                    "n_steps": 2048}),
+                         # a constant rate let a 6 M-step run collapse (79% -> 5% held-out success); decaying it did not (docs/agents.md)
+                         batched_defaults=MappingProxyType({"n_steps": 64, "batch_size": 512, "learning_rate_schedule": "linear"})),
 }
 
 ALGORITHM_SPECS: Mapping[str, AlgorithmSpec] = MappingProxyType(_ALGORITHM_SPECS)
