@@ -59,6 +59,7 @@ from crowdnav.evaluation.storage import (
     results_root_of,
 )
 from crowdnav.evaluation.transfer import claim_storage, pack_folder, remove_work_folder, unpack_folder, work_folder
+from crowdnav.evaluation.unit_spec import run_identity
 
 THREADS_ENV = {"OMP_NUM_THREADS": "1", "MKL_NUM_THREADS": "1"}
 """Environment of the tasks: one thread each (Ray already runs one task per CPU)."""
@@ -224,7 +225,7 @@ def _holds_other_run(job: Job) -> bool:
     """Whether the job's results folder already belongs to another run (run_unit refuses it with a clear message)."""
     path = Path(job.out_dir) / SPEC_FILE
     try:
-        return path.is_file() and read_json(path) != job.spec
+        return path.is_file() and run_identity(read_json(path)) != run_identity(job.spec)
     except ValueError:
         return True
 

@@ -57,6 +57,7 @@ from crowdnav.evaluation.unit_spec import PRETRAINED as PRETRAINED
 from crowdnav.evaluation.unit_spec import PROTOCOL_FIELDS as PROTOCOL_FIELDS
 from crowdnav.evaluation.unit_spec import RUN_COLUMNS as RUN_COLUMNS
 from crowdnav.evaluation.unit_spec import UnitSpec as UnitSpec
+from crowdnav.evaluation.unit_spec import run_identity
 
 from crowdnav.simulator import OUTCOMES as OUTCOMES
 
@@ -156,15 +157,16 @@ def _claim(out_dir: Path, spec: UnitSpec) -> None:
     """Write spec.json, or check that the folder holds this run.
 
     A folder of the same experiment, configuration and seed whose training config, protocol or
-    label changed (the experiment file was edited) is moved aside to ``<folder>.replaced-N`` and
+    label changed (the experiment file was edited; the protocol's ``seeds`` does not count: see
+    :func:`~crowdnav.evaluation.unit_spec.run_identity`) is moved aside to ``<folder>.replaced-N`` and
     the run starts afresh: nothing is overwritten (a protocol whose budget changed unit, episodes
     or env steps, is such a change: its snapshots and rows are never mixed). A folder of another
     run is refused.
     """
     path = out_dir / SPEC_FILE
     if path.is_file():
-        existing = read_json(path)
-        wanted = spec.to_dict()
+        existing = run_identity(read_json(path))
+        wanted = run_identity(spec.to_dict())
         if existing != wanted:
             changed = sorted(key for key in wanted if existing.get(key) != wanted[key])
             if any(existing.get(key) != wanted[key] for key in ("experiment", "configuration", "seed")):

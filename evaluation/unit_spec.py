@@ -1,7 +1,8 @@
 """What one run is: :class:`UnitSpec`, the configuration, seed and protocol that define it.
 
 Two runs with equal specs are the same run (``spec.json`` in the run's folder holds it, and
-:func:`crowdnav.evaluation.runner.run_unit` compares it); this module turns a spec into the
+:func:`crowdnav.evaluation.runner.run_unit` compares it by :func:`run_identity`: the protocol's ``seeds``, the
+experiment's run count, is not part of a run); this module turns a spec into the
 TrainConfig the run trains with. Carrying a run out is :mod:`crowdnav.evaluation.runner`.
 """
 
@@ -28,6 +29,16 @@ PRETRAINED = "<pretrained>"
 
 RUN_COLUMNS = ("experiment", "configuration", "label", "seed")
 """The columns that name the run, first in every table."""
+
+
+def run_identity(document: Mapping[str, Any]) -> dict[str, Any]:
+    """A spec's dict without what does not change the run: the protocol's ``seeds``, the number of runs of the experiment.
+
+    Two spec dicts name the same run when their identities are equal, so adding seeds to an experiment
+    (``crowdnav benchmark --seeds N``) leaves its finished runs alone.
+    """
+    protocol = {key: value for key, value in dict(document.get("protocol") or {}).items() if key != "seeds"}
+    return {**document, "protocol": protocol}
 
 
 @dataclass(frozen=True)

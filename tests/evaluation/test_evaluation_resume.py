@@ -185,3 +185,13 @@ def test_an_edited_configuration_starts_afresh_and_its_old_run_is_kept_aside(tmp
     from crowdnav.evaluation.storage import finished_runs
 
     assert finished_runs([tmp_path]) == [tmp_path / "run"]  # the old run is kept, not counted
+
+
+def test_adding_seeds_to_the_protocol_keeps_a_finished_run_instead_of_training_it_again(tmp_path):
+    spec = tiny_unit_spec()
+    run_unit(spec, tmp_path / "run")
+    rows = (tmp_path / "run" / "test_episodes.csv").read_bytes()
+    more_seeds = {**spec, "protocol": {**spec["protocol"], "seeds": spec["protocol"]["seeds"] + 3}}
+    summary = run_unit(more_seeds, tmp_path / "run")
+    assert summary["status"] == "skipped" and not (tmp_path / "run.replaced-1").exists()
+    assert (tmp_path / "run" / "test_episodes.csv").read_bytes() == rows
