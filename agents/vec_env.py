@@ -125,19 +125,22 @@ class CrowdNavSB3VecEnv(VecEnv):
         dones = terminated | truncated
         self._returns += rewards
         self._lengths += 1
-        out = []
-        for i in range(self.num_envs):  # SB3's API: one info dict per world
-            info = _world_info(infos["final_info"] if dones[i] else infos, i)
-            info["TimeLimit.truncated"] = bool(truncated[i] and not terminated[i])
-            if dones[i]:
+        out = _world_infos(infos, self.num_envs)  # SB3's API: one info dict per world
+        ended = _world_infos(infos["final_info"], self.num_envs) if "final_info" in infos else out
+        done, time_limit = dones.tolist(), (truncated & ~terminated).tolist()
+        for i in range(self.num_envs):
+            info = ended[i] if done[i] else out[i]
+            out[i] = info
+            info["TimeLimit.truncated"] = time_limit[i]
+            if done[i]:
                 info["terminal_observation"] = self._observe(infos["final_obs"][i])
                 info["episode"] = {"r": round(float(self._returns[i]), 6), "l": int(self._lengths[i]), "t": round(time.time() - self._start, 6)}
                 if self.episode_seeds is not None:  # the episode that ended (its world has started the next)
                     index = self.episode_seeds.ended_of[i]
                     info["episode_index"], info["episode_seed"] = index, train_seed(self.episode_seeds.run_seed, index)
-            out.append(info)
-        self._returns[dones] = 0.0
-        self._lengths[dones] = 0
+        if True in done:
+            self._returns[dones] = 0.0
+            self._lengths[dones] = 0
         if self.reward_scale != 1.0:
             rewards = rewards * self.reward_scale
         return self._observe(observation), rewards.astype(np.float32), dones, out
@@ -176,14 +179,16 @@ class CrowdNavSB3VecEnv(VecEnv):
         return [None] * self.num_envs
 
 
-def _world_info(infos: Mapping[str, Any], i: int) -> dict[str, Any]:
-    """World ``i``'s entries of Gymnasium vector ``infos``, as the single env's info dict."""
-    out: dict[str, Any] = {}
+def _world_infos(infos: Mapping[str, Any], n: int) -> list[dict[str, Any]]:
+    """Gymnasium vector ``infos`` of ``n`` worlds as one info dict per world (world ``i``'s entries, as the single env's
+    info dict: numpy scalars as Python ones). One ``tolist`` per key, then a loop over the worlds."""
+    out: list[dict[str, Any]] = [{} for _ in range(n)]
     for key, value in infos.items():
-        if key.startswith("_") or key in ("final_obs", "final_info") or not infos[f"_{key}"][i]:
+        if key[0] == "_" or key == "final_obs" or key == "final_info":
             continue
-        if isinstance(value, dict):
-            out[key] = _world_info(value, i)
-        else:
-            out[key] = value[i].item() if isinstance(value[i], np.generic) else value[i]
+        has = infos["_" + key].tolist()
+        values = _world_infos(value, n) if isinstance(value, dict) else value.tolist()
+        for i in range(n):
+            if has[i]:
+                out[i][key] = values[i]
     return out

@@ -15,7 +15,7 @@ goal rules of worlds where a human reached its goal or stalled, draw from each w
 run per world (the arrival and stall checks themselves run on all worlds at once). A reset draws on the world's own
 :class:`crowdnav.Simulator` (its *slot*) and its state is copied into the stack; the goal rules (:func:`crowdnav.groups.apply_goal_rules`) change
 the world's row of the stack in place, drawing from the slot's generator. Crowds large enough for the neighbour grid
-(``Simulator.grid_from`` humans) are not batched. The humans' commands come from the crowd models
+(``Simulator.grid_from`` humans) are not stacked (the vector env holds them as single envs). The humans' commands come from the crowd models
 (:mod:`crowdnav.crowd`) through :meth:`crowdnav.crowd.Crowd.commands_batch`, each world with its
 slot's own model instances (ORCA: the slot's solver, one world per pyrvo call).
 """
@@ -59,7 +59,8 @@ class StepResult:
     @property
     def collided(self) -> np.ndarray:
         out = np.zeros(len(self.goal_reached), dtype=bool)
-        out[list(self.collisions)] = True
+        if self.collisions:
+            out[list(self.collisions)] = True
         return out
 
     @property
@@ -90,8 +91,8 @@ class BatchSimulator:
         self.scenario = world.scenario
         self.dt = first.dt
         if first.max_humans >= first.grid_from:
-            raise ValueError(f"the batched simulator handles crowds below {first.grid_from} humans (all pairs); "
-                             f"this scenario allows {first.max_humans}: use gymnasium.make_vec(..., vectorization_mode='sync')")
+            raise ValueError(f"the batched simulator handles crowds below {first.grid_from} humans (all pairs); this scenario allows "
+                             f"{first.max_humans}: step its worlds with crowdnav.envs.vector.CrowdNavVectorEnv (single envs, the neighbour grid)")
         obstacles = world.obstacles
         assert obstacles.surface is not None  # a compiled world has its edge table
         self._surface: EdgeSet = obstacles.surface

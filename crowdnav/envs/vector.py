@@ -8,7 +8,7 @@ returns a :class:`CrowdNavVectorEnv`; ``vectorization_mode="sync"`` still gives 
 from __future__ import annotations
 
 from collections.abc import Callable, Mapping, Sequence
-from typing import TYPE_CHECKING, Any, TypeGuard
+from typing import Any, TypeGuard
 
 import numpy as np
 from gymnasium import spaces
@@ -16,7 +16,7 @@ from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
 from crowdnav.batch.memory import keep_freed_memory as _keep_freed_memory
-from crowdnav.batch.simulator import BatchSimulator
+from crowdnav.batch.simulator import BatchSimulator, StepResult
 from crowdnav.contacts import goal_distance
 from crowdnav.envs.core import ScenarioSource, checked_residual, load_env_world, option_overrides
 from crowdnav.envs.reward import REWARD_TERMS, reward_terms
@@ -25,9 +25,8 @@ from crowdnav.envs.vector_infos import end_infos, reward_term_infos, same_step_i
 from crowdnav.envs.vector_team import TeamWorlds
 from crowdnav.events import outcomes
 from crowdnav.planning.shield import validate_shield
-
-if TYPE_CHECKING:
-    from crowdnav.simulator import Simulator
+from crowdnav.simulator import Simulator
+from crowdnav.world import CompiledWorld
 
 MAX_WORLDS = 4_096
 """Most worlds in one vector env (the training config's num_envs bound)."""
@@ -67,7 +66,9 @@ class CrowdNavVectorEnv(VectorEnv):
 
     A step loops over the crowd sizes present, never over worlds, humans, beams or cells
     (:mod:`crowdnav.batch.simulator`); resets and goal-rule draws run per world that needs one.
-    Crowds of ``Simulator.grid_from`` humans or more are refused (use the sync mode).
+    One world (``num_envs=1``) and crowds of ``Simulator.grid_from`` humans or more (the single
+    simulator's neighbour grid) are held as single envs instead (:func:`stacks`,
+    :mod:`crowdnav.envs.vector_team`): the same episodes, at the single env's speed per world.
 
     **Several robots** (a scenario with ``robots:``): world ``i`` is :class:`crowdnav.envs.CrowdNavEnv`
     with the same ``other_robots`` option (the first robot learns, the others follow their scripted
@@ -119,11 +120,11 @@ class CrowdNavVectorEnv(VectorEnv):
         _check_agents(num_envs, world.scenario.humans.max_count)
         self.shield = validate_shield(dict(shield) if isinstance(shield, Mapping) else shield, world)
         self.batch: BatchSimulator | TeamWorlds
-        if world.scenario.robots is None:
+        if stacks(world, num_envs):
             self.batch = BatchSimulator(world, num_envs)
-        else:  # several robots: one single env per world, stepped in one call (crowdnav.envs.vector_team)
+        else:  # one single env per world, stepped in one call (crowdnav.envs.vector_team)
             self.batch = TeamWorlds(world, num_envs, other_robots)
-            self.modalities = self.batch.modalities  # the first robot's own (robots.0.modalities)
+            self.modalities = self.batch.modalities  # several robots: the first robot's own (robots.0.modalities)
         self.residual = checked_residual(residual, self.modalities)
         if keep_freed_memory:
             _keep_freed_memory()
@@ -139,6 +140,7 @@ class CrowdNavVectorEnv(VectorEnv):
         b = self.num_envs
         self._previous_distance = np.zeros(b)
         self._started = np.zeros(b, dtype=bool)
+        self._all_started = False
         self._ended = np.zeros(b, dtype=bool)  # the episode ended at the last step (NEXT_STEP: reset next; DISABLED: wait)
         self._last_flags = (np.zeros(b, dtype=bool), np.zeros(b, dtype=bool))
         # the modalities' own Boxes (the same objects as the Dict's): a Box's shape is never None
@@ -175,10 +177,12 @@ class CrowdNavVectorEnv(VectorEnv):
     def _reset_worlds(self, worlds: np.ndarray, seeds: Sequence[int | None]) -> None:
         self.batch.reset(worlds, seeds)
         self._started[worlds] = True
+        self._all_started = bool(self._started.all())
         self._ended[worlds] = False
         for flags in self._last_flags:
             flags[worlds] = False
-        self._previous_distance[worlds] = self._goal_distance(worlds)
+        if isinstance(self.batch, BatchSimulator):  # single envs keep their own (their Reward)
+            self._previous_distance[worlds] = self._goal_distance(worlds)
 
     def _autoreset(self, worlds: np.ndarray) -> None:
         seeds = [None] * len(worlds) if self.episode_seeds is None else list(self.episode_seeds(worlds))
@@ -186,9 +190,7 @@ class CrowdNavVectorEnv(VectorEnv):
 
     def _goal_distance(self, worlds: np.ndarray) -> np.ndarray:
         """The robot-goal distance of ``worlds``: :func:`crowdnav.contacts.goal_distance`, the single simulator's kernel."""
-        if isinstance(self.batch, TeamWorlds):
-            team: np.ndarray = self.batch.goal_distance()[worlds]
-            return team
+        assert isinstance(self.batch, BatchSimulator)
         out = np.zeros(self.num_envs)
         for bucket in self.batch.buckets.values():
             out[bucket.world] = goal_distance(bucket.state.robot_goal, bucket.state.positions[:, 0])
@@ -199,36 +201,34 @@ class CrowdNavVectorEnv(VectorEnv):
 
     def step(self, actions: Any) -> tuple[dict[str, np.ndarray], np.ndarray, np.ndarray, np.ndarray, dict[str, Any]]:
         """Step every running world with its row of ``actions`` ((num_envs, 2), each checked finite); autoreset per the mode."""
-        if not self._started.all():
+        if not self._all_started:
             raise RuntimeError("call reset() before step(): some worlds have not been reset")
         actions = checked_actions(actions, self.num_envs)
-        b = self.num_envs
-        rewards = np.zeros(b)
         infos: dict[str, Any] = {}
         stepping = ~self._ended
-        if self.autoreset_mode is AutoresetMode.NEXT_STEP and self._ended.any():
-            self._autoreset(np.flatnonzero(self._ended))
-        if not stepping.any():  # every world is waiting (DISABLED) or was just reset
-            self._observe_all()
-            return self._copy_observations(), rewards, *self._waiting_flags(), infos
+        every = not self._ended.any()  # every world steps (then no mask is applied below: the common case, one world's always)
+        if not every:
+            if self.autoreset_mode is AutoresetMode.NEXT_STEP:
+                self._autoreset(np.flatnonzero(self._ended))
+            if not stepping.any():  # every world is waiting (DISABLED) or was just reset
+                self._observe_all()
+                return self._copy_observations(), np.zeros(self.num_envs), *self._waiting_flags(), infos
         actions, shielded = self._executed(actions)
         if shielded is not None:  # every stepping world's flag (the vector infos' mask convention)
             infos["shielded"], infos["_shielded"] = shielded, stepping.copy()
-        result = self.batch.step(actions, None if stepping.all() else stepping)
-        terminated = result.terminated & stepping
-        truncated = result.truncated & stepping & ~terminated
-        # every stepping world's outcome, "truncated" where it runs on (the infos' convention, see vector_infos.end_infos)
-        outcome = outcomes(result.collided & stepping, result.left_world & stepping, result.goal_reached & stepping, stepping)
-        rewards[stepping], terms = self._rewards(outcome, stepping)
-        reward_term_infos(infos, terms, stepping)
+        result = self.batch.step(actions, None if every else stepping)
+        terminated = result.terminated if every else result.terminated & stepping
+        truncated = result.truncated & ~terminated if every else result.truncated & stepping & ~terminated
+        outcome, rewards, terms = self._judged(result, stepping, every)
+        reward_term_infos(infos, terms, stepping, every)
         ended = terminated | truncated
-        end_infos(infos, self.batch, result, outcome, stepping, self._add_info)
+        end_infos(infos, self.batch, result, outcome, stepping, self._add_info, every)
         self._observe_all()
         if self.autoreset_mode is AutoresetMode.DISABLED:
             waiting = self._ended.copy()
             terminated |= waiting & self._last_flags[0]
             truncated |= waiting & self._last_flags[1]
-        self._last_flags = (terminated.copy(), truncated.copy())
+            self._last_flags = (terminated.copy(), truncated.copy())  # what the waiting worlds repeat
         self._ended = self._ended | ended if self.autoreset_mode is AutoresetMode.DISABLED else ended
         if self.autoreset_mode is AutoresetMode.SAME_STEP and ended.any():
             infos = self._same_step_reset(infos, ended)
@@ -256,7 +256,8 @@ class CrowdNavVectorEnv(VectorEnv):
             self.batch.step(applied, None if active.all() else active)
             if self.residual:  # the next plan is observed after this step
                 self._observe_all()
-        self._previous_distance[:] = self._goal_distance(np.arange(b))  # what a step's reward code keeps
+        if isinstance(self.batch, BatchSimulator):  # what a step's reward code keeps (single envs: their Reward did)
+            self._previous_distance[:] = self._goal_distance(np.arange(b))
         self._observe_all()
         return self._copy_observations()
 
@@ -266,13 +267,20 @@ class CrowdNavVectorEnv(VectorEnv):
             return self._last_flags[0] & self._ended, self._last_flags[1] & self._ended
         return np.zeros(self.num_envs, dtype=bool), np.zeros(self.num_envs, dtype=bool)
 
+    def _judged(self, result: StepResult, stepping: np.ndarray, every: bool) -> tuple[np.ndarray, np.ndarray, dict[str, np.ndarray]]:
+        """Every world's outcome ("truncated" where a stepping world runs on, the infos' convention of
+        :func:`crowdnav.envs.vector_infos.end_infos`; None where it did not step), every world's reward (0 where it did not
+        step) and the stepping worlds' reward terms; ``every``: all worlds stepped."""
+        if isinstance(self.batch, TeamWorlds):  # each world's single env judged its own step (the same kernels)
+            return self.batch.judged(None if every else stepping)
+        outcome = outcomes(result.collided & stepping, result.left_world & stepping, result.goal_reached & stepping, stepping)
+        rewards = np.zeros(self.num_envs)
+        rewards[stepping], terms = self._rewards(outcome, stepping)
+        return outcome, rewards, terms
+
     def _rewards(self, outcome: np.ndarray, stepping: np.ndarray) -> tuple[np.ndarray, dict[str, np.ndarray]]:
         """:func:`crowdnav.envs.reward.reward_terms` (the single env's kernel) for the stepping worlds."""
         worlds = np.flatnonzero(stepping)
-        if isinstance(self.batch, TeamWorlds):  # each world's single env computed them (the same kernel)
-            self._previous_distance[worlds] = self._goal_distance(worlds)
-            terms = {term: np.array([self.batch.terms[i][term] for i in worlds], dtype=float) for term in REWARD_TERMS}
-            return self.batch.rewards[worlds], terms
         distance = self._goal_distance(worlds)
         previous = self._previous_distance[worlds]
         self._previous_distance[worlds] = distance
@@ -355,6 +363,12 @@ class CrowdNavVectorEnv(VectorEnv):
         it shares nothing writable with the vector env, so stepping it leaves the world as it is.
         """
         return self.batch.simulator(world)
+
+
+def stacks(world: CompiledWorld, num_envs: int) -> bool:
+    """Whether the vector env steps ``num_envs`` worlds of ``world`` as one :class:`BatchSimulator`, else as single envs
+    (:class:`TeamWorlds`): one robot per world, more than one world, crowds below :attr:`Simulator.grid_from` humans."""
+    return world.scenario.robots is None and num_envs > 1 and world.scenario.humans.max_count < Simulator.grid_from
 
 
 def _check_num_envs(num_envs: Any) -> None:

@@ -22,9 +22,9 @@ def checked_actions(actions: Any, num_envs: int) -> np.ndarray:
     values = real_array(actions, "the robot actions")
     if values.shape != (num_envs, 2):
         raise ValueError(f"the robot actions must have shape ({num_envs}, 2), got shape {values.shape}")
-    bad = ~np.isfinite(values).all(1)
-    if bad.any():
-        i = int(np.flatnonzero(bad)[0])
+    finite = np.isfinite(values)
+    if not finite.all():
+        i = int(np.flatnonzero(~finite.all(1))[0])
         raise ValueError(f"the robot action of world {i} must be finite (no NaN or inf), got {values[i].tolist()}")
     return values
 
@@ -43,8 +43,11 @@ def executed(
 
 def shielded(shield: Shield, batch: BatchSimulator | TeamWorlds, actions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Every world's action through the shield (as the single env's, world by world bit for bit), and which it replaced."""
-    assert isinstance(batch, BatchSimulator)  # the shield refuses several robots
     out, replaced = actions.copy(), np.zeros(batch.num_worlds, dtype=bool)
+    if isinstance(batch, TeamWorlds):  # single envs (one robot each: the shield refuses several): the single env's own call
+        for i, env in enumerate(batch.envs):
+            out[i], replaced[i] = shield.single(env.simulator, actions[i])
+        return out, replaced
     for bucket in batch.buckets.values():
         rows, size = np.arange(len(bucket)), batch.chunk_size(bucket.n)
         for start in range(0, len(rows), size):

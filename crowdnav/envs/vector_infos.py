@@ -17,15 +17,18 @@ from crowdnav.envs.reward import REWARD_TERMS
 from crowdnav.envs.vector_team import TeamWorlds
 
 
-def reward_term_infos(infos: dict[str, Any], terms: dict[str, np.ndarray], stepping: np.ndarray) -> None:
-    """``infos["reward_terms"]``: each term's (num_envs,) values (``terms``' values for the stepping worlds, 0 elsewhere)."""
-    b = len(stepping)
-    infos["reward_terms"] = {}
+def reward_term_infos(infos: dict[str, Any], terms: dict[str, np.ndarray], stepping: np.ndarray, every: bool) -> None:
+    """``infos["reward_terms"]``: each term's (num_envs,) values (``terms``' values for the stepping worlds, 0 elsewhere;
+    ``every``: all worlds stepped, and each term's values are ``terms``' own arrays, new ones every step)."""
+    out: dict[str, np.ndarray] = {}
     for term in REWARD_TERMS:
-        values = np.zeros(b)
-        values[stepping] = terms[term]
-        infos["reward_terms"][term], infos["reward_terms"][f"_{term}"] = values, stepping.copy()
-    infos["_reward_terms"] = stepping.copy()
+        if every:
+            values = terms[term]
+        else:
+            values = np.zeros(len(stepping))
+            values[stepping] = terms[term]
+        out[term], out[f"_{term}"] = values, stepping.copy()
+    infos["reward_terms"], infos["_reward_terms"] = out, stepping.copy()
 
 
 def end_infos(
@@ -35,28 +38,29 @@ def end_infos(
     outcome: np.ndarray,
     stepping: np.ndarray,
     add_info: Callable[[dict[str, Any], dict[str, Any], int], Any],
+    every: bool = False,
 ) -> None:
     """``outcome`` / ``is_success`` of every world that stepped, as CrowdNavEnv's info: "truncated" / False unless it terminated;
     ``human_stalls``, the collisions' ``collision_kind`` / ``collision_partner`` and, with several robots, ``other_robots``
-    (through ``add_info``, the vector env's ``_add_info``)."""
+    (through ``add_info``, the vector env's ``_add_info``); ``every``: all worlds stepped."""
     b = len(stepping)
-    collided = outcome == "collision"
-    kind, partner = np.full(b, None, dtype=object), np.full(b, None, dtype=object)
-    for i in np.flatnonzero(collided):  # per collision event
-        hit = result.collisions[int(i)]
-        kind[i], partner[i] = hit.kind, hit.partner
     infos["outcome"], infos["_outcome"] = outcome, stepping.copy()
     infos["is_success"], infos["_is_success"] = outcome == "success", stepping.copy()
     stalls = np.zeros(b, dtype=np.int64)
     if isinstance(batch, TeamWorlds):
         stalls = batch.stalls()
-        for i in np.flatnonzero(stepping):  # per world: its robots' outcomes, laid out as SyncVectorEnv lays out a dict
+        for i in np.flatnonzero(stepping) if batch.team else ():  # per world: its robots' outcomes, as SyncVectorEnv lays out a dict
             add_info(infos, {"other_robots": batch.other_robots[int(i)]}, int(i))
     else:
         for bucket in batch.buckets.values():  # per crowd size
             stalls[bucket.world] = bucket.state.human_stalls.sum(1)
-    infos["human_stalls"], infos["_human_stalls"] = np.where(stepping, stalls, 0), stepping.copy()
-    if collided.any():
+    infos["human_stalls"], infos["_human_stalls"] = stalls if every else np.where(stepping, stalls, 0), stepping.copy()
+    collided = outcome == "collision" if result.collisions else None  # the collisions of worlds that stepped
+    if collided is not None and collided.any():
+        kind, partner = np.full(b, None, dtype=object), np.full(b, None, dtype=object)
+        for i in np.flatnonzero(collided):  # per collision event
+            hit = result.collisions[int(i)]
+            kind[i], partner[i] = hit.kind, hit.partner
         infos["collision_kind"], infos["_collision_kind"] = kind, collided
         infos["collision_partner"], infos["_collision_partner"] = partner, collided.copy()
 

@@ -1,17 +1,24 @@
-"""Several-robot worlds in the native vector env: :class:`TeamWorlds`, a group of per-world simulators stepped in one call.
+"""Worlds held as single envs in the native vector env: :class:`TeamWorlds`, a group of per-world simulators stepped in one call.
 
-A scenario with ``robots:`` puts the robots after the first in each world's :class:`crowdnav.robots.Team`,
-whose per-robot work (each robot's kinematics, scripted policy, outcome and retirement) is not
-stacked across worlds by :class:`crowdnav.batch.simulator.BatchSimulator`. For such a scenario
-:class:`crowdnav.envs.vector.CrowdNavVectorEnv` holds its worlds here instead: one
-:class:`crowdnav.envs.single.CrowdNavEnv` per world (its own :class:`crowdnav.Simulator`, the other
-robots' policies, the first robot's sensors and reward), all stepped by one :meth:`TeamWorlds.step`
+:class:`crowdnav.envs.vector.CrowdNavVectorEnv` holds its worlds here, not in one stacked
+:class:`crowdnav.batch.simulator.BatchSimulator`, where stacking does not pay or does not apply:
+
+* a scenario with ``robots:``: the robots after the first are in each world's :class:`crowdnav.robots.Team`,
+  whose per-robot work (each robot's kinematics, scripted policy, outcome and retirement) is not stacked;
+* one world (``num_envs=1``): a batch of one does the single env's array work with a world axis and
+  per-step bookkeeping on top (about 0.4x its env-steps/s, docs/environments.md#one-world), so the world is
+  the single env itself and ``num_envs`` stays a size: every world count collects through the same vector env;
+* crowds of :attr:`crowdnav.Simulator.grid_from` humans or more: the single simulator measures them with
+  its neighbour grid (:mod:`crowdnav.crowd_grid`), which the all-pairs batch does not have.
+
+Each world is one :class:`crowdnav.envs.single.CrowdNavEnv` (its own :class:`crowdnav.Simulator`, the
+other robots' policies, the first robot's sensors and reward), all stepped by one :meth:`TeamWorlds.step`
 call. Each world's step is the single env's own, so world ``i`` plays the single env's episodes bit
 for bit by construction; the vector env keeps everything around it (autoreset modes, episode seeds,
-reset masks, the infos' layout, SB3's adapter, a training resume) as it is for one-robot worlds.
-Inside a world nothing loops over humans (the simulator's step is array work); the loop is over
-worlds, except for the first robots' LIDAR scans, made for all the worlds in one batched raycast
-between the two halves of each world's step (the same kernel, row k world k's, bit for bit).
+reset masks, the infos' layout, the shield, the residual plan, SB3's adapter, a training resume) as it
+is for stacked worlds. Inside a world nothing loops over humans (the simulator's step is array work); the
+loop is over worlds, except for several robots' first-robot LIDAR scans, made for all the worlds in one
+batched raycast between the two halves of each world's step (the same kernel, row k world k's, bit for bit).
 docs/environments.md#several-robots measures it.
 """
 
@@ -23,7 +30,9 @@ from typing import Any
 import numpy as np
 
 from crowdnav.batch.simulator import StepResult
+from crowdnav.envs.reward import REWARD_TERMS
 from crowdnav.envs.single import CrowdNavEnv
+from crowdnav.events import StepEvents
 from crowdnav.robot_view import RobotWorld
 from crowdnav.sensors import Modality
 from crowdnav.sensors.lidar import LidarModality
@@ -32,7 +41,7 @@ from crowdnav.world import CompiledWorld
 
 
 class TeamWorlds:
-    """``num_worlds`` single envs of one several-robot world, reset and stepped as a batch (the vector env's engine).
+    """``num_worlds`` single envs of one world, reset and stepped as a batch (the vector env's engine; see the module docstring).
 
     ``world``: the compiled scenario with every env option applied (sensors, reward weights, overrides);
     ``other_robots``: the single env's option (a policy name, or a callable / class; a class is made per
@@ -50,8 +59,13 @@ class TeamWorlds:
         """The first robot's modalities (``robots.0.modalities`` or ``sensors.modalities``), the vector env's observation keys."""
         self.observations: list[dict[str, np.ndarray]] = [{} for _ in range(self.num_worlds)]
         self.rewards = np.zeros(self.num_worlds)
-        self.terms: list[dict[str, float]] = [{} for _ in range(self.num_worlds)]
+        self.terms = {term: np.zeros(self.num_worlds) for term in REWARD_TERMS}
+        """Each reward term's value in every world at its last step."""
+        self.outcomes = np.full(self.num_worlds, None, dtype=object)
+        """World i's outcome at its last step ("truncated" while it runs on: the vector infos' convention)."""
         self.other_robots: list[dict[str, str | None]] = [{} for _ in range(self.num_worlds)]
+        self.team = world.scenario.robots is not None
+        """Several robots per world (``robots:``): the other robots' infos and the batched first-robot LIDAR."""
 
     def reset(self, worlds: Sequence[int] | np.ndarray, seeds: Sequence[int | None] | np.ndarray) -> None:
         """Start a new episode in each of ``worlds`` (``seeds[k]`` for ``worlds[k]``; None continues its generator)."""
@@ -67,6 +81,13 @@ class TeamWorlds:
         b = self.num_worlds
         result = StepResult(goal_reached=np.zeros(b, dtype=bool), left_world=np.zeros(b, dtype=bool), truncated=np.zeros(b, dtype=bool))
         worlds = [int(i) for i in (range(b) if active is None else np.flatnonzero(active))]
+        if not self.team:
+            for i in worlds:  # per world: the single env's step (CrowdNavEnv.step without its info dict, which the vector env lays out)
+                core = self.envs[i].core
+                events, self.rewards[i], terms = core.step(actions[i])
+                self.observations[i] = core.observe()
+                self._record(result, i, events, terms)
+            return result
         # per world: the single env's step up to its observation (its simulator steps every agent as arrays)
         stepped = [self.envs[i].advance(actions[i]) for i in worlds]
         views = [self.envs[i].simulator.robot_view(0) for i in worlds]
@@ -77,12 +98,31 @@ class TeamWorlds:
             self.observations[i], self.rewards[i], _, _, info = env.finish_step(*stepped[k], view=views[k], given=given)
             events = env.simulator.robot_events[0]  # the first robot's: it is in the world until its episode ends
             assert events is not None
-            result.goal_reached[i], result.left_world[i], result.truncated[i] = events.goal_reached, events.left_world, events.truncated
-            if events.collision is not None:
-                result.collisions[i] = events.collision
-            self.terms[i] = info["reward_terms"]
+            self._record(result, i, events, info["reward_terms"])
             self.other_robots[i] = info["other_robots"]
         return result
+
+    def _record(self, result: StepResult, i: int, events: StepEvents, terms: dict[str, float]) -> None:
+        """World ``i``'s step: its events in the batch's ``result``, its outcome and reward terms here."""
+        result.goal_reached[i], result.left_world[i], result.truncated[i] = events.goal_reached, events.left_world, events.truncated
+        if events.collision is not None:
+            result.collisions[i] = events.collision
+        self.outcomes[i] = events.outcome or "truncated"
+        for term, values in self.terms.items():
+            values[i] = terms[term]
+
+    def judged(self, stepping: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, dict[str, np.ndarray]]:
+        """What the single envs said of the last step of the ``stepping`` worlds (a bool mask; None: all): every world's
+        outcome (None where it did not step), every world's reward (0 where it did not step) and the stepping worlds'
+        values of each reward term (as the vector env's own kernels give them), all new arrays."""
+        if stepping is None:
+            return self.outcomes.copy(), self.rewards.copy(), {term: values.copy() for term, values in self.terms.items()}
+        worlds = np.flatnonzero(stepping)
+        outcome = np.full(self.num_worlds, None, dtype=object)
+        outcome[worlds] = self.outcomes[worlds]
+        rewards = np.zeros(self.num_worlds)
+        rewards[worlds] = self.rewards[worlds]
+        return outcome, rewards, {term: values[worlds] for term, values in self.terms.items()}
 
     def _scans(self, views: list[RobotWorld]) -> dict[str, np.ndarray]:
         """Each LIDAR modality's readings of ``views`` (the first robots' after a step), row k of ``views[k]``.
@@ -113,10 +153,6 @@ class TeamWorlds:
     def simulators(self) -> list[Simulator]:
         """Each world's simulator (live: read it, do not step it)."""
         return [env.simulator for env in self.envs]
-
-    def goal_distance(self) -> np.ndarray:
-        """(num_worlds,) the first robot's goal distance in each world."""
-        return np.array([sim.robot_goal_distance for sim in self.simulators()], dtype=float)
 
     def social_force(self) -> np.ndarray:
         """(num_worlds,) complex: the humans' social-force repulsion on each world's first robot."""

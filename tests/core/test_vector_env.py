@@ -140,7 +140,7 @@ def test_disabled_autoreset_holds_ended_worlds_until_reset_mask():
     assert not (terminated3 | truncated3)[done].any()
 
 
-def test_vector_env_rejects_bad_actions_seeds_masks_and_large_crowds(monkeypatch):
+def test_vector_env_rejects_bad_actions_seeds_and_masks():
     env = CrowdNavVectorEnv("open_space", 2, modalities=["goal"])
     with pytest.raises(RuntimeError, match="reset"):
         env.step(np.zeros((2, 2)))
@@ -157,9 +157,6 @@ def test_vector_env_rejects_bad_actions_seeds_masks_and_large_crowds(monkeypatch
         env.reset(options={"reset_mask": np.zeros(2, dtype=bool)})
     with pytest.raises(ValueError, match="autoreset_mode"):
         CrowdNavVectorEnv("open_space", 2, autoreset_mode="sometimes")
-    monkeypatch.setattr(Simulator, "grid_from", 4)  # crowds this large use the neighbour grid: not batched
-    with pytest.raises(ValueError, match="vectorization_mode='sync'"):
-        CrowdNavVectorEnv("open_space", 2, overrides={"humans.count": 5})
 
 
 def test_held_out_episodes_batched_equal_one_env_per_seed_with_recorded_frames():
