@@ -8,9 +8,17 @@ Four ways to step the same B worlds (all modalities unless ``--modalities``), ra
 * ``sync``: ``gymnasium.make_vec(..., vectorization_mode="sync")``, B single envs in a loop;
 * ``native``: ``gymnasium.make_vec(..., vectorization_mode="vector_entry_point")``;
 * ``kernels``: the native env's batched simulator step and batched sensors alone, no rewards,
-  infos, autoreset bookkeeping or copies (the floor the env's own work adds to).
+  infos, autoreset bookkeeping or copies (the floor the env's own work adds to);
+* ``sb3_single`` / ``sb3_native``: the two ways ``crowdnav train`` can collect from B worlds for SB3 (on-policy,
+  so both behind its ``ActionLog``): ``DummyVecEnv`` of B ``make_env`` stacks (CrowdNavEnv, observation
+  normalisation, episode seeds, Monitor) against ``make_vec_env`` (the native env through
+  ``CrowdNavSB3VecEnv``), with the training config's options (``--modalities``, ``--humans``).
 
-Printed: median env-steps/s over the repeats and the ratios native / sync and native / kernels.
+Printed: median env-steps/s over the repeats and the ratios native / sync, native / single, native /
+kernels and sb3_native / sb3_single. ``--clock cpu`` times with the process's CPU time instead of the
+wall clock: on a machine shared with other jobs the wall clock also counts the time the process waits
+for a core. One world (``--batch 1``) is a size like any other: the native env then holds it as a
+single env (``crowdnav.envs.vector.stacks``), and ``kernels`` does not apply.
 
 A several-robot scenario (``--scenario robots_crossing_hall --batch 32 --modalities goal lidar``) runs
 the same cases: its native worlds are a group of single simulators (:mod:`crowdnav.envs.vector_team`),
@@ -21,7 +29,9 @@ from __future__ import annotations
 
 import argparse
 import statistics
+import tempfile
 import time
+from collections.abc import Callable
 
 import gymnasium as gym
 import numpy as np
@@ -36,26 +46,29 @@ def _options(args: argparse.Namespace) -> dict:
     return {"modalities": args.modalities, "overrides": {"humans.count": args.humans}}
 
 
+CLOCK: Callable[[], float] = time.perf_counter
+
+
 def single(args: argparse.Namespace) -> float:
     env = gym.make(env_id(args.scenario), **_options(args)).unwrapped
     env.reset(seed=0)
     actions = np.random.default_rng(0).uniform(-1, 1, (args.steps * args.batch, 2))
-    start = time.perf_counter()
+    start = CLOCK()
     for action in actions:
         _, _, terminated, truncated, _ = env.step(action)
         if terminated or truncated:
             env.reset()
-    return len(actions) / (time.perf_counter() - start)
+    return len(actions) / (CLOCK() - start)
 
 
 def vector(args: argparse.Namespace, mode: str) -> float:
     env = gym.make_vec(env_id(args.scenario), num_envs=args.batch, vectorization_mode=mode, **_options(args))
     env.reset(seed=0)
     actions = np.random.default_rng(0).uniform(-1, 1, (args.steps, args.batch, 2)).astype(np.float32)
-    start = time.perf_counter()
+    start = CLOCK()
     for action in actions:
         env.step(action)
-    return args.steps * args.batch / (time.perf_counter() - start)
+    return args.steps * args.batch / (CLOCK() - start)
 
 
 def kernels(args: argparse.Namespace) -> float:
@@ -63,14 +76,40 @@ def kernels(args: argparse.Namespace) -> float:
     env.reset(seed=0)
     batch = env.batch
     actions = np.random.default_rng(0).uniform(-1, 1, (args.steps, args.batch, 2))
-    start = time.perf_counter()
+    start = CLOCK()
     for action in actions:
         result = batch.step(action)
         done = np.flatnonzero(result.terminated | result.truncated)
         if len(done):
             batch.reset(done, [None] * len(done))
         env._observe_all()  # the batched sensors, in the env's chunks of worlds
-    return args.steps * args.batch / (time.perf_counter() - start)
+    return args.steps * args.batch / (CLOCK() - start)
+
+
+def sb3(args: argparse.Namespace, native: bool) -> Callable[[], float]:
+    """The SB3 collection stack ``crowdnav train`` builds for ``native`` (or not), made once; returns its timing run."""
+    from functools import partial
+
+    from crowdnav.agents.config import config_from_mapping
+    from crowdnav.agents.factory import make_env, make_vec_env
+    from crowdnav.agents.resume_state import ActionLog
+    from stable_baselines3.common.vec_env import DummyVecEnv
+
+    config = config_from_mapping({"scenario": args.scenario, "modalities": args.modalities, "algo": "ppo", "seed": 0,
+                                  "out": tempfile.mkdtemp(), "overrides": {"humans.count": args.humans}, "num_envs": args.batch})
+    env = ActionLog(make_vec_env(config) if native else DummyVecEnv([partial(make_env, config)] * args.batch))
+    env.reset()
+    actions = np.random.default_rng(0).uniform(-1, 1, (args.steps, args.batch, 2)).astype(np.float32)
+
+    def run() -> float:
+        start = CLOCK()
+        for action in actions:
+            env.step(action)
+        return args.steps * args.batch / (CLOCK() - start)
+    return run
+
+
+CASES = ["single", "sync", "native", "kernels", "sb3_single", "sb3_native"]
 
 
 def main() -> None:
@@ -81,23 +120,31 @@ def main() -> None:
     parser.add_argument("--steps", type=int, default=200, help="batch steps per measurement (single: batch x steps env steps)")
     parser.add_argument("--repeats", type=int, default=3)
     parser.add_argument("--modalities", nargs="+", default=ALL)
-    parser.add_argument("--cases", nargs="+", default=["single", "sync", "native", "kernels"], choices=["single", "sync", "native", "kernels"])
+    parser.add_argument("--cases", nargs="+", default=CASES[:4], choices=CASES)
+    parser.add_argument("--clock", choices=["wall", "cpu"], default="wall", help="cpu: the process's CPU time (a loaded machine)")
     args = parser.parse_args()
+    global CLOCK
+    CLOCK = time.process_time if args.clock == "cpu" else time.perf_counter
     run = {"single": lambda: single(args), "sync": lambda: vector(args, "sync"),
            "native": lambda: vector(args, "vector_entry_point"), "kernels": lambda: kernels(args)}
+    run.update({case: sb3(args, case == "sb3_native") for case in ("sb3_single", "sb3_native") if case in args.cases})
     results: dict[str, list[float]] = {case: [] for case in args.cases}
     for _ in range(args.repeats):  # interleaved, so every case sees the same machine load
         for case in args.cases:
             results[case].append(run[case]())
     medians = {case: statistics.median(values) for case, values in results.items()}
     print(f"{args.scenario}, {args.humans} humans, batch {args.batch}, modalities {' '.join(args.modalities)}; "
-          f"median of {args.repeats} (env-steps/s)")
+          f"median of {args.repeats} (env-steps/s, {args.clock} clock)")
     for case, value in medians.items():
         print(f"  {case:8s} {value:10,.0f}")
     if "native" in medians:
         for other in ("sync", "single", "kernels"):
             if other in medians:
                 print(f"  native / {other}: {medians['native'] / medians[other]:.2f}x")
+    if "sb3_native" in medians and "sb3_single" in medians:
+        pairs = [n / s for n, s in zip(results["sb3_native"], results["sb3_single"], strict=True)]
+        print(f"  sb3_native / sb3_single: {medians['sb3_native'] / medians['sb3_single']:.2f}x "
+              f"(median of the per-repeat ratios {statistics.median(pairs):.2f}x)")
 
 
 if __name__ == "__main__":

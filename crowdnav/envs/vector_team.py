@@ -6,7 +6,7 @@
 * a scenario with ``robots:``: the robots after the first are in each world's :class:`crowdnav.robots.Team`,
   whose per-robot work (each robot's kinematics, scripted policy, outcome and retirement) is not stacked;
 * one world (``num_envs=1``): a batch of one does the single env's array work with a world axis and
-  per-step bookkeeping on top (about 0.4x its env-steps/s, docs/environments.md#one-world), so the world is
+  per-step bookkeeping on top (0.36x its env-steps/s, docs/environments.md#one-world-and-crowds-of-200-humans-or-more), so the world is
   the single env itself and ``num_envs`` stays a size: every world count collects through the same vector env;
 * crowds of :attr:`crowdnav.Simulator.grid_from` humans or more: the single simulator measures them with
   its neighbour grid (:mod:`crowdnav.crowd_grid`), which the all-pairs batch does not have.
@@ -84,9 +84,9 @@ class TeamWorlds:
         if not self.team:
             for i in worlds:  # per world: the single env's step (CrowdNavEnv.step without its info dict, which the vector env lays out)
                 core = self.envs[i].core
-                events, self.rewards[i], terms = core.step(actions[i])
+                own, self.rewards[i], terms = core.step(actions[i])
                 self.observations[i] = core.observe()
-                self._record(result, i, events, terms)
+                self._record(result, i, own, terms)
             return result
         # per world: the single env's step up to its observation (its simulator steps every agent as arrays)
         stepped = [self.envs[i].advance(actions[i]) for i in worlds]
