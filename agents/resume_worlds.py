@@ -16,8 +16,6 @@ from typing import Any
 import numpy as np
 from crowdnav.agents.resume_state import _ROLLOUT, ActionLog, ResumeStateError, _fill, _position, _read_npz, _write_npz
 from crowdnav.agents.vec_env import CrowdNavSB3VecEnv
-from crowdnav.agents.wrappers import EpisodeSeeds
-from stable_baselines3.common.vec_env import DummyVecEnv
 
 
 def save_rollout(path: Path, state: Mapping[str, Any]) -> None:
@@ -79,27 +77,14 @@ def _world_state(env: Any) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
     longest = int(env.lengths.max(initial=0))
     arrays = {"worlds/actions": env.actions[:, :longest], "worlds/lengths": env.lengths.copy()}
     inner = env.venv
-    if isinstance(inner, CrowdNavSB3VecEnv):
-        counter = inner.episode_seeds
-        if counter is None:  # training always gives the batched env its counter (make_vec_env)
-            raise ResumeStateError("the run's vector env has no episode counter to store")
-        returns, lengths = inner.world_counts()
-        arrays.update({"worlds/returns": returns, "worlds/episode_lengths": lengths})
-        return arrays, {"kind": "vector", "run_seed": counter.run_seed, "next_episode": counter.next_episode,
-                        "episode_of": [counter.episode_of[i] for i in range(inner.num_envs)],
-                        "ended_of": {str(k): v for k, v in counter.ended_of.items()}}
-    seeds = _episode_seeds(inner)
-    return arrays, {"kind": "single", "run_seed": seeds.run_seed, "episode": seeds.episode}
-
-
-def _episode_seeds(inner: Any) -> EpisodeSeeds:
-    if isinstance(inner, DummyVecEnv) and inner.num_envs == 1:
-        wrapper = inner.envs[0]
-        while hasattr(wrapper, "env"):
-            if isinstance(wrapper, EpisodeSeeds):
-                return wrapper
-            wrapper = wrapper.env
-    raise ResumeStateError(f"cannot store the worlds of {type(inner).__name__}: expected crowdnav's training environments")
+    if not isinstance(inner, CrowdNavSB3VecEnv) or inner.episode_seeds is None:  # make_vec_env gives it its counter
+        raise ResumeStateError(f"cannot store the worlds of {type(inner).__name__}: expected crowdnav's training vector env")
+    counter = inner.episode_seeds
+    returns, lengths = inner.world_counts()
+    arrays.update({"worlds/returns": returns, "worlds/episode_lengths": lengths})
+    return arrays, {"kind": "vector", "run_seed": counter.run_seed, "next_episode": counter.next_episode,
+                    "episode_of": [counter.episode_of[i] for i in range(inner.num_envs)],
+                    "ended_of": {str(k): v for k, v in counter.ended_of.items()}}
 
 
 def _restore_worlds(path: Path, env: ActionLog, arrays: Mapping[str, np.ndarray], meta: Mapping[str, Any], last_obs: Any) -> None:
@@ -109,12 +94,14 @@ def _restore_worlds(path: Path, env: ActionLog, arrays: Mapping[str, np.ndarray]
             or (lengths < 0).any() or lengths.max(initial=0) > actions.shape[1] or not np.isfinite(actions).all():
         raise ResumeStateError(f"{path}: its worlds' actions do not fit the run's {n} worlds")
     inner = env.venv
-    if meta["kind"] == "vector" and isinstance(inner, CrowdNavSB3VecEnv):
+    if not isinstance(inner, CrowdNavSB3VecEnv):
+        raise ResumeStateError(f"{path}: the run's environment is {type(inner).__name__}, not crowdnav's training vector env")
+    if meta["kind"] == "vector":
         observation = _replay_vector(inner, actions, lengths, meta, arrays["worlds/returns"], arrays["worlds/episode_lengths"])
-    elif meta["kind"] == "single" and isinstance(inner, DummyVecEnv):
+    elif meta["kind"] == "single" and n == 1:
         observation = _replay_single(inner, actions, lengths, meta)
     else:
-        raise ResumeStateError(f"{path}: its worlds are {meta['kind']}, the run's config builds {type(inner).__name__}")
+        raise ResumeStateError(f"{path}: its worlds are {meta['kind']!r}, the run's config builds {n} worlds")
     expected = _as_dict(last_obs)
     replayed = _as_dict(observation)
     if expected.keys() != replayed.keys() or not all(np.array_equal(expected[key], replayed[key]) for key in expected):
@@ -135,15 +122,21 @@ def _replay_vector(inner: CrowdNavSB3VecEnv, actions: np.ndarray, lengths: np.nd
     return inner.restore_worlds([counter.episode_of[i] for i in range(inner.num_envs)], actions, lengths, returns, episode_lengths)
 
 
-def _replay_single(inner: DummyVecEnv, actions: np.ndarray, lengths: np.ndarray, meta: Mapping[str, Any]) -> Any:
-    seeds = _episode_seeds(inner)
-    if int(meta["run_seed"]) != seeds.run_seed:
-        raise ValueError(f"the world was seeded by run seed {meta['run_seed']}, the run's config has {seeds.run_seed}")
-    seeds.episode = int(meta["episode"]) - 1  # its reset starts the stored episode (the wrapper counts up first)
-    env = inner.envs[0]
-    observation, _ = env.reset()
-    for action in actions[0, : int(lengths[0])]:  # through every wrapper, so the Monitor's return counts these steps
-        observation, *_ = env.step(action)
-    inner._save_obs(0, observation)
-    inner._reset_seeds()
-    return inner._obs_from_buf()
+def _replay_single(inner: CrowdNavSB3VecEnv, actions: np.ndarray, lengths: np.ndarray, meta: Mapping[str, Any]) -> Any:
+    """A ``num_envs: 1`` checkpoint written before every run collected from the vector env (kind "single": a
+    ``DummyVecEnv`` of one env, its world stored as the episode it plays, without its return so far).
+
+    Replayed through the one world's own steps, which count the return and length as the single env's ``Monitor``
+    did; the episode cannot end within them (it was mid-episode when stored).
+    """
+    counter = inner.episode_seeds
+    if counter is None or int(meta["run_seed"]) != counter.run_seed:
+        raise ValueError(f"the world was seeded by run seed {meta['run_seed']}, the run's config has {getattr(counter, 'run_seed', None)}")
+    counter.next_episode, counter.episode_of, counter.ended_of = int(meta["episode"]), {}, {}
+    observation = inner.reset()  # the stored episode, numbered by the counter
+    for action in actions[0, : int(lengths[0])]:
+        inner.step_async(action[None])
+        observation, _, dones, _ = inner.step_wait()
+        if dones[0]:
+            raise ValueError("its world's episode ends within the actions it stores")
+    return observation

@@ -39,7 +39,7 @@ _SAC = "stable_baselines3.sac.sac.SAC"
 _TD3 = "stable_baselines3.td3.td3.TD3"
 _REPLAY = "stable_baselines3.common.buffers.DictReplayBuffer"
 _ROLLOUT = "stable_baselines3.common.buffers.DictRolloutBuffer"
-_DUMMY = "stable_baselines3.common.vec_env.dummy_vec_env.DummyVecEnv"
+_VEC_ENV = "stable_baselines3.common.vec_env.base_vec_env.VecEnv"
 _SAC_ACTOR = "stable_baselines3.sac.policies.Actor"
 _SAC_POLICY = "stable_baselines3.sac.policies.SACPolicy"
 _TD3_POLICY = "stable_baselines3.td3.policies.TD3Policy"
@@ -144,11 +144,7 @@ SB3_INTERNALS: tuple[Internal, ...] = (
     Internal(_REPLAY, "_normalize_reward", "method", "agents/replay_buffer.py (PackedGridReplayBuffer._get_samples)", ("reward", "env")),
     *_attributes(_ROLLOUT, "observations actions rewards returns episode_starts values log_probs advantages pos full buffer_size "
                  "generator_ready", "agents/resume_worlds.py (rollout_state.npz)"),
-    # a single world rebuilt in place (resume_worlds._replay_single)
-    Internal(_DUMMY, "envs", "attribute", "agents/resume_worlds.py (_episode_seeds)"),
-    Internal(_DUMMY, "_save_obs", "method", "agents/resume_worlds.py (_replay_single)", ("env_idx", "obs")),
-    Internal(_DUMMY, "_obs_from_buf", "method", "agents/resume_worlds.py (_replay_single)"),
-    Internal(_DUMMY, "_reset_seeds", "method", "agents/resume_worlds.py (_replay_single), agents/vec_env.py (restore_worlds)"),
+    Internal(_VEC_ENV, "_reset_seeds", "method", "agents/vec_env.py (reset, restore_worlds)"),
 )
 
 

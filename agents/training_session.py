@@ -23,7 +23,6 @@ from functools import partial
 from pathlib import Path
 from typing import Any
 
-import gymnasium as gym
 import yaml
 from crowdnav.agents.algorithm_kinds import off_policy, replay_buffer
 from crowdnav.agents.callbacks import EpisodeCallback
@@ -33,7 +32,6 @@ from crowdnav.agents.factory import (
     env_options,
     hyperparameters,
     load_leog_weights,
-    make_env,
     make_model,
     make_vec_env,
     observation_normalization,
@@ -52,13 +50,10 @@ from crowdnav.agents.training_checks import (
     restart_hint,
     resume_errors,
     resume_info,
-    scenario_max_steps,
     set_aside_snapshots_after,
     tensorboard_folder,
 )
-from crowdnav.agents.vec_env import CrowdNavSB3VecEnv
 from crowdnav.agents.wrappers import scales_from_json, scales_to_json
-from stable_baselines3.common.vec_env import DummyVecEnv, VecEnv
 
 from crowdnav.registry import algorithm_spec
 
@@ -75,12 +70,9 @@ class TrainingSession:
         self.out = Path(config.out)
         self.checkpoint = checkpoint_dir(self.out)
         self.batched = config.num_envs > 1
-        """Several worlds: their episodes end out of order, so checkpoints keep every world mid-episode (one world: rewound to an episode end)."""
-        self.vector = self.batched
-        """Collect from the native vector env (:func:`make_vec_env`); False: one ``gymnasium.Env`` (:func:`make_env`), as the
-        published ``num_envs: 1`` results were trained. One world through the vector env trains bit for bit alike
-        (tests/agents/test_one_world_stack.py), but the vector env refuses crowds of ``Simulator.grid_from`` humans, which one
-        env takes, and steps one world slower, so the size still picks the stack (docs/architecture.md)."""
+        """Several worlds: their episodes end out of order, so checkpoints keep every world mid-episode (one world:
+        off-policy checkpoints are rewound to its last episode end). Every world count collects from the same stack, the
+        native vector env (:func:`make_vec_env`, one world held as one env inside) behind an ``ActionLog``."""
         self.off_policy = algorithm_spec(config.algo).off_policy
         self.unit = "steps" if config.checkpoint_every_steps is not None else "episodes"  # what snapshots and checkpoints count
         self.state: ResumeInfo | None = None
@@ -163,18 +155,9 @@ class TrainingSession:
         first_started = (state.next_episode or state.episodes) if state and self.batched else self.first_episode
         saved_scales = scales_from_json(state.normalization) if state and state.normalization is not None else None
         # on-policy and batched checkpoints store the collecting env's worlds mid-episode (crowdnav.agents.resume_worlds)
-        self.env: gym.Env | CrowdNavSB3VecEnv
-        self.collecting: gym.Env | VecEnv
-        if self.vector:
-            vector = make_vec_env(config, leog, first_started, saved_scales)
-            self.env, self.collecting = vector, ActionLog(vector)
-            self.max_steps = vector.env.scenario.max_steps
-        else:
-            single = make_env(config, leog, first_started, saved_scales)
-            self.env = self.collecting = single
-            if not self.off_policy:
-                self.collecting = ActionLog(DummyVecEnv([partial(_same, single)]))
-            self.max_steps = scenario_max_steps(single)
+        self.env = make_vec_env(config, leog, first_started, saved_scales)
+        self.collecting = ActionLog(self.env)
+        self.max_steps = self.env.env.scenario.max_steps
         self.scales = observation_normalization(self.env)
 
     def _restore_progress(self) -> int | None:
@@ -271,7 +254,7 @@ class TrainingSession:
 
         The same total as an uninterrupted run's, so a learning-rate schedule sees the same progress
         after a resume (B worlds finish N episodes of at most max_steps within ceil(N / B) * max_steps
-        steps each; one env: as before batching).
+        steps each; one world: N * max_steps, as the published ``num_envs: 1`` runs had).
         """
         config, model = self.config, self.model
         other_worlds = config.num_envs - 1
@@ -280,9 +263,3 @@ class TrainingSession:
         if self.state and not self.exact and config.timesteps is None:  # the steps of the interrupted episodes are taken again
             budget = max(budget, (config.episodes - self.callback.done + other_worlds) * self.max_steps + 1)
         return budget
-
-
-def _same(env: gym.Env) -> gym.Env:
-    """``DummyVecEnv``'s env factory for an env that exists already."""
-    return env
-
