@@ -12,8 +12,8 @@ Output folder (``config.out``):
 
 ``resume=True`` continues from ``checkpoint/``: the episode count, the episode seeds, the
 model and (if saved) the replay buffer carry on; the budget is still ``config.episodes`` (or
-``config.timesteps``) in all. With ``num_envs > 1`` the run collects from that many worlds of the
-native vector env (:func:`crowdnav.agents.factory.make_vec_env`); a resume needs the same number.
+``config.timesteps``) in all. An SB3 run collects from ``num_envs`` worlds of the native vector env
+(:func:`crowdnav.agents.factory.make_vec_env`), one world included; a resume needs the same number.
 
 Which loop trains a run is read from the algorithm's registered builder, for every algorithm alike
 (:func:`trainer_of`): crowdnav's episode loop around the agent's ``learn``
