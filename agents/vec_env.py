@@ -138,7 +138,7 @@ class CrowdNavSB3VecEnv(VecEnv):
                 if self.episode_seeds is not None:  # the episode that ended (its world has started the next)
                     index = self.episode_seeds.ended_of[i]
                     info["episode_index"], info["episode_seed"] = index, train_seed(self.episode_seeds.run_seed, index)
-        if True in done:
+        if any(done):
             self._returns[dones] = 0.0
             self._lengths[dones] = 0
         if self.reward_scale != 1.0:

@@ -143,10 +143,7 @@ class TeamWorlds:
             for members in groups.values():
                 positions = np.stack([views[k].positions for k in members])
                 headings = np.array([views[k].robot_heading for k in members], dtype=float)
-                scans = np.empty((len(members), lidar.beams), dtype=np.float32)
-                # as LidarModality.observe: (1 / max_range) / inverse, into float32
-                np.divide(1.0 / lidar.max_range, lidar.inverse_ranges(positions, headings, views[members[0]].radii), out=scans)
-                out[members] = scans
+                out[members] = lidar.readings(positions, headings, views[members[0]].radii)
             readings[key] = out
         return readings
 

@@ -75,14 +75,17 @@ class LidarModality(Modality):
         return spaces.Box(low=0.0, high=1.0, shape=(self.beams,), dtype=np.float32)
 
     def observe(self, sim: RobotWorld) -> np.ndarray:
-        out = np.empty(self.beams, dtype=np.float32)
-        # (1 / max_range) / inverse <= 1: the inverse ranges start at 1 / max_range
-        np.divide(1.0 / self.max_range, self.inverse_ranges(sim.positions, sim.robot_heading, sim.radii), out=out)
-        return out
+        return self.readings(sim.positions, sim.robot_heading, sim.radii)
 
     def observe_batch(self, state: BatchState) -> np.ndarray:
-        out = np.empty((state.worlds, self.beams), dtype=np.float32)
-        np.divide(1.0 / self.max_range, self.inverse_ranges(state.positions, state.robot_heading, state.radii), out=out)
+        return self.readings(state.positions, state.robot_heading, state.radii)
+
+    def readings(self, positions: np.ndarray, heading: float | np.ndarray, radii: np.ndarray) -> np.ndarray:
+        """The observation ``(*W, B)`` float32 of :meth:`inverse_ranges`' worlds: ``range / max_range`` per beam."""
+        inverse = self.inverse_ranges(positions, heading, radii)
+        out = np.empty(inverse.shape, dtype=np.float32)
+        # (1 / max_range) / inverse <= 1: the inverse ranges start at 1 / max_range
+        np.divide(1.0 / self.max_range, inverse, out=out)
         return out
 
     def ranges(self, sim: RobotWorld) -> np.ndarray:
