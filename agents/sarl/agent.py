@@ -34,7 +34,7 @@ from crowdnav.agents.factory import observation_normalization
 from crowdnav.agents.sarl.imitation import Demonstrations, make_teacher
 from crowdnav.agents.sarl.lookahead import REQUIRED_KEYS, Physics, action_set, decode, features, lookahead
 from crowdnav.agents.sarl.memory import ReplayMemory
-from crowdnav.agents.sarl.network import ValueNetwork, evaluate
+from crowdnav.agents.sarl.network import ValueEnsemble, evaluate, value_network
 
 DEFAULTS: dict[str, Any] = {
     "width": 64,  # hidden layer size of every MLP of the value network
@@ -50,6 +50,7 @@ DEFAULTS: dict[str, Any] = {
     "imitation_epochs": 50,  # passes of the value regression over the demonstrations
     "lookahead_depth": 1,  # greedy actions (evaluation): 1 step as SARL; 2 refines the best actions one step further
     "lookahead_width": 8,  # depth 2: how many of the best one-step actions are expanded
+    "ensemble": 1,  # value networks averaged (1: one network, as the published runs)
 }
 """The agent's options (``algo_kwargs``) and their defaults."""
 GAMMA = 0.9
@@ -72,7 +73,8 @@ class SarlAgent:
         if unknown:
             raise ConfigError(f"algo_kwargs: {name!r} has no option {unknown[0]!r}; its options: {', '.join(DEFAULTS)}")
         self.options = {**DEFAULTS, **config.algo_kwargs}
-        for option, allowed in (("lookahead_depth", range(1, 3)), ("lookahead_width", range(1, len(action_set(1.0)) + 1))):
+        for option, allowed in (("lookahead_depth", range(1, 3)), ("lookahead_width", range(1, len(action_set(1.0)) + 1)),
+                                ("ensemble", range(1, 9))):
             value = self.options[option]
             if isinstance(value, bool) or not isinstance(value, int) or value not in allowed:
                 raise ConfigError(f"algo_kwargs.{option}: {name!r} takes an integer from {allowed.start} to {allowed.stop - 1}, got {value!r}")
@@ -85,12 +87,18 @@ class SarlAgent:
         self.humans = int(cast(tuple[int, ...], spaces["humans"].shape)[0])
         self.gamma = float(config.gamma if config.gamma is not None else GAMMA)
         self.learning_rate = float(config.learning_rate if config.learning_rate is not None else LEARNING_RATE)
+        # linear: Adam's rate falls to 0 over the run's budget (as SB3's "linear"), so the last episodes move V less
+        self.decay_episodes: int | None = None
+        if config.learning_rate_schedule == "linear":
+            if config.episodes is None:
+                raise ConfigError(f"learning_rate_schedule: {name!r} decays over an episode budget; set episodes, not timesteps")
+            self.decay_episodes = int(config.episodes)
         self.episodes = 0
         self.rng = np.random.default_rng(config.seed)
         with torch.random.fork_rng():
             torch.manual_seed(config.seed)
-            self.network = ValueNetwork(int(self.options["width"]))
-            self.target = ValueNetwork(int(self.options["width"]))
+            self.network = value_network(int(self.options["width"]), int(self.options.get("ensemble", 1)))
+            self.target = value_network(int(self.options["width"]), int(self.options.get("ensemble", 1)))
         self._setup(ReplayMemory(int(self.options["memory_size"]), self.humans), Demonstrations())
         self.target.load_state_dict(self.network.state_dict())
 
@@ -223,7 +231,19 @@ class SarlAgent:
             order = torch.from_numpy(self.rng.permutation(len(returns)))
             for start in range(0, len(order), size):
                 index = order[start:start + size]
-                self._step(torch.nn.functional.mse_loss(self.network(robot[index], humans[index]), returns[index]))
+                self._step(self._loss(robot[index], humans[index], returns[index]))
+
+    def _loss(self, robot: torch.Tensor, humans: torch.Tensor, target: torch.Tensor) -> torch.Tensor:
+        """Mean squared error of V against ``target``; an ensemble: each member's, summed (each learns as one network)."""
+        if isinstance(self.network, ValueEnsemble):
+            return ((self.network.each(robot, humans) - target[None]) ** 2).mean(dim=1).sum()
+        return torch.nn.functional.mse_loss(self.network(robot, humans), target)
+
+    def _learning_rate(self) -> float:
+        """Adam's rate for the updates after the episode now ending: constant, or falling linearly to 0 at the budget."""
+        if self.decay_episodes is None:
+            return self.learning_rate
+        return self.learning_rate * max(0.0, 1.0 - (self.episodes + 1) / self.decay_episodes)
 
     def _step(self, loss: torch.Tensor) -> None:
         self.optimizer.zero_grad()
@@ -234,11 +254,14 @@ class SarlAgent:
         size = int(self.options["batch_size"])
         if self.memory.size < size:
             return
+        if self.decay_episodes is not None:
+            for group in self.optimizer.param_groups:
+                group["lr"] = self._learning_rate()
         for _ in range(int(self.options["updates_per_episode"])):
             batch = {key: torch.from_numpy(value) for key, value in self.memory.sample(self.rng, size).items()}
             with torch.no_grad():
                 target = batch["reward"] + self.discount * (1.0 - batch["terminal"]) * self.target(batch["next_robot"], batch["next_humans"])
-            self._step(torch.nn.functional.mse_loss(self.network(batch["robot"], batch["humans"]), target))
+            self._step(self._loss(batch["robot"], batch["humans"], target))
 
     # ------------------------------------------------------------------ checkpoints
 
@@ -252,7 +275,8 @@ class SarlAgent:
         self.memory.save(folder / "memory.npz")
         self.demonstrations.save(folder / "demonstrations.npz")
         document = {"options": self.options, "physics": self.physics.to_json(), "humans": self.humans, "gamma": self.gamma,
-                    "learning_rate": self.learning_rate, "episodes": self.episodes, "rng": self.rng.bit_generator.state,
+                    "learning_rate": self.learning_rate, "decay_episodes": self.decay_episodes, "episodes": self.episodes,
+                    "rng": self.rng.bit_generator.state,
                     "scales": {key: {"offset": offset.tolist(), "scale": scale.tolist()} for key, (offset, scale) in self.scales.items()},
                     "adam_groups": [{key: value for key, value in group.items() if key != "params"} for group in optimizer["param_groups"]]}
         (folder / "state.json").write_text(json.dumps(document), encoding="utf-8")
@@ -264,11 +288,13 @@ class SarlAgent:
         agent.options, agent.humans = dict(document["options"]), int(document["humans"])
         agent.physics = Physics.from_json(document["physics"])
         agent.gamma, agent.learning_rate, agent.episodes = float(document["gamma"]), float(document["learning_rate"]), int(document["episodes"])
+        agent.decay_episodes = document.get("decay_episodes")  # absent in checkpoints from before the schedule: constant
         agent.scales = {key: (np.asarray(item["offset"], dtype=np.float64), np.asarray(item["scale"], dtype=np.float64))
                         for key, item in document["scales"].items()}
         agent.rng = np.random.default_rng()
         agent.rng.bit_generator.state = document["rng"]
-        agent.network, agent.target = ValueNetwork(int(agent.options["width"])), ValueNetwork(int(agent.options["width"]))
+        width, members = int(agent.options["width"]), int(agent.options.get("ensemble", 1))
+        agent.network, agent.target = value_network(width, members), value_network(width, members)
         with np.load(folder / "weights.npz", allow_pickle=False) as arrays:
             for prefix, network in (("network.", agent.network), ("target.", agent.target)):
                 network.load_state_dict({key[len(prefix):]: torch.from_numpy(arrays[key].copy()) for key in arrays.files if key.startswith(prefix)})
@@ -283,3 +309,4 @@ class SarlAgent:
             group.update({key: tuple(value) if isinstance(value, list) else value for key, value in saved.items()})
         agent.optimizer.load_state_dict({"state": adam, "param_groups": groups})
         return agent
+

@@ -57,7 +57,34 @@ class ValueNetwork(nn.Module):
         return self.value(torch.cat([robot, pooled], dim=-1))[..., 0], attention
 
 
-def evaluate(network: ValueNetwork, robot: np.ndarray, humans: np.ndarray) -> np.ndarray:
+class ValueEnsemble(nn.Module):
+    """``members`` value networks of one width, each initialised apart; ``forward`` is their mean value.
+
+    Every member regresses on the same minibatches and the same target (the target ensemble's mean); the mean of
+    independently initialised networks moves less from one update to the next than any one of them, so the greedy
+    action changes less between snapshots (the policy churn of a single network is what moves a seed by a point or
+    two over its last 500 episodes).
+    """
+
+    def __init__(self, width: int = 64, members: int = 2):
+        super().__init__()
+        self.width = width
+        self.members = nn.ModuleList(ValueNetwork(width) for _ in range(members))
+
+    def forward(self, robot: torch.Tensor, humans: torch.Tensor) -> torch.Tensor:
+        return self.each(robot, humans).mean(dim=0)
+
+    def each(self, robot: torch.Tensor, humans: torch.Tensor) -> torch.Tensor:
+        """(members, N) values, one row per member."""
+        return torch.stack([member(robot, humans) for member in self.members])
+
+
+def value_network(width: int, members: int) -> ValueNetwork | ValueEnsemble:
+    """One network (``members`` 1: the published runs' parameter names and draws) or an ensemble of ``members``."""
+    return ValueNetwork(width) if members == 1 else ValueEnsemble(width, members)
+
+
+def evaluate(network: ValueNetwork | ValueEnsemble, robot: np.ndarray, humans: np.ndarray) -> np.ndarray:
     """Values (float64, leading axes of ``robot``) of feature arrays with any leading axes, without gradients."""
     lead = robot.shape[:-1]
     with torch.no_grad():
