@@ -77,6 +77,14 @@ class Algorithm(Predictor, Protocol):
 
 
 @runtime_checkable
+class Continuing(Protocol):
+    """Optional: an agent whose behaviour depends on the run's settings (e.g. a schedule over the budget) is told them again on a resume."""
+
+    def continue_with(self, config: Any) -> None:
+        """Called on the agent :func:`load_algorithm` gave back, with the resumed run's config (its budget may be larger)."""
+
+
+@runtime_checkable
 class Exportable(Protocol):
     """An agent ``crowdnav export`` can write to ONNX (optional: an :class:`Algorithm` without it is refused in one line)."""
 

@@ -22,7 +22,7 @@ from typing import Any, SupportsFloat
 
 import gymnasium as gym
 import yaml
-from crowdnav.agents.algorithm_protocol import ALGORITHM_FOLDER, Algorithm, builder_of, load_algorithm
+from crowdnav.agents.algorithm_protocol import ALGORITHM_FOLDER, Algorithm, Continuing, builder_of, load_algorithm
 from crowdnav.agents.callbacks import EpisodeRecord
 from crowdnav.agents.checkpoint import POLICY_FORMAT, find_checkpoint, read_policy_info, replace_folder, staging_folder
 from crowdnav.agents.config import ConfigError, TrainConfig, config_to_dict
@@ -54,6 +54,8 @@ def train_registered(config: TrainConfig, resume: bool, on_checkpoint: Callable[
     scales = observation_normalization(inner)
     env = EpisodeEnds(inner, int(info["timesteps"]) if info else 0)
     agent: Algorithm = load_algorithm(find_checkpoint(checkpoint), config.algo) if info else builder_of(config.algo)(env, config)
+    if info and isinstance(agent, Continuing):  # e.g. a learning-rate schedule over the resumed run's budget
+        agent.continue_with(config)
     session = _Session(config, out, agent, env, first, int(info.get("successes", 0)) if info else 0,
                        None if scales is None else scales_to_json(scales), on_checkpoint)
     started, start_steps = time.perf_counter(), env.steps

@@ -16,7 +16,10 @@ regresses V on their discounted returns for ``imitation_epochs`` passes before V
 from there).
 
 Options (``algo_kwargs``): :data:`DEFAULTS`. ``gamma`` (default 0.9) is the discount per second at full speed,
-as SARL's; ``learning_rate`` (default 1e-3) Adam's.
+as SARL's; ``learning_rate`` (default 1e-3) Adam's, constant, or with ``learning_rate_schedule: linear`` falling
+linearly to 0 at the episode budget (a resume with a larger budget stretches it, as SB3's schedules).
+``ensemble: K`` values a state by the mean of K value networks initialised apart
+(:class:`~crowdnav.agents.sarl.network.ValueEnsemble`), each regressing on the same minibatches and target.
 """
 
 from __future__ import annotations
@@ -88,11 +91,7 @@ class SarlAgent:
         self.gamma = float(config.gamma if config.gamma is not None else GAMMA)
         self.learning_rate = float(config.learning_rate if config.learning_rate is not None else LEARNING_RATE)
         # linear: Adam's rate falls to 0 over the run's budget (as SB3's "linear"), so the last episodes move V less
-        self.decay_episodes: int | None = None
-        if config.learning_rate_schedule == "linear":
-            if config.episodes is None:
-                raise ConfigError(f"learning_rate_schedule: {name!r} decays over an episode budget; set episodes, not timesteps")
-            self.decay_episodes = int(config.episodes)
+        self.decay_episodes = _decay_episodes(config)
         self.episodes = 0
         self.rng = np.random.default_rng(config.seed)
         with torch.random.fork_rng():
@@ -170,6 +169,10 @@ class SarlAgent:
         return SarlPolicyModule(self, keys)
 
     # ------------------------------------------------------------------ learning
+
+    def continue_with(self, config: Any) -> None:
+        """A resume: the learning-rate schedule follows the resumed run's budget (as SB3's schedules do)."""
+        self.decay_episodes = _decay_episodes(config)
 
     def learn(self, env: gym.Env, keep_going: Callable[[], bool]) -> None:
         threads = torch.get_num_threads()
@@ -310,3 +313,12 @@ class SarlAgent:
         agent.optimizer.load_state_dict({"state": adam, "param_groups": groups})
         return agent
 
+
+
+def _decay_episodes(config: Any) -> int | None:
+    """``learning_rate_schedule: linear``: the episode budget Adam's rate falls to 0 over (None: a constant rate)."""
+    if config.learning_rate_schedule != "linear":
+        return None
+    if config.episodes is None:
+        raise ConfigError(f"learning_rate_schedule: {config.algo!r} decays over an episode budget; set episodes, not timesteps")
+    return int(config.episodes)
