@@ -181,7 +181,7 @@ class TrainConfig(_Section):
                              json_schema_extra=_algorithm_enum)
     agents: Literal["robot", "robots"] = option(
         "robot", "robot: the Gymnasium env's first robot learns; robots: every robot of a multi-robot scenario learns one shared "
-                 "PPO policy through SuperSuit (docs/agents.md#several-robots-shared-parameter-ppo).")
+                 "PPO policy, one vector row per robot per world (docs/agents.md#several-robots-shared-parameter-ppo).")
     agent_identity: Bool = option(True, "agents: robots: append a one-hot of the robot's index to its observation, so the shared "
                                         "network can tell robots of different kinematics apart.")
     robot_actions: Literal["native", "velocity", "goal_velocity"] = option(
@@ -317,7 +317,7 @@ def robots_problems(config: TrainConfig) -> list[tuple[str, str]]:
     if config.robot_networks == "per_kind" and not config.agent_identity:
         problems.append(("robot_networks", "per_kind picks each robot's network by its one-hot; set agent_identity: true"))
     if config.algo != "ppo":
-        problems.append(("algo", f"agents: robots trains shared-parameter PPO through SuperSuit; set algo: ppo (got {config.algo!r})"))
+        problems.append(("algo", f"agents: robots trains shared-parameter PPO; set algo: ppo (got {config.algo!r})"))
     if config.demonstrations.episodes:
         problems.append(("demonstrations.episodes", "agents: robots has no warm start from demonstrations; set it to 0"))
     if config.encoder.mode != "scratch" or "leog" in config.modalities:

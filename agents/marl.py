@@ -1,10 +1,10 @@
 """Shared-parameter PPO for the robots of a multi-robot scenario (``agents: robots`` in a TrainConfig).
 
-No training loop of crowdnav's own: SuperSuit turns the robots-only PettingZoo env
-(:class:`crowdnav.agents.marl_env.RobotsTrainingEnv`) into one vector row per robot
-(``pettingzoo_env_to_vec_env_v1``) and stacks ``num_envs`` worlds (``concat_vec_envs_v1``, in
-this process); Stable-Baselines3's PPO trains one ``MlpPolicy`` on every row, so every robot
-acts with the same network (told apart by the one-hot of ``agent_identity``).
+No training loop of crowdnav's own: :class:`crowdnav.agents.marl_vec_env.RobotsVecEnv` holds
+``num_envs`` worlds of the robots-only env (:class:`crowdnav.agents.marl_env.RobotsTrainingEnv`)
+and gives Stable-Baselines3 one vector row per robot per world, stepped in this process;
+SB3's PPO trains one ``MlpPolicy`` on every row, so every robot acts with the same network (told
+apart by the one-hot of ``agent_identity``).
 
 The output folder is a run folder like a single-agent run's (:mod:`crowdnav.agents.run_folder`):
 ``config.yaml``, ``episodes.csv`` (one row per *robot* episode: a world's episode with three
@@ -44,9 +44,10 @@ from crowdnav.agents.config import ConfigError, TrainConfig, config_from_mapping
 from crowdnav.agents.episode_log import EpisodeLogWriter, prepare_log
 from crowdnav.agents.factory import LinearDecay, env_options, hyperparameters
 from crowdnav.agents.marl_actions import RobotActions
-from crowdnav.agents.marl_env import RobotObservations, RobotsTrainingEnv, robots_env
+from crowdnav.agents.marl_env import RobotObservations, robots_env
 from crowdnav.agents.marl_networks import KindActorCriticPolicy, robot_kinds
 from crowdnav.agents.marl_resume import has_state, load_state, pending_update, save_resumable
+from crowdnav.agents.marl_vec_env import RobotsVecEnv
 from crowdnav.agents.model_zip import read_model_zip
 from crowdnav.agents.resume_state import STATE_FILE, restore_training_state
 from crowdnav.agents.run_folder import checkpoint_dir, episode_log, recover_checkpoint, snapshot_dir, writing
@@ -65,32 +66,21 @@ ROBOTS_KIND = "robots"
 """``policy.json``'s ``agents`` for a shared robot policy (single-agent checkpoints have none)."""
 
 
-def make_robots_vec_env(config: TrainConfig, first_episode: int = 0) -> Any:
-    """``num_envs`` worlds of the run's robots as one SB3 VecEnv (one row per robot per world), through SuperSuit."""
-    import supersuit as ss
-
-    base = RobotsTrainingEnv(env_options(config), normalize=config.normalize_observations, identity=config.agent_identity,
-                             run_seed=config.seed, first_episode=first_episode, actions=config.robot_actions)
-    vec = ss.concat_vec_envs_v1(ss.pettingzoo_env_to_vec_env_v1(base), config.num_envs, base_class="stable_baselines3")
-    for world, markov in enumerate(vec.venv.vec_envs):  # SuperSuit copied the env: each copy learns which world it is
-        markov.par_env.assign_world(world, config.num_envs)
-    return vec
+def make_robots_vec_env(config: TrainConfig, first_episode: int = 0) -> RobotsVecEnv:
+    """``num_envs`` worlds of the run's robots as one SB3 VecEnv (one row per robot per world)."""
+    return RobotsVecEnv.make(config, first_episode)
 
 
-def _worlds(vec: Any) -> list[RobotsTrainingEnv]:
-    return [markov.par_env for markov in vec.venv.vec_envs]
-
-
-def _ppo(config: TrainConfig, vec: Any) -> PPO:
+def _ppo(config: TrainConfig, vec: RobotsVecEnv) -> PPO:
     """SB3's PPO with crowdnav's batched PPO defaults (``hyperparameters``), on an MLP over the flat observations."""
     chosen = hyperparameters(config)
     rate = chosen["learning_rate"]
     schedule = LinearDecay(rate) if chosen["learning_rate_schedule"] == "linear" else rate
     kwargs = {"n_steps": chosen["n_steps"], "batch_size": min(chosen["batch_size"], chosen["n_steps"] * vec.num_envs),
               "gamma": chosen["gamma"], "learning_rate": schedule, **config.algo_kwargs}
-    kinds = robot_kinds(_worlds(vec)[0].env.scenario) if config.robot_networks == "per_kind" else None
+    kinds = robot_kinds(vec.worlds[0].env.scenario) if config.robot_networks == "per_kind" else None
     robots_network_size(config, int(np.prod(vec.observation_space.shape)), "config", len(set(kinds or [0])))
-    set_random_seed(config.seed)  # SB3's own seeding calls env.seed, which SuperSuit's vector env lacks
+    set_random_seed(config.seed)  # not PPO(seed=...): the worlds seed their own episodes, and the runs before kept this order
     extra: dict[str, Any] = {} if kinds is None else {"robot_kinds": kinds}
     policy: str | type[ActorCriticPolicy] = "MlpPolicy" if kinds is None else KindActorCriticPolicy
     try:
@@ -151,7 +141,7 @@ class _RobotEpisodes(BaseCallback):
 
     def _on_step(self) -> bool:
         infos, rewards = self.locals["infos"], self.locals["rewards"]
-        dones = np.asarray(self.locals["dones"], dtype=bool)  # SuperSuit's are uint8: as an index they would pick rows 0 and 1
+        dones = np.asarray(self.locals["dones"], dtype=bool)  # as an index, uint8 dones would pick rows 0 and 1
         if len(self.returns) != len(infos):
             self.returns, self.lengths = np.zeros(len(infos)), np.zeros(len(infos), dtype=int)
         self.returns += rewards
@@ -203,7 +193,7 @@ def _train(config: TrainConfig, resume: bool, on_checkpoint: Callable[[int], Non
     (out / "config.yaml").write_text(yaml.safe_dump(config_to_dict(config), sort_keys=False), encoding="utf-8")
     prepare_log(episode_log(out), first_episode)  # a resume sets aside the rows after its checkpoint
     vec = make_robots_vec_env(config, int(state["next_episode"]) if state else 0)
-    inputs = _worlds(vec)[0].inputs
+    inputs = vec.worlds[0].inputs
     if state and not inputs.matches(state["robots"]):
         raise ConfigError(f"{checkpoint}: its robots' observations differ from this config's scenario and options; "
                           "resume with the run's own config.yaml")
@@ -214,7 +204,7 @@ def _train(config: TrainConfig, resume: bool, on_checkpoint: Callable[[int], Non
 
     def info() -> dict[str, Any]:
         # the episode after every one any world has started: a resume's worlds start there, so no seed repeats
-        following = max(world.next_episode for world in _worlds(vec))
+        following = max(world.next_episode for world in vec.worlds)
         return {"algo": config.algo, "agents": ROBOTS_KIND, "env": env_options(config), "robots": inputs.to_json(),
                 "episodes": callback.done, "timesteps": model.num_timesteps, "next_episode": following,
                 "successes": callback.successes, "hyperparameters": hyperparameters(config), "config": config_to_dict(config)}
@@ -225,7 +215,7 @@ def _train(config: TrainConfig, resume: bool, on_checkpoint: Callable[[int], Non
     def save(resumable: bool = False) -> None:
         callback.log.sync()  # the log holds every episode the checkpoint counts
         if resumable:  # at a rollout's end: the worlds, the rollout and the random streams, for an exact resume
-            save_resumable(model, checkpoint, info(), _worlds(vec), {"returns": callback.returns, "lengths": callback.lengths})
+            save_resumable(model, checkpoint, info(), vec.worlds, {"returns": callback.returns, "lengths": callback.lengths})
         else:  # the budget's end, inside a step: a resume with a larger budget starts new episodes
             save_checkpoint(model, checkpoint, info())
         if on_checkpoint is not None:
@@ -235,7 +225,7 @@ def _train(config: TrainConfig, resume: bool, on_checkpoint: Callable[[int], Non
     callback.returns, callback.lengths = np.zeros(vec.num_envs), np.zeros(vec.num_envs, dtype=int)
     if state and has_state(checkpoint):
         sums = {"returns": callback.returns, "lengths": callback.lengths}
-        load_state(checkpoint, model, _worlds(vec), sums)
+        load_state(checkpoint, model, vec, sums)
         callback.returns, callback.lengths = sums["returns"], sums["lengths"]
         restore_training_state(model, checkpoint / STATE_FILE)  # counters and every random stream, last
         callback.pending = pending_update(model)
@@ -243,7 +233,7 @@ def _train(config: TrainConfig, resume: bool, on_checkpoint: Callable[[int], Non
     started, start_steps = time.perf_counter(), model.num_timesteps
     rows = vec.num_envs
     # an upper bound in robot steps: the callback stops at the budget (episodes of at most max_steps each)
-    max_steps = _worlds(vec)[0].env.scenario.max_steps
+    max_steps = vec.worlds[0].env.scenario.max_steps
     total = config.timesteps if config.timesteps is not None else (config.episodes + rows) * max_steps
     remaining = max(total - model.num_timesteps, 0)
     if remaining and not (callback.unit == "episodes" and first_episode >= config.episodes):

@@ -1,9 +1,10 @@
-"""The robots of a multi-robot scenario as SuperSuit and one shared network take them (``agents: robots``).
+"""The robots of a multi-robot scenario as the robots' vector env and one shared network take them (``agents: robots``).
 
 :class:`RobotsTrainingEnv` is a PettingZoo ParallelEnv over crowdnav's robots-only env
 (``crowdnav.parallel_env(..., humans_as_agents=False, fixed_agents=True, flat_observations=True)``):
 every robot is an agent every step (a robot that ended is inactive: zero observation, reward 0),
-the humans follow the scenario's crowd model. What it adds for shared-parameter training:
+the humans follow the scenario's crowd model. :class:`crowdnav.agents.marl_vec_env.RobotsVecEnv`
+steps ``num_envs`` of them as one SB3 vector env. What it adds for shared-parameter training:
 
 * **observations** through :class:`RobotObservations`: each modality scaled by the scale it
   declares (as the single-agent runs' ``normalize_observations``), then, with
@@ -14,9 +15,9 @@ the humans follow the scenario's crowd model. What it adds for shared-parameter 
   a unicycle tracks;
 * **training seeds**: world ``w`` of ``B`` plays its ``k``-th episode with
   :func:`crowdnav.agents.seeding.train_seed` ``(seed, first_episode + k * B + w)``, whatever seed
-  SuperSuit passes: the training band, never a held-out test seed, the same for the same seed;
-* **infos**: ``episode_seed`` on every robot at every step (not at reset: SuperSuit merges the next
-  episode's reset infos into the last step's), and SB3's ``TimeLimit.truncated`` when the episode
+  the caller passes: the training band, never a held-out test seed, the same for the same seed;
+* **infos**: ``episode_seed`` on every robot at every step (not at reset: the vector env merges the
+  next episode's reset infos into the last step's), and SB3's ``TimeLimit.truncated`` when the episode
   hits the time limit (so PPO bootstraps the value there rather than treating it as an end).
 """
 
@@ -85,7 +86,7 @@ class RobotObservations:
         self.space = spaces.Box(-np.inf, np.inf, shape=(width,), dtype=np.float32)
 
     def __call__(self, index: int, flat: np.ndarray, active: bool = True) -> np.ndarray:
-        """Robot ``index``'s input; an inactive robot's stays all zero (SuperSuit's convention for an agent that left)."""
+        """Robot ``index``'s input; an inactive robot's stays all zero (PettingZoo's "black death" for an agent that left)."""
         scaled = (np.asarray(flat, np.float32) - self.offset) / self.scale if active else np.zeros_like(self.offset)
         if not self.identity:
             return scaled.astype(np.float32, copy=False)
@@ -139,7 +140,7 @@ class RobotsTrainingEnv(ParallelEnv):  # type: ignore[misc]  # pettingzoo is unt
         resumable checkpoint replays (:mod:`crowdnav.agents.marl_resume`); None after a step that did not act for every robot."""
 
     def assign_world(self, world: int, worlds: int) -> None:
-        """This copy is world ``world`` of ``worlds`` (set on every copy SuperSuit's concat_vec_envs_v1 made, before the first reset)."""
+        """This env is world ``world`` of ``worlds`` (set on every world before the first reset: it numbers their episodes)."""
         self.world, self.worlds = int(world), int(worlds)
 
     @property
@@ -154,7 +155,7 @@ class RobotsTrainingEnv(ParallelEnv):  # type: ignore[misc]  # pettingzoo is unt
         return self.env.action_space(agent)
 
     def reset(self, seed: int | None = None, options: dict[str, Any] | None = None) -> tuple[dict[str, np.ndarray], dict[str, dict[str, Any]]]:
-        # SuperSuit's seed (or none, at an autoreset) is replaced: every episode's seed comes from the run's band
+        # the caller's seed (or none, at an autoreset) is replaced: every episode's seed comes from the run's band
         episode = self.next_episode
         if episode >= MAX_TRAIN_EPISODES:
             raise RuntimeError(f"a run may start at most {MAX_TRAIN_EPISODES:,} training episodes (crowdnav.agents.seeding)")
@@ -164,12 +165,12 @@ class RobotsTrainingEnv(ParallelEnv):  # type: ignore[misc]  # pettingzoo is unt
         self.observed = observations
         self.agents = list(self.env.agents)
         self.actions = []
-        return self._inputs(observations, infos), infos  # no episode_seed here: SuperSuit merges an autoreset's infos over the last step's
+        return self._inputs(observations, infos), infos  # no episode_seed here: an autoreset's infos are merged over the last step's
 
     def step(self, actions: Mapping[str, Any]) -> tuple[dict[str, Any], dict[str, Any], dict[str, Any], dict[str, Any], dict[str, Any]]:
         if self.actions is not None and all(name in actions for name in self.possible_agents):
             self.actions.append(np.stack([actions[name] for name in self.possible_agents]))
-        else:  # SuperSuit acts for every robot each step (fixed agents); another caller may not, and cannot be replayed
+        else:  # the vector env acts for every robot each step (fixed agents); another caller may not, and cannot be replayed
             self.actions = None
         observations, rewards, terminations, truncations, infos = self.env.step(self.commands(actions, self.possible_agents, self.observed))
         self.observed = observations

@@ -8,7 +8,7 @@ each, ``net_arch`` as for the shared network): :class:`KindNetworks` reads the r
 its one-hot and passes the row through its kind's layers. Kind ``k``'s latent fills the ``k``-th
 block of a latent ``kinds`` times as wide, the other blocks zero, so SB3's action and value heads
 (linear layers on that latent) hold separate weights per kind as well; only their two biases and
-the action log-std are shared. It stays one SB3 PPO on one vector env (SuperSuit's rows), one
+the action log-std are shared. It stays one SB3 PPO on one vector env (one row per robot), one
 checkpoint, one ``act`` for every robot.
 """
 

@@ -1,8 +1,8 @@
 """Exact resume of shared robot training (``agents: robots``): the checkpoint at a PPO rollout's end, and its way back.
 
-SuperSuit's chain (``concat_vec_envs_v1`` over ``pettingzoo_env_to_vec_env_v1``) holds no state of
-its own between steps: every world is a :class:`crowdnav.agents.marl_env.RobotsTrainingEnv`, and
-an episode's only randomness is the simulator's generator seeded at reset. So a run is stored
+The robots' vector env (:class:`crowdnav.agents.marl_vec_env.RobotsVecEnv`) holds no state of its
+own between steps: every world is a :class:`crowdnav.agents.marl_env.RobotsTrainingEnv`, and an
+episode's only randomness is the simulator's generator seeded at reset. So a run is stored
 as a single-robot on-policy run is (:mod:`crowdnav.agents.resume_worlds`), when a rollout is
 complete and before SB3 trains on it:
 
@@ -13,7 +13,7 @@ complete and before SB3 trains on it:
   its episode counters and every robot's actions since that episode's reset.
 
 A resumed run rebuilds each world by resetting it with its episode's seed and replaying the
-actions (the rebuilt observation must equal the stored one, or the resume is refused), puts the
+actions (:meth:`RobotsVecEnv.restore_worlds`; the rebuilt observation must equal the stored one, or the resume is refused), puts the
 rollout back, takes the update the checkpoint preceded, then collects as the uninterrupted run
 did: the same episodes and the same weights, bit for bit, wherever the run was killed.
 
@@ -32,6 +32,7 @@ from typing import Any
 import numpy as np
 from crowdnav.agents.checkpoint import save_checkpoint
 from crowdnav.agents.marl_env import RobotsTrainingEnv
+from crowdnav.agents.marl_vec_env import RobotsVecEnv
 from crowdnav.agents.resume_state import _ROLLOUT, ResumeStateError, _fill, _position, _read_npz, _write_npz
 
 STATE_FILE = "robots_state.npz"
@@ -85,7 +86,7 @@ def has_state(folder: Path) -> bool:
     return (folder / STATE_FILE).is_file()
 
 
-def load_state(folder: Path, model: Any, worlds: list[RobotsTrainingEnv], rows: dict[str, np.ndarray]) -> None:
+def load_state(folder: Path, model: Any, vec: RobotsVecEnv, rows: dict[str, np.ndarray]) -> None:
     """Put back what :func:`save_resumable` stored: rollout, last observation, worlds mid-episode, the log's running sums.
 
     The model's counters and random streams come from ``training_state.json``
@@ -107,26 +108,28 @@ def load_state(folder: Path, model: Any, worlds: list[RobotsTrainingEnv], rows: 
     expected = (model.env.num_envs, *model.observation_space.shape)
     if last_obs is None or last_obs.shape != expected or starts is None or starts.shape != (model.env.num_envs,):
         raise ResumeStateError(f"{path}: its last observation does not fit this run's {model.env.num_envs} robot rows")
-    _replay_worlds(path, worlds, arrays, meta, last_obs)
+    _replay_worlds(path, vec, arrays, meta, last_obs)
     model._last_obs, model._last_episode_starts = last_obs, starts
 
 
-def _replay_worlds(path: Path, worlds: list[RobotsTrainingEnv], arrays: Mapping[str, np.ndarray], meta: Mapping[str, Any],
+def _replay_worlds(path: Path, vec: RobotsVecEnv, arrays: Mapping[str, np.ndarray], meta: Mapping[str, Any],
                    last_obs: np.ndarray) -> None:
+    worlds = vec.worlds
     counters, actions, lengths = meta.get("worlds"), arrays.get("worlds/actions"), arrays.get("worlds/lengths")
-    robots = len(worlds[0].possible_agents)
+    robots = len(vec.robots)
     if not isinstance(counters, list) or len(counters) != len(worlds) or actions is None or lengths is None \
             or actions.shape[0] != len(worlds) or actions.shape[2:] != (robots, 2) or lengths.shape != (len(worlds),) \
             or not all(0 <= length <= actions.shape[1] for length in lengths):
         raise ResumeStateError(f"{path}: its worlds do not fit this run's {len(worlds)} worlds of {robots} robots")
-    for w, (world, counter) in enumerate(zip(worlds, counters, strict=True)):
+    pairs = []
+    for w, counter in enumerate(counters):
         try:
-            first, played = int(counter["first_episode"]), int(counter["played"])
+            pairs.append((int(counter["first_episode"]), int(counter["played"])))
         except (KeyError, TypeError, ValueError):
             raise ResumeStateError(f"{path}: world {w}'s episode counters are unreadable") from None
-        observations = world.replay(first, played, actions[w, : lengths[w]])
-        rebuilt = np.stack([observations[name] for name in world.possible_agents])
-        if not np.array_equal(rebuilt, last_obs[w * robots: (w + 1) * robots]):
+    rebuilt = vec.restore_worlds(pairs, actions, lengths)
+    for w in range(len(worlds)):
+        if not np.array_equal(rebuilt[w * robots: (w + 1) * robots], last_obs[w * robots: (w + 1) * robots]):
             raise ResumeStateError(f"{path}: world {w} replayed to another observation than the one stored; the scenario or "
                                    "crowdnav changed since the checkpoint (resume with the version that wrote it)")
 

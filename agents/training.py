@@ -50,7 +50,7 @@ def train(config: TrainConfig | Mapping[str, Any] | str | Path, *, resume: bool 
     elif isinstance(config, Mapping):
         config = config_from_mapping(config)
     # a TrainConfig was checked when it was built: not again here (one validation per run)
-    if config.agents == "robots":  # every robot of a multi-robot scenario, one shared policy: SuperSuit + SB3's PPO
+    if config.agents == "robots":  # every robot of a multi-robot scenario, one shared policy: SB3's PPO on RobotsVecEnv
         from crowdnav.agents.marl import train_robots
 
         return train_robots(config, resume=resume, on_checkpoint=on_checkpoint)

@@ -7,16 +7,13 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-
-pytest.importorskip("supersuit")
-
-from crowdnav.agents import ConfigError, train  # noqa: E402
-from crowdnav.agents.config import config_from_mapping  # noqa: E402
-from crowdnav.agents.marl import load_robots_policy  # noqa: E402
-from crowdnav.agents.marl_env import RobotsConfigError, RobotsTrainingEnv  # noqa: E402
-from crowdnav.agents.seeding import TRAIN_SEED_BASE, train_seed  # noqa: E402
-from crowdnav.evaluation.baselines import scripted_policy  # noqa: E402
-from crowdnav.evaluation.robot_rollout import RobotEpisodes, robot_count  # noqa: E402
+from crowdnav.agents import ConfigError, train
+from crowdnav.agents.config import config_from_mapping
+from crowdnav.agents.marl import load_robots_policy
+from crowdnav.agents.marl_env import RobotsConfigError, RobotsTrainingEnv
+from crowdnav.agents.seeding import TRAIN_SEED_BASE, train_seed
+from crowdnav.evaluation.baselines import scripted_policy
+from crowdnav.evaluation.robot_rollout import RobotEpisodes, robot_count
 
 HALL = "robots_crossing_hall"
 
@@ -49,7 +46,7 @@ def test_a_one_robot_scenario_is_refused_in_one_line(tmp_path):
     assert "\n" not in str(error.value)
 
 
-def test_every_world_plays_its_own_training_band_seeds_whatever_seed_supersuit_passes():
+def test_every_world_plays_its_own_training_band_seeds_whatever_seed_the_caller_passes():
     worlds = [RobotsTrainingEnv({"scenario": HALL}, normalize=True, identity=True, run_seed=3) for _ in range(2)]
     for world, env in enumerate(worlds):
         env.assign_world(world, 2)

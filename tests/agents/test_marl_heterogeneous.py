@@ -11,21 +11,18 @@ import numpy as np
 import pytest
 import torch
 import yaml
+from crowdnav.agents import ConfigError, train
+from crowdnav.agents.config import config_from_mapping
+from crowdnav.agents.marl import load_robots_policy
+from crowdnav.agents.marl_actions import RobotActions, command, unicycle_action
+from crowdnav.agents.marl_env import RobotsTrainingEnv, robots_env
+from crowdnav.agents.marl_networks import KindActorCriticPolicy, KindNetworks, robot_kinds
+from stable_baselines3.common.policies import ActorCriticPolicy
 
-pytest.importorskip("supersuit")
-
-from crowdnav.agents import ConfigError, train  # noqa: E402
-from crowdnav.agents.config import config_from_mapping  # noqa: E402
-from crowdnav.agents.marl import load_robots_policy  # noqa: E402
-from crowdnav.agents.marl_actions import RobotActions, command, unicycle_action  # noqa: E402
-from crowdnav.agents.marl_env import RobotsTrainingEnv, robots_env  # noqa: E402
-from crowdnav.agents.marl_networks import KindActorCriticPolicy, KindNetworks, robot_kinds  # noqa: E402
-from stable_baselines3.common.policies import ActorCriticPolicy  # noqa: E402
-
-from crowdnav.policies import velocity_to_action  # noqa: E402
-from crowdnav.scenario.loader import load_scenario  # noqa: E402
-from tests.agents.test_marl import HALL, robots_config  # noqa: E402
-from tests.agents.test_marl_resume import Stopped, _episodes, _stop_at, _weights  # noqa: E402
+from crowdnav.policies import velocity_to_action
+from crowdnav.scenario.loader import load_scenario
+from tests.agents.test_marl import HALL, robots_config
+from tests.agents.test_marl_resume import Stopped, _episodes, _stop_at, _weights
 
 DT, TURN = 0.2, 2.0  # robots_crossing_hall's time step and its unicycle's max angular speed
 COMMANDS = [(1.0, 0.0), (0.5, 0.5), (0.2, -0.9), (-0.7, 0.1), (-1.0, -0.0), (0.0, 1.0), (3.0, 4.0), (1e-12, 0.0), (0.9, 0.05)]

@@ -14,14 +14,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 import yaml
+from crowdnav.agents import train
+from crowdnav.agents.marl_resume import STATE_FILE
+from crowdnav.agents.resume_state import ResumeStateError
 
-pytest.importorskip("supersuit")
-
-from crowdnav.agents import train  # noqa: E402
-from crowdnav.agents.marl_resume import STATE_FILE  # noqa: E402
-from crowdnav.agents.resume_state import ResumeStateError  # noqa: E402
-
-from tests.agents.test_marl import robots_config  # noqa: E402
+from tests.agents.test_marl import robots_config
 
 
 class Stopped(Exception):

@@ -9,9 +9,7 @@ from pathlib import Path
 import pytest
 import yaml
 
-pytest.importorskip("supersuit")
-
-from crowdnav.cli import main  # noqa: E402
+from crowdnav.cli import main
 
 HALL = "robots_crossing_hall"
 
