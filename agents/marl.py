@@ -79,7 +79,7 @@ def _ppo(config: TrainConfig, vec: RobotsVecEnv) -> PPO:
     kwargs = {"n_steps": chosen["n_steps"], "batch_size": min(chosen["batch_size"], chosen["n_steps"] * vec.num_envs),
               "gamma": chosen["gamma"], "learning_rate": schedule, **config.algo_kwargs}
     kinds = robot_kinds(vec.worlds[0].env.scenario) if config.robot_networks == "per_kind" else None
-    robots_network_size(config, int(np.prod(vec.observation_space.shape)), "config", len(set(kinds or [0])))
+    robots_network_size(config, vec.worlds[0].inputs.space.shape[0], "config", len(set(kinds or [0])))
     set_random_seed(config.seed)  # not PPO(seed=...): the worlds seed their own episodes, and the runs before kept this order
     extra: dict[str, Any] = {} if kinds is None else {"robot_kinds": kinds}
     policy: str | type[ActorCriticPolicy] = "MlpPolicy" if kinds is None else KindActorCriticPolicy

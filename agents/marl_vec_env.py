@@ -60,7 +60,7 @@ class RobotsVecEnv(VecEnv):
 
     def _rows(self, observations: Sequence[Mapping[str, np.ndarray]]) -> np.ndarray:
         """Every world's robots' observations as the (rows, inputs) float32 array."""
-        out = np.empty((self.num_envs, *self.observation_space.shape), dtype=np.float32)  # type: ignore[misc]
+        out = np.empty((self.num_envs, *self.worlds[0].inputs.space.shape), dtype=np.float32)
         return np.stack([world[name] for world in observations for name in self.robots], out=out)
 
     def reset(self) -> VecEnvObs:
