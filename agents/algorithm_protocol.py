@@ -3,9 +3,12 @@
 An algorithm is registered by name with :func:`crowdnav.registry.register_algorithm` and an
 :class:`~crowdnav.registry.AlgorithmSpec` whose ``builder`` (:func:`builder_of`) is a class (or factory) with
 
-* ``builder(env, config) -> Algorithm``: a new agent for the run's env (a :func:`crowdnav.agents.factory.make_env`
-  environment: the observation dict as the modalities give it, normalised if the config says so; actions in
-  [-1, 1]) and its :class:`~crowdnav.agents.config.TrainConfig` (``seed``, ``gamma``, ``learning_rate``, ``algo_kwargs``, ...);
+* ``builder(env, config) -> Algorithm``: a new agent for the run's env and its
+  :class:`~crowdnav.agents.config.TrainConfig` (``seed``, ``gamma``, ``learning_rate``, ``algo_kwargs``, ...). The env is
+  the one collection stack of every algorithm and world count, :func:`crowdnav.agents.factory.make_vec_env`:
+  ``num_envs`` worlds (``config.num_envs``, 1 included) behind Stable-Baselines3's ``VecEnv`` API (``observation_space``
+  the single world's Dict, as the modalities give it, normalised if the config says so; actions ``(num_envs, 2)`` in
+  [-1, 1]; ``env.get_attr("scenario")[0]`` the scenario). At one world it plays the single env's episodes, bit for bit;
 * ``builder.load(folder) -> Algorithm``: the agent :meth:`Algorithm.save` wrote to ``folder``, with everything a
   resumed run continues from (weights, optimiser state, random streams).
 
@@ -28,7 +31,8 @@ The Stable-Baselines3 algorithms (``sac``, ``td3``, ``ddpg``, ``a2c``, ``ppo``, 
 the builder :data:`crowdnav.registry.SB3_BUILDER` (:class:`crowdnav.agents.sb3_algorithm.SB3Builder`): its agents are
 :class:`crowdnav.agents.sb3_algorithm.SB3Algorithm` (``learn``, ``save``, ``predict``, ``export_module``), and it is the
 one :class:`RunTrainer`: ``crowdnav train`` runs their :class:`crowdnav.agents.training_session.TrainingSession`
-(SB3's own loop with crowdnav's callbacks, several worlds at once, replay buffers and rollouts restored
+(SB3's own loop with crowdnav's callbacks, collecting from the same :func:`~crowdnav.agents.factory.make_vec_env`
+worlds, replay buffers and rollouts restored
 mid-episode for an exact resume), which a loop that sees the agent only between episodes could not give, and
 their checkpoints are SB3's ``model.zip`` at the checkpoint's top, read back as tensors only.
 ``agents: robots`` (shared-parameter PPO, :mod:`crowdnav.agents.marl`) is SB3's PPO only.
@@ -41,10 +45,10 @@ from importlib import import_module
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Protocol, runtime_checkable
 
-import gymnasium as gym
 import numpy as np
 
 if TYPE_CHECKING:
+    from stable_baselines3.common.vec_env import VecEnv
     from torch import nn
 
 ALGORITHM_FOLDER = "algorithm"
@@ -63,13 +67,18 @@ class Predictor(Protocol):
 class Algorithm(Predictor, Protocol):
     """A learning agent crowdnav can train, checkpoint, resume and evaluate (module docstring: how it is registered)."""
 
-    def learn(self, env: gym.Env, keep_going: Callable[[], bool]) -> None:
-        """Train on ``env`` (reset it, step it, learn) until ``keep_going()`` returns False.
+    def learn(self, env: VecEnv, keep_going: Callable[[], bool]) -> None:
+        """Train on the worlds of ``env`` (``reset()`` once, then ``step(actions)`` for all worlds at once) until ``keep_going()`` returns False.
 
-        Call ``keep_going()`` after every episode, once what the episode taught is in the agent's state: crowdnav
-        logs the episodes that ended since the last call there, stops on the budget (episodes, or env steps
-        counted by crowdnav) and may call :meth:`save` from inside it for a checkpoint. Play every episode to its
-        end before the next reset: crowdnav seeds each training episode itself, whatever seed ``reset`` is given.
+        ``env`` follows SB3's ``VecEnv`` conventions (:class:`crowdnav.agents.vec_env.CrowdNavSB3VecEnv`): ``step`` returns
+        ``(observations, rewards, dones, infos)`` with a leading world axis; a world whose episode ended is reset in the
+        same step, its last observation in ``infos[i]["terminal_observation"]`` and ``infos[i]["TimeLimit.truncated"]``
+        set when the time limit (not an event) ended it. Act on all worlds in one batched call (``predict`` takes
+        batches). Call ``keep_going()`` once for every episode that ended, in the order they ended (several in one
+        step: in world order), once what that episode taught is in the agent's state: crowdnav logs that episode
+        there, stops on the budget (episodes, or env steps of all worlds) and may call :meth:`save` from inside it
+        for a checkpoint (the other worlds then mid-episode: a resume starts new episodes in every world, see
+        :mod:`crowdnav.agents.protocol_training`). crowdnav seeds every training episode itself; do not reset mid-run.
         """
 
     def save(self, folder: Path) -> None:

@@ -35,6 +35,7 @@ from stable_baselines3.common.base_class import BaseAlgorithm
 from stable_baselines3.common.monitor import Monitor
 from stable_baselines3.common.noise import NormalActionNoise
 from stable_baselines3.common.type_aliases import GymEnv
+from stable_baselines3.common.vec_env import VecEnv
 
 from crowdnav.registry import ALGORITHM_NAMES, ALGORITHM_SPECS, OFF_POLICY_ALGORITHMS, AlgorithmSpec, algorithm_spec
 
@@ -136,14 +137,14 @@ def _scaled(reward: SupportsFloat, scale: float) -> float:
 
 
 def make_vec_env(config: TrainConfig, encoder: LeogEncoder | None = None, first_episode: int = 0,
-                 scales: ObservationScales | None = None) -> CrowdNavSB3VecEnv:
+                 scales: ObservationScales | None = None, reward_dtype: type[np.floating[Any]] = np.float32) -> CrowdNavSB3VecEnv:
     """The batched counterpart of :func:`make_env`: ``config.num_envs`` worlds of the native vector env for SB3.
 
     The same observations as :func:`make_env` gives (normalised with the modalities' scales or
     ``scales``, the frozen encoder's latent when ``encoder`` is given), the same rewards (scaled
     for the algorithm only), and every episode seeded by the run's own numbering from
     ``first_episode`` on (:class:`~crowdnav.agents.seeding.EpisodeSeedCounter`), never by the
-    seed the algorithm passes.
+    seed the algorithm passes. ``reward_dtype``: SB3's float32, or float64 (the env's own, as :func:`make_env` gives).
     """
     from gymnasium.vector import AutoresetMode
 
@@ -157,13 +158,14 @@ def make_vec_env(config: TrainConfig, encoder: LeogEncoder | None = None, first_
     if encoder is not None:
         check_leog_shape(config, encoder.architecture, vector.single_observation_space)
     return CrowdNavSB3VecEnv(vector, scales=scales, episode_seeds=EpisodeSeedCounter(config.seed, first_episode),
-                             reward_scale=config.reward_scale, encoder=encoder)
+                             reward_scale=config.reward_scale, encoder=encoder, reward_dtype=reward_dtype)
 
 
-def observation_normalization(env: gym.Env | CrowdNavSB3VecEnv) -> ObservationScales | None:
-    """The scales a :func:`make_env` or :func:`make_vec_env` environment applies (None: raw observations)."""
-    if isinstance(env, CrowdNavSB3VecEnv):
-        return env.scales
+def observation_normalization(env: gym.Env | VecEnv) -> ObservationScales | None:
+    """The scales a :func:`make_env` or :func:`make_vec_env` environment (or a VecEnvWrapper of it) applies (None: raw observations)."""
+    if isinstance(env, VecEnv):
+        inner = env.unwrapped
+        return inner.scales if isinstance(inner, CrowdNavSB3VecEnv) else None
     while isinstance(env, gym.Wrapper):
         if isinstance(env, NormalizeObservation):
             return env.scales

@@ -9,7 +9,15 @@ training episode, seeded ``train_seed(seed, i)``), ``checkpoint/`` (``policy.jso
 agent's :meth:`~crowdnav.agents.algorithm_protocol.Algorithm.save` wrote) every ``checkpoint_every`` episodes and at
 the end, ``snapshots/episode_<N>/`` after N episodes. ``--resume`` loads the agent from ``checkpoint/`` and goes
 on from its episode count, with the episode seeds the uninterrupted run would have had: an agent whose state is
-all in what it saves continues exactly. One env (``num_envs: 1``); a budget in episodes or ``timesteps``.
+all in what it saves continues exactly. A budget in episodes or ``timesteps`` (env steps of all worlds).
+
+The agent collects from the one vector stack every algorithm uses (:func:`crowdnav.agents.factory.make_vec_env`:
+``num_envs`` worlds of :class:`crowdnav.envs.vector.CrowdNavVectorEnv` behind SB3's ``VecEnv`` API, rewards in
+float64 as the env gives them; at ``num_envs: 1`` the one world is the single env, episode for episode). Episodes
+are numbered in the order they end and logged with the seed their world played. With several worlds a checkpoint
+falls while the other worlds are mid-episode: a resume starts new episodes in every world, from the first episode
+no world had begun (``next_episode`` in policy.json), and the unfinished ones are not played again (as SB3's
+batched runs that end inside a step); at one world that is the episode the uninterrupted run played next.
 """
 
 from __future__ import annotations
@@ -18,21 +26,24 @@ import json
 import time
 from collections.abc import Callable
 from pathlib import Path
-from typing import Any, SupportsFloat
+from typing import Any
 
-import gymnasium as gym
+import numpy as np
 import yaml
 from crowdnav.agents.algorithm_protocol import ALGORITHM_FOLDER, Algorithm, Continuing, builder_of, load_algorithm
 from crowdnav.agents.callbacks import EpisodeRecord
 from crowdnav.agents.checkpoint import POLICY_FORMAT, find_checkpoint, read_policy_info, replace_folder, staging_folder
 from crowdnav.agents.config import ConfigError, TrainConfig, config_to_dict
 from crowdnav.agents.episode_log import EpisodeLogWriter
-from crowdnav.agents.factory import env_options, make_env, observation_normalization
+from crowdnav.agents.factory import env_options, make_vec_env, observation_normalization
 from crowdnav.agents.run_folder import POLICY_FILE, checkpoint_dir, episode_log, recover_checkpoint, snapshot_dir
 from crowdnav.agents.seeding import train_seed
 from crowdnav.agents.train_result import TrainResult
 from crowdnav.agents.training_checks import prepare_episode_log
+from crowdnav.agents.vec_env import CrowdNavSB3VecEnv
 from crowdnav.agents.wrappers import scales_from_json, scales_to_json
+from stable_baselines3.common.vec_env import VecEnvWrapper
+from stable_baselines3.common.vec_env.base_vec_env import VecEnvObs, VecEnvStepReturn
 
 
 def train_registered(config: TrainConfig, resume: bool, on_checkpoint: Callable[[int], None] | None = None) -> TrainResult:
@@ -50,7 +61,8 @@ def train_registered(config: TrainConfig, resume: bool, on_checkpoint: Callable[
     first = int(info["episodes"]) if info else 0
     prepare_episode_log(out, first, stacklevel=3)  # as before: the warning points at train_registered's caller
     saved = info.get("observation_normalization") if info else None
-    inner = make_env(config, None, first, scales_from_json(saved) if saved is not None else None)
+    started = int(info.get("next_episode", first)) if info else 0  # several worlds: past the count (episodes end out of order)
+    inner = make_vec_env(config, None, started, scales_from_json(saved) if saved is not None else None, reward_dtype=np.float64)
     scales = observation_normalization(inner)
     env = EpisodeEnds(inner, int(info["timesteps"]) if info else 0)
     agent: Algorithm = load_algorithm(find_checkpoint(checkpoint), config.algo) if info else builder_of(config.algo)(env, config)
@@ -61,7 +73,7 @@ def train_registered(config: TrainConfig, resume: bool, on_checkpoint: Callable[
     started, start_steps = time.perf_counter(), env.steps
     if not session.finished:
         agent.learn(env, session.keep_going)
-        session.keep_going()  # episodes that ended after the agent's last call
+        session.flush()  # episodes that ended after the agent's last call
     session.finish()
     env.close()
     seconds = time.perf_counter() - started
@@ -70,21 +82,31 @@ def train_registered(config: TrainConfig, resume: bool, on_checkpoint: Callable[
                        records=session.records, model=agent)
 
 
-class EpisodeEnds(gym.Wrapper):
-    """Counts the env steps (``steps``, over the whole run) and keeps the final info of each episode that ends (``ended``)."""
+class EpisodeEnds(VecEnvWrapper):
+    """Counts the env steps (``steps``, of all worlds, over the whole run) and keeps the final info of each episode that ends."""
 
-    def __init__(self, env: gym.Env, steps: int = 0):
-        super().__init__(env)
+    def __init__(self, venv: CrowdNavSB3VecEnv, steps: int = 0):
+        super().__init__(venv)
         self.steps = steps
         self.ended: list[tuple[dict[str, Any], int]] = []
-        """(info of the episode's last step, env steps after it), oldest first; the session empties it."""
+        """(info of the episode's last step, env steps after it), in the order they ended (one step: world order); the session empties it."""
 
-    def step(self, action: Any) -> tuple[Any, SupportsFloat, bool, bool, dict[str, Any]]:
-        observation, reward, terminated, truncated, info = self.env.step(action)
-        self.steps += 1
-        if terminated or truncated:
-            self.ended.append((info, self.steps))
-        return observation, reward, terminated, truncated, info
+    def reset(self) -> VecEnvObs:
+        return self.venv.reset()
+
+    def step_wait(self) -> VecEnvStepReturn:
+        observation, rewards, dones, infos = self.venv.step_wait()
+        self.steps += self.num_envs
+        self.ended.extend((infos[i], self.steps) for i in np.flatnonzero(dones))
+        return observation, rewards, dones, infos
+
+    def next_episode(self) -> int:
+        """The first training episode no world has begun: the counter's next, less the worlds still at their episode's first step."""
+        inner = self.venv
+        assert isinstance(inner, CrowdNavSB3VecEnv) and inner.episode_seeds is not None  # make_vec_env's
+        counter, (_, lengths) = inner.episode_seeds, inner.world_counts()  # the worlds reset last hold the counter's last numbers
+        fresh = sum(1 for world in counter.episode_of if lengths[world] == 0)
+        return counter.next_episode - fresh
 
 
 class _Session:
@@ -109,17 +131,26 @@ class _Session:
         return self.done >= self.config.episodes
 
     def keep_going(self) -> bool:
-        """The agent's call after an episode: log the episodes that ended, checkpoint on schedule, say whether to go on."""
+        """The agent's call after each episode that ended: log the oldest one not yet logged (checkpoint on schedule), say whether to go on."""
+        if self.env.ended:
+            self._next(*self.env.ended.pop(0))
+        return not self.finished
+
+    def flush(self) -> None:
+        """Log the episodes that ended after the agent's last call (within the budget)."""
         ended, self.env.ended = self.env.ended, []
         for info, steps in ended:
-            if self.config.timesteps is None and self.done >= self.config.episodes:
-                break  # the run is exactly `episodes` long
-            self._record(info, steps)
-        return not self.finished
+            self._next(info, steps)
+
+    def _next(self, info: dict[str, Any], steps: int) -> None:
+        if self.config.timesteps is None and self.done >= self.config.episodes:
+            return  # the run is exactly `episodes` long (several worlds can end in the step that reaches it)
+        self._record(info, steps)
 
     def _record(self, info: dict[str, Any], steps: int) -> None:
         episode = info.get("episode", {})  # the Monitor's: the env's own return, before reward scaling
-        record = EpisodeRecord(episode=self.done, seed=train_seed(self.config.seed, self.done), outcome=info.get("outcome", "truncated"),
+        seed = int(info.get("episode_seed", train_seed(self.config.seed, self.done)))  # the seed the world played
+        record = EpisodeRecord(episode=self.done, seed=seed, outcome=info.get("outcome", "truncated"),
                                reward=round(float(episode.get("r", float("nan"))), 4), length=int(episode.get("l", 0)),
                                timesteps=steps, seconds=round(time.perf_counter() - self._start, 3))
         self.records.append(record)
@@ -144,6 +175,7 @@ class _Session:
         self.agent.save(staging / ALGORITHM_FOLDER)
         document = {"format": POLICY_FORMAT, "algo": self.config.algo, "env": env_options(self.config),
                     "observation_normalization": self.normalization, "episodes": self.done, "timesteps": self.env.steps,
+                    "next_episode": self.env.next_episode(),
                     "successes": self.successes, "hyperparameters": {}, "config": config_to_dict(self.config), "leog_encoder": None}
         (staging / POLICY_FILE).write_text(json.dumps(document, indent=2, default=str) + "\n", encoding="utf-8")
         replace_folder(staging, folder)
@@ -157,8 +189,6 @@ class _Session:
 
 def check_supported(config: TrainConfig) -> None:
     """ConfigError for the settings only the SB3 path has."""
-    if config.num_envs != 1:
-        raise ConfigError(f"num_envs: algorithm {config.algo!r} trains on one env; set num_envs: 1")
     if config.encoder.mode != "scratch":
         raise ConfigError(f"encoder.mode: algorithm {config.algo!r} takes the observations as they are; use encoder mode scratch")
     if config.demonstrations.episodes:

@@ -22,19 +22,17 @@ from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-import gymnasium as gym
 import numpy as np
 from crowdnav.agents.algorithm_protocol import SB3Predictor
 from crowdnav.agents.checkpoint import MODEL_FILE, load_model, model_from_parameters, resume_model
 from crowdnav.agents.config import TrainConfig, config_from_mapping, config_to_dict
 from crowdnav.agents.factory import make_env, make_model, observation_normalization
 from crowdnav.agents.train_result import TrainResult
-from crowdnav.agents.training_checks import scenario_max_steps
 from crowdnav.agents.training_session import TrainingSession
 from crowdnav.agents.wrappers import scales_from_json, scales_to_json
 from stable_baselines3.common.base_class import BaseAlgorithm
 from stable_baselines3.common.callbacks import BaseCallback
-from stable_baselines3.common.vec_env import DummyVecEnv
+from stable_baselines3.common.vec_env import VecEnv
 
 if TYPE_CHECKING:
     from torch import nn
@@ -51,13 +49,13 @@ class SB3Algorithm(SB3Predictor):
         super().__init__(model)
         self.settings: dict[str, Any] = {key: settings.get(key) for key in ("algo", "config", "observation_normalization")}
 
-    def learn(self, env: gym.Env, keep_going: Callable[[], bool]) -> None:
-        """SB3's ``learn`` on ``env`` for the rest of the config's budget, ``keep_going()`` after every episode's last step."""
+    def learn(self, env: VecEnv, keep_going: Callable[[], bool]) -> None:
+        """SB3's ``learn`` on ``env``'s worlds for the rest of the config's budget, ``keep_going()`` after every episode that ended."""
         config = config_from_mapping(self.settings["config"])
-        current = self.model.get_env()
-        if not (isinstance(current, DummyVecEnv) and current.envs[0] is env):  # a loaded model acts in an env of its own
+        if self.model.get_env() is not env:  # a loaded model acts in an env of its own
             self.model.set_env(env)
-        total = config.timesteps if config.timesteps is not None else config.episodes * scenario_max_steps(env) + 1
+        steps = int(env.get_attr("scenario")[0].max_steps) * env.num_envs  # every world's episodes as long as the limit
+        total = config.timesteps if config.timesteps is not None else config.episodes * steps + 1
         self.model.learn(max(1, total - self.model.num_timesteps), callback=_KeepGoing(keep_going), reset_num_timesteps=False)
 
     def save(self, folder: Path) -> None:
@@ -82,20 +80,20 @@ class SB3Algorithm(SB3Predictor):
 
 
 class _KeepGoing(BaseCallback):
-    """Calls ``keep_going()`` after a step that ended an episode; SB3's loop stops when it says False."""
+    """Calls ``keep_going()`` once per episode a step ended (world order); SB3's loop stops when it says False."""
 
     def __init__(self, keep_going: Callable[[], bool]):
         super().__init__()
         self.keep_going = keep_going
 
     def _on_step(self) -> bool:
-        return not np.any(self.locals["dones"]) or bool(self.keep_going())
+        return all([bool(self.keep_going()) for _ in range(int(np.count_nonzero(self.locals["dones"])))])  # every call made
 
 
 class SB3Builder:
     """``builder(env, config)`` and ``builder.load(folder)`` of :class:`SB3Algorithm`, for any spec with an ``sb3_class``."""
 
-    def __call__(self, env: gym.Env, config: TrainConfig) -> SB3Algorithm:
+    def __call__(self, env: VecEnv, config: TrainConfig) -> SB3Algorithm:
         scales = observation_normalization(env)
         settings = {"algo": config.algo, "config": config_to_dict(config),
                     "observation_normalization": None if scales is None else scales_to_json(scales)}

@@ -17,7 +17,8 @@ For training (:func:`crowdnav.agents.factory.make_vec_env`): ``episode_seeds`` (
 ones included, whatever seed the algorithm passes to ``VecEnv.seed`` (SB3 passes its own, which
 would otherwise replay held-out test seeds); a finished world's info then has ``episode_index``
 and ``episode_seed``. ``reward_scale`` multiplies the rewards the algorithm sees (the logged
-returns stay in env units); ``encoder`` replaces ``leog`` by a frozen encoder's latent, as
+returns stay in env units) and ``reward_dtype`` is their dtype (SB3's float32 by default;
+crowdnav's episode loop for registered algorithms keeps the env's float64); ``encoder`` replaces ``leog`` by a frozen encoder's latent, as
 :class:`crowdnav.agents.wrappers.LeogLatentWrapper` does for one env.
 """
 
@@ -43,7 +44,8 @@ class CrowdNavSB3VecEnv(VecEnv):
     """SB3's ``VecEnv`` interface over one :class:`CrowdNavVectorEnv` in ``SAME_STEP`` autoreset mode."""
 
     def __init__(self, env: CrowdNavVectorEnv, seed: int | None = None, scales: ObservationScales | None = None, *,
-                 episode_seeds: EpisodeSeedCounter | None = None, reward_scale: float = 1.0, encoder: Any = None):
+                 episode_seeds: EpisodeSeedCounter | None = None, reward_scale: float = 1.0, encoder: Any = None,
+                 reward_dtype: type[np.floating[Any]] = np.float32):
         if env.autoreset_mode is not AutoresetMode.SAME_STEP:
             raise ValueError("CrowdNavSB3VecEnv needs a CrowdNavVectorEnv with autoreset_mode=AutoresetMode.SAME_STEP (SB3 resets in the same step)")
         self.env = env
@@ -59,6 +61,7 @@ class CrowdNavSB3VecEnv(VecEnv):
         self.encoder = encoder
         self.episode_seeds = episode_seeds
         self.reward_scale = float(reward_scale)
+        self.reward_dtype = reward_dtype
         if episode_seeds is not None:  # without it, the vector env's own hook (if any) is left alone
             env.episode_seeds = episode_seeds
         super().__init__(env.num_envs, space, env.single_action_space)
@@ -143,7 +146,7 @@ class CrowdNavSB3VecEnv(VecEnv):
             self._lengths[dones] = 0
         if self.reward_scale != 1.0:
             rewards = rewards * self.reward_scale
-        return self._observe(observation), rewards.astype(np.float32), dones, out
+        return self._observe(observation), rewards.astype(self.reward_dtype), dones, out
 
     def close(self) -> None:
         self.env.close()

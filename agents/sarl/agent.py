@@ -7,13 +7,17 @@ predicted collision or goal); the best action is taken. All actions of all obser
 in one forward pass.
 
 Learning (:meth:`SarlAgent.learn`, deep V-learning as in Chen et al. 2019): epsilon-greedy episodes (epsilon
-decays linearly with the episodes played) fill a replay memory of observed transitions; after every episode a
-few minibatches regress ``V(s)`` on ``r + gamma^(dt * v_pref) * V_target(s')`` (``r`` the env's reward, no
-bootstrap after the episode ended), and every ``target_update_every`` episodes the target network copies the
+decays linearly with the episodes played) fill a replay memory of observed transitions, collected from the run's
+``num_envs`` worlds at once (one batched ``predict`` per step; at one world the episodes of the single env); after
+every episode (several ending in one step: one after the other, in world order) a few minibatches regress
+``V(s)`` on ``r + gamma^(dt * v_pref) * V_target(s')`` (``r`` the env's reward, no bootstrap after the episode
+ended), and every ``target_update_every`` episodes the target network copies the
 value network. By default the agent learns from its own episodes only (pure RL); ``imitation_episodes: N`` first
 plays N episodes of a scripted teacher (:mod:`~crowdnav.agents.sarl.imitation`, RL + demonstrations) and
 regresses V on their discounted returns for ``imitation_epochs`` passes before V-learning starts (epsilon decays
-from there).
+from there). With several worlds the first N episodes to start are the teacher's, each world's teacher reading
+that world's simulator; episodes that start while they run are the agent's own (their transitions join the
+memory, V-learning waits for the imitation).
 
 Options (``algo_kwargs``): :data:`DEFAULTS`. ``gamma`` (default 0.9) is the discount per second at full speed,
 as SARL's; ``learning_rate`` (default 1e-3) Adam's, constant, or with ``learning_rate_schedule: linear`` falling
@@ -27,17 +31,20 @@ from __future__ import annotations
 import json
 from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
-from typing import Any, cast
+from typing import TYPE_CHECKING, Any, cast
 
 import gymnasium as gym
 import numpy as np
 import torch
 from crowdnav.agents.config import ConfigError
 from crowdnav.agents.factory import observation_normalization
-from crowdnav.agents.sarl.imitation import Demonstrations, make_teacher
+from crowdnav.agents.sarl.imitation import Demonstrations, make_teacher, world_simulators
 from crowdnav.agents.sarl.lookahead import REQUIRED_KEYS, Physics, action_set, decode, features, lookahead
 from crowdnav.agents.sarl.memory import ReplayMemory
 from crowdnav.agents.sarl.network import ValueEnsemble, evaluate, value_network
+
+if TYPE_CHECKING:
+    from stable_baselines3.common.vec_env import VecEnv
 
 DEFAULTS: dict[str, Any] = {
     "width": 64,  # hidden layer size of every MLP of the value network
@@ -63,14 +70,14 @@ LEARNING_RATE = 1e-3
 class SarlAgent:
     """Implements crowdnav.agents.algorithm_protocol.Algorithm; ``SarlAgent(env, config)`` is the builder."""
 
-    def __init__(self, env: gym.Env, config: Any):
+    def __init__(self, env: VecEnv, config: Any):
         name = config.algo
-        space, unwrapped = env.observation_space, cast(Any, env.unwrapped)
+        space, scenario = env.observation_space, env.get_attr("scenario")[0]
         spaces = space.spaces if isinstance(space, gym.spaces.Dict) else {}
         missing = [key for key in REQUIRED_KEYS if key not in spaces]
         if missing:
             raise ConfigError(f"modalities: algorithm {name!r} reads humans, goal and velocity; add {', '.join(missing)}")
-        if unwrapped.scenario.robot.kinematics != "holonomic":
+        if scenario.robot.kinematics != "holonomic":
             raise ConfigError(f"scenario: algorithm {name!r} drives a holonomic robot; set robot.kinematics: holonomic")
         unknown = sorted(set(config.algo_kwargs) - set(DEFAULTS))
         if unknown:
@@ -83,7 +90,7 @@ class SarlAgent:
                 raise ConfigError(f"algo_kwargs.{option}: {name!r} takes an integer from {allowed.start} to {allowed.stop - 1}, got {value!r}")
         if int(self.options["imitation_episodes"]):
             make_teacher(str(self.options["imitation_teacher"]))  # an unknown teacher is refused before the run starts
-        self.physics = Physics.of_env(env, config.reward_scale)
+        self.physics = Physics.of_scenario(scenario, config.reward_scale)
         scales = observation_normalization(env) or {}
         self.scales = {key: (np.asarray(offset, dtype=np.float64), np.asarray(scale, dtype=np.float64))
                        for key, (offset, scale) in scales.items() if key in REQUIRED_KEYS}
@@ -174,7 +181,7 @@ class SarlAgent:
         """A resume: the learning-rate schedule follows the resumed run's budget (as SB3's schedules do)."""
         self.decay_episodes = _decay_episodes(config)
 
-    def learn(self, env: gym.Env, keep_going: Callable[[], bool]) -> None:
+    def learn(self, env: VecEnv, keep_going: Callable[[], bool]) -> None:
         threads = torch.get_num_threads()
         torch.set_num_threads(1)  # a small network: more threads only contend (25x slower on a busy 2-core machine)
         try:
@@ -182,49 +189,73 @@ class SarlAgent:
         finally:
             torch.set_num_threads(threads)
 
-    def _learn(self, env: gym.Env, keep_going: Callable[[], bool]) -> None:
+    def _learn(self, env: VecEnv, keep_going: Callable[[], bool]) -> None:
+        """Step all worlds together; every ended episode (world order) is learnt from, then ``keep_going`` is asked."""
+        worlds = env.num_envs
+        observation = env.reset()
+        robot, humans = self._observed(observation)
+        self._teaching = 0  # demonstrations under way (a resume starts every world afresh)
+        teaching = np.array([self._starts_demonstration() for _ in range(worlds)])
+        shown: list[tuple[list[np.ndarray], list[np.ndarray], list[float]]] = [([], [], []) for _ in range(worlds)]
         while True:
-            demonstrating = self.episodes < int(self.options["imitation_episodes"])
-            self._play(env, demonstrating)
-            if not demonstrating:
-                self._train()
-            elif self.episodes + 1 == int(self.options["imitation_episodes"]):
-                self._imitate()
-                self.target.load_state_dict(self.network.state_dict())
-            self.episodes += 1
-            if self.episodes % int(self.options["target_update_every"]) == 0:
-                self.target.load_state_dict(self.network.state_dict())
-            if not keep_going():
-                return
+            observation, rewards, dones, infos = env.step(self._actions(env, observation, teaching))
+            last = observation
+            if dones.any():  # the ended worlds' last observation (the one returned is the next episode's first)
+                last = {key: value.copy() for key, value in observation.items()}
+                for i in np.flatnonzero(dones):
+                    for key, value in infos[i]["terminal_observation"].items():
+                        last[key][i] = value
+            next_robot, next_humans = self._observed(last)
+            for i in range(worlds):
+                terminal = bool(dones[i]) and not infos[i].get("TimeLimit.truncated", False)
+                self.memory.add(robot[i], humans[i], float(rewards[i]), next_robot[i], next_humans[i], terminal)
+                if teaching[i]:  # the teacher's states and rewards, for its discounted returns
+                    shown[i][0].append(robot[i])
+                    shown[i][1].append(humans[i])
+                    shown[i][2].append(float(rewards[i]))
+            robot, humans = (next_robot, next_humans) if last is observation else self._observed(observation)
+            for i in np.flatnonzero(dones):
+                self._ended(shown[i] if teaching[i] else None)
+                if not keep_going():
+                    return
+                shown[i] = ([], [], [])
+                teaching[i] = self._starts_demonstration()
 
     def _observed(self, observation: Mapping[str, np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
         return features(decode(observation, self.scales), self.physics.radius)
 
-    def _play(self, env: gym.Env, demonstrating: bool) -> None:
-        """One training episode into the replay memory; ``demonstrating``: the teacher drives and its returns are kept."""
-        if demonstrating and self.teacher is None:
+    def _starts_demonstration(self) -> bool:
+        """Whether the episode a world starts now is the teacher's: fewer than ``imitation_episodes`` played or under way."""
+        if self.demonstrations.episodes + self._teaching >= int(self.options["imitation_episodes"]):
+            return False
+        if self.teacher is None:
             self.teacher = make_teacher(str(self.options["imitation_teacher"]))
-        observation, _ = env.reset()
-        robot, humans = self._observed(observation)
-        robots: list[np.ndarray] = []
-        crowds: list[np.ndarray] = []
-        rewards: list[float] = []
-        done = False
-        while not done:
-            if demonstrating:  # the teacher reads the simulator: demonstrations only
-                action = np.asarray(self.teacher(cast(Any, env.unwrapped).simulator), dtype=np.float32)
-            else:
-                action = self.predict(observation, deterministic=False)
-            observation, reward, terminated, truncated, _ = env.step(action)
-            next_robot, next_humans = self._observed(observation)
-            self.memory.add(robot, humans, float(reward), next_robot, next_humans, bool(terminated))
-            robots.append(robot)
-            crowds.append(humans)
-            rewards.append(float(reward))
-            robot, humans = next_robot, next_humans
-            done = terminated or truncated
-        if demonstrating:
-            self.demonstrations.add_episode(robots, crowds, rewards, self.discount)
+        self._teaching += 1
+        return True
+
+    def _actions(self, env: VecEnv, observation: Mapping[str, np.ndarray], teaching: np.ndarray) -> np.ndarray:
+        """Every world's action: epsilon-greedy, or the teacher's (it reads that world's simulator: demonstrations only)."""
+        if not teaching.any():
+            return self.predict(observation, deterministic=False)
+        actions = np.zeros((len(teaching), 2), dtype=np.float32) if teaching.all() else self.predict(observation, deterministic=False)
+        simulators = world_simulators(env)
+        for i in np.flatnonzero(teaching):
+            actions[i] = np.asarray(self.teacher(simulators[i]), dtype=np.float32)
+        return actions
+
+    def _ended(self, shown: tuple[list[np.ndarray], list[np.ndarray], list[float]] | None) -> None:
+        """What an ended episode teaches: V-learning, or (``shown``: the teacher's states and rewards) the demonstrations."""
+        if shown is None:
+            self._train()
+        else:
+            self._teaching -= 1
+            self.demonstrations.add_episode(*shown, self.discount)
+            if self.demonstrations.episodes == int(self.options["imitation_episodes"]):
+                self._imitate()
+                self.target.load_state_dict(self.network.state_dict())
+        self.episodes += 1
+        if self.episodes % int(self.options["target_update_every"]) == 0:
+            self.target.load_state_dict(self.network.state_dict())
 
     def _imitate(self) -> None:
         """Regress V on the demonstrations' discounted returns (``imitation_epochs`` shuffled passes)."""

@@ -27,6 +27,23 @@ def make_teacher(name: str) -> Any:
     return SCRIPTED_POLICIES[name]()
 
 
+def world_simulators(env: Any) -> list[Any]:
+    """Each world's simulator of a :func:`crowdnav.agents.factory.make_vec_env` env (or a VecEnvWrapper of it), for the teacher.
+
+    Where the vector env holds single envs (one world, or crowds too large to stack) these are their live simulators
+    (read, never stepped: the teacher of one world reads what it read before the vector stack); stacked worlds give
+    a snapshot per call (:meth:`crowdnav.envs.vector.CrowdNavVectorEnv.simulator`), so a teacher that keeps a plan per
+    episode state (the oracle) plans again at every step there.
+    """
+    from crowdnav.envs.vector_team import TeamWorlds
+
+    batch = env.get_attr("batch")[0]
+    if isinstance(batch, TeamWorlds):
+        return list(batch.simulators())
+    vector = env.unwrapped.env
+    return [vector.simulator(world) for world in range(env.num_envs)]
+
+
 def discounted_returns(rewards: list[float], discount: float) -> np.ndarray:
     """Per step, the discounted sum of the episode's rewards from that step on (nothing after its end)."""
     returns = np.zeros(len(rewards), dtype=np.float32)
@@ -52,6 +69,11 @@ class Demonstrations:
 
     def arrays(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         return np.concatenate(self.robot), np.concatenate(self.humans), np.concatenate(self.returns)
+
+    @property
+    def episodes(self) -> int:
+        """How many teacher episodes are held."""
+        return len(self.returns)
 
     def __len__(self) -> int:
         return sum(len(item) for item in self.returns)

@@ -51,10 +51,9 @@ class Physics:
     reward_scale: float = 1.0
 
     @classmethod
-    def of_env(cls, env: Any, reward_scale: float) -> Physics:
-        """The constants of a crowdnav env's scenario and reward (read once, before any episode)."""
-        unwrapped = env.unwrapped
-        scenario, reward = unwrapped.scenario, unwrapped.core.reward.weights
+    def of_scenario(cls, scenario: Any, reward_scale: float) -> Physics:
+        """The constants of a crowdnav scenario and its reward weights (read once, before any episode)."""
+        reward = scenario.reward
         force = scenario.humans.social_force
         weights = {term: float(getattr(reward, term)) for term in ("step", "goal_progress", "social", "goal_reached", "collision")}
         return cls(float(scenario.robot.radius), float(scenario.robot.max_speed), float(scenario.time_step),

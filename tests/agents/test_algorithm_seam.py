@@ -103,12 +103,35 @@ def test_crowdnav_evaluate_plays_a_registered_algorithms_run_and_export_refuses_
     assert err.count("\n") == 1 and "algorithm 'random_search' has no ONNX export: its agent has no export_module()" in err
 
 
+def test_registered_algorithm_collects_from_several_worlds_and_a_resume_starts_new_episodes_in_every_world(tmp_path, random_search):
+    import json
+
+    from crowdnav.agents import train
+    from crowdnav.agents.seeding import train_seed
+
+    run = tmp_path / "run"
+    result = train(toy_config(run, num_envs=4, episodes=10, checkpoint_every=5))
+    first = rows(run)
+    assert result.episodes == 10 and [int(row["episode"]) for row in first] == list(range(10))
+    assert int(first[-1]["timesteps"]) % 4 == 0  # every step is one of each of the 4 worlds
+    info = json.loads((run / "checkpoint" / "policy.json").read_text(encoding="utf-8"))
+    started = info["next_episode"]  # the first episode no world had begun when the run stopped
+    assert 10 < started <= 10 + 4 and {int(row["seed"]) for row in first} < {train_seed(0, e) for e in range(started)}
+    train(toy_config(run, num_envs=4, episodes=16, checkpoint_every=5), resume=True)
+    resumed = rows(run)
+    assert resumed[:10] == first and len(resumed) == 16
+    later = {int(row["seed"]) for row in resumed[10:]}  # new episodes in every world: none played again, none before started
+    assert len(later) == 6 and later <= {train_seed(0, e) for e in range(started, started + 10)}
+
+
 def test_registered_algorithm_refuses_settings_of_the_sb3_path_in_one_line(tmp_path, random_search):
     from crowdnav.agents import train
     from crowdnav.agents.config import ConfigError
 
-    with pytest.raises(ConfigError, match="^num_envs: algorithm 'random_search' trains on one env; set num_envs: 1$"):
-        train(toy_config(tmp_path / "run", num_envs=4))
+    config = toy_config(tmp_path / "run", timesteps=400, checkpoint_every_steps=100)
+    del config["episodes"]
+    with pytest.raises(ConfigError, match="^checkpoint_every_steps: algorithm 'random_search' checkpoints every checkpoint_every episodes$"):
+        train(config)
     assert not (tmp_path / "run").exists()
 
 

@@ -4,6 +4,9 @@ A linear policy ``tanh(W [x, 1])`` on the flattened observation, trained by anti
 update plays one episode with ``W + noise * delta`` and one with ``W - noise * delta`` and moves ``W`` along
 ``delta`` by the difference of their returns. Everything it learns from, its random stream included, is saved
 as ``weights.npz`` (read with ``allow_pickle=False``) and ``state.json``: a resumed run continues exactly.
+
+It collects as every algorithm does, from the run's worlds (``num_envs``) behind SB3's ``VecEnv`` API, acting on all
+of them in one call; an episode's return counts for the candidate (``+`` or ``-``) in force when it ended.
 """
 
 from __future__ import annotations
@@ -13,8 +16,8 @@ from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import Any
 
-import gymnasium as gym
 import numpy as np
+from stable_baselines3.common.vec_env import VecEnv
 
 from crowdnav.registry import AlgorithmSpec
 
@@ -22,7 +25,7 @@ from crowdnav.registry import AlgorithmSpec
 class RandomSearchAgent:
     """Implements crowdnav.agents.algorithm_protocol.Algorithm; ``RandomSearchAgent(env, config)`` is the builder."""
 
-    def __init__(self, env: gym.Env, config: Any):
+    def __init__(self, env: VecEnv, config: Any):
         spaces = env.observation_space.spaces
         self.shapes = {key: list(spaces[key].shape) for key in sorted(spaces)}
         inputs = sum(int(np.prod(shape)) for shape in self.shapes.values()) + 1
@@ -36,19 +39,20 @@ class RandomSearchAgent:
 
     # ------------------------------------------------------------------ the protocol
 
-    def learn(self, env: gym.Env, keep_going: Callable[[], bool]) -> None:
+    def learn(self, env: VecEnv, keep_going: Callable[[], bool]) -> None:
+        observation = env.reset()
+        returns = np.zeros(env.num_envs)
         while True:
             if self.delta is None:
                 self.delta = self.rng.standard_normal(self.weights.shape)
             sign = 1.0 if self.plus_return is None else -1.0
-            episode_return = self._play(env, self.weights + sign * self.noise * self.delta)
-            if self.plus_return is None:
-                self.plus_return = episode_return
-            else:
-                self.weights += self.step_size * (self.plus_return - episode_return) / 2 * self.delta
-                self.delta, self.plus_return = None, None
-            if not keep_going():
-                return
+            observation, rewards, dones, _ = env.step(self._act(self.weights + sign * self.noise * self.delta, observation))
+            returns += rewards
+            for world in np.flatnonzero(dones):  # every ended episode, in world order, then crowdnav's keep_going
+                self._ended(float(returns[world]))
+                returns[world] = 0.0
+                if not keep_going():
+                    return
 
     def predict(self, observation: Mapping[str, np.ndarray], deterministic: bool = True) -> np.ndarray:
         return self._act(self.weights, observation)
@@ -83,14 +87,15 @@ class RandomSearchAgent:
         features = np.concatenate([*rows, np.ones((rows[0].shape[0], 1)) if batched else np.ones(1)], axis=-1)
         return np.tanh(features @ weights.T).astype(np.float32)
 
-    def _play(self, env: gym.Env, weights: np.ndarray) -> float:
-        observation, _ = env.reset()
-        total, done = 0.0, False
-        while not done:
-            observation, reward, terminated, truncated, _ = env.step(self._act(weights, observation))
-            total += float(reward)
-            done = terminated or truncated
-        return total
+    def _ended(self, episode_return: float) -> None:
+        """The return of the candidate played: the first of a pair is kept, the second moves ``W``."""
+        if self.delta is None:  # several worlds: a pair was completed earlier in this step
+            self.delta = self.rng.standard_normal(self.weights.shape)
+        if self.plus_return is None:
+            self.plus_return = episode_return
+        else:
+            self.weights += self.step_size * (self.plus_return - episode_return) / 2 * self.delta
+            self.delta, self.plus_return = None, None
 
 
 SPEC = AlgorithmSpec("Linear policy trained by antithetic random search (a test algorithm outside SB3).", builder=RandomSearchAgent)
