@@ -12,8 +12,9 @@ Output folder (``config.out``):
 
 ``resume=True`` continues from ``checkpoint/``: the episode count, the episode seeds, the
 model and (if saved) the replay buffer carry on; the budget is still ``config.episodes`` (or
-``config.timesteps``) in all. An SB3 run collects from ``num_envs`` worlds of the native vector env
-(:func:`crowdnav.agents.factory.make_vec_env`), one world included; a resume needs the same number.
+``config.timesteps``) in all. Every run, whatever its algorithm and loop, collects from ``num_envs`` worlds
+of the one vector stack (:func:`crowdnav.agents.factory.make_vec_env` over the native vector env), one world
+included: ``num_envs`` is a size, not a fork. An SB3 resume needs the same number.
 
 Which loop trains a run is read from the algorithm's registered builder, for every algorithm alike
 (:func:`trainer_of`): crowdnav's episode loop around the agent's ``learn``
