@@ -61,8 +61,8 @@ def train_registered(config: TrainConfig, resume: bool, on_checkpoint: Callable[
     first = int(info["episodes"]) if info else 0
     prepare_episode_log(out, first, stacklevel=3)  # as before: the warning points at train_registered's caller
     saved = info.get("observation_normalization") if info else None
-    started = int(info.get("next_episode", first)) if info else 0  # several worlds: past the count (episodes end out of order)
-    inner = make_vec_env(config, None, started, scales_from_json(saved) if saved is not None else None, reward_dtype=np.float64)
+    first_started = int(info.get("next_episode", first)) if info else 0  # several worlds: past the count (episodes end out of order)
+    inner = make_vec_env(config, None, first_started, scales_from_json(saved) if saved is not None else None, reward_dtype=np.float64)
     scales = observation_normalization(inner)
     env = EpisodeEnds(inner, int(info["timesteps"]) if info else 0)
     agent: Algorithm = load_algorithm(find_checkpoint(checkpoint), config.algo) if info else builder_of(config.algo)(env, config)

@@ -192,27 +192,27 @@ class SarlAgent:
     def _learn(self, env: VecEnv, keep_going: Callable[[], bool]) -> None:
         """Step all worlds together; every ended episode (world order) is learnt from, then ``keep_going`` is asked."""
         worlds = env.num_envs
-        observation = env.reset()
+        observation = cast(dict[str, np.ndarray], env.reset())
         robot, humans = self._observed(observation)
         self._teaching = 0  # demonstrations under way (a resume starts every world afresh)
         teaching = np.array([self._starts_demonstration() for _ in range(worlds)])
         shown: list[tuple[list[np.ndarray], list[np.ndarray], list[float]]] = [([], [], []) for _ in range(worlds)]
         while True:
-            observation, rewards, dones, infos = env.step(self._actions(env, observation, teaching))
-            last = observation
+            stepped, rewards, dones, infos = env.step(self._actions(env, observation, teaching))
+            observation = last = cast(dict[str, np.ndarray], stepped)
             if dones.any():  # the ended worlds' last observation (the one returned is the next episode's first)
                 last = {key: value.copy() for key, value in observation.items()}
                 for i in np.flatnonzero(dones):
                     for key, value in infos[i]["terminal_observation"].items():
                         last[key][i] = value
             next_robot, next_humans = self._observed(last)
-            for i in range(worlds):
-                terminal = bool(dones[i]) and not infos[i].get("TimeLimit.truncated", False)
-                self.memory.add(robot[i], humans[i], float(rewards[i]), next_robot[i], next_humans[i], terminal)
-                if teaching[i]:  # the teacher's states and rewards, for its discounted returns
-                    shown[i][0].append(robot[i])
-                    shown[i][1].append(humans[i])
-                    shown[i][2].append(float(rewards[i]))
+            for w in range(worlds):
+                terminal = bool(dones[w]) and not infos[w].get("TimeLimit.truncated", False)
+                self.memory.add(robot[w], humans[w], float(rewards[w]), next_robot[w], next_humans[w], terminal)
+                if teaching[w]:  # the teacher's states and rewards, for its discounted returns
+                    shown[w][0].append(robot[w])
+                    shown[w][1].append(humans[w])
+                    shown[w][2].append(float(rewards[w]))
             robot, humans = (next_robot, next_humans) if last is observation else self._observed(observation)
             for i in np.flatnonzero(dones):
                 self._ended(shown[i] if teaching[i] else None)
