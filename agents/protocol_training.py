@@ -97,7 +97,8 @@ class EpisodeEnds(VecEnvWrapper):
     def step_wait(self) -> VecEnvStepReturn:
         observation, rewards, dones, infos = self.venv.step_wait()
         self.steps += self.num_envs
-        self.ended.extend((infos[i], self.steps) for i in np.flatnonzero(dones))
+        if dones.any():
+            self.ended.extend((infos[i], self.steps) for i in np.flatnonzero(dones))
         return observation, rewards, dones, infos
 
     def next_episode(self) -> int:
