@@ -39,7 +39,17 @@ import torch
 from crowdnav.agents.config import ConfigError
 from crowdnav.agents.factory import observation_normalization
 from crowdnav.agents.sarl.imitation import Demonstrations, make_teacher, world_simulators
-from crowdnav.agents.sarl.lookahead import REQUIRED_KEYS, Physics, action_set, decode, features, lookahead
+from crowdnav.agents.sarl.lookahead import (
+    FEATURE_SCALE,
+    REQUIRED_KEYS,
+    Physics,
+    action_set,
+    bounded_weights,
+    decode,
+    features,
+    lookahead,
+    value_ceiling,
+)
 from crowdnav.agents.sarl.memory import ReplayMemory
 from crowdnav.agents.sarl.network import ValueEnsemble, evaluate, value_network
 
@@ -61,6 +71,7 @@ DEFAULTS: dict[str, Any] = {
     "lookahead_depth": 1,  # greedy actions (evaluation): 1 step as SARL; 2 refines the best actions one step further
     "lookahead_width": 8,  # depth 2: how many of the best one-step actions are expanded
     "ensemble": 1,  # value networks averaged (1: one network, as the published runs)
+    "value_bound": False,  # V capped by the largest return reachable from the goal distance (lookahead.value_ceiling)
 }
 """The agent's options (``algo_kwargs``) and their defaults."""
 GAMMA = 0.9
@@ -91,6 +102,11 @@ class SarlAgent:
         if int(self.options["imitation_episodes"]):
             make_teacher(str(self.options["imitation_teacher"]))  # an unknown teacher is refused before the run starts
         self.physics = Physics.of_scenario(scenario, config.reward_scale)
+        if not isinstance(self.options["value_bound"], bool):
+            raise ConfigError(f"algo_kwargs.value_bound: {name!r} takes true or false, got {self.options['value_bound']!r}")
+        if self.options["value_bound"] and not bounded_weights(self.physics):
+            raise ConfigError(f"algo_kwargs.value_bound: {name!r} bounds V only with step, social and collision weights <= 0 "
+                              "and goal_progress, goal_reached >= 0")
         scales = observation_normalization(env) or {}
         self.scales = {key: (np.asarray(offset, dtype=np.float64), np.asarray(scale, dtype=np.float64))
                        for key, (offset, scale) in scales.items() if key in REQUIRED_KEYS}
@@ -136,7 +152,11 @@ class SarlAgent:
     def _backup(self, ahead: Mapping[str, Any]) -> np.ndarray:
         """``r + discount * V(next)`` of every action (no value after a predicted collision or goal)."""
         robot, humans = features(ahead["next"], self.physics.radius)
-        return ahead["reward"] + self.discount * evaluate(self.network, robot, humans) * ~ahead["done"]
+        values = evaluate(self.network, robot, humans)
+        if self.options.get("value_bound"):
+            goal = ahead["next"]["goal"]
+            values = np.minimum(values, value_ceiling(np.hypot(goal[..., 0], goal[..., 1]), self.physics, self.discount))
+        return ahead["reward"] + self.discount * values * ~ahead["done"]
 
     def _deepen(self, ahead: Mapping[str, Any], scores: np.ndarray) -> np.ndarray:
         """Depth 2 (as SG-D3QN's pruned tree): the ``lookahead_width`` best actions score ``r + discount * max_a' score'``.
@@ -294,7 +314,12 @@ class SarlAgent:
         for _ in range(int(self.options["updates_per_episode"])):
             batch = {key: torch.from_numpy(value) for key, value in self.memory.sample(self.rng, size).items()}
             with torch.no_grad():
-                target = batch["reward"] + self.discount * (1.0 - batch["terminal"]) * self.target(batch["next_robot"], batch["next_humans"])
+                following = self.target(batch["next_robot"], batch["next_humans"])
+                if self.options.get("value_bound"):  # the features' first column is the goal distance, scaled
+                    distance = batch["next_robot"][:, 0].numpy().astype(np.float64) / FEATURE_SCALE
+                    ceiling = torch.from_numpy(value_ceiling(distance, self.physics, self.discount).astype(np.float32))
+                    following = torch.minimum(following, ceiling)
+                target = batch["reward"] + self.discount * (1.0 - batch["terminal"]) * following
             self._step(self._loss(batch["robot"], batch["humans"], target))
 
     # ------------------------------------------------------------------ checkpoints

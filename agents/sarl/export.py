@@ -80,6 +80,7 @@ class SarlPolicyModule(nn.Module):
             self.register_buffer(f"offset_{key}", torch.as_tensor(offset, dtype=F64))
             self.register_buffer(f"scale_{key}", torch.as_tensor(scale, dtype=F64))
         self.network = agent.network
+        self.bounded = bool(agent.options.get("value_bound", False))
 
     def decode(self, inputs: Sequence[torch.Tensor]) -> dict[str, torch.Tensor]:
         """The joint states (robot frame, float64), as :func:`~crowdnav.agents.sarl.lookahead.decode`."""
@@ -179,4 +180,13 @@ class SarlPolicyModule(nn.Module):
                             radii[..., None], gap[..., None] * FEATURE_SCALE, present[..., None]], dim=-1)
         robot32, humans32 = robot.to(torch.float32), (humans * present[..., None]).to(torch.float32)
         values = self.network(robot32.reshape(-1, robot32.shape[-1]), humans32.reshape(-1, *humans32.shape[-2:]))
-        return values.reshape(-1, self.count).to(F64)
+        values = values.reshape(-1, self.count).to(F64)
+        return torch.minimum(values, self.ceiling(distance)) if self.bounded else values
+
+    def ceiling(self, distance: torch.Tensor) -> torch.Tensor:
+        """:func:`~crowdnav.agents.sarl.lookahead.value_ceiling` of goal distances (float64)."""
+        p, w = self.physics, self.physics.weights
+        steps = torch.clamp(torch.ceil((distance - p.goal_radius) / (p.max_speed * p.time_step) - 1e-9), min=1.0)
+        paid = w["step"] * (1.0 - torch.pow(torch.full_like(steps, self.discount), steps)) / (1.0 - self.discount)
+        bonus = torch.pow(torch.full_like(steps, self.discount), steps - 1.0) * w["goal_reached"]
+        return (paid + w["goal_progress"] * distance + bonus) * p.reward_scale

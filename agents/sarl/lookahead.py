@@ -67,6 +67,26 @@ class Physics:
         return cls(**{**document, "weights": dict(document["weights"])})
 
 
+def bounded_weights(physics: Physics) -> bool:
+    """Whether the reward's signs bound every return from above (:func:`value_ceiling`): costs <= 0, goal terms >= 0."""
+    w = physics.weights
+    return w["step"] <= 0 and w["social"] <= 0 and w["collision"] <= 0 and w["goal_progress"] >= 0 and w["goal_reached"] >= 0
+
+
+def value_ceiling(distance: np.ndarray, physics: Physics, discount: float) -> np.ndarray:
+    """The largest discounted return any policy can collect from a state whose episode goes on, at goal ``distance`` (m).
+
+    At least ``k = ceil((distance - goal_radius) / (max_speed * dt))`` more steps (1 at least), each paying the step
+    cost; the discounted goal progress sums to at most ``w_goal_progress * distance`` (sum of ``discount^t (d_t -
+    d_t+1)`` is ``d_0`` minus non-negative terms); the goal bonus at best on the k-th step; social and collision terms
+    only cost. Valid when :func:`bounded_weights` holds; times the reward scale, as the lookahead's rewards.
+    """
+    w = physics.weights
+    steps = np.maximum(np.ceil((distance - physics.goal_radius) / (physics.max_speed * physics.time_step) - 1e-9), 1.0)
+    paid = w["step"] * (1.0 - discount ** steps) / (1.0 - discount)
+    return (paid + w["goal_progress"] * distance + discount ** (steps - 1.0) * w["goal_reached"]) * physics.reward_scale
+
+
 def action_set(max_speed: float) -> np.ndarray:
     """(81, 2) velocities (m/s) in the goal frame: stop, then 5 speeds x 16 headings (heading 0 toward the goal)."""
     speeds = (np.exp(np.arange(1, SPEEDS + 1) / SPEEDS) - 1.0) / (np.e - 1.0) * max_speed

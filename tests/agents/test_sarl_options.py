@@ -1,6 +1,7 @@
-"""Two training options of the SARL-style agent: a value ensemble (``algo_kwargs.ensemble``: members averaged, each
-regressing on the same target) and ``learning_rate_schedule: linear`` (Adam's rate falls to 0 over the episode
-budget). Both survive checkpoints and resume bit for bit; the ensemble exports as predict acts."""
+"""Training options of the SARL-style agent: a value ensemble (``algo_kwargs.ensemble``: members averaged, each
+regressing on the same target), ``learning_rate_schedule: linear`` (Adam's rate falls to 0 over the episode budget)
+and ``algo_kwargs.value_bound`` (V capped by the largest return reachable from the goal distance). Each survives
+checkpoints and resume bit for bit and exports as predict acts."""
 
 from __future__ import annotations
 
@@ -119,3 +120,44 @@ def test_an_ensemble_size_out_of_range_is_refused_in_one_line(tmp_path):
     with pytest.raises(ConfigError, match="^algo_kwargs.ensemble: 'sarl' takes an integer from 1 to 8, got 0$"):
         train(ensemble_config(tmp_path / "a", algo_kwargs={"ensemble": 0}))
     assert not (tmp_path / "a").exists()
+
+
+def test_the_value_ceiling_bounds_every_discounted_return_of_a_straight_drive_and_is_tight_one_step_out():
+    from crowdnav.agents.sarl.lookahead import value_ceiling
+
+    from tests.agents.test_sarl import PHYSICS
+
+    discount = 0.9 ** (PHYSICS.time_step * PHYSICS.max_speed)
+    w, step = PHYSICS.weights, PHYSICS.max_speed * PHYSICS.time_step
+    for start in (0.31, 0.55, 1.0, 2.37, 8.0):
+        distances = [start]
+        while distances[-1] > PHYSICS.goal_radius:  # full speed straight at the goal: the fastest way in
+            distances.append(max(distances[-1] - step, 0.0))
+        rewards = [w["step"] + w["goal_progress"] * (a - b) for a, b in zip(distances[:-1], distances[1:], strict=True)]
+        rewards[-1] += w["goal_reached"]
+        for index, distance in enumerate(distances[:-1]):
+            achieved = sum(discount ** t * r for t, r in enumerate(rewards[index:]))
+            ceiling = float(value_ceiling(np.asarray(distance), PHYSICS, discount))
+            assert achieved <= ceiling + 1e-9, (start, distance, achieved, ceiling)
+    # one step out, from 0.45 m: the full-speed step lands 0.25 m short of the centre; the bound adds only its 0.25 m
+    achieved = w["step"] + w["goal_progress"] * step + w["goal_reached"]
+    assert float(value_ceiling(np.asarray(0.45), PHYSICS, discount)) == pytest.approx(achieved + w["goal_progress"] * 0.25)
+
+
+def test_value_bound_trains_acts_and_exports_as_predict_and_refuses_unbounded_rewards(tmp_path):
+    kwargs = {**config("x")["algo_kwargs"], "value_bound": True}
+    train(config(tmp_path / "run", episodes=3, algo_kwargs=kwargs))
+    policy = load_policy(tmp_path / "run")
+    assert policy.model.options["value_bound"] is True
+    env = policy.make_env()
+    observations = [policy.preprocess(env.reset(seed=seed)[0]) for seed in range(4)]
+    batch = {key: np.stack([obs[key] for obs in observations]) for key in observations[0]}
+    module = policy.model.export_module(list(batch)).eval()
+    with torch.no_grad():
+        traced = module(*(torch.as_tensor(batch[key]) for key in batch)).numpy()
+    np.testing.assert_array_equal(traced, policy.model.predict(batch))
+    with pytest.raises(ConfigError, match="^algo_kwargs.value_bound: 'sarl' bounds V only with step, social and collision weights"):
+        train(config(tmp_path / "a", algo_kwargs=kwargs, reward_weights={"step": 0.1}))
+    with pytest.raises(ConfigError, match="^algo_kwargs.value_bound: 'sarl' takes true or false, got 1$"):
+        train(config(tmp_path / "b", algo_kwargs={**kwargs, "value_bound": 1}))
+    assert not (tmp_path / "a").exists() and not (tmp_path / "b").exists()
