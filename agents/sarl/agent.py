@@ -119,8 +119,8 @@ class SarlAgent:
         self.rng = np.random.default_rng(config.seed)
         with torch.random.fork_rng():
             torch.manual_seed(config.seed)
-            self.network = value_network(int(self.options["width"]), int(self.options.get("ensemble", 1)))
-            self.target = value_network(int(self.options["width"]), int(self.options.get("ensemble", 1)))
+            self.network = value_network(int(self.options["width"]), int(self.options["ensemble"]))
+            self.target = value_network(int(self.options["width"]), int(self.options["ensemble"]))
         self._setup(ReplayMemory(int(self.options["memory_size"]), self.humans), Demonstrations())
         self.target.load_state_dict(self.network.state_dict())
 
@@ -153,7 +153,7 @@ class SarlAgent:
         """``r + discount * V(next)`` of every action (no value after a predicted collision or goal)."""
         robot, humans = features(ahead["next"], self.physics.radius)
         values = evaluate(self.network, robot, humans)
-        if self.options.get("value_bound"):
+        if self.options["value_bound"]:
             goal = ahead["next"]["goal"]
             values = np.minimum(values, value_ceiling(np.hypot(goal[..., 0], goal[..., 1]), self.physics, self.discount))
         return ahead["reward"] + self.discount * values * ~ahead["done"]
@@ -164,7 +164,7 @@ class SarlAgent:
         The other actions score -inf (the choice is among the expanded ones); an expanded action predicted to end
         the episode keeps its one-step reward.
         """
-        batch, width = scores.shape[0], min(int(self.options.get("lookahead_width", 8)), scores.shape[1])
+        batch, width = scores.shape[0], min(int(self.options["lookahead_width"]), scores.shape[1])
         best = np.argsort(-scores, axis=1, kind="stable")[:, :width]  # (B, w)
         rows = np.arange(batch)[:, None]
         chosen = {key: value[rows, best] for key, value in ahead["next"].items()}
@@ -181,7 +181,7 @@ class SarlAgent:
         batch = observation if batched else {key: np.asarray(value)[None] for key, value in observation.items()}
         # training episodes (not deterministic) act on the one-step lookahead V-learning is built on; greedy acting
         # (evaluation, rendering) may search deeper
-        scores, commands = self.scores(batch, int(self.options.get("lookahead_depth", 1)) if deterministic else 1)
+        scores, commands = self.scores(batch, int(self.options["lookahead_depth"]) if deterministic else 1)
         choice = np.argmax(scores, axis=1)
         if not deterministic:
             explore = self.rng.random(len(choice)) < self.epsilon
@@ -315,7 +315,7 @@ class SarlAgent:
             batch = {key: torch.from_numpy(value) for key, value in self.memory.sample(self.rng, size).items()}
             with torch.no_grad():
                 following = self.target(batch["next_robot"], batch["next_humans"])
-                if self.options.get("value_bound"):  # the features' first column is the goal distance, scaled
+                if self.options["value_bound"]:  # the features' first column is the goal distance, scaled
                     distance = batch["next_robot"][:, 0].numpy().astype(np.float64) / FEATURE_SCALE
                     ceiling = torch.from_numpy(value_ceiling(distance, self.physics, self.discount).astype(np.float32))
                     following = torch.minimum(following, ceiling)
@@ -344,7 +344,8 @@ class SarlAgent:
     def load(cls, folder: Path) -> SarlAgent:
         document = json.loads((folder / "state.json").read_text(encoding="utf-8"))
         agent = cls.__new__(cls)
-        agent.options, agent.humans = dict(document["options"]), int(document["humans"])
+        # options added since a checkpoint was written take their defaults (the behaviour it was trained with)
+        agent.options, agent.humans = {**DEFAULTS, **document["options"]}, int(document["humans"])
         agent.physics = Physics.from_json(document["physics"])
         agent.gamma, agent.learning_rate, agent.episodes = float(document["gamma"]), float(document["learning_rate"]), int(document["episodes"])
         agent.decay_episodes = document.get("decay_episodes")  # absent in checkpoints from before the schedule: constant
@@ -352,7 +353,7 @@ class SarlAgent:
                         for key, item in document["scales"].items()}
         agent.rng = np.random.default_rng()
         agent.rng.bit_generator.state = document["rng"]
-        width, members = int(agent.options["width"]), int(agent.options.get("ensemble", 1))
+        width, members = int(agent.options["width"]), int(agent.options["ensemble"])
         agent.network, agent.target = value_network(width, members), value_network(width, members)
         with np.load(folder / "weights.npz", allow_pickle=False) as arrays:
             for prefix, network in (("network.", agent.network), ("target.", agent.target)):
@@ -368,7 +369,6 @@ class SarlAgent:
             group.update({key: tuple(value) if isinstance(value, list) else value for key, value in saved.items()})
         agent.optimizer.load_state_dict({"state": adam, "param_groups": groups})
         return agent
-
 
 
 def _decay_episodes(config: Any) -> int | None:

@@ -65,7 +65,7 @@ class SarlPolicyModule(nn.Module):
         missing = [key for key in REQUIRED_KEYS if key not in keys]
         if missing:
             raise ValueError(f"algorithm 'sarl' reads humans, goal and velocity; the observation has no {', '.join(missing)}")
-        self.depth, self.width = int(agent.options.get("lookahead_depth", 1)), int(agent.options.get("lookahead_width", 8))
+        self.depth, self.width = int(agent.options["lookahead_depth"]), int(agent.options["lookahead_width"])
         if self.depth not in (1, 2):
             raise ValueError(f"algorithm 'sarl' with lookahead_depth {self.depth}: ONNX export covers depths 1 and 2")
         self.keys = list(keys)
@@ -80,7 +80,7 @@ class SarlPolicyModule(nn.Module):
             self.register_buffer(f"offset_{key}", torch.as_tensor(offset, dtype=F64))
             self.register_buffer(f"scale_{key}", torch.as_tensor(scale, dtype=F64))
         self.network = agent.network
-        self.bounded = bool(agent.options.get("value_bound", False))
+        self.bounded = bool(agent.options["value_bound"])
 
     def decode(self, inputs: Sequence[torch.Tensor]) -> dict[str, torch.Tensor]:
         """The joint states (robot frame, float64), as :func:`~crowdnav.agents.sarl.lookahead.decode`."""

@@ -29,6 +29,17 @@ def weights(network):
     return [value.clone() for value in network.state_dict().values()]
 
 
+def assert_exports_as_predict(policy):
+    """The agent's export module chooses predict's actions, bit for bit, on the first observations of 4 episodes."""
+    env = policy.make_env()
+    observations = [policy.preprocess(env.reset(seed=seed)[0]) for seed in range(4)]
+    batch = {key: np.stack([obs[key] for obs in observations]) for key in observations[0]}
+    module = policy.model.export_module(list(batch)).eval()
+    with torch.no_grad():
+        traced = module(*(torch.as_tensor(batch[key]) for key in batch)).numpy()
+    np.testing.assert_array_equal(traced, policy.model.predict(batch))
+
+
 def test_an_ensemble_values_a_state_at_its_members_mean_and_every_member_learns(tmp_path):
     train(ensemble_config(tmp_path / "run", episodes=4))
     early, final = load_policy(tmp_path / "run" / "snapshots" / "episode_00002"), load_policy(tmp_path / "run")
@@ -55,13 +66,7 @@ def test_an_ensemble_run_resumes_bit_for_bit_and_exports_as_predict_acts(tmp_pat
     for a, b in zip(weights(mine), weights(theirs), strict=True):
         torch.testing.assert_close(a, b, rtol=0, atol=0)
     policy = load_policy(whole)
-    env = policy.make_env()
-    observations = [policy.preprocess(env.reset(seed=seed)[0]) for seed in range(4)]
-    batch = {key: np.stack([obs[key] for obs in observations]) for key in observations[0]}
-    module = policy.model.export_module(list(batch)).eval()
-    with torch.no_grad():
-        traced = module(*(torch.as_tensor(batch[key]) for key in batch)).numpy()
-    np.testing.assert_array_equal(traced, policy.model.predict(batch))
+    assert_exports_as_predict(policy)
 
 
 def test_one_member_is_the_plain_network_of_the_published_runs(tmp_path):
@@ -149,13 +154,7 @@ def test_value_bound_trains_acts_and_exports_as_predict_and_refuses_unbounded_re
     train(config(tmp_path / "run", episodes=3, algo_kwargs=kwargs))
     policy = load_policy(tmp_path / "run")
     assert policy.model.options["value_bound"] is True
-    env = policy.make_env()
-    observations = [policy.preprocess(env.reset(seed=seed)[0]) for seed in range(4)]
-    batch = {key: np.stack([obs[key] for obs in observations]) for key in observations[0]}
-    module = policy.model.export_module(list(batch)).eval()
-    with torch.no_grad():
-        traced = module(*(torch.as_tensor(batch[key]) for key in batch)).numpy()
-    np.testing.assert_array_equal(traced, policy.model.predict(batch))
+    assert_exports_as_predict(policy)
     with pytest.raises(ConfigError, match="^algo_kwargs.value_bound: 'sarl' bounds V only with step, social and collision weights"):
         train(config(tmp_path / "a", algo_kwargs=kwargs, reward_weights={"step": 0.1}))
     with pytest.raises(ConfigError, match="^algo_kwargs.value_bound: 'sarl' takes true or false, got 1$"):

@@ -4,8 +4,6 @@ world's simulator and a resume starts new episodes in every world."""
 
 from __future__ import annotations
 
-import csv
-
 import numpy as np
 import pytest
 
@@ -15,6 +13,9 @@ torch = pytest.importorskip("torch")
 
 from crowdnav.agents.sarl.agent import SarlAgent  # noqa: E402
 from crowdnav.agents.sarl.imitation import make_teacher  # noqa: E402
+
+from tests.agents.test_sarl import config as sarl_config  # noqa: E402
+from tests.agents.test_sarl import rows  # noqa: E402
 
 KWARGS = {"batch_size": 16, "updates_per_episode": 3, "target_update_every": 2, "width": 16, "imitation_episodes": 2,
           "imitation_epochs": 2}
@@ -26,16 +27,8 @@ before the vector stack): 2 of the predictive teacher, then V-learning."""
 
 
 def config(out, **fields):
-    document = {"algo": "sarl", "scenario": "open_space", "modalities": ["humans", "goal", "velocity"], "num_envs": 1,
-                "episodes": 8, "seed": 0, "out": str(out), "overrides": {"humans.count": 3, "max_steps": 20},
-                "checkpoint_every": 2, "progress": False, "algo_kwargs": dict(KWARGS)}
-    document.update(fields)
-    return document
-
-
-def rows(run):
-    with open(run / "episodes.csv", encoding="utf-8") as file:
-        return [{key: value for key, value in row.items() if key != "seconds"} for row in csv.DictReader(file)]
+    """tests/agents/test_sarl.py's run, 8 episodes, the first 2 the teacher's."""
+    return sarl_config(out, **{"episodes": 8, "algo_kwargs": dict(KWARGS), **fields})
 
 
 def outcomes(run):
