@@ -16,6 +16,8 @@ from crowdnav.agents import load_policy, train  # noqa: E402
 from crowdnav.agents.config import ConfigError  # noqa: E402
 from crowdnav.agents.sarl.network import ValueEnsemble, ValueNetwork, evaluate  # noqa: E402
 
+from crowdnav.errors import CrowdNavError  # noqa: E402
+from crowdnav.scenario.library import library_names  # noqa: E402
 from tests.agents.test_sarl import config, rows  # noqa: E402
 
 
@@ -160,3 +162,27 @@ def test_value_bound_trains_acts_and_exports_as_predict_and_refuses_unbounded_re
     with pytest.raises(ConfigError, match="^algo_kwargs.value_bound: 'sarl' takes true or false, got 1$"):
         train(config(tmp_path / "b", algo_kwargs={**kwargs, "value_bound": 1}))
     assert not (tmp_path / "a").exists() and not (tmp_path / "b").exists()
+
+
+@pytest.mark.parametrize("scenario", library_names())
+def test_every_option_together_trains_acts_and_exports_in_every_library_scenario_sarl_drives(tmp_path, scenario):
+    kwargs = {**config("x")["algo_kwargs"], "ensemble": 2, "value_bound": True}
+    try:
+        train(config(tmp_path / "run", scenario=scenario, episodes=2, overrides={"max_steps": 10}, checkpoint_every=1,
+                     learning_rate_schedule="linear", algo_kwargs=kwargs))
+    except CrowdNavError as error:  # a robot it cannot drive (test_sarl.py checks which): one line
+        assert "\n" not in str(error) and "holonomic" in str(error), str(error)
+        return
+    policy = load_policy(tmp_path / "run")
+    assert isinstance(policy.model.network, ValueEnsemble)
+    learnt = policy.model.memory.size >= kwargs["batch_size"]  # short episodes (a crowd ends them) may leave no update yet
+    assert adam_rate(tmp_path / "run") == ([0.0] if learnt else [pytest.approx(1e-3)])
+    env = policy.make_env()
+    obs, _ = env.reset(seed=0)
+    for _ in range(3):
+        action = policy(obs)
+        assert action.shape == (2,) and np.all(np.isfinite(action))
+        obs, _, terminated, truncated, _ = env.step(action)
+        if terminated or truncated:
+            break
+    assert_exports_as_predict(policy)
