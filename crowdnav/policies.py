@@ -2,8 +2,10 @@
 
 Each policy is a callable ``policy(sim) -> action`` (:data:`ScriptedPolicy`; ``sim`` a simulator or
 one robot's :class:`crowdnav.robot_view.RobotView`, :class:`crowdnav.robot_view.RobotWorld`) returning the robot's normalized action
-(2 values in [-1, 1]) for the scenario's kinematics. They are privileged (they see the true
-state, not the observation), which is what a baseline for a video or a sanity check needs.
+(2 values in [-1, 1]) for the scenario's kinematics. All but one are privileged (they see the
+true state, not the observation), which is what a baseline for a video or a sanity check needs;
+``onboard`` (:class:`crowdnav.planning.onboard.OnboardPlanner`) reads only what the robot's own
+sensing gives (its tracker's rows, its pose and the map: it executes the ``plan`` modality's move).
 """
 
 from __future__ import annotations
@@ -17,6 +19,7 @@ import numpy as np
 
 from crowdnav import social_force as sf
 from crowdnav.orca import OrcaSolver, SolverCache, obstacle_rings, pyrvo_module, toward_goal
+from crowdnav.planning.onboard import OnboardPlanner
 from crowdnav.planning.oracle import OraclePlanner
 from crowdnav.planning.predictive import PredictivePlanner
 from crowdnav.robot_view import RobotWorld
@@ -136,6 +139,6 @@ class OrcaRobot:
 
 SCRIPTED_POLICIES: dict[str, Callable[..., ScriptedPolicy]] = {
     "social-force": SocialForceRobot, "straight": StraightToGoal, "random": RandomPolicy, "orca": OrcaRobot,
-    "oracle": OraclePlanner, "predictive": PredictivePlanner,
+    "oracle": OraclePlanner, "predictive": PredictivePlanner, "onboard": OnboardPlanner,
 }
 """Names accepted by ``crowdnav render --policy`` -> the policy's class (``random`` takes a seed, the others nothing)."""

@@ -11,6 +11,7 @@ robot: the first and only); :class:`crowdnav.Simulator` shows them as its attrib
 
 from __future__ import annotations
 
+import copy
 from typing import TYPE_CHECKING, Protocol
 
 import numpy as np
@@ -179,6 +180,22 @@ class RobotView:
             distance.flat[:: len(self.positions) + 1] = SELF_DISTANCE
             self._pairs = (offset, distance)
         return self._pairs
+
+    def without_robots(self) -> RobotView:
+        """This view without the other robots: the humans only, what a people tracker sees.
+
+        The same arrays, bit for bit, as the simulator's ``robot_view(index, with_robots=False)``
+        (the other robots are listed last, so this is a cut); this view itself when it holds none.
+        """
+        end = self.other_robot_discs.start
+        if end is None or end >= len(self.positions):
+            return self
+        people = copy.copy(self)
+        for name in ("positions", "velocities", "radii", "robot_offset", "robot_distance"):
+            setattr(people, name, getattr(self, name)[:end])
+        people.human_max_speed = self.human_max_speed[: end - 1]
+        people._pairs = None
+        return people
 
     @property
     def robot_position(self) -> complex:

@@ -1,19 +1,25 @@
 """Scripted baselines on an experiment's own test episodes: the bar a learned policy must clear.
 
-Every experiment evaluates two privileged scripted robots (:mod:`crowdnav.policies`) on the
-same held-out test episodes as its learned runs, with the same scenario, overrides and reward
-(a configuration with ``agents: robots``: the baseline drives every robot of the scenario,
-:mod:`crowdnav.evaluation.robot_rollout`):
+Every experiment evaluates the scripted robots of :data:`EXPERIMENT_BASELINES`
+(:mod:`crowdnav.policies`) on the same held-out test episodes as its learned runs, with the same
+scenario, overrides and reward (a configuration with ``agents: robots``: the baseline drives every
+robot of the scenario, :mod:`crowdnav.evaluation.robot_rollout`):
 
 * ``straight``: drive at the goal at full speed, blind to everyone. A learned policy that does
   worse has not learned to navigate, only (at best) to head for the goal;
 * ``social_force``: the humans' own reactive model applied to the robot (goal attraction plus
   repulsion from the true positions of the humans and obstacles): what a purely reactive,
-  position-only policy with perfect perception reaches.
+  position-only policy with perfect perception reaches;
+* ``onboard``: the predictive planner fed by the robot's own sensing (the humans its tracker
+  reports, its pose, velocity and goal, the map), the ``plan`` modality's move executed
+  (:class:`crowdnav.planning.onboard.OnboardPlanner`). Not privileged: the level a learned agent
+  has to beat;
+* ``predictive``: the same planner fed the true current state of every human (privileged);
+* ``oracle``: knows the humans' future (the ceiling, docs/planning.md).
 
-A third, ``orca`` (ORCA with the true positions and velocities of everyone, the field's standard
+Another, ``orca`` (ORCA with the true positions and velocities of everyone, the field's standard
 scripted baseline), needs the optional package pyrvo: ``crowdnav evaluate baseline:orca`` plays
-it on demand; experiments play only the two above, so their results never depend on an extra.
+it on demand; experiments do not, so their results never depend on an extra.
 
 Each baseline is stored like a run, ``<experiment>/baseline_<name>/<env>/`` with ``meta.json``
 and ``test_episodes.csv`` (the same per-episode columns as a learned run), so the leaderboard
@@ -50,15 +56,28 @@ BASELINES: dict[str, str] = {
     "straight": "straight to goal (scripted)",
     "social_force": "social force, privileged (scripted)",
     "orca": "ORCA, privileged (scripted)",
+    "onboard": "onboard planner: tracker + map (scripted)",
     "predictive": "predictive planner, privileged: state + map (scripted)",
     "oracle": "oracle, privileged: knows the future (ceiling)",
 }
 """Baseline name (``baseline:NAME``) -> label in tables and figures."""
 
-EXPERIMENT_BASELINES = ("straight", "social_force", "predictive", "oracle")
+EXPERIMENT_BASELINES = ("straight", "social_force", "onboard", "predictive", "oracle")
 """The baselines every experiment plays (those the core install runs; ``orca`` needs pyrvo). Where the
-oracle or the predictive planner refuses a scenario (the crowd reacts to the robot, several robots,
-a unicycle), the experiment says so in one line and goes on without it."""
+oracle or a predictive planner (onboard, predictive) refuses a scenario (the crowd reacts to the robot,
+several robots, a unicycle), the experiment says so in one line and goes on without it."""
+
+ONBOARD_BASELINES: dict[str, list[str]] = {"onboard": ["plan"]}
+"""Baselines that read only what the robot senses -> the observation key that carries what they read (``plan``:
+the tracker's rows, the robot's pose and the map); every other baseline reads the simulator's state (privileged)."""
+
+PRIVILEGED_OBSERVATIONS = "privileged: the simulator's state"
+"""What a privileged baseline's results declare it observed."""
+
+
+def baseline_observations(name: str) -> list[str] | str:
+    """What baseline ``name`` reads, as results declare it: its observation keys (onboard) or :data:`PRIVILEGED_OBSERVATIONS`."""
+    return list(ONBOARD_BASELINES[name]) if name in ONBOARD_BASELINES else PRIVILEGED_OBSERVATIONS
 
 
 def is_baseline(configuration: str) -> bool:
@@ -67,8 +86,8 @@ def is_baseline(configuration: str) -> bool:
 
 
 def scripted_policy(name: str) -> Any:
-    """The scripted robot policy of a baseline name (``straight``, ``social_force``, ``orca``; the last one
-    raises :class:`crowdnav.orca.OrcaUnavailableError`, one line, without pyrvo)."""
+    """The scripted robot policy of a baseline name (:data:`BASELINES`; ``orca`` raises
+    :class:`crowdnav.orca.OrcaUnavailableError`, one line, without pyrvo)."""
     from crowdnav.policies import SCRIPTED_POLICIES
 
     return SCRIPTED_POLICIES[name.replace("_", "-")]()
@@ -86,7 +105,7 @@ def baseline_env_options(train: Mapping[str, Any]) -> dict[str, Any]:
 def experiment_baselines(experiment: Any) -> list[tuple[str, str, dict[str, Any]]]:
     """(configuration name, label, env options) of every baseline an experiment needs.
 
-    One pair of baselines per distinct environment of its configurations; with several
+    One set of baselines (:data:`EXPERIMENT_BASELINES`) per distinct environment of its configurations; with several
     environments the name and label carry the first configuration trained in each.
     """
     environments: dict[str, tuple[str, dict[str, Any]]] = {}

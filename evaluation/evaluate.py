@@ -3,8 +3,9 @@
 ``crowdnav evaluate POLICY --scenario NAME`` and :func:`evaluate_policy`. POLICY is one of:
 
 * ``baseline:NAME`` (:data:`crowdnav.evaluation.baselines.BASELINES`: straight, social_force, orca,
-  predictive, oracle): the scripted robots (privileged: they read the simulator; the oracle
-  even the humans' future, docs/planning.md);
+  onboard, predictive, oracle): the scripted robots, privileged (they read the simulator; the oracle
+  even the humans' future, docs/planning.md) but for ``onboard``, which reads only what the ``plan``
+  observation carries (the humans its tracker reports, its pose and the map) and declares ``plan``;
 * ``module:function``: a Python callable ``function(observation) -> action`` taking one
   observation dict of :class:`crowdnav.envs.CrowdNavEnv` (raw units) and returning 2 numbers.
   This imports and runs that module: code by request (docs/security.md);
@@ -246,10 +247,10 @@ def evaluate_policy(spec: str, scenario: str | None, out: str | Path, *, modalit
                                "overrides": dict(overrides or {})}
     options = {key: value for key, value in options.items() if value is not None}
     configuration, label, act, privileged, env_options = resolve_policy(spec, options)
-    declared: list[str] | str = "privileged: the simulator's state" if privileged else _observation_keys(env_options)
+    declared = _declared_observations(spec, privileged, env_options)
     if track is not None:
         env_options = {**env_options, "scenario": track.scenario, "overrides": dict(options["overrides"])}  # a run's own settings never win
-        if not privileged:
+        if isinstance(declared, list):  # what it reads must be allowed (baseline:onboard: the plan observation's inputs)
             track.check_observations(declared)
         from crowdnav.evaluation.track import track_key
 
@@ -300,6 +301,15 @@ def evaluate_policy(spec: str, scenario: str | None, out: str | Path, *, modalit
         if track is not None:
             meta["track"] = track.identity()
         return install_result(folder, lambda staging: (atomic_write_text(staging / TEST_FILE, table), atomic_write_json(staging / META_FILE, meta)))
+
+
+def _declared_observations(spec: str, privileged: bool, env_options: Mapping[str, Any]) -> list[str] | str:
+    """What the results declare the policy observed: its observation keys, or that it read the simulator's state."""
+    if not privileged:
+        return _observation_keys(env_options)
+    from crowdnav.evaluation.baselines import baseline_observations
+
+    return baseline_observations(spec.removeprefix("baseline:").replace("-", "_"))
 
 
 def _observation_keys(env_options: Mapping[str, Any]) -> list[str]:

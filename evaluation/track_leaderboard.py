@@ -40,6 +40,15 @@ REFERENCE_FILE = "reference.json"
 """A reference folder's index: the track, the commit, and one entry per baseline CSV."""
 CEILING = "ceiling"
 """The kind of the privileged planner that knows the future: listed apart from the ranks."""
+PRIVILEGED_KIND, ONBOARD_KIND = "scripted, privileged", "scripted, onboard"
+"""The kinds of the other scripted baselines: those that read the simulator's state, and ``onboard`` (the robot's own sensing)."""
+
+
+def baseline_kind(name: str) -> str:
+    """The kind of scripted baseline ``name`` (:data:`crowdnav.evaluation.baselines.BASELINES`) in a track's rankings."""
+    from crowdnav.evaluation.baselines import ONBOARD_BASELINES
+
+    return CEILING if name == "oracle" else ONBOARD_KIND if name in ONBOARD_BASELINES else PRIVILEGED_KIND
 
 
 @dataclass
@@ -49,7 +58,7 @@ class Entry:
     name: str
     label: str
     kind: str
-    """``policy`` (a user's result), ``scripted, privileged`` or :data:`CEILING`."""
+    """``policy`` (a user's result), ``scripted, privileged``, ``scripted, onboard`` or :data:`CEILING`."""
     observations: str
     source: Path
     outcomes: dict[int, str]
@@ -115,7 +124,7 @@ def read_entries(track: Track, paths: Iterable[str | Path]) -> list[Entry]:
             baseline = str(meta.get("policy", "")).removeprefix("baseline:").replace("-", "_")
             kind = "policy"
             if configuration.startswith(BASELINE_PREFIX) and baseline in BASELINES:
-                kind = CEILING if baseline == "oracle" else "scripted, privileged"
+                kind = baseline_kind(baseline)
             observations = meta.get("observations", "")
             entries.append(_entry_from_rows(_read_rows(meta_path.parent / TEST_FILE), meta_path.parent, name=configuration,
                                             label=str(meta.get("label", configuration)), kind=kind,

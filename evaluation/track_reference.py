@@ -3,16 +3,21 @@
 ``crowdnav track reference NAME --out DIR`` writes ``DIR/<track>/``:
 
 * ``baseline_<name>.csv`` per baseline (:data:`REFERENCE_BASELINES`: straight, social_force,
-  orca where pyrvo is installed, predictive, and oracle where it does not refuse the track), one
-  row per test episode with :data:`COLUMNS`, numbers at 4 decimals;
+  orca where pyrvo is installed, onboard where the track allows what it reads (the ``plan``
+  observation's inputs: the tracker and the map), predictive, and oracle where it does not refuse
+  the track), one row per test episode with :data:`COLUMNS`, numbers at 4 decimals;
 * ``reference.json``: the track (name, version, fingerprint), the crowdnav commit, and one entry
-  per baseline (its label, kind, file, success rate), plus the baselines skipped and why.
+  per baseline (its label, kind, what it observes, file, success rate; ``git_commit`` where it was
+  played at another commit than the document's), plus the baselines skipped and why.
 
 Nothing in them depends on the time or the machine, so playing the same commit again writes the
 same bytes. It is resumable: a baseline already written by this commit for this version of the
-track is kept (``force`` plays it again), and ``reference.json`` is rewritten after each one. The
-reference agents' entries (``crowdnav track reference NAME --agents``, :mod:`crowdnav.evaluation.track_agents`)
-are kept as they are while the track's version is the same.
+track is kept (``force`` plays it again), and ``reference.json`` is rewritten after each one.
+``only`` (``--baseline NAME``) plays just the baselines named (one added to
+:data:`REFERENCE_BASELINES` later, say) and keeps every other baseline of this version of the track
+as it was published, rows and commit: the document's ``git_commit`` stays theirs and each entry
+played now names its own. The reference agents' entries (``crowdnav track reference NAME --agents``,
+:mod:`crowdnav.evaluation.track_agents`) are kept as they are while the track's version is the same.
 Results are published only from a clean checkout: with ``git status --porcelain`` listing anything
 outside DIR, it refuses in one line (``allow_dirty`` for tests), and it records the exact commit.
 """
@@ -21,16 +26,18 @@ from __future__ import annotations
 
 import json
 import subprocess
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
 from crowdnav.evaluation.track import Track, TrackError
-from crowdnav.evaluation.track_leaderboard import CEILING, REFERENCE_FILE
+from crowdnav.evaluation.track_leaderboard import REFERENCE_FILE, baseline_kind
 
-REFERENCE_BASELINES = ("straight", "social_force", "orca", "predictive", "oracle")
+REFERENCE_BASELINES = ("straight", "social_force", "orca", "onboard", "predictive", "oracle")
 COLUMNS = ("test_seed", "outcome", "collision_kind", "steps", "return", "time_to_goal", "path_length", "spl", "min_human_distance", "psc")
 PRIVILEGED = "privileged: the simulator's state"
+ONBOARD = "onboard: the humans its tracker reports, its pose, velocity and goal, the map (the plan observation's inputs)"
+"""What ``baseline:onboard`` reads, as its entry says (:class:`crowdnav.planning.onboard.OnboardPlanner`)."""
 AGENT_PREFIX = "agent_"
 DIRTY = "+dirty"
 """The suffix of a commit with uncommitted changes."""
@@ -92,9 +99,9 @@ def reference_csv(rows: list[dict[str, Any]]) -> str:
 
 
 def write_reference(track: Track, out: str | Path, *, allow_dirty: bool = False, force: bool = False,
-                    log: Callable[[str], None] = print) -> Path:
-    """Play every reference baseline on ``track`` into ``out/<track>/``; returns that folder."""
-    from crowdnav.evaluation.baselines import BASELINE_PREFIX, BASELINES, scripted_policy
+                    only: Sequence[str] | None = None, log: Callable[[str], None] = print) -> Path:
+    """Play every reference baseline (``only``: those named) on ``track`` into ``out/<track>/``; returns that folder."""
+    from crowdnav.evaluation.baselines import BASELINE_PREFIX, BASELINES, baseline_observations, scripted_policy
     from crowdnav.evaluation.rollout import HeldOutEpisodes
     from crowdnav.evaluation.storage import atomic_write_text, read_json
 
@@ -102,28 +109,53 @@ def write_reference(track: Track, out: str | Path, *, allow_dirty: bool = False,
     from crowdnav.orca import OrcaUnavailableError
     from crowdnav.planning.oracle import PlannerUnavailable
 
+    unknown = [name for name in only or () if name not in REFERENCE_BASELINES]
+    if unknown:
+        raise TrackError(f"unknown reference baseline {unknown[0]!r}; expected some of {', '.join(REFERENCE_BASELINES)}")
     folder = Path(out) / track.name
     commit = publishing_commit(Path(out), allow_dirty)
     index = folder / REFERENCE_FILE
     recorded = read_json(index) if index.is_file() else {}
-    previous = recorded if not force else {}
-    same = previous.get("track") == track.identity() and previous.get("git_commit") == commit
-    kept = {entry["name"]: entry for entry in previous.get("entries", []) if same and (folder / entry["file"]).is_file()}
+    same = recorded.get("track") == track.identity()
+    published = {entry["name"]: {"git_commit": recorded.get("git_commit"), **entry} for entry in recorded.get("entries", [])
+                 if same and not entry["name"].startswith(AGENT_PREFIX) and (folder / entry["file"]).is_file()}
+    """This version's baselines as published, each with the commit that played it."""
     agents = [entry for entry in recorded.get("entries", []) if entry["name"].startswith(AGENT_PREFIX)  # their rows are no baseline's
-              and recorded.get("track") == track.identity() and (folder / entry["file"]).is_file()]
-    document: dict[str, Any] = {"track": track.identity(), "git_commit": commit, "crowdnav": __version__, "test_episodes": track.test_episodes,
-                                "entries": [], "skipped": []}
+              and same and (folder / entry["file"]).is_file()]
+    playing = REFERENCE_BASELINES if only is None else tuple(only)
+    keeping = same and only is not None and recorded.get("git_commit") is not None  # the others stay as published
+    document: dict[str, Any] = {"track": track.identity(), "git_commit": recorded["git_commit"] if keeping else commit,
+                                "crowdnav": recorded.get("crowdnav", __version__) if keeping else __version__,
+                                "test_episodes": track.test_episodes, "entries": [], "skipped": []}
+
+    def add(entry: dict[str, Any]) -> None:
+        """An entry, naming its own commit where it is not the document's."""
+        played_at = entry.pop("git_commit")
+        document["entries"].append({**entry, **({"git_commit": played_at} if played_at != document["git_commit"] else {})})
 
     def index_text() -> str:
         return json.dumps({**document, "entries": document["entries"] + agents}, indent=2, sort_keys=True) + "\n"
 
     for name in REFERENCE_BASELINES:
         configuration = f"{BASELINE_PREFIX}{name}"
-        if configuration in kept:
-            document["entries"].append(kept[configuration])
+        before = published.get(configuration)
+        if name not in playing:  # only the baselines named are played: the others as published
+            if before is not None:
+                add(dict(before))
+                log(f"{track.name}: {configuration} kept (as published at {str(before['git_commit'])[:12]}, v{track.version})")
+            document["skipped"].extend(skip for skip in recorded.get("skipped", []) if same and skip["name"] == configuration)
+            continue
+        if before is not None and not force and before["git_commit"] == commit:
+            add(dict(before))
             log(f"{track.name}: {configuration} kept (this commit, v{track.version})")
             continue
+        observations = baseline_observations(name)
         try:
+            if isinstance(observations, list):  # it reads what these observation keys carry: the track must allow them
+                try:
+                    track.check_observations(observations)
+                except TrackError as error:
+                    raise PlannerUnavailable(f"baseline:{name} reads what the plan observation carries (the tracker, the map): {error}") from None
             policy = scripted_policy(name)
             played = HeldOutEpisodes(track.env_options(["goal"]), track.seeds)
             try:
@@ -139,9 +171,9 @@ def write_reference(track: Track, out: str | Path, *, allow_dirty: bool = False,
         folder.mkdir(parents=True, exist_ok=True)
         atomic_write_text(folder / file, reference_csv(rows))
         success = sum(row["outcome"] == "success" for row in rows) / len(rows)
-        document["entries"].append({"name": configuration, "label": BASELINES[name], "policy": f"baseline:{name}",
-                                    "kind": CEILING if name == "oracle" else "scripted, privileged", "observations": PRIVILEGED,
-                                    "file": file, "episodes": len(rows), "success": round(success, 4)})
+        add({"name": configuration, "label": BASELINES[name], "policy": f"baseline:{name}", "kind": baseline_kind(name),
+             "observations": PRIVILEGED if isinstance(observations, str) else ONBOARD, "file": file, "episodes": len(rows),
+             "success": round(success, 4), "git_commit": commit})
         atomic_write_text(index, index_text())  # after each one: resumable
         log(f"{track.name}: {configuration} success {success:.0%} on {len(rows)} episodes")
     folder.mkdir(parents=True, exist_ok=True)

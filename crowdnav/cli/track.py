@@ -32,8 +32,10 @@ def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) ->
     reference = commands.add_parser(
         "reference", help="play every scripted baseline on a track, or add trained reference agents, as small per-episode CSVs to publish",
         description="Writes OUT/<track>/baseline_<name>.csv and reference.json (straight, social_force, orca where pyrvo is "
-                    "installed, predictive, oracle where it does not refuse the track). Resumable and idempotent: a baseline "
-                    "this commit already wrote is kept. Refuses a checkout with uncommitted changes. With --agents, plays "
+                    "installed, onboard where the track allows its tracker, predictive, oracle where it does not refuse the "
+                    "track). Resumable and idempotent: a baseline this commit already wrote is kept. With --baseline, plays "
+                    "only those named and keeps the others as published (their rows and commit). Refuses a checkout with "
+                    "uncommitted changes. With --agents, plays "
                     "nothing: it adds each training seed of a finished `crowdnav benchmark` configuration (its final "
                     "evaluation's episodes) as agent_<experiment>_<configuration>_seed<K>.csv, after checking that the "
                     "experiment ran the track's setting, from a clean commit, with every seed finished (at least 3).",
@@ -42,6 +44,9 @@ def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) ->
     reference.add_argument("--agents", action="append", default=[], metavar="RESULTS_DIR/CONFIGURATION",
                            help="add this experiment configuration's seeds as reference agents (repeatable); the baselines "
                                 "already there are kept")
+    reference.add_argument("--baseline", action="append", default=None, metavar="NAME", dest="baselines",
+                           help="play only this reference baseline (repeatable), e.g. one added since the track's results "
+                                "were published; the other baselines are kept as published")
     reference.add_argument("--out", default="docs/results/tracks", metavar="DIR", help="default: %(default)s")
     reference.add_argument("--force", action="store_true", help="play every baseline again (with --agents: replace a different result)")
     reference.add_argument("--allow-dirty", action="store_true", help="write from a checkout with uncommitted changes (marked +dirty)")
@@ -96,12 +101,15 @@ def reference_command(args: argparse.Namespace) -> int:
     from crowdnav.evaluation.track_reference import write_reference
 
     track = _track(args.name)
+    if args.agents and args.baselines:
+        raise CliError("--agents adds reference agents and plays nothing; --baseline plays baselines: one or the other")
     try:
         if args.agents:
             folder = write_agents(track, args.agents, args.out, allow_dirty=args.allow_dirty, force=args.force,
                                   log=lambda line: print(line, flush=True))
         else:
-            folder = write_reference(track, args.out, allow_dirty=args.allow_dirty, force=args.force, log=lambda line: print(line, flush=True))
+            folder = write_reference(track, args.out, allow_dirty=args.allow_dirty, force=args.force, only=args.baselines,
+                                     log=lambda line: print(line, flush=True))
     except TrackError as error:
         raise CliError(str(error)) from None
     print(f"wrote {folder}; rank against it with: crowdnav leaderboard --track {track.name} --reference {folder} RESULTS")

@@ -71,6 +71,8 @@ def test_unknown_or_missing_tracks_are_refused_in_one_line(capsys, argv):
     ("baseline:oracle", ["robot.kinematics=unicycle", "robot.max_angular_speed=1.0"], "holonomic"),
     ("baseline:predictive", ["robot.kinematics=unicycle", "robot.max_angular_speed=1.0"], "holonomic"),
     ("baseline:predictive", ["world.min=[-5000,-5000]", "world.max=[5000,5000]"], "limit of 1,000,000"),
+    ("baseline:onboard", ["robot.kinematics=unicycle", "robot.max_angular_speed=1.0"], "holonomic"),
+    ("baseline:onboard", ["world.min=[-5000,-5000]", "world.max=[5000,5000]"], "limit of 1,000,000"),
     ("baseline:oracle", ["humans.see_robot=false", "max_steps=100000"], "limit of 50,000,000"),
 ])
 def test_planner_baselines_refuse_what_they_cannot_plan_in_one_line_and_write_nothing(capsys, tmp_path, policy, sets, words):

@@ -47,6 +47,20 @@ def test_evaluate_then_leaderboard_on_a_track_with_a_page(capsys, tmp_path, monk
     assert (tmp_path / "res" / "leaderboard_figure4.csv").is_file()
 
 
+def test_track_reference_plays_only_the_baselines_named_and_keeps_the_others(capsys, tmp_path, monkeypatch):
+    source = load_track("figure4").source
+    short = tmp_path / "short.yaml"
+    short.write_text(open(source, encoding="utf-8").read().replace("test_episodes: 100", "test_episodes: 2"), encoding="utf-8")
+    monkeypatch.chdir(tmp_path)
+    assert main(["track", "reference", str(short), "--out", "ref", "--allow-dirty", "--baseline", "straight"]) == 0
+    assert main(["track", "reference", str(short), "--out", "ref", "--allow-dirty", "--baseline", "onboard"]) == 0
+    out = capsys.readouterr().out
+    assert "baseline_straight kept" in out and "baseline_onboard success" in out and "baseline_oracle" not in out
+    assert sorted(path.name for path in (tmp_path / "ref" / "figure4").glob("*.csv")) == ["baseline_onboard.csv", "baseline_straight.csv"]
+    assert main(["track", "reference", str(short), "--out", "ref", "--baseline", "onboard", "--agents", "x"]) == 1
+    assert capsys.readouterr().err.count("\n") == 1
+
+
 def test_the_leaderboard_needs_a_track_for_its_track_options(capsys):
     assert main(["leaderboard", "--html", "x.html", "somewhere"]) == 1
     assert "add --track NAME" in capsys.readouterr().err

@@ -1,6 +1,6 @@
 """Every scripted baseline crowdnav ships plays a whole episode in every library scenario, or refuses it in one line.
 
-The lattice planners (oracle, predictive) drive one holonomic robot; the oracle also needs a crowd that
+The lattice planners (oracle, predictive, onboard) drive one holonomic robot; the oracle also needs a crowd that
 does not react to the robot. Elsewhere they raise :class:`crowdnav.planning.PlannerUnavailable`.
 """
 
@@ -27,7 +27,7 @@ HAS_PYRVO = importlib.util.find_spec("pyrvo") is not None
 def test_the_baseline_plays_two_whole_episodes_of_the_library_scenario_with_defined_metrics(baseline, scenario):
     episodes = HeldOutEpisodes({"scenario": scenario, "modalities": ["goal"]}, range(2))
     spec = load_world(scenario).scenario
-    refuses = baseline in ("oracle", "predictive") and (  # the planners drive the first robot (others: their own policy)
+    refuses = baseline in ("oracle", "predictive", "onboard") and (  # the planners drive the first robot (others: their own policy)
         spec.robot.kinematics != "holonomic" or (baseline == "oracle" and (spec.robots is not None or spec.humans.see_robot)))
     if refuses:
         with pytest.raises(PlannerUnavailable) as refusal:

@@ -12,6 +12,7 @@ from crowdnav.evaluation.protocol import Protocol
 from crowdnav.evaluation.storage import META_FILE, TEST_FILE, load_results, read_json
 
 from crowdnav.envs import CrowdNavEnv
+from crowdnav.planning.onboard import OnboardPlanner
 from crowdnav.policies import SocialForceRobot, StraightToGoal
 from tests.evaluation.evaluation_tiny import tiny_experiment_document, tiny_results
 
@@ -28,7 +29,7 @@ def _outcome(policy, env_options, seed):
 def test_baselines_play_the_protocols_test_episodes_like_the_scripted_policies_do(tmp_path):
     options = {"scenario": "open_space", "modalities": ["goal"], "overrides": {"max_steps": 60}, "reward_weights": {}}
     protocol = Protocol(train_episodes=4, eval_every=2, test_episodes=4, seeds=1, test_seed_base=7)
-    for name, policy in (("straight", StraightToGoal()), ("social_force", SocialForceRobot())):
+    for name, policy in (("straight", StraightToGoal()), ("social_force", SocialForceRobot()), ("onboard", OnboardPlanner())):
         folder = evaluate_baseline("x", f"baseline_{name}", BASELINES[name], options, protocol, tmp_path / name)
         tests = pd.read_csv(folder / TEST_FILE, keep_default_na=False)
         # the same rows at both evaluation points, one per test seed, as the scripted policy plays them
@@ -49,14 +50,29 @@ def test_a_finished_baseline_is_not_played_again(tmp_path):
     assert (folder / META_FILE).stat().st_mtime_ns == stamp
 
 
-def test_an_experiment_gets_one_pair_of_baselines_per_distinct_environment():
+def test_an_experiment_gets_one_set_of_baselines_per_distinct_environment():
     experiment = experiment_from_mapping(tiny_experiment_document())
-    assert [name for name, _, _ in experiment_baselines(experiment)] == ["baseline_straight", "baseline_social_force",
-                                                                         "baseline_predictive", "baseline_oracle"]
+    played = ("straight", "social_force", "onboard", "predictive", "oracle")
+    assert EXPERIMENT_BASELINES == played
+    assert [name for name, _, _ in experiment_baselines(experiment)] == [f"baseline_{name}" for name in played]
     document = tiny_experiment_document()
     document["configurations"][1]["train"]["scenario"] = "room_furniture"
     names = [name for name, _, _ in experiment_baselines(experiment_from_mapping(document))]
-    assert names == [f"baseline_{name}_{first}" for first in ("lidar", "closest") for name in ("straight", "social_force", "predictive", "oracle")]
+    assert names == [f"baseline_{name}_{first}" for first in ("lidar", "closest") for name in played]
+
+
+def test_a_baseline_that_refuses_the_scenario_is_one_line_and_the_others_are_played(tmp_path):
+    from crowdnav.evaluation.baselines import evaluate_experiment_baselines
+
+    document = tiny_experiment_document(seeds=1, test_episodes=2)
+    document["configurations"] = document["configurations"][:1]
+    document["defaults"]["overrides"] = {**document["defaults"]["overrides"], "robot.kinematics": "unicycle", "robot.max_angular_speed": 2.0}
+    done = evaluate_experiment_baselines(experiment_from_mapping(document), tmp_path / "results")
+    refused = {item.split(" skipped: ")[0]: item.split(" skipped: ")[1] for item in done if isinstance(item, str)}
+    assert set(refused) == {f"baseline {BASELINES[name]}" for name in ("onboard", "predictive", "oracle")}
+    assert refused[f"baseline {BASELINES['onboard']}"] == ("PlannerUnavailable: the onboard planner plans lattice moves for a holonomic "
+                                                           "robot; this scenario's robot is unicycle")
+    assert [path.parent.name for path in done if not isinstance(path, str)] == ["baseline_straight", "baseline_social_force"]
 
 
 def test_configuration_names_starting_with_baseline_are_refused():
@@ -71,7 +87,8 @@ def test_benchmark_results_rank_the_baselines_and_draw_them_as_horizontal_lines(
     tests, _, metas = load_results([results])
     table = leaderboard_table(tests, metas)
     baselines = table[table["kind"] == "baseline"]
-    assert sorted(baselines["configuration"]) == ["baseline_oracle", "baseline_predictive", "baseline_social_force", "baseline_straight"]
+    assert sorted(baselines["configuration"]) == ["baseline_onboard", "baseline_oracle", "baseline_predictive", "baseline_social_force",
+                                                  "baseline_straight"]
     assert (baselines["seeds"] == 1).all() and all(map(is_baseline, baselines["configuration"]))
     figure = curves_figure(tests, window=3)
     # one dashed / dotted horizontal line per baseline in every outcome panel

@@ -157,7 +157,7 @@ def test_leaderboard_regenerates_byte_for_byte(tmp_path_factory, tmp_path):
     table = pd.read_csv(first[1])
     learned = table[table["kind"] == "learned"]
     assert sorted(learned["configuration"]) == ["closest", "lidar"] and (learned["seeds"] == 2).all()
-    assert sorted(table.loc[table["kind"] == "baseline", "configuration"]) == ["baseline_oracle", "baseline_predictive",
+    assert sorted(table.loc[table["kind"] == "baseline", "configuration"]) == ["baseline_onboard", "baseline_oracle", "baseline_predictive",
                                                                               "baseline_social_force", "baseline_straight"]
     # a baseline's one play is repeated at every evaluation: its interval counts each test episode once
     baseline = table[table["configuration"] == "baseline_straight"].iloc[0]

@@ -94,3 +94,54 @@ def test_reference_results_refuse_a_checkout_with_changes(tmp_path, monkeypatch)
         track_reference.source_state(out)
     changes.pop(0)  # what it writes itself is no change of the source
     assert track_reference.source_state(out) == "abc123"
+
+
+def test_a_baseline_added_later_is_played_alone_and_the_published_ones_are_kept_with_their_commit(tmp_path):
+    from crowdnav.evaluation.track_reference import ONBOARD, REFERENCE_BASELINES
+
+    track = load_track("figure4")
+    short = track.__class__(**{**track.__dict__, "test_episodes": 3})
+    older = [name for name in REFERENCE_BASELINES if name != "onboard"]
+    folder = write_reference(short, tmp_path, allow_dirty=True, only=older, log=lambda line: None)
+    index = folder / "reference.json"
+    published = json.loads(index.read_text())
+    published["git_commit"] = "0123abc"  # as if played at an older commit
+    index.write_text(json.dumps(published))
+    files = {path.name: path.read_bytes() for path in folder.glob("*.csv")}
+    lines: list[str] = []
+    write_reference(short, tmp_path, allow_dirty=True, only=["onboard"], log=lines.append)
+    document = read_json(index)
+    entries = {entry["name"]: entry for entry in document["entries"]}
+    assert document["git_commit"] == "0123abc" and {path.name: path.read_bytes() for path in folder.glob("*.csv") if path.name in files} == files
+    assert [entries[entry["name"]] for entry in published["entries"]] == published["entries"]  # the published ones, as they were
+    onboard = entries["baseline_onboard"]
+    assert onboard["kind"] == "scripted, onboard" and onboard["observations"] == ONBOARD and onboard["policy"] == "baseline:onboard"
+    assert onboard["git_commit"] not in (None, "0123abc") and list(entries).index("baseline_onboard") == REFERENCE_BASELINES.index("onboard")
+    assert sum("kept (as published at 0123abc" in line for line in lines) == len(older) and any("baseline_onboard success" in line for line in lines)
+    board = rank(short, read_entries(short, [folder]))
+    assert next(entry for entry in board.rows if entry.name == "baseline_onboard").kind == "scripted, onboard"
+    write_reference(short, tmp_path, allow_dirty=True, log=lambda line: None)  # every baseline at this commit: no entry names its own
+    document = read_json(index)
+    assert document["git_commit"] == onboard["git_commit"] and not any("git_commit" in entry for entry in document["entries"])
+    with pytest.raises(TrackError, match="unknown reference baseline 'onbord'"):
+        write_reference(short, tmp_path, allow_dirty=True, only=["onbord"], log=lambda line: None)
+
+
+def test_the_onboard_baseline_is_refused_in_one_line_on_a_track_that_does_not_allow_its_tracker(tmp_path):
+    track = load_track("robots_crossing_hall")
+    lines: list[str] = []
+    folder = write_reference(track, tmp_path, allow_dirty=True, only=["onboard"], log=lines.append)
+    skipped = read_json(folder / "reference.json")["skipped"]
+    assert [skip["name"] for skip in skipped] == ["baseline_onboard"] and "\n" not in skipped[0]["reason"]
+    assert "plan is not allowed" in skipped[0]["reason"] and not (folder / "baseline_onboard.csv").exists()
+    with pytest.raises(TrackError, match="plan is not allowed"):
+        evaluate_policy("baseline:onboard", None, tmp_path / "res", track=track)
+
+
+def test_an_evaluated_onboard_baseline_declares_what_it_reads_and_ranks_as_onboard(tmp_path):
+    track = load_track("figure4")
+    short = track.__class__(**{**track.__dict__, "test_episodes": 3})
+    folder = evaluate_policy("baseline:onboard", None, tmp_path / "res", track=short)
+    assert read_json(folder / META_FILE)["observations"] == ["plan"]
+    (entry,) = read_entries(short, [tmp_path / "res"])
+    assert entry.kind == "scripted, onboard" and entry.observations == "plan"
