@@ -7,7 +7,7 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[2]
 TRACKS = ROOT / "docs" / "results" / "tracks"
-BASELINES = ("straight", "social_force", "orca", "predictive", "oracle")
+BASELINES = ("straight", "social_force", "orca", "onboard", "predictive", "oracle")
 
 
 def _percent(rate: float) -> str:
