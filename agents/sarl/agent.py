@@ -29,6 +29,7 @@ linearly to 0 at the episode budget (a resume with a larger budget stretches it,
 from __future__ import annotations
 
 import json
+import warnings
 from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, cast
@@ -41,7 +42,10 @@ from crowdnav.agents.factory import observation_normalization
 from crowdnav.agents.sarl.imitation import Demonstrations, make_teacher, world_simulators
 from crowdnav.agents.sarl.lookahead import (
     FEATURE_SCALE,
+    GEODESIC_KEY,
     REQUIRED_KEYS,
+    ROBOT_FEATURES,
+    STATIC_KEY,
     Physics,
     action_set,
     bounded_weights,
@@ -51,7 +55,7 @@ from crowdnav.agents.sarl.lookahead import (
     value_ceiling,
 )
 from crowdnav.agents.sarl.memory import ReplayMemory
-from crowdnav.agents.sarl.network import ValueEnsemble, evaluate, value_network
+from crowdnav.agents.sarl.network import ValueEnsemble, ValueNetwork, evaluate, value_network
 
 if TYPE_CHECKING:
     from stable_baselines3.common.vec_env import VecEnv
@@ -109,8 +113,14 @@ class SarlAgent:
                               "and goal_progress, goal_reached >= 0")
         scales = observation_normalization(env) or {}
         self.scales = {key: (np.asarray(offset, dtype=np.float64), np.asarray(scale, dtype=np.float64))
-                       for key, (offset, scale) in scales.items() if key in REQUIRED_KEYS}
+                       for key, (offset, scale) in scales.items() if key in (*REQUIRED_KEYS, STATIC_KEY, GEODESIC_KEY)}
         self.humans = int(cast(tuple[int, ...], spaces["humans"].shape)[0])
+        # the walls and furniture it reads (the obstacles modality's slots; 0: it sees no static world)
+        self.statics = int(cast(tuple[int, ...], spaces[STATIC_KEY].shape)[0]) if STATIC_KEY in spaces else 0
+        self.geodesic = GEODESIC_KEY in spaces  # the distance to the goal around obstacles: a 4th robot feature
+        if not self.statics and _furnished(scenario):
+            warnings.warn(f"algorithm {name!r} reads no walls nor furniture, and this scenario has them inside its floor: "
+                          f"add the modality {STATIC_KEY!r} (docs/agents.md#agents-that-read-the-room)", UserWarning, stacklevel=2)
         self.gamma = float(config.gamma if config.gamma is not None else GAMMA)
         self.learning_rate = float(config.learning_rate if config.learning_rate is not None else LEARNING_RATE)
         # linear: Adam's rate falls to 0 over the run's budget (as SB3's "linear"), so the last episodes move V less
@@ -119,10 +129,17 @@ class SarlAgent:
         self.rng = np.random.default_rng(config.seed)
         with torch.random.fork_rng():
             torch.manual_seed(config.seed)
-            self.network = value_network(int(self.options["width"]), int(self.options["ensemble"]))
-            self.target = value_network(int(self.options["width"]), int(self.options["ensemble"]))
-        self._setup(ReplayMemory(int(self.options["memory_size"]), self.humans), Demonstrations())
+            self.network, self.target = self._network(), self._network()
+        self._setup(ReplayMemory(int(self.options["memory_size"]), self.humans, self.statics, self._robot_features), Demonstrations())
         self.target.load_state_dict(self.network.state_dict())
+
+    @property
+    def _robot_features(self) -> int:
+        return ROBOT_FEATURES + int(self.geodesic)
+
+    def _network(self) -> ValueNetwork | ValueEnsemble:
+        """A value network of this agent's options and inputs (initialised from torch's global generator)."""
+        return value_network(int(self.options["width"]), int(self.options["ensemble"]), self.statics > 0, self._robot_features)
 
     def _setup(self, memory: ReplayMemory, demonstrations: Demonstrations) -> None:
         self.memory, self.demonstrations = memory, demonstrations
@@ -151,8 +168,7 @@ class SarlAgent:
 
     def _backup(self, ahead: Mapping[str, Any]) -> np.ndarray:
         """``r + discount * V(next)`` of every action (no value after a predicted collision or goal)."""
-        robot, humans = features(ahead["next"], self.physics.radius)
-        values = evaluate(self.network, robot, humans)
+        values = evaluate(self.network, *features(ahead["next"], self.physics))
         if self.options["value_bound"]:
             goal = ahead["next"]["goal"]
             values = np.minimum(values, value_ceiling(np.hypot(goal[..., 0], goal[..., 1]), self.physics, self.discount))
@@ -213,10 +229,10 @@ class SarlAgent:
         """Step all worlds together; every ended episode (world order) is learnt from, then ``keep_going`` is asked."""
         worlds = env.num_envs
         observation = cast(dict[str, np.ndarray], env.reset())
-        robot, humans = self._observed(observation)
+        state = self._observed(observation)
         self._teaching = 0  # demonstrations under way (a resume starts every world afresh)
         teaching = np.array([self._starts_demonstration() for _ in range(worlds)])
-        shown: list[tuple[list[np.ndarray], list[np.ndarray], list[float]]] = [([], [], []) for _ in range(worlds)]
+        shown: list[tuple[list[tuple[np.ndarray, ...]], list[float]]] = [([], []) for _ in range(worlds)]
         while True:
             stepped, rewards, dones, infos = env.step(self._actions(env, observation, teaching))
             observation = last = cast(dict[str, np.ndarray], stepped)
@@ -225,24 +241,24 @@ class SarlAgent:
                 for i in np.flatnonzero(dones):
                     for key, value in infos[i]["terminal_observation"].items():
                         last[key][i] = value
-            next_robot, next_humans = self._observed(last)
+            following = self._observed(last)
             for w in range(worlds):
                 terminal = bool(dones[w]) and not infos[w].get("TimeLimit.truncated", False)
-                self.memory.add(robot[w], humans[w], float(rewards[w]), next_robot[w], next_humans[w], terminal)
+                now = tuple(part[w] for part in state)
+                self.memory.add(now, float(rewards[w]), tuple(part[w] for part in following), terminal)
                 if teaching[w]:  # the teacher's states and rewards, for its discounted returns
-                    shown[w][0].append(robot[w])
-                    shown[w][1].append(humans[w])
-                    shown[w][2].append(float(rewards[w]))
-            robot, humans = (next_robot, next_humans) if last is observation else self._observed(observation)
+                    shown[w][0].append(now)
+                    shown[w][1].append(float(rewards[w]))
+            state = following if last is observation else self._observed(observation)
             for i in np.flatnonzero(dones):
                 self._ended(shown[i] if teaching[i] else None)
                 if not keep_going():
                     return
-                shown[i] = ([], [], [])
+                shown[i] = ([], [])
                 teaching[i] = self._starts_demonstration()
 
-    def _observed(self, observation: Mapping[str, np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
-        return features(decode(observation, self.scales), self.physics.radius)
+    def _observed(self, observation: Mapping[str, np.ndarray]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        return features(decode(observation, self.scales), self.physics)
 
     def _starts_demonstration(self) -> bool:
         """Whether the episode a world starts now is the teacher's: fewer than ``imitation_episodes`` played or under way."""
@@ -263,7 +279,7 @@ class SarlAgent:
             actions[i] = np.asarray(self.teacher(simulators[i]), dtype=np.float32)
         return actions
 
-    def _ended(self, shown: tuple[list[np.ndarray], list[np.ndarray], list[float]] | None) -> None:
+    def _ended(self, shown: tuple[list[tuple[np.ndarray, ...]], list[float]] | None) -> None:
         """What an ended episode teaches: V-learning, or (``shown``: the teacher's states and rewards) the demonstrations."""
         if shown is None:
             self._train()
@@ -279,19 +295,19 @@ class SarlAgent:
 
     def _imitate(self) -> None:
         """Regress V on the demonstrations' discounted returns (``imitation_epochs`` shuffled passes)."""
-        robot, humans, returns = (torch.from_numpy(array) for array in self.demonstrations.arrays())
+        robot, humans, statics, returns = (torch.from_numpy(array) for array in self.demonstrations.arrays())
         size = int(self.options["batch_size"])
         for _ in range(int(self.options["imitation_epochs"])):
             order = torch.from_numpy(self.rng.permutation(len(returns)))
             for start in range(0, len(order), size):
                 index = order[start:start + size]
-                self._step(self._loss(robot[index], humans[index], returns[index]))
+                self._step(self._loss((robot[index], humans[index], statics[index]), returns[index]))
 
-    def _loss(self, robot: torch.Tensor, humans: torch.Tensor, target: torch.Tensor) -> torch.Tensor:
-        """Mean squared error of V against ``target``; an ensemble: each member's, summed (each learns as one network)."""
+    def _loss(self, state: tuple[torch.Tensor, ...], target: torch.Tensor) -> torch.Tensor:
+        """Mean squared error of V(state) against ``target``; an ensemble: each member's, summed (each learns as one network)."""
         if isinstance(self.network, ValueEnsemble):
-            return ((self.network.each(robot, humans) - target[None]) ** 2).mean(dim=1).sum()
-        return torch.nn.functional.mse_loss(self.network(robot, humans), target)
+            return ((self.network.each(*state) - target[None]) ** 2).mean(dim=1).sum()
+        return torch.nn.functional.mse_loss(self.network(*state), target)
 
     def _learning_rate(self) -> float:
         """Adam's rate for the updates after the episode now ending: constant, or falling linearly to 0 at the budget."""
@@ -314,13 +330,13 @@ class SarlAgent:
         for _ in range(int(self.options["updates_per_episode"])):
             batch = {key: torch.from_numpy(value) for key, value in self.memory.sample(self.rng, size).items()}
             with torch.no_grad():
-                following = self.target(batch["next_robot"], batch["next_humans"])
+                following = self.target(batch["next_robot"], batch["next_humans"], batch["next_statics"])
                 if self.options["value_bound"]:  # the features' first column is the goal distance, scaled
                     distance = batch["next_robot"][:, 0].numpy().astype(np.float64) / FEATURE_SCALE
                     ceiling = torch.from_numpy(value_ceiling(distance, self.physics, self.discount).astype(np.float32))
                     following = torch.minimum(following, ceiling)
                 target = batch["reward"] + self.discount * (1.0 - batch["terminal"]) * following
-            self._step(self._loss(batch["robot"], batch["humans"], target))
+            self._step(self._loss((batch["robot"], batch["humans"], batch["statics"]), target))
 
     # ------------------------------------------------------------------ checkpoints
 
@@ -333,7 +349,9 @@ class SarlAgent:
         np.savez(folder / "weights.npz", **arrays)
         self.memory.save(folder / "memory.npz")
         self.demonstrations.save(folder / "demonstrations.npz")
-        document = {"options": self.options, "physics": self.physics.to_json(), "humans": self.humans, "gamma": self.gamma,
+        document = {"options": self.options, "physics": self.physics.to_json(), "humans": self.humans, "statics": self.statics,
+                    "geodesic": self.geodesic,
+                    "gamma": self.gamma,
                     "learning_rate": self.learning_rate, "decay_episodes": self.decay_episodes, "episodes": self.episodes,
                     "rng": self.rng.bit_generator.state,
                     "scales": {key: {"offset": offset.tolist(), "scale": scale.tolist()} for key, (offset, scale) in self.scales.items()},
@@ -346,6 +364,8 @@ class SarlAgent:
         agent = cls.__new__(cls)
         # options added since a checkpoint was written take their defaults (the behaviour it was trained with)
         agent.options, agent.humans = {**DEFAULTS, **document["options"]}, int(document["humans"])
+        agent.statics = int(document.get("statics", 0))  # checkpoints from before the room was read: none
+        agent.geodesic = bool(document.get("geodesic", False))
         agent.physics = Physics.from_json(document["physics"])
         agent.gamma, agent.learning_rate, agent.episodes = float(document["gamma"]), float(document["learning_rate"]), int(document["episodes"])
         agent.decay_episodes = document.get("decay_episodes")  # absent in checkpoints from before the schedule: constant
@@ -353,8 +373,7 @@ class SarlAgent:
                         for key, item in document["scales"].items()}
         agent.rng = np.random.default_rng()
         agent.rng.bit_generator.state = document["rng"]
-        width, members = int(agent.options["width"]), int(agent.options["ensemble"])
-        agent.network, agent.target = value_network(width, members), value_network(width, members)
+        agent.network, agent.target = agent._network(), agent._network()
         with np.load(folder / "weights.npz", allow_pickle=False) as arrays:
             for prefix, network in (("network.", agent.network), ("target.", agent.target)):
                 network.load_state_dict({key[len(prefix):]: torch.from_numpy(arrays[key].copy()) for key in arrays.files if key.startswith(prefix)})
@@ -378,3 +397,8 @@ def _decay_episodes(config: Any) -> int | None:
     if config.episodes is None:
         raise ConfigError(f"learning_rate_schedule: {config.algo!r} decays over an episode budget; set episodes, not timesteps")
     return int(config.episodes)
+
+
+def _furnished(scenario: Any) -> bool:
+    """Whether walls, furniture or a floor outline stand where the robot may drive (boundary walls alone do not count)."""
+    return bool(scenario.walls or scenario.furniture or scenario.world.points is not None)

@@ -27,7 +27,7 @@ from collections.abc import Sequence
 from typing import Any
 
 import torch
-from crowdnav.agents.sarl.lookahead import FEATURE_SCALE, REQUIRED_KEYS
+from crowdnav.agents.sarl.lookahead import FEATURE_SCALE, GEODESIC_KEY, REQUIRED_KEYS, STATIC_KEY
 from torch import nn
 
 F64 = torch.float64
@@ -55,6 +55,25 @@ def _direction(goal: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Te
     return distance, cos, sin
 
 
+def _geodesic_at(grid: torch.Tensor, origin: torch.Tensor, spacing: float) -> torch.Tensor:
+    """:func:`~crowdnav.agents.sarl.lookahead.geodesic_at`: bilinear on the grid (..., g, g) at ``origin`` (..., 2)."""
+    size = int(grid.shape[-1])
+    if size == 1:
+        return grid[..., 0, 0]
+    centre = size // 2
+    u = torch.clamp(origin[..., 0] / spacing + centre, 0.0, size - 1.0)
+    v = torch.clamp(origin[..., 1] / spacing + centre, 0.0, size - 1.0)
+    i, j = torch.clamp(torch.floor(u), max=size - 2.0), torch.clamp(torch.floor(v), max=size - 2.0)
+    fu, fv = u - i, v - j
+    i, j = i.to(torch.int64), j.to(torch.int64)
+    flat = grid.reshape(*grid.shape[:-2], size * size)
+
+    def at(di: int, dj: int) -> torch.Tensor:
+        return torch.gather(flat, -1, ((i + di) * size + (j + dj))[..., None])[..., 0]
+
+    return at(0, 0) * (1 - fu) * (1 - fv) + at(1, 0) * fu * (1 - fv) + at(0, 1) * (1 - fu) * fv + at(1, 1) * fu * fv
+
+
 class SarlPolicyModule(nn.Module):
     """``forward(*observation)`` (tensors in :attr:`keys` order, batch first) -> the agent's deterministic actions (batch, 2)."""
 
@@ -69,12 +88,18 @@ class SarlPolicyModule(nn.Module):
         if self.depth not in (1, 2):
             raise ValueError(f"algorithm 'sarl' with lookahead_depth {self.depth}: ONNX export covers depths 1 and 2")
         self.keys = list(keys)
-        self.index = {key: self.keys.index(key) for key in REQUIRED_KEYS}
+        self.room = bool(agent.statics)  # it reads the walls and furniture (no static tensors in the graph otherwise)
+        self.geodesic = bool(agent.geodesic)  # the distance to the goal around obstacles, on the modality's grid
+        self.read = (*REQUIRED_KEYS, *((STATIC_KEY,) if self.room else ()), *((GEODESIC_KEY,) if self.geodesic else ()))
+        missing = [key for key in self.read if key not in self.keys]
+        if missing:
+            raise ValueError(f"algorithm 'sarl' trained on {', '.join(missing)} reads it; the observation has no {', '.join(missing)}")
+        self.index = {key: self.keys.index(key) for key in self.read}
         self.physics = agent.physics
         self.discount = float(agent.discount)
         self.register_buffer("actions", torch.as_tensor(agent.actions, dtype=F64))
         self.count = len(agent.actions)
-        self.scaled = [key for key in REQUIRED_KEYS if key in agent.scales]
+        self.scaled = [key for key in self.read if key in agent.scales]
         for key in self.scaled:
             offset, scale = agent.scales[key]
             self.register_buffer(f"offset_{key}", torch.as_tensor(offset, dtype=F64))
@@ -84,7 +109,7 @@ class SarlPolicyModule(nn.Module):
 
     def decode(self, inputs: Sequence[torch.Tensor]) -> dict[str, torch.Tensor]:
         """The joint states (robot frame, float64), as :func:`~crowdnav.agents.sarl.lookahead.decode`."""
-        raw = {key: inputs[self.index[key]].to(F64) for key in REQUIRED_KEYS}
+        raw = {key: inputs[self.index[key]].to(F64) for key in self.read}
         for key in self.scaled:
             raw[key] = raw[key] * getattr(self, f"scale_{key}") + getattr(self, f"offset_{key}")
         goal = raw["goal"]
@@ -95,9 +120,16 @@ class SarlPolicyModule(nn.Module):
             goal = goal[..., :1] * torch.stack([goal[..., 2], goal[..., 1]], dim=-1)
         rows, velocity = raw["humans"], raw["velocity"]
         present = (rows[..., 5] > 0.5).to(F64)
-        return {"goal": goal, "velocity": velocity, "positions": rows[..., 0:2],
-                "velocities": (rows[..., 2:4] + velocity[..., None, :]) * present[..., None], "radii": rows[..., 4],
-                "present": present}
+        state = {"goal": goal, "velocity": velocity, "positions": rows[..., 0:2],
+                 "velocities": (rows[..., 2:4] + velocity[..., None, :]) * present[..., None], "radii": rows[..., 4],
+                 "present": present}
+        if self.room:
+            static = raw[STATIC_KEY]
+            here = (static[..., 2] > 0.5).to(F64)
+            state.update(static=static[..., 0:2] * here[..., None], static_present=here)
+        if self.geodesic:
+            state.update(geodesic=raw[GEODESIC_KEY], origin=torch.zeros_like(velocity))
+        return state
 
     def forward(self, *inputs: torch.Tensor) -> torch.Tensor:
         ahead = self.lookahead(self.decode(inputs))
@@ -129,6 +161,12 @@ class SarlPolicyModule(nn.Module):
         radii = state["radii"][:, None, :].expand_as(closest)
         hits = (closest <= p.radius + radii) & (present > 0)
         collision = hits.to(F64).sum(dim=-1) > 0
+        if self.room:  # walls and furniture: the supporting half-plane at each nearest point (lookahead.lookahead)
+            static, here = state["static"][:, None, :, :], state["static_present"][:, None, :]
+            gap = _norm(static)
+            normal = static / torch.where(gap > 1e-12, gap, torch.ones_like(gap))[..., None]
+            clearance = gap - torch.sum(velocity[:, :, None, :] * normal, dim=-1) * dt
+            collision = collision | (((clearance <= p.radius) & (here > 0)).to(F64).sum(dim=-1) > 0)
         distance_before = _norm(state["goal"])[:, None]
         distance_after = _norm(goal)
         reached = distance_after <= p.goal_radius
@@ -143,6 +181,12 @@ class SarlPolicyModule(nn.Module):
         velocities = state["velocities"][:, None, :, :].expand_as(after)
         following = {"goal": goal, "velocity": velocity, "positions": after, "velocities": velocities, "radii": radii,
                      "present": present}
+        if self.room:
+            following.update(static=normal * (clearance * here)[..., None], static_present=here.expand_as(clearance))
+        if self.geodesic:  # the grid stays where it was observed; the robot moves on it
+            grid = state["geodesic"]
+            following.update(geodesic=grid[:, None].expand(-1, velocity.shape[1], *grid.shape[1:]),
+                             origin=state["origin"][:, None, :] + velocity * dt)
         return {"next": following, "reward": reward * p.reward_scale, "done": collision | reached, "commands": commands}
 
     def backup(self, ahead: dict[str, Any]) -> torch.Tensor:
@@ -172,14 +216,24 @@ class SarlPolicyModule(nn.Module):
     def value(self, state: dict[str, torch.Tensor]) -> torch.Tensor:
         """V of joint states (B, M) in float64: :func:`~crowdnav.agents.sarl.lookahead.features`, then the network."""
         distance, cos, sin = _direction(state["goal"])
-        robot = torch.cat([distance[..., None], _rotate(state["velocity"], cos, sin)], dim=-1) * FEATURE_SCALE
+        parts = [distance[..., None], _rotate(state["velocity"], cos, sin)]
+        if self.geodesic:
+            parts.append(_geodesic_at(state["geodesic"], state["origin"], self.physics.geodesic_spacing)[..., None])
+        robot = torch.cat(parts, dim=-1) * FEATURE_SCALE
         c, s = cos[..., None], sin[..., None]
         positions, present, radii = state["positions"], state["present"], state["radii"]
         gap = _norm(positions) - self.physics.radius - radii
         humans = torch.cat([_rotate(positions, c, s) * FEATURE_SCALE, _rotate(state["velocities"], c, s) * FEATURE_SCALE,
                             radii[..., None], gap[..., None] * FEATURE_SCALE, present[..., None]], dim=-1)
         robot32, humans32 = robot.to(torch.float32), (humans * present[..., None]).to(torch.float32)
-        values = self.network(robot32.reshape(-1, robot32.shape[-1]), humans32.reshape(-1, *humans32.shape[-2:]))
+        statics32 = None
+        if self.room:  # as lookahead.features
+            static, here = state["static"], state["static_present"]
+            statics = torch.cat([_rotate(static, c, s) * FEATURE_SCALE, (_norm(static) - self.physics.radius)[..., None] * FEATURE_SCALE,
+                                 here[..., None]], dim=-1)
+            statics32 = (statics * here[..., None]).to(torch.float32)
+            statics32 = statics32.reshape(-1, *statics32.shape[-2:])
+        values = self.network(robot32.reshape(-1, robot32.shape[-1]), humans32.reshape(-1, *humans32.shape[-2:]), statics32)
         values = values.reshape(-1, self.count).to(F64)
         return torch.minimum(values, self.ceiling(distance)) if self.bounded else values
 

@@ -14,8 +14,9 @@ from typing import Any
 import numpy as np
 from crowdnav.agents.config import ConfigError
 
-TEACHERS = ("predictive", "orca", "oracle")
-"""Scripted robots that may teach: the predictive planner (true current state), the ORCA robot, the oracle (future)."""
+TEACHERS = ("predictive", "orca", "oracle", "onboard")
+"""Scripted robots that may teach: the predictive planner (true current state), the ORCA robot, the oracle (future), and
+the onboard planner (the same planner fed by the robot's own tracker and map: no privileged state)."""
 
 
 def make_teacher(name: str) -> Any:
@@ -60,15 +61,20 @@ class Demonstrations:
     def __init__(self) -> None:
         self.robot: list[np.ndarray] = []
         self.humans: list[np.ndarray] = []
+        self.statics: list[np.ndarray] = []
         self.returns: list[np.ndarray] = []
 
-    def add_episode(self, robot: list[np.ndarray], humans: list[np.ndarray], rewards: list[float], discount: float) -> None:
+    def add_episode(self, states: list[tuple[np.ndarray, ...]], rewards: list[float], discount: float) -> None:
+        """One teacher episode: its states' (robot, humans, statics) features and its rewards."""
+        robot, humans, statics = zip(*states, strict=True)
         self.robot.append(np.stack(robot))
         self.humans.append(np.stack(humans))
+        self.statics.append(np.stack(statics))
         self.returns.append(discounted_returns(rewards, discount))
 
-    def arrays(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        return np.concatenate(self.robot), np.concatenate(self.humans), np.concatenate(self.returns)
+    def arrays(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """(robot, humans, statics, returns) of every held step."""
+        return np.concatenate(self.robot), np.concatenate(self.humans), np.concatenate(self.statics), np.concatenate(self.returns)
 
     @property
     def episodes(self) -> int:
@@ -81,8 +87,8 @@ class Demonstrations:
     def save(self, path: Path) -> None:
         lengths = np.array([len(item) for item in self.returns], dtype=np.int64)
         if len(lengths):
-            robot, humans, returns = self.arrays()
-            np.savez_compressed(path, robot=robot, humans=humans, returns=returns, lengths=lengths)
+            robot, humans, statics, returns = self.arrays()
+            np.savez_compressed(path, robot=robot, humans=humans, statics=statics, returns=returns, lengths=lengths)
         else:
             np.savez_compressed(path, lengths=lengths)
 
@@ -95,5 +101,8 @@ class Demonstrations:
                 splits = np.cumsum(lengths)[:-1]
                 demonstrations.robot = list(np.split(arrays["robot"], splits))
                 demonstrations.humans = list(np.split(arrays["humans"], splits))
+                # a checkpoint from before the room was read holds no statics: 0 slots
+                statics = arrays["statics"] if "statics" in arrays.files else np.zeros((len(arrays["robot"]), 0, 4), np.float32)
+                demonstrations.statics = list(np.split(statics, splits))
                 demonstrations.returns = list(np.split(arrays["returns"], splits))
         return demonstrations

@@ -9,7 +9,18 @@ A joint state is six arrays in one common frame (any rotation of the robot frame
 
 * ``goal`` (..., 2): the goal relative to the robot (m); ``velocity`` (..., 2): the robot's velocity (m/s);
 * ``positions`` (..., k, 2): the k tracked humans' centres relative to the robot (m); ``velocities`` (..., k, 2):
-  their velocities (m/s, not relative); ``radii`` (..., k) (m); ``present`` (..., k): 1 for a tracked human.
+  their velocities (m/s, not relative); ``radii`` (..., k) (m); ``present`` (..., k): 1 for a tracked human;
+* ``static`` (..., s, 2): the nearest surface point of each of the s nearest walls and pieces of furniture, relative
+  to the robot (m; the ``obstacles`` modality, from the map and the pose); ``static_present`` (..., s). Without the
+  ``obstacles`` modality s is 0: the agent sees no walls nor furniture.
+
+* ``geodesic`` (..., g, g): the ``geodesic`` modality's grid of distances to the goal around walls and furniture
+  (m, robot frame, centred on where the robot stood when it observed) and ``origin`` (..., 2): where the robot is now
+  on that grid (0 when observed; the lookahead moves it). Absent without the modality.
+
+A wall or piece of furniture is predicted by its supporting half-plane at that nearest point (the offset to it is
+the surface's normal there): after a move ``m`` its clearance is ``|p| - m . p / |p|``, exact along a flat wall and
+never more than the true clearance of a convex shape, so a predicted clear move past a table's corner is clear.
 
 :func:`features` turns one into the value network's input, rotated so that the goal lies on the x axis (the
 value of a state does not depend on which way the robot frame points).
@@ -33,7 +44,14 @@ HUMAN_FEATURES = 7
 """Per human: position (2), velocity (2), radius, surface gap to the robot, presence; goal frame."""
 FEATURE_SCALE = 0.25
 """Metres and m/s are multiplied by this in the features (the circle crossing's 8 m become 2)."""
+STATIC_FEATURES = 4
+"""Per wall or piece of furniture: its nearest point (2), the surface gap to the robot, presence; goal frame."""
 REQUIRED_KEYS = ("humans", "goal", "velocity")
+STATIC_KEY = "obstacles"
+"""The optional modality of the static world (:class:`crowdnav.sensors.obstacles.ObstaclesModality`)."""
+GEODESIC_KEY = "geodesic"
+"""The optional modality of the distance to the goal around obstacles (:class:`crowdnav.sensors.geodesic.GeodesicModality`)."""
+OPTIONAL_KEYS = (STATIC_KEY, GEODESIC_KEY)
 
 
 @dataclass(frozen=True)
@@ -49,6 +67,8 @@ class Physics:
     weights: dict[str, float]
     """Reward weights: step, goal_progress, social, goal_reached, collision."""
     reward_scale: float = 1.0
+    geodesic_spacing: float = 0.1
+    """Metres between the points of the ``geodesic`` modality's grid (its sensor setting)."""
 
     @classmethod
     def of_scenario(cls, scenario: Any, reward_scale: float) -> Physics:
@@ -57,7 +77,8 @@ class Physics:
         force = scenario.humans.social_force
         weights = {term: float(getattr(reward, term)) for term in ("step", "goal_progress", "social", "goal_reached", "collision")}
         return cls(float(scenario.robot.radius), float(scenario.robot.max_speed), float(scenario.time_step),
-                   float(scenario.robot.goal_radius), float(force.human_strength), float(force.human_range), weights, float(reward_scale))
+                   float(scenario.robot.goal_radius), float(force.human_strength), float(force.human_range), weights, float(reward_scale),
+                   float(scenario.sensors.geodesic.spacing))
 
     def to_json(self) -> dict[str, Any]:
         return asdict(self)
@@ -98,7 +119,8 @@ def action_set(max_speed: float) -> np.ndarray:
 
 def decode(observation: Mapping[str, np.ndarray], scales: Mapping[str, tuple[np.ndarray, np.ndarray]]) -> dict[str, np.ndarray]:
     """The joint state (robot frame, float64) of a raw or normalised observation, batched (leading axis) or not."""
-    raw = {key: np.asarray(observation[key], dtype=np.float64) for key in REQUIRED_KEYS}
+    keys = (*REQUIRED_KEYS, *(key for key in OPTIONAL_KEYS if key in observation))
+    raw = {key: np.asarray(observation[key], dtype=np.float64) for key in keys}
     for key, (offset, scale) in scales.items():
         if key in raw:
             raw[key] = raw[key] * scale + offset
@@ -107,8 +129,33 @@ def decode(observation: Mapping[str, np.ndarray], scales: Mapping[str, tuple[np.
         goal = goal[..., :1] * np.stack([goal[..., 2], goal[..., 1]], axis=-1)
     rows, velocity = raw["humans"], raw["velocity"]
     present = (rows[..., 5] > 0.5).astype(np.float64)
-    return {"goal": goal, "velocity": velocity, "positions": rows[..., 0:2],
-            "velocities": (rows[..., 2:4] + velocity[..., None, :]) * present[..., None], "radii": rows[..., 4], "present": present}
+    static = raw.get(STATIC_KEY, np.zeros((*velocity.shape[:-1], 0, 3)))
+    static_present = (static[..., 2] > 0.5).astype(np.float64)
+    state = {"goal": goal, "velocity": velocity, "positions": rows[..., 0:2],
+             "velocities": (rows[..., 2:4] + velocity[..., None, :]) * present[..., None], "radii": rows[..., 4], "present": present,
+             "static": static[..., 0:2] * static_present[..., None], "static_present": static_present}
+    if GEODESIC_KEY in raw:
+        state.update(geodesic=raw[GEODESIC_KEY], origin=np.zeros_like(velocity))
+    return state
+
+
+def geodesic_at(grid: np.ndarray, origin: np.ndarray, spacing: float) -> np.ndarray:
+    """The distance to the goal (m) at ``origin`` (..., 2) on ``grid`` (..., g, g): bilinear, clamped to the grid's edge."""
+    size = grid.shape[-1]
+    if size == 1:
+        return grid[..., 0, 0].copy()
+    centre = size // 2
+    u = np.clip(origin[..., 0] / spacing + centre, 0.0, size - 1.0)
+    v = np.clip(origin[..., 1] / spacing + centre, 0.0, size - 1.0)
+    i, j = np.minimum(np.floor(u), size - 2.0), np.minimum(np.floor(v), size - 2.0)
+    fu, fv = u - i, v - j
+    i, j = i.astype(np.int64), j.astype(np.int64)
+    flat = grid.reshape(*grid.shape[:-2], size * size)
+
+    def at(di: int, dj: int) -> np.ndarray:
+        return np.take_along_axis(flat, ((i + di) * size + (j + dj))[..., None], axis=-1)[..., 0]
+
+    return (at(0, 0) * (1 - fu) * (1 - fv) + at(1, 0) * fu * (1 - fv) + at(0, 1) * (1 - fu) * fv + at(1, 1) * fu * fv)
 
 
 def _rotate(vectors: np.ndarray, cos: np.ndarray, sin: np.ndarray) -> np.ndarray:
@@ -124,16 +171,26 @@ def goal_direction(goal: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray
     return distance, np.where(distance > 1e-9, goal[..., 0] / safe, 1.0), np.where(distance > 1e-9, goal[..., 1] / safe, 0.0)
 
 
-def features(state: Mapping[str, np.ndarray], radius: float) -> tuple[np.ndarray, np.ndarray]:
-    """The value network's input of joint states: robot (..., 3) and humans (..., k, 7) float32, in the goal frame."""
+def features(state: Mapping[str, np.ndarray], physics: Physics) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The value network's input of joint states: robot (..., 3), humans (..., k, 7), static (..., s, 4) float32, goal frame.
+
+    With the ``geodesic`` grid the robot's row has a fourth entry: the distance to the goal around obstacles.
+    """
+    radius = physics.radius
     distance, cos, sin = goal_direction(state["goal"])
-    robot = np.concatenate([distance[..., None], _rotate(state["velocity"], cos, sin)], axis=-1) * FEATURE_SCALE
+    parts = [distance[..., None], _rotate(state["velocity"], cos, sin)]
+    if "geodesic" in state:
+        parts.append(geodesic_at(state["geodesic"], state["origin"], physics.geodesic_spacing)[..., None])
+    robot = np.concatenate(parts, axis=-1) * FEATURE_SCALE
     c, s = cos[..., None], sin[..., None]
     positions, present = state["positions"], state["present"]
     gap = np.hypot(positions[..., 0], positions[..., 1]) - radius - state["radii"]
     humans = np.concatenate([_rotate(positions, c, s) * FEATURE_SCALE, _rotate(state["velocities"], c, s) * FEATURE_SCALE,
                              state["radii"][..., None], gap[..., None] * FEATURE_SCALE, present[..., None]], axis=-1)
-    return robot.astype(np.float32), (humans * present[..., None]).astype(np.float32)
+    static, here = state["static"], state["static_present"]
+    static_gap = np.hypot(static[..., 0], static[..., 1]) - radius
+    statics = np.concatenate([_rotate(static, c, s) * FEATURE_SCALE, static_gap[..., None] * FEATURE_SCALE, here[..., None]], axis=-1)
+    return robot.astype(np.float32), (humans * present[..., None]).astype(np.float32), (statics * here[..., None]).astype(np.float32)
 
 
 def lookahead(state: Mapping[str, np.ndarray], physics: Physics, actions: np.ndarray) -> dict[str, Any]:
@@ -143,8 +200,8 @@ def lookahead(state: Mapping[str, np.ndarray], physics: Physics, actions: np.nda
     for one step, the humans at their observed velocities (constant velocity). Returns ``next`` (the joint states,
     axes (B, M, ...)), ``reward`` (B, M): the env's reward terms as the agent predicts them (step, goal progress,
     the social term at the next positions, goal reached, collision = a tracked human's disc touched at any time
-    during the step), times the reward scale; ``done`` (B, M): a predicted collision or goal; ``commands`` (B, M, 2):
-    the env actions in [-1, 1] (robot frame).
+    during the step, or the half-plane of a wall or a piece of furniture reached), times the reward scale; ``done``
+    (B, M): a predicted collision or goal; ``commands`` (B, M, 2): the env actions in [-1, 1] (robot frame).
     """
     _, cos, sin = goal_direction(state["goal"])
     # goal frame -> robot frame: rotate the actions by the goal's angle
@@ -164,6 +221,12 @@ def lookahead(state: Mapping[str, np.ndarray], physics: Physics, actions: np.nda
     present = np.broadcast_to(state["present"][:, None, :], closest.shape)
     radii = np.broadcast_to(state["radii"][:, None, :], closest.shape)
     collision = np.any((closest <= physics.radius + radii) & (present > 0), axis=-1)
+    # walls and furniture: the supporting half-plane at each nearest point (linear in time: the end of the step is closest)
+    static, here = state["static"][:, None, :, :], state["static_present"][:, None, :]
+    gap = np.hypot(static[..., 0], static[..., 1])
+    normal = static / np.where(gap > 1e-12, gap, 1.0)[..., None]
+    clearance = gap - np.sum(velocity[:, :, None, :] * normal, axis=-1) * dt  # (B, M, s)
+    collision |= np.any((clearance <= physics.radius) & (here > 0), axis=-1)
     distance_before = np.hypot(state["goal"][:, 0], state["goal"][:, 1])[:, None]
     distance_after = np.hypot(goal[..., 0], goal[..., 1])
     reached = distance_after <= physics.goal_radius
@@ -176,8 +239,14 @@ def lookahead(state: Mapping[str, np.ndarray], physics: Physics, actions: np.nda
     commands = velocity / physics.max_speed
     commands /= np.maximum(np.hypot(commands[..., 0], commands[..., 1]), 1.0)[..., None]
     shape = velocity.shape[:2]
+    if "geodesic" in state:  # the grid stays where it was observed; the robot moves on it
+        geodesic = {"geodesic": np.broadcast_to(state["geodesic"][:, None], (*shape, *state["geodesic"].shape[1:])),
+                    "origin": state["origin"][:, None, :] + velocity * dt}
     next_state = {"goal": goal, "velocity": velocity, "positions": after,
                   "velocities": np.broadcast_to(state["velocities"][:, None], (*shape, *state["velocities"].shape[1:])),
-                  "radii": radii, "present": present}
+                  "radii": radii, "present": present, "static": normal * (clearance * here)[..., None],
+                  "static_present": np.broadcast_to(here, clearance.shape)}
+    if "geodesic" in state:
+        next_state.update(geodesic)
     return {"next": next_state, "reward": reward * physics.reward_scale, "done": collision | reached,
             "commands": commands.astype(np.float32)}

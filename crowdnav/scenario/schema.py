@@ -163,6 +163,28 @@ class HumansSensor(StrictModel):
     )
 
 
+class ObstaclesSensor(StrictModel):
+    """The nearest walls and pieces of furniture, from the map and the robot's pose: each one's nearest surface point."""
+
+    count: Annotated[int, Field(ge=1, le=64)] = Field(default=8, description="Number of shape slots (the nearest shapes).")
+    max_range: PositiveFloat = Field(
+        default=4.0, description="Shapes whose nearest surface point is farther than this (m) are absent."
+    )
+
+
+class GeodesicSensor(StrictModel):
+    """The distance to the goal around walls and furniture (the map's), on a grid of points centred on the robot."""
+
+    size: Annotated[int, Field(ge=1, le=33)] = Field(default=9, description="Points per side of the grid (odd: the centre is the robot).")
+    spacing: PositiveFloat = Field(default=0.1, description="Distance between neighbouring grid points in metres.")
+
+    @model_validator(mode="after")
+    def _odd_size(self) -> GeodesicSensor:
+        if self.size % 2 == 0:
+            raise ValueError(f"expected an odd size (the robot at the centre point), got {self.size}")
+        return self
+
+
 class Sensors(StrictModel):
     """Default settings of the robot's sensing modalities (env options may override)."""
 
@@ -176,6 +198,8 @@ class Sensors(StrictModel):
     lidar: LidarSensor = Field(default_factory=LidarSensor, description="LIDAR settings.")
     leog: LeogSensor = Field(default_factory=LeogSensor, description="Occupancy-grid settings.")
     humans: HumansSensor = Field(default_factory=HumansSensor, description="Nearest-humans settings.")
+    obstacles: ObstaclesSensor = Field(default_factory=ObstaclesSensor, description="Nearest walls and furniture settings.")
+    geodesic: GeodesicSensor = Field(default_factory=GeodesicSensor, description="Distance-to-goal-around-obstacles settings.")
 
 
 def _preset_term(description: str) -> Any:

@@ -118,7 +118,7 @@ def test_depth_two_scores_the_best_one_step_actions_by_their_best_second_step(tm
             continue
         state = {key: value[:, action] for key, value in first["next"].items()}
         further = lookahead(state, agent.physics, agent.actions)
-        values = evaluate(agent.network, *features(further["next"], agent.physics.radius))
+        values = evaluate(agent.network, *features(further["next"], agent.physics))
         backup = (further["reward"] + agent.discount * values * ~further["done"]).max()
         expected = first["reward"][0, action] + (0.0 if first["done"][0, action] else agent.discount * backup)
         assert two[0, action] == pytest.approx(expected, rel=1e-6, abs=1e-9)

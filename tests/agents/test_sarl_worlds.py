@@ -50,16 +50,16 @@ def single_env_loop(document):
             demonstrating = agent.episodes < imitation
             teacher = make_teacher("predictive")
             observation, _ = env.reset()
-            robot, humans = agent._observed(observation)
-            shown, done = ([], [], []), False
+            state = agent._observed(observation)
+            shown, done = ([], []), False
             while not done:
                 action = teacher(env.unwrapped.simulator) if demonstrating else agent.predict(observation, deterministic=False)
                 observation, reward, terminated, truncated, info = env.step(action)
-                next_robot, next_humans = agent._observed(observation)
-                agent.memory.add(robot, humans, float(reward), next_robot, next_humans, bool(terminated))
-                for items, item in zip(shown, (robot, humans, float(reward)), strict=True):
+                following = agent._observed(observation)
+                agent.memory.add(state, float(reward), following, bool(terminated))
+                for items, item in zip(shown, (state, float(reward)), strict=True):
                     items.append(item)
-                robot, humans, done = next_robot, next_humans, terminated or truncated
+                state, done = following, terminated or truncated
             if demonstrating:
                 agent.demonstrations.add_episode(*shown, agent.discount)
             if not demonstrating:

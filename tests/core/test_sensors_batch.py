@@ -15,7 +15,7 @@ import pytest
 
 from crowdnav import Simulator
 from crowdnav.batch.state import BatchState
-from crowdnav.scenario.schema import ClosestObstacleSensor, GoalSensor, HumansSensor, LeogSensor, LidarSensor
+from crowdnav.scenario.schema import ClosestObstacleSensor, GoalSensor, HumansSensor, LeogSensor, LidarSensor, ObstaclesSensor
 from crowdnav.sensors import (
     ClosestObstacleModality,
     GoalModality,
@@ -23,12 +23,13 @@ from crowdnav.sensors import (
     LeogModality,
     LidarModality,
     Modality,
+    ObstaclesModality,
     VelocityModality,
     build_modalities,
 )
 from crowdnav.sensors.frames import encode_vector, encode_vectors
 
-BUILT_IN = ["goal", "velocity", "closest_obstacle", "lidar", "leog", "humans"]
+BUILT_IN = ["goal", "velocity", "closest_obstacle", "lidar", "leog", "humans", "obstacles"]
 
 
 def all_modalities(world) -> dict[str, Modality]:
@@ -43,6 +44,8 @@ def all_modalities(world) -> dict[str, Modality]:
     modalities["leog_coarse"] = LeogModality(world, LeogSensor(size=4.0, resolution=0.25))
     modalities["humans_short"] = HumansModality(world, HumansSensor(count=2, max_range=0.8))
     modalities["humans_all"] = HumansModality(world, HumansSensor(count=64, max_range=100.0))
+    modalities["obstacles_short"] = ObstaclesModality(world, ObstaclesSensor(count=2, max_range=0.8))
+    modalities["obstacles_all"] = ObstaclesModality(world, ObstaclesSensor(count=64, max_range=100.0))
     return modalities
 
 
