@@ -129,6 +129,8 @@ def resolve_policy(spec: str, env_options: Mapping[str, Any], *, allow_import: b
         if options.get("scenario") not in (None, trained["scenario"]):
             trained["scenario"] = options["scenario"]  # the same observations, in another scenario
             trained["overrides"] = dict(options.get("overrides", {}))
+        elif options.get("overrides"):  # its own scenario with --set: the run's settings, changed where --set says
+            trained["overrides"] = {**trained.get("overrides", {}), **options["overrides"]}
         return _safe(_run_name(Path(spec))), _run_name(Path(spec)), policy, False, trained
     if _CALLABLE.fullmatch(spec):
         if not allow_import:

@@ -29,7 +29,7 @@ from crowdnav.sensors import (
 )
 from crowdnav.sensors.frames import encode_vector, encode_vectors
 
-BUILT_IN = ["goal", "velocity", "closest_obstacle", "lidar", "leog", "humans", "obstacles"]
+BUILT_IN = ["goal", "velocity", "closest_obstacle", "lidar", "leog", "humans", "obstacles", "geodesic"]
 
 
 def all_modalities(world) -> dict[str, Modality]:

@@ -129,6 +129,24 @@ def test_a_crowdnav_run_is_evaluated_by_its_parameters_with_its_own_modalities(t
     assert np.isclose(sum(meta["final"].values()), 1.0)
 
 
+def test_a_run_evaluated_in_its_own_scenario_with_set_plays_the_changed_setting_on_top_of_its_own(tmp_path):
+    import json
+
+    from crowdnav.agents import train
+
+    from tests.agents.agents_tiny import tiny_config
+
+    run = tmp_path / "runs" / "sac"
+    train(tiny_config(run, modalities=["goal", "closest_obstacle"], episodes=1, overrides={"humans.count": 2, "max_steps": 7}))
+    denser = evaluate_policy(str(run), "open_space", tmp_path / "results", episodes=2, overrides={"humans.count": 4})
+    meta = json.loads((denser / "meta.json").read_text())
+    assert meta["env"]["overrides"] == {"humans.count": 4, "max_steps": 7}  # --set wins, the run's other settings stay
+    rows = (denser / "test_episodes.csv").read_text().splitlines()
+    own = evaluate_policy(str(run), "open_space", tmp_path / "own", episodes=2)
+    assert json.loads((own / "meta.json").read_text())["env"]["overrides"] == {"humans.count": 2, "max_steps": 7}
+    assert rows != (own / "test_episodes.csv").read_text().splitlines()
+
+
 def test_render_takes_the_same_policy_forms_as_evaluate(tmp_path, module_on_path):
     for policy, extra in ((f"{module_on_path}:toward_goal", ["--modalities", "goal"]), ("baseline:social_force", [])):
         code = main(["render", "open_space", "--policy", policy, *extra, "--episodes", "1", "--format", "gif", "--out", str(tmp_path),
