@@ -7,6 +7,12 @@ may stand, computed once per goal). This modality reads it at a ``size`` x ``siz
 points around the robot's centre, in the robot frame, so an agent can tell where a move brings it
 closer to the goal *by a path that exists*, not only as the crow flies (the SARL-style agent reads
 it in its lookahead: docs/agents.md#agents-that-read-the-room). Humans are not in it.
+
+A grid point where the robot's centre may not stand (closer to a wall than its radius) reads the
+least, over the grid's standing points, of their distance plus the straight way from them: a move
+of a few centimetres toward a wall then reads the goal a few centimetres farther, not suddenly out
+of reach (else a robot in a 0.8 m gap would see every move off the exact centre line as hopeless),
+and no reading cuts through a wall beyond the grid.
 """
 
 from __future__ import annotations
@@ -28,7 +34,7 @@ if TYPE_CHECKING:
     from crowdnav.world import CompiledWorld
 
 UNREACHABLE_FACTOR = 4.0
-"""Grid points inside an obstacle, or cut off from the goal, read this many world diagonals (the Box's bound)."""
+"""Grids with no standing point connected to the goal read this many world diagonals (the Box's bound)."""
 
 
 @register_modality
@@ -39,9 +45,10 @@ class GeodesicModality(Modality):
     spacing)`` in the robot frame (x along the heading, y to the left; ``c = size // 2``, so the centre
     entry is the robot's own position). The distance is the predictive planner's
     (:class:`~crowdnav.planning.predictive.PlannerSettings`: its static margin and grid spacing): from a
-    point, the best of the four surrounding grid cells plus the straight step to it. Points where the
-    robot's centre may not stand, or from which no path leads to the goal, read ``4 x`` the world's
-    diagonal, the Box's bound. Scale (:meth:`scale`): one diagonal; offsets 0.
+    point, the best of the four surrounding grid cells plus the straight step to it. A point where the
+    robot's centre may not stand reads the least, over the grid's points that have a distance, of that
+    distance plus the straight line between the two points; a grid without any (cut off from the goal)
+    reads ``4 x`` the world's diagonal, the Box's bound. Scale (:meth:`scale`): one diagonal; offsets 0.
     """
 
     key = "geodesic"
@@ -59,6 +66,8 @@ class GeodesicModality(Modality):
         self.maps = MapCache(planner.static_margin, planner.map_spacing)
         span = (np.arange(size) - size // 2) * spacing
         self.offset_x, self.offset_y = np.meshgrid(span, span, indexing="ij")  # (size, size), robot frame
+        flat = (self.offset_x + 1j * self.offset_y).ravel()
+        self._between = np.abs(flat[:, None] - flat[None, :])  # (size^2, size^2) straight lines between grid points
         self.diagonal = float(world.scenario.world_diagonal)
         self.bound = UNREACHABLE_FACTOR * self.diagonal
 
@@ -85,5 +94,8 @@ class GeodesicModality(Modality):
         x = robot.real[:, None, None] + (self.offset_x * c - self.offset_y * s)
         y = robot.imag[:, None, None] + (self.offset_x * s + self.offset_y * c)
         owner = np.broadcast_to(np.arange(len(robot))[:, None, None], x.shape)
-        distance = self.maps.cost(self.world, goals, x + 1j * y, owner)
+        distance = self.maps.cost(self.world, goals, x + 1j * y, owner).reshape(len(robot), -1)
+        # points off the standing cells: the least standing point's distance plus the straight way from it
+        reach = np.min(distance[:, None, :] + self._between[None], axis=2)
+        distance = np.where(np.isfinite(distance), distance, reach).reshape(x.shape)
         return np.minimum(np.where(np.isfinite(distance), distance, self.bound), self.bound).astype(np.float32)

@@ -57,13 +57,18 @@ def test_the_distance_goes_around_the_wall_and_is_euclidean_in_an_empty_room():
     assert float(open_modality.observe(empty)[4, 4]) == pytest.approx(4.0, abs=0.05)
 
 
-def test_points_inside_an_obstacle_read_the_bound():
+def test_the_distance_keeps_rising_into_a_walls_margin_and_a_grid_without_a_standing_point_reads_the_bound():
     sim, modality = world(size=9, spacing=0.1)
-    sim.positions[0] = -0.35 + 2j  # 0.25 m from the wall's face: the grid's +x points reach into it
+    sim.positions[0], sim.robot_heading = -0.5 + 2j, 0.0  # 0.4 m from the wall's face: +x points reach into its margin
     sim.refresh()
     grid = modality.observe(sim)
-    assert grid[8, 4] == modality.bound and grid[0, 4] < modality.bound
+    toward = grid[4:, 4] if sim.robot_heading == 0.0 else None
+    assert toward is not None and np.all(grid < modality.bound) and np.all(np.diff(toward) > 0)  # rising toward the wall
     assert modality.space().contains(grid)
+    small, small_modality = world(size=3, spacing=0.1)
+    small.positions[0] = 2j  # inside the wall: no grid point near a place to stand, nothing to measure from
+    small.refresh()
+    assert np.all(small_modality.observe(small) == small_modality.bound)
 
 
 def test_settings_are_validated_with_a_one_line_error():
