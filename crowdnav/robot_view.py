@@ -191,11 +191,15 @@ class RobotView:
         if end is None or end >= len(self.positions):
             return self
         people = copy.copy(self)
-        for name in ("positions", "velocities", "radii", "robot_offset", "robot_distance"):
-            setattr(people, name, getattr(self, name)[:end])
-        people.human_max_speed = self.human_max_speed[: end - 1]
-        people._pairs = None
+        people._keep_first(end)
         return people
+
+    def _keep_first(self, end: int) -> None:
+        """Cut this view (a copy: the arrays are slices, nothing is written into them) to its first ``end`` discs."""
+        self.positions, self.velocities, self.radii = self.positions[:end], self.velocities[:end], self.radii[:end]
+        self.robot_offset, self.robot_distance = self.robot_offset[:end], self.robot_distance[:end]
+        self.human_max_speed = self.human_max_speed[: end - 1]
+        self._pairs = None
 
     @property
     def robot_position(self) -> complex:

@@ -25,7 +25,7 @@ def test_shipped_experiments_cover_figure_4_the_default_and_the_reference_agents
                                           "reference_figure4", "reference_room", "modalities_steps", "paradigms_steps", "robots",
                                           "anticipate", "anticipate_room", "anticipate_circle", "anticipate_circle_sarl", "anticipate_circle_sarl_rl",
                                           "anticipate_circle_sarl_deep", "anticipate_circle_sarl_rl_short", "anticipate_circle_sarl_rl_memory",
-                                          "anticipate_circle_sarl_rl_bound", "robots_goal_frame",
+                                          "anticipate_circle_sarl_rl_bound", "robots_goal_frame", "room_sarl_figure4",
                                           "track_crowded_open_space", "track_station_hall", "track_robots_crossing_hall"}
     labels = {name: [c.name for c in load_experiment(name).configurations] for name in shipped_experiments()}
     assert labels["encoders"] == ["frozen", "finetune", "scratch"]

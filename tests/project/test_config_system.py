@@ -208,7 +208,7 @@ def test_modality_names_follow_the_sensor_registry_including_user_modalities(mon
     from crowdnav.sensors import MODALITIES, GoalModality
 
     assert set(modality_names()) == set(MODALITIES) >= {"goal", "lidar", "leog", "closest_obstacle", "velocity"}
-    with pytest.raises(ConfigError, match="modalities.0: unknown modality 'sonar'; expected one of: closest_obstacle, goal"):
+    with pytest.raises(ConfigError, match="modalities.0: unknown modality 'sonar'; expected one of: closest_obstacle, geodesic, goal"):
         load_config(None, {"modalities": ["sonar"]})
     monkeypatch.setitem(MODALITIES, "sonar", GoalModality)  # a modality a user registered
     assert load_config(None, {"modalities": ["sonar"]}).modalities == ["sonar"]
