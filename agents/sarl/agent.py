@@ -43,6 +43,7 @@ from crowdnav.agents.sarl.imitation import Demonstrations, make_teacher, world_s
 from crowdnav.agents.sarl.lookahead import (
     FEATURE_SCALE,
     GEODESIC_KEY,
+    OPTIONAL_KEYS,
     REQUIRED_KEYS,
     ROBOT_FEATURES,
     STATIC_KEY,
@@ -113,7 +114,7 @@ class SarlAgent:
                               "and goal_progress, goal_reached >= 0")
         scales = observation_normalization(env) or {}
         self.scales = {key: (np.asarray(offset, dtype=np.float64), np.asarray(scale, dtype=np.float64))
-                       for key, (offset, scale) in scales.items() if key in (*REQUIRED_KEYS, STATIC_KEY, GEODESIC_KEY)}
+                       for key, (offset, scale) in scales.items() if key in (*REQUIRED_KEYS, *OPTIONAL_KEYS)}
         self.humans = int(cast(tuple[int, ...], spaces["humans"].shape)[0])
         # the walls and furniture it reads (the obstacles modality's slots; 0: it sees no static world)
         self.statics = int(cast(tuple[int, ...], spaces[STATIC_KEY].shape)[0]) if STATIC_KEY in spaces else 0

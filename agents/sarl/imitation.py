@@ -13,6 +13,7 @@ from typing import Any
 
 import numpy as np
 from crowdnav.agents.config import ConfigError
+from crowdnav.agents.sarl.lookahead import STATIC_FEATURES
 
 TEACHERS = ("predictive", "orca", "oracle", "onboard")
 """Scripted robots that may teach: the predictive planner (true current state), the ORCA robot, the oracle (future), and
@@ -102,7 +103,7 @@ class Demonstrations:
                 demonstrations.robot = list(np.split(arrays["robot"], splits))
                 demonstrations.humans = list(np.split(arrays["humans"], splits))
                 # a checkpoint from before the room was read holds no statics: 0 slots
-                statics = arrays["statics"] if "statics" in arrays.files else np.zeros((len(arrays["robot"]), 0, 4), np.float32)
+                statics = arrays["statics"] if "statics" in arrays.files else np.zeros((len(arrays["robot"]), 0, STATIC_FEATURES), np.float32)
                 demonstrations.statics = list(np.split(statics, splits))
                 demonstrations.returns = list(np.split(arrays["returns"], splits))
         return demonstrations

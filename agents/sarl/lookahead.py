@@ -239,14 +239,12 @@ def lookahead(state: Mapping[str, np.ndarray], physics: Physics, actions: np.nda
     commands = velocity / physics.max_speed
     commands /= np.maximum(np.hypot(commands[..., 0], commands[..., 1]), 1.0)[..., None]
     shape = velocity.shape[:2]
-    if "geodesic" in state:  # the grid stays where it was observed; the robot moves on it
-        geodesic = {"geodesic": np.broadcast_to(state["geodesic"][:, None], (*shape, *state["geodesic"].shape[1:])),
-                    "origin": state["origin"][:, None, :] + velocity * dt}
     next_state = {"goal": goal, "velocity": velocity, "positions": after,
                   "velocities": np.broadcast_to(state["velocities"][:, None], (*shape, *state["velocities"].shape[1:])),
                   "radii": radii, "present": present, "static": normal * (clearance * here)[..., None],
                   "static_present": np.broadcast_to(here, clearance.shape)}
-    if "geodesic" in state:
-        next_state.update(geodesic)
+    if "geodesic" in state:  # the grid stays where it was observed; the robot moves on it
+        next_state.update(geodesic=np.broadcast_to(state["geodesic"][:, None], (*shape, *state["geodesic"].shape[1:])),
+                          origin=state["origin"][:, None, :] + velocity * dt)
     return {"next": next_state, "reward": reward * physics.reward_scale, "done": collision | reached,
             "commands": commands.astype(np.float32)}

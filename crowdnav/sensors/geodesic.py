@@ -95,7 +95,9 @@ class GeodesicModality(Modality):
         y = robot.imag[:, None, None] + (self.offset_x * s + self.offset_y * c)
         owner = np.broadcast_to(np.arange(len(robot))[:, None, None], x.shape)
         distance = self.maps.cost(self.world, goals, x + 1j * y, owner).reshape(len(robot), -1)
-        # points off the standing cells: the least standing point's distance plus the straight way from it
-        reach = np.min(distance[:, None, :] + self._between[None], axis=2)
-        distance = np.where(np.isfinite(distance), distance, reach).reshape(x.shape)
+        off = ~np.isfinite(distance)
+        if off.any():  # points off the standing cells: the least standing point's distance plus the straight way from it
+            reach = np.min(distance[:, None, :] + self._between[None], axis=2)
+            distance = np.where(off, reach, distance)
+        distance = distance.reshape(x.shape)
         return np.minimum(np.where(np.isfinite(distance), distance, self.bound), self.bound).astype(np.float32)

@@ -238,10 +238,14 @@ def test_sarl_trains_and_acts_in_every_library_scenario_or_refuses_in_one_line(t
     except CrowdNavError as error:  # a robot it cannot drive: one line that says why
         assert "\n" not in str(error) and "holonomic" in str(error), str(error)
         return
-    policy = load_policy(tmp_path / "run")
+    assert_acts(load_policy(tmp_path / "run"))
+
+
+def assert_acts(policy, steps: int = 3) -> None:
+    """The loaded policy drives its own env a few steps with finite 2-D actions."""
     env = policy.make_env()
     obs, _ = env.reset(seed=0)
-    for _ in range(3):
+    for _ in range(steps):
         action = policy(obs)
         assert action.shape == (2,) and np.all(np.isfinite(action))
         obs, _, terminated, truncated, _ = env.step(action)

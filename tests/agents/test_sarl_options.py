@@ -18,7 +18,7 @@ from crowdnav.agents.sarl.network import ValueEnsemble, ValueNetwork, evaluate  
 
 from crowdnav.errors import CrowdNavError  # noqa: E402
 from crowdnav.scenario.library import library_names  # noqa: E402
-from tests.agents.test_sarl import config, rows  # noqa: E402
+from tests.agents.test_sarl import assert_acts, config, rows  # noqa: E402
 
 
 def ensemble_config(out, **fields):
@@ -177,12 +177,5 @@ def test_every_option_together_trains_acts_and_exports_in_every_library_scenario
     assert isinstance(policy.model.network, ValueEnsemble)
     learnt = policy.model.memory.size >= kwargs["batch_size"]  # short episodes (a crowd ends them) may leave no update yet
     assert adam_rate(tmp_path / "run") == ([0.0] if learnt else [pytest.approx(1e-3)])
-    env = policy.make_env()
-    obs, _ = env.reset(seed=0)
-    for _ in range(3):
-        action = policy(obs)
-        assert action.shape == (2,) and np.all(np.isfinite(action))
-        obs, _, terminated, truncated, _ = env.step(action)
-        if terminated or truncated:
-            break
+    assert_acts(policy)
     assert_exports_as_predict(policy)

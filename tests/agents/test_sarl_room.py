@@ -17,6 +17,7 @@ torch = pytest.importorskip("torch")
 from crowdnav.agents.sarl.lookahead import Physics, action_set, decode, features, geodesic_at, lookahead  # noqa: E402
 
 from crowdnav.scenario.library import library_names  # noqa: E402
+from tests.agents.test_sarl import assert_acts  # noqa: E402
 
 ROOM = ["humans", "goal", "velocity", "obstacles", "geodesic"]
 WEIGHTS = {"step": -0.01, "goal_progress": 0.1, "social": 0.0, "goal_reached": 1.0, "collision": -1.0}
@@ -91,14 +92,7 @@ def test_sarl_reading_the_room_trains_acts_and_resumes_in_every_library_scenario
         return
     policy = load_policy(tmp_path / "run")
     assert policy.model.statics == 8 and policy.model.geodesic
-    env = policy.make_env()
-    observation, _ = env.reset(seed=0)
-    for _ in range(3):
-        action = policy(observation)
-        assert action.shape == (2,) and np.all(np.isfinite(action))
-        observation, _, terminated, truncated, _ = env.step(action)
-        if terminated or truncated:
-            break
+    assert_acts(policy)
     train(config(tmp_path / "run", scenario, episodes=3), resume=True)
     assert load_policy(tmp_path / "run").model.episodes == 3
 
