@@ -30,7 +30,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any, NoReturn
 
 import numpy as np
-from crowdnav.agents.model_zip import ModelZipError, check_layers, read_model_zip
+from crowdnav.agents.model_zip import ModelZipError, check_layers, check_model_zip, read_model_zip
 from crowdnav.agents.resume_state import (
     REPLAY_ARRAYS,
     ROLLOUT_ARRAYS,
@@ -45,6 +45,7 @@ from crowdnav.agents.wrappers import ObservationScales, agent_observation, scale
 from stable_baselines3.common.base_class import BaseAlgorithm
 
 from crowdnav.errors import CrowdNavError
+from crowdnav.files import remove_tree
 from crowdnav.registry import algorithm_spec
 
 if TYPE_CHECKING:
@@ -99,21 +100,19 @@ def save_checkpoint(
 def staging_folder(folder: Path) -> Path:
     """A new empty ``<folder>.partial`` to write a checkpoint into (:func:`replace_folder` then swaps it in)."""
     staging = folder.with_name(folder.name + ".partial")
-    if staging.exists():
-        shutil.rmtree(staging)
+    remove_tree(staging)  # a link there is removed, not followed: the checkpoint is written into a folder made here
     staging.mkdir(parents=True)
     return staging
 
 
 def replace_folder(staging: Path, folder: Path) -> None:
     """Put the complete ``staging`` folder in ``folder``'s place (a kill leaves a complete ``.partial`` or ``.old``)."""
-    if folder.exists():
+    if folder.exists() or folder.is_symlink():
         old = folder.with_name(folder.name + ".old")
-        if old.exists():
-            shutil.rmtree(old)
+        remove_tree(old)
         folder.rename(old)
         staging.rename(folder)
-        shutil.rmtree(old)
+        remove_tree(old)
     else:
         staging.rename(folder)
 
@@ -198,6 +197,7 @@ def load_model(path: str | Path, env: Any = None, device: str = "cpu") -> BaseAl
         algo = model_class(info["algo"])
     except ValueError as error:  # an unknown name, or an algorithm outside SB3 (ConfigError)
         raise ValueError(f"{folder}: {error}") from None
+    check_model_zip(folder / MODEL_FILE)  # SB3's load decompresses every .pth member: only SB3's own names, sizes bounded
     return algo.load(folder / MODEL_FILE, env=env, device=device)
 
 
@@ -369,7 +369,8 @@ def load_parameters(model: BaseAlgorithm, path: Path, device: str = "cpu") -> No
     import torch
     from stable_baselines3.common.utils import get_device
 
-    zipped = read_model_zip(path, str(get_device(device)))
+    objects, _ = model._get_torch_save_params()  # the state dicts this model has: any other member is refused unread
+    zipped = read_model_zip(path, str(get_device(device)), objects=objects)
     # SB3 annotates a dict of tensors; it takes (and its own load passes) a dict of state dicts, one per object, as here
     model.set_parameters(zipped.parameters, exact_match=True, device=device)  # type: ignore[arg-type]
     expected = set(model._get_torch_save_params()[1])

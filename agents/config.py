@@ -42,6 +42,11 @@ __all__ = ["ALGORITHM_NAMES", "ENCODER_MODES", "ConfigError", "DemonstrationConf
            "config_from_mapping", "config_to_dict", "describe_fields", "load_config"]
 
 
+MAX_TIMESTEPS = 1_000_000_000
+"""The longest budget in env steps (``timesteps``): 2,000 steps an episode over the MAX_TRAIN_EPISODES training seeds a
+run has, days of training on one machine; refused in one line, not when the seeds run out."""
+
+
 class ConfigError(CrowdNavError, ValueError):
     """A training configuration is invalid; ``str()`` names the file, line and key (``issues``: each problem)."""
 
@@ -194,7 +199,9 @@ class TrainConfig(_Section):
     episodes: Int = option(700, "Training length in episodes (the paper trains for 700); ignored when timesteps is set. At most "
                                 f"{MAX_TRAIN_EPISODES:,}: a run's training seeds end there (crowdnav.agents.seeding).",
                            ge=1, le=MAX_TRAIN_EPISODES)
-    timesteps: Int | None = option(None, "Training length in env steps, counted over all worlds (None: the episodes budget).", ge=1)
+    timesteps: Int | None = option(None, "Training length in env steps, counted over all worlds (None: the episodes budget). At "
+                                         f"most {MAX_TIMESTEPS:,}: 2,000 steps an episode over a run's training seeds.",
+                                   ge=1, le=MAX_TIMESTEPS)
     num_envs: Int = option(32, "Worlds collected from at once (the native vector env, docs/agents.md#batched-training); "
                                "1: one env, as the published single-env results were trained.", ge=1, le=4096)
     updates_per_step: Float | None = option(None, "Off-policy with num_envs > 1: gradient steps per env step, the update-to-data "
@@ -283,25 +290,31 @@ def planner_problems(config: TrainConfig) -> list[tuple[str, str]]:
 
     problems = []
     try:
-        shield_settings(config.shield)
+        settings = shield_settings(config.shield)
     except ValueError as error:
         problems.append(("shield", str(error).removeprefix("shield: ")))
     else:
-        if config.shield and _declares_robots(config):
+        scenario = _scenario(config) if settings is not None else None
+        if scenario is not None and scenario.robots is not None:
             problems.append(("shield", f"shields one robot; {config.scenario!r} declares several (robots:): train it without the shield"))
+        elif scenario is not None and settings is not None:
+            try:  # the lattice over the horizon at the scenario's time step, bounded before the env allocates it
+                settings.window(float(scenario.time_step))
+            except ValueError as error:
+                problems.append(("shield", str(error).removeprefix("planner settings: ")))
     if config.residual and "plan" not in config.modalities:
         problems.append(("residual", f"the action corrects the planner's move, so modalities must include plan; got {config.modalities}"))
     return problems
 
 
-def _declares_robots(config: TrainConfig) -> bool:
-    """Whether the config's scenario (with its overrides) has ``robots:``; False when it does not load (the env reports that)."""
+def _scenario(config: TrainConfig) -> Any:
+    """The config's scenario (with its overrides); None when it does not load (the env reports that)."""
     from crowdnav.scenario.loader import load_scenario
 
     try:
-        return load_scenario(config.scenario, config.overrides).robots is not None
+        return load_scenario(config.scenario, config.overrides)
     except (CrowdNavError, OSError, ValueError):
-        return False
+        return None
 
 
 def robots_problems(config: TrainConfig) -> list[tuple[str, str]]:

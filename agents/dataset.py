@@ -22,6 +22,8 @@ from typing import Any
 
 import numpy as np
 
+from crowdnav.files import replacing
+
 DATASET_FORMAT = "crowdnav-leog-dataset/1"
 
 
@@ -47,7 +49,9 @@ def save_dataset(dataset: GridDataset, path: str | Path) -> Path:
         path = path.with_name(path.name + ".npz")
     path.parent.mkdir(parents=True, exist_ok=True)
     metadata = {"format": DATASET_FORMAT, **dataset.metadata}
-    np.savez_compressed(path, grids=_as_grids(dataset.grids, str(path)), metadata=np.array(json.dumps(metadata)))
+    grids = _as_grids(dataset.grids, str(path))
+    with replacing(path, suffix=".npz") as temporary:  # a link at ``path`` is replaced; ".npz": numpy adds none then
+        np.savez_compressed(temporary, grids=grids, metadata=np.array(json.dumps(metadata)))
     return path
 
 

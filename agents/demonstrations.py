@@ -69,6 +69,7 @@ from stable_baselines3.common.base_class import BaseAlgorithm
 from stable_baselines3.common.buffers import DictReplayBuffer
 from stable_baselines3.common.vec_env import DummyVecEnv, VecEnvWrapper
 
+from crowdnav.files import atomic_write_text
 from crowdnav.registry import is_off_policy
 
 REPORT_FILE = "demonstrations.json"
@@ -255,5 +256,5 @@ def warm_start(model: BaseAlgorithm, config: TrainConfig) -> dict[str, Any] | No
         report["replay_buffer"] = add_to_replay_buffer(model, demonstrations, config.reward_scale)
     out = Path(config.out)
     if out.is_dir():
-        (out / REPORT_FILE).write_text(json.dumps(report, indent=2) + "\n", encoding="utf-8")
+        atomic_write_text(out / REPORT_FILE, json.dumps(report, indent=2) + "\n")  # replaces a link, never writes through it
     return report

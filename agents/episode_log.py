@@ -25,6 +25,7 @@ import os
 from pathlib import Path
 
 from crowdnav.errors import CrowdNavError
+from crowdnav.files import atomic_write_text, open_for_write, open_text_for_append
 from crowdnav.simulator import OUTCOMES
 
 COLUMNS = ("episode", "seed", "outcome", "return", "length", "timesteps", "seconds")
@@ -68,13 +69,11 @@ def _fsync_folder(folder: Path) -> None:
 
 
 def _replace(path: Path, lines: list[str]) -> None:
-    """Write ``lines`` to ``path`` through ``<path>.tmp``, fsync'd, renamed over it: a kill leaves the old or the new file whole."""
-    temporary = path.with_name(path.name + ".tmp")
-    with open(temporary, "w", encoding="utf-8", newline="\n") as file:
-        file.write("".join(line + "\n" for line in lines))
-        file.flush()
-        os.fsync(file.fileno())
-    temporary.replace(path)
+    """Write ``lines`` to ``path`` through a temporary file, fsync'd, renamed over it: a kill leaves the old or the new file whole.
+
+    The rename replaces a link at ``path`` rather than writing through it.
+    """
+    atomic_write_text(path, "".join(line + "\n" for line in lines), fsync=True)
     _fsync_folder(path.parent)
 
 
@@ -82,7 +81,7 @@ def _discard(path: Path, lines: list[str]) -> None:
     if not lines:
         return
     discarded = path.with_name(path.name + DISCARDED_SUFFIX)
-    with open(discarded, "a", encoding="utf-8", newline="\n") as file:
+    with open_text_for_append(discarded) as file:  # appended to, never through a link
         if file.tell() == 0:
             file.write(HEADER + "\n")
         file.write("".join(line + "\n" for line in lines))
@@ -173,7 +172,7 @@ class EpisodeLogWriter:
     """Appends rows to a prepared log, each with one ``write`` on an ``O_APPEND`` descriptor (no buffer a kill could lose)."""
 
     def __init__(self, path: str | Path):
-        self._fd: int | None = os.open(path, os.O_WRONLY | os.O_APPEND)
+        self._fd: int | None = open_for_write(path, os.O_WRONLY | os.O_APPEND)  # prepared by prepare_log; never a link
 
     def write(self, line: str) -> None:
         if self._fd is None:

@@ -57,6 +57,7 @@ from stable_baselines3.common.callbacks import BaseCallback
 from stable_baselines3.common.policies import ActorCriticPolicy
 from stable_baselines3.common.utils import set_random_seed
 
+from crowdnav.files import atomic_write_text
 from crowdnav.scenario.loader import load_scenario
 
 MAX_INPUTS = 65_536
@@ -189,9 +190,11 @@ def _train(config: TrainConfig, resume: bool, on_checkpoint: Callable[[int], Non
         recover_checkpoint(out)  # a kill during a checkpoint swap leaves a complete .partial or .old
     state = read_policy_info(checkpoint) if resume and checkpoint.exists() else None
     first_episode = int(state["episodes"]) if state else 0
-    out.mkdir(parents=True, exist_ok=True)
-    (out / "config.yaml").write_text(yaml.safe_dump(config_to_dict(config), sort_keys=False), encoding="utf-8")
-    prepare_log(episode_log(out), first_episode)  # a resume sets aside the rows after its checkpoint
+    spent = state is not None and _spent(config, state)  # a resume with nothing left to play writes nothing (below)
+    if not spent:
+        out.mkdir(parents=True, exist_ok=True)
+        atomic_write_text(out / "config.yaml", yaml.safe_dump(config_to_dict(config), sort_keys=False))  # replaces a link, never writes through it
+        prepare_log(episode_log(out), first_episode)  # a resume sets aside the rows after its checkpoint
     vec = make_robots_vec_env(config, int(state["next_episode"]) if state else 0)
     inputs = vec.worlds[0].inputs
     if state and not inputs.matches(state["robots"]):
@@ -201,6 +204,10 @@ def _train(config: TrainConfig, resume: bool, on_checkpoint: Callable[[int], Non
     if state:
         load_parameters(model, checkpoint / MODEL_FILE, config.device)
         model.num_timesteps = int(state["timesteps"])
+    if state and spent:  # its checkpoint left as it is: rewriting next_episode would move a later extension's seeds
+        vec.close()
+        return TrainResult(out=out, checkpoint=checkpoint, episodes=first_episode, timesteps=model.num_timesteps,
+                           successes=int(state["successes"]), seconds=0.0, steps_per_second=0.0, model=model)
 
     def info() -> dict[str, Any]:
         # the episode after every one any world has started: a resume's worlds start there, so no seed repeats
@@ -248,6 +255,13 @@ def _train(config: TrainConfig, resume: bool, on_checkpoint: Callable[[int], Non
                        successes=callback.successes, seconds=seconds,
                        steps_per_second=(model.num_timesteps - start_steps) / seconds if seconds > 0 else 0.0,
                        records=callback.records, model=model)
+
+
+def _spent(config: TrainConfig, state: Mapping[str, Any]) -> bool:
+    """Whether the checkpoint has played the config's whole budget (episodes, or env steps with ``timesteps``)."""
+    if config.timesteps is not None:
+        return int(state["timesteps"]) >= config.timesteps
+    return int(state["episodes"]) >= config.episodes
 
 
 class RobotsPolicy:

@@ -24,7 +24,6 @@ for :func:`crowdnav.agents.run_folder.recover_checkpoint` to pick.
 
 from __future__ import annotations
 
-import shutil
 from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import Any
@@ -35,6 +34,8 @@ from crowdnav.agents.marl_env import RobotsTrainingEnv
 from crowdnav.agents.marl_vec_env import RobotsVecEnv
 from crowdnav.agents.resume_state import _ROLLOUT, ResumeStateError, _fill, _position, _read_npz, _write_npz
 
+from crowdnav.files import remove_tree
+
 STATE_FILE = "robots_state.npz"
 """The rollout and worlds of a resumable shared robot checkpoint."""
 
@@ -44,21 +45,18 @@ def save_resumable(model: Any, folder: Path, info: Mapping[str, Any], worlds: li
     """Write the resumable checkpoint ``folder`` (module docstring); ``rows``: the episode log's per-row running sums."""
     staging = folder.with_name(folder.name + ".next")
     for stale in (staging, staging.with_name(staging.name + ".partial")):
-        if stale.exists():
-            shutil.rmtree(stale)
+        remove_tree(stale)  # a link there is removed, not followed
     save_checkpoint(model, staging, info, rng_state=True)
     _save_state(staging / STATE_FILE, model, worlds, rows)
     partial = folder.with_name(folder.name + ".partial")
-    if partial.exists():
-        shutil.rmtree(partial)
+    remove_tree(partial)
     staging.rename(partial)  # complete from here on: recover_checkpoint may pick it
-    if folder.exists():
+    if folder.exists() or folder.is_symlink():
         old = folder.with_name(folder.name + ".old")
-        if old.exists():
-            shutil.rmtree(old)
+        remove_tree(old)
         folder.rename(old)
         partial.rename(folder)
-        shutil.rmtree(old)
+        remove_tree(old)
     else:
         partial.rename(folder)
 

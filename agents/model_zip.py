@@ -6,6 +6,10 @@ read with ``torch.load(..., weights_only=True)`` (tensors only), and ``data`` is
 its entries SB3 could not write as JSON are base64 pickles (``{":type:": ..., ":serialized:":
 ...}``), which are never decoded; only the plain JSON values beside them are read.
 
+Only the members SB3 writes are accepted (:data:`SB3_FILES`, ``<object>.pth`` of the objects the
+caller expects, :data:`SB3_OBJECTS` by default), refused in one line before anything is decompressed;
+of those, only the members a caller names are read (a policy alone reads ``policy.pth``).
+
 :func:`read_model_zip` is used by every parameter-only load (crowdnav checkpoints, resumes);
 :func:`zip_policy` rebuilds the policy network of a zip saved by Stable-Baselines3 itself
 (SAC, TD3, DDPG, PPO, A2C on a Dict observation) from that JSON, with every network size
@@ -18,7 +22,7 @@ import io
 import json
 import re
 import zipfile
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Collection, Mapping
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -35,6 +39,11 @@ MAX_TOTAL_BYTES = 1 << 30
 """All members' uncompressed sizes together, checked before any is read: the checkpoint of the biggest model
 :data:`crowdnav.agents.network_size.MAX_PARAMETERS` allows (its parameters and Adam's two moments) is under 700 MB."""
 MAX_DATA_BYTES = 16 << 20
+SB3_FILES = ("data", "_stable_baselines3_version", "system_info.txt", "pytorch_variables.pth", "tensors.pth")
+"""The members of an SB3 zip besides its objects' state dicts (``tensors.pth``: SB3 before 0.9)."""
+SB3_OBJECTS = ("policy", "policy.optimizer", "actor.optimizer", "critic.optimizer", "ent_coef_optimizer")
+"""The objects whose state dicts SB3's algorithms save (``<name>.pth``; ``_get_torch_save_params``)."""
+VARIABLES = ("pytorch_variables", "tensors")
 MAX_UNITS = 4096
 """Widest hidden layer a loaded network may declare."""
 MAX_LAYERS = 16
@@ -66,27 +75,19 @@ def _pickled(value: Any) -> bool:
     return isinstance(value, dict) and ":serialized:" in value
 
 
-def read_model_zip(path: str | Path, device: str = "cpu") -> ModelZip:
-    """The zip's JSON ``data`` and its ``.pth`` tensors; nothing pickled is decoded. ModelZipError on a bad file."""
+def read_model_zip(path: str | Path, device: str = "cpu", objects: Collection[str] = SB3_OBJECTS,
+                   read: Collection[str] | None = None) -> ModelZip:
+    """The zip's JSON ``data`` and its ``.pth`` tensors; nothing pickled is decoded. ModelZipError on a bad file.
+
+    ``objects``: the state dicts the zip may hold (any other member is refused before anything is read); ``read``: the
+    ``.pth`` members to read, by name without ``.pth`` (``"policy"``, ``"pytorch_variables"``; None: all it holds).
+    """
     import torch
 
     path = Path(path)
     try:
         with zipfile.ZipFile(path) as archive:
-            members = archive.infolist()
-            if len(members) > MAX_MEMBERS:
-                raise ModelZipError(f"{path}: {len(members)} entries, more than an SB3 model zip holds ({MAX_MEMBERS})")
-            for member in members:
-                limit = MAX_DATA_BYTES if member.filename == "data" else MAX_MEMBER_BYTES
-                if member.file_size > limit:
-                    raise ModelZipError(f"{path}: entry {member.filename} is {member.file_size:,} bytes (at most {limit:,})")
-            total = sum(member.file_size for member in members)  # the sizes zipfile will read at most, whatever is compressed
-            if total > MAX_TOTAL_BYTES:
-                raise ModelZipError(f"{path}: its {len(members)} entries hold {total:,} bytes uncompressed, more than a model zip "
-                                    f"may ({MAX_TOTAL_BYTES:,}, crowdnav.agents.model_zip)")
-            names = archive.namelist()
-            if "data" not in names or "policy.pth" not in names:
-                raise ModelZipError(f"{path}: not an SB3 model zip (no data or policy.pth entry)")
+            names = _checked_members(archive, path, objects)
             try:
                 data = json.loads(archive.read("data").decode("utf-8"))
             except (UnicodeDecodeError, json.JSONDecodeError, RecursionError) as error:
@@ -95,19 +96,56 @@ def read_model_zip(path: str | Path, device: str = "cpu") -> ModelZip:
                 raise ModelZipError(f"{path}: its data entry is not a JSON object")
             parameters, variables = {}, {}
             for name in names:
-                if not name.endswith(".pth"):
+                stem = name[: -len(".pth")]
+                if not name.endswith(".pth") or (read is not None and stem not in read):  # unused: never decompressed
                     continue
                 try:
                     tensors = torch.load(io.BytesIO(archive.read(name)), map_location=device, weights_only=True)
                 except Exception as error:  # noqa: BLE001 - whatever torch's restricted unpickler refuses: one line
                     raise ModelZipError(f"{path}: {name} holds more than tensors ({str(error).splitlines()[0][:200]})") from None
-                if name in ("pytorch_variables.pth", "tensors.pth"):
+                if stem in VARIABLES:
                     variables = dict(tensors)
                 else:
-                    parameters[name[: -len(".pth")]] = tensors
+                    parameters[stem] = tensors
     except (zipfile.BadZipFile, zipfile.LargeZipFile, OSError, EOFError, NotImplementedError) as error:
         raise ModelZipError(f"{path}: cannot read it as a zip ({str(error).splitlines()[0]})") from None
     return ModelZip(path, data, parameters, variables)
+
+
+def check_model_zip(path: str | Path, objects: Collection[str] = SB3_OBJECTS) -> None:
+    """ModelZipError (one line) unless ``path`` holds only the members SB3 writes, within the sizes: checked from the zip's
+    directory before SB3's own ``load`` decompresses every ``.pth`` member it finds."""
+    path = Path(path)
+    try:
+        with zipfile.ZipFile(path) as archive:
+            _checked_members(archive, path, objects)
+    except (zipfile.BadZipFile, zipfile.LargeZipFile, OSError, EOFError, NotImplementedError) as error:
+        raise ModelZipError(f"{path}: cannot read it as a zip ({str(error).splitlines()[0]})") from None
+
+
+def _checked_members(archive: zipfile.ZipFile, path: Path, objects: Collection[str]) -> list[str]:
+    """The members' names, once their count, names and uncompressed sizes (the zip's directory: what zipfile reads at most,
+    whatever is compressed) are within the bounds; nothing is decompressed here."""
+    members = archive.infolist()
+    if len(members) > MAX_MEMBERS:
+        raise ModelZipError(f"{path}: {len(members)} entries, more than an SB3 model zip holds ({MAX_MEMBERS})")
+    allowed = set(SB3_FILES) | {f"{name}.pth" for name in objects}
+    for member in members:
+        if member.filename not in allowed:
+            raise ModelZipError(f"{path}: entry {member.filename[:80]!r} is not one an SB3 model zip holds (data, "
+                                f"{', '.join(f'{name}.pth' for name in objects)}, pytorch_variables.pth, _stable_baselines3_version, "
+                                "system_info.txt); refused before anything is read")
+        limit = MAX_DATA_BYTES if member.filename == "data" else MAX_MEMBER_BYTES
+        if member.file_size > limit:
+            raise ModelZipError(f"{path}: entry {member.filename} is {member.file_size:,} bytes (at most {limit:,})")
+    total = sum(member.file_size for member in members)
+    if total > MAX_TOTAL_BYTES:
+        raise ModelZipError(f"{path}: its {len(members)} entries hold {total:,} bytes uncompressed, more than a model zip "
+                            f"may ({MAX_TOTAL_BYTES:,}, crowdnav.agents.model_zip)")
+    names = archive.namelist()
+    if "data" not in names or "policy.pth" not in names:
+        raise ModelZipError(f"{path}: not an SB3 model zip (no data or policy.pth entry)")
+    return names
 
 
 def check_layers(label: str, layers: Any) -> None:
@@ -142,7 +180,7 @@ def zip_policy(path: str | Path, observation_space: Any,
     the returned shapes) and gets the zip's tensors. Custom classes (a features extractor,
     sb3-contrib's policies) would need the zip's code: refused with one line.
     """
-    model = read_model_zip(path)
+    model = read_model_zip(path, read=("policy",))  # the optimizers and variables are training's: never decompressed
     cls = _policy_class(model)
     kwargs = _policy_kwargs(model)
     shapes = observation_shapes(model)

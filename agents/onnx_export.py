@@ -40,6 +40,7 @@ from crowdnav.agents.space_checks import box_space, dict_space
 from torch import nn
 
 from crowdnav.errors import CrowdNavError
+from crowdnav.files import replacing
 
 OPSET = 17
 ACTION_OUTPUT = "action"
@@ -155,20 +156,22 @@ def export_onnx(policy_path: str | Path, out: str | Path, *, opset: int = OPSET)
     validate = torch.distributions.Distribution._validate_args
     # PPO / A2C build a Normal to take its mean: its argument checks only test values, and traced they become constants
     torch.distributions.Distribution.set_default_validate_args(False)
-    try:
-        with torch.no_grad(), warnings.catch_warnings():
-            warnings.filterwarnings("ignore", category=DeprecationWarning, module=r"torch\.onnx.*|crowdnav\.agents\.onnx_export")
-            warnings.filterwarnings("ignore", category=DeprecationWarning, message=".*legacy TorchScript-based ONNX export.*")
-            torch.onnx.export(module, inputs, str(out), input_names=keys, output_names=[ACTION_OUTPUT], dynamic_axes=axes,
-                              opset_version=opset, dynamo=False)
-    finally:
-        torch.distributions.Distribution.set_default_validate_args(validate)
-    _add_metadata(out, {
-        "crowdnav.env_options": json.dumps(policy.env_options, sort_keys=True),
-        "crowdnav.algo": policy.algo,
-        "crowdnav.observation": json.dumps({key: {"shape": list(box_space(raw, key).shape), "dtype": str(space.dtype)}
-                                          for key, space in raw.spaces.items()}),
-    })
+    # written whole under a temporary name, then renamed over ``out``: a link at ``out`` is replaced, never written through
+    with replacing(out, suffix=".onnx") as temporary:
+        try:
+            with torch.no_grad(), warnings.catch_warnings():
+                warnings.filterwarnings("ignore", category=DeprecationWarning, module=r"torch\.onnx.*|crowdnav\.agents\.onnx_export")
+                warnings.filterwarnings("ignore", category=DeprecationWarning, message=".*legacy TorchScript-based ONNX export.*")
+                torch.onnx.export(module, inputs, str(temporary), input_names=keys, output_names=[ACTION_OUTPUT],
+                                  dynamic_axes=axes, opset_version=opset, dynamo=False)
+        finally:
+            torch.distributions.Distribution.set_default_validate_args(validate)
+        _add_metadata(temporary, {
+            "crowdnav.env_options": json.dumps(policy.env_options, sort_keys=True),
+            "crowdnav.algo": policy.algo,
+            "crowdnav.observation": json.dumps({key: {"shape": list(box_space(raw, key).shape), "dtype": str(space.dtype)}
+                                              for key, space in raw.spaces.items()}),
+        })
     return out
 
 

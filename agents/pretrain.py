@@ -25,6 +25,8 @@ from crowdnav.agents.dataset import GridDataset
 from crowdnav.agents.encoders import LeogAutoencoder, LeogEncoder, leog_architecture
 from torch import nn
 
+from crowdnav.files import atomic_write_text, replacing
+
 ENCODER_FORMAT = "crowdnav-leog-encoder/1"
 ENCODER_FILE = "encoder.pt"
 
@@ -143,10 +145,11 @@ def save_encoder(model: LeogAutoencoder, out: str | Path, result: PretrainResult
     folder = Path(out)
     folder.mkdir(parents=True, exist_ok=True)
     path = folder / ENCODER_FILE
-    torch.save({"format": ENCODER_FORMAT, "architecture": result.architecture, "encoder": model.encoder.state_dict(),
-                "decoder": model.decoder.state_dict(), "metadata": result.metadata}, path)
+    with replacing(path) as temporary:  # renamed over the destination: a link there is replaced, never written through
+        torch.save({"format": ENCODER_FORMAT, "architecture": result.architecture, "encoder": model.encoder.state_dict(),
+                    "decoder": model.decoder.state_dict(), "metadata": result.metadata}, temporary)
     summary = {"format": ENCODER_FORMAT, **{k: v for k, v in asdict(result).items() if k != "encoder_path"}}
-    (folder / "encoder.json").write_text(json.dumps(summary, indent=2) + "\n", encoding="utf-8")
+    atomic_write_text(folder / "encoder.json", json.dumps(summary, indent=2) + "\n")
     plot_losses(result.train_loss, result.val_loss, folder / "loss.png")
     return path
 
@@ -168,7 +171,8 @@ def plot_losses(train_loss: Sequence[float], val_loss: Sequence[float], path: st
     axes.legend()
     axes.grid(True, alpha=0.3)
     figure.tight_layout()
-    figure.savefig(path, dpi=100)
+    with replacing(path, suffix=".png") as temporary:  # the suffix tells matplotlib the format
+        figure.savefig(temporary, dpi=100)
     plt.close(figure)
 
 

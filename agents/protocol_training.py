@@ -39,11 +39,13 @@ from crowdnav.agents.factory import env_options, make_vec_env, observation_norma
 from crowdnav.agents.run_folder import POLICY_FILE, checkpoint_dir, episode_log, recover_checkpoint, snapshot_dir
 from crowdnav.agents.seeding import train_seed
 from crowdnav.agents.train_result import TrainResult
-from crowdnav.agents.training_checks import prepare_episode_log
+from crowdnav.agents.training_checks import budget_spent, prepare_episode_log
 from crowdnav.agents.vec_env import CrowdNavSB3VecEnv
 from crowdnav.agents.wrappers import scales_from_json, scales_to_json
 from stable_baselines3.common.vec_env import VecEnvWrapper
 from stable_baselines3.common.vec_env.base_vec_env import VecEnvObs, VecEnvStepReturn
+
+from crowdnav.files import atomic_write_text
 
 
 def train_registered(config: TrainConfig, resume: bool, on_checkpoint: Callable[[int], None] | None = None) -> TrainResult:
@@ -57,7 +59,8 @@ def train_registered(config: TrainConfig, resume: bool, on_checkpoint: Callable[
     if not resume and checkpoint.exists():
         raise ConfigError(f"{out} already holds a run (checkpoint/); resume it with --resume or choose another --out")
     out.mkdir(parents=True, exist_ok=True)
-    (out / "config.yaml").write_text(yaml.safe_dump(config_to_dict(config), sort_keys=False), encoding="utf-8")
+    if not (info and budget_spent(config, int(info["episodes"]), int(info["timesteps"]))):  # nothing left to play: change nothing
+        atomic_write_text(out / "config.yaml", yaml.safe_dump(config_to_dict(config), sort_keys=False))  # replaces a link
     first = int(info["episodes"]) if info else 0
     prepare_episode_log(out, first, stacklevel=3)  # as before: the warning points at train_registered's caller
     saved = info.get("observation_normalization") if info else None

@@ -7,6 +7,7 @@ business, so it happens here, and torch is imported only when a checkpoint is lo
 
 from __future__ import annotations
 
+import os
 from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
@@ -101,7 +102,7 @@ def render_robots_policy(scenario: str, policy: str, *, seed: int = 0, episodes:
     except Exception as error:  # a damaged checkpoint can fail in many ways; report one clear line
         message = str(error).splitlines()[0] if str(error) else ""
         raise PolicyLoadError(f"cannot load shared robot policy {policy}: {type(error).__name__}{': ' + message if message else ''}") from None
-    if scenario != trained.env_options["scenario"]:
+    if not _same_scenario(scenario, trained.env_options["scenario"]):
         raise PolicyLoadError(f"{policy} drives the robots of {trained.env_options['scenario']!r}, not {scenario!r}")
 
     env = robots_env({**trained.env_options, "render_mode": "rgb_array", "render_options": render_options})
@@ -120,20 +121,17 @@ def render_robots_policy(scenario: str, policy: str, *, seed: int = 0, episodes:
             path = inside(Path(out), f"{env.scenario.name}_{label}_seed{seed + episode}{suffix}")
             observations, infos = env.reset(seed=seed + episode)
             outcomes: dict[str, str] = {}
-            try:
-                with VideoWriter(path, fps=fps) as writer:
+            # the writer drops its unfinished temporary if the episode raises; a file of that name stays as it was
+            with VideoWriter(path, fps=fps) as writer:
+                writer.append(frame())
+                while env.agents:
+                    observations, _, terminations, truncations, infos = env.step(trained.act(observations, infos))
                     writer.append(frame())
-                    while env.agents:
-                        observations, _, terminations, truncations, infos = env.step(trained.act(observations, infos))
-                        writer.append(frame())
-                        for name, info in infos.items():  # the outcome of the step a robot ended (later steps: inactive)
-                            if "outcome" in info:
-                                outcomes.setdefault(name, info["outcome"])
-                        if all(terminations.values()) or all(truncations.values()):
-                            break
-            except BaseException:  # an interrupt: no unfinished video is left behind
-                path.unlink(missing_ok=True)
-                raise
+                    for name, info in infos.items():  # the outcome of the step a robot ended (later steps: inactive)
+                        if "outcome" in info:
+                            outcomes.setdefault(name, info["outcome"])
+                    if all(terminations.values()) or all(truncations.values()):
+                        break
             reached = sum(outcome == "success" for outcome in outcomes.values())
             named = inside(Path(out), f"{env.scenario.name}_{label}_seed{seed + episode}_{reached}of{len(trained.robots)}_arrived{suffix}")
             path.replace(named)
@@ -143,3 +141,14 @@ def render_robots_policy(scenario: str, policy: str, *, seed: int = 0, episodes:
     finally:
         env.close()
     return paths
+
+
+def _same_scenario(given: str, trained: str) -> bool:
+    """Whether ``given`` names the scenario ``trained`` does: the same library name, or the same file written another way
+    (``hall.yaml``, ``./hall.yaml`` and its absolute path)."""
+    if given == trained:
+        return True
+    try:
+        return os.path.samefile(given, trained)
+    except OSError:  # a library name, or a path that is not there from here: not shown to be the same
+        return False

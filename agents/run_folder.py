@@ -23,6 +23,7 @@ from pathlib import Path
 from typing import Any
 
 from crowdnav.errors import CrowdNavError
+from crowdnav.files import open_text_for_append, remove_tree
 
 CHECKPOINT_DIR = "checkpoint"
 SNAPSHOTS_DIR = "snapshots"
@@ -153,29 +154,30 @@ def recover_checkpoint(train_dir: str | Path) -> int:
     complete one with the most episodes becomes ``checkpoint/`` and the others are removed, so a
     resume never restarts from scratch while a complete checkpoint exists.
     """
-    import shutil
-
     current = checkpoint_dir(train_dir)
     candidates = [current, current.with_name(current.name + ".partial"), current.with_name(current.name + ".old")]
-    complete = [(episodes, k) for k, folder in enumerate(candidates) if folder.is_dir() and (episodes := _complete(folder)) is not None]
+    # a link is never a checkpoint a kill left: it is removed, not followed
+    complete = [(episodes, k) for k, folder in enumerate(candidates)
+                if folder.is_dir() and not folder.is_symlink() and (episodes := _complete(folder)) is not None]
     if not complete:
         for folder in candidates[1:]:
-            if folder.is_dir():
-                shutil.rmtree(folder)
+            remove_tree(folder)
         return 0
     best_episodes, best = max(complete, key=lambda item: (item[0], -item[1]))  # ties: the current one first
     if best != 0:
-        if current.exists():
-            shutil.rmtree(current)
+        remove_tree(current)
         candidates[best].rename(current)
     for folder in candidates[1:]:
-        if folder.is_dir():
-            shutil.rmtree(folder)
+        remove_tree(folder)
     return best_episodes
 
 
 class RunBusyError(CrowdNavError, RuntimeError):
     """Another process is writing this run folder."""
+
+
+class LockUnavailableError(CrowdNavError, OSError):
+    """The file system of a folder crowdnav writes cannot lock files (``flock``), so one writer at a time cannot be kept."""
 
 
 @contextmanager
@@ -244,7 +246,7 @@ def hold_lock(path: str | Path, busy: Callable[[str], str], *, remove: bool = Fa
         return
     path = Path(path)
     while True:
-        handle = open(path, "a+", encoding="utf-8")  # noqa: SIM115 - closed below, after the lock's whole life
+        handle = open_text_for_append(path, readable=True)  # never through a link; closed after the lock's whole life
         try:
             fcntl.flock(handle, fcntl.LOCK_EX | fcntl.LOCK_NB)
         except BlockingIOError:
@@ -252,6 +254,12 @@ def hold_lock(path: str | Path, busy: Callable[[str], str], *, remove: bool = Fa
             holder = handle.read().strip() or "unknown"
             handle.close()
             raise RunBusyError(busy(holder)) from None
+        except OSError as error:  # a file system without flock (some network mounts): ENOLCK, EOPNOTSUPP
+            handle.close()
+            if remove:
+                path.unlink(missing_ok=True)
+            raise LockUnavailableError(f"{path.parent}: this file system cannot lock files ({error.strerror or error}), so "
+                                       "crowdnav cannot keep a second writer out; write to a folder on a local disk") from None
         try:
             current = os.stat(path).st_ino
         except FileNotFoundError:

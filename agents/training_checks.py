@@ -40,6 +40,17 @@ class ResumeInfo:
     """A batched run's first episode not yet started."""
     legacy: bool
     """Written by an older crowdnav, whose resume state is pickled (resumed only with ``trust_pickle``)."""
+    timesteps: int = 0
+    """The env steps the checkpoint's run had taken."""
+
+    def spent(self, config: TrainConfig) -> bool:
+        """Whether the checkpoint has already spent ``config``'s budget (:func:`budget_spent`)."""
+        return budget_spent(config, self.episodes, self.timesteps)
+
+
+def budget_spent(config: TrainConfig, episodes: int, timesteps: int) -> bool:
+    """Whether a run of ``episodes`` episodes and ``timesteps`` env steps has spent ``config``'s budget (a resume plays nothing)."""
+    return timesteps >= config.timesteps if config.timesteps is not None else episodes >= config.episodes
 
 
 def resume_info(checkpoint: Path, config: TrainConfig, trust_pickle: bool = False) -> ResumeInfo:
@@ -76,7 +87,8 @@ def resume_info(checkpoint: Path, config: TrainConfig, trust_pickle: bool = Fals
             f"the config asks for {str(config.normalize_observations).lower()}"
         )
     return ResumeInfo(episodes=int(info["episodes"]), successes=int(info.get("successes", 0)), config=info.get("config"),
-                      normalization=normalization, next_episode=info.get("next_episode"), legacy=legacy)
+                      normalization=normalization, next_episode=info.get("next_episode"), legacy=legacy,
+                      timesteps=int(info.get("timesteps", 0)))
 
 
 def prepare_episode_log(out: Path, first_episode: int, stacklevel: int = 4) -> None:

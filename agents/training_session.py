@@ -55,6 +55,7 @@ from crowdnav.agents.training_checks import (
 )
 from crowdnav.agents.wrappers import scales_from_json, scales_to_json
 
+from crowdnav.files import atomic_write_text
 from crowdnav.registry import algorithm_spec
 
 
@@ -95,7 +96,8 @@ class TrainingSession:
                           "(normalize_observations: false)", stacklevel=3)
             self.config = self.config.model_copy(update={"normalize_observations": False})
         self.out.mkdir(parents=True, exist_ok=True)
-        (self.out / "config.yaml").write_text(yaml.safe_dump(config_to_dict(self.config), sort_keys=False), encoding="utf-8")
+        if not (self.state and self.state.spent(self.config)):  # a resume with nothing left to play changes nothing
+            atomic_write_text(self.out / "config.yaml", yaml.safe_dump(config_to_dict(self.config), sort_keys=False))  # replaces a link
         prepare_episode_log(self.out, self.first_episode)  # header on disk before anything can be killed mid-episode
 
     @property

@@ -17,10 +17,12 @@ import argparse
 import platform
 import statistics
 import time
+from pathlib import Path
 
 import numpy as np
 
 from crowdnav import Simulator
+from crowdnav.files import replacing
 
 HALL = {
     "description": "a 60 m x 60 m hall with 16 pillars",
@@ -81,7 +83,8 @@ def main() -> None:
         axes.grid(True, which="both", alpha=0.3)
         axes.legend()
         figure.tight_layout()
-        figure.savefig(args.plot)
+        with replacing(Path(args.plot), suffix=Path(args.plot).suffix) as temporary:  # the suffix tells matplotlib the format
+            figure.savefig(temporary)
         print(f"wrote {args.plot}")
 
 

@@ -63,6 +63,8 @@ from crowdnav.agents.factory import (
 from stable_baselines3 import SAC
 from stable_baselines3.common.monitor import Monitor
 
+from crowdnav.files import atomic_write_text
+
 CASES = {
     "lidar+goal": (["lidar", "goal"], "scratch", True),
     "leog+goal frozen": (["leog", "goal"], "frozen", True),
@@ -194,7 +196,7 @@ def main(argv: list[str] | None = None) -> int:
         single_env_tables(args, results)
     print(f"# load average at end {os.getloadavg()[0]:.2f}")
     if args.json is not None:
-        args.json.write_text(json.dumps(results, indent=2) + "\n")
+        atomic_write_text(args.json, json.dumps(results, indent=2) + "\n")
     return 0
 
 

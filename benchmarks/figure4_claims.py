@@ -1,7 +1,7 @@
 """The paper's Figure-4 claims, judged on crowdnav's runs: writes docs/results/README.md.
 
-Reads ``docs/results/<experiment>/evaluation_rates.csv`` (one row per run and evaluation: the
-success / collision / out_of_bounds / truncated rates over the 20 held-out test episodes) for the
+Reads ``docs/results/<experiment>/evaluation_rates.csv`` (or ``docs/results/archive/<experiment>/``, marked archived;
+one row per run and evaluation: the success / collision / out_of_bounds / truncated rates over the 20 held-out test episodes) for the
 experiments encoders, modalities, fusion, paradigms and modalities_paper, and judges every claim
 of the paper by a rule fixed in this file before the runs were read (``CLAIMS``). Missing
 experiments are listed as "not run yet". ``modalities_steps`` and ``paradigms_steps`` (Figure 4(b)
@@ -34,6 +34,8 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+
+from crowdnav.files import atomic_write_text
 
 EXPERIMENTS = ("encoders", "modalities", "fusion", "paradigms", "modalities_paper", "modalities_steps", "paradigms_steps")
 FINAL_EVALUATIONS = 3
@@ -287,14 +289,17 @@ CLAIMS: dict[str, Callable[[dict[str, Runs]], list[tuple[str, Verdict]]]] = {
 def report(results: Path) -> str:
     lines = ["| experiment | claim | verdict | numbers |", "|---|---|---|---|"]
     for name in EXPERIMENTS:
-        path = results / name / "evaluation_rates.csv"
+        # an archived experiment (runs that cannot be repeated from the history) is still judged, and says so
+        folder = next((f for f in (name, f"archive/{name}") if (results / f / "evaluation_rates.csv").exists()), name)
+        link = f"[{name}]({folder}/)" + (" (archived)" if folder != name else "")
+        path = results / folder / "evaluation_rates.csv"
         if not path.exists():
-            lines += [f"| [{name}]({name}/) | {claim} | not run yet | |" for claim in CLAIM_TEXTS[name]]
+            lines += [f"| {link} | {claim} | not run yet | |" for claim in CLAIM_TEXTS[name]]
             continue
         runs = load(path)
         for claim, (verdict, numbers) in CLAIMS[name](runs):
             seeds = ", ".join(f"{k} {len(v.rates['success'])}" for k, v in runs.items())
-            lines.append(f"| [{name}]({name}/) | {claim} | **{verdict}** | {numbers} (runs: {seeds}) |")
+            lines.append(f"| {link} | {claim} | **{verdict}** | {numbers} (runs: {seeds}) |")
     return "\n".join(lines) + "\n"
 
 
@@ -311,7 +316,7 @@ def main() -> None:
     start, end = "<!-- CLAIMS -->", "<!-- /CLAIMS -->"
     head, _, rest = text.partition(start)
     _, _, tail = rest.partition(end)
-    args.out.write_text(f"{head}{start}\n{table}{end}{tail}", encoding="utf-8")
+    atomic_write_text(args.out, f"{head}{start}\n{table}{end}{tail}")
 
 
 if __name__ == "__main__":

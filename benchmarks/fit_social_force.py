@@ -36,6 +36,7 @@ import numpy as np
 
 from crowdnav import social_force as sf
 from crowdnav.crowd.recording import read_recording
+from crowdnav.files import atomic_write_text
 from crowdnav.scenario.crowd import SocialForce
 
 DEFAULT_PREFERRED_SPEED = 1.0
@@ -224,7 +225,7 @@ def write_synthetic_obsmat(path: str | Path, walkers: int = 36, seed: int = 0, p
         if gone.all():
             break
     rows.sort(key=lambda row: (row[0], row[1]))
-    Path(path).write_text("".join(f"{f:.7e} {p:.7e} {z.real:.7e} 0.0000000e+00 {z.imag:.7e} 0 0 0\n" for f, p, z in rows))
+    atomic_write_text(path, "".join(f"{f:.7e} {p:.7e} {z.real:.7e} 0.0000000e+00 {z.imag:.7e} 0 0 0\n" for f, p, z in rows))
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -251,7 +252,7 @@ def main(argv: list[str] | None = None) -> int:
     table = report(windows, Path(args.recording).name)
     print(table, end="")
     if args.out is not None:
-        args.out.write_text(table)
+        atomic_write_text(args.out, table)
     return 0
 
 

@@ -32,6 +32,7 @@ from crowdnav.agents.checkpoint import find_checkpoint
 from crowdnav.agents.config import load_config
 
 from crowdnav.cli.common import CliError, parse_overrides
+from crowdnav.files import atomic_write_text
 from crowdnav.simulator import OUTCOMES
 
 MODALITIES = ["closest_obstacle", "goal"]
@@ -108,13 +109,13 @@ def main(argv: list[str] | None = None) -> int:
 
         def save(seed_file: Path = seed_file, seed: int = seed) -> None:
             seed_file.parent.mkdir(parents=True, exist_ok=True)
-            seed_file.write_text(json.dumps(results[str(seed)], indent=2) + "\n")
+            atomic_write_text(seed_file, json.dumps(results[str(seed)], indent=2) + "\n")
 
         run_seed(seed, args, results, save)
     # results.json: every seed evaluated in --out so far, this process's and others'
     merged = {path.parent.name.removeprefix("seed_"): json.loads(path.read_text())
               for path in sorted(args.out.glob("seed_*/evaluations.json"))}
-    results_file.write_text(json.dumps(merged, indent=2) + "\n")
+    atomic_write_text(results_file, json.dumps(merged, indent=2) + "\n")
     summary = {}
     for seed in args.seeds:
         evaluations = {int(k): v["success"] for k, v in results[str(seed)].items()}

@@ -41,6 +41,8 @@ from crowdnav.agents.run_folder import policy_snapshots
 from crowdnav.evaluation.baselines import scripted_policy
 from crowdnav.evaluation.rollout import HeldOutEpisodes
 
+from crowdnav.files import open_for_write
+
 TRAIN = "import json, sys; from crowdnav.agents import train; train(json.loads(sys.argv[1]))"
 """What each side-by-side run executes: a fresh interpreter per run (one core each, nothing shared)."""
 
@@ -82,7 +84,8 @@ def train_side_by_side(configs: dict[str, dict[str, Any]], workers: int, seconds
         while waiting and len(running) < workers:
             name, config = waiting.pop(0)
             Path(config["out"]).parent.mkdir(parents=True, exist_ok=True)
-            with open(f"{config['out']}.log", "w") as log:  # the child keeps its own copy of the handle
+            # never through a planted link (refused in one line); the child keeps its own copy of the handle
+            with os.fdopen(open_for_write(f"{config['out']}.log", os.O_WRONLY | os.O_CREAT | os.O_TRUNC), "w") as log:
                 running[name] = subprocess.Popen([sys.executable, "-c", TRAIN, json.dumps(config)], stdout=log,
                                                  stderr=subprocess.STDOUT, env=env, start_new_session=True,
                                                  cwd=Path(config["out"]).parent)  # not a source tree: import the installed crowdnav

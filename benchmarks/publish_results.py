@@ -7,7 +7,8 @@ Copies the curves (png, pdf), the leaderboard (md, csv) and the per-evaluation r
 (between ``<!-- FACTS -->`` markers, so the hand-written reading around it survives a re-run):
 the command, the resolved setting, run count, wall time (the experiment's elapsed time when the
 driver recorded it in ``<experiment>.done``, and the sum over runs) and the commits the runs ran
-at. Refuses an experiment whose runs are not all finished.
+at. Refuses an experiment whose runs are not all finished, and one whose runs ran from a working tree
+with uncommitted changes (a commit marked ``+dirty``: that code cannot be checked out again).
 """
 
 from __future__ import annotations
@@ -18,6 +19,8 @@ import shutil
 from pathlib import Path
 
 import yaml
+
+from crowdnav.files import atomic_write_text, replacing
 
 FILES = ("curves.png", "curves.pdf", "leaderboard.md", "leaderboard.csv", "evaluation_rates.csv")
 START, END = "<!-- FACTS -->", "<!-- /FACTS -->"
@@ -34,6 +37,9 @@ def facts(folder: Path) -> str:
     if len(learned) < expected:
         raise SystemExit(f"{folder}: {len(learned)} of {expected} runs finished; publish when all are done")
     commits = sorted({c for m in learned for c in m.get("git_commits", [m.get("git_commit")]) if c})
+    dirty = [c for c in commits if c.endswith("+dirty")]
+    if dirty:
+        raise SystemExit(f"{folder}: runs ran from uncommitted code ({', '.join(dirty)}); re-run from a clean commit to publish")
     done = folder.parent / f"{folder.name}.done"
     elapsed = f"{int(done.read_text()) / 60:.0f} min elapsed, " if done.exists() else ""
     total = sum(m["wall_time_s"] for m in learned)
@@ -72,14 +78,15 @@ def main() -> None:
     target = args.docs / folder.name
     target.mkdir(parents=True, exist_ok=True)
     for name in FILES:
-        shutil.copy2(folder / name, target / name)
+        with replacing(target / name) as temporary:  # a link in docs/results is replaced, never written through
+            shutil.copy2(folder / name, temporary)
     readme = target / "README.md"
     text = readme.read_text(encoding="utf-8") if readme.exists() else f"# {folder.name}\n\n{START}\n{END}\n"
     if START not in text:
         text = f"{text.rstrip()}\n\n{START}\n{END}\n"
     head, _, rest = text.partition(START)
     _, _, tail = rest.partition(END)
-    readme.write_text(f"{head}{START}\n{block}{END}{tail}", encoding="utf-8")
+    atomic_write_text(readme, f"{head}{START}\n{block}{END}{tail}")
     print(f"published {folder} -> {target}")
 
 

@@ -25,6 +25,8 @@ from pathlib import Path
 
 from crowdnav.evaluation.experiment import load_experiment
 
+from crowdnav.files import atomic_write_text
+
 NAMES = ("experiment", "configuration", "label")
 
 
@@ -39,7 +41,7 @@ def _relabel_csv(path: Path, old: tuple[str, str, str], new: tuple[str, str, str
     for column, value in zip(NAMES, new, strict=True):
         if column in frame.columns:
             frame[column] = value
-    frame.to_csv(path, index=False, lineterminator="\n", na_rep="nan")
+    atomic_write_text(path, frame.to_csv(index=False, lineterminator="\n", na_rep="nan"))
 
 
 def main() -> None:
@@ -73,10 +75,10 @@ def main() -> None:
         shutil.copytree(match, folder)
         old_spec = json.loads((match / "spec.json").read_text())
         old, new = tuple(old_spec[key] for key in NAMES), (document["experiment"], document["configuration"], document["label"])
-        (folder / "spec.json").write_text(json.dumps(document, indent=2, sort_keys=True) + "\n")
+        atomic_write_text(folder / "spec.json", json.dumps(document, indent=2, sort_keys=True) + "\n")
         meta = json.loads((match / "meta.json").read_text().replace(str(match.parent.parent), str(target)))
         meta.update(dict(zip(NAMES, new, strict=True)), reused_from=str(match))
-        (folder / "meta.json").write_text(json.dumps(meta, indent=2, sort_keys=True) + "\n")
+        atomic_write_text(folder / "meta.json", json.dumps(meta, indent=2, sort_keys=True) + "\n")
         for csv in [folder / "test_episodes.csv", folder / "training_episodes.csv", *sorted((folder / "evaluations").glob("*.csv"))]:
             if csv.is_file():
                 _relabel_csv(csv, old, new)

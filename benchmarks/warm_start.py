@@ -41,6 +41,7 @@ from crowdnav.agents.wrappers import scales_to_json
 from crowdnav.evaluation.rollout import HeldOutEpisodes
 
 from crowdnav.cli.common import CliError, parse_overrides
+from crowdnav.files import atomic_write_text
 
 FIGURE_4 = {"scenario": "room_furniture", "overrides": {"humans.count": 5, "humans.preferred_speed": [0.5, 1.2]},
             "modalities": ["closest_obstacle", "goal"]}
@@ -110,7 +111,7 @@ def main(argv: list[str] | None = None) -> int:
                 if str(steps) not in points:
                     points[str(steps)] = success(load_policy(snapshot, trusted=True), held)  # this script's own runs
                     print(json.dumps({"run": name, "steps": steps, **points[str(steps)]}), flush=True)
-            results_file.write_text(json.dumps(results, indent=1) + "\n")
+            atomic_write_text(results_file, json.dumps(results, indent=1) + "\n")
     steps = sorted({int(s) for points in results.values() for s in points if s.isdigit()})
     print("| run | " + " | ".join(f"{s // 1000}k" if s else "0" for s in steps) + " |")
     print("|---" * (len(steps) + 1) + "|")

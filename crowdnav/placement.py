@@ -15,6 +15,8 @@ several robots and the check that they all fit together. The names users import 
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 import shapely
 from shapely.geometry import Polygon as ShapelyPolygon
@@ -104,6 +106,20 @@ def _robot_placement(robot: Robot, path: str, world_box: ShapelyPolygon, occupie
     return Placement(robot_start, robot_goal, [], start_goal_ok, *components_kept)
 
 
+def _circle_centres(region: Any, where: str, group: HumanGroup, ring: float, radius: float, world_box: ShapelyPolygon,
+                    occupied: BaseGeometry) -> CandidateSet:
+    """Centres in ``region`` of a circle of members (radius ``ring``) clear of obstacles and walls; when one member would fit
+    but the whole circle does not, the error says the group is too big for its region, with its size."""
+    try:
+        return region_candidates(region, where, ring + radius, world_box, occupied)
+    except GeometryError:
+        region_candidates(region, where, radius, world_box, occupied)  # no room for one member either: that error stands
+        what = "standing circle" if group.standing else "walking group"
+        raise GeometryError(where, f"the {what} of {group.max_count} members does not fit its region: its circle is "
+                            f"{2 * (ring + radius):.2f} m across (radius {ring:.2f} m plus the members' {radius:g} m), and no centre "
+                            "in the region keeps it clear of the walls and obstacles; expected fewer members or a larger region") from None
+
+
 def _group_placement(scenario: Scenario, path: str, group: HumanGroup, world_box: ShapelyPolygon, occupied: BaseGeometry) -> GroupPlacement:
     """Candidate sets of one group: member spawns and goals (walking) or circle centres (standing)."""
     humans, slack = scenario.humans, 2 * JITTER_REACH
@@ -114,7 +130,8 @@ def _group_placement(scenario: Scenario, path: str, group: HumanGroup, world_box
     if group.on_circle:  # a standing circle, or a group that walks together: members start around one drawn centre
         ring = group.circle_radius_for(humans.radius)
         # the circle is one disc of radius ring + radius for obstacles; its members stay in the world too
-        spawn_sets = [region_candidates(r, f"{path}.spawn.{i}", ring + humans.radius, world_box, occupied) for i, r in enumerate(group.spawn)]
+        spawn_sets = [_circle_centres(r, f"{path}.spawn.{i}", group, ring, humans.radius, world_box, occupied)
+                      for i, r in enumerate(group.spawn)]
         centres = merge_candidates(spawn_sets, spacing=0.0)
         inside = shapely.contains_xy(world_box.buffer(-ring - JITTER_REACH), centres.points.real, centres.points.imag)
         if not inside.any():

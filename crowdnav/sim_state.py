@@ -15,6 +15,7 @@ recomputed from the positions by ``refresh`` and never written by anyone else.
 
 from __future__ import annotations
 
+from collections import OrderedDict
 from collections.abc import Callable
 from dataclasses import dataclass, fields
 from operator import attrgetter
@@ -162,6 +163,36 @@ class PairConstants:
     """(n+1, n+1+S) float64, m: surface contact distance of each column: touching where distance - contact <= 0."""
     grid: CrowdGrid | None
     """The neighbour-grid constants of a large crowd (None: all pairs)."""
+
+
+CONSTANTS_KEPT = 8
+"""Crowd sizes whose :class:`PairConstants` a simulator keeps (a crowd of [1, 2000] humans would otherwise keep one set per size seen)."""
+
+
+class ConstantsCache:
+    """The :class:`PairConstants` of the last few crowd sizes (:data:`CONSTANTS_KEPT`), the least recently used freed first.
+
+    The constants are a pure function of the scenario and the size (:func:`pair_constants`): a set built again equals the
+    one freed bit for bit, so only the cost of building it is paid again.
+    """
+
+    def __init__(self, size: int = CONSTANTS_KEPT):
+        self.size = size
+        self._kept: OrderedDict[tuple[int, bool], PairConstants] = OrderedDict()
+
+    def __len__(self) -> int:
+        return len(self._kept)
+
+    def get(self, key: tuple[int, bool], build: Callable[[], PairConstants]) -> PairConstants:
+        """The constants of ``key`` (crowd size, neighbour grid): the kept ones, or ``build()`` (the oldest beyond the size freed first)."""
+        kept = self._kept.get(key)
+        if kept is not None:
+            self._kept.move_to_end(key)
+            return kept
+        while len(self._kept) >= self.size:  # freed before building: at most ``size`` sets alive at once (in this cache)
+            self._kept.popitem(last=False)
+        kept = self._kept[key] = build()
+        return kept
 
 
 def pair_constants(scenario: Any, obstacles: Any, n: int, grid: bool = False) -> PairConstants:

@@ -53,7 +53,7 @@ from crowdnav.robots import Team, clipped_action, retire_robots, robot_kinematic
 from crowdnav.scenario.loader import Overrides
 from crowdnav.scenario.schema import Scenario
 from crowdnav.sim_geometry import Geometry
-from crowdnav.sim_state import PairConstants, SimState, StateFields, pair_constants, read_state_fields, read_through, read_with
+from crowdnav.sim_state import ConstantsCache, PairConstants, SimState, StateFields, pair_constants, read_state_fields, read_through, read_with
 from crowdnav.world import CompiledWorld, WorldSource, load_world
 
 if TYPE_CHECKING:  # the state's fields as the simulator's attributes, for the type checker (read_state_fields adds them)
@@ -121,7 +121,8 @@ class Simulator(_StateAttributes):
         self.geometry = Geometry(self.obstacles, self.bounds)
         """What :meth:`refresh` measures from the state (:class:`crowdnav.sim_geometry.Geometry`): not state, never written by others."""
         self._rng = np.random.default_rng()
-        self._constants: dict[tuple[int, bool], PairConstants] = {}
+        self._constants = ConstantsCache()
+        """The pair constants of the last few crowd sizes (LRU): bounded whatever sizes ``humans.count`` draws."""
         self.team = Team(scenario, self.obstacles, self.placement) if scenario.robots is not None else None
         """The robots after the first (:mod:`crowdnav.robots`) of a scenario with ``robots:``; None for one robot."""
         self._robot_scenarios: list[Scenario] = [robot_scenario(scenario, k) for k in range(len(scenario.robot_specs))]
@@ -192,12 +193,15 @@ class Simulator(_StateAttributes):
                 self._state.human_stopped[index] = True
 
     def pair_constants(self, n: int) -> PairConstants:
-        """The repulsion constants of a crowd of ``n`` humans (:func:`crowdnav.sim_state.pair_constants`, cached per ``n``)."""
-        key = (n, n >= self.grid_from)
-        cached = self._constants.get(key)
-        if cached is None:
-            cached = self._constants[key] = pair_constants(self.scenario, self.obstacles, n, grid=key[1])
-        return cached
+        """The repulsion constants of a crowd of ``n`` humans (:func:`crowdnav.sim_state.pair_constants`, the last few sizes kept)."""
+        grid = n >= self.grid_from
+        return self._constants.get((n, grid), lambda: pair_constants(self.scenario, self.obstacles, n, grid=grid))
+
+    def share_constants(self, other: Simulator) -> None:
+        """Take ``other``'s cache of pair constants (a simulator of the same compiled world): one bounded cache for both."""
+        if other.world is not self.world:
+            raise ValueError("share_constants: the simulators must share one compiled world")
+        self._constants = other._constants
 
     def _use_pair_constants(self, n: int) -> None:
         constants = self.pair_constants(n)

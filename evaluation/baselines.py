@@ -32,6 +32,7 @@ reference line.
 
 from __future__ import annotations
 
+import difflib
 import time
 from collections.abc import Mapping
 from pathlib import Path
@@ -78,6 +79,16 @@ PRIVILEGED_OBSERVATIONS = "privileged: the simulator's state"
 def baseline_observations(name: str) -> list[str] | str:
     """What baseline ``name`` reads, as results declare it: its observation keys (onboard) or :data:`PRIVILEGED_OBSERVATIONS`."""
     return list(ONBOARD_BASELINES[name]) if name in ONBOARD_BASELINES else PRIVILEGED_OBSERVATIONS
+
+
+def unknown_baseline(name: str) -> str | None:
+    """None for a baseline name (``social-force`` spelled as render does, too); else the one-line refusal, with a "did you mean"."""
+    name = name.replace("-", "_")
+    if name in BASELINES:
+        return None
+    close = difflib.get_close_matches(name, list(BASELINES), n=1)  # suggested as typed: baseline:NAME
+    hint = f"; did you mean 'baseline:{close[0]}'?" if close else ";"
+    return f"unknown baseline {name!r}{hint} expected one of: {', '.join(f'baseline:{known}' for known in BASELINES)}"
 
 
 def is_baseline(configuration: str) -> bool:

@@ -22,6 +22,7 @@ from typing import Any
 import numpy as np
 from crowdnav.evaluation.protocol import AXIS_LABELS, POINT_COLUMNS, protocol_unit
 
+from crowdnav.files import replacing
 from crowdnav.simulator import OUTCOMES
 
 RUN_KEYS = ["experiment", "configuration", "label", "seed"]
@@ -224,7 +225,8 @@ def plot_curves(paths: Iterable[str | Path], out: str | Path | None = None, band
         stem.parent.mkdir(parents=True, exist_ok=True)
         for suffix in (".png", ".pdf"):
             path = stem.with_name(stem.name + suffix)
-            # no creation date: the same results give the same file
-            figure.savefig(path, dpi=150, metadata={"CreationDate": None} if suffix == ".pdf" else {"Software": None})
+            # no creation date: the same results give the same file; renamed over ``path``: a link there is replaced
+            with replacing(path, suffix=suffix) as temporary:
+                figure.savefig(temporary, dpi=150, metadata={"CreationDate": None} if suffix == ".pdf" else {"Software": None})
             written.append(path)
     return written

@@ -44,6 +44,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from crowdnav.evaluation.played_options import OptionRefusedError, check_observation_sizes, check_policy_world, refuse_modalities, run_env_options
 
 from crowdnav.errors import CrowdNavError
 
@@ -100,11 +101,16 @@ def resolve_policy(spec: str, env_options: Mapping[str, Any], *, allow_import: b
     """
     options = dict(env_options)
     if spec.startswith("baseline:"):
-        from crowdnav.evaluation.baselines import BASELINE_PREFIX, BASELINES, scripted_policy
+        from crowdnav.evaluation.baselines import BASELINE_PREFIX, BASELINES, scripted_policy, unknown_baseline
 
         name = spec.removeprefix("baseline:").replace("-", "_")  # the render spelling (social-force) is accepted
-        if name not in BASELINES:
-            raise PolicyError(f"unknown baseline {name!r}; expected one of: {', '.join(f'baseline:{n}' for n in BASELINES)}")
+        refusal = unknown_baseline(name)
+        if refusal:
+            raise PolicyError(refusal)
+        from crowdnav.evaluation.baselines import baseline_observations
+
+        reads = baseline_observations(name)
+        _refused(refuse_modalities, spec, options, f"only {', '.join(reads)}" if isinstance(reads, list) else "the simulator's state")
         return f"{BASELINE_PREFIX}{name}", BASELINES[name], scripted_policy(name), True, options
     path = Path(spec)
     from crowdnav.agents.run_folder import POLICY_FILE
@@ -125,13 +131,11 @@ def resolve_policy(spec: str, env_options: Mapping[str, Any], *, allow_import: b
             policy = load_policy(path)
         except (FileNotFoundError, ValueError) as error:
             raise PolicyError(f"{path}: {error}") from None
-        trained = dict(policy.env_options)
-        if options.get("scenario") not in (None, trained["scenario"]):
-            trained["scenario"] = options["scenario"]  # the same observations, in another scenario
-            trained["overrides"] = dict(options.get("overrides", {}))
-        elif options.get("overrides"):  # its own scenario with --set: the run's settings, changed where --set says
-            trained["overrides"] = {**trained.get("overrides", {}), **options["overrides"]}
-        return _safe(_run_name(Path(spec))), _run_name(Path(spec)), policy, False, trained
+        # its own settings, changed where --scenario and --set say; what its network cannot take is refused in one line
+        played = _refused(run_env_options, spec, policy.env_options, options)
+        _refused(check_observation_sizes, spec, policy.env_options, played)
+        _refused(check_policy_world, spec, policy, played)
+        return _safe(_run_name(Path(spec))), _run_name(Path(spec)), policy, False, played
     if _CALLABLE.fullmatch(spec):
         if not allow_import:
             raise PolicyError(f"{spec[:200]}: a module:function read from a file is never imported; name it on the command line")
@@ -160,12 +164,20 @@ def resolve_policy(spec: str, env_options: Mapping[str, Any], *, allow_import: b
                       f"({', '.join(f'baseline:{name}' for name in BASELINES)})")
 
 
+def _refused(check: Callable[..., Any], *args: Any) -> Any:
+    """``check(*args)``, its :class:`OptionRefusedError` as a PolicyError (the same one line)."""
+    try:
+        return check(*args)
+    except OptionRefusedError as error:
+        raise PolicyError(str(error)) from None
+
+
 def _zip_modalities(path: Path) -> list[str] | None:
     """The observation keys an SB3 zip was trained on, read from its JSON (None when it does not say)."""
     from crowdnav.agents.model_zip import ModelZipError, observation_shapes, read_model_zip
 
     try:
-        shapes = observation_shapes(read_model_zip(path))
+        shapes = observation_shapes(read_model_zip(path, read=()))  # the JSON only: no tensor is decompressed
     except ModelZipError as error:
         raise PolicyError(str(error)) from None
     return list(shapes) if shapes else None
@@ -223,7 +235,6 @@ def evaluate_policy(spec: str, scenario: str | None, out: str | Path, *, modalit
     """
     from crowdnav.evaluation.protocol import Protocol
     from crowdnav.evaluation.provenance import git_commit, package_versions
-    from crowdnav.evaluation.rollout import HeldOutEpisodes
     from crowdnav.evaluation.storage import (
         META_FILE,
         TEST_FILE,
@@ -245,6 +256,8 @@ def evaluate_policy(spec: str, scenario: str | None, out: str | Path, *, modalit
         overrides = track.env_options()["overrides"]
     if scenario is None:
         raise PolicyError("name a scenario (--scenario) or a track (--track)")
+    if not 1 <= episodes <= MAX_EPISODES:  # the rows are kept until written: a bound on memory (docs/security.md)
+        raise OptionRefusedError(f"--episodes must be from 1 to {MAX_EPISODES:,}, got {episodes:,}")
     options: dict[str, Any] = {"scenario": scenario, "modalities": list(modalities) if modalities else None,
                                "overrides": dict(overrides or {})}
     options = {key: value for key, value in options.items() if value is not None}
@@ -269,25 +282,22 @@ def evaluate_policy(spec: str, scenario: str | None, out: str | Path, *, modalit
         protocol = Protocol(train_episodes=1, eval_every=1, test_episodes=episodes, seeds=1, test_seed_base=test_seed_base,
                             final_evaluations=1)
         started = time.perf_counter()
-        held_out = HeldOutEpisodes(env_options, protocol.test_seeds)
         bar = None
         if progress:
             from tqdm import tqdm
 
             bar = tqdm(total=episodes, unit="ep", desc=f"evaluate {label}", leave=False)
+        leading = dict(zip((*RUN_COLUMNS, "training_episodes", "evaluation"), (EXPERIMENT, configuration, label, 0, 0, 0), strict=True))
         try:
-            rows = held_out.run(_guarded(act, spec), privileged=privileged, on_end=bar.update if bar is not None else None)
+            table, steps, outcomes = _play(_guarded(act, spec), env_options, protocol.test_seeds, privileged, leading,
+                                           bar.update if bar is not None else None)
         except PolicyError:
             raise
         except (ValueError, TypeError) as error:  # an action of the wrong shape or type, from the user's policy
             raise PolicyError(f"{spec}: {str(error).splitlines()[0]}") from error
         finally:
-            held_out.close()
             if bar is not None:
                 bar.close()
-        leading = dict(zip((*RUN_COLUMNS, "training_episodes", "evaluation"), (EXPERIMENT, configuration, label, 0, 0, 0), strict=True))
-        table = episode_csv([{**leading, **row} for row in rows])
-        steps = sum(int(row["steps"]) for row in rows)
         meta = {
             "experiment": EXPERIMENT, "configuration": configuration, "label": label, "seed": 0, "status": "complete",
             "kind": "evaluated", "policy": spec, "scenario": scenario, "env": env_options, "protocol": protocol.to_dict(),
@@ -296,13 +306,45 @@ def evaluate_policy(spec: str, scenario: str | None, out: str | Path, *, modalit
             "policy_source": str(Path(spec).resolve()) if Path(spec).exists() else spec,
             "versions": package_versions(),
             "git_commit": git_commit(), "wall_time_s": round(time.perf_counter() - started, 3),
-            "env_steps": {"train": 0, "test": steps, "total": steps}, "training_episodes": 0, "test_episodes": len(rows),
-            "resumed": False, "final": {outcome: round(sum(row["outcome"] == outcome for row in rows) / len(rows), 6) for outcome in OUTCOMES},
+            "env_steps": {"train": 0, "test": steps, "total": steps}, "training_episodes": 0, "test_episodes": len(outcomes),
+            "resumed": False, "final": {outcome: round(outcomes.count(outcome) / len(outcomes), 6) for outcome in OUTCOMES},
             "observations": declared,
         }
         if track is not None:
             meta["track"] = track.identity()
         return install_result(folder, lambda staging: (atomic_write_text(staging / TEST_FILE, table), atomic_write_json(staging / META_FILE, meta)))
+
+
+BATCH_EPISODES = 500
+"""Test episodes played side by side at most (a batch's envs and step logs are freed before the next): memory stays
+bounded whatever ``episodes``; 500, the final rankings' count, plays as one batch as before batches existed."""
+MAX_EPISODES = 100_000
+"""The most test episodes one evaluation plays (their CSV rows are kept until written: ~0.5 KB each)."""
+
+
+def _play(act: Act, env_options: Mapping[str, Any], seeds: Sequence[int], privileged: bool, leading: Mapping[str, Any],
+          on_end: Callable[[], None] | None) -> tuple[str, int, list[str]]:
+    """(CSV text of the episode rows, env steps, outcomes) of one episode per seed, played :data:`BATCH_EPISODES` at a time.
+
+    Each episode is its seed's alone (world i of a batch is the single env seeded with seed i), so
+    the batches give the rows one batch of all seeds would.
+    """
+    from crowdnav.evaluation.rollout import HeldOutEpisodes
+
+    parts, steps, outcomes = [], 0, []
+    for first in range(0, len(seeds), BATCH_EPISODES):
+        held_out = HeldOutEpisodes(env_options, seeds[first:first + BATCH_EPISODES])
+        try:
+            rows = held_out.run(act, privileged=privileged, on_end=on_end)
+        finally:
+            held_out.close()
+        for row in rows:
+            row["test_episode"] += first  # numbered over the whole test set, not the batch
+        text = episode_csv([{**leading, **row} for row in rows])
+        parts.append(text if first == 0 else text.partition("\n")[2])  # the header once
+        steps += sum(int(row["steps"]) for row in rows)
+        outcomes += [str(row["outcome"]) for row in rows]
+    return "".join(parts), steps, outcomes
 
 
 def _declared_observations(spec: str, privileged: bool, env_options: Mapping[str, Any]) -> list[str] | str:

@@ -108,9 +108,9 @@ def one_line(error: BaseException) -> str:
 def write_error_log(out_dir: str | Path, text: str) -> Path:
     """The traceback of a failed run, in OUT/error.log."""
     log = Path(out_dir) / "error.log"
-    log.parent.mkdir(parents=True, exist_ok=True)
-    log.write_text(text, encoding="utf-8")
-    return log
+    from crowdnav.files import atomic_write_text
+
+    return atomic_write_text(log, text)  # makes the folder; a link at OUT/error.log is replaced, never written through
 
 
 def failure_record(spec: dict[str, Any], out_dir: str, message: str, log: Path | None, *, attempts: int = 0) -> dict[str, Any]:

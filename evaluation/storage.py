@@ -38,6 +38,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from crowdnav import files
 from crowdnav.errors import CrowdNavError
 
 EXPERIMENT_FILE = "experiment.yaml"
@@ -117,19 +118,8 @@ class ResultsError(CrowdNavError, ValueError):
 
 
 def atomic_write_text(path: str | Path, text: str) -> Path:
-    """Write ``text`` to ``path`` through a temporary file in the same folder and a rename."""
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    # a name no other process uses (mkstemp would also do, but makes the file private to its owner)
-    temporary = path.with_name(f".{path.name}.{os.getpid()}.{uuid.uuid4().hex[:8]}.tmp")
-    try:
-        with open(temporary, "x", encoding="utf-8", newline="") as file:
-            file.write(text)
-        os.replace(temporary, path)
-    except BaseException:
-        temporary.unlink(missing_ok=True)
-        raise
-    return path
+    """Write ``text`` to ``path`` through a temporary file in the same folder and a rename (a link at ``path`` is replaced)."""
+    return files.atomic_write_text(path, text)
 
 
 def clean_temporaries(folder: str | Path) -> list[Path]:
@@ -138,7 +128,8 @@ def clean_temporaries(folder: str | Path) -> list[Path]:
     Only a run's own process writes in its folder (the folder is claimed), so any such file there
     is an orphan.
     """
-    orphans = [path for path in Path(folder).rglob(".*.tmp") if path.is_file()]
+    # the helpers' ``.<name>.<pid>.<hex>.tmp<suffix>`` (a video's ends in ``.tmp.mp4``), and older crowdnavs' ``.<name>.tmp``
+    orphans = [path for path in Path(folder).rglob(".*") if path.is_file() and (files.is_temporary(path.name) or path.name.endswith(".tmp"))]
     orphans += [path for path in Path(folder).rglob("*.csv.tmp") if path.is_file()]  # the training log's own temporary
     for path in orphans:
         path.unlink(missing_ok=True)
@@ -211,6 +202,8 @@ def install_result(folder: str | Path, write: Callable[[Path], object]) -> Path:
     staging.mkdir()
     try:
         write(staging)
+        if folder.is_symlink():  # a link in the result's place goes; what it points to is left alone
+            folder.unlink()
         if not folder.exists():
             os.rename(staging, folder)
         elif _exchange(staging, folder):

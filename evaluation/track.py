@@ -13,8 +13,10 @@ what a policy is ranked on:
   (:func:`fingerprint`). A change of the simulator or of the track that changes its episodes
   changes the fingerprint; ``tests/evaluation/test_tracks.py`` recomputes every track's and fails
   until the developer bumps the version and stores the new fingerprint (``crowdnav track check``
-  prints it). Results carry the track's name and version, and ``crowdnav leaderboard --track``
-  refuses to rank results of different versions together.
+  prints it). A track file given by path is played again on load and refused when its episodes
+  are not its fingerprint's: a modified copy of a track cannot pass for it. Results carry the
+  track's name, version and fingerprint, and ``crowdnav leaderboard --track`` refuses to rank
+  results of another version or fingerprint (or another recorded setting) together.
 
 Every problem in a track file is one :class:`TrackError` line naming the file and the field.
 """
@@ -39,7 +41,7 @@ from crowdnav.suggest import did_you_mean
 from crowdnav.yaml_input import YamlLimitError, read_text_file
 
 FINGERPRINT_SEEDS = 10
-"""Test seeds (the track's first ones) the fingerprint plays."""
+"""Seeds (from the track's ``test_seed_base``) the fingerprint plays."""
 FINGERPRINT_STEPS = 5
 """Steps whose positions (every agent's) the fingerprint hashes, after the reset's."""
 ANY = "any"
@@ -63,7 +65,7 @@ class _TrackFile(BaseModel):
     test_episodes: int = Field(ge=1, le=10_000)
     test_seed_base: int = Field(ge=0)
     observations: Literal["any"] | list[str] = Field(description="Allowed observation keys, or any (declared in the results).")
-    fingerprint: str = Field(description="Hash of the track's first episodes (crowdnav track check).")
+    fingerprint: str = Field(pattern=r"^[0-9a-f]{16}$", description="Hash of the track's first episodes (crowdnav track check).")
 
 
 @dataclass(frozen=True)
@@ -118,7 +120,7 @@ class Track:
                  f"  time limit:   {self.time_limit_steps} steps",
                  f"  test set:     {self.test_episodes} episodes, seeds {self.seeds[0]}-{self.seeds[-1]}",
                  f"  observations: {', '.join(self.observations) if self.observations else 'any (declared in the results)'}",
-                 f"  fingerprint:  {self.fingerprint} (straight-to-goal on the first {min(FINGERPRINT_SEEDS, len(self.seeds))} test seeds)"]
+                 f"  fingerprint:  {self.fingerprint} (straight-to-goal on the first {FINGERPRINT_SEEDS} seeds from {self.test_seed_base})"]
         from crowdnav.scenario import load_scenario
 
         if load_scenario(self.scenario, dict(self.overrides)).robots is not None:
@@ -140,8 +142,13 @@ def shipped_tracks() -> list[str]:
     return sorted(entry.name[: -len(".yaml")] for entry in _tracks_folder().iterdir() if entry.name.endswith(".yaml"))
 
 
-def load_track(name_or_path: str | Path) -> Track:
-    """A shipped track by name, or a track file by path; :class:`TrackError` (one line) for anything wrong."""
+def load_track(name_or_path: str | Path, *, check_fingerprint: bool = True) -> Track:
+    """A shipped track by name, or a track file by path; :class:`TrackError` (one line) for anything wrong.
+
+    A track file's fingerprint is played again (~0.1 s) and a mismatch refused: a copy of a track
+    with other episodes cannot pass for it (``check_fingerprint=False``: ``crowdnav track check``).
+    Shipped tracks are checked by the test suite instead.
+    """
     spec = str(name_or_path)
     if spec in shipped_tracks():
         entry = _tracks_folder().joinpath(f"{spec}.yaml")
@@ -189,22 +196,31 @@ def load_track(name_or_path: str | Path) -> Track:
                                       yaml_line(root, "observations")))
     if issues:
         raise TrackError(format_issues(label, issues, separator=" / "))
-    return Track(parsed.name, parsed.version, parsed.description, parsed.scenario, dict(parsed.overrides), parsed.time_limit_steps,
-                 parsed.test_episodes, parsed.test_seed_base, None if parsed.observations == ANY else tuple(parsed.observations),
-                 parsed.fingerprint, label)
+    track = Track(parsed.name, parsed.version, parsed.description, parsed.scenario, dict(parsed.overrides), parsed.time_limit_steps,
+                  parsed.test_episodes, parsed.test_seed_base, None if parsed.observations == ANY else tuple(parsed.observations),
+                  parsed.fingerprint, label)
+    if check_fingerprint and spec not in shipped_tracks():
+        played = fingerprint(track)
+        if played != track.fingerprint:
+            raise TrackError(format_issues(label, [ConfigIssue(
+                "fingerprint", f"{track.fingerprint} is not this file's episodes' ({played}): a track whose episodes differ cannot pass "
+                f"for track {track.label}; give it its own name or version and the fingerprint `crowdnav track check FILE` prints",
+                yaml_line(root, "fingerprint"))]))
+    return track
 
 
 def fingerprint(track: Track, seeds: int = FINGERPRINT_SEEDS) -> str:
     """16 hex digits of sha256 over the straight-to-goal baseline's first test episodes of ``track``.
 
-    Per episode: the seed, outcome, what was hit, its length in steps, and every agent's position
-    (rounded to 1e-6 m) at the reset and after each of the first :data:`FINGERPRINT_STEPS` steps.
+    It plays the ``seeds`` seeds from ``test_seed_base`` whatever ``test_episodes`` says (a shorter
+    copy of a track has its episodes, so its fingerprint). Per episode: the seed, outcome, what was
+    hit, its length in steps, and every agent's position (rounded to 1e-6 m) at the reset and after each of the first :data:`FINGERPRINT_STEPS` steps.
     Straight-to-goal ignores everyone, so these move only when the track's episodes move.
     """
     from crowdnav.evaluation.baselines import scripted_policy
     from crowdnav.evaluation.rollout import HeldOutEpisodes
 
-    played = HeldOutEpisodes({**track.env_options(), "modalities": ["goal"]}, track.seeds[:seeds])
+    played = HeldOutEpisodes({**track.env_options(), "modalities": ["goal"]}, list(range(track.test_seed_base, track.test_seed_base + seeds)))
     try:
         rows = played.run(scripted_policy("straight"), privileged=True, record=True)
     finally:
@@ -225,6 +241,9 @@ def check_version(track: Track, recorded: Mapping[str, Any] | None, where: str) 
     if recorded.get("version") != track.version:
         raise TrackError(f"{where} was measured on track {track.name} v{recorded.get('version')}, and the track is v{track.version} "
                          f"now: results of different versions are never ranked together; evaluate it again with --track {track.name}")
+    if recorded.get("fingerprint") != track.fingerprint:
+        raise TrackError(f"{where} was measured on episodes of fingerprint {str(recorded.get('fingerprint'))[:16]!r}, and track "
+                         f"{track.label}'s are {track.fingerprint}: a modified copy of the track; evaluate it again with --track {track.name}")
 
 
 def track_key(track: Track) -> str:

@@ -37,7 +37,7 @@ from pathlib import Path
 from typing import Any
 
 from crowdnav.evaluation.track import FINGERPRINT_SEEDS, Track, TrackError
-from crowdnav.evaluation.track_leaderboard import REFERENCE_FILE
+from crowdnav.evaluation.track_leaderboard import MAX_TABLE_BYTES, REFERENCE_FILE, read_bounded, read_index
 from crowdnav.evaluation.track_reference import AGENT_PREFIX, COLUMNS, DIRTY, publishing_commit, reference_csv
 
 MIN_SEEDS = 3
@@ -217,14 +217,14 @@ def read_agents(track: Track, folder: str | Path, *, log: Callable[[str], None] 
 def write_agents(track: Track, folders: list[str | Path], out: str | Path, *, allow_dirty: bool = False, force: bool = False,
                  log: Callable[[str], None] = print) -> Path:
     """Add every seed of every experiment configuration in ``folders`` to ``out/<track>/``; returns that folder."""
-    from crowdnav.evaluation.storage import atomic_write_text, read_json
+    from crowdnav.evaluation.storage import atomic_write_text
 
     from crowdnav import __version__
 
     target = Path(out) / track.name
     commit = publishing_commit(Path(out), allow_dirty)
     index = target / REFERENCE_FILE
-    document: dict[str, Any] = read_json(index) if index.is_file() else {
+    document: dict[str, Any] = read_index(index) if index.is_file() else {
         "track": track.identity(), "git_commit": commit, "crowdnav": __version__, "test_episodes": track.test_episodes,
         "entries": [], "skipped": []}
     if document.get("track") != track.identity():
@@ -243,7 +243,7 @@ def write_agents(track: Track, folders: list[str | Path], out: str | Path, *, al
         if before is None and not path.is_file():
             return None
         return before is not None and {**before, "checked_with": None} == {**entry, "checked_with": None} and path.is_file() \
-            and path.read_text(encoding="utf-8") == text
+            and read_bounded(path, MAX_TABLE_BYTES) == text
 
     for entry, text in agents:
         if same(entry, text) is False and not force:

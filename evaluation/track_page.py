@@ -21,7 +21,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from crowdnav.evaluation.track_leaderboard import Entry, Ranked, table_rows
+from crowdnav.evaluation.track_leaderboard import Entry, Ranked, note, table_rows
 
 MAX_STEPS_SHOWN = 10_000
 
@@ -100,13 +100,11 @@ def render_page(board: Ranked) -> str:
              f"<title>crowdnav track {html.escape(track.label)}</title><style>{STYLE}</style></head>",
              f'<body data-track="{html.escape(track.name)}" data-version="{track.version}">',
              f"<h1>Track {html.escape(track.label)}</h1><p>{html.escape(track.description)}. Test set: {track.test_episodes} episodes, "
-             f"seeds {track.seeds[0]}-{track.seeds[-1]}; time limit {track.time_limit_steps} steps; fingerprint {track.fingerprint}.</p>",
+             f"seeds {track.seeds[0]}-{track.seeds[-1]}; time limit {track.time_limit_steps} steps; "
+             f"fingerprint {html.escape(track.fingerprint)}.</p>",
              '<table id="leaderboard"><thead><tr>' + "".join(f"<th>{html.escape(column)}</th>" for column in header) + "</tr></thead><tbody>"]
     parts += ["<tr>" + "".join(f"<td>{html.escape(row[column])}</td>" for column in header) + "</tr>" for row in rows]
-    challenger = board.challenger.label if board.challenger is not None else "-"
-    parts.append(f"</tbody></table><p>* not a reference result. Challenger: {html.escape(challenger)}. Δ success and McNemar p are paired "
-                 "on the episodes both played: McNemar's exact test (two-sided). 95% CI: Wilson. The ceiling knows the humans' future "
-                 "(privileged) and is not ranked.</p>")
+    parts.append(f"</tbody></table><p>* not a reference result. {html.escape(note(board))}</p>")
     parts.append('<h2>One frame per entry</h2><div class="frames">')
     for entry in board.rows:
         frame, caption = entry_frame(board, entry)

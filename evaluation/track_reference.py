@@ -31,7 +31,7 @@ from pathlib import Path
 from typing import Any
 
 from crowdnav.evaluation.track import Track, TrackError
-from crowdnav.evaluation.track_leaderboard import REFERENCE_FILE, baseline_kind
+from crowdnav.evaluation.track_leaderboard import REFERENCE_FILE, baseline_kind, member, read_index
 
 REFERENCE_BASELINES = ("straight", "social_force", "orca", "onboard", "predictive", "oracle")
 COLUMNS = ("test_seed", "outcome", "collision_kind", "steps", "return", "time_to_goal", "path_length", "spl", "min_human_distance", "psc")
@@ -103,7 +103,7 @@ def write_reference(track: Track, out: str | Path, *, allow_dirty: bool = False,
     """Play every reference baseline (``only``: those named) on ``track`` into ``out/<track>/``; returns that folder."""
     from crowdnav.evaluation.baselines import BASELINE_PREFIX, BASELINES, baseline_observations, scripted_policy
     from crowdnav.evaluation.rollout import HeldOutEpisodes
-    from crowdnav.evaluation.storage import atomic_write_text, read_json
+    from crowdnav.evaluation.storage import atomic_write_text
 
     from crowdnav import __version__
     from crowdnav.orca import OrcaUnavailableError
@@ -115,13 +115,20 @@ def write_reference(track: Track, out: str | Path, *, allow_dirty: bool = False,
     folder = Path(out) / track.name
     commit = publishing_commit(Path(out), allow_dirty)
     index = folder / REFERENCE_FILE
-    recorded = read_json(index) if index.is_file() else {}
+    recorded = read_index(index) if index.is_file() else {}
     same = recorded.get("track") == track.identity()
+
+    def there(entry: dict[str, Any]) -> bool:  # a file of this folder only, never one a planted index names elsewhere
+        try:
+            return (path := member(folder, str(entry["file"]))).is_file() and not path.is_symlink()
+        except TrackError:
+            return False
+
     published = {entry["name"]: {"git_commit": recorded.get("git_commit"), **entry} for entry in recorded.get("entries", [])
-                 if same and not entry["name"].startswith(AGENT_PREFIX) and (folder / entry["file"]).is_file()}
+                 if same and not entry["name"].startswith(AGENT_PREFIX) and there(entry)}
     """This version's baselines as published, each with the commit that played it."""
     agents = [entry for entry in recorded.get("entries", []) if entry["name"].startswith(AGENT_PREFIX)  # their rows are no baseline's
-              and same and (folder / entry["file"]).is_file()]
+              and same and there(entry)]
     playing = REFERENCE_BASELINES if only is None else tuple(only)
     keeping = same and only is not None and recorded.get("git_commit") is not None  # the others stay as published
     document: dict[str, Any] = {"track": track.identity(), "git_commit": recorded["git_commit"] if keeping else commit,

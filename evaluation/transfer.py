@@ -27,6 +27,8 @@ from pathlib import Path
 
 from crowdnav.evaluation.storage import ResultsError, atomic_write_text, experiment_of
 
+from crowdnav.files import is_temporary
+
 STORAGE_ID_FILE = ".crowdnav-storage"
 """The storage root's id file (one random id, written once, kept)."""
 
@@ -69,8 +71,9 @@ def remove_work_folder(work_dir: str | Path) -> None:
 
 
 def _temporary(member: tarfile.TarInfo) -> bool:
-    """Files a crash can leave behind: atomic writes' ``.NAME.tmp`` and checkpoints' ``.partial`` / ``.old`` folders."""
-    return any(part.endswith((".tmp", ".partial", ".old")) for part in Path(member.name).parts)
+    """Files a crash can leave behind: atomic writes' temporaries (``.NAME.tmp``, ``.NAME.PID.HEX.tmp.mp4``) and checkpoints'
+    ``.partial`` / ``.old`` folders."""
+    return any(part.endswith((".tmp", ".partial", ".old")) or is_temporary(part) for part in Path(member.name).parts)
 
 
 def pack_folder(folder: str | Path, skip: tuple[str, ...] = ()) -> bytes:

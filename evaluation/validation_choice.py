@@ -22,12 +22,15 @@ import csv
 import json
 from collections import Counter
 from collections.abc import Callable, Sequence
+from contextlib import AbstractContextManager
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from crowdnav.agents.run_folder import snapshot_dir
+from crowdnav.agents.run_folder import hold_lock, snapshot_dir
 from crowdnav.agents.seeding import check_test_seeds
+
+from crowdnav.files import open_text_for_append, refuse_link
 
 VALIDATION_SEED_BASE = 500_000
 """First validation seed: above any protocol's test seeds in the shipped experiments, below every training seed."""
@@ -77,11 +80,13 @@ def _choose(run: Path, spec: dict[str, Any], episodes: int, seed_base: int, log:
         raise ValueError(f"validation seeds {seed_base:,}-{seed_base + episodes - 1:,} meet {run}'s test seeds "
                          f"{test_first:,}-{test_first + test_count - 1:,}; choose --seed-base outside them")
     tests = _test_successes(run / "test_episodes.csv")
-    stored = _read(run / f"validation_{seed_base}_{episodes}.csv")
-    for point in sorted(set(tests) - set(stored)):
-        stored[point] = _validate(run, point, episodes, seed_base)
-        _append(run / f"validation_{seed_base}_{episodes}.csv", point, episodes, stored[point])
-        log(f"{run.parent.name}/{run.name}: snapshot after {point:,} episodes, {stored[point]['success']} of {episodes} validation successes")
+    table = run / f"validation_{seed_base}_{episodes}.csv"
+    with _table_lock(table):  # one writer per table: two would play the same snapshots and interleave rows
+        stored = _read(table)
+        for point in sorted(set(tests) - set(stored)):
+            stored[point] = _validate(run, point, episodes, seed_base)
+            _append(table, point, episodes, stored[point])
+            log(f"{run.parent.name}/{run.name}: snapshot after {point:,} episodes, {stored[point]['success']} of {episodes} validation successes")
     validation = {point: stored[point]["success"] for point in sorted(tests)}
     chosen = max(validation, key=lambda point: (validation[point], point))  # ties: the later snapshot
     successes, played = tests[chosen]
@@ -111,7 +116,14 @@ def _validate(run: Path, point: int, episodes: int, seed_base: int) -> Counter[s
     return Counter(str(row["outcome"]) for row in rows)
 
 
+def _table_lock(table: Path) -> AbstractContextManager[None]:
+    """The table's writer lock, ``.<table>.lock`` beside it: a second writer is refused at once, naming the first's PID."""
+    return hold_lock(table.with_name(f".{table.name}.lock"), lambda holder: f"{table} is being written by another process "
+                     f"(PID {holder}); one writer at a time: wait for it to finish", remove=True)
+
+
 def _read(path: Path) -> dict[int, Counter[str]]:
+    refuse_link(path)  # rows read from elsewhere would stand for this run's
     if not path.is_file():
         return {}
     with path.open(encoding="utf-8", newline="") as file:
@@ -120,10 +132,9 @@ def _read(path: Path) -> dict[int, Counter[str]]:
 
 def _append(path: Path, point: int, episodes: int, outcomes: Counter[str]) -> None:
     """One stored row more (the header first on a new file); rows already there are never rewritten."""
-    new = not path.is_file()
-    with path.open("a", encoding="utf-8", newline="") as file:
+    with open_text_for_append(path) as file:  # appended to, never through a link
         writer = csv.DictWriter(file, fieldnames=FIELDS)
-        if new:
+        if file.tell() == 0:
             writer.writeheader()
         writer.writerow({"training_episodes": point, "episodes": episodes, **{key: outcomes.get(key, 0) for key in OUTCOMES}})
 

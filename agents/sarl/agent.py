@@ -39,6 +39,7 @@ import numpy as np
 import torch
 from crowdnav.agents.config import ConfigError
 from crowdnav.agents.factory import observation_normalization
+from crowdnav.agents.sarl.files import load_weights, read_state, refuse
 from crowdnav.agents.sarl.imitation import Demonstrations, make_teacher, world_simulators
 from crowdnav.agents.sarl.lookahead import (
     FEATURE_SCALE,
@@ -57,6 +58,8 @@ from crowdnav.agents.sarl.lookahead import (
 )
 from crowdnav.agents.sarl.memory import ReplayMemory
 from crowdnav.agents.sarl.network import ValueEnsemble, ValueNetwork, evaluate, value_network
+from crowdnav.agents.sarl.options import check_options, check_sizes
+from crowdnav.agents.sarl.sensing import check_shapes, check_world
 
 if TYPE_CHECKING:
     from stable_baselines3.common.vec_env import VecEnv
@@ -99,16 +102,10 @@ class SarlAgent:
         if unknown:
             raise ConfigError(f"algo_kwargs: {name!r} has no option {unknown[0]!r}; its options: {', '.join(DEFAULTS)}")
         self.options = {**DEFAULTS, **config.algo_kwargs}
-        for option, allowed in (("lookahead_depth", range(1, 3)), ("lookahead_width", range(1, len(action_set(1.0)) + 1)),
-                                ("ensemble", range(1, 9))):
-            value = self.options[option]
-            if isinstance(value, bool) or not isinstance(value, int) or value not in allowed:
-                raise ConfigError(f"algo_kwargs.{option}: {name!r} takes an integer from {allowed.start} to {allowed.stop - 1}, got {value!r}")
+        check_options(self.options, name)
         if int(self.options["imitation_episodes"]):
             make_teacher(str(self.options["imitation_teacher"]))  # an unknown teacher is refused before the run starts
         self.physics = Physics.of_scenario(scenario, config.reward_scale)
-        if not isinstance(self.options["value_bound"], bool):
-            raise ConfigError(f"algo_kwargs.value_bound: {name!r} takes true or false, got {self.options['value_bound']!r}")
         if self.options["value_bound"] and not bounded_weights(self.physics):
             raise ConfigError(f"algo_kwargs.value_bound: {name!r} bounds V only with step, social and collision weights <= 0 "
                               "and goal_progress, goal_reached >= 0")
@@ -119,6 +116,8 @@ class SarlAgent:
         # the walls and furniture it reads (the obstacles modality's slots; 0: it sees no static world)
         self.statics = int(cast(tuple[int, ...], spaces[STATIC_KEY].shape)[0]) if STATIC_KEY in spaces else 0
         self.geodesic = GEODESIC_KEY in spaces  # the distance to the goal around obstacles: a 4th robot feature
+        # the networks, replay memory and demonstrations these sizes make, bounded before any is allocated
+        check_sizes(self.options, self.humans, self.statics, self._robot_features, int(scenario.max_steps))
         if not self.statics and _furnished(scenario):
             warnings.warn(f"algorithm {name!r} reads no walls nor furniture, and this scenario has them inside its floor: "
                           f"add the modality {STATIC_KEY!r} (docs/agents.md#agents-that-read-the-room)", UserWarning, stacklevel=2)
@@ -195,6 +194,7 @@ class SarlAgent:
 
     def predict(self, observation: Mapping[str, np.ndarray], deterministic: bool = True) -> np.ndarray:
         batched = np.ndim(observation["humans"]) == 3
+        check_shapes(self, {key: np.shape(value) for key, value in observation.items()}, batched)
         batch = observation if batched else {key: np.asarray(value)[None] for key, value in observation.items()}
         # training episodes (not deterministic) act on the one-step lookahead V-learning is built on; greedy acting
         # (evaluation, rendering) may search deeper
@@ -205,6 +205,10 @@ class SarlAgent:
             choice = np.where(explore, self.rng.integers(0, len(self.actions), size=len(choice)), choice)
         actions = commands[np.arange(len(choice)), choice]
         return actions if batched else actions[0]
+
+    def check_world(self, observation_space: gym.spaces.Dict, scenario: Any) -> None:
+        """One line (:class:`~crowdnav.agents.sarl.sensing.SensorMismatchError`) if that world senses otherwise than this agent was trained to."""
+        check_world(self, observation_space, scenario)
 
     def export_module(self, keys: Sequence[str]) -> torch.nn.Module:
         """:meth:`predict` (deterministic) as a torch module for ONNX export (:mod:`crowdnav.agents.sarl.export`)."""
@@ -361,35 +365,42 @@ class SarlAgent:
 
     @classmethod
     def load(cls, folder: Path) -> SarlAgent:
-        document = json.loads((folder / "state.json").read_text(encoding="utf-8"))
+        """The agent saved in ``folder``; every file is checked first (:mod:`crowdnav.agents.sarl.files`): one line naming it."""
+        path = folder / "state.json"
+        document = read_state(path, "sarl", DEFAULTS)
         agent = cls.__new__(cls)
         # options added since a checkpoint was written take their defaults (the behaviour it was trained with)
         agent.options, agent.humans = {**DEFAULTS, **document["options"]}, int(document["humans"])
         agent.statics = int(document.get("statics", 0))  # checkpoints from before the room was read: none
         agent.geodesic = bool(document.get("geodesic", False))
+        try:
+            check_sizes(agent.options, agent.humans, agent.statics, agent._robot_features, None, "options")
+        except ConfigError as error:
+            refuse(path, str(error))
         agent.physics = Physics.from_json(document["physics"])
         agent.gamma, agent.learning_rate, agent.episodes = float(document["gamma"]), float(document["learning_rate"]), int(document["episodes"])
         agent.decay_episodes = document.get("decay_episodes")  # absent in checkpoints from before the schedule: constant
         agent.scales = {key: (np.asarray(item["offset"], dtype=np.float64), np.asarray(item["scale"], dtype=np.float64))
                         for key, item in document["scales"].items()}
         agent.rng = np.random.default_rng()
-        agent.rng.bit_generator.state = document["rng"]
+        try:
+            agent.rng.bit_generator.state = document["rng"]
+        except (TypeError, ValueError, KeyError, OverflowError) as error:
+            refuse(path, f"rng: not a {type(agent.rng.bit_generator).__name__} state ({str(error)[:80]})")
         agent.network, agent.target = agent._network(), agent._network()
-        with np.load(folder / "weights.npz", allow_pickle=False) as arrays:
-            for prefix, network in (("network.", agent.network), ("target.", agent.target)):
-                network.load_state_dict({key[len(prefix):]: torch.from_numpy(arrays[key].copy()) for key in arrays.files if key.startswith(prefix)})
-            adam: dict[int, dict[str, torch.Tensor]] = {}
-            for key in arrays.files:
-                if key.startswith("adam."):
-                    _, index, name = key.split(".", 2)
-                    adam.setdefault(int(index), {})[name] = torch.from_numpy(arrays[key].copy())
-        agent._setup(ReplayMemory.load(folder / "memory.npz"), Demonstrations.load(folder / "demonstrations.npz"))
+        adam = load_weights(folder / "weights.npz", agent.network, agent.target)
+        agent._setup(ReplayMemory.load(folder / "memory.npz", int(agent.options["memory_size"]), agent.humans, agent.statics,
+                                       agent._robot_features),
+                     Demonstrations.load(folder / "demonstrations.npz", agent.humans, agent.statics, agent._robot_features,
+                                         int(agent.options["imitation_episodes"])))
         groups = agent.optimizer.state_dict()["param_groups"]
-        for group, saved in zip(groups, document["adam_groups"], strict=True):
-            group.update({key: tuple(value) if isinstance(value, list) else value for key, value in saved.items()})
-        agent.optimizer.load_state_dict({"state": adam, "param_groups": groups})
+        try:
+            for group, saved in zip(groups, document["adam_groups"], strict=True):
+                group.update({key: tuple(value) if isinstance(value, list) else value for key, value in saved.items()})
+            agent.optimizer.load_state_dict({"state": adam, "param_groups": groups})
+        except (TypeError, ValueError, KeyError, RuntimeError) as error:
+            refuse(path, f"adam_groups: not the state of this agent's optimiser ({str(error).splitlines()[0][:80] if str(error) else 'malformed'})")
         return agent
-
 
 def _decay_episodes(config: Any) -> int | None:
     """``learning_rate_schedule: linear``: the episode budget Adam's rate falls to 0 over (None: a constant rate)."""

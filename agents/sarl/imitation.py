@@ -13,7 +13,8 @@ from typing import Any
 
 import numpy as np
 from crowdnav.agents.config import ConfigError
-from crowdnav.agents.sarl.lookahead import STATIC_FEATURES
+from crowdnav.agents.sarl.files import array_headers, expect, finite, only, refuse
+from crowdnav.agents.sarl.lookahead import HUMAN_FEATURES, STATIC_FEATURES
 
 TEACHERS = ("predictive", "orca", "oracle", "onboard")
 """Scripted robots that may teach: the predictive planner (true current state), the ORCA robot, the oracle (future), and
@@ -94,16 +95,29 @@ class Demonstrations:
             np.savez_compressed(path, lengths=lengths)
 
     @classmethod
-    def load(cls, path: Path) -> Demonstrations:
+    def load(cls, path: Path, humans: int, statics: int, robot_features: int, episodes: int) -> Demonstrations:
+        """The demonstrations saved at ``path``: at most ``episodes`` teacher episodes of these sizes (else one line)."""
+        headers = array_headers(path)
+        only(path, headers, ("robot", "humans", "statics", "returns", "lengths"))
+        if "lengths" not in headers or len(headers["lengths"][0]) != 1 or headers["lengths"][0][0] > episodes:
+            refuse(path, f"lengths: expected at most {episodes} (imitation_episodes) episode lengths, holds {headers.get('lengths', ('none',))[0]}")
+        expect(path, headers, "lengths", headers["lengths"][0], "iu")
         demonstrations = cls()
         with np.load(path, allow_pickle=False) as arrays:
             lengths = arrays["lengths"]
             if len(lengths):
+                if (lengths < 1).any():
+                    refuse(path, "lengths: expected episodes of at least one step")
+                steps = int(lengths.sum())
+                for name, rows in (("robot", (robot_features,)), ("humans", (humans, HUMAN_FEATURES)), ("returns", ()),
+                                   *((("statics", (statics, STATIC_FEATURES)),) if statics or "statics" in headers else ())):
+                    expect(path, headers, name, (steps, *rows))
                 splits = np.cumsum(lengths)[:-1]
-                demonstrations.robot = list(np.split(arrays["robot"], splits))
-                demonstrations.humans = list(np.split(arrays["humans"], splits))
+                demonstrations.robot = list(np.split(finite(path, "robot", arrays["robot"]), splits))
+                demonstrations.humans = list(np.split(finite(path, "humans", arrays["humans"]), splits))
                 # a checkpoint from before the room was read holds no statics: 0 slots
-                statics = arrays["statics"] if "statics" in arrays.files else np.zeros((len(arrays["robot"]), 0, STATIC_FEATURES), np.float32)
-                demonstrations.statics = list(np.split(statics, splits))
-                demonstrations.returns = list(np.split(arrays["returns"], splits))
+                statics_rows = finite(path, "statics", arrays["statics"]) if "statics" in headers else \
+                    np.zeros((steps, 0, STATIC_FEATURES), np.float32)
+                demonstrations.statics = list(np.split(statics_rows, splits))
+                demonstrations.returns = list(np.split(finite(path, "returns", arrays["returns"]), splits))
         return demonstrations

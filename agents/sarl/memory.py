@@ -5,6 +5,7 @@ from __future__ import annotations
 from pathlib import Path
 
 import numpy as np
+from crowdnav.agents.sarl.files import array_headers, expect, finite, only, refuse
 from crowdnav.agents.sarl.lookahead import HUMAN_FEATURES, ROBOT_FEATURES, STATIC_FEATURES
 
 FIELDS = ("robot", "humans", "statics", "next_robot", "next_humans", "next_statics", "reward", "terminal")
@@ -43,14 +44,23 @@ class ReplayMemory:
                             counters=np.array([self.capacity, self.size, self.next], dtype=np.int64))
 
     @classmethod
-    def load(cls, path: Path) -> ReplayMemory:
+    def load(cls, path: Path, capacity: int, humans: int, statics: int, robot_features: int) -> ReplayMemory:
+        """The memory saved at ``path``, whose shapes must be those of ``capacity`` transitions of these sizes (else one line)."""
+        headers = array_headers(path)
+        only(path, headers, (*FIELDS, "counters"))
+        expect(path, headers, "counters", (3,), "iu")
         with np.load(path, allow_pickle=False) as arrays:
-            capacity, size, position = (int(value) for value in arrays["counters"])
-            # a checkpoint from before the room was read holds no statics: 0 slots
-            statics = arrays["statics"].shape[1] if "statics" in arrays.files else 0
-            memory = cls(capacity, arrays["humans"].shape[1], statics, arrays["robot"].shape[1])
+            saved, size, position = (int(value) for value in arrays["counters"])
+            if saved != capacity or not 0 <= size <= capacity or not 0 <= position < capacity:
+                refuse(path, f"counters: expected capacity {capacity} (memory_size), size and next within it, got {saved}, {size}, {position}")
+            rows = {"robot": (robot_features,), "humans": (humans, HUMAN_FEATURES), "statics": (statics, STATIC_FEATURES)}
             for name in FIELDS:
-                if name in arrays.files:
-                    getattr(memory, name)[:size] = arrays[name]
+                if name.removeprefix("next_") == "statics" and not statics and name not in headers:
+                    continue  # a checkpoint from before the room was read holds no statics: 0 slots
+                expect(path, headers, name, (size, *rows.get(name.removeprefix("next_"), ())))
+            memory = cls(capacity, humans, statics, robot_features)
+            for name in FIELDS:
+                if name in headers:
+                    getattr(memory, name)[:size] = finite(path, name, arrays[name])
         memory.size, memory.next = size, position
         return memory

@@ -87,6 +87,8 @@ class BatchSimulator:
         self.slots = [Simulator(world) for _ in range(self.num_worlds)]
         """One single simulator per world: its resets and goal rules (each world's own generator)."""
         first = self.slots[0]
+        for slot in self.slots[1:]:  # one bounded cache of pair constants for all the worlds, not one per world
+            slot.share_constants(first)
         self.world = world
         self.scenario = world.scenario
         self.dt = first.dt

@@ -32,6 +32,8 @@ def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) ->
                        help="--track: reference results to rank against (default: the clone's docs/results/tracks/<track>)")
     board.add_argument("--html", metavar="PATH", help="--track: also write a self-contained HTML page of the leaderboard "
                                                       "(a frame per entry, viewable offline)")
+    board.add_argument("--challenger", metavar="NAME", help="--track: the entry the paired columns compare every row with (its name "
+                                                            "or label; default: your best entry that is not a scripted baseline)")
     board.set_defaults(handler=leaderboard_command)
 
     evaluate = subparsers.add_parser(
@@ -61,8 +63,8 @@ def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) ->
 def leaderboard_command(args: argparse.Namespace) -> int:
     if args.track:
         return track_leaderboard_command(args)
-    if args.reference or args.html:
-        raise CliError("--reference and --html rank a track's entries: add --track NAME")
+    if args.reference or args.html or args.challenger:
+        raise CliError("--reference, --html and --challenger rank a track's entries: add --track NAME")
     if not args.results:
         raise CliError("name the results folders to rank (RESULTS_DIR ...), or a track (--track NAME)")
     from crowdnav.evaluation.leaderboard import write_leaderboard
@@ -91,9 +93,13 @@ def track_leaderboard_command(args: argparse.Namespace) -> int:
         if not references:
             print(f"crowdnav: no reference results of track {track.name} here (a clone's docs/results/tracks/{track.name}, or "
                   "--reference DIR): ranking the results named alone", file=sys.stderr)
-        board = rank(track, read_entries(track, [*references, *[Path(path) for path in args.results]]))
+        skipped: list[str] = []  # a folder with none of the track's results is refused; others passed over are named
+        entries = read_entries(track, references) + read_entries(track, [Path(path) for path in args.results], require=True, skipped=skipped)
+        board = rank(track, entries, challenger=args.challenger)
     except TrackError as error:
         raise CliError(str(error)) from None
+    for line in skipped:
+        print(f"crowdnav: not of track {track.label}, left out: {line}", file=sys.stderr)
     markdown = to_markdown(board)
     print(markdown, end="")
     out = Path(args.out) if args.out else (Path(args.results[0]) if args.results else Path(".")) / f"leaderboard_{track.name}"
@@ -113,6 +119,12 @@ def evaluate_command(args: argparse.Namespace) -> int:
     from crowdnav.scenario import ScenarioError
 
     modalities = [key.strip() for key in args.modalities.split(",") if key.strip()] if args.modalities else None
+    if args.policy.startswith("baseline:"):
+        from crowdnav.evaluation.baselines import unknown_baseline
+
+        refused = unknown_baseline(args.policy.removeprefix("baseline:"))
+        if refused:
+            raise CliError(refused)
     track = None
     if args.track:
         taken = [option for option, value in (("--episodes", args.episodes), ("--test-seed-base", args.test_seed_base), ("--set", args.overrides))

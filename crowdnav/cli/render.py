@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 from collections.abc import Mapping
+from pathlib import Path
 from typing import TYPE_CHECKING
 
 from crowdnav.cli.common import CliError, add_override_option, add_reward_options, parse_overrides, reward_options
@@ -50,6 +51,9 @@ def run(args: argparse.Namespace) -> int:
         raise CliError(f"--episodes must be at least 1, got {args.episodes}")
     if _foreign(args.policy):  # the forms crowdnav evaluate loads: the evaluation layer resolves them
         return _render_foreign(args)
+    if args.modalities:  # a scripted name reads the simulator, a shared robot policy its own observations
+        raise CliError(f"--modalities: {args.policy} reads {'its own observations' if Path(args.policy).exists() else 'the simulator'}, "
+                       "not the observation keys named; leave --modalities out")
     try:
         paths = render_policy(
             args.scenario,
@@ -83,7 +87,21 @@ def _render_options(args: argparse.Namespace) -> dict[str, bool]:
 
 
 def _foreign(policy: str) -> bool:
-    return policy.startswith("baseline:") or policy.endswith(".zip") or (":" in policy and not policy.startswith(("/", ".")))
+    return (policy.startswith("baseline:") or policy.endswith(".zip") or (":" in policy and not policy.startswith(("/", ".")))
+            or _one_robot_run(policy))
+
+
+def _one_robot_run(policy: str) -> bool:
+    """A training run or checkpoint of one robot: played as `crowdnav evaluate` plays it (--set wins over its own settings)."""
+    if not Path(policy).is_dir():
+        return False
+    from crowdnav.agents.checkpoint import read_policy_info
+    from crowdnav.agents.marl import ROBOTS_KIND
+
+    try:
+        return bool(read_policy_info(policy).get("agents") != ROBOTS_KIND)
+    except (OSError, ValueError):  # not a checkpoint: the agents' loader says so in one line
+        return False
 
 
 def _render_foreign(args: argparse.Namespace) -> int:
@@ -115,7 +133,8 @@ def _render_foreign(args: argparse.Namespace) -> int:
             return action
 
         extra = {key: value for key, value in env_options.items() if key not in ("scenario", "overrides")}
-        paths = render_episodes(args.scenario, play, label=name, env_options=extra, episodes=args.episodes, seed=args.seed, out=args.out,
+        label = Path(args.policy).stem if _one_robot_run(args.policy) else name  # a run's videos keep their names
+        paths = render_episodes(args.scenario, play, label=label, env_options=extra, episodes=args.episodes, seed=args.seed, out=args.out,
                                 video_format=args.video_format, overrides=env_options.get("overrides"),
                                 reward_weights=reward_options(args), render_options=_render_options(args),
                                 progress=not args.no_progress)

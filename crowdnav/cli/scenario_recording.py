@@ -9,6 +9,7 @@ from pathlib import Path
 import yaml
 
 from crowdnav.cli.common import CliError
+from crowdnav.files import atomic_write_text
 
 FORMATS = ("auto", "obsmat", "frames", "trajnet")
 
@@ -44,7 +45,7 @@ def from_recording_command(args: argparse.Namespace) -> int:
             raise CliError(f"--{name.replace('_', '-')}: expected a number > 0, got {value:g}")
     if args.max_steps is not None and args.max_steps < 1:
         raise CliError(f"--max-steps: expected at least 1, got {args.max_steps}")
-    if args.out is not None and args.out.exists():
+    if args.out is not None and (args.out.exists() or args.out.is_symlink()):  # a dangling link too: "exists" follows it
         raise CliError(f"--out: {args.out} exists; choose another file or delete it")
     try:
         scenario = scenario_from_recording(args.file, args.format, args.annotation_step, out=args.out, time_step=args.time_step,
@@ -59,7 +60,6 @@ def from_recording_command(args: argparse.Namespace) -> int:
     if args.out is None:
         sys.stdout.write(text)
         return 0
-    args.out.parent.mkdir(parents=True, exist_ok=True)
-    args.out.write_text(text, encoding="utf-8")
+    atomic_write_text(args.out, text)  # never through a link planted after the check above
     print(f"wrote {args.out}: {scenario['humans']['count']} places, world {scenario['world']['min']} to {scenario['world']['max']}")
     return 0

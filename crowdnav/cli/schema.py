@@ -15,6 +15,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from crowdnav.cli.common import CliError
+from crowdnav.files import atomic_write_text
 
 if TYPE_CHECKING:
     from pydantic import BaseModel
@@ -65,8 +66,10 @@ def schema_command(args: argparse.Namespace) -> int:
     if args.output is None:
         sys.stdout.write(text)
         return 0
+    if not args.output.parent.is_dir():  # as before: no folders made for it (the atomic write would make them)
+        raise CliError(f"cannot write {args.output}: no folder {args.output.parent}")
     try:
-        args.output.write_text(text, encoding="utf-8")
+        atomic_write_text(args.output, text)  # replaces a link at OUTPUT, never writes through it
     except OSError as error:
         raise CliError(f"cannot write {args.output}: {error.strerror or error}") from None
     print(f"wrote {args.output}", file=sys.stderr)

@@ -23,22 +23,27 @@ first annotation to their last: a person is present exactly while the recording 
 
 **Checks.** The path: a relative one is resolved in the folder of the file that names it and
 must stay inside it (after ``..`` and symbolic links); the file must be a regular UTF-8 file of at
-most :data:`MAX_BYTES` bytes and :data:`MAX_ROWS` rows, positions within :data:`MAX_COORDINATE` m.
-Every malformed row is refused in one line, ``FILE:LINE: what is wrong`` (the row's content is not
-quoted).
+most :data:`MAX_BYTES` bytes, :data:`MAX_LINES` lines of at most :data:`MAX_LINE_BYTES` bytes and
+:data:`MAX_ROWS` rows, positions within :data:`MAX_COORDINATE` m. It is read a block of lines at a time (never
+whole), so a file of comments costs no more than its longest line. On the time grid it may span at
+most :data:`MAX_GRID_STEPS` steps and hold :data:`MAX_GRID_POINTS` positions, both counted before
+anything of that size is allocated (frames far apart would otherwise cost gigabytes). Every
+malformed row is refused in one line, ``FILE:LINE: what is wrong`` (the row's content is not quoted).
 """
 
 from __future__ import annotations
 
+import itertools
 import json
 import math
 import os
 import re
 import stat
+from array import array
 from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Literal
+from typing import BinaryIO, Literal
 
 import numpy as np
 
@@ -49,8 +54,15 @@ MAX_BYTES = 64 * 1024 * 1024
 """The largest recording read (bytes): ETH/UCY files are well under 1 MB, TrajNet++ splits a few MB."""
 MAX_ROWS = 2_000_000
 """At most this many annotations (rows) in a recording."""
+MAX_LINES = 3_000_000
+"""At most this many lines read, comments and blank lines included (64 MiB of comment lines are refused in about a second)."""
+MAX_LINE_BYTES = 1024 * 1024
+"""The longest line read (bytes): a row is under 200 bytes; a 64 MiB line of millions of fields is never split."""
 MAX_GRID_POINTS = 20_000_000
 """At most this many (person, time step) positions after resampling (a smaller time step costs more)."""
+MAX_GRID_STEPS = 20_000_000
+"""At most this many time steps from the first annotation to the last (11 days at 0.05 s): frames 0 and 2,000,000,010 are
+refused before any array of the span is allocated."""
 MAX_COORDINATE = 1_000_000.0
 """Largest |x| or |y| (m) of a recorded position: far below where the replay parks absent people, and squared distances stay finite."""
 DEFAULT_ANNOTATION_STEP = 0.4
@@ -120,19 +132,26 @@ class Recording:
         """Every person on the grid ``k * dt`` (k = 0, 1, ...), linearly interpolated between their annotations."""
         if not (math.isfinite(dt) and dt > 0):
             raise ValueError(f"expected a time step > 0, got {dt!r}")
-        steps = int(math.floor(self.duration / dt + 1e-9)) + 1
+        span = math.floor(min(self.duration / dt, 1e18) + 1e-9) + 1  # min: a float too big for int() is refused below all the same
+        if span > MAX_GRID_STEPS:
+            raise RecordingError(f"{self.source}: spans {self.duration:.6g} s, {span:,} time steps of {dt:g} s, more than "
+                                 f"{MAX_GRID_STEPS:,}; expected annotations closer in time (frame numbers far apart?) "
+                                 "or a longer time step")
+        steps = int(span)
         bounds = np.flatnonzero(np.diff(self.people)) + 1
-        tracks, total = [], 0
-        for first, last in zip(np.r_[0, bounds], np.r_[bounds, len(self.people)], strict=True):  # per person, once per recording
+        firsts, lasts = np.r_[0, bounds], np.r_[bounds, len(self.people)]
+        begins = np.ceil(self.times[firsts] / dt - 1e-9).astype(np.int64)
+        ends = np.floor(self.times[lasts - 1] / dt + 1e-9).astype(np.int64)
+        total = int(np.maximum(ends - begins + 1, 0).sum())  # every person's grid, counted before one is allocated
+        if total > MAX_GRID_POINTS:
+            raise RecordingError(f"{self.source}: {total:,} positions at a time step of {dt:g} s, more than {MAX_GRID_POINTS:,}; "
+                                 "expected a shorter recording or a longer time step")
+        tracks = []
+        for first, last, begin, end in zip(firsts, lasts, begins.tolist(), ends.tolist(), strict=True):  # per person, once per recording
             times, where = self.times[first:last], self.positions[first:last]
-            begin, end = math.ceil(times[0] / dt - 1e-9), math.floor(times[-1] / dt + 1e-9)
             if end < begin:  # seen for less than a time step between two grid times: never on the grid
                 continue
             grid = np.arange(begin, end + 1) * dt
-            total += len(grid)
-            if total > MAX_GRID_POINTS:
-                raise RecordingError(f"{self.source}: more than {MAX_GRID_POINTS:,} positions at a time step of {dt:g} s; "
-                                     "expected a shorter recording or a longer time step")
             line = np.interp(grid, times, where.real) + 1j * np.interp(grid, times, where.imag)
             tracks.append(Track(int(self.people[first]), begin, line))
         tracks.sort(key=lambda track: (track.start, track.person))
@@ -156,16 +175,19 @@ def read_recording(path: str | Path, fmt: RecordingFormat = "auto", annotation_s
                    folder: str | Path | None = None) -> Recording:
     """Read a recording (see the module docstring); ``folder``: where a relative ``path`` is resolved and must stay."""
     file = resolve_path(path, folder)
-    text = _read_text(file)
     source = str(path)
-    if fmt == "auto":
-        fmt = _guess_format(file, text, source)
-    if fmt == "trajnet":
-        frames, people, positions, fps = _parse_trajnet(text, source)
-        step = 1.0 / fps if fps is not None else annotation_step
-    else:
-        frames, people, positions = _parse_columns(text, source, 8 if fmt == "obsmat" else 4)
-        step = annotation_step
+    with _open_recording(file) as stream:
+        rows = _rows(stream, file, source)
+        if fmt == "auto":
+            first = next(rows, None)
+            fmt = _guess_format(file, first, source)
+            rows = itertools.chain([first] if first is not None else [], rows)
+        if fmt == "trajnet":
+            frames, people, positions, fps = _parse_trajnet(rows, source)
+            step = 1.0 / fps if fps is not None else annotation_step
+        else:
+            frames, people, positions = _parse_columns(rows, source, 8 if fmt == "obsmat" else 4)
+            step = annotation_step
     if not len(frames):
         raise RecordingError(f"{source}: holds no annotation; expected rows of {_FORMAT_WORDS[fmt]}")
     order = np.lexsort((frames, people))
@@ -189,63 +211,89 @@ _FORMAT_WORDS = {"obsmat": "8 numbers (frame id x z y vx vz vy)", "frames": "4 n
                  "trajnet": 'TrajNet++ JSON lines ({"track": {"f": ..., "p": ..., "x": ..., "y": ...}})'}
 
 
-def _read_text(file: Path) -> str:
+def _open_recording(file: Path) -> BinaryIO:
+    """``file`` opened for reading: a regular file (a FIFO or a device is refused without blocking) of at most MAX_BYTES."""
     try:
         handle = os.open(file, os.O_RDONLY | getattr(os, "O_NONBLOCK", 0))
     except OSError as error:
         raise RecordingError(f"{file}: cannot read the recording: {error.strerror or error}") from None
     try:
-        if not stat.S_ISREG(os.fstat(handle).st_mode):
+        info = os.fstat(handle)
+        if not stat.S_ISREG(info.st_mode):
             raise RecordingError(f"{file}: not a regular file; expected a recording (obsmat, frame id x y, or TrajNet++ ndjson)")
-        with os.fdopen(os.dup(handle), "rb") as stream:
-            data = stream.read(MAX_BYTES + 1)
+        if info.st_size > MAX_BYTES:
+            raise RecordingError(f"{file}: holds more than {MAX_BYTES:,} bytes; expected a recording of at most that size")
+        return os.fdopen(os.dup(handle), "rb")
     finally:
         os.close(handle)
-    if len(data) > MAX_BYTES:
-        raise RecordingError(f"{file}: holds more than {MAX_BYTES:,} bytes; expected a recording of at most that size")
-    try:
-        return data.decode("utf-8-sig")
-    except UnicodeDecodeError as error:
-        line = data.count(b"\n", 0, error.start) + 1
-        raise RecordingError(f"{file}:{line}: not UTF-8 text; expected a text recording") from None
 
 
-def _rows(text: str, source: str) -> Iterator[tuple[int, str]]:
-    """(line number, stripped line) of every non-blank line that is not a '#' comment, at most MAX_ROWS of them."""
-    count = 0
-    for number, line in enumerate(text.splitlines(), start=1):
-        line = line.strip()
-        if not line or line.startswith("#"):
-            continue
-        count += 1
-        if count > MAX_ROWS:
-            raise RecordingError(f"{source}:{number}: more than {MAX_ROWS:,} rows; expected a smaller recording")
-        yield number, line
+def _rows(stream: BinaryIO, file: Path, source: str) -> Iterator[tuple[int, str]]:
+    """(line number, stripped line) of every non-blank line that is not a '#' comment, at most MAX_ROWS of them, read one
+    block of whole lines at a time (about MAX_LINE_BYTES; MAX_LINES lines and MAX_BYTES in all: a file that grows is cut too)."""
+    count = number = read = 0
+    while True:
+        block = stream.read(MAX_LINE_BYTES)
+        if not block:
+            return
+        if not block.endswith(b"\n"):  # complete the last line, itself at most MAX_LINE_BYTES
+            rest = stream.readline(MAX_LINE_BYTES + 1)
+            if len(rest) > MAX_LINE_BYTES:
+                where = number + block.count(b"\n") + 1
+                raise RecordingError(f"{file}:{where}: a line longer than {MAX_LINE_BYTES:,} bytes; expected one row a line")
+            block += rest
+        read += len(block)
+        if read > MAX_BYTES:
+            raise RecordingError(f"{file}: holds more than {MAX_BYTES:,} bytes; expected a recording of at most that size")
+        try:
+            text = block.decode("utf-8-sig" if number == 0 else "utf-8")
+        except UnicodeDecodeError as error:
+            where = number + block.count(b"\n", 0, error.start) + 1
+            raise RecordingError(f"{file}:{where}: not UTF-8 text; expected a text recording") from None
+        lines = text.splitlines()  # the line breaks str.splitlines knows (a lone \r too): blocks end at a \n, so as a whole text's
+        if number + len(lines) > MAX_LINES:
+            raise RecordingError(f"{source}:{MAX_LINES + 1}: more than {MAX_LINES:,} lines; expected a smaller recording")
+        for line in lines:
+            number += 1
+            line = line.strip()
+            if not line or line.startswith("#"):
+                continue
+            count += 1
+            if count > MAX_ROWS:
+                raise RecordingError(f"{source}:{number}: more than {MAX_ROWS:,} rows; expected a smaller recording")
+            yield number, line
 
 
-def _guess_format(file: Path, text: str, source: str) -> RecordingFormat:
+def _guess_format(file: Path, first: tuple[int, str] | None, source: str) -> RecordingFormat:
+    """The format of ``file`` from its name, else from its first row ``first`` (None: it has none)."""
     if file.suffix.lower() in (".ndjson", ".json", ".jsonl"):
         return "trajnet"
-    for number, line in _rows(text, source):
-        if line.startswith("{"):
-            return "trajnet"
-        columns = len(_SEPARATORS.split(line))
-        if columns in (8, 4):
-            return "obsmat" if columns == 8 else "frames"
-        raise RecordingError(f"{source}:{number}: {columns} columns; expected 8 (obsmat: frame id x z y vx vz vy), "
-                             "4 (frame id x y) or TrajNet++ JSON lines")
-    raise RecordingError(f"{source}: holds no annotation; expected obsmat, frame id x y, or TrajNet++ ndjson rows")
+    if first is None:
+        raise RecordingError(f"{source}: holds no annotation; expected obsmat, frame id x y, or TrajNet++ ndjson rows")
+    number, line = first
+    if line.startswith("{"):
+        return "trajnet"
+    columns = len(_SEPARATORS.split(line))
+    if columns in (8, 4):
+        return "obsmat" if columns == 8 else "frames"
+    raise RecordingError(f"{source}:{number}: {columns} columns; expected 8 (obsmat: frame id x z y vx vz vy), "
+                         "4 (frame id x y) or TrajNet++ JSON lines")
 
 
 def _integer(value: float) -> bool:
     return math.isfinite(value) and value == int(value) and abs(value) < 2**53
 
 
-def _parse_columns(text: str, source: str, width: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def _columns() -> tuple[array[int], array[int], array[float], array[float]]:
+    """Frames, ids, x and y as they are read: 8 bytes a value (Python lists would hold 2,000,000 rows in about 300 MB)."""
+    return array("q"), array("q"), array("d"), array("d")
+
+
+def _parse_columns(rows: Iterator[tuple[int, str]], source: str, width: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Frames, ids and positions of an obsmat (width 8: x at column 3, y at column 5) or a frame id x y file (width 4)."""
-    frames, people, xs, ys = [], [], [], []
+    frames, people, xs, ys = _columns()
     y_column = 4 if width == 8 else 3
-    for number, line in _rows(text, source):
+    for number, line in rows:
         fields = _SEPARATORS.split(line)
         if len(fields) != width:
             raise RecordingError(f"{source}:{number}: {len(fields)} columns; expected {_FORMAT_WORDS['obsmat' if width == 8 else 'frames']}")
@@ -266,10 +314,10 @@ def _parse_columns(text: str, source: str, width: int) -> tuple[np.ndarray, np.n
     return np.array(frames, dtype=np.int64), np.array(people, dtype=np.int64), np.array(xs) + 1j * np.array(ys)
 
 
-def _parse_trajnet(text: str, source: str) -> tuple[np.ndarray, np.ndarray, np.ndarray, float | None]:
-    frames, people, xs, ys = [], [], [], []
+def _parse_trajnet(rows: Iterator[tuple[int, str]], source: str) -> tuple[np.ndarray, np.ndarray, np.ndarray, float | None]:
+    frames, people, xs, ys = _columns()
     fps: float | None = None
-    for number, line in _rows(text, source):
+    for number, line in rows:
         try:
             row = json.loads(line)
         except (ValueError, RecursionError):

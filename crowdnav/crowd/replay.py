@@ -36,6 +36,7 @@ from crowdnav.crowd.base import CrowdModel, CrowdView
 from crowdnav.crowd.react import Reaction
 from crowdnav.crowd.recording import Resampled, read_recording
 from crowdnav.errors import CrowdNavError
+from crowdnav.scenario.crowd import MAX_REPLAY_CELLS
 from crowdnav.world import CompiledWorld
 
 PARKING = complex(2.0e7, 2.0e7)
@@ -62,16 +63,29 @@ def empty_places(positions: np.ndarray) -> np.ndarray:
 
 def places_needed(grid: Resampled) -> int:
     """The places a recording on a time grid needs: the most people present at one step, each counted one step longer (a
-    place is empty for at least a step between two people, so every track of an export is one person's)."""
-    present = np.zeros(grid.steps + 2, dtype=np.int64)
-    for track in grid.tracks:  # per person, once per load
-        present[track.start] += 1
-        present[track.start + len(track.positions) + 1] -= 1
-    return int(np.cumsum(present).max()) if len(grid.tracks) else 0
+    place is empty for at least a step between two people, so every track of an export is one person's). Counted over the
+    steps where someone comes or goes, never an array of the recording's whole span."""
+    if not grid.tracks:
+        return 0
+    starts = np.array([track.start for track in grid.tracks], dtype=np.int64)
+    ends = starts + np.array([len(track.positions) for track in grid.tracks], dtype=np.int64) + 1
+    steps, where = np.unique(np.concatenate([starts, ends]), return_inverse=True)
+    change = np.zeros(len(steps), dtype=np.int64)
+    np.add.at(change, where, np.r_[np.ones(len(starts), dtype=np.int64), -np.ones(len(ends), dtype=np.int64)])
+    return int(np.cumsum(change).max())
 
 
 class ReplayError(CrowdNavError, ValueError):
-    """The recording does not fit the scenario (more people at once than the group has places)."""
+    """The recording does not fit the scenario (more people at once than the group has places, or too much state per episode)."""
+
+
+def check_replay_state(places: int, max_steps: int) -> None:
+    """ReplayError (one line) when an episode of ``places`` places over ``max_steps`` steps holds more than
+    :data:`crowdnav.scenario.crowd.MAX_REPLAY_CELLS` (place, step) cells, before any is allocated."""
+    cells = places * (max_steps + 1)
+    if cells > MAX_REPLAY_CELLS:
+        raise ReplayError(f"model replay: {places:,} places x {max_steps + 1:,} steps is {cells:,} (place, step) positions an "
+                          f"episode, more than {MAX_REPLAY_CELLS:,}; expected fewer places (humans count) or a smaller max_steps")
 
 
 class ReplayModel(CrowdModel):
@@ -85,16 +99,17 @@ class ReplayModel(CrowdModel):
         humans = world.scenario.humans
         settings = humans.replay
         assert settings is not None  # the schema asks for it with model: replay
+        crowd = [group for _, group in humans.crowd]
+        self._group = next(i for i, group in enumerate(crowd) if not group.standing and group.model == "replay")
+        count = crowd[self._group].count
+        assert isinstance(count, int)  # the schema refuses a range
+        check_replay_state(count, world.scenario.max_steps)  # a scenario built without validation (model_construct) too
         label = world.source.label if world.source is not None else ""
         folder = Path(label).parent if label and Path(label).is_file() else None
         recording = read_recording(settings.file, settings.format, settings.annotation_step, folder)
         self._grid: Resampled = recording.resample(self.dt)
         self._offset = complex(settings.offset[0], settings.offset[1])
         self._steps = world.scenario.max_steps + 1
-        crowd = [group for _, group in humans.crowd]
-        self._group = next(i for i, group in enumerate(crowd) if not group.standing and group.model == "replay")
-        count = crowd[self._group].count
-        assert isinstance(count, int)  # the schema refuses a range
         self.count = count
         peak = places_needed(self._grid)
         if peak > count:
@@ -146,20 +161,21 @@ class ReplayModel(CrowdModel):
         steps, dt = self._steps, self.dt
         self.start = self._draw_window(view, rng)
         """The recording's time step (of the scenario's ``dt``) this episode starts at."""
-        _, positions, present = self._grid.window(self.start, steps)
-        stop = self.start + steps  # the window's tracks, in the order window() gives them
+        stop = self.start + steps  # the window's tracks, in the order Resampled.window() gives them (read here track by track)
         chosen = np.flatnonzero((self._track_start < stop) & (self._track_start + self._track_length > self.start))
         places = np.broadcast_to(parked(self.count), (steps, self.count)).copy()
         velocities = np.zeros((steps, self.count), dtype=complex)
         targets = places.copy()
         holder = np.full((steps, self.count), -1, dtype=np.int64)
         free_from = np.zeros(self.count, dtype=np.int64)  # the first step each place is free again
-        for person in range(positions.shape[1]):  # per recorded person of the window, once per episode
-            there = np.flatnonzero(present[:, person])
-            first, last = int(there[0]), int(there[-1])
+        for person, index in enumerate(chosen.tolist()):  # per recorded person of the window, once per episode
+            begin = int(self._track_start[index])
+            first = max(begin, self.start) - self.start  # the window steps it is present at, first to last
+            last = min(begin + int(self._track_length[index]), stop) - 1 - self.start
             place = int(np.flatnonzero(free_from <= first)[0])  # exists: the peak fits the places
             free_from[place] = last + 2
-            track = positions[first : last + 1, person] + self._offset
+            offset = int(self._track_first[index]) + self.start + first - begin
+            track = self._track_points[offset : offset + last - first + 1] + self._offset
             places[first : last + 1, place] = track
             holder[first : last + 1, place] = person
             if len(track) > 1:
@@ -167,7 +183,7 @@ class ReplayModel(CrowdModel):
                 velocities[first:last, place] = step
                 velocities[last, place] = step[-1]
             if self._reaction is not None:  # its own position `ahead` steps on, its last near the track's end
-                targets[first : last + 1, place] = self._ahead_of(int(chosen[person]), first, last)
+                targets[first : last + 1, place] = self._ahead_of(index, first, last)
         self._positions, self._velocities, self._targets, self._holder = places, velocities, targets, holder
         self.reacting = np.zeros(self.count, dtype=bool)
         self._moving = np.zeros(self.count, dtype=complex)

@@ -79,18 +79,15 @@ def render_episodes(
         for episode in range(episodes):
             path = inside(out, f"{env.scenario.name}_{label}_seed{seed + episode}{suffix}")
             observation, _ = env.reset(seed=seed + episode)
-            try:
-                with VideoWriter(path, fps=env.metadata["render_fps"]) as writer:
+            # the writer drops its unfinished temporary if the episode raises; a file of that name stays as it was
+            with VideoWriter(path, fps=env.metadata["render_fps"]) as writer:
+                writer.append(_frame(env))
+                done = False
+                while not done:
+                    observation, _, terminated, truncated, info = env.step(act(env, observation))
                     writer.append(_frame(env))
-                    done = False
-                    while not done:
-                        observation, _, terminated, truncated, info = env.step(act(env, observation))
-                        writer.append(_frame(env))
-                        done = terminated or truncated
-                        bar.update(1)
-            except BaseException:  # a policy that raised, an interrupt: no unfinished video is left behind
-                path.unlink(missing_ok=True)
-                raise
+                    done = terminated or truncated
+                    bar.update(1)
             bar.update(env.scenario.max_steps - env.simulator.step_count)  # an early end skips the rest
             bar.set_postfix_str(f"episode {episode + 1}/{episodes}: {info['outcome']}")
             # named by how the episode ended, so a folder of videos reads at a glance

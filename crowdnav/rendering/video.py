@@ -2,11 +2,14 @@
 
 from __future__ import annotations
 
+import os
 from collections.abc import Iterable
 from pathlib import Path
 from typing import TYPE_CHECKING
 
 import numpy as np
+
+from crowdnav.files import temporary_beside
 
 if TYPE_CHECKING:
     from imageio.core.format import Format
@@ -27,7 +30,8 @@ class VideoWriter:
         suffix = self.path.suffix.lower()
         if suffix not in VIDEO_FORMATS:
             raise ValueError(f"unsupported video format {suffix!r} for {self.path}; expected one of {', '.join(VIDEO_FORMATS)}")
-        self.path.parent.mkdir(parents=True, exist_ok=True)
+        # written under a temporary name, renamed over ``path`` when whole: a link at ``path`` is replaced, never written through
+        self._temporary = temporary_beside(self.path, suffix)
         self._gif_frames: list[np.ndarray] | None = [] if suffix == ".gif" else None
         self._mp4: Format.Writer | None = None
         self.frames_written = 0
@@ -44,7 +48,7 @@ class VideoWriter:
 
                 # macro_block_size=1: the renderer already makes sides multiples of 16, never resize.
                 self._mp4 = imageio.get_writer(
-                    self.path, fps=self.fps, codec="libx264", quality=7, macro_block_size=1, ffmpeg_params=["-preset", "veryfast"]
+                    self._temporary, fps=self.fps, codec="libx264", quality=7, macro_block_size=1, ffmpeg_params=["-preset", "veryfast"]
                 )
             self._mp4.append_data(frame)
         self.frames_written += 1
@@ -55,18 +59,26 @@ class VideoWriter:
                 raise ValueError(f"no frames to write to {self.path}")
             import imageio.v3 as iio
 
-            iio.imwrite(self.path, np.stack(self._gif_frames), duration=1000.0 / self.fps, loop=0)
+            iio.imwrite(self._temporary, np.stack(self._gif_frames), duration=1000.0 / self.fps, loop=0)
             self._gif_frames = []
         elif self._mp4 is not None:
             self._mp4.close()
             self._mp4 = None
+        if self._temporary.exists():  # not on a second close
+            os.replace(self._temporary, self.path)
         return self.path
 
     def __enter__(self) -> VideoWriter:
         return self
 
-    def __exit__(self, *exc: object) -> None:
-        self.close()
+    def __exit__(self, kind: type[BaseException] | None, *exc: object) -> None:
+        if kind is None:
+            self.close()
+            return
+        if self._mp4 is not None:  # an episode that raised: its unfinished video is dropped
+            self._mp4.close()
+            self._mp4 = None
+        self._temporary.unlink(missing_ok=True)
 
 
 def write_video(frames: Iterable[np.ndarray], path: str | Path, fps: float = 10.0) -> Path:

@@ -166,6 +166,21 @@ class Orca(StrictModel):
     safety_margin: NonNegativeFloat = Field(default=0.01, description="Added to every body radius ORCA sees (m).")
 
 
+MAX_REPLAY_CELLS = 2_000_000
+"""Most (place, step) cells of one replay episode: the replaying group's count x (max_steps + 1), each about 56 bytes of
+episode state (positions, velocities, targets, holders), checked before any is allocated: e.g. 1,000 places over 2,000
+steps, or 100 over 20,000."""
+
+
+def replay_cells(humans: Humans, max_steps: int) -> tuple[str, int] | None:
+    """(the replaying group's count field, its places x (max_steps + 1)) when a group replays (None: no group does)."""
+    for path, group in humans.crowd:
+        if not group.standing and group.model == "replay" and isinstance(group.count, int):
+            field = "humans.count" if path == "humans" else f"{path}.count"
+            return field, group.count * (max_steps + 1)
+    return None
+
+
 class Replay(StrictModel):
     """The recording that humans with ``model: replay`` follow (docs/simulator.md#recorded-crowds)."""
 

@@ -21,6 +21,7 @@ from crowdnav.paths import SAFE_NAME_EXPECTATION, is_safe_name
 from crowdnav.scenario.crowd import (  # noqa: F401  (re-exported: the schema's public names)
     CIRCLE_SPACING,
     IMPLICIT_GROUP,
+    MAX_REPLAY_CELLS,
     MIN_FORCE_RANGE,
     HumanGroup,
     HumanModel,
@@ -28,6 +29,7 @@ from crowdnav.scenario.crowd import (  # noqa: F401  (re-exported: the schema's 
     Orca,
     SocialForce,
     Stall,
+    replay_cells,
 )
 from crowdnav.scenario.fields import (  # noqa: F401  (re-exported: the schema's public names)
     MAX_HUMANS,
@@ -297,6 +299,14 @@ class Scenario(StrictModel):
         if repeated:
             raise FieldProblems([("robots", f"expected unique robot names, got {', '.join(map(repr, repeated))} more than once")])
         self.__dict__["robot"] = self.robots[0]  # not setattr: that would validate (and call this) again
+        return self
+
+    @model_validator(mode="after")
+    def _replay_state_bounded(self) -> Scenario:
+        replay = replay_cells(self.humans, self.max_steps)
+        if replay is not None and replay[1] > MAX_REPLAY_CELLS:  # the episode's state, refused before the model allocates it
+            raise FieldProblems([(replay[0], f"model replay: {replay[1]:,} (place, step) positions an episode (count x "
+                                  f"(max_steps + 1)), more than {MAX_REPLAY_CELLS:,}; expected fewer places or a smaller max_steps")])
         return self
 
     @model_serializer(mode="wrap")

@@ -4,12 +4,16 @@ from __future__ import annotations
 
 import json
 import shutil
+import tarfile
+from io import BytesIO
 
 import pytest
 from crowdnav.agents import train
 from crowdnav.agents.run_folder import checkpoint_episodes, recover_checkpoint
 from crowdnav.evaluation.storage import clean_temporaries
+from crowdnav.evaluation.transfer import pack_folder
 
+from crowdnav.files import temporary_beside
 from tests.agents.agents_tiny import tiny_config
 
 
@@ -60,6 +64,20 @@ def test_orphaned_temporaries_are_removed_and_real_files_kept(tmp_path):
     keep.write_text("whole")
     assert sorted(clean_temporaries(tmp_path)) == sorted([orphan, log_orphan])
     assert keep.exists() and not orphan.exists() and not log_orphan.exists()
+
+
+@pytest.mark.parametrize("suffix", [".mp4", ".gif", ".npz", ".png"])
+def test_a_temporary_the_file_helpers_name_with_a_suffix_is_an_orphan_to_the_clean_up_and_the_transfer(tmp_path, suffix):
+    destination = tmp_path / "videos" / f"episode_000{suffix}"
+    orphan = temporary_beside(destination, suffix)  # the name a writer killed before its rename leaves (a video: ``.tmp.mp4``)
+    orphan.write_bytes(b"half")
+    keep = [tmp_path / "videos" / f"episode_001{suffix}", tmp_path / "videos" / f".hidden.tmp{suffix}.notes"]
+    for path in keep:
+        path.write_bytes(b"whole")
+    with tarfile.open(fileobj=BytesIO(pack_folder(tmp_path))) as packed:
+        assert sorted(packed.getnames()) == sorted(str(path.relative_to(tmp_path)) for path in keep)
+    assert clean_temporaries(tmp_path) == [orphan]
+    assert not orphan.exists() and all(path.exists() for path in keep)
 
 
 def test_every_checkpoint_is_announced_so_the_runner_can_save_its_timing(tmp_path):

@@ -53,6 +53,26 @@ def test_render_of_a_robots_run_folder_in_another_scenario_or_with_overrides_is_
     assert "without overrides" in _one_error_line(capsys)
 
 
+def test_render_takes_the_scenario_file_a_robots_run_was_trained_in_written_relative_or_absolute(tmp_path, capsys, monkeypatch):
+    from importlib.resources import files
+
+    monkeypatch.chdir(tmp_path)
+    Path("hall.yaml").write_text((files("crowdnav.scenarios") / f"{HALL}.yaml").read_text(encoding="utf-8"), encoding="utf-8")
+    Path("other.yaml").write_text(Path("hall.yaml").read_text(encoding="utf-8"), encoding="utf-8")  # same content, another file
+    config = {"scenario": "hall.yaml", "algo": "ppo", "num_envs": 2, "timesteps": 96, "n_steps": 16, "batch_size": 48,
+              "net_arch": [16], "seed": 0, "out": "run", "progress": False, "overrides": {"max_steps": 20},
+              "sensors": {"lidar": {"beams": 16}}}
+    Path("robots.yaml").write_text(yaml.safe_dump(config), encoding="utf-8")
+    assert main(["train", "--config", "robots.yaml", "--agents", "robots"]) == 0
+    for given in ("./hall.yaml", str(tmp_path / "hall.yaml")):  # the run recorded "hall.yaml"
+        assert main(["render", given, "--policy", "run", "--episodes", "1", "--format", "gif", "--out", "videos", "--no-progress"]) == 0, \
+            capsys.readouterr().err
+    assert [video.suffix for video in Path("videos").iterdir()] == [".gif"]
+    capsys.readouterr()
+    assert main(["render", "other.yaml", "--policy", "run", "--episodes", "1", "--out", "videos", "--no-progress"]) == 1
+    assert "drives the robots of 'hall.yaml', not 'other.yaml'" in _one_error_line(capsys)
+
+
 @pytest.mark.parametrize("command", [
     ["evaluate", "{run}", "--scenario", HALL, "--episodes", "1", "--out", "{tmp}/results"],
     ["trajectories", "{run}", "--episodes", "1", "--out", "{tmp}/trajectories"],

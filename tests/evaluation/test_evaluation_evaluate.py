@@ -78,6 +78,11 @@ def test_an_sb3_zip_is_evaluated_and_a_space_mismatch_is_one_clear_line(tmp_path
         evaluate_policy(str(tmp_path / "my_ppo.zip"), "open_space", tmp_path / "results", modalities=["lidar"], episodes=3)
 
 
+def test_a_misspelled_baseline_gets_a_did_you_mean_from_the_python_api_too(tmp_path):
+    with pytest.raises(PolicyError, match=r"unknown baseline 'straigth'; did you mean 'baseline:straight'\?"):
+        evaluate_policy("baseline:straigth", "open_space", tmp_path / "results", episodes=1)
+
+
 def test_bad_policies_are_one_line_errors(tmp_path, module_on_path, capsys):
     assert main(["evaluate", "nowhere:nothing", "--scenario", "open_space", "--out", str(tmp_path)]) == 1
     assert "cannot import 'nothing' from 'nowhere'" in capsys.readouterr().err
