@@ -80,6 +80,7 @@ DEFAULTS: dict[str, Any] = {
     "lookahead_width": 8,  # depth 2: how many of the best one-step actions are expanded
     "ensemble": 1,  # value networks averaged (1: one network, as the published runs)
     "value_bound": False,  # V capped by the largest return reachable from the goal distance (lookahead.value_ceiling)
+    "human_margin": 0.0,  # m: a move predicted to pass a tracked human closer than this counts as a collision when acting
 }
 """The agent's options (``algo_kwargs``) and their defaults."""
 GAMMA = 0.9
@@ -160,7 +161,7 @@ class SarlAgent:
     def scores(self, observation: Mapping[str, np.ndarray], depth: int = 1) -> tuple[np.ndarray, np.ndarray]:
         """(scores (B, 81), env actions (B, 81, 2)) of a batch of observations (leading axis B), looking ``depth`` steps ahead."""
         state = decode(observation, self.scales)
-        ahead = lookahead(state, self.physics, self.actions)
+        ahead = lookahead(state, self.physics, self.actions, float(self.options["human_margin"]))
         scores = self._backup(ahead)
         if depth > 1:
             scores = self._deepen(ahead, scores)
@@ -185,7 +186,7 @@ class SarlAgent:
         rows = np.arange(batch)[:, None]
         chosen = {key: value[rows, best] for key, value in ahead["next"].items()}
         flat = {key: value.reshape(batch * width, *value.shape[2:]) for key, value in chosen.items()}
-        further = lookahead(flat, self.physics, self.actions)
+        further = lookahead(flat, self.physics, self.actions, float(self.options["human_margin"]))
         second = self._backup(further).max(axis=1).reshape(batch, width)
         refined = ahead["reward"][rows, best] + self.discount * second * ~ahead["done"][rows, best]
         deep = np.full_like(scores, -np.inf)

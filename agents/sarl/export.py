@@ -106,6 +106,7 @@ class SarlPolicyModule(nn.Module):
             self.register_buffer(f"scale_{key}", torch.as_tensor(scale, dtype=F64))
         self.network = agent.network
         self.bounded = bool(agent.options["value_bound"])
+        self.human_margin = float(agent.options["human_margin"])
 
     def decode(self, inputs: Sequence[torch.Tensor]) -> dict[str, torch.Tensor]:
         """The joint states (robot frame, float64), as :func:`~crowdnav.agents.sarl.lookahead.decode`."""
@@ -159,7 +160,7 @@ class SarlPolicyModule(nn.Module):
         closest = _norm(positions + relative * t[..., None])
         present = state["present"][:, None, :].expand_as(closest)
         radii = state["radii"][:, None, :].expand_as(closest)
-        hits = (closest <= p.radius + radii) & (present > 0)
+        hits = (closest <= p.radius + radii + self.human_margin) & (present > 0)
         collision = hits.to(F64).sum(dim=-1) > 0
         if self.room:  # walls and furniture: the supporting half-plane at each nearest point (lookahead.lookahead)
             static, here = state["static"][:, None, :, :], state["static_present"][:, None, :]

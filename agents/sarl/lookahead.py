@@ -193,14 +193,15 @@ def features(state: Mapping[str, np.ndarray], physics: Physics) -> tuple[np.ndar
     return robot.astype(np.float32), (humans * present[..., None]).astype(np.float32), (statics * here[..., None]).astype(np.float32)
 
 
-def lookahead(state: Mapping[str, np.ndarray], physics: Physics, actions: np.ndarray) -> dict[str, Any]:
+def lookahead(state: Mapping[str, np.ndarray], physics: Physics, actions: np.ndarray, human_margin: float = 0.0) -> dict[str, Any]:
     """Every action's next joint state, predicted reward and end, for B joint states (leading axis B) and M actions.
 
     ``actions`` (M, 2): velocities in the goal frame (:func:`action_set`). The robot moves at the action's velocity
     for one step, the humans at their observed velocities (constant velocity). Returns ``next`` (the joint states,
     axes (B, M, ...)), ``reward`` (B, M): the env's reward terms as the agent predicts them (step, goal progress,
-    the social term at the next positions, goal reached, collision = a tracked human's disc touched at any time
-    during the step, or the half-plane of a wall or a piece of furniture reached), times the reward scale; ``done``
+    the social term at the next positions, goal reached, collision = a tracked human's disc, grown by ``human_margin``
+    (m), touched at any time during the step, or the half-plane of a wall or a piece of furniture reached), times the
+    reward scale; ``done``
     (B, M): a predicted collision or goal; ``commands`` (B, M, 2): the env actions in [-1, 1] (robot frame).
     """
     _, cos, sin = goal_direction(state["goal"])
@@ -220,7 +221,9 @@ def lookahead(state: Mapping[str, np.ndarray], physics: Physics, actions: np.nda
     closest = np.hypot(*np.moveaxis(positions + relative * t[..., None], -1, 0))
     present = np.broadcast_to(state["present"][:, None, :], closest.shape)
     radii = np.broadcast_to(state["radii"][:, None, :], closest.shape)
-    collision = np.any((closest <= physics.radius + radii) & (present > 0), axis=-1)
+    # the margin: people leave the constant-velocity line within a step (by ~0.1 m in the figure4 room), so a move
+    # predicted to pass closer than that is a collision to the chooser, not a near miss
+    collision = np.any((closest <= physics.radius + radii + human_margin) & (present > 0), axis=-1)
     # walls and furniture: the supporting half-plane at each nearest point (linear in time: the end of the step is closest)
     static, here = state["static"][:, None, :, :], state["static_present"][:, None, :]
     gap = np.hypot(static[..., 0], static[..., 1])

@@ -50,6 +50,9 @@ def check_options(options: Mapping[str, Any], name: str, where: str = "algo_kwar
         value = options[option]
         if isinstance(value, bool) or not isinstance(value, (int, float)) or not 0.0 <= value <= 1.0:
             raise ConfigError(f"{where}.{option}: {name!r} takes a rate from 0 to 1, got {_shown(value)}")
+    margin = options["human_margin"]
+    if isinstance(margin, bool) or not isinstance(margin, (int, float)) or not 0.0 <= margin <= 1.0:
+        raise ConfigError(f"{where}.human_margin: {name!r} takes metres from 0 to 1, got {_shown(margin)}")
     if not isinstance(options["value_bound"], bool):
         raise ConfigError(f"{where}.value_bound: {name!r} takes true or false, got {_shown(options['value_bound'])}")
     if not isinstance(options["imitation_teacher"], str):

@@ -131,7 +131,8 @@ def test_onnx_export_of_an_agent_that_reads_the_room_acts_as_predict(tmp_path):
     from tests.agents.test_sarl_export import check_choices
 
     run = tmp_path / "run"
-    train(config(run, algo_kwargs={"batch_size": 4, "updates_per_episode": 2, "width": 16, "lookahead_depth": 2}))
+    # a margin around people too: the exported lookahead carries it
+    train(config(run, algo_kwargs={"batch_size": 4, "updates_per_episode": 2, "width": 16, "lookahead_depth": 2, "human_margin": 0.1}))
     out = tmp_path / "policy.onnx"
     assert main(["export", str(run), "--out", str(out)]) == 0
     policy = load_policy(run)
