@@ -42,8 +42,9 @@ def draw_state(sim: GroupWorld, rng: np.random.Generator) -> SimState:
     spawn = place_groups(sim, starts, goals, counts)
     standing = np.repeat([group.standing for group in sim.groups], counts).astype(bool)
     human_goals = np.concatenate([np.zeros(0, dtype=complex), *first_goals(sim, spawn)])
-    preferred_speed = np.concatenate([np.zeros(0), *(_preferred_speeds(rng, group, count)
-                                                     for group, count in zip(sim.groups, counts, strict=True))])
+    normals = sim.scenario.humans.speed_normals
+    preferred_speed = np.concatenate([np.zeros(0), *(_preferred_speeds(rng, group, count, normal)
+                                                     for group, count, normal in zip(sim.groups, counts, normals, strict=True))])
     max_speed = preferred_speed * sim.scenario.humans.social_force.max_speed_factor
     positions = np.concatenate([start, *spawn])
     return SimState(
@@ -66,9 +67,12 @@ def draw_state(sim: GroupWorld, rng: np.random.Generator) -> SimState:
     )
 
 
-def _preferred_speeds(rng: np.random.Generator, group: HumanGroup, count: int) -> np.ndarray:
-    """``count`` preferred speeds (m/s) of ``group``'s members: drawn from its range, 0 for a standing group."""
+def _preferred_speeds(rng: np.random.Generator, group: HumanGroup, count: int, normal: tuple[float, float] | None) -> np.ndarray:
+    """``count`` preferred speeds (m/s) of ``group``'s members: drawn from its range (uniform, or ``normal`` = (mean, sd)
+    clipped to it: a crowd preset's, :attr:`crowdnav.scenario.schema.Humans.speed_normals`), 0 for a standing group."""
     if group.standing:
         return np.zeros(count)
     assert group.preferred_speed is not None  # a walking group always has its range (Humans.crowd fills it in)
+    if normal is not None:
+        return np.clip(rng.normal(*normal, size=count), *group.preferred_speed)
     return rng.uniform(*group.preferred_speed, size=count)

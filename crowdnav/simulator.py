@@ -9,7 +9,8 @@ stated tolerance). Each walking group's humans take their commands from the grou
 (:mod:`crowdnav.crowd`, held as :attr:`Simulator.crowd`); everything after the command is the same.
 
 Step order: humans' commands (a crowd model, or given actions) and robot kinematics -> integrate
--> measure the new geometry once -> keep humans out of walls and of each other -> robot
+-> measure the new geometry once -> keep humans out of walls and of each other (after each sub-step: humans
+that would move their radius in a step move in sub-steps, :func:`crowdnav.scenario.loader.human_substeps`) -> robot
 collision, world-exit and goal checks -> humans at their goals follow the scenario's ``on_goal``
 rule. The simulator is made of parts, not base classes: the measuring and what is read from it
 (overlap pushes, collision, world exit) are :class:`crowdnav.sim_geometry.Geometry`
@@ -44,13 +45,14 @@ from crowdnav import social_force as sf
 from crowdnav.contacts import goal_distance
 from crowdnav.crowd import Crowd
 from crowdnav.crowd.base import action_commands
+from crowdnav.crowd.routing import Router, router_for
 from crowdnav.crowd.views import WorldView
 from crowdnav.episode_draw import draw_state
 from crowdnav.events import OUTCOMES, Collision, SimulationError, StepEvents  # noqa: F401  (re-exported: their public home)
 from crowdnav.groups import apply_goal_rules, stall_window, together_table
 from crowdnav.robot_view import RobotView, RobotWorld, robot_scenario
 from crowdnav.robots import Team, clipped_action, retire_robots, robot_kinematics
-from crowdnav.scenario.loader import Overrides
+from crowdnav.scenario.loader import Overrides, human_substeps
 from crowdnav.scenario.schema import Scenario
 from crowdnav.sim_geometry import Geometry
 from crowdnav.sim_state import ConstantsCache, PairConstants, SimState, StateFields, pair_constants, read_state_fields, read_through, read_with
@@ -112,6 +114,11 @@ class Simulator(_StateAttributes):
         self._force = force
         self.relaxation = min(1.0, self.dt / force.relaxation_time)
         """``min(1, dt / relaxation_time)``: the share of the way to its desired velocity a human goes in one step."""
+        self.substeps = human_substeps(scenario)
+        """Sub-steps the humans' motion and contacts take per step (:func:`crowdnav.scenario.loader.human_substeps`; 1 unless a
+        step would move a human its radius or more)."""
+        self.substep_dt = self.dt / self.substeps
+        """Seconds of one sub-step (``dt`` with one sub-step)."""
         self.stall_window = stall_window(scenario)
         """Steps between stall checks (``humans.stall``; 0: none): :func:`crowdnav.groups.apply_goal_rules`."""
         world = scenario.world
@@ -131,6 +138,8 @@ class Simulator(_StateAttributes):
         self.crowd = Crowd(self.world)
         """The crowd models of the walking groups (:mod:`crowdnav.crowd`); a model that cannot run (ORCA without pyrvo)
         fails here, at load, in one line naming the scenario field that asked for it."""
+        self.router: Router | None = router_for(self.world) if scenario.humans.routing == "geodesic" else None
+        """``humans.routing: geodesic``: the compiled world's shared router (:mod:`crowdnav.crowd.routing`); None: straight."""
         self._ready = False
 
     # ----------------------------------------------------------------- state views
@@ -297,7 +306,11 @@ class Simulator(_StateAttributes):
         velocities, positions = state.velocities, state.positions
         velocities[0] = robot_velocity
         velocities[1:] = commands
-        positions += velocities * self.dt
+        if self.substeps == 1:
+            positions += velocities * self.dt
+        else:  # the robot's whole step, the humans' first sub-step (the others after its contacts, below)
+            positions[:1] += velocities[:1] * self.dt
+            positions[1:] += velocities[1:] * self.substep_dt
         if self.team is not None:
             self.team.move(other_robot_actions, self.dt)
         state.step_count += 1
@@ -310,6 +323,11 @@ class Simulator(_StateAttributes):
                                   "check the scenario's social_force parameters")
         self.refresh()
         n = len(positions) - 1
+        for _ in range(1, self.substeps if n else 1):  # fast humans: contacts after every sub-step, so none passes through a wall
+            if self.geometry.humans_touch:
+                self.geometry.push_humans_apart(positions)
+            positions[1:] += velocities[1:] * self.substep_dt
+            self.refresh()
         if n and self.geometry.humans_touch:  # a human touches someone or something
             self.geometry.push_humans_apart(positions)
             self.refresh()
@@ -353,6 +371,8 @@ class Simulator(_StateAttributes):
         """(n_humans,) complex velocity commands (m/s) of the social-force model in the current state."""
         force, state = self._force, self._state
         to_goal = state.human_goals - state.positions[1:]
+        if self.router is not None:  # humans.routing: geodesic
+            to_goal = self.router.to_goal(state.positions[1:], state.human_goals)
         total = sf.goal_force(to_goal, force.goal_weight, force.goal_saturation_distance)
         total += self.geometry.repulsion[1:]
         if self.together is not None:  # the walking groups' terms (Moussaïd et al. 2010)

@@ -140,6 +140,8 @@ def leaderboard_table(tests: Any, metas: list[dict[str, Any]], missing: Sequence
         for metric in SOCIAL_MEANS:
             present = metric in final and final[metric].notna().any()
             row[metric] = float(np.nanmean(final[metric])) if present else float("nan")
+        if "min_human_distance" in final:
+            row["min_human_distance"] = met_mean(final["min_human_distance"].to_numpy(dtype=float))
         row["min_time_to_collision"] = float(np.median(final["min_time_to_collision"]))
         metas_here = [run_meta[(experiment, configuration, seed)] for seed in sorted(frame["seed"].unique())
                       if (experiment, configuration, seed) in run_meta]
@@ -152,6 +154,15 @@ def leaderboard_table(tests: Any, metas: list[dict[str, Any]], missing: Sequence
                                            ignore_index=True)
     table.attrs["missing"] = list(missing)
     return table
+
+
+def met_mean(distances: np.ndarray) -> float:
+    """The mean ``min_human_distance`` over the episodes that met someone: an episode nobody was present in (``inf``, e.g. a
+    recorded crowd's quiet window) has no distance to average; ``inf`` when no episode met anyone, NaN without episodes."""
+    met = distances[np.isfinite(distances)]
+    if len(met):
+        return float(met.mean())
+    return float("inf") if np.isinf(distances).any() else float("nan")
 
 
 def _number(value: float, digits: int = 3) -> str:

@@ -9,7 +9,9 @@ Social Robot Navigation Algorithms", for STL and personal-space compliance; Ande
 Conventions: a trajectory has states ``t = 0 .. T`` (0: after reset, t: after step t); the
 per-step quantities (distances, zones, time to collision, social force) use the states after
 each step, ``t = 1 .. T``; velocities are displacements over one step,
-``v_t = (p_t - p_{t-1}) / dt``, and the robot starts at rest.
+``v_t = (p_t - p_{t-1}) / dt``, and the robot starts at rest. An empty place of a recorded crowd
+(``humans.model: replay``) is nobody: no metric measures it (:attr:`Trajectory.present`), so
+``min_human_distance`` is ``inf`` in an episode where nobody is present.
 """
 
 from __future__ import annotations
@@ -17,6 +19,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+
+from crowdnav.crowd.replay import empty_places
 
 INTIMATE = 0.45
 """Upper bound (m) of the intimate zone (Hall's proxemics), on the surface distance."""
@@ -62,6 +66,13 @@ class Trajectory:
     @property
     def steps(self) -> int:
         return len(self.positions) - 1
+
+    @property
+    def present(self) -> np.ndarray:
+        """(T + 1, n) bool: the humans present at each state; an empty place of a recorded crowd (parked far outside the
+        world, :func:`crowdnav.crowd.replay.empty_places`) is nobody, so no metric measures it."""
+        present: np.ndarray = ~empty_places(self.positions[:, 1:])
+        return present
 
 
 def path_length(points: np.ndarray) -> float:
@@ -160,14 +171,21 @@ def time_to_collision(offset: np.ndarray, relative_velocity: np.ndarray, contact
     return np.where(c <= 0.0, 0.0, np.where(approaching, tau, np.inf))
 
 
-def min_time_to_collision(positions: np.ndarray, radii: np.ndarray, dt: float) -> float:
-    """Smallest robot-human time to collision over the states ``t = 1 .. T`` under constant step velocities."""
+def min_time_to_collision(positions: np.ndarray, radii: np.ndarray, dt: float, present: np.ndarray | None = None) -> float:
+    """Smallest robot-human time to collision over the states ``t = 1 .. T`` under constant step velocities.
+
+    ``present`` (T + 1, n) bool: a human counts at state t only when present at t and t - 1 (a person entering a
+    place of a recorded crowd would otherwise "move" from the parking place); None: every human always.
+    """
     if positions.shape[1] < 2 or len(positions) < 2:
         return float("inf")
     velocity = step_velocities(positions, dt)  # (T, n + 1)
     offset = positions[1:, 1:] - positions[1:, :1]
     relative = velocity[:, 1:] - velocity[:, :1]
-    return float(time_to_collision(offset, relative, radii[0] + radii[1:]).min())
+    tau = time_to_collision(offset, relative, radii[0] + radii[1:])
+    if present is not None:
+        tau = np.where(present[1:] & present[:-1], tau, np.inf)
+    return float(tau.min())
 
 
 def cumulative_social_force(force: np.ndarray, dt: float) -> float:
@@ -221,7 +239,10 @@ def episode_metrics(trajectory: Trajectory, success: bool) -> dict[str, float]:
     length = path_length(robot)
     shortest = straight_line_distance(complex(robot[0]), trajectory.goal, trajectory.goal_radius)
     after = positions[1:]  # the states after each step
-    closest = closest_distance(surface_distances(after[:, 0], after[:, 1:], trajectory.radii[0], trajectory.radii[1:]))
+    present = trajectory.present
+    humans = np.where(present[1:], after[:, 1:], complex(np.nan, np.nan))  # nobody in an empty place: no distance, no group
+    distances = surface_distances(after[:, 0], humans, trajectory.radii[0], trajectory.radii[1:])
+    closest = closest_distance(np.where(present[1:], distances, np.inf))
     speed, acceleration, jerk = motion_magnitudes(robot, dt)
     metrics = {
         "steps": steps,
@@ -237,8 +258,8 @@ def episode_metrics(trajectory: Trajectory, success: bool) -> dict[str, float]:
     metrics["mean_speed"], metrics["max_speed"] = _mean_max(speed)
     metrics["mean_acceleration"], metrics["max_acceleration"] = _mean_max(acceleration)
     metrics["mean_jerk"], metrics["max_jerk"] = _mean_max(jerk)
-    metrics["min_time_to_collision"] = min_time_to_collision(positions, trajectory.radii, dt)
+    metrics["min_time_to_collision"] = min_time_to_collision(positions, trajectory.radii, dt, present)
     metrics["social_force"] = cumulative_social_force(trajectory.social_force, dt)
     metrics["human_stalls"] = trajectory.human_stalls  # the crowd's health, not the robot's: a stall-free crowd has 0
-    metrics["group_intrusions"] = group_intrusions(after[:, 0], after[:, 1:], trajectory.walking_group, float(trajectory.radii[0]))
+    metrics["group_intrusions"] = group_intrusions(after[:, 0], humans, trajectory.walking_group, float(trajectory.radii[0]))
     return metrics

@@ -102,6 +102,8 @@ class BatchSimulator:
         self._static_count = obstacles.polygon_count + obstacles.disc_count
         self._labels = obstacles.labels + obstacles.disc_labels
         self._force, self._relax, self._bounds = self.scenario.humans.social_force, first.relaxation, first.bounds
+        self._router = first.router
+        self._substeps, self._substep_dt = first.substeps, first.substep_dt
         self._crowd = first.crowd
         """The first world's crowd models, for what all worlds share (which models, which groups)."""
         self._crowds = np.empty(self.num_worlds, dtype=object)
@@ -199,13 +201,23 @@ class BatchSimulator:
                 commands = np.where(stopped, 0.0, commands)
             velocities[:, 1:] = commands
         velocities.real[:, 0], velocities.imag[:, 0] = robot_re, robot_im  # exactly the scalar's parts
-        positions += velocities * dt
+        if self._substeps == 1:
+            positions += velocities * dt
+        else:  # as Simulator.step: the robot's whole step, the humans' first sub-step
+            positions[:, :1] += velocities[:, :1] * dt
+            positions[:, 1:] += velocities[:, 1:] * self._substep_dt
         state.robot_heading[rows] = heading
         state.step_count[rows] += 1
         self._check_finite(bucket, rows, positions, velocities)
         state.positions[rows], state.velocities[rows] = positions, velocities
         self._refresh(bucket, rows)
         if n:
+            for _ in range(1, self._substeps):  # the other sub-steps, each after the last one's contacts (Simulator.step)
+                touch = rows[bucket.humans_touch[rows]]
+                if len(touch):
+                    self._resolve_overlaps(bucket, touch)
+                state.positions[rows, 1:] += velocities[:, 1:] * self._substep_dt
+                self._refresh(bucket, rows)
             touch = rows[bucket.humans_touch[rows]]
             if len(touch):
                 self._resolve_overlaps(bucket, touch)
@@ -234,6 +246,8 @@ class BatchSimulator:
         the step's (K, n+1) copies of the rows)."""
         force, state = self._force, bucket.state
         to_goal = state.human_goals[rows] - positions[:, 1:]
+        if self._router is not None:  # humans.routing: geodesic, every world's at once (the slots' shared router)
+            to_goal = self._router.to_goal(positions[:, 1:], state.human_goals[rows])
         total = sf.goal_force(to_goal, force.goal_weight, force.goal_saturation_distance)
         total += bucket.repulsion[rows, 1:]
         if self._together:  # the walking groups' terms, every world's at once

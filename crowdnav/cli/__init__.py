@@ -23,7 +23,7 @@ from crowdnav.errors import CrowdNavError, install_line
 # Packages that only an extra installs (pyproject.toml), so a command run on the core install
 # names the extra to add instead of failing with a traceback.
 EXTRA_OF_MODULE = {"torch": "train", "stable_baselines3": "train", "matplotlib": "train", "pandas": "bench", "seaborn": "bench", "ray": "ray",
-                   "onnx": "onnx", "onnxruntime": "onnx"}
+                   "onnx": "onnx", "onnxruntime": "onnx", "scipy": "fit"}
 EXTRA_OF_COMMAND = {"train": "train", "collect-dataset": "train", "pretrain-encoder": "train", "benchmark": "bench", "plot": "bench",
                     "leaderboard": "bench", "trajectories": "bench", "evaluate": "bench", "export": "onnx"}
 # What each command's layer needs, checked before it starts: a benchmark's worker processes would

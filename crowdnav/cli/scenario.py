@@ -21,8 +21,8 @@ def register(groups: argparse._SubParsersAction[argparse.ArgumentParser]) -> Non
     validate = commands.add_parser(
         "validate",
         help="check scenario files or library names; exit status 1 if any is invalid",
-        description="Load each scenario as an environment would (schema, geometry, modality names) and report every "
-                    "problem with file, line and field.",
+        description="Load each scenario as an environment would (schema, geometry, modality names, the crowd models: a "
+                    "replayed recording is read and its places counted) and report every problem with file, line and field.",
     )
     validate.add_argument("scenarios", nargs="+", metavar="FILE_OR_NAME", help="a YAML file or a library scenario name")
     add_override_option(validate)
@@ -53,12 +53,14 @@ def validate_command(args: argparse.Namespace) -> int:
     from crowdnav.envs.core import load_env_world
     from crowdnav.scenario import ScenarioError
     from crowdnav.scenario.library import resolve
+    from crowdnav.simulator import Simulator
 
     overrides = parse_overrides(args.overrides)
     invalid = 0
     for source in args.scenarios:
         try:
-            load_env_world(source, overrides)
+            world, _ = load_env_world(source, overrides)
+            Simulator(world)  # the environment's own build: its crowd models' checks (a replay's recording and places) too
         except ScenarioError as error:
             invalid += 1
             print(error.report(), file=sys.stderr)

@@ -8,6 +8,7 @@ from pathlib import Path
 
 import yaml
 
+from crowdnav.cli import scenario_fit
 from crowdnav.cli.common import CliError
 from crowdnav.files import atomic_write_text
 
@@ -34,6 +35,7 @@ def register(commands: argparse._SubParsersAction[argparse.ArgumentParser]) -> N
     parser.add_argument("--out", "-o", type=Path, default=None, metavar="FILE",
                         help="write the scenario to FILE (refused if it exists); default: print it")
     parser.set_defaults(handler=from_recording_command)
+    scenario_fit.register(commands)  # `scenario fit` reads the same recordings
 
 
 def from_recording_command(args: argparse.Namespace) -> int:

@@ -58,7 +58,7 @@ class Crowd:
             try:
                 self.models[name] = CROWD_MODELS[name](world)
             except CrowdNavError as error:  # "FILE:LINE: humans.model: orca needs the optional package pyrvo ..."
-                issue = ScenarioIssue(_field_asking(world, name), str(error))
+                issue = ScenarioIssue(getattr(error, "field", None) or _field_asking(world, name), str(error))
                 raise (world.source.error([issue]) if world.source is not None else ScenarioError("scenario", [issue])) from None
         self._only = next(iter(self.models.values())) if len(self.models) == 1 else None
         self._placing = [model for model in self.models.values() if model.places]

@@ -216,7 +216,7 @@ def _open_recording(file: Path) -> BinaryIO:
     try:
         handle = os.open(file, os.O_RDONLY | getattr(os, "O_NONBLOCK", 0))
     except OSError as error:
-        raise RecordingError(f"{file}: cannot read the recording: {error.strerror or error}") from None
+        raise RecordingError(f"{file}: cannot read the recording: {error.strerror or error}; expected a readable file") from None
     try:
         info = os.fstat(handle)
         if not stat.S_ISREG(info.st_mode):

@@ -34,9 +34,9 @@ import numpy as np
 
 from crowdnav.crowd.base import CrowdModel, CrowdView
 from crowdnav.crowd.react import Reaction
-from crowdnav.crowd.recording import Resampled, read_recording
+from crowdnav.crowd.recording import RecordingError, Resampled, read_recording
 from crowdnav.errors import CrowdNavError
-from crowdnav.scenario.crowd import MAX_REPLAY_CELLS
+from crowdnav.scenario.crowd import MAX_REPLAY_CELLS, replay_cells
 from crowdnav.world import CompiledWorld
 
 PARKING = complex(2.0e7, 2.0e7)
@@ -56,7 +56,11 @@ def parked(places: int) -> np.ndarray:
 
 
 def empty_places(positions: np.ndarray) -> np.ndarray:
-    """Bool mask (``positions``' shape): the places nobody holds (parked near :data:`PARKING`), e.g. in recorded frames."""
+    """Bool mask (``positions``' shape): the places nobody holds (parked near :data:`PARKING`), e.g. in recorded frames.
+
+    The one test of "nobody is here" that every reader of human positions uses (metrics, rendering, trajectories): a
+    parked place is far outside any world but still a position, so a reader that forgot it would measure 28,000 km.
+    """
     empty: np.ndarray = np.abs(np.asarray(positions) - PARKING) < PARKED_BEYOND
     return empty
 
@@ -76,7 +80,12 @@ def places_needed(grid: Resampled) -> int:
 
 
 class ReplayError(CrowdNavError, ValueError):
-    """The recording does not fit the scenario (more people at once than the group has places, or too much state per episode)."""
+    """The recording does not fit the scenario (more people at once than the group has places, or too much state per episode),
+    or cannot be read; ``field``: the scenario field to name in the error (:class:`crowdnav.crowd.Crowd` reports it there)."""
+
+    def __init__(self, message: str, field: str | None = None):
+        super().__init__(message)
+        self.field = field
 
 
 def check_replay_state(places: int, max_steps: int) -> None:
@@ -106,15 +115,18 @@ class ReplayModel(CrowdModel):
         check_replay_state(count, world.scenario.max_steps)  # a scenario built without validation (model_construct) too
         label = world.source.label if world.source is not None else ""
         folder = Path(label).parent if label and Path(label).is_file() else None
-        recording = read_recording(settings.file, settings.format, settings.annotation_step, folder)
-        self._grid: Resampled = recording.resample(self.dt)
+        try:
+            self._grid: Resampled = read_recording(settings.file, settings.format, settings.annotation_step, folder).resample(self.dt)
+        except RecordingError as error:  # named at the file's field, not at the model that asked for it
+            raise ReplayError(str(error), "humans.replay.file") from None
         self._offset = complex(settings.offset[0], settings.offset[1])
         self._steps = world.scenario.max_steps + 1
         self.count = count
         peak = places_needed(self._grid)
         if peak > count:
             raise ReplayError(f"model replay: the recording {settings.file} needs {peak} places (the people it shows at once, "
-                              f"a place empty for a step between two people); the group has {count}: expected count >= {peak}")
+                              f"a place empty for a step between two people); the group has {count}: expected count >= {peak}",
+                              (replay_cells(humans, 0) or ("humans.count", 0))[0])
         self.react_within = settings.react_within
         """None: pure replay; else the distance (m) to a robot within which a recorded person starts reacting."""
         self._ahead = max(1, round(settings.react_lookahead / self.dt))

@@ -3,7 +3,7 @@
 **Global state** (``env.state()``, for centralised critics): a float32 vector of ``(R + N) * 8``
 values, R the scenario's robots (1 without ``robots:``) and N its maximum crowd size, read as a
 table of ``R + N`` rows (rows 0..R-1 the robots, row ``R + i`` human ``i``; rows of humans absent
-this episode and of robots that left are zero) by the columns of
+this episode, of robots that left and of a recorded crowd's empty places are zero) by the columns of
 :data:`STATE_COLUMNS`, world frame, metres and m/s:
 
 ==========  ===============================================================
@@ -39,6 +39,7 @@ from typing import cast
 import numpy as np
 from gymnasium import spaces
 
+from crowdnav.crowd.replay import empty_places
 from crowdnav.errors import CrowdNavError
 from crowdnav.simulator import Simulator
 from crowdnav.suggest import did_you_mean
@@ -73,6 +74,7 @@ def global_state(sim: Simulator, max_humans: int) -> np.ndarray:
     rows[:, 4], rows[:, 5] = goals.real, goals.imag
     rows[:, 6] = sim.radii[: 1 + n]
     rows[:, 7] = 1.0
+    rows[1:][empty_places(sim.human_positions)] = 0.0  # nobody there: no 20,000 km coordinate in a critic's input
     return table.reshape(-1)
 
 
@@ -93,6 +95,7 @@ def _several_robots_state(sim: Simulator, max_humans: int) -> np.ndarray:
     rows[:, 6] = np.concatenate([team.all_radii, sim.radii[1:]])
     rows[:, 7] = 1.0
     table[:robots][~active] = 0.0
+    rows[robots:][empty_places(sim.human_positions)] = 0.0  # a recorded crowd's empty place: nobody there
     return table.reshape(-1)
 
 

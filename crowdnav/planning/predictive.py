@@ -23,6 +23,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from crowdnav.crowd.replay import empty_places
 from crowdnav.planning.lattice import Lattice, SearchLayers, disc_cells, search, shifted
 from crowdnav.planning.oracle import EPSILON, check_plannable, to_action
 from crowdnav.planning.static_map import RASTER, MapCache, StaticMap, grid_shape
@@ -60,10 +61,10 @@ class CrowdEstimate:
 
     @classmethod
     def from_sim(cls, sim: RobotWorld) -> CrowdEstimate:
-        """The true current state of one world (every human, and other robots as moving discs)."""
+        """The true current state of one world (every human present, and other robots as moving discs)."""
         positions, velocities, radii = sim.positions[1:], sim.velocities[1:], sim.radii[1:]
         return cls(np.array([sim.robot_position]), np.array([sim.robot_goal]), positions[None].astype(complex),
-                   velocities[None].astype(complex), radii[None].astype(float), np.ones((1, len(positions)), dtype=bool))
+                   velocities[None].astype(complex), radii[None].astype(float), ~empty_places(positions)[None])
 
 
 MAX_WINDOW_CELLS = 4_000_000

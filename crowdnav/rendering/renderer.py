@@ -23,6 +23,7 @@ from typing import TYPE_CHECKING, Any, cast
 
 import numpy as np
 
+from crowdnav.crowd.replay import empty_places
 from crowdnav.rendering.group_links import draw_group_links
 from crowdnav.simulator import Simulator
 
@@ -231,14 +232,16 @@ class Renderer:
         surface.set_clip(self._map_rect)  # nothing drawn on the map spills into the bar or the panel
         robot = sim.robot_position
         heading = sim.robot_heading
+        shown = ~empty_places(sim.human_positions)  # an empty place of a recorded crowd is nobody: nothing is drawn for it
         if overlays.human_goals:
-            for goal in self.to_pixels(sim.human_goals):
+            for goal in self.to_pixels(sim.human_goals[shown]):
                 _cross(surface, palette.human_goal, goal, 4)
         if len(self._history.humans) > 1:
-            trails = self.to_pixels(np.array(self._history.humans))  # (T, n, 2)
-            if trails.shape[1] == sim.n_humans:
-                for i in range(trails.shape[1]):
-                    pygame.draw.lines(surface, palette.human_trail, False, _xy(trails[:, i]), 2)
+            history = np.array(self._history.humans)  # (T, n)
+            if history.shape[1] == sim.n_humans:
+                trails = self.to_pixels(history)  # (T, n, 2)
+                for i, first, stop in present_runs(~empty_places(history)):  # no line from a parking place to a person
+                    pygame.draw.lines(surface, palette.human_trail, False, _xy(trails[first:stop, i]), 2)
         if len(self._history.robot) > 1:
             pygame.draw.lines(surface, palette.robot_path, False, _xy(self.to_pixels(np.array(self._history.robot))), 2)
         if overlays.lidar is not None:
@@ -258,7 +261,8 @@ class Renderer:
         radius = sim.scenario.humans.radius * scale
         colours = self._group_colours
         draw_group_links(surface, sim, colours, self.to_pixels)  # who walks together, under the discs
-        for position, velocity, group in zip(self.to_pixels(sim.human_positions), sim.human_velocities, sim.human_group, strict=True):
+        for position, velocity, group in zip(self.to_pixels(sim.human_positions[shown]), sim.human_velocities[shown],
+                                             sim.human_group[shown], strict=True):
             pygame.draw.circle(surface, colours[group], _xy(position), radius)
             pygame.draw.circle(surface, palette.outline, _xy(position), radius, 1)
             if abs(velocity) > 1e-6:
@@ -400,6 +404,14 @@ class Renderer:
 
 _SCALE_BAR_ROOM = 40
 """Pixels at the panel's bottom kept for the scale bar and its label."""
+
+
+def present_runs(present: np.ndarray) -> list[tuple[int, int, int]]:
+    """``(column, first, stop)`` of every run of two or more consecutive True rows of each column of ``present`` (T, n): the
+    stretches of a trail to draw (a place of a recorded crowd stays empty a step between two people, so a run is one person)."""
+    edges = np.diff(np.pad(present.astype(np.int8), ((1, 1), (0, 0))), axis=0)  # +1 where a run starts, -1 after it ends
+    starts, ends = np.nonzero(edges.T == 1), np.nonzero(edges.T == -1)  # column-major: both in the same (column, row) order
+    return [(int(i), int(a), int(b)) for i, a, b in zip(starts[0], starts[1], ends[1], strict=True) if b - a > 1]
 
 
 def _fit(font: pygame.font.Font, text: str, width: int) -> str:

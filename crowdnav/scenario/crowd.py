@@ -22,12 +22,24 @@ from __future__ import annotations
 
 import math
 import re
-from typing import Annotated, Literal
+from typing import Annotated, Any, Literal
 
-from pydantic import AfterValidator, BeforeValidator, Field, ValidationError, WithJsonSchema, field_validator, model_validator
+from pydantic import (
+    AfterValidator,
+    BeforeValidator,
+    Field,
+    PrivateAttr,
+    SerializerFunctionWrapHandler,
+    ValidationError,
+    WithJsonSchema,
+    field_validator,
+    model_serializer,
+    model_validator,
+)
 from pydantic_core import InitErrorDetails, PydanticCustomError
 
 from crowdnav.paths import SAFE_NAME_EXPECTATION, is_safe_name
+from crowdnav.scenario.crowd_presets import CROWD_PRESETS, DEFAULT_CROWD_PRESET, unknown_crowd_preset_message
 from crowdnav.scenario.errors import show
 from crowdnav.scenario.fields import (
     MAX_HUMANS,
@@ -340,10 +352,20 @@ class Humans(StrictModel):
         description="Named groups (at most 64), instead of count/spawn/goal/goal_rule/mirror_center/on_goal above.",
     )
     see_robot: bool = Field(default=False, description="Whether humans avoid the robot (off as in the paper).")
+    routing: Literal["straight", "geodesic"] = Field(
+        default="straight",
+        description="How social-force humans head for their goal: straight at it (the paper), or geodesic: along the shortest "
+                    "path around walls and furniture when the straight line is blocked (docs/simulator.md#routing-around-furniture).",
+    )
     model: HumanModel = Field(
         default="social_force",
         description="How walking humans choose their velocity: social_force or orca (needs the orca extra: "
                     "pip install -e \".[orca]\" in crowdnav's clone); groups may override.",
+    )
+    preset: str = Field(
+        default=DEFAULT_CROWD_PRESET, json_schema_extra={"enum": list(CROWD_PRESETS)},
+        description="Named crowd values the preferred_speed and social_force fields not given here take: paper (the schema's "
+                    "defaults) or calibrated (normal preferred speeds, parameters fitted to pedestrians; docs/simulator.md#crowd-presets).",
     )
     social_force: SocialForce = Field(default_factory=SocialForce, description="Social-force model parameters.")
     group_force: GroupForce = Field(
@@ -352,6 +374,52 @@ class Humans(StrictModel):
     stall: Stall = Field(default_factory=Stall, description="Stalled humans: no progress toward their goal for a while gives them a new goal.")
     orca: Orca = Field(default_factory=Orca, description="ORCA parameters (humans with model: orca, the ORCA robot baseline).")
     replay: Replay | None = Field(default=None, description="The recording humans with model: replay follow (null: none).")
+    _from_preset: frozenset[str] = PrivateAttr(default=frozenset())
+    """The fields the preset filled in (``preferred_speed``, ``social_force.<name>``): left out of dumps, so a dump loads the same."""
+
+    @field_validator("preset")
+    @classmethod
+    def _known_preset(cls, preset: str) -> str:
+        if preset not in CROWD_PRESETS:
+            raise ValueError(unknown_crowd_preset_message(preset))
+        return preset
+
+    @model_validator(mode="after")
+    def _fill_from_preset(self) -> Humans:
+        # fields never given take the preset's values (not setattr: that would validate again)
+        preset, filled = CROWD_PRESETS[self.preset], set()
+        if preset.preferred_speed is not None and "preferred_speed" not in self.model_fields_set:
+            self.__dict__["preferred_speed"] = preset.preferred_speed
+            filled.add("preferred_speed")
+        for name, value in preset.social_force.items():
+            if name not in self.social_force.model_fields_set:
+                self.social_force.__dict__[name] = value
+                filled.add(f"social_force.{name}")
+        self._from_preset = frozenset(filled)
+        return self
+
+    @model_serializer(mode="wrap")
+    def _dump_as_written(self, handler: SerializerFunctionWrapHandler) -> dict[str, Any]:
+        dumped: dict[str, Any] = handler(self)
+        if self.preset == DEFAULT_CROWD_PRESET and "preset" not in self.model_fields_set:
+            dumped.pop("preset", None)  # files without a preset dump as they always did
+        for name in self._from_preset:
+            if name.startswith("social_force."):
+                dumped["social_force"].pop(name.removeprefix("social_force."), None)
+            else:
+                dumped.pop(name, None)
+        return dumped
+
+    @property
+    def speed_normals(self) -> list[tuple[float, float] | None]:
+        """Per group of :attr:`crowd`: the (mean, sd) of the normal its walkers draw preferred speeds from, clipped to their
+        range, when they take the preset's range (None: uniform in the range)."""
+        normal = CROWD_PRESETS[self.preset].speed_normal
+        if normal is None or "preferred_speed" not in self._from_preset:
+            return [None] * len(self.crowd)
+        if not self.groups:
+            return [normal]
+        return [None if group.standing or group.preferred_speed is not None else normal for group in self.groups]
 
     @model_validator(mode="after")
     def _replay_has_a_recording(self) -> Humans:

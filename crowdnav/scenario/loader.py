@@ -247,16 +247,43 @@ def consistency_issues(scenario: Scenario) -> list[ScenarioIssue]:
                 issues.append(ScenarioIssue(f"{path}.circle_radius", (
                     f"{group.max_count} humans of radius {humans.radius:g} m overlap on a circle of radius {group.circle_radius:g} m; "
                     f"expected at least {humans.radius / math.sin(math.pi / group.max_count):.2f} m")))
-    # Humans are pushed back out of walls after each step; moving less than their radius
-    # per step guarantees their centre never crosses a wall before that happens.
-    human_step = humans.max_preferred_speed * humans.social_force.max_speed_factor * scenario.time_step
-    if humans.max_count > 0 and human_step >= humans.radius:
+    # Humans are pushed back out of walls after each (sub-)step; moving less than their radius per
+    # sub-step guarantees their centre never crosses a wall before that happens (human_substeps).
+    human_step = humans_step_length(scenario)
+    if humans.max_count > 0 and human_step >= MAX_HUMAN_SUBSTEPS * humans.radius:
         issues.append(ScenarioIssue(
             _fastest_speed_field(humans),
             f"humans move up to {human_step:g} m per step (preferred_speed max * max_speed_factor * time_step); "
-            f"expected less than their radius {humans.radius:g} m: lower preferred_speed or time_step",
+            f"expected less than {MAX_HUMAN_SUBSTEPS} times their radius {humans.radius:g} m (at most {MAX_HUMAN_SUBSTEPS} sub-steps "
+            "of less than the radius each): lower preferred_speed or time_step",
         ))
     return issues
+
+
+MAX_HUMAN_SUBSTEPS = 4
+"""Most sub-steps a step splits the humans' motion into: humans may move up to this many radii per step (4 x 0.3 m at
+0.2 s: 6 m/s, three times a brisk walk); faster ones are refused at load."""
+
+
+def humans_step_length(scenario: Scenario) -> float:
+    """The farthest a human can move in one step (m): preferred_speed max * max_speed_factor * time_step."""
+    humans = scenario.humans
+    return humans.max_preferred_speed * humans.social_force.max_speed_factor * scenario.time_step
+
+
+def human_substeps(scenario: Scenario) -> int:
+    """Sub-steps of the humans' motion per step: the fewest that move each human less than its radius per sub-step.
+
+    1 whenever a step moves them less than their radius (every scenario loadable before sub-steps existed: the same
+    episodes bit for bit); a loaded scenario needs at most :data:`MAX_HUMAN_SUBSTEPS`.
+    """
+    step, radius = humans_step_length(scenario), scenario.humans.radius
+    if scenario.humans.max_count == 0 or step < radius:
+        return 1
+    count = math.floor(step / radius) + 1
+    while step / count >= radius:  # a quotient rounded up to a whole number
+        count += 1
+    return count
 
 
 def _robot_issues(scenario: Scenario, path: str, robot: Any) -> list[ScenarioIssue]:

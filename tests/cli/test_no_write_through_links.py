@@ -367,15 +367,11 @@ def test_a_schema_written_to_a_file_replaces_a_link(tmp_path, command):
     assert not out.is_symlink() and "$schema" in json.loads(out.read_text()) and victim.read_text() == VICTIM_TEXT
 
 
-def test_a_benchmark_scripts_result_file_replaces_a_link(tmp_path):
-    from benchmarks.fit_social_force import main as fit_main
-    from benchmarks.fit_social_force import write_synthetic_obsmat
-
+def test_the_fit_commands_synthetic_recording_and_table_replace_links(tmp_path):
     victim = _victim(tmp_path)
     recording = _plant(tmp_path / "out" / "walkers.txt", victim)
-    write_synthetic_obsmat(recording, walkers=8, seed=1)
     table = _plant(tmp_path / "out" / "table.md", victim)
-    assert fit_main([str(recording), "--out", str(table)]) == 0
+    assert main(["scenario", "fit", "--synthetic", str(recording), "--max-rollouts", "20", "--out", str(table)]) == 0
     assert not recording.is_symlink() and not table.is_symlink() and "| ADE (m)" in table.read_text()
     assert victim.read_text() == VICTIM_TEXT
 

@@ -102,7 +102,7 @@ def test_a_relative_recording_is_read_beside_the_scenario_file_and_may_not_leave
     inner = tmp_path / "inner"
     inner.mkdir()
     (inner / "scenario.yaml").write_text(text.replace("walk.txt", "../walk.txt"))
-    with pytest.raises(ScenarioError, match=r"humans.model: .*must stay inside") as error:
+    with pytest.raises(ScenarioError, match=r"humans.replay.file: .*must stay inside") as error:
         Simulator(str(inner / "scenario.yaml"))
     assert "\n" not in str(error.value)
 
@@ -112,7 +112,7 @@ def test_what_replay_needs_is_refused_in_one_line(recording):
         load_world("open_space", {"humans.model": "replay"})
     with pytest.raises(ScenarioError, match="humans.count: the replaying group's count is its number of places"):
         load_world("open_space", {**_replay(recording), "humans.count": [2, 3]})
-    with pytest.raises(ScenarioError, match=r"humans.model: model replay: the recording .* needs 3 places .*expected count >= 3"):
+    with pytest.raises(ScenarioError, match=r"humans.count: model replay: the recording .* needs 3 places .*expected count >= 3"):
         Simulator("open_space", {**_replay(recording), "humans.count": 2})
 
 
@@ -142,3 +142,20 @@ def native_equals_sync(overrides: dict, check_finite: bool = False) -> int:
 def test_the_native_vector_env_with_a_recorded_crowd_equals_the_sync_one(recording):
     ends = native_equals_sync(_replay(recording), check_finite=True)
     assert ends > 0  # resets happened inside the comparison
+
+
+def test_empty_places_are_nobody_to_the_global_state_and_the_planners_estimate(recording):
+    from crowdnav.envs.multi_agent import STATE_COLUMNS, global_state
+    from crowdnav.planning.predictive import CrowdEstimate
+
+    sim = Simulator("open_space", _replay(recording))
+    sim.reset(seed=0)
+    for _ in range(60):  # until a place is empty and another held
+        shown = np.abs(sim.human_positions - PARKING) > 1e6
+        if shown.any() and not shown.all():
+            break
+        sim.step(np.zeros(2))
+    assert shown.any() and not shown.all()
+    table = global_state(sim, sim.max_humans).reshape(-1, len(STATE_COLUMNS))[1:]
+    assert (table[~shown] == 0).all() and (table[shown, 7] == 1).all()  # an empty place's row: zero, inactive
+    assert np.array_equal(CrowdEstimate.from_sim(sim.robot_view(0)).present[0], shown)

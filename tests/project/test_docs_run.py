@@ -3,7 +3,8 @@
 Each documentation file's fenced ``python`` and ``bash`` blocks run in order, in a fresh folder
 that holds the files the examples refer to (``my_room.yaml``: the minimal scenario of
 docs/scenarios.md; ``my_scenarios/lab.yaml``; ``my_policies.py``: the callable of
-docs/evaluate.md). Python blocks of one file share a namespace; shell commands must exit 0.
+docs/evaluate.md; ``ewap_dataset/seq_eth/obsmat.txt``: a synthetic recording for the replay
+recipe). Python blocks of one file share a namespace; shell commands must exit 0.
 
 A block is marked by an HTML comment on the line before its fence:
 ``<!-- docs-test: slow -->`` (minutes of training: it runs with ``pytest -m slow``) or
@@ -22,6 +23,7 @@ from pathlib import Path
 
 import pytest
 
+from tests.cli.test_recording_cli import write_recording
 from tests.paths import REPO
 
 ROOT = REPO
@@ -51,6 +53,9 @@ def workdir(tmp_path: Path) -> Path:
     evaluate = (ROOT / "docs" / "evaluate.md").read_text(encoding="utf-8")
     shutil.copytree(ROOT / "notebooks", tmp_path / "notebooks")  # the docs run it from the repository root
     (tmp_path / "my_policies.py").write_text(re.search(r"```python\n(import numpy as np\n\n\ndef toward_goal.*?)```", evaluate, re.S)[1])
+    # docs/scenarios.md's replay recipe reads an ETH recording, which cannot ship: a synthetic one in its layout and place
+    (tmp_path / "ewap_dataset" / "seq_eth").mkdir(parents=True)
+    write_recording(tmp_path / "ewap_dataset" / "seq_eth" / "obsmat.txt", "obsmat")
     return tmp_path
 
 
