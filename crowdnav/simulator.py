@@ -306,11 +306,9 @@ class Simulator(_StateAttributes):
         velocities, positions = state.velocities, state.positions
         velocities[0] = robot_velocity
         velocities[1:] = commands
-        if self.substeps == 1:
-            positions += velocities * self.dt
-        else:  # the robot's whole step, the humans' first sub-step (the others after its contacts, below)
-            positions[:1] += velocities[:1] * self.dt
-            positions[1:] += velocities[1:] * self.substep_dt
+        # the robot's whole step, the humans' first sub-step (the others after its contacts, below; dt / 1 is dt)
+        positions[:1] += velocities[:1] * self.dt
+        positions[1:] += velocities[1:] * self.substep_dt
         if self.team is not None:
             self.team.move(other_robot_actions, self.dt)
         state.step_count += 1
@@ -370,9 +368,8 @@ class Simulator(_StateAttributes):
     def social_force_commands(self) -> np.ndarray:
         """(n_humans,) complex velocity commands (m/s) of the social-force model in the current state."""
         force, state = self._force, self._state
-        to_goal = state.human_goals - state.positions[1:]
-        if self.router is not None:  # humans.routing: geodesic
-            to_goal = self.router.to_goal(state.positions[1:], state.human_goals)
+        to_goal = (state.human_goals - state.positions[1:] if self.router is None  # humans.routing: geodesic below
+                   else self.router.to_goal(state.positions[1:], state.human_goals))
         total = sf.goal_force(to_goal, force.goal_weight, force.goal_saturation_distance)
         total += self.geometry.repulsion[1:]
         if self.together is not None:  # the walking groups' terms (Moussaïd et al. 2010)

@@ -44,7 +44,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from crowdnav.evaluation.played_options import OptionRefusedError, check_observation_sizes, check_policy_world, refuse_modalities, run_env_options
+from crowdnav.evaluation.played_options import OptionRefusedError, check_played_world, refuse_modalities, run_env_options
 
 from crowdnav.errors import CrowdNavError
 
@@ -133,8 +133,7 @@ def resolve_policy(spec: str, env_options: Mapping[str, Any], *, allow_import: b
             raise PolicyError(f"{path}: {error}") from None
         # its own settings, changed where --scenario and --set say; what its network cannot take is refused in one line
         played = _refused(run_env_options, spec, policy.env_options, options)
-        _refused(check_observation_sizes, spec, policy.env_options, played)
-        _refused(check_policy_world, spec, policy, played)
+        _refused(check_played_world, spec, policy, played)
         return _safe(_run_name(Path(spec))), _run_name(Path(spec)), policy, False, played
     if _CALLABLE.fullmatch(spec):
         if not allow_import:

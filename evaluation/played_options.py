@@ -63,48 +63,41 @@ def _without(settings: Mapping[str, Any], paths: Sequence[Sequence[str]]) -> dic
     return kept
 
 
-def check_observation_sizes(spec: str, trained: Mapping[str, Any], played: Mapping[str, Any]) -> None:
-    """Refuse, naming the options, settings under which the observations differ in size from the run's own."""
-    own, now = _shapes(trained), _shapes(played)
-    if own == now:
-        return
-    from crowdnav.agents.model_zip import describe_shapes
-
-    changed = [path for path in played.get("overrides", {}) if path.split(".")[0] == "sensors"]
-    named = (f"--set {', '.join(changed)}" if changed else f"--scenario {played['scenario']}" if played["scenario"] != trained["scenario"]
-             else "--set")
-    raise OptionRefusedError(f"{named}: {spec} was trained on observations {describe_shapes(own)}, these settings give "
-                             f"{describe_shapes(now)}; its network takes only the sizes it was trained on")
-
-
-def check_policy_world(spec: str, policy: Any, played: Mapping[str, Any]) -> None:
-    """Refuse, naming the setting, a world the policy's own model says it senses otherwise than it was trained to.
-
-    Sizes are checked by :func:`check_observation_sizes`; this asks the model itself (an agent's ``check_world``,
-    e.g. the SARL agent's geodesic spacing, a constant of its lookahead that changes no observation size).
-    """
-    check = getattr(getattr(policy, "model", None), "check_world", None)
-    if check is None:
-        return
+def check_played_world(spec: str, policy: Any, played: Mapping[str, Any]) -> None:
+    """Refuse, naming the options, a world the run cannot play: observations of other sizes than its own (its
+    network takes only those), or one its model says it senses otherwise than it was trained to (an agent's
+    ``check_world``, e.g. the SARL agent's geodesic spacing, a constant of its lookahead that changes no size)."""
     from crowdnav.envs import CrowdNavEnv
 
+    trained = policy.env_options
     env = CrowdNavEnv(**played)
     try:
-        check(env.observation_space, env.scenario)
-    except ValueError as error:  # the agent's one-line mismatch (a CrowdNavError and ValueError)
-        raise OptionRefusedError(f"--set: {spec}: {error}") from None
+        own, now = _shapes(CrowdNavEnv(**trained)), _shapes(env, close=False)
+        if own != now:
+            from crowdnav.agents.model_zip import describe_shapes
+
+            changed = [path for path in played.get("overrides", {}) if path.split(".")[0] == "sensors"]
+            named = (f"--set {', '.join(changed)}" if changed else f"--scenario {played['scenario']}"
+                     if played["scenario"] != trained["scenario"] else "--set")
+            raise OptionRefusedError(f"{named}: {spec} was trained on observations {describe_shapes(own)}, these settings give "
+                                     f"{describe_shapes(now)}; its network takes only the sizes it was trained on")
+        check = getattr(getattr(policy, "model", None), "check_world", None)
+        if check is not None:
+            try:
+                check(env.observation_space, env.scenario)
+            except ValueError as error:  # the agent's one-line mismatch (a CrowdNavError and ValueError)
+                raise OptionRefusedError(f"--set: {spec}: {error}") from None
     finally:
         env.close()
 
 
-def _shapes(options: Mapping[str, Any]) -> dict[str, tuple[int, ...]]:
-    from crowdnav.envs import CrowdNavEnv
-
-    env = CrowdNavEnv(**options)
+def _shapes(env: Any, close: bool = True) -> dict[str, tuple[int, ...]]:
+    """Each observation key's shape in ``env`` (closed after unless ``close`` is false)."""
     try:
-        return {key: tuple(space.shape or ()) for key, space in env.observation_space.items()}  # type: ignore[attr-defined]
+        return {key: tuple(space.shape or ()) for key, space in env.observation_space.items()}
     finally:
-        env.close()
+        if close:
+            env.close()
 
 
 def refuse_modalities(spec: str, requested: Mapping[str, Any], reads: str) -> None:

@@ -201,11 +201,9 @@ class BatchSimulator:
                 commands = np.where(stopped, 0.0, commands)
             velocities[:, 1:] = commands
         velocities.real[:, 0], velocities.imag[:, 0] = robot_re, robot_im  # exactly the scalar's parts
-        if self._substeps == 1:
-            positions += velocities * dt
-        else:  # as Simulator.step: the robot's whole step, the humans' first sub-step
-            positions[:, :1] += velocities[:, :1] * dt
-            positions[:, 1:] += velocities[:, 1:] * self._substep_dt
+        # as Simulator.step: the robot's whole step, the humans' first sub-step (dt / 1 is dt)
+        positions[:, :1] += velocities[:, :1] * dt
+        positions[:, 1:] += velocities[:, 1:] * self._substep_dt
         state.robot_heading[rows] = heading
         state.step_count[rows] += 1
         self._check_finite(bucket, rows, positions, velocities)
@@ -245,9 +243,9 @@ class BatchSimulator:
         """(K, n) :meth:`Simulator.social_force_commands` of ``rows``, every world's at once (``positions`` and ``velocities``:
         the step's (K, n+1) copies of the rows)."""
         force, state = self._force, bucket.state
-        to_goal = state.human_goals[rows] - positions[:, 1:]
-        if self._router is not None:  # humans.routing: geodesic, every world's at once (the slots' shared router)
-            to_goal = self._router.to_goal(positions[:, 1:], state.human_goals[rows])
+        goals = state.human_goals[rows]
+        # humans.routing: geodesic, every world's at once (the slots' shared router)
+        to_goal = goals - positions[:, 1:] if self._router is None else self._router.to_goal(positions[:, 1:], goals)
         total = sf.goal_force(to_goal, force.goal_weight, force.goal_saturation_distance)
         total += bucket.repulsion[rows, 1:]
         if self._together:  # the walking groups' terms, every world's at once

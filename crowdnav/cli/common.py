@@ -12,6 +12,9 @@ import yaml
 from crowdnav.errors import CrowdNavError
 from crowdnav.yaml_input import YamlLimitError, parse_value
 
+RECORDING_FORMATS = ("auto", "obsmat", "frames", "trajnet")
+"""``--format`` of the recording commands: :data:`crowdnav.crowd.recording.RecordingFormat` (not imported: the CLI loads fast)."""
+
 
 class CliError(CrowdNavError, Exception):
     """A user mistake a command reports as one line on stderr (exit status 1), never as a traceback."""

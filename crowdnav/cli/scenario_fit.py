@@ -7,10 +7,8 @@ import math
 import sys
 from pathlib import Path
 
-from crowdnav.cli.common import CliError
+from crowdnav.cli.common import RECORDING_FORMATS, CliError
 from crowdnav.files import atomic_write_text
-
-FORMATS = ("auto", "obsmat", "frames", "trajnet")
 
 
 def register(commands: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
@@ -22,7 +20,7 @@ def register(commands: argparse._SubParsersAction[argparse.ArgumentParser]) -> N
                     "(docs/simulator.md#fitting-the-social-force-to-people). Needs the fit extra (scipy).",
     )
     parser.add_argument("recording", nargs="?", metavar="RECORDING", help="an ETH/UCY obsmat.txt, a frame id x y file or TrajNet++ ndjson")
-    parser.add_argument("--format", choices=FORMATS, default="auto", help="the file's layout (default: auto)")
+    parser.add_argument("--format", choices=RECORDING_FORMATS, default="auto", help="the file's layout (default: auto)")
     parser.add_argument("--annotation-step", type=float, default=0.4, metavar="S", help="seconds between annotations (ETH/UCY: 0.4)")
     parser.add_argument("--time-step", type=float, default=None, metavar="S", help="the grid's step (default: the annotation step)")
     parser.add_argument("--horizon", type=float, default=4.8, metavar="S", help="seconds simulated from each recorded state (default 4.8)")

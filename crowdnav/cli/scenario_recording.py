@@ -9,10 +9,8 @@ from pathlib import Path
 import yaml
 
 from crowdnav.cli import scenario_fit
-from crowdnav.cli.common import CliError
+from crowdnav.cli.common import RECORDING_FORMATS, CliError
 from crowdnav.files import atomic_write_text
-
-FORMATS = ("auto", "obsmat", "frames", "trajnet")
 
 
 def register(commands: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
@@ -24,7 +22,7 @@ def register(commands: argparse._SubParsersAction[argparse.ArgumentParser]) -> N
                     "with `crowdnav render SCENARIO --episodes 1`.",
     )
     parser.add_argument("file", metavar="FILE", help="the recording")
-    parser.add_argument("--format", choices=FORMATS, default="auto", help="the file's layout (default: auto, from the name and columns)")
+    parser.add_argument("--format", choices=RECORDING_FORMATS, default="auto", help="the file's layout (default: auto, from the name and columns)")
     parser.add_argument("--annotation-step", type=float, default=0.4, metavar="S",
                         help="seconds between two annotations (default 0.4, ETH/UCY; a TrajNet++ scene's fps overrides it)")
     parser.add_argument("--time-step", type=float, default=0.2, metavar="S", help="the scenario's time step (default 0.2 s)")

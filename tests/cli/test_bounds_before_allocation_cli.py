@@ -32,13 +32,9 @@ def test_from_recording_refuses_64_mib_of_comment_lines_in_one_line_under_1_gib(
 
 
 def test_validate_refuses_a_replay_episode_of_2000_places_over_20000_steps_in_one_line(tmp_path):
-    (tmp_path / "walk.txt").write_text("0 1 0 0\n10 1 1 0\n")
-    scenario = tmp_path / "big_replay.yaml"
-    scenario.write_text("description: a replay too big for one episode\n"
-                        "world: {min: [-5, -5], max: [5, 5]}\n"
-                        "robot: {start: {type: rectangle, min: [-4, -4], max: [-3, -3]}, goal: {type: rectangle, min: [3, 3], max: [4, 4]}}\n"
-                        "humans: {count: 2000, model: replay, replay: {file: walk.txt}}\n"
-                        "max_steps: 20000\n")
+    from tests.core.test_bounds_before_allocation import write_big_replay
+
+    scenario = write_big_replay(tmp_path, flow=True)
     error = _refused("render", str(scenario), "--episodes", "1", "--out", str(tmp_path / "video"))
     assert "big_replay.yaml:4" in error and "40,002,000 (place, step) positions" in error
 

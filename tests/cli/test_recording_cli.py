@@ -116,3 +116,12 @@ def test_the_recorded_scenario_renders_evaluates_and_exports_only_present_people
         assert (np.abs(np.diff(where)) <= fastest * dt + 1e-3).all()
     humans = table[table["agent"] != "robot"]
     assert humans["track"].nunique() >= 4  # people of the windows, each its own track
+
+
+def test_the_recording_commands_offer_exactly_the_formats_the_reader_takes():
+    from typing import get_args
+
+    from crowdnav.cli.common import RECORDING_FORMATS
+    from crowdnav.crowd.recording import RecordingFormat
+
+    assert RECORDING_FORMATS == get_args(RecordingFormat)

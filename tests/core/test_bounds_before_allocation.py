@@ -10,6 +10,8 @@ tests/cli/test_bounds_before_allocation_cli.py.
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 
@@ -110,14 +112,21 @@ def test_places_needed_counts_comings_and_goings_without_an_array_of_the_whole_s
 # ------------------------------------------------------------------------------------------------ replay episodes
 
 
-def test_a_replay_group_of_2000_places_over_20000_steps_is_refused_at_validation_naming_the_count(tmp_path):
-    (tmp_path / "walk.txt").write_text("0 1 0 0\n10 1 1 0\n")
-    scenario = tmp_path / "big_replay.yaml"
+def write_big_replay(folder: Path, flow: bool = False) -> Path:
+    """A scenario replaying a 2-row recording with 2,000 places over 20,000 steps (``humans.count`` on line 5; 4 with ``flow``)."""
+    (folder / "walk.txt").write_text("0 1 0 0\n10 1 1 0\n")
+    scenario = folder / "big_replay.yaml"
     scenario.write_text("description: a replay too big for one episode\n"
                         "world: {min: [-5, -5], max: [5, 5]}\n"
                         "robot: {start: {type: rectangle, min: [-4, -4], max: [-3, -3]}, goal: {type: rectangle, min: [3, 3], max: [4, 4]}}\n"
-                        "humans:\n  count: 2000\n  model: replay\n  replay: {file: walk.txt}\n"
-                        "max_steps: 20000\n")
+                        + ("humans: {count: 2000, model: replay, replay: {file: walk.txt}}\n" if flow else
+                           "humans:\n  count: 2000\n  model: replay\n  replay: {file: walk.txt}\n")
+                        + "max_steps: 20000\n")
+    return scenario
+
+
+def test_a_replay_group_of_2000_places_over_20000_steps_is_refused_at_validation_naming_the_count(tmp_path):
+    scenario = write_big_replay(tmp_path)
     with pytest.raises(ScenarioError) as error:
         load_world(str(scenario))
     message = _one_line(error)
