@@ -12,7 +12,8 @@ constant), never over humans.
 A group with ``walk_together`` (Moussaïd et al. 2010, PLoS ONE 5(4): e10047; the forces are
 :func:`crowdnav.social_force.group_force`) starts on a small circle like a standing one, shares
 one goal, has arrived when its walking members' centre of mass is within the goal tolerance
-(:func:`arrivals`), and takes its next goal as a whole, also when one member stalled.
+(plus its circle radius under geodesic routing: :func:`arrivals`), and takes its next goal as a
+whole, also when one member stalled.
 """
 
 from __future__ import annotations
@@ -180,7 +181,10 @@ def arrivals(distance: np.ndarray, humans: np.ndarray, goals: np.ndarray, group:
     A human whose ``distance`` to its goal is within ``goal_tolerance`` (stopped ones too: the caller
     masks them); in a group that walks together, a walking member when the centre of mass of the
     group's walking members is within it of the group's goal (all of them arrive together), a
-    stopped one never. ``sim``: the simulator (its scenario and ``together`` table).
+    stopped one never. With ``humans.routing: geodesic`` the group's circle radius is added to the
+    tolerance: members gathered around a goal beside a wall or bench (where they cannot stand
+    around it, so their centre stays off it) have arrived. ``sim``: the simulator (its scenario,
+    placement and ``together`` table).
     """
     tolerance = sim.scenario.humans.social_force.goal_tolerance
     arrived: np.ndarray = distance <= tolerance
@@ -192,8 +196,14 @@ def arrivals(distance: np.ndarray, humans: np.ndarray, goals: np.ndarray, group:
     index, key, bins = sf.member_keys(in_group & ~stopped, group, len(table))
     if len(index):
         _, centres = sf.group_centroids(humans.reshape(-1)[index], key, bins)
-        arrived.reshape(-1)[index] = np.abs(goals.reshape(-1)[index] - centres[key]) <= tolerance
+        reach = tolerance if sim.scenario.humans.routing != "geodesic" else tolerance + _circle_radii(sim)[key % len(table)]
+        arrived.reshape(-1)[index] = np.abs(goals.reshape(-1)[index] - centres[key]) <= reach
     return arrived
+
+
+def _circle_radii(sim: GroupWorld) -> np.ndarray:
+    """(G,) m: each group's circle radius, how far a gathered group's members stand from its centre."""
+    return np.array([places.circle_radius for places in sim.placement.groups])
 
 
 def stall_window(scenario: Scenario) -> int:

@@ -45,6 +45,7 @@ from crowdnav import social_force as sf
 from crowdnav.contacts import goal_distance
 from crowdnav.crowd import Crowd
 from crowdnav.crowd.base import action_commands
+from crowdnav.crowd.passing import passing_force
 from crowdnav.crowd.routing import Router, router_for
 from crowdnav.crowd.views import WorldView
 from crowdnav.episode_draw import draw_state
@@ -371,6 +372,9 @@ class Simulator(_StateAttributes):
         to_goal = (state.human_goals - state.positions[1:] if self.router is None  # humans.routing: geodesic below
                    else self.router.to_goal(state.positions[1:], state.human_goals))
         total = sf.goal_force(to_goal, force.goal_weight, force.goal_saturation_distance)
+        if self.router is not None:  # routed humans side-step oncoming ones (crowdnav.crowd.passing)
+            total += passing_force(state.positions[1:], to_goal, ~state.human_stopped, self.scenario.humans.radius, force.goal_weight,
+                                   state.human_group, self.together)
         total += self.geometry.repulsion[1:]
         if self.together is not None:  # the walking groups' terms (Moussaïd et al. 2010)
             total += self.group_terms(state.positions[1:], state.velocities[1:], state.human_preferred_speed, state.human_group,

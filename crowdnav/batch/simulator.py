@@ -32,6 +32,7 @@ from crowdnav.batch.bucket import Bucket
 from crowdnav.batch.scalar_math import TWO_PI, cmul, remainder
 from crowdnav.batch.state import BatchState
 from crowdnav.contacts import deepest_contact, goal_distance, outside, push_humans_apart, push_out_of_obstacles, touching
+from crowdnav.crowd.passing import passing_force
 from crowdnav.crowd.views import BatchView
 from crowdnav.events import Collision, SimulationError
 from crowdnav.groups import apply_goal_rules, arrivals, stalled_humans
@@ -247,6 +248,9 @@ class BatchSimulator:
         # humans.routing: geodesic, every world's at once (the slots' shared router)
         to_goal = goals - positions[:, 1:] if self._router is None else self._router.to_goal(positions[:, 1:], goals)
         total = sf.goal_force(to_goal, force.goal_weight, force.goal_saturation_distance)
+        if self._router is not None:  # routed humans side-step oncoming ones, as Simulator.social_force_commands
+            total += passing_force(positions[:, 1:], to_goal, ~state.human_stopped[rows], self.scenario.humans.radius, force.goal_weight,
+                                   state.human_group[rows], self.slots[0].together)
         total += bucket.repulsion[rows, 1:]
         if self._together:  # the walking groups' terms, every world's at once
             total += self.slots[0].group_terms(positions[:, 1:], velocities[:, 1:], state.human_preferred_speed[rows],

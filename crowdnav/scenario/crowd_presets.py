@@ -11,9 +11,10 @@ gives the values, their sources and how each maps onto crowdnav's formulas.
   clipped to mean +- 2 sd; the speed cap 1.3 times the preferred speed (Helbing & Molnár 1995);
   relaxation time 0.54 s (Moussaïd, Helbing, Garnier, Johansson, Combe & Theraulaz 2009, Proc. R.
   Soc. B 276: 2755); human repulsion from the circular specification fitted to video tracks
-  (Johansson, Helbing & Shukla 2007, Adv. Complex Syst. 10: 271; table 1 of Moussaïd et al. 2009):
-  ``A = 0.42 m/s^2``, ``B = 1.65 m``; walls from Helbing & Molnár 1995 (``U0 = 10 m^2/s^2``,
-  ``R = 0.2 m``).
+  (Johansson, Helbing & Shukla 2007, Adv. Complex Syst. 10: 271): ``A = 0.42 m/s^2``, ``B = 1.65 m``;
+  walls from Helbing & Molnár 1995 (``U0 = 10 m^2/s^2``, ``R = 0.2 m``). Checked for issue 52 against
+  secondary write-ups that quote the papers (the papers' own text was not reachable): every value agrees;
+  docs/simulator.md#crowd-presets says which source gives which and what stays unconfirmed.
 
 Mapping (approximate where said). crowdnav's repulsions are dimensionless parts of the desired
 direction: the acceleration they give is ``v* F / tau``. A published acceleration ``a`` (m/s^2)
@@ -41,9 +42,9 @@ DEFAULT_CROWD_PRESET = "paper"
 SPEED_MEAN, SPEED_SD = 1.34, 0.26
 """Free walking speed (m/s): Weidmann (1993), the preferred speeds of Helbing & Molnár (1995)."""
 RELAXATION_TIME = 0.54
-"""Seconds (Moussaïd et al. 2009, measured on their participants)."""
+"""Seconds (Moussaïd et al. 2009: 0.54 +- 0.05 s, estimated from their participants' starts, with desired speeds 1.29 m/s)."""
 _HUMAN_A, _HUMAN_B = 0.42, 1.65
-"""Circular specification fitted by Johansson, Helbing & Shukla (2007): m/s^2 and m."""
+"""Circular specification fitted by Johansson, Helbing & Shukla (2007): m/s^2 and m (+- 0.26 and 1.01; lambda 0.12 unused)."""
 _WALL_U0, _WALL_R, _BODY_RADIUS = 10.0, 0.2, 0.3
 """Helbing & Molnár (1995)'s wall potential (m^2/s^2, m), and the body radius its force is written at (m)."""
 

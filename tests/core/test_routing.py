@@ -7,6 +7,7 @@ import pytest
 
 from crowdnav import Simulator
 from crowdnav.batch.simulator import BatchSimulator
+from crowdnav.crowd.passing import passing_force
 from crowdnav.crowd.routing import Router
 from crowdnav.scenario.errors import ScenarioError
 from crowdnav.world import load_world
@@ -71,7 +72,15 @@ def test_routing_other_than_straight_or_geodesic_is_refused_in_one_line():
         Simulator(BEHIND_BENCH, {"humans.routing": "shortest"})
 
 
-def test_batched_simulator_gives_the_single_simulators_episodes_with_geodesic_routing():
+def test_batched_simulator_gives_the_single_simulators_episodes_with_geodesic_routing(monkeypatch):
+    sidesteps = []  # the passing force (crowdnav.crowd.passing) acts in these episodes: the batch agrees on it too
+
+    def counted(*args: object) -> np.ndarray:
+        force = passing_force(*args)  # type: ignore[arg-type]
+        sidesteps.append(int((force != 0).sum()))
+        return force
+
+    monkeypatch.setattr("crowdnav.simulator.passing_force", counted)
     world = load_world(L_ROOM, {"humans.routing": "geodesic"})
     batch = BatchSimulator(world, 3)
     batch.reset(range(3), [0, 1, 2])
@@ -86,3 +95,5 @@ def test_batched_simulator_gives_the_single_simulators_episodes_with_geodesic_ro
         bucket, row = batch.locate(k)
         np.testing.assert_array_equal(bucket.state.positions[row], single.state.positions)
         np.testing.assert_array_equal(bucket.state.human_goals[row], single.state.human_goals)
+        np.testing.assert_array_equal(bucket.state.human_stalls[row], single.state.human_stalls)
+    assert sum(sidesteps) > 0
