@@ -11,8 +11,8 @@ it takes the move that keeps the most room.
 
 What it reads is a :class:`CrowdEstimate`: from the simulator (:meth:`CrowdEstimate.from_sim`:
 the true current state of every human; the baseline is privileged that far) or from a robot's
-own observation (:mod:`crowdnav.planning.observed`: the humans its tracker reports). It never
-reads the future. Worlds are batched: one call plans K worlds of one map with the same arrays.
+own observation (:meth:`CrowdEstimate.from_tracker`: the humans its tracker reports; the ``plan``
+modality and ``baseline:onboard``). It never reads the future. Worlds are batched: one call plans K worlds of one map with the same arrays.
 """
 
 from __future__ import annotations
