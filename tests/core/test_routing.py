@@ -10,6 +10,7 @@ from crowdnav.batch.simulator import BatchSimulator
 from crowdnav.crowd.passing import passing_force
 from crowdnav.crowd.routing import Router
 from crowdnav.scenario.errors import ScenarioError
+from crowdnav.scenario.library import library_names
 from crowdnav.world import load_world
 
 L_ROOM = Path(__file__).with_name("routing_l_room.yaml")
@@ -97,3 +98,21 @@ def test_batched_simulator_gives_the_single_simulators_episodes_with_geodesic_ro
         np.testing.assert_array_equal(bucket.state.human_goals[row], single.state.human_goals)
         np.testing.assert_array_equal(bucket.state.human_stalls[row], single.state.human_stalls)
     assert sum(sidesteps) > 0
+
+
+@pytest.mark.parametrize("name", library_names())
+def test_every_library_scenario_runs_geodesic_routing_with_the_calibrated_preset_and_the_batch_agrees(name):
+    world = load_world(name, {"humans.routing": "geodesic", "humans.preset": "calibrated"})
+    single = Simulator(world)
+    single.reset(seed=0)
+    batch = BatchSimulator(world, 2) if world.scenario.robots is None else None  # robot teams step through the envs
+    if batch is not None:
+        batch.reset(range(2), [0, 1])
+    for _ in range(50):
+        single.step(np.zeros(2))  # the other robots of a team stand still
+        if batch is not None:
+            batch.step(np.zeros((2, 2)))
+    assert np.isfinite(single.state.positions).all()
+    if batch is not None:
+        bucket, row = batch.locate(0)
+        np.testing.assert_array_equal(bucket.state.positions[row], single.state.positions)
