@@ -1,6 +1,7 @@
 """Gymnasium env throughput: env steps/s with all modalities, resets included, and where the time goes.
 
     python benchmarks/bench_env.py [--scenario room_furniture] [--steps 10000] [--repeats 5] [--counts 5 10 20 50]
+    python benchmarks/bench_env.py --floor [--scenarios room_furniture open_space] [--steps 3000] [--repeats 5] [--clock cpu]
 
 One CrowdNavEnv (no wrappers, no vectorization) with every modality on (goal, closest obstacle,
 360-beam LIDAR, 60x60 LEOG, velocity); the robot takes uniformly random actions (pre-drawn, so
@@ -10,7 +11,11 @@ median over repeats.
 The breakdown replays the same action sequence on the env's own simulator and times each part
 separately, per env step: the simulator (step and resets), each sensor's observe(), the env's
 action check + reward + info, and the rest (env total minus all those: Python call layers, the
-observation dict, and timing noise).
+observation dict, the observation each reset returns, which the breakdown does not make, and timing
+noise).
+
+``--floor``: the env side by side with its numpy floor (:mod:`bench_env_floor`): the same episodes'
+work done directly on the env's own simulator, sensors and reward, without the env layer.
 """
 
 from __future__ import annotations
@@ -71,6 +76,11 @@ def part_seconds_per_step(env: CrowdNavEnv, actions: np.ndarray, seed: int) -> d
 
 
 def main() -> None:
+    if "--floor" in sys.argv:  # the side-by-side with the floor has its own options
+        from bench_env_floor import main as floor_main
+
+        floor_main()
+        return
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--scenario", default="room_furniture")
     parser.add_argument("--steps", type=int, default=10000, help="timed env steps per repeat")

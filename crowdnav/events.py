@@ -38,9 +38,16 @@ def outcome_of(collided: bool, left_world: bool, goal_reached: bool, truncated: 
     The one world case of :func:`outcomes`, in Python scalars: a step of the single env pays no
     numpy call for it. The events are given in the precedence's order.
     """
-    for outcome, happened in zip(OUTCOME_PRECEDENCE, (collided, left_world, goal_reached, truncated), strict=True):
-        if happened:
-            return outcome
+    # OUTCOME_PRECEDENCE written out (tests/core/test_reward_outcome_kernel.py checks it against outcomes()):
+    # a loop over it cost the single env ~1 us a step
+    if collided:
+        return "collision"
+    if left_world:
+        return "out_of_bounds"
+    if goal_reached:
+        return "success"
+    if truncated:
+        return "truncated"
     return None
 
 

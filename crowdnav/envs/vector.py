@@ -21,7 +21,7 @@ from crowdnav.contacts import goal_distance
 from crowdnav.envs.core import ScenarioSource, checked_residual, load_env_world, option_overrides
 from crowdnav.envs.reward import REWARD_TERMS, reward_terms
 from crowdnav.envs.vector_actions import checked_actions, checked_replay, executed
-from crowdnav.envs.vector_infos import end_infos, reward_term_infos, same_step_infos
+from crowdnav.envs.vector_infos import end_infos, every_infos, reward_term_infos, same_step_infos
 from crowdnav.envs.vector_team import TeamWorlds
 from crowdnav.events import outcomes
 from crowdnav.planning.shield import validate_shield
@@ -79,7 +79,7 @@ class CrowdNavVectorEnv(VectorEnv):
 
     **Episode seeds.** ``episode_seeds(worlds)`` (optional) gives the seeds of the episodes an
     autoreset starts, for ``worlds`` in ascending order (training numbers its episodes this way,
-    :class:`crowdnav.agents.seeding.EpisodeSeedCounter`); without it an autoreset continues each
+    :class:`crowdnav.agents.training.seeding.EpisodeSeedCounter`); without it an autoreset continues each
     world's generator.
 
     **Memory.** With ``keep_freed_memory`` (default) the env raises glibc malloc's trim threshold
@@ -125,6 +125,8 @@ class CrowdNavVectorEnv(VectorEnv):
         else:  # one single env per world, stepped in one call (crowdnav.envs.vector_team)
             self.batch = TeamWorlds(world, num_envs, other_robots)
             self.modalities = self.batch.modalities  # several robots: the first robot's own (robots.0.modalities)
+        # worlds that are plain single envs (one robot): when all step, TeamWorlds.step_every steps them
+        self._single_worlds = self.batch if isinstance(self.batch, TeamWorlds) and self.batch.plain else None
         self.residual = checked_residual(residual, self.modalities)
         if keep_freed_memory:
             _keep_freed_memory()
@@ -142,6 +144,7 @@ class CrowdNavVectorEnv(VectorEnv):
         self._started = np.zeros(b, dtype=bool)
         self._all_started = False
         self._ended = np.zeros(b, dtype=bool)  # the episode ended at the last step (NEXT_STEP: reset next; DISABLED: wait)
+        self._none_ended = True  # not self._ended.any(), kept as a bool: every world steps next (one world: all steps but a reset's)
         self._last_flags = (np.zeros(b, dtype=bool), np.zeros(b, dtype=bool))
         # the modalities' own Boxes (the same objects as the Dict's): a Box's shape is never None
         self._observations = {key: np.zeros((b, *modality.space().shape), dtype=modality.space().dtype) for key, modality in self._sensors}
@@ -179,6 +182,7 @@ class CrowdNavVectorEnv(VectorEnv):
         self._started[worlds] = True
         self._all_started = bool(self._started.all())
         self._ended[worlds] = False
+        self._none_ended = not self._ended.any()
         for flags in self._last_flags:
             flags[worlds] = False
         if isinstance(self.batch, BatchSimulator):  # single envs keep their own (their Reward)
@@ -206,31 +210,40 @@ class CrowdNavVectorEnv(VectorEnv):
         actions = checked_actions(actions, self.num_envs)
         infos: dict[str, Any] = {}
         stepping = ~self._ended
-        every = not self._ended.any()  # every world steps (then no mask is applied below: the common case, one world's always)
+        every = self._none_ended  # every world steps (then no mask is applied below: the common case, one world's always)
         if not every:
             if self.autoreset_mode is AutoresetMode.NEXT_STEP:
                 self._autoreset(np.flatnonzero(self._ended))
             if not stepping.any():  # every world is waiting (DISABLED) or was just reset
                 self._observe_all()
                 return self._copy_observations(), np.zeros(self.num_envs), *self._waiting_flags(), infos
-        actions, shielded = self._executed(actions)
+        actions, shielded = self._executed(actions) if self.residual or self.shield is not None else (actions, None)
         if shielded is not None:  # every stepping world's flag (the vector infos' mask convention)
             infos["shielded"], infos["_shielded"] = shielded, stepping.copy()
-        result = self.batch.step(actions, None if every else stepping)
-        terminated = result.terminated if every else result.terminated & stepping
-        truncated = result.truncated & ~terminated if every else result.truncated & stepping & ~terminated
-        outcome, rewards, terms = self._judged(result, stepping, every)
-        reward_term_infos(infos, terms, stepping, every)
+        if every and self._single_worlds is not None:  # one world: every step but a reset's
+            stepped = self._single_worlds.step_every(actions)  # the same arrays, each made once from the worlds' scalars
+            rewards, terminated, truncated = stepped.rewards, stepped.terminated, stepped.truncated
+            every_infos(infos, stepped, stepping)
+            none_ended: bool | None = not stepped.ended  # (every world stepped, so in every mode self._ended becomes theirs)
+        else:
+            result = self.batch.step(actions, None if every else stepping)
+            terminated = result.terminated if every else result.terminated & stepping
+            truncated = result.truncated & ~terminated if every else result.truncated & stepping & ~terminated
+            outcome, rewards, terms = self._judged(result, stepping, every)
+            reward_term_infos(infos, terms, stepping, every)
+            end_infos(infos, self.batch, result, outcome, stepping, self._add_info, every)
+            none_ended = None
         ended = terminated | truncated
-        end_infos(infos, self.batch, result, outcome, stepping, self._add_info, every)
         self._observe_all()
-        if self.autoreset_mode is AutoresetMode.DISABLED:
+        disabled = self.autoreset_mode is AutoresetMode.DISABLED
+        if disabled:
             waiting = self._ended.copy()
             terminated |= waiting & self._last_flags[0]
             truncated |= waiting & self._last_flags[1]
             self._last_flags = (terminated.copy(), truncated.copy())  # what the waiting worlds repeat
-        self._ended = self._ended | ended if self.autoreset_mode is AutoresetMode.DISABLED else ended
-        if self.autoreset_mode is AutoresetMode.SAME_STEP and ended.any():
+        self._ended = self._ended | ended if disabled else ended
+        self._none_ended = not self._ended.any() if none_ended is None else none_ended
+        if self.autoreset_mode is AutoresetMode.SAME_STEP and not self._none_ended:  # (self._ended is ended)
             infos = self._same_step_reset(infos, ended)
         return self._copy_observations(), rewards, terminated, truncated, infos
 

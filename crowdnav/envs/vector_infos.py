@@ -14,21 +14,39 @@ import numpy as np
 
 from crowdnav.batch.simulator import BatchSimulator, StepResult
 from crowdnav.envs.reward import REWARD_TERMS
-from crowdnav.envs.vector_team import TeamWorlds
+from crowdnav.envs.vector_team import EveryStep, TeamWorlds
+from crowdnav.events import Collision
+
+MASKED_TERMS = tuple((term, f"_{term}") for term in REWARD_TERMS)
+"""Each reward term's key and its mask's, made once (not an f-string per term per step)."""
 
 
 def reward_term_infos(infos: dict[str, Any], terms: dict[str, np.ndarray], stepping: np.ndarray, every: bool) -> None:
     """``infos["reward_terms"]``: each term's (num_envs,) values (``terms``' values for the stepping worlds, 0 elsewhere;
     ``every``: all worlds stepped, and each term's values are ``terms``' own arrays, new ones every step)."""
     out: dict[str, np.ndarray] = {}
-    for term in REWARD_TERMS:
+    for term, mask in MASKED_TERMS:
         if every:
             values = terms[term]
         else:
             values = np.zeros(len(stepping))
             values[stepping] = terms[term]
-        out[term], out[f"_{term}"] = values, stepping.copy()
+        out[term], out[mask] = values, stepping.copy()
     infos["reward_terms"], infos["_reward_terms"] = out, stepping.copy()
+
+
+def every_infos(infos: dict[str, Any], stepped: EveryStep, stepping: np.ndarray) -> None:
+    """:func:`reward_term_infos` then :func:`end_infos` (the same keys in the same order, the same values) when every
+    world of one robot stepped (``stepping`` all True): from :meth:`TeamWorlds.step_every`'s arrays, without recomputing them."""
+    out: dict[str, np.ndarray] = {}
+    for term, mask in MASKED_TERMS:
+        out[term], out[mask] = stepped.terms[term], stepping.copy()
+    infos["reward_terms"], infos["_reward_terms"] = out, stepping.copy()
+    infos["outcome"], infos["_outcome"] = stepped.outcome, stepping.copy()
+    infos["is_success"], infos["_is_success"] = stepped.success, stepping.copy()
+    infos["human_stalls"], infos["_human_stalls"] = stepped.stalls, stepping.copy()
+    if stepped.collisions:  # rare: end_infos' own code for them
+        collision_infos(infos, stepped.collisions, stepped.outcome == "collision")
 
 
 def end_infos(
@@ -55,11 +73,17 @@ def end_infos(
         for bucket in batch.buckets.values():  # per crowd size
             stalls[bucket.world] = bucket.state.human_stalls.sum(1)
     infos["human_stalls"], infos["_human_stalls"] = stalls if every else np.where(stepping, stalls, 0), stepping.copy()
-    collided = outcome == "collision" if result.collisions else None  # the collisions of worlds that stepped
-    if collided is not None and collided.any():
+    if result.collisions:
+        collision_infos(infos, result.collisions, outcome == "collision")  # the collisions of worlds that stepped
+
+
+def collision_infos(infos: dict[str, Any], collisions: dict[int, Collision], collided: np.ndarray) -> None:
+    """``collision_kind`` / ``collision_partner`` of the worlds in ``collided`` (their outcome is "collision") from ``collisions``."""
+    if collided.any():
+        b = len(collided)
         kind, partner = np.full(b, None, dtype=object), np.full(b, None, dtype=object)
         for i in np.flatnonzero(collided):  # per collision event
-            hit = result.collisions[int(i)]
+            hit = collisions[int(i)]
             kind[i], partner[i] = hit.kind, hit.partner
         infos["collision_kind"], infos["_collision_kind"] = kind, collided
         infos["collision_partner"], infos["_collision_partner"] = partner, collided.copy()

@@ -25,19 +25,39 @@ docs/environments.md#several-robots measures it.
 from __future__ import annotations
 
 from collections.abc import Callable, Sequence
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 
 from crowdnav.batch.simulator import StepResult
 from crowdnav.envs.reward import REWARD_TERMS
 from crowdnav.envs.single import CrowdNavEnv
-from crowdnav.events import StepEvents
+from crowdnav.events import Collision, StepEvents
 from crowdnav.robot_view import RobotWorld
 from crowdnav.sensors import Modality
 from crowdnav.sensors.lidar import LidarModality
 from crowdnav.simulator import Simulator
 from crowdnav.world import CompiledWorld
+
+
+class EveryStep(NamedTuple):
+    """One step of every world, one robot each (:meth:`TeamWorlds.step_every`): what :meth:`TeamWorlds.step`,
+    :meth:`TeamWorlds.judged` and :meth:`TeamWorlds.stalls` give the vector env, as new (num_worlds,) arrays."""
+
+    rewards: np.ndarray
+    terminated: np.ndarray
+    truncated: np.ndarray
+    """Truncated and not terminated (the single env's flag)."""
+    outcome: np.ndarray
+    """Object: each world's outcome, "truncated" while it runs on."""
+    success: np.ndarray
+    """The outcome is "success"."""
+    terms: dict[str, np.ndarray]
+    stalls: np.ndarray
+    collisions: dict[int, Collision]
+    """World -> the robot's collision, for the worlds whose robot collided."""
+    ended: bool
+    """Some world's episode ended (terminated or truncated)."""
 
 
 class TeamWorlds:
@@ -66,6 +86,8 @@ class TeamWorlds:
         self.other_robots: list[dict[str, str | None]] = [{} for _ in range(self.num_worlds)]
         self.team = world.scenario.robots is not None
         """Several robots per world (``robots:``): the other robots' infos and the batched first-robot LIDAR."""
+        self.plain = all(env.core.plain for env in self.envs)
+        """Every world's core is :attr:`crowdnav.envs.core.EnvCore.plain` (one robot, no shield, plan or view): :meth:`step_every` steps them."""
 
     def reset(self, worlds: Sequence[int] | np.ndarray, seeds: Sequence[int | None] | np.ndarray) -> None:
         """Start a new episode in each of ``worlds`` (``seeds[k]`` for ``worlds[k]``; None continues its generator)."""
@@ -101,6 +123,38 @@ class TeamWorlds:
             self._record(result, i, events, info["reward_terms"])
             self.other_robots[i] = info["other_robots"]
         return result
+
+    def step_every(self, actions: np.ndarray) -> EveryStep:
+        """Step every world (all :attr:`plain`) with its row of ``actions`` (checked, float64): :meth:`step` and what
+        the vector env then asks of it, in one pass (one world: every step but an autoreset's).
+
+        Each world's core steps and observes as in :meth:`step` (:meth:`crowdnav.envs.core.EnvCore.step_plain`, its
+        action already checked: not again); its scalars make each array once, where :meth:`step` writes them into
+        this object's arrays for :meth:`judged` and the vector env's info code to copy and recompute: at one world
+        those small numpy calls were most of what the vector env cost over the single env
+        (docs/environments.md#one-world-and-crowds-of-200-humans-or-more). Leaves ``rewards``, ``terms`` and
+        ``outcomes`` as they were (only :meth:`judged` reads them, after :meth:`step`).
+        """
+        rewards, terminated, truncated, success, outcome, stalls = [], [], [], [], [], []
+        terms: list[dict[str, float]] = []
+        collisions = {}
+        for i, env in enumerate(self.envs):
+            core = env.core
+            self.observations[i], events, reward, own = core.step_plain(actions[i], checked=True)
+            ended = events.terminated
+            rewards.append(reward)
+            terminated.append(ended)
+            truncated.append(events.truncated and not ended)
+            outcome.append(events.outcome or "truncated")
+            success.append(outcome[-1] == "success")
+            terms.append(own)
+            stalls.append(int(np.add.reduce(env.simulator.human_stalls)))  # .sum() without its Python wrapper
+            if events.collision is not None:
+                collisions[i] = events.collision
+        return EveryStep(np.array(rewards, dtype=float), np.array(terminated, dtype=bool), np.array(truncated, dtype=bool),
+                         np.array(outcome, dtype=object), np.array(success, dtype=bool),
+                         {term: np.array([world[term] for world in terms], dtype=float) for term in REWARD_TERMS},
+                         np.array(stalls, dtype=np.int64), collisions, any(terminated) or any(truncated))
 
     def _record(self, result: StepResult, i: int, events: StepEvents, terms: dict[str, float]) -> None:
         """World ``i``'s step: its events in the batch's ``result``, its outcome and reward terms here."""
