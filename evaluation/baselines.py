@@ -17,6 +17,11 @@ robot of the scenario, :mod:`crowdnav.evaluation.robot_rollout`):
 * ``predictive``: the same planner fed the true current state of every human (privileged);
 * ``oracle``: knows the humans' future (the ceiling, docs/planning.md).
 
+Beside a configuration that trains with the action-time shield (``shield`` in its ``train``), the experiment
+also plays ``straight_shield`` and ``social_force_shield``: the same scripted robots with that same shield in
+their loop (:data:`SHIELDED_BASELINES`), so a shielded agent is shown beside what the shield alone makes of
+driving straight at the goal and of the social-force robot (the shield is reported apart, never the target).
+
 Another, ``orca`` (ORCA with the true positions and velocities of everyone, the field's standard
 scripted baseline), needs the optional package pyrvo: ``crowdnav evaluate baseline:orca`` plays
 it on demand; experiments do not, so their results never depend on an extra.
@@ -60,8 +65,14 @@ BASELINES: dict[str, str] = {
     "onboard": "onboard planner: tracker + map (scripted)",
     "predictive": "predictive planner, privileged: state + map (scripted)",
     "oracle": "oracle, privileged: knows the future (ceiling)",
+    "straight_shield": "straight to goal + shield (scripted)",
+    "social_force_shield": "social force, privileged, + shield (scripted)",
 }
 """Baseline name (``baseline:NAME``) -> label in tables and figures."""
+
+SHIELDED_BASELINES: dict[str, str] = {"straight_shield": "straight", "social_force_shield": "social_force"}
+"""Shielded baseline -> the scripted robot inside it: played with the env's action-time shield on (``shield``: the
+shielded configuration's settings; ``true``, the defaults, from ``crowdnav evaluate baseline:NAME``)."""
 
 EXPERIMENT_BASELINES = ("straight", "social_force", "onboard", "predictive", "oracle")
 """The baselines every experiment plays (those the core install runs; ``orca`` needs pyrvo). Where the
@@ -101,7 +112,12 @@ def scripted_policy(name: str) -> Any:
     :class:`crowdnav.orca.OrcaUnavailableError`, one line, without pyrvo)."""
     from crowdnav.policies import SCRIPTED_POLICIES
 
-    return SCRIPTED_POLICIES[name.replace("_", "-")]()
+    return SCRIPTED_POLICIES[SHIELDED_BASELINES.get(name, name).replace("_", "-")]()
+
+
+def shielded(name: str, options: Mapping[str, Any], shield: Any = True) -> dict[str, Any]:
+    """``options`` (env options) for baseline ``name``: with ``shield`` on for a shielded baseline, unchanged otherwise."""
+    return {**options, "shield": shield} if name in SHIELDED_BASELINES else dict(options)
 
 
 def baseline_env_options(train: Mapping[str, Any]) -> dict[str, Any]:
@@ -116,16 +132,23 @@ def baseline_env_options(train: Mapping[str, Any]) -> dict[str, Any]:
 def experiment_baselines(experiment: Any) -> list[tuple[str, str, dict[str, Any]]]:
     """(configuration name, label, env options) of every baseline an experiment needs.
 
-    One set of baselines (:data:`EXPERIMENT_BASELINES`) per distinct environment of its configurations; with several
+    One set of baselines (:data:`EXPERIMENT_BASELINES`) per distinct environment of its configurations, and the
+    shielded ones (:data:`SHIELDED_BASELINES`) per distinct shield its configurations train with; with several
     environments the name and label carry the first configuration trained in each.
     """
     environments: dict[str, tuple[str, dict[str, Any]]] = {}
+    shields: dict[str, tuple[str, dict[str, Any]]] = {}
     for configuration in experiment.configurations:
         options = baseline_env_options(configuration.train)
         environments.setdefault(repr(sorted(options.items())), (configuration.name, options))
-    several = len(environments) > 1
-    return [(f"{BASELINE_PREFIX}{name}" + (f"_{first}" if several else ""), label + (f" [{first}]" if several else ""), options)
-            for first, options in environments.values() for name, label in BASELINES.items() if name in EXPERIMENT_BASELINES]
+        if configuration.train.get("shield"):
+            guarded = {**options, "shield": configuration.train["shield"]}
+            shields.setdefault(repr(sorted(guarded.items())), (configuration.name, guarded))
+    several = len(environments) > 1 or len(shields) > 1
+    plain = [(f"{BASELINE_PREFIX}{name}" + (f"_{first}" if several else ""), label + (f" [{first}]" if several else ""), options)
+             for first, options in environments.values() for name, label in BASELINES.items() if name in EXPERIMENT_BASELINES]
+    return plain + [(f"{BASELINE_PREFIX}{name}" + (f"_{first}" if several else ""), BASELINES[name] + (f" [{first}]" if several else ""),
+                     options) for first, options in shields.values() for name in SHIELDED_BASELINES]
 
 
 def evaluate_baseline(experiment: str, configuration: str, label: str, env_options: Mapping[str, Any], protocol: Protocol,

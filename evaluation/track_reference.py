@@ -5,7 +5,9 @@
 * ``baseline_<name>.csv`` per baseline (:data:`REFERENCE_BASELINES`: straight, social_force,
   orca where pyrvo is installed, onboard where the track allows what it reads (the ``plan``
   observation's inputs: the tracker and the map), predictive, and oracle where it does not refuse
-  the track), one row per test episode with :data:`COLUMNS`, numbers at 4 decimals;
+  the track; ``straight_shield`` and ``social_force_shield``, those two with the action-time shield in their loop,
+  where the track allows what the shield reads, as ``onboard``), one row per test episode with :data:`COLUMNS`,
+  numbers at 4 decimals;
 * ``reference.json``: the track (name, version, fingerprint), the crowdnav commit, and one entry
   per baseline (its label, kind, what it observes, file, success rate; ``git_commit`` where it was
   played at another commit than the document's), plus the baselines skipped and why.
@@ -33,7 +35,7 @@ from typing import Any
 from crowdnav.evaluation.track import Track, TrackError
 from crowdnav.evaluation.track_leaderboard import REFERENCE_FILE, baseline_kind, member, read_index
 
-REFERENCE_BASELINES = ("straight", "social_force", "orca", "onboard", "predictive", "oracle")
+REFERENCE_BASELINES = ("straight", "social_force", "orca", "onboard", "predictive", "oracle", "straight_shield", "social_force_shield")
 COLUMNS = ("test_seed", "outcome", "collision_kind", "steps", "return", "time_to_goal", "path_length", "spl", "min_human_distance", "psc")
 PRIVILEGED = "privileged: the simulator's state"
 ONBOARD = "onboard: the humans its tracker reports, its pose, velocity and goal, the map (the plan observation's inputs)"
@@ -101,7 +103,7 @@ def reference_csv(rows: list[dict[str, Any]]) -> str:
 def write_reference(track: Track, out: str | Path, *, allow_dirty: bool = False, force: bool = False,
                     only: Sequence[str] | None = None, log: Callable[[str], None] = print) -> Path:
     """Play every reference baseline (``only``: those named) on ``track`` into ``out/<track>/``; returns that folder."""
-    from crowdnav.evaluation.baselines import BASELINE_PREFIX, BASELINES, baseline_observations, scripted_policy
+    from crowdnav.evaluation.baselines import BASELINE_PREFIX, BASELINES, SHIELDED_BASELINES, baseline_observations, scripted_policy, shielded
     from crowdnav.evaluation.rollout import HeldOutEpisodes
     from crowdnav.evaluation.storage import atomic_write_text
 
@@ -158,13 +160,15 @@ def write_reference(track: Track, out: str | Path, *, allow_dirty: bool = False,
             continue
         observations = baseline_observations(name)
         try:
-            if isinstance(observations, list):  # it reads what these observation keys carry: the track must allow them
+            # onboard reads what the plan observation carries, the shield the same (the tracker, the map): the track must allow it
+            reads = observations if isinstance(observations, list) else ["plan"] if name in SHIELDED_BASELINES else []
+            if reads:
                 try:
-                    track.check_observations(observations)
+                    track.check_observations(reads)
                 except TrackError as error:
                     raise PlannerUnavailable(f"baseline:{name} reads what the plan observation carries (the tracker, the map): {error}") from None
             policy = scripted_policy(name)
-            played = HeldOutEpisodes(track.env_options(["goal"]), track.seeds)
+            played = HeldOutEpisodes(shielded(name, track.env_options(["goal"])), track.seeds)
             try:
                 rows = played.run(policy, privileged=True)
             finally:

@@ -38,7 +38,8 @@ def test_the_users_policy_is_the_challenger_and_an_evaluated_baseline_is_listed_
     assert main(_board(evaluated)) == 0
     out = capsys.readouterr().out
     rows = [line for line in out.splitlines() if line.startswith("| ")]
-    assert sum("social force, privileged" in row for row in rows) == 1 and sum("straight to goal" in row for row in rows) == 1
+    # full labels: the shielded baselines' labels start the same ("social force, privileged, + shield")
+    assert sum("social force, privileged (scripted)" in row for row in rows) == 1 and sum("straight to goal (scripted)" in row for row in rows) == 1
     assert "Challenger: mine (your best entry that is not a scripted baseline" in out
     assert next(row for row in rows if "mine *" in row).count("| challenger |") == 1
 
@@ -48,7 +49,7 @@ def test_the_challenger_can_be_named_and_an_unknown_name_is_one_line(evaluated, 
     assert main(_board(evaluated, "--challenger", "baseline_social_force")) == 0
     out = capsys.readouterr().out
     assert "Challenger: social force, privileged (scripted) (named" in out
-    assert "| challenger |" in next(line for line in out.splitlines() if "social force, privileged" in line)
+    assert "| challenger |" in next(line for line in out.splitlines() if "social force, privileged (scripted)" in line)
     assert main(_board(evaluated, "--challenger", "mien")) == 1
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "no entry 'mien' on track figure4 v1's leaderboard; did you mean 'mine'?" in err

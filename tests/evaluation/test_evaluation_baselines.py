@@ -112,3 +112,34 @@ def test_a_baseline_that_cannot_be_played_is_reported_and_the_others_are_played(
     assert [isinstance(item, str) for item in done] == [False] * len(EXPERIMENT_BASELINES) + [True] * len(EXPERIMENT_BASELINES)
     first_skipped = done[len(EXPERIMENT_BASELINES)]
     assert "gone.yaml" in first_skipped and first_skipped.startswith("baseline straight to goal (scripted) [closest] skipped: ")
+
+
+def test_a_shielded_configuration_brings_straight_and_social_force_with_its_shield_and_an_unshielded_one_none():
+    document = tiny_experiment_document()
+    document["defaults"] = {**document["defaults"], "scenario": "room_furniture"}
+    assert not any("shield" in name for name, _, _ in experiment_baselines(experiment_from_mapping(document)))
+    document["configurations"][1]["train"]["shield"] = {"horizon": 1.0}
+    baselines = {name: options for name, _, options in experiment_baselines(experiment_from_mapping(document))}
+    assert set(baselines) == {f"baseline_{name}" for name in (*EXPERIMENT_BASELINES, "straight_shield", "social_force_shield")}
+    for name in ("straight_shield", "social_force_shield"):
+        assert baselines[f"baseline_{name}"] == {**baselines["baseline_straight"], "shield": {"horizon": 1.0}}
+    assert "shield" not in baselines["baseline_straight"]
+
+
+def test_shielded_baselines_play_the_scripted_robot_through_the_envs_shield(tmp_path):
+    options = {"scenario": "room_furniture", "modalities": ["goal"], "overrides": {"max_steps": 60}, "reward_weights": {}}
+    protocol = Protocol(train_episodes=2, eval_every=2, test_episodes=3, seeds=1, test_seed_base=3)
+    guarded = {**options, "shield": True}
+    for name, policy in (("straight_shield", StraightToGoal()), ("social_force_shield", SocialForceRobot())):
+        folder = evaluate_baseline("x", f"baseline_{name}", BASELINES[name], guarded, protocol, tmp_path / name)
+        tests = pd.read_csv(folder / TEST_FILE, keep_default_na=False)
+        assert list(tests["outcome"]) == [_outcome(policy, guarded, seed) for seed in range(3, 6)]
+        assert read_json(folder / META_FILE)["env"]["shield"] is True
+
+
+def test_evaluate_plays_baseline_straight_shield_with_the_default_shield():
+    from crowdnav.evaluation.evaluate import resolve_policy
+
+    name, label, _, privileged, options = resolve_policy("baseline:straight_shield", {"scenario": "room_furniture"})
+    assert (name, label, privileged, options["shield"]) == ("baseline_straight_shield", BASELINES["straight_shield"], True, True)
+    assert "shield" not in resolve_policy("baseline:straight", {"scenario": "room_furniture"})[4]

@@ -145,3 +145,25 @@ def test_an_evaluated_onboard_baseline_declares_what_it_reads_and_ranks_as_onboa
     assert read_json(folder / META_FILE)["observations"] == ["plan"]
     (entry,) = read_entries(short, [tmp_path / "res"])
     assert entry.kind == "scripted, onboard" and entry.observations == "plan"
+
+
+def test_shielded_baselines_are_played_with_the_shield_and_skipped_in_one_line_where_the_track_allows_no_tracker(tmp_path):
+    from crowdnav.evaluation.rollout import HeldOutEpisodes
+
+    from crowdnav.policies import StraightToGoal
+
+    track = load_track("figure4")
+    short = track.__class__(**{**track.__dict__, "test_episodes": 3})
+    folder = write_reference(short, tmp_path, allow_dirty=True, only=["straight", "straight_shield"], log=lambda line: None)
+    entries = {entry["name"]: entry for entry in read_json(folder / "reference.json")["entries"]}
+    played = HeldOutEpisodes({**short.env_options(["goal"]), "shield": True}, short.seeds)
+    try:
+        outcomes = [row["outcome"] for row in played.run(StraightToGoal(), privileged=True)]
+    finally:
+        played.close()
+    rows = (folder / entries["baseline_straight_shield"]["file"]).read_text().splitlines()[1:]
+    assert [row.split(",")[1] for row in rows] == outcomes and entries["baseline_straight_shield"]["policy"] == "baseline:straight_shield"
+    hall = write_reference(load_track("robots_crossing_hall"), tmp_path / "hall", allow_dirty=True, only=["social_force_shield"],
+                           log=lambda line: None)
+    skipped = read_json(hall / "reference.json")["skipped"]
+    assert [skip["name"] for skip in skipped] == ["baseline_social_force_shield"] and "plan is not allowed" in skipped[0]["reason"]
