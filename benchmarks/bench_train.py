@@ -6,7 +6,7 @@
 
 **Batched training** (``--batched``): every algorithm in the Figure-4 setting (room_furniture,
 5 humans at 0.5-1.2 m/s, closest obstacle + goal) with crowdnav's batched defaults
-(``num_envs`` worlds of the native vector env, :data:`crowdnav.agents.factory.BATCHED_DEFAULTS`), timed
+(``num_envs`` worlds of the native vector env, :data:`crowdnav.agents.sb3.factory.BATCHED_DEFAULTS`), timed
 over ``--batched-steps`` env steps after a warm-up past ``learning_starts``, next to the
 single-env path in the same run (one env, the defaults ``crowdnav train`` had before batching:
 SAC at one gradient step per env step); the ``vs single SAC`` column is the ratio of wall-clock
@@ -50,8 +50,7 @@ import time
 from pathlib import Path
 
 import torch
-from crowdnav.agents.config import EncoderConfig, TrainConfig
-from crowdnav.agents.factory import (
+from crowdnav.agents.sb3.factory import (
     OFF_POLICY,
     SB3_ALGORITHMS,
     load_leog_weights,
@@ -60,6 +59,7 @@ from crowdnav.agents.factory import (
     make_vec_env,
     precomputes_leog,
 )
+from crowdnav.agents.training.config import EncoderConfig, TrainConfig
 from stable_baselines3 import SAC
 from stable_baselines3.common.monitor import Monitor
 

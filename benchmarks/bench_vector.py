@@ -52,7 +52,8 @@ CLOCK: Callable[[], float] = time.perf_counter
 def single(args: argparse.Namespace) -> float:
     env = gym.make(env_id(args.scenario), **_options(args)).unwrapped
     env.reset(seed=0)
-    actions = np.random.default_rng(0).uniform(-1, 1, (args.steps * args.batch, 2))
+    # float32 like the other cases' (the action space's dtype): both then pay the same conversion
+    actions = np.random.default_rng(0).uniform(-1, 1, (args.steps * args.batch, 2)).astype(np.float32)
     start = CLOCK()
     for action in actions:
         _, _, terminated, truncated, _ = env.step(action)
@@ -90,9 +91,9 @@ def sb3(args: argparse.Namespace, native: bool) -> Callable[[], float]:
     """The SB3 collection stack ``crowdnav train`` builds for ``native`` (or not), made once; returns its timing run."""
     from functools import partial
 
-    from crowdnav.agents.config import config_from_mapping
-    from crowdnav.agents.factory import make_env, make_vec_env
-    from crowdnav.agents.resume_state import ActionLog
+    from crowdnav.agents.runs.resume_state import ActionLog
+    from crowdnav.agents.sb3.factory import make_env, make_vec_env
+    from crowdnav.agents.training.config import config_from_mapping
     from stable_baselines3.common.vec_env import DummyVecEnv
 
     config = config_from_mapping({"scenario": args.scenario, "modalities": args.modalities, "algo": "ppo", "seed": 0,

@@ -28,8 +28,8 @@ from pathlib import Path
 
 import numpy as np
 from crowdnav.agents import load_policy, train
-from crowdnav.agents.checkpoint import find_checkpoint
-from crowdnav.agents.config import load_config
+from crowdnav.agents.runs.checkpoint import find_checkpoint
+from crowdnav.agents.training.config import load_config
 
 from crowdnav.cli.common import CliError, parse_overrides
 from crowdnav.files import atomic_write_text

@@ -37,7 +37,7 @@ from pathlib import Path
 from typing import Any
 
 from crowdnav.agents import load_policy, train
-from crowdnav.agents.run_folder import policy_snapshots
+from crowdnav.agents.runs.folder import policy_snapshots
 from crowdnav.evaluation.baselines import scripted_policy
 from crowdnav.evaluation.rollout import HeldOutEpisodes
 

@@ -7,7 +7,7 @@ batched training with crowdnav's defaults (32 worlds). For each seed:
 
 * ``scratch``: ``--timesteps`` env steps of RL from a new model;
 * ``warm``: the same, from a new model warm-started with ``demonstrations.episodes:
-  --demonstrations`` (:func:`crowdnav.agents.demonstrations.warm_start`: behaviour cloning of the
+  --demonstrations`` (:func:`crowdnav.agents.imitation.demonstrations.warm_start`: behaviour cloning of the
   social-force robot, value / critic pre-training, off-policy: the demonstrations in the replay
   buffer);
 
@@ -31,13 +31,13 @@ from pathlib import Path
 from typing import Any
 
 import torch
-from crowdnav.agents.checkpoint import AgentPolicy, load_policy
-from crowdnav.agents.config import TrainConfig, load_config
-from crowdnav.agents.demonstrations import warm_start
-from crowdnav.agents.factory import env_options, make_model, make_vec_env, observation_normalization
-from crowdnav.agents.run_folder import policy_snapshots
-from crowdnav.agents.training import train
-from crowdnav.agents.wrappers import scales_to_json
+from crowdnav.agents.imitation.demonstrations import warm_start
+from crowdnav.agents.runs.checkpoint import AgentPolicy, load_policy
+from crowdnav.agents.runs.folder import policy_snapshots
+from crowdnav.agents.sb3.factory import env_options, make_model, make_vec_env, observation_normalization
+from crowdnav.agents.training.config import TrainConfig, load_config
+from crowdnav.agents.training.run import train
+from crowdnav.agents.training.wrappers import scales_to_json
 from crowdnav.evaluation.rollout import HeldOutEpisodes
 
 from crowdnav.cli.common import CliError, parse_overrides

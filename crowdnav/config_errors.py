@@ -1,6 +1,6 @@
 """One error style for every configuration file crowdnav reads: scenarios, training configs, experiments.
 
-All three are pydantic models (:mod:`crowdnav.scenario.schema`, :mod:`crowdnav.agents.config`,
+All three are pydantic models (:mod:`crowdnav.scenario.schema`, :mod:`crowdnav.agents.training.config`,
 :mod:`crowdnav.evaluation.experiment`). A failed validation becomes a list of
 :class:`ConfigIssue`, each printed as::
 

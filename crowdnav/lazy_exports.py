@@ -1,8 +1,8 @@
 """Names a package exports but imports only on first use (PEP 562).
 
 ``crowdnav.agents`` and ``crowdnav.evaluation`` re-export names from their modules this way,
-so that importing the package, or one of its light modules (``crowdnav.agents.seeding``,
-``crowdnav.agents.run_folder``, ``crowdnav.evaluation.protocol``), does not load torch, pandas
+so that importing the package, or one of its light modules (``crowdnav.agents.training.seeding``,
+``crowdnav.agents.runs.folder``, ``crowdnav.evaluation.protocol``), does not load torch, pandas
 or matplotlib until one of those names is used.
 """
 

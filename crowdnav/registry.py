@@ -25,8 +25,8 @@ from crowdnav.scenario.reward_presets import REWARD_PRESETS
 from crowdnav.sensors import MODALITIES  # numpy and gymnasium only; registers the built-in modalities
 from crowdnav.suggest import did_you_mean, unknown_name_message  # noqa: F401  (re-exported: the one wording)
 
-SB3_BUILDER = "crowdnav.agents.sb3_algorithm:SB3_BUILDER"
-"""The builder of the Stable-Baselines3 algorithms (:class:`crowdnav.agents.sb3_algorithm.SB3Builder`), named, not imported."""
+SB3_BUILDER = "crowdnav.agents.sb3.algorithm:SB3_BUILDER"
+"""The builder of the Stable-Baselines3 algorithms (:class:`crowdnav.agents.sb3.algorithm.SB3Builder`), named, not imported."""
 
 
 @dataclass(frozen=True)
@@ -45,19 +45,19 @@ class AlgorithmSpec:
     exploration_noise: bool = False
     """Deterministic actor explored with Gaussian action noise (the config's ``action_noise``)."""
     builder: Callable[..., Any] | str | None = None
-    """The class (or factory) of an :class:`crowdnav.agents.algorithm_protocol.Algorithm`, or its ``"module:attribute"``
-    (imported when first used: :func:`crowdnav.agents.algorithm_protocol.builder_of`): ``builder(env, config)`` makes a
+    """The class (or factory) of an :class:`crowdnav.agents.training.algorithm_protocol.Algorithm`, or its ``"module:attribute"``
+    (imported when first used: :func:`crowdnav.agents.training.algorithm_protocol.builder_of`): ``builder(env, config)`` makes a
     new one, ``builder.load(folder)`` a saved one (docs/architecture.md, "Adding a learning algorithm"). The
     Stable-Baselines3 algorithms' is :data:`SB3_BUILDER`. None: a name that cannot be trained or loaded."""
     sb3_class: str | None = None
     """Stable-Baselines3's class, ``"module:attribute"`` (e.g. ``"stable_baselines3:SAC"``): the reference
     ``make_model(..., reference=True)`` builds; None for an algorithm outside SB3."""
     model_class: str | None = None
-    """The class crowdnav trains instead (the same updates at less cost per step, :mod:`crowdnav.agents.algorithms`);
+    """The class crowdnav trains instead (the same updates at less cost per step, :mod:`crowdnav.agents.sb3.algorithms`);
     None: :attr:`sb3_class` itself."""
     defaults: Mapping[str, Any] = field(default_factory=dict)
     """crowdnav's values of the config fields the algorithm takes, for those left at ``None`` (``net_arch``,
-    ``learning_rate``, ``batch_size``, ...; a field not named here is refused: :func:`crowdnav.agents.factory.hyperparameters`)."""
+    ``learning_rate``, ``batch_size``, ...; a field not named here is refused: :func:`crowdnav.agents.sb3.factory.hyperparameters`)."""
     batched_defaults: Mapping[str, Any] = field(default_factory=dict)
     """What replaces :attr:`defaults` entries when a run collects from ``num_envs > 1`` worlds."""
     n_critics: int = 2
@@ -79,15 +79,15 @@ _OFF_POLICY_BATCHED = MappingProxyType({"updates_per_step": 0.125, "batch_size":
 
 _ALGORITHM_SPECS: dict[str, AlgorithmSpec] = {
     "sac": AlgorithmSpec("Soft Actor-Critic: off-policy, entropy-regularised (crowdnav's default).", off_policy=True,
-                         builder=SB3_BUILDER, sb3_class="stable_baselines3:SAC", model_class="crowdnav.agents.algorithms:CrowdNavSAC",
+                         builder=SB3_BUILDER, sb3_class="stable_baselines3:SAC", model_class="crowdnav.agents.sb3.algorithms:CrowdNavSAC",
                          defaults=_OFF_POLICY_DEFAULTS, batched_defaults=_OFF_POLICY_BATCHED),
     "td3": AlgorithmSpec("Twin Delayed DDPG: off-policy, deterministic policy with Gaussian exploration noise.",
                          off_policy=True, exploration_noise=True,
-                         builder=SB3_BUILDER, sb3_class="stable_baselines3:TD3", model_class="crowdnav.agents.algorithms:CrowdNavTD3",
+                         builder=SB3_BUILDER, sb3_class="stable_baselines3:TD3", model_class="crowdnav.agents.sb3.algorithms:CrowdNavTD3",
                          defaults=_OFF_POLICY_DEFAULTS, batched_defaults=_OFF_POLICY_BATCHED),
     "ddpg": AlgorithmSpec("Deep Deterministic Policy Gradient: off-policy, deterministic policy with Gaussian exploration noise.",
                           off_policy=True, exploration_noise=True,
-                          builder=SB3_BUILDER, sb3_class="stable_baselines3:DDPG", model_class="crowdnav.agents.algorithms:CrowdNavDDPG",
+                          builder=SB3_BUILDER, sb3_class="stable_baselines3:DDPG", model_class="crowdnav.agents.sb3.algorithms:CrowdNavDDPG",
                           defaults=_OFF_POLICY_DEFAULTS, batched_defaults=_OFF_POLICY_BATCHED, n_critics=1),
     "a2c": AlgorithmSpec("Advantage Actor-Critic: on-policy, synchronous.", builder=SB3_BUILDER, sb3_class="stable_baselines3:A2C",
                          defaults=MappingProxyType({"net_arch": [64, 64], "learning_rate": 7e-4, "gamma": 0.95, "n_steps": 5}),

@@ -212,8 +212,8 @@ def write_report(folder: Path, *, video: bool = True, log: Callable[[str], None]
 
 def render_final_policy(configuration_dir: Path, out: Path) -> list[Path]:
     """A video of the first seed's final policy on the first test episode."""
-    from crowdnav.agents.render import render_policy
-    from crowdnav.agents.run_folder import checkpoint_dir
+    from crowdnav.agents.runs.folder import checkpoint_dir
+    from crowdnav.agents.runs.render import render_policy
     from crowdnav.evaluation.storage import read_json
 
     runs = sorted(path for path in configuration_dir.iterdir() if (path / META_FILE).is_file())

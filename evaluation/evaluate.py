@@ -6,12 +6,14 @@
   onboard, predictive, oracle): the scripted robots, privileged (they read the simulator; the oracle
   even the humans' future, docs/planning.md) but for ``onboard``, which reads only what the ``plan``
   observation carries (the humans its tracker reports, its pose and the map) and declares ``plan``;
+  ``straight_shield`` and ``social_force_shield`` play those two with the action-time shield (its defaults) in
+  their loop, the rows to show beside a shielded agent;
 * ``module:function``: a Python callable ``function(observation) -> action`` taking one
   observation dict of :class:`crowdnav.envs.CrowdNavEnv` (raw units) and returning 2 numbers.
   This imports and runs that module: code by request (docs/security.md);
 * a ``.zip`` saved by Stable-Baselines3 (SAC, TD3, DDPG, A2C, PPO with ``MultiInputPolicy``),
   trained on the scenario's observation ``Dict`` (``--modalities``). Only its parameters and
-  plain JSON are read, never its pickled objects (:mod:`crowdnav.agents.model_zip`), so custom policy
+  plain JSON are read, never its pickled objects (:mod:`crowdnav.agents.sb3.model_zip`), so custom policy
   classes and sb3-contrib's algorithms are refused; a crowdnav checkpoint's own ``model.zip``
   loads as its checkpoint folder;
 * a crowdnav training run folder or checkpoint (its own modalities and scenario settings unless
@@ -65,8 +67,8 @@ class ResultsExistError(CrowdNavError, FileExistsError):
 
 def _load_sb3_zip(path: Path, options: Mapping[str, Any]) -> Act:
     """A zip saved by SB3 itself, rebuilt from its parameters and JSON (nothing unpickled)."""
-    from crowdnav.agents.model_zip import ModelZipError, describe_shapes, zip_policy
-    from crowdnav.agents.space_checks import box_space, dict_space
+    from crowdnav.agents.sb3.model_zip import ModelZipError, describe_shapes, zip_policy
+    from crowdnav.agents.training.space_checks import box_space, dict_space
 
     from crowdnav.envs import CrowdNavEnv
 
@@ -111,9 +113,11 @@ def resolve_policy(spec: str, env_options: Mapping[str, Any], *, allow_import: b
 
         reads = baseline_observations(name)
         _refused(refuse_modalities, spec, options, f"only {', '.join(reads)}" if isinstance(reads, list) else "the simulator's state")
-        return f"{BASELINE_PREFIX}{name}", BASELINES[name], scripted_policy(name), True, options
+        from crowdnav.evaluation.baselines import shielded
+
+        return f"{BASELINE_PREFIX}{name}", BASELINES[name], scripted_policy(name), True, shielded(name, options)
     path = Path(spec)
-    from crowdnav.agents.run_folder import POLICY_FILE
+    from crowdnav.agents.runs.folder import POLICY_FILE
 
     if path.suffix == ".zip" and path.is_file() and (path.parent / POLICY_FILE).is_file():
         path = path.parent  # a crowdnav checkpoint's own model.zip: its folder's config rebuilds the network
@@ -124,7 +128,7 @@ def resolve_policy(spec: str, env_options: Mapping[str, Any], *, allow_import: b
         return _safe(path.stem), path.stem, _load_sb3_zip(path, options), False, options
     if path.exists():
         from crowdnav.agents import load_policy
-        from crowdnav.agents.run_folder import training_run
+        from crowdnav.agents.runs.folder import training_run
 
         path = training_run(path)
         try:
@@ -173,7 +177,7 @@ def _refused(check: Callable[..., Any], *args: Any) -> Any:
 
 def _zip_modalities(path: Path) -> list[str] | None:
     """The observation keys an SB3 zip was trained on, read from its JSON (None when it does not say)."""
-    from crowdnav.agents.model_zip import ModelZipError, observation_shapes, read_model_zip
+    from crowdnav.agents.sb3.model_zip import ModelZipError, observation_shapes, read_model_zip
 
     try:
         shapes = observation_shapes(read_model_zip(path, read=()))  # the JSON only: no tensor is decompressed
@@ -208,7 +212,7 @@ def _guarded(act: Act, spec: str) -> Act:
 
 def _run_name(path: Path) -> str:
     """``lidar_seed_2`` for EXPERIMENT/lidar/seed_2, ``sac`` for runs/sac/checkpoint."""
-    from crowdnav.agents.run_folder import CHECKPOINT_DIR, POLICY_FILE
+    from crowdnav.agents.runs.folder import CHECKPOINT_DIR, POLICY_FILE
     from crowdnav.evaluation.storage import SEED_PREFIX, TRAIN_DIR
 
     parts = [part for part in path.resolve().parts if part not in (CHECKPOINT_DIR, POLICY_FILE, TRAIN_DIR)]

@@ -91,7 +91,7 @@ class PretrainEncoder(_Strict):
     scenario: Text = Field("room_furniture", description="Scenario the grids are collected in (library name or path).")
     grids: Int = Field(5000, ge=1, description="Occupancy grids to collect.")
     epochs: Int = Field(20, ge=1, description="Autoencoder training epochs.")
-    seed: Int = Field(99, ge=0, description="Collection seed (never meets test or training seeds: crowdnav.agents.seeding.dataset_seed).")
+    seed: Int = Field(99, ge=0, description="Collection seed (never meets test or training seeds: crowdnav.agents.training.seeding.dataset_seed).")
     every: Int = Field(2, ge=1, description="Keep every this many steps' grid.")
 
 
@@ -143,7 +143,7 @@ class Configuration:
     train: dict[str, Any]
     """TrainConfig fields, defaults merged in."""
     config: Any = field(default=None, compare=False, repr=False)
-    """The validated :class:`~crowdnav.agents.config.TrainConfig` (protocol fields at their defaults until a run sets them)."""
+    """The validated :class:`~crowdnav.agents.training.config.TrainConfig` (protocol fields at their defaults until a run sets them)."""
 
 
 @dataclass(frozen=True)
@@ -298,7 +298,7 @@ def _with_encoder(train: dict[str, Any], pretrain: dict[str, Any] | None) -> Non
 def _train_config(merged: dict[str, Any], defaults: Mapping[str, Any], train: Mapping[str, Any], where: str, name: str,
                   root: Any) -> tuple[Any, list[ConfigIssue]]:
     """The configuration's TrainConfig, or the issues, each at the key that set it (the configuration's train, else defaults)."""
-    from crowdnav.agents.config import TrainConfig
+    from crowdnav.agents.training.config import TrainConfig
 
     try:
         return TrainConfig.model_validate(merged), []

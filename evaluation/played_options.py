@@ -74,7 +74,7 @@ def check_played_world(spec: str, policy: Any, played: Mapping[str, Any]) -> Non
     try:
         own, now = _shapes(CrowdNavEnv(**trained)), _shapes(env, close=False)
         if own != now:
-            from crowdnav.agents.model_zip import describe_shapes
+            from crowdnav.agents.sb3.model_zip import describe_shapes
 
             changed = [path for path in played.get("overrides", {}) if path.split(".")[0] == "sensors"]
             named = (f"--set {', '.join(changed)}" if changed else f"--scenario {played['scenario']}"

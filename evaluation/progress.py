@@ -17,7 +17,7 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
-from crowdnav.agents.run_folder import last_logged_row, logged_episodes
+from crowdnav.agents.runs.folder import last_logged_row, logged_episodes
 from crowdnav.evaluation.protocol import Protocol
 from crowdnav.evaluation.storage import EVALUATIONS_DIR, META_FILE, TRAIN_DIR
 

@@ -17,7 +17,7 @@ from __future__ import annotations
 
 from typing import Annotated, Any
 
-from crowdnav.agents.seeding import train_seed  # torch-free: the protocol stays cheap to import
+from crowdnav.agents.training.seeding import train_seed  # torch-free: the protocol stays cheap to import
 from pydantic import BaseModel, BeforeValidator, ConfigDict, Field, ValidationError, model_validator
 
 from crowdnav.config_errors import FieldProblems, validation_issues
@@ -43,7 +43,7 @@ StepCount = Annotated[int, _at_least(1), Field(ge=1, le=MAX_STEPS)] | None
 SeedBase = Annotated[int, _at_least(0), Field(ge=0, le=MAX_SEED_BASE)]
 
 UNITS = ("episodes", "steps")
-"""What a protocol's budget and evaluation points count (as ``crowdnav.agents.run_folder.UNITS``)."""
+"""What a protocol's budget and evaluation points count (as ``crowdnav.agents.runs.folder.UNITS``)."""
 POINT_COLUMNS = {"episodes": "training_episodes", "steps": "training_steps"}
 """The results column that holds an evaluation's point, per unit."""
 AXIS_LABELS = {"episodes": "training episodes", "steps": "training env steps"}

@@ -310,8 +310,8 @@ def _run_task(unit: Any, out_dir: str, storage: str, storage_id: str, encoder: b
     finally:
         reporter.stop()
     if work_dir != Path(out_dir):
-        from crowdnav.agents.resume_state import REPLAY_ARRAYS
-        from crowdnav.agents.run_folder import replay_buffer_file
+        from crowdnav.agents.runs.folder import replay_buffer_file
+        from crowdnav.agents.runs.resume_state import REPLAY_ARRAYS
 
         # The replay buffer only serves to resume training, which a finished run never does, and can weigh hundreds of MB
         # (replay_buffer.npz; replay_buffer.pkl from an older crowdnav).

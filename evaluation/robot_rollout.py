@@ -1,6 +1,6 @@
 """Held-out test episodes of a multi-robot scenario, every robot driven by one policy: one row per robot per episode.
 
-A shared robot policy (:class:`crowdnav.agents.marl.RobotsPolicy`, trained with ``agents: robots``)
+A shared robot policy (:class:`crowdnav.agents.marl.robots.RobotsPolicy`, trained with ``agents: robots``)
 and the scripted baselines play the *same* episodes: test seed ``s`` resets the robots-only
 PettingZoo env (``crowdnav.parallel_env(..., humans_as_agents=False, fixed_agents=True,
 flat_observations=True)``) with ``s``, and every robot acts with the policy (a scripted one reads

@@ -25,7 +25,7 @@ from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from crowdnav.agents.run_folder import (
+from crowdnav.agents.runs.folder import (
     POLICY_FILE,
     checkpoint_dir,
     checkpoint_info,
@@ -62,9 +62,9 @@ from crowdnav.evaluation.unit_spec import run_identity
 from crowdnav.simulator import OUTCOMES as OUTCOMES
 
 if TYPE_CHECKING:
-    from crowdnav.agents.checkpoint import AgentPolicy
-    from crowdnav.agents.config import TrainConfig
-    from crowdnav.agents.marl import RobotsPolicy
+    from crowdnav.agents.marl.robots import RobotsPolicy
+    from crowdnav.agents.runs.checkpoint import AgentPolicy
+    from crowdnav.agents.training.config import TrainConfig
     from crowdnav.evaluation.robot_rollout import RobotEpisodes
     from crowdnav.evaluation.rollout import HeldOutEpisodes
 
@@ -123,8 +123,8 @@ def _train_and_evaluate(spec: UnitSpec, out_dir: Path, hook: EventHook, repairs:
     loader: Callable[[Path], Any] = lambda folder: load_policy(folder, config=config)  # noqa: E731
     rows = protocol.test_episodes
     if config.agents == ROBOTS_AGENTS:  # one shared policy for every robot: one row per robot per test episode
-        from crowdnav.agents.factory import env_options
-        from crowdnav.agents.marl import load_robots_policy
+        from crowdnav.agents.marl.robots import load_robots_policy
+        from crowdnav.agents.sb3.factory import env_options
         from crowdnav.evaluation.robot_rollout import robot_count
 
         loader = lambda folder: load_robots_policy(folder, config=config)  # noqa: E731
@@ -299,13 +299,13 @@ def _finish(spec: UnitSpec, out_dir: Path, protocol: Protocol, config: TrainConf
 
 
 def _training_episodes(spec: UnitSpec, log: Path, episodes: int, repairs: list[str]) -> Any:
-    """agents' episodes.csv, exactly one whole row per training episode (:func:`crowdnav.agents.episode_log.read_log`), as a table.
+    """agents' episodes.csv, exactly one whole row per training episode (:func:`crowdnav.agents.runs.episode_log.read_log`), as a table.
 
     A cut last row a kill left is set aside first (noted in ``repairs``); a missing, damaged or
     short log is a ResultsError that names the file and line (those episodes cannot be replayed).
     """
     import pandas as pd
-    from crowdnav.agents.episode_log import COLUMNS, EpisodeLogError, prepare_log, read_log
+    from crowdnav.agents.runs.episode_log import COLUMNS, EpisodeLogError, prepare_log, read_log
 
     notes: list[str] = []
     try:

@@ -151,11 +151,11 @@ def result_lock(folder: str | Path) -> Iterator[None]:
 
     The lock is a sibling file, ``.<name>.lock`` (the folder itself is replaced whole), held with the
     OS's ``flock`` and removed on release: a second writer gets
-    :class:`crowdnav.agents.run_folder.RunBusyError` at once, one line naming the folder and the
+    :class:`crowdnav.agents.runs.folder.RunBusyError` at once, one line naming the folder and the
     holder's PID. Once held, a replaced result a killed writer left aside is put back and unfinished
     new ones are removed (:func:`install_result`). Folders made for the lock and left empty are removed.
     """
-    from crowdnav.agents.run_folder import hold_lock
+    from crowdnav.agents.runs.folder import hold_lock
 
     folder = Path(folder)
     made = [parent for parent in (folder.parent, *folder.parent.parents) if not parent.exists()]

@@ -181,7 +181,7 @@ def load_track(name_or_path: str | Path, *, check_fingerprint: bool = True) -> T
             load_scenario(parsed.scenario, {**parsed.overrides, "max_steps": parsed.time_limit_steps})
         except ScenarioError as error:
             issues.append(ConfigIssue("overrides", str(error).splitlines()[0], yaml_line(root, "overrides")))
-    from crowdnav.agents.seeding import check_test_seeds
+    from crowdnav.agents.training.seeding import check_test_seeds
 
     try:  # a track's test seeds are held out: below every run's training, grid and demonstration seeds
         check_test_seeds(parsed.test_seed_base, parsed.test_episodes)

@@ -255,7 +255,7 @@ def replay_evaluation(run_dir: str | Path, evaluation: int | None = None, *, imp
         expected = recorded.drop_duplicates("test_episode").set_index("test_episode")["outcome"]
     else:
         from crowdnav.agents import load_policy
-        from crowdnav.agents.run_folder import policy_snapshots
+        from crowdnav.agents.runs.folder import policy_snapshots
 
         k = protocol.evaluations - 1 if evaluation is None else evaluation
         if not 0 <= k < protocol.evaluations:

@@ -18,7 +18,7 @@ from crowdnav.evaluation.protocol import Protocol
 from crowdnav.evaluation.storage import SPEC_FILE, TRAIN_DIR, experiment_of, pretrained_encoder_path
 
 if TYPE_CHECKING:
-    from crowdnav.agents.config import TrainConfig
+    from crowdnav.agents.training.config import TrainConfig
 
 PROTOCOL_FIELDS = ("seed", "out", "episodes", "checkpoint_every", "timesteps", "checkpoint_every_steps", "progress", "torch_threads",
                    "save_replay_buffer")
@@ -78,10 +78,10 @@ class UnitSpec:
         return {**train, **self._protocol_fields(out_dir)}
 
     def config_for(self, out_dir: Path) -> TrainConfig:
-        """This run's :class:`~crowdnav.agents.config.TrainConfig`: :attr:`config` completed (no second validation),
+        """This run's :class:`~crowdnav.agents.training.config.TrainConfig`: :attr:`config` completed (no second validation),
         or ``train`` validated here when the spec came without it (a dict from a worker process, a test)."""
         if self.config is None:
-            from crowdnav.agents.config import config_from_mapping
+            from crowdnav.agents.training.config import config_from_mapping
 
             return config_from_mapping(self.train_config(out_dir), f"{out_dir / SPEC_FILE}")
         update = self._protocol_fields(out_dir)

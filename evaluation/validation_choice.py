@@ -27,8 +27,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from crowdnav.agents.run_folder import hold_lock, snapshot_dir
-from crowdnav.agents.seeding import check_test_seeds
+from crowdnav.agents.runs.folder import hold_lock, snapshot_dir
+from crowdnav.agents.training.seeding import check_test_seeds
 
 from crowdnav.files import open_text_for_append, refuse_link
 

@@ -37,8 +37,6 @@ from typing import TYPE_CHECKING, Any, cast
 import gymnasium as gym
 import numpy as np
 import torch
-from crowdnav.agents.config import ConfigError
-from crowdnav.agents.factory import observation_normalization
 from crowdnav.agents.sarl.files import load_weights, read_state, refuse
 from crowdnav.agents.sarl.imitation import Demonstrations, make_teacher, world_simulators
 from crowdnav.agents.sarl.lookahead import (
@@ -60,6 +58,8 @@ from crowdnav.agents.sarl.memory import ReplayMemory
 from crowdnav.agents.sarl.network import ValueEnsemble, ValueNetwork, evaluate, value_network
 from crowdnav.agents.sarl.options import check_options, check_sizes
 from crowdnav.agents.sarl.sensing import check_shapes, check_world
+from crowdnav.agents.sb3.factory import observation_normalization
+from crowdnav.agents.training.config import ConfigError
 
 if TYPE_CHECKING:
     from stable_baselines3.common.vec_env import VecEnv
@@ -88,7 +88,7 @@ LEARNING_RATE = 1e-3
 
 
 class SarlAgent:
-    """Implements crowdnav.agents.algorithm_protocol.Algorithm; ``SarlAgent(env, config)`` is the builder."""
+    """Implements crowdnav.agents.training.algorithm_protocol.Algorithm; ``SarlAgent(env, config)`` is the builder."""
 
     def __init__(self, env: VecEnv, config: Any):
         name = config.algo

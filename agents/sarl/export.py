@@ -1,7 +1,7 @@
 """ONNX export of the SARL-style agent: :meth:`SarlAgent.predict` (deterministic) as one torch module.
 
 :class:`SarlPolicyModule` is what :meth:`crowdnav.agents.sarl.agent.SarlAgent.export_module` returns (the
-``export_module`` side of :class:`crowdnav.agents.algorithm_protocol.Exportable`): the observation as ``predict``
+``export_module`` side of :class:`crowdnav.agents.training.algorithm_protocol.Exportable`): the observation as ``predict``
 receives it (crowdnav's normalisation already applied, batch first) in, the action ``(batch, 2)`` float32 out.
 Inside, the numpy of :mod:`~crowdnav.agents.sarl.lookahead` written again in torch, step for step and in the same
 precision (float64, the value network in float32):

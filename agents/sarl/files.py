@@ -20,9 +20,9 @@ from typing import Any, NoReturn
 
 import numpy as np
 import torch
-from crowdnav.agents.config import ConfigError
 from crowdnav.agents.sarl.lookahead import OPTIONAL_KEYS, REQUIRED_KEYS, Physics
 from crowdnav.agents.sarl.options import MAX_ROWS, check_options
+from crowdnav.agents.training.config import ConfigError
 
 from crowdnav.errors import CrowdNavError
 

@@ -12,9 +12,9 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from crowdnav.agents.config import ConfigError
 from crowdnav.agents.sarl.files import array_headers, expect, finite, only, refuse
 from crowdnav.agents.sarl.lookahead import HUMAN_FEATURES, STATIC_FEATURES
+from crowdnav.agents.training.config import ConfigError
 
 TEACHERS = ("predictive", "orca", "oracle", "onboard")
 """Scripted robots that may teach: the predictive planner (true current state), the ORCA robot, the oracle (future), and
@@ -31,7 +31,7 @@ def make_teacher(name: str) -> Any:
 
 
 def world_simulators(env: Any) -> list[Any]:
-    """Each world's simulator of a :func:`crowdnav.agents.factory.make_vec_env` env (or a VecEnvWrapper of it), for the teacher.
+    """Each world's simulator of a :func:`crowdnav.agents.sb3.factory.make_vec_env` env (or a VecEnvWrapper of it), for the teacher.
 
     Where the vector env holds single envs (one world, or crowds too large to stack) these are their live simulators
     (read, never stepped: the teacher of one world reads what it read before the vector stack); stacked worlds give

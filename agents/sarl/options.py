@@ -2,7 +2,7 @@
 
 Every size-like option is bounded on its own (:data:`INTEGER_OPTIONS`), and the totals they multiply into are bounded
 as the SB3 runs' are (docs/security.md, "Bounds on totals"): the value networks' parameters (network and target
-copy, every ensemble member) by :data:`crowdnav.agents.network_size.MAX_PARAMETERS`, counted here by arithmetic
+copy, every ensemble member) by :data:`crowdnav.agents.networks.size.MAX_PARAMETERS`, counted here by arithmetic
 (:func:`network_parameters`, exact: tests/agents/test_sarl_bounds.py compares it with built networks), and the replay
 memory and the demonstrations by :data:`MAX_MEMORY_BYTES`. A checkpoint's ``state.json`` options go through the same
 checks before its networks are built (:mod:`crowdnav.agents.sarl.files`).
@@ -13,9 +13,9 @@ from __future__ import annotations
 from collections.abc import Mapping
 from typing import Any
 
-from crowdnav.agents.config import ConfigError
-from crowdnav.agents.network_size import check_parameters, mlp
+from crowdnav.agents.networks.size import check_parameters, mlp
 from crowdnav.agents.sarl.lookahead import HUMAN_FEATURES, STATIC_FEATURES
+from crowdnav.agents.training.config import ConfigError
 
 INTEGER_OPTIONS: dict[str, tuple[int, int]] = {
     "width": (1, 4096),

@@ -32,7 +32,7 @@ def export_command(args: argparse.Namespace) -> int:
     policy = Path(args.policy)
     if not policy.exists():
         raise CliError(f"{args.policy}: no such run folder or checkpoint (export takes a crowdnav training run or checkpoint)")
-    from crowdnav.agents.run_folder import POLICY_FILE
+    from crowdnav.agents.runs.folder import POLICY_FILE
 
     if policy.is_file() and policy.suffix == ".zip":
         if not (policy.parent / POLICY_FILE).is_file():  # `crowdnav evaluate` and `render` take it with --scenario / --modalities
@@ -40,7 +40,7 @@ def export_command(args: argparse.Namespace) -> int:
                            "scenario, sensor settings and observation scaling a crowdnav checkpoint records; export the crowdnav "
                            "run folder or checkpoint that holds it (docs/deploy.md)")
         policy = policy.parent  # a crowdnav checkpoint's own model.zip: its folder is the checkpoint
-    from crowdnav.agents.onnx_export import ExportError, export_onnx
+    from crowdnav.agents.runs.onnx_export import ExportError, export_onnx
     from crowdnav.errors import CrowdNavError
 
     try:

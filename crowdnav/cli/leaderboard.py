@@ -113,7 +113,7 @@ def track_leaderboard_command(args: argparse.Namespace) -> int:
 
 
 def evaluate_command(args: argparse.Namespace) -> int:
-    from crowdnav.agents.run_folder import RunBusyError
+    from crowdnav.agents.runs.folder import RunBusyError
     from crowdnav.evaluation.evaluate import PolicyError, ResultsExistError, evaluate_policy
     from crowdnav.evaluation.track import TrackError, load_track
     from crowdnav.scenario import ScenarioError
@@ -139,7 +139,7 @@ def evaluate_command(args: argparse.Namespace) -> int:
     seed_base = args.test_seed_base if args.test_seed_base is not None else (track.test_seed_base if track else 0)
     if episodes < 1:
         raise CliError(f"--episodes must be at least 1, got {episodes}")
-    from crowdnav.agents.seeding import check_test_seeds
+    from crowdnav.agents.training.seeding import check_test_seeds
 
     try:
         check_test_seeds(seed_base, episodes)

@@ -43,7 +43,7 @@ def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) ->
 
 
 def run(args: argparse.Namespace) -> int:
-    from crowdnav.agents.render import PolicyLoadError, render_policy
+    from crowdnav.agents.runs.render import PolicyLoadError, render_policy
     from crowdnav.paths import OutputPathError
     from crowdnav.scenario import ScenarioError
 
@@ -95,8 +95,8 @@ def _one_robot_run(policy: str) -> bool:
     """A training run or checkpoint of one robot: played as `crowdnav evaluate` plays it (--set wins over its own settings)."""
     if not Path(policy).is_dir():
         return False
-    from crowdnav.agents.checkpoint import read_policy_info
-    from crowdnav.agents.marl import ROBOTS_KIND
+    from crowdnav.agents.marl.robots import ROBOTS_KIND
+    from crowdnav.agents.runs.checkpoint import read_policy_info
 
     try:
         return bool(read_policy_info(policy).get("agents") != ROBOTS_KIND)

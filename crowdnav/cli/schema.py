@@ -46,7 +46,7 @@ def json_schema(kind: str) -> dict[str, Any]:
         return scenario_json_schema()
     model: type[BaseModel]
     if kind == "train":
-        from crowdnav.agents.config import TrainConfig
+        from crowdnav.agents.training.config import TrainConfig
 
         model, title = TrainConfig, "crowdnav training config"
     elif kind == "experiment":

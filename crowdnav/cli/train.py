@@ -27,7 +27,7 @@ class _ConfigDefaultsFormatter(argparse.HelpFormatter):
         text = super()._expand_help(action)
         if "{" not in text:
             return text
-        from crowdnav.agents.config import TrainConfig, config_to_dict
+        from crowdnav.agents.training.config import TrainConfig, config_to_dict
 
         defaults = _flatten(config_to_dict(TrainConfig()))
         shown = {key: ",".join(map(str, value)) if isinstance(value, list) else value for key, value in defaults.items()}
@@ -150,7 +150,7 @@ def train_overrides(args: argparse.Namespace) -> dict[str, Any]:
 
 
 def train_command(args: argparse.Namespace) -> int:
-    from crowdnav.agents.config import ConfigError, describe_fields, load_config
+    from crowdnav.agents.training.config import ConfigError, describe_fields, load_config
 
     if args.list_options:
         for name, default, doc in describe_fields():
@@ -166,11 +166,11 @@ def train_command(args: argparse.Namespace) -> int:
     if args.print_config:
         import yaml
 
-        from crowdnav.agents.config import config_to_dict
+        from crowdnav.agents.training.config import config_to_dict
 
         sys.stdout.write(yaml.safe_dump(config_to_dict(config), sort_keys=False))
         return 0
-    from crowdnav.agents.training import describe_run, train
+    from crowdnav.agents.training.run import describe_run, train
     from crowdnav.cli.signals import interrupt_on_sigterm
     from crowdnav.scenario import ScenarioError
 
@@ -188,7 +188,7 @@ def train_command(args: argparse.Namespace) -> int:
 
 def _how_to_continue(out: Path) -> str:
     """What the user runs after a stopped training: resume from the checkpoint a kill keeps, or start again."""
-    from crowdnav.agents.run_folder import checkpoint_dir
+    from crowdnav.agents.runs.folder import checkpoint_dir
 
     current = checkpoint_dir(out)
     if any(folder.is_dir() for folder in (current, current.with_name(current.name + ".partial"), current.with_name(current.name + ".old"))):
@@ -197,7 +197,7 @@ def _how_to_continue(out: Path) -> str:
 
 
 def collect_dataset_command(args: argparse.Namespace) -> int:
-    from crowdnav.agents.dataset import collect_grids, save_dataset
+    from crowdnav.agents.networks.dataset import collect_grids, save_dataset
     from crowdnav.scenario import ScenarioError
 
     try:
@@ -212,8 +212,8 @@ def collect_dataset_command(args: argparse.Namespace) -> int:
 def pretrain_encoder_command(args: argparse.Namespace) -> int:
     import torch
 
-    from crowdnav.agents.dataset import collect_grids, load_dataset
-    from crowdnav.agents.pretrain import pretrain_encoder
+    from crowdnav.agents.networks.dataset import collect_grids, load_dataset
+    from crowdnav.agents.networks.pretrain import pretrain_encoder
     from crowdnav.scenario import ScenarioError
 
     torch.set_num_threads(args.threads)

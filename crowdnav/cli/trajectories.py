@@ -87,7 +87,7 @@ def _record(args: argparse.Namespace) -> int:
 
     if args.episodes < 1:
         raise CliError(f"--episodes must be at least 1, got {args.episodes}")
-    from crowdnav.agents.seeding import check_test_seeds
+    from crowdnav.agents.training.seeding import check_test_seeds
 
     try:  # the held-out seeds evaluate plays: never a run's training seeds
         check_test_seeds(args.test_seed_base, args.episodes)

@@ -1,7 +1,7 @@
 """Render whole episodes of a policy to video files.
 
 The policy is a plain callable ``act(env, observation) -> action``, or the name of a scripted
-policy; a trained agent is rendered through :func:`crowdnav.agents.render.render_policy`
+policy; a trained agent is rendered through :func:`crowdnav.agents.runs.render.render_policy`
 (what ``crowdnav render`` runs), which loads the checkpoint and calls :func:`render_episodes`.
 """
 

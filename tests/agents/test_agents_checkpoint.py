@@ -75,7 +75,7 @@ def test_resume_sets_aside_episodes_and_snapshots_saved_after_the_checkpoint(tmp
 
 
 def test_the_snapshot_is_saved_before_the_checkpoint_and_a_missing_one_is_restored_on_resume(tmp_path, monkeypatch):
-    import crowdnav.agents.training_session as training_module
+    import crowdnav.agents.sb3.session as training_module
 
     saved = []
     original = training_module.save_checkpoint
@@ -93,10 +93,10 @@ def test_the_snapshot_is_saved_before_the_checkpoint_and_a_missing_one_is_restor
 
 def test_models_saved_by_sb3s_own_classes_load_into_crowdnavs_and_the_other_way_round(tmp_path):
     import torch
-    from crowdnav.agents.algorithms import CrowdNavSAC
-    from crowdnav.agents.checkpoint import load_model, save_checkpoint
-    from crowdnav.agents.config import config_from_mapping
-    from crowdnav.agents.factory import make_env, make_model
+    from crowdnav.agents.runs.checkpoint import load_model, save_checkpoint
+    from crowdnav.agents.sb3.algorithms import CrowdNavSAC
+    from crowdnav.agents.sb3.factory import make_env, make_model
+    from crowdnav.agents.training.config import config_from_mapping
     from stable_baselines3 import SAC
 
     config = config_from_mapping(tiny_config(tmp_path, modalities=["leog", "goal"]))
@@ -107,7 +107,7 @@ def test_models_saved_by_sb3s_own_classes_load_into_crowdnavs_and_the_other_way_
     assert isinstance(loaded, CrowdNavSAC)
     observation = {key: space.sample() for key, space in sb3_model.observation_space.spaces.items()}
     np.testing.assert_array_equal(loaded.predict(observation, deterministic=True)[0], sb3_model.predict(observation, deterministic=True)[0])
-    from crowdnav.agents.resume_state import REPLAY_ARRAYS, load_replay_buffer
+    from crowdnav.agents.runs.resume_state import REPLAY_ARRAYS, load_replay_buffer
 
     load_replay_buffer(loaded.replay_buffer, tmp_path / "old" / REPLAY_ARRAYS)  # arrays, no pickle
     loaded.learn(20, reset_num_timesteps=False)  # resumes training
@@ -121,7 +121,7 @@ def test_models_saved_by_sb3s_own_classes_load_into_crowdnavs_and_the_other_way_
 
 
 def test_a_checkpoint_renders_as_a_video_with_the_env_options_it_was_trained_with(tmp_path):
-    from crowdnav.agents.render import render_policy
+    from crowdnav.agents.runs.render import render_policy
 
     train(tiny_config(tmp_path / "run", episodes=1, max_steps=10))
     paths = render_policy("open_space", str(tmp_path / "run" / "checkpoint"), episodes=1, seed=3, out=tmp_path / "videos",
@@ -161,7 +161,7 @@ def test_parameters_only_loading_never_unpickles_the_models_data(tmp_path, monke
 
 
 def test_a_checkpoint_without_its_config_needs_a_trusted_load(tmp_path):
-    from crowdnav.agents.checkpoint import UntrustedCheckpointError
+    from crowdnav.agents.runs.checkpoint import UntrustedCheckpointError
 
     train(tiny_config(tmp_path, episodes=2))
     info_path = tmp_path / "checkpoint" / "policy.json"

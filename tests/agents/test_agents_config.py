@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 import yaml
 from crowdnav.agents import ConfigError, TrainConfig, load_config, load_dataset
-from crowdnav.agents.config import describe_fields
+from crowdnav.agents.training.config import describe_fields
 
 from crowdnav.cli import main
 from tests.agents.agents_tiny import tiny_config
@@ -91,7 +91,7 @@ def test_train_reward_flag_errors_are_usage_errors_naming_the_valid_values(capsy
 
 
 def test_train_config_reward_weights_select_a_preset_for_the_env():
-    from crowdnav.agents.factory import env_options
+    from crowdnav.agents.sb3.factory import env_options
 
     from crowdnav.envs import CrowdNavEnv
 

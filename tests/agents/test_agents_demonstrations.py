@@ -7,9 +7,8 @@ import json
 import numpy as np
 import pytest
 import torch
-from crowdnav.agents import demonstrations as demos
-from crowdnav.agents.config import config_from_mapping
-from crowdnav.agents.demonstrations import (
+from crowdnav.agents.imitation import demonstrations as demos
+from crowdnav.agents.imitation.demonstrations import (
     REPORT_FILE,
     add_to_replay_buffer,
     agent_view,
@@ -17,8 +16,11 @@ from crowdnav.agents.demonstrations import (
     collect_demonstrations,
     warm_start,
 )
-from crowdnav.agents.factory import env_options, make_env, make_model, make_vec_env
-from crowdnav.agents.seeding import (
+from crowdnav.agents.sb3.factory import env_options, make_env, make_model, make_vec_env
+from crowdnav.agents.sb3.vec_env import CrowdNavSB3VecEnv
+from crowdnav.agents.training.config import config_from_mapping
+from crowdnav.agents.training.run import train
+from crowdnav.agents.training.seeding import (
     DATASET_SEED_OFFSET,
     DEMONSTRATION_EPISODES,
     DEMONSTRATION_SEED_OFFSET,
@@ -28,8 +30,6 @@ from crowdnav.agents.seeding import (
     demonstration_seed,
     train_seed,
 )
-from crowdnav.agents.training import train
-from crowdnav.agents.vec_env import CrowdNavSB3VecEnv
 
 from tests.agents.agents_tiny import tiny_config
 
@@ -109,7 +109,7 @@ def test_observations_are_the_agents_normalised_ones_and_actions_what_the_env_ta
 
 
 def test_frozen_leog_demonstrations_hold_the_encoders_latent(tmp_path):
-    from crowdnav.agents.encoders import LeogEncoder, leog_architecture
+    from crowdnav.agents.networks.encoders import LeogEncoder, leog_architecture
 
     cfg = config(tmp_path, modalities=["leog", "goal"])
     torch.manual_seed(0)

@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 import torch
 from crowdnav.agents import load_policy, train
-from crowdnav.agents.factory import extractors
-from crowdnav.agents.wrappers import LeogLatentWrapper, NormalizeObservation
+from crowdnav.agents.sb3.factory import extractors
+from crowdnav.agents.training.wrappers import LeogLatentWrapper, NormalizeObservation
 
 from tests.agents.agents_tiny import TINY_EXTRACTOR, tiny_config
 

@@ -5,9 +5,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 import torch
-from crowdnav.agents.encoders import LeogAutoencoder, LeogEncoder, LidarEncoder, leog_architecture
-from crowdnav.agents.extractor import ENCODERS, MultiModalExtractor, register_encoder
-from crowdnav.agents.rbf import GaussianRBF
+from crowdnav.agents.networks.encoders import LeogAutoencoder, LeogEncoder, LidarEncoder, leog_architecture
+from crowdnav.agents.networks.extractor import ENCODERS, MultiModalExtractor, register_encoder
+from crowdnav.agents.networks.rbf import GaussianRBF
 from gymnasium import spaces
 from torch import nn
 
@@ -136,7 +136,7 @@ def test_rbf_gradients_with_respect_to_the_input_and_trainable_centres_still_flo
 
 @pytest.mark.parametrize("dtype", [torch.uint8, torch.float32])
 def test_binarize_equals_the_plain_comparison_and_reuses_its_result_for_the_same_unchanged_tensor(dtype):
-    from crowdnav.agents.extractor import binarize
+    from crowdnav.agents.networks.extractor import binarize
 
     grid = (torch.rand(4, 1, 6, 6) > 0.7).to(dtype) * (255 if dtype == torch.uint8 else 1)
     binary = binarize(grid)
@@ -165,7 +165,7 @@ def test_extractor_on_sampled_tensors_equals_sb3_preprocessing_and_the_reference
 
 
 def test_parameter_free_transforms_run_once_per_batch_and_are_shared_only_between_equal_constants():
-    from crowdnav.agents.encoders import LowDimEncoder
+    from crowdnav.agents.networks.encoders import LowDimEncoder
 
     scan = torch.rand(5, 8)
     first, same, other = (LidarEncoder(np.zeros(8), np.full(8, high), hidden=[4]) for high in (1.0, 1.0, 2.0))

@@ -8,9 +8,9 @@ import warnings
 import numpy as np
 import pytest
 from crowdnav.agents import ConfigError, load_policy, train
-from crowdnav.agents.config import config_from_mapping
-from crowdnav.agents.factory import make_env, observation_normalization
-from crowdnav.agents.wrappers import NormalizeObservation, normalize_observation, observation_scales
+from crowdnav.agents.sb3.factory import make_env, observation_normalization
+from crowdnav.agents.training.config import config_from_mapping
+from crowdnav.agents.training.wrappers import NormalizeObservation, normalize_observation, observation_scales
 
 from crowdnav.envs import CrowdNavEnv
 from crowdnav.simulator import OUTCOMES
@@ -122,8 +122,8 @@ def test_make_env_normalizes_by_default_and_switching_it_off_gives_the_raw_obser
 
 def test_frozen_latent_wrapper_on_top_of_the_normalisation_still_encodes_the_raw_grid():
     import torch
-    from crowdnav.agents.encoders import LeogEncoder, leog_architecture
-    from crowdnav.agents.wrappers import LeogLatentWrapper, encode_grids
+    from crowdnav.agents.networks.encoders import LeogEncoder, leog_architecture
+    from crowdnav.agents.training.wrappers import LeogLatentWrapper, encode_grids
 
     env = NormalizeObservation(CrowdNavEnv("room_furniture", modalities=["leog", "goal"], sensors={"leog": {"size": 3.0}}))
     torch.manual_seed(0)
@@ -213,7 +213,7 @@ def test_resuming_with_the_other_setting_is_a_clear_error(tmp_path):
 
 def test_crowdnavs_extractor_gives_the_same_latent_on_raw_and_scaled_observations():
     import torch
-    from crowdnav.agents.extractor import MultiModalExtractor
+    from crowdnav.agents.networks.extractor import MultiModalExtractor
 
     from crowdnav.envs import CrowdNavEnv
 

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 import torch
 from crowdnav.agents import GridDataset, collect_grids, load_dataset, load_encoder, pretrain_encoder, save_dataset, train_seed
-from crowdnav.agents.wrappers import TRAIN_SEED_BASE, dataset_seed
+from crowdnav.agents.training.wrappers import TRAIN_SEED_BASE, dataset_seed
 
 
 def test_pretraining_cuts_the_held_out_reconstruction_loss_at_least_5x_on_the_furniture_room(tmp_path):

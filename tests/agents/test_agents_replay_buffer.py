@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from crowdnav.agents.replay_buffer import PackedGridReplayBuffer
+from crowdnav.agents.sb3.replay_buffer import PackedGridReplayBuffer
 from gymnasium import spaces
 
 GAMMA = 0.9

@@ -6,7 +6,7 @@ import json
 import shutil
 
 from crowdnav.agents import load_policy, train
-from crowdnav.agents.run_folder import (
+from crowdnav.agents.runs.folder import (
     checkpoint_dir,
     checkpoint_episodes,
     checkpoint_info,

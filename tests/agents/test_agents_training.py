@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 from crowdnav.agents import train
-from crowdnav.agents.extractor import MultiModalExtractor
+from crowdnav.agents.networks.extractor import MultiModalExtractor
 
 from crowdnav.simulator import OUTCOMES
 from tests.agents.agents_tiny import tiny_config
@@ -45,7 +45,7 @@ def test_training_stops_after_the_requested_episodes_and_logs_each(tmp_path):
 
 def test_packed_replay_buffer_gives_back_the_grids_at_one_bit_per_cell(tmp_path):
     import torch
-    from crowdnav.agents.replay_buffer import PackedGridReplayBuffer
+    from crowdnav.agents.sb3.replay_buffer import PackedGridReplayBuffer
 
     result = train(tiny_config(tmp_path, modalities=["leog", "goal"], episodes=1, max_steps=20, scenario="room_furniture"))
     buffer = result.model.replay_buffer
@@ -118,9 +118,9 @@ def test_n_step_returns_reach_the_replay_buffer_and_are_refused_for_on_policy_al
 def test_fast_training_gives_the_networks_sb3s_own_classes_give_to_the_last_bit(tmp_path, algo, modalities):
     """Same seed: crowdnav's algorithms, extractor and replay-buffer fast paths = SB3's classes and the plain paths."""
     import torch
-    from crowdnav.agents.algorithms import CrowdNavDDPG, CrowdNavSAC, CrowdNavTD3
-    from crowdnav.agents.config import config_from_mapping
-    from crowdnav.agents.factory import make_env, make_model
+    from crowdnav.agents.sb3.algorithms import CrowdNavDDPG, CrowdNavSAC, CrowdNavTD3
+    from crowdnav.agents.sb3.factory import make_env, make_model
+    from crowdnav.agents.training.config import config_from_mapping
     from stable_baselines3 import DDPG, SAC, TD3
 
     states, classes = [], []
@@ -138,7 +138,7 @@ def test_fast_training_gives_the_networks_sb3s_own_classes_give_to_the_last_bit(
 
 def test_soft_update_equals_sb3s_polyak_update_to_the_last_bit():
     import torch
-    from crowdnav.agents.algorithms import soft_update
+    from crowdnav.agents.sb3.algorithms import soft_update
     from stable_baselines3.common.utils import polyak_update
 
     generator = torch.Generator().manual_seed(0)
@@ -154,8 +154,8 @@ def test_soft_update_equals_sb3s_polyak_update_to_the_last_bit():
 
 
 def test_fast_training_mode_sets_the_flags_sb3s_set_training_mode_sets(tmp_path):
-    from crowdnav.agents.config import config_from_mapping
-    from crowdnav.agents.factory import make_env, make_model
+    from crowdnav.agents.sb3.factory import make_env, make_model
+    from crowdnav.agents.training.config import config_from_mapping
     from stable_baselines3.sac.policies import SACPolicy
 
     config = config_from_mapping(tiny_config(tmp_path))
@@ -175,8 +175,8 @@ def test_fast_training_mode_sets_the_flags_sb3s_set_training_mode_sets(tmp_path)
 
 def test_sac_actor_written_out_gaussian_matches_sb3s_distribution(tmp_path):
     import torch
-    from crowdnav.agents.config import config_from_mapping
-    from crowdnav.agents.factory import make_env, make_model
+    from crowdnav.agents.sb3.factory import make_env, make_model
+    from crowdnav.agents.training.config import config_from_mapping
     from stable_baselines3.sac.policies import Actor
 
     config = config_from_mapping(tiny_config(tmp_path, modalities=["leog", "goal"]))

@@ -58,7 +58,7 @@ def mean_return(policy, seeds):
 
 def test_registered_algorithm_trains_through_crowdnav_train_without_pickle_and_learns(tmp_path, random_search):
     from crowdnav.agents import load_policy
-    from crowdnav.agents.seeding import train_seed
+    from crowdnav.agents.training.seeding import train_seed
 
     run = tmp_path / "run"
     assert main(["train", "--config", str(write_config(tmp_path, toy_config(run)))]) == 0
@@ -107,7 +107,7 @@ def test_registered_algorithm_collects_from_several_worlds_and_a_resume_starts_n
     import json
 
     from crowdnav.agents import train
-    from crowdnav.agents.seeding import train_seed
+    from crowdnav.agents.training.seeding import train_seed
 
     run = tmp_path / "run"
     result = train(toy_config(run, num_envs=4, episodes=10, checkpoint_every=5))
@@ -126,7 +126,7 @@ def test_registered_algorithm_collects_from_several_worlds_and_a_resume_starts_n
 
 def test_registered_algorithm_refuses_settings_of_the_sb3_path_in_one_line(tmp_path, random_search):
     from crowdnav.agents import train
-    from crowdnav.agents.config import ConfigError
+    from crowdnav.agents.training.config import ConfigError
 
     config = toy_config(tmp_path / "run", timesteps=400, checkpoint_every_steps=100)
     del config["episodes"]
@@ -150,7 +150,7 @@ def test_a_run_of_an_algorithm_this_process_has_not_registered_is_refused_in_one
 def test_an_installed_algorithm_is_registered_from_its_entry_point(monkeypatch):
     import importlib.metadata
 
-    from crowdnav.agents.config import config_from_mapping
+    from crowdnav.agents.training.config import config_from_mapping
 
     import crowdnav.registry as registry
 

@@ -14,11 +14,11 @@ import sys
 import zipfile
 
 import pytest
-from crowdnav.agents.checkpoint import POLICY_FORMAT
-from crowdnav.agents.config import config_from_mapping, config_to_dict
-from crowdnav.agents.factory import env_options, hyperparameters, make_env, make_model
-from crowdnav.agents.model_zip import MAX_TOTAL_BYTES, zip_parameters
-from crowdnav.agents.network_size import MAX_PARAMETERS, NetworkSizeError, model_parameters
+from crowdnav.agents.networks.size import MAX_PARAMETERS, NetworkSizeError, model_parameters
+from crowdnav.agents.runs.checkpoint import POLICY_FORMAT
+from crowdnav.agents.sb3.factory import env_options, hyperparameters, make_env, make_model
+from crowdnav.agents.sb3.model_zip import MAX_TOTAL_BYTES, zip_parameters
+from crowdnav.agents.training.config import config_from_mapping, config_to_dict
 
 from tests.agents.agents_tiny import tiny_config
 from tests.paths import REPO
@@ -34,7 +34,7 @@ import resource, sys
 argv = sys.argv[1:]
 try:
     if argv[0] == "load_robots_policy":
-        from crowdnav.agents.marl import load_robots_policy
+        from crowdnav.agents.marl.robots import load_robots_policy
         load_robots_policy(argv[1])
         code = 0
     else:
@@ -186,7 +186,7 @@ def test_a_zip_whose_members_sum_over_the_total_is_refused_before_reading_any(tm
 
 
 def test_a_zip_with_more_members_than_allowed_is_refused(tmp_path):
-    from crowdnav.agents.model_zip import MAX_MEMBERS, ModelZipError, read_model_zip
+    from crowdnav.agents.sb3.model_zip import MAX_MEMBERS, ModelZipError, read_model_zip
 
     path = tmp_path / "many.zip"
     with zipfile.ZipFile(path, "w") as archive:

@@ -7,8 +7,8 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from crowdnav.agents.checkpoint import POLICY_FORMAT, read_policy_info, save_checkpoint
-from crowdnav.agents.resume_state import (
+from crowdnav.agents.runs.checkpoint import POLICY_FORMAT, read_policy_info, save_checkpoint
+from crowdnav.agents.runs.resume_state import (
     REPLAY_ARRAYS,
     RESUME_FORMAT,
     STATE_FILE,

@@ -8,10 +8,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 from crowdnav.agents import ConfigError, train
-from crowdnav.agents.config import config_from_mapping
-from crowdnav.agents.marl import load_robots_policy
-from crowdnav.agents.marl_env import RobotsConfigError, RobotsTrainingEnv
-from crowdnav.agents.seeding import TRAIN_SEED_BASE, train_seed
+from crowdnav.agents.marl.env import RobotsConfigError, RobotsTrainingEnv
+from crowdnav.agents.marl.robots import load_robots_policy
+from crowdnav.agents.training.config import config_from_mapping
+from crowdnav.agents.training.seeding import TRAIN_SEED_BASE, train_seed
 from crowdnav.evaluation.baselines import scripted_policy
 from crowdnav.evaluation.robot_rollout import RobotEpisodes, robot_count
 
@@ -200,7 +200,7 @@ def test_robots_observing_a_modality_differently_are_refused_in_one_line_naming_
 
 
 def test_a_shared_robot_checkpoint_renders_every_robot_to_a_video_named_by_how_many_arrived(tmp_path, capsys):
-    from crowdnav.agents.render import PolicyLoadError, render_policy
+    from crowdnav.agents.runs.render import PolicyLoadError, render_policy
 
     train(robots_config(tmp_path / "run"))
     checkpoint = str(tmp_path / "run" / "checkpoint")

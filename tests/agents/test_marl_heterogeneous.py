@@ -12,11 +12,11 @@ import pytest
 import torch
 import yaml
 from crowdnav.agents import ConfigError, train
-from crowdnav.agents.config import config_from_mapping
-from crowdnav.agents.marl import load_robots_policy
-from crowdnav.agents.marl_actions import RobotActions, command, unicycle_action
-from crowdnav.agents.marl_env import RobotsTrainingEnv, robots_env
-from crowdnav.agents.marl_networks import KindActorCriticPolicy, KindNetworks, robot_kinds
+from crowdnav.agents.marl.actions import RobotActions, command, unicycle_action
+from crowdnav.agents.marl.env import RobotsTrainingEnv, robots_env
+from crowdnav.agents.marl.networks import KindActorCriticPolicy, KindNetworks, robot_kinds
+from crowdnav.agents.marl.robots import load_robots_policy
+from crowdnav.agents.training.config import config_from_mapping
 from stable_baselines3.common.policies import ActorCriticPolicy
 
 from crowdnav.policies import velocity_to_action

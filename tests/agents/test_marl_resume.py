@@ -15,8 +15,8 @@ import numpy as np
 import pytest
 import yaml
 from crowdnav.agents import train
-from crowdnav.agents.marl_resume import STATE_FILE
-from crowdnav.agents.resume_state import ResumeStateError
+from crowdnav.agents.marl.resume import STATE_FILE
+from crowdnav.agents.runs.resume_state import ResumeStateError
 
 from tests.agents.test_marl import robots_config
 
@@ -91,7 +91,7 @@ def _train_process(config: Path, resume: bool) -> subprocess.Popen:
 
 
 def _parameters(run: Path) -> dict[str, bytes]:
-    from crowdnav.agents.model_zip import read_model_zip
+    from crowdnav.agents.sb3.model_zip import read_model_zip
 
     policy = read_model_zip(run / "checkpoint" / "model.zip", "cpu").parameters["policy"]
     return {name: tensor.numpy().tobytes() for name, tensor in policy.items()}
@@ -101,7 +101,7 @@ def _checkpoint_steps(run: Path, recover: bool = True) -> int:
     """The robot steps of the run's checkpoint (0: none yet or mid-swap); ``recover``: first pick one a kill cut mid-swap."""
     import json
 
-    from crowdnav.agents.run_folder import recover_checkpoint
+    from crowdnav.agents.runs.folder import recover_checkpoint
 
     if recover:
         recover_checkpoint(run)

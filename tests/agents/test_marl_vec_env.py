@@ -5,8 +5,8 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from crowdnav.agents.config import config_from_mapping
-from crowdnav.agents.marl_vec_env import RobotsVecEnv
+from crowdnav.agents.marl.vec_env import RobotsVecEnv
+from crowdnav.agents.training.config import config_from_mapping
 
 from tests.agents.test_marl import robots_config
 

@@ -15,13 +15,13 @@ from typing import Any
 
 import numpy as np
 import pytest
-from crowdnav.agents.config import config_from_mapping
-from crowdnav.agents.factory import make_env, observation_normalization
-from crowdnav.agents.resume_state import ROLLOUT_ARRAYS, ActionLog
-from crowdnav.agents.run_folder import checkpoint_dir
-from crowdnav.agents.train_result import TrainResult
-from crowdnav.agents.training_checks import scenario_max_steps
-from crowdnav.agents.training_session import TrainingSession
+from crowdnav.agents.runs.folder import checkpoint_dir
+from crowdnav.agents.runs.result import TrainResult
+from crowdnav.agents.runs.resume_state import ROLLOUT_ARRAYS, ActionLog
+from crowdnav.agents.sb3.factory import make_env, observation_normalization
+from crowdnav.agents.sb3.session import TrainingSession
+from crowdnav.agents.training.checks import scenario_max_steps
+from crowdnav.agents.training.config import config_from_mapping
 from stable_baselines3.common.vec_env import DummyVecEnv
 
 from tests.agents.agents_tiny import tiny_config

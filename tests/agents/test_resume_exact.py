@@ -14,7 +14,7 @@ import numpy as np
 import pandas as pd
 import pytest
 from crowdnav.agents import train
-from crowdnav.agents.run_folder import RunBusyError, writing
+from crowdnav.agents.runs.folder import RunBusyError, writing
 
 from tests.agents.agents_tiny import tiny_config
 

@@ -9,7 +9,7 @@ from io import BytesIO
 
 import pytest
 from crowdnav.agents import train
-from crowdnav.agents.run_folder import checkpoint_episodes, recover_checkpoint
+from crowdnav.agents.runs.folder import checkpoint_episodes, recover_checkpoint
 from crowdnav.evaluation.storage import clean_temporaries
 from crowdnav.evaluation.transfer import pack_folder
 
@@ -91,8 +91,8 @@ def test_a_checkpoint_carries_the_random_streams_and_a_resume_restores_them(tmp_
 
     import numpy as np
     import torch
-    from crowdnav.agents.checkpoint import load_policy
-    from crowdnav.agents.resume_state import STATE_FILE, restore_training_state
+    from crowdnav.agents.runs.checkpoint import load_policy
+    from crowdnav.agents.runs.resume_state import STATE_FILE, restore_training_state
 
     train(tiny_config(tmp_path, episodes=2, checkpoint_every=2))
     path = tmp_path / "checkpoint" / STATE_FILE

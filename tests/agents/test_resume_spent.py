@@ -11,7 +11,7 @@ from pathlib import Path
 
 import pytest
 from crowdnav.agents import train
-from crowdnav.agents.run_folder import LOCK_FILE
+from crowdnav.agents.runs.folder import LOCK_FILE
 
 from tests.agents.agents_tiny import tiny_config
 from tests.agents.test_marl import robots_config

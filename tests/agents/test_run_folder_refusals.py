@@ -3,8 +3,8 @@
 from __future__ import annotations
 
 import pytest
-from crowdnav.agents.config import ConfigError
-from crowdnav.agents.run_folder import EPISODE_LOG, writing
+from crowdnav.agents.runs.folder import EPISODE_LOG, writing
+from crowdnav.agents.training.config import ConfigError
 
 
 def test_a_refusal_removes_the_folder_it_created_with_its_setup_files_and_new_parents(tmp_path):

@@ -183,7 +183,7 @@ def test_crowdnav_evaluate_plays_a_sarl_run(tmp_path):
 
 def test_settings_it_cannot_use_are_refused_in_one_line(tmp_path):
     from crowdnav.agents import train
-    from crowdnav.agents.config import ConfigError
+    from crowdnav.agents.training.config import ConfigError
 
     with pytest.raises(ConfigError, match="^modalities: algorithm 'sarl' reads humans, goal and velocity; add velocity$"):
         train(config(tmp_path / "a", modalities=["humans", "goal"]))

@@ -16,13 +16,13 @@ pytestmark = pytest.mark.filterwarnings("ignore::DeprecationWarning")
 torch = pytest.importorskip("torch")
 
 from crowdnav.agents import load_policy, train  # noqa: E402
-from crowdnav.agents.config import ConfigError  # noqa: E402
-from crowdnav.agents.network_size import MAX_PARAMETERS  # noqa: E402
+from crowdnav.agents.networks.size import MAX_PARAMETERS  # noqa: E402
 from crowdnav.agents.sarl.agent import SarlAgent  # noqa: E402
 from crowdnav.agents.sarl.files import SarlFileError  # noqa: E402
 from crowdnav.agents.sarl.network import value_network  # noqa: E402
 from crowdnav.agents.sarl.options import network_parameters  # noqa: E402
 from crowdnav.agents.sarl.sensing import SensorMismatchError  # noqa: E402
+from crowdnav.agents.training.config import ConfigError  # noqa: E402
 
 from crowdnav import CrowdNavEnv  # noqa: E402
 from tests.agents.test_bounded_totals import _refused  # noqa: E402

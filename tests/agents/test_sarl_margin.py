@@ -11,8 +11,8 @@ pytestmark = pytest.mark.filterwarnings("ignore::DeprecationWarning")
 
 torch = pytest.importorskip("torch")
 
-from crowdnav.agents.config import ConfigError  # noqa: E402
 from crowdnav.agents.sarl.lookahead import Physics, action_set, decode, lookahead  # noqa: E402
+from crowdnav.agents.training.config import ConfigError  # noqa: E402
 
 WEIGHTS = {"step": -0.01, "goal_progress": 0.1, "social": 0.0, "goal_reached": 1.0, "collision": -1.0}
 PHYSICS = Physics(0.3, 1.0, 0.2, 0.3, 0.0, 1.0, WEIGHTS)

@@ -13,8 +13,8 @@ pytestmark = pytest.mark.filterwarnings("ignore::DeprecationWarning")
 torch = pytest.importorskip("torch")
 
 from crowdnav.agents import load_policy, train  # noqa: E402
-from crowdnav.agents.config import ConfigError  # noqa: E402
 from crowdnav.agents.sarl.network import ValueEnsemble, ValueNetwork, evaluate  # noqa: E402
+from crowdnav.agents.training.config import ConfigError  # noqa: E402
 
 from crowdnav.errors import CrowdNavError  # noqa: E402
 from crowdnav.scenario.library import library_names  # noqa: E402

@@ -37,8 +37,8 @@ def outcomes(run):
 
 def single_env_loop(document):
     """SarlAgent's training before the vector stack (4c1b7e2), written out: one gym env (make_env), an episode at a time."""
-    from crowdnav.agents.config import config_from_mapping
-    from crowdnav.agents.factory import make_env, make_vec_env
+    from crowdnav.agents.sb3.factory import make_env, make_vec_env
+    from crowdnav.agents.training.config import config_from_mapping
 
     cfg = config_from_mapping(document)
     agent = SarlAgent(make_vec_env(cfg, reward_dtype=np.float64), cfg)
@@ -91,8 +91,8 @@ def test_one_world_trains_the_single_env_loop_bit_for_bit_and_the_published_runs
 
 def teacher_episode(document, seed):
     """(outcome, return, length) of the predictive teacher driving one single env from ``seed``, by hand."""
-    from crowdnav.agents.config import config_from_mapping
-    from crowdnav.agents.factory import env_options
+    from crowdnav.agents.sb3.factory import env_options
+    from crowdnav.agents.training.config import config_from_mapping
 
     from crowdnav.envs import CrowdNavEnv
 
@@ -109,7 +109,7 @@ def test_three_stacked_worlds_each_taught_from_its_own_simulator_and_a_resume_st
     import json
 
     from crowdnav.agents import train
-    from crowdnav.agents.seeding import train_seed
+    from crowdnav.agents.training.seeding import train_seed
 
     document = config(tmp_path / "run", num_envs=3, episodes=5, overrides={"humans.count": 3, "max_steps": 30})
     result = train(document)

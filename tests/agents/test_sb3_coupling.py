@@ -1,4 +1,4 @@
-"""Every SB3 internal crowdnav relies on (crowdnav.agents.sb3_internals) exists on the installed SB3, as crowdnav uses it."""
+"""Every SB3 internal crowdnav relies on (crowdnav.agents.sb3.internals) exists on the installed SB3, as crowdnav uses it."""
 
 from __future__ import annotations
 
@@ -12,7 +12,7 @@ import gymnasium as gym
 import numpy as np
 import pytest
 import stable_baselines3
-from crowdnav.agents.sb3_internals import SB3_INTERNALS, TESTED_SB3, Internal, fingerprint, source_fingerprint
+from crowdnav.agents.sb3.internals import SB3_INTERNALS, TESTED_SB3, Internal, fingerprint, source_fingerprint
 from gymnasium import spaces
 
 from tests.paths import REPO
@@ -87,7 +87,7 @@ def _problem(internal: Internal) -> str | None:
     found = fingerprint(member)
     if found not in internal.fingerprints:
         return (f"its code changed (fingerprint {found}, crowdnav's copy matches {list(internal.fingerprints)}): port the change "
-                "to crowdnav's copy (or judge it irrelevant), then add the fingerprint in crowdnav/agents/sb3_internals.py")
+                "to crowdnav's copy (or judge it irrelevant), then add the fingerprint in crowdnav/agents/sb3/internals.py")
     return None
 
 

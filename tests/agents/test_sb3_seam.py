@@ -52,11 +52,11 @@ def rows(run):
 
 
 def test_every_algorithm_gets_its_trainer_from_its_registered_builder(registered):
-    from crowdnav.agents.algorithm_protocol import RunTrainer, builder_of
-    from crowdnav.agents.config import config_from_mapping
-    from crowdnav.agents.protocol_training import train_registered
-    from crowdnav.agents.sb3_algorithm import SB3_BUILDER
-    from crowdnav.agents.training import trainer_of
+    from crowdnav.agents.sb3.algorithm import SB3_BUILDER
+    from crowdnav.agents.training.algorithm_protocol import RunTrainer, builder_of
+    from crowdnav.agents.training.config import config_from_mapping
+    from crowdnav.agents.training.episode_loop import train_registered
+    from crowdnav.agents.training.run import trainer_of
 
     registered("random_search", SPEC)
     for name in algorithm_names():
@@ -70,8 +70,8 @@ def test_every_algorithm_gets_its_trainer_from_its_registered_builder(registered
 
 
 def test_a_spec_without_a_builder_is_refused_in_one_line(registered):
-    from crowdnav.agents.config import ConfigError, config_from_mapping
-    from crowdnav.agents.training import trainer_of
+    from crowdnav.agents.training.config import ConfigError, config_from_mapping
+    from crowdnav.agents.training.run import trainer_of
 
     registered("nameonly", AlgorithmSpec("A name without a builder."))
     with pytest.raises(ConfigError, match="^algo: algorithm 'nameonly' has no builder: it cannot be trained or loaded$"):
@@ -80,8 +80,8 @@ def test_a_spec_without_a_builder_is_refused_in_one_line(registered):
 
 def test_an_sb3_algorithm_is_one_registry_entry_and_trains_bit_for_bit_as_the_built_in_one(tmp_path, registered):
     from crowdnav.agents import load_policy, train
-    from crowdnav.agents.factory import hyperparameters, model_class
-    from crowdnav.agents.sb3_algorithm import SB3Algorithm
+    from crowdnav.agents.sb3.algorithm import SB3Algorithm
+    from crowdnav.agents.sb3.factory import hyperparameters, model_class
 
     registered("ppo_again", replace(ALGORITHM_SPECS["ppo"], description="PPO once more, registered by a test."))
     assert model_class("ppo_again") is model_class("ppo")
@@ -91,7 +91,7 @@ def test_an_sb3_algorithm_is_one_registry_entry_and_trains_bit_for_bit_as_the_bu
         assert left.detach().numpy().tobytes() == right.detach().numpy().tobytes()
     policy = load_policy(tmp_path / "again")  # the checkpoint reader is the builder's, as for "ppo"
     assert isinstance(policy.agent, SB3Algorithm) and policy.model is policy.agent.model
-    from crowdnav.agents.config import config_from_mapping
+    from crowdnav.agents.training.config import config_from_mapping
 
     assert hyperparameters(config_from_mapping(ppo_config("x", algo="ppo_again"))) == hyperparameters(config_from_mapping(ppo_config("x")))
 
@@ -99,9 +99,9 @@ def test_an_sb3_algorithm_is_one_registry_entry_and_trains_bit_for_bit_as_the_bu
 def test_an_sb3_algorithm_trains_in_crowdnavs_episode_loop_like_the_toy_and_loads_and_exports_alike(tmp_path, registered):
     """The builder without a loop of its own (SB3Builder): the same train_registered, load_agent and export_module as the toy."""
     from crowdnav.agents import load_policy, train
-    from crowdnav.agents.onnx_export import actor_of
-    from crowdnav.agents.sb3_algorithm import SB3Algorithm, SB3Builder
-    from crowdnav.agents.seeding import train_seed
+    from crowdnav.agents.runs.onnx_export import actor_of
+    from crowdnav.agents.sb3.algorithm import SB3Algorithm, SB3Builder
+    from crowdnav.agents.training.seeding import train_seed
 
     registered("random_search", SPEC)
     registered("ppo_episodes", replace(ALGORITHM_SPECS["ppo"], description="PPO in crowdnav's episode loop.", builder=SB3Builder()))

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import numpy as np
-from crowdnav.agents.vec_env import CrowdNavSB3VecEnv
+from crowdnav.agents.sb3.vec_env import CrowdNavSB3VecEnv
 from stable_baselines3 import PPO, SAC
 from stable_baselines3.common.monitor import Monitor
 from stable_baselines3.common.vec_env import DummyVecEnv
@@ -76,9 +76,9 @@ def test_resume_rebuilds_worlds_through_public_methods_and_touches_no_private_me
 
     from tests.paths import REPO
 
-    tree = ast.parse((REPO / "agents" / "resume_worlds.py").read_text(encoding="utf-8"))
+    tree = ast.parse((REPO / "agents" / "runs" / "resume_worlds.py").read_text(encoding="utf-8"))
     names = {node.attr for node in ast.walk(tree) if isinstance(node, ast.Attribute)}
     private = {name for name in names if name.startswith("_") and not name.startswith("__")}
-    # only the DummyVecEnv internals of the one-env path, which agents/sb3_internals.py checks against SB3
+    # only the DummyVecEnv internals of the one-env path, which agents/sb3/internals.py checks against SB3
     assert private <= {"_save_obs", "_obs_from_buf", "_reset_seeds"}, private
     assert hasattr(CrowdNavSB3VecEnv, "restore_worlds") and hasattr(CrowdNavSB3VecEnv, "world_counts")

@@ -10,11 +10,11 @@ import numpy as np
 import pandas as pd
 import pytest
 from crowdnav.agents import ConfigError, train
-from crowdnav.agents.config import config_from_mapping
-from crowdnav.agents.resume_state import ROLLOUT_ARRAYS
-from crowdnav.agents.run_folder import checkpoint_dir, checkpoint_info, policy_snapshots
-from crowdnav.agents.seeding import TRAIN_SEED_BASE, EpisodeSeedCounter, train_seed
-from crowdnav.agents.vec_env import CrowdNavSB3VecEnv
+from crowdnav.agents.runs.folder import checkpoint_dir, checkpoint_info, policy_snapshots
+from crowdnav.agents.runs.resume_state import ROLLOUT_ARRAYS
+from crowdnav.agents.sb3.vec_env import CrowdNavSB3VecEnv
+from crowdnav.agents.training.config import config_from_mapping
+from crowdnav.agents.training.seeding import TRAIN_SEED_BASE, EpisodeSeedCounter, train_seed
 
 from crowdnav.scenario.library import library_names
 from tests.agents.agents_tiny import TINY_EXTRACTOR, tiny_config
@@ -234,7 +234,7 @@ def test_reward_scale_multiplies_what_the_algorithm_learns_from_and_not_the_logg
 
 def test_frozen_precomputed_encoder_gives_the_worlds_the_single_envs_latents_and_trains(tmp_path, encoder_file):
     from crowdnav.agents import load_policy
-    from crowdnav.agents.factory import load_leog_weights, make_env, make_vec_env
+    from crowdnav.agents.sb3.factory import load_leog_weights, make_env, make_vec_env
 
     fields = {"modalities": ["leog", "goal"], "scenario": "room_furniture", "encoder": {"mode": "frozen", "weights": str(encoder_file)}}
     config = config_from_mapping(batched_config(tmp_path / "run", **fields))
@@ -285,7 +285,7 @@ def test_resuming_with_another_number_of_worlds_is_refused(tmp_path):
 ])
 def test_off_policy_batched_gradient_steps_are_the_update_to_data_ratio_times_the_env_steps_of_a_rollout(
         tmp_path, worlds, ratio, train_freq, expected):
-    from crowdnav.agents.factory import make_model, make_vec_env
+    from crowdnav.agents.sb3.factory import make_model, make_vec_env
 
     fields = {"num_envs": worlds, "updates_per_step": ratio, "algo_kwargs": {} if train_freq is None else {"train_freq": train_freq}}
     config = config_from_mapping(tiny_config(tmp_path, algo="sac", **fields))
@@ -295,7 +295,7 @@ def test_off_policy_batched_gradient_steps_are_the_update_to_data_ratio_times_th
 
 
 def test_a_run_refuses_to_start_more_training_episodes_than_its_seed_band_holds():
-    from crowdnav.agents.seeding import MAX_TRAIN_EPISODES, dataset_seed
+    from crowdnav.agents.training.seeding import MAX_TRAIN_EPISODES, dataset_seed
 
     counter = EpisodeSeedCounter(0, first_episode=MAX_TRAIN_EPISODES - 1)
     assert counter([0]) == [train_seed(0, MAX_TRAIN_EPISODES - 1)]
@@ -305,7 +305,7 @@ def test_a_run_refuses_to_start_more_training_episodes_than_its_seed_band_holds(
 
 
 def test_a_linear_learning_rate_schedule_decays_to_zero_over_the_budget_and_survives_a_checkpoint(tmp_path):
-    from crowdnav.agents.checkpoint import load_model
+    from crowdnav.agents.runs.checkpoint import load_model
 
     result = train(batched_config(tmp_path / "run", algo="ppo", learning_rate=1e-3, learning_rate_schedule="linear",
                                   timesteps=256, episodes=1000))

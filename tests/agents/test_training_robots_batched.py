@@ -5,8 +5,8 @@ from __future__ import annotations
 import pandas as pd
 import pytest
 from crowdnav.agents import train
-from crowdnav.agents.resume_state import ROLLOUT_ARRAYS
-from crowdnav.agents.run_folder import checkpoint_dir
+from crowdnav.agents.runs.folder import checkpoint_dir
+from crowdnav.agents.runs.resume_state import ROLLOUT_ARRAYS
 
 from tests.agents.test_training_batched import Stopped, _log, _weights, batched_config
 

@@ -23,7 +23,7 @@ from crowdnav.registry import AlgorithmSpec
 
 
 class RandomSearchAgent:
-    """Implements crowdnav.agents.algorithm_protocol.Algorithm; ``RandomSearchAgent(env, config)`` is the builder."""
+    """Implements crowdnav.agents.training.algorithm_protocol.Algorithm; ``RandomSearchAgent(env, config)`` is the builder."""
 
     def __init__(self, env: VecEnv, config: Any):
         spaces = env.observation_space.spaces

@@ -11,7 +11,7 @@ from __future__ import annotations
 import zipfile
 
 import pytest
-from crowdnav.agents.model_zip import ModelZipError, read_model_zip
+from crowdnav.agents.sb3.model_zip import ModelZipError, read_model_zip
 
 from tests.agents.test_bounded_totals import _refused, _sb3_zip
 
@@ -83,7 +83,7 @@ def test_train_refuses_a_shield_horizon_of_1e300_in_one_line_naming_the_config(t
 
 
 def test_a_trusted_load_checks_the_zip_members_before_sb3_decompresses_them(tmp_path, monkeypatch):
-    from crowdnav.agents import checkpoint
+    from crowdnav.agents.runs import checkpoint
 
     path = _with_members(_sb3_zip(tmp_path / "model.zip", lambda data: None), ["junk.pth"], mib=1)
     checkpoint.check_model_zip(_sb3_zip(tmp_path / "clean.zip", lambda data: None))  # what SB3 writes passes

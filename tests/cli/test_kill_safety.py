@@ -13,7 +13,7 @@ from pathlib import Path
 
 import pytest
 import yaml
-from crowdnav.agents.episode_log import DISCARDED_SUFFIX, HEADER, EpisodeLogError, prepare_log, read_log
+from crowdnav.agents.runs.episode_log import DISCARDED_SUFFIX, HEADER, EpisodeLogError, prepare_log, read_log
 
 from crowdnav.cli import main
 from tests.agents.agents_tiny import tiny_config

@@ -13,11 +13,11 @@ import numpy as np
 import pytest
 import yaml
 from crowdnav.agents import pretrain_encoder, train
-from crowdnav.agents.dataset import GridDataset, load_dataset, save_dataset
-from crowdnav.agents.demonstrations import REPORT_FILE as DEMONSTRATIONS_REPORT
-from crowdnav.agents.episode_log import DISCARDED_SUFFIX, HEADER, EpisodeLogWriter, prepare_log
-from crowdnav.agents.pretrain import load_encoder
-from crowdnav.agents.run_folder import LOCK_FILE, RunBusyError, hold_lock
+from crowdnav.agents.imitation.demonstrations import REPORT_FILE as DEMONSTRATIONS_REPORT
+from crowdnav.agents.networks.dataset import GridDataset, load_dataset, save_dataset
+from crowdnav.agents.networks.pretrain import load_encoder
+from crowdnav.agents.runs.episode_log import DISCARDED_SUFFIX, HEADER, EpisodeLogWriter, prepare_log
+from crowdnav.agents.runs.folder import LOCK_FILE, RunBusyError, hold_lock
 from crowdnav.evaluation.jobs import write_error_log
 from crowdnav.evaluation.rollout import HeldOutEpisodes
 from crowdnav.evaluation.storage import atomic_write_csv, atomic_write_json

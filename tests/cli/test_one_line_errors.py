@@ -13,7 +13,7 @@ import shutil
 
 import numpy as np
 import pytest
-from crowdnav.agents.config import ConfigError
+from crowdnav.agents.training.config import ConfigError
 
 from crowdnav.cli import main
 from crowdnav.errors import CrowdNavError
@@ -90,7 +90,7 @@ def _set(value, *path):
     (_set({"optimizer_class": "torch.optim.SGD"}, "config", "policy_kwargs"), "policy_kwargs.optimizer_class: a torch optimizer class"),
 ], ids=["no-robots", "no-offset", "nan-text-scale", "nan-scale", "zero-scale", "no-robot-names", "string-optimizer"])
 def test_a_damaged_robots_policy_json_is_one_line(robots_run, tmp_path, change, field):
-    from crowdnav.agents.marl import load_robots_policy
+    from crowdnav.agents.marl.robots import load_robots_policy
 
     folder = _damaged(robots_run, tmp_path, change)
     with pytest.raises(CrowdNavError) as caught:
@@ -99,7 +99,7 @@ def test_a_damaged_robots_policy_json_is_one_line(robots_run, tmp_path, change, 
 
 
 def test_the_undamaged_robots_policy_still_loads(robots_run):
-    from crowdnav.agents.marl import load_robots_policy
+    from crowdnav.agents.marl.robots import load_robots_policy
 
     policy = load_robots_policy(robots_run)
     assert np.all(np.isfinite(policy.observe.scale)) and len(policy.robots) == 3
@@ -144,7 +144,7 @@ def test_demonstration_settings_out_of_bounds_are_one_line_before_any_work(tmp_p
 @pytest.mark.parametrize(("settings", "expected"), [({"learning_rate": 1e300}, "learning_rate: expected a number <= 1"),
                                                     ({"action_std": 1e-300}, "action_std: expected a number >= 0.0001")])
 def test_behaviour_cloning_called_directly_checks_its_settings_first(settings, expected):
-    from crowdnav.agents.cloning import behaviour_cloning
+    from crowdnav.agents.imitation.cloning import behaviour_cloning
 
     with pytest.raises(ConfigError) as caught:
         behaviour_cloning(None, None, **settings)  # refused before the model or the demonstrations are looked at
@@ -178,7 +178,7 @@ def test_evaluate_refuses_test_seeds_that_are_training_seeds(tmp_path, capsys, a
 
 
 def test_evaluate_takes_the_last_test_seeds_below_the_training_band(tmp_path, capsys):
-    from crowdnav.agents.seeding import TRAIN_SEED_BASE, check_test_seeds
+    from crowdnav.agents.training.seeding import TRAIN_SEED_BASE, check_test_seeds
 
     check_test_seeds(TRAIN_SEED_BASE - 20, 20)  # 999,980-999,999: allowed
     with pytest.raises(ValueError, match="include 1,000,000"):

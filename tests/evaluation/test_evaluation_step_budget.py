@@ -61,7 +61,7 @@ def test_the_papers_700_episode_protocol_is_unchanged():
 
 
 def test_a_protocol_in_env_steps_evaluates_at_multiples_of_its_interval():
-    from crowdnav.agents.run_folder import UNITS as SNAPSHOT_UNITS
+    from crowdnav.agents.runs.folder import UNITS as SNAPSHOT_UNITS
 
     assert UNITS == SNAPSHOT_UNITS  # a protocol's unit names its runs' snapshots
     protocol = Protocol(train_steps=2_000_000, eval_every_steps=100_000)
@@ -96,7 +96,7 @@ def test_quick_shrinks_a_protocol_in_its_own_unit():
 
 
 def test_step_budget_training_seeds_bound_every_episode_the_run_can_start():
-    from crowdnav.agents.config import TrainConfig
+    from crowdnav.agents.training.config import TrainConfig
 
     # the bound counts the first reset's episodes: it must cover the most worlds a config allows
     limit = next(item.le for item in TrainConfig.model_fields["num_envs"].metadata if hasattr(item, "le"))

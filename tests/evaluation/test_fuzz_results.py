@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 import yaml
-from crowdnav.agents.config import ConfigError, load_config
+from crowdnav.agents.training.config import ConfigError, load_config
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 

@@ -6,7 +6,7 @@ from __future__ import annotations
 import shutil
 
 import pytest
-from crowdnav.agents.episode_log import HEADER
+from crowdnav.agents.runs.episode_log import HEADER
 from crowdnav.evaluation.benchmark import run_experiment
 from crowdnav.evaluation.experiment import experiment_from_mapping
 from crowdnav.evaluation.leaderboard import write_leaderboard

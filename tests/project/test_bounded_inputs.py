@@ -10,7 +10,7 @@ import re
 import time
 
 import pytest
-from crowdnav.agents.config import ConfigError, load_config
+from crowdnav.agents.training.config import ConfigError, load_config
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 

@@ -95,7 +95,7 @@ def test_train_schema_lists_the_registry_names_and_the_defaults(capsys):
 
 
 def test_shipped_experiments_and_the_default_train_config_fit_their_schemas_top_level_fields(capsys):
-    from crowdnav.agents.config import config_to_dict, load_config
+    from crowdnav.agents.training.config import config_to_dict, load_config
     from crowdnav.evaluation.experiment import experiment_path, shipped_experiments
 
     main(["schema", "experiment"])
@@ -120,7 +120,7 @@ def test_schema_command_writes_to_a_file_and_refuses_an_unknown_kind(tmp_path, c
 
 def test_one_experiment_unit_validates_its_train_config_exactly_once(tmp_path, monkeypatch):
     """Experiment file -> benchmark -> runner -> train: the TrainConfig is validated when the file is loaded, not after."""
-    from crowdnav.agents import config as config_module
+    from crowdnav.agents.training import config as config_module
     from crowdnav.evaluation.benchmark import run_experiment
     from crowdnav.evaluation.experiment import load_experiment
 
@@ -145,12 +145,12 @@ def test_one_experiment_unit_validates_its_train_config_exactly_once(tmp_path, m
 
 
 def test_factory_algorithm_classes_cover_exactly_the_registry_names():
-    from crowdnav.agents.factory import ALGORITHM_DEFAULTS, OFF_POLICY, SB3_ALGORITHMS
-    from crowdnav.agents.factory import ALGORITHMS as CLASSES
+    from crowdnav.agents.sb3.factory import ALGORITHM_DEFAULTS, OFF_POLICY, SB3_ALGORITHMS
+    from crowdnav.agents.sb3.factory import ALGORITHMS as CLASSES
 
     assert tuple(CLASSES) == tuple(SB3_ALGORITHMS) == tuple(ALGORITHM_DEFAULTS) == ALGORITHM_NAMES == tuple(ALGORITHMS)
     assert set(OFF_POLICY) <= set(ALGORITHM_NAMES)
-    from crowdnav.agents.network_size import kind_of, policy_kind
+    from crowdnav.agents.networks.size import kind_of, policy_kind
 
     # the head layout the network-size count reads from a registry entry is the one of SB3's policy class
     assert all(kind_of(name) == policy_kind(CLASSES[name].policy_aliases["MultiInputPolicy"]) for name in ALGORITHM_NAMES)
@@ -160,7 +160,7 @@ def test_factory_algorithm_classes_cover_exactly_the_registry_names():
 def test_config_and_cli_choices_read_the_registry():
     import typing
 
-    from crowdnav.agents.config import EncoderConfig, TrainConfig
+    from crowdnav.agents.training.config import EncoderConfig, TrainConfig
 
     assert TrainConfig.model_json_schema()["properties"]["algo"]["enum"] == list(algorithm_names())
     assert all(TrainConfig(algo=name).algo == name for name in algorithm_names())
@@ -172,7 +172,7 @@ def test_config_and_cli_choices_read_the_registry():
 
 
 def test_algorithm_properties_come_from_the_registry_entries_and_registered_names_validate():
-    from crowdnav.agents.config import ConfigError, config_from_mapping
+    from crowdnav.agents.training.config import ConfigError, config_from_mapping
 
     from crowdnav.registry import (
         ALGORITHM_SPECS,
@@ -203,7 +203,7 @@ def test_algorithm_properties_come_from_the_registry_entries_and_registered_name
 
 
 def test_modality_names_follow_the_sensor_registry_including_user_modalities(monkeypatch):
-    from crowdnav.agents.config import ConfigError, load_config
+    from crowdnav.agents.training.config import ConfigError, load_config
 
     from crowdnav.sensors import MODALITIES, GoalModality
 

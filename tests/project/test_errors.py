@@ -39,14 +39,14 @@ def test_every_crowdnav_exception_derives_from_crowdnav_error() -> None:
     done = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, cwd=REPO, check=True)
     classes = json.loads(done.stdout.strip().splitlines()[-1])
     assert len(classes) >= 24, sorted(classes)  # the walk reaches every layer (24 classes when the base was introduced)
-    assert {"crowdnav.scenario.errors.ScenarioError", "crowdnav.agents.config.ConfigError",
+    assert {"crowdnav.scenario.errors.ScenarioError", "crowdnav.agents.training.config.ConfigError",
             "crowdnav.evaluation.storage.ResultsError"} <= classes.keys()
     outside = sorted(name for name, derives in classes.items() if not derives)
     assert not outside, f"exception classes not deriving from crowdnav.CrowdNavError: {outside}"
 
 
 def test_crowdnav_errors_keep_their_builtin_base_so_callers_catching_it_still_do() -> None:
-    from crowdnav.agents.run_folder import RunBusyError
+    from crowdnav.agents.runs.folder import RunBusyError
     from crowdnav.evaluation.evaluate import ResultsExistError
 
     assert issubclass(crowdnav.ScenarioError, ValueError) and issubclass(crowdnav.SimulationError, RuntimeError)

@@ -11,7 +11,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 import yaml
-from crowdnav.agents.config import ConfigError, load_config
+from crowdnav.agents.training.config import ConfigError, load_config
 from crowdnav.evaluation.experiment import EXPERIMENTS_DIR, ExperimentError, load_experiment
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st

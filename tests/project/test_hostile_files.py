@@ -10,7 +10,7 @@ import copy
 import numpy as np
 import pytest
 import yaml
-from crowdnav.agents.config import ConfigError, load_config
+from crowdnav.agents.training.config import ConfigError, load_config
 from crowdnav.evaluation.experiment import ExperimentError, load_experiment
 
 from crowdnav import ScenarioError, load_scenario

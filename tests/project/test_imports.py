@@ -47,6 +47,6 @@ def test_building_and_stepping_an_env_without_a_render_mode_loads_no_pygame_or_t
 
 
 def test_the_evaluation_protocol_and_the_seed_rules_load_no_torch():
-    loaded = loaded_modules("import crowdnav.evaluation.protocol as p, crowdnav.agents.seeding, crowdnav.agents.run_folder\n"
+    loaded = loaded_modules("import crowdnav.evaluation.protocol as p, crowdnav.agents.training.seeding, crowdnav.agents.runs.folder\n"
                             "p.Protocol().check_disjoint()")
     assert not loaded & set(HEAVY)

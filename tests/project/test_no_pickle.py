@@ -14,8 +14,8 @@ import numpy as np
 import pytest
 import torch
 from crowdnav.agents import ConfigError, load_policy, train
-from crowdnav.agents.checkpoint import UntrustedCheckpointError
-from crowdnav.agents.resume_state import ROLLOUT_ARRAYS, STATE_FILE
+from crowdnav.agents.runs.checkpoint import UntrustedCheckpointError
+from crowdnav.agents.runs.resume_state import ROLLOUT_ARRAYS, STATE_FILE
 from crowdnav.evaluation.evaluate import PolicyError, evaluate_policy
 
 from crowdnav.cli import main
@@ -199,8 +199,8 @@ def test_network_sizes_are_refused_before_anything_is_built(tmp_path):
 
 def _legacy(checkpoint) -> None:
     """The checkpoint as an older crowdnav wrote it: random streams and replay buffer pickled, no training_state.json."""
-    from crowdnav.agents.checkpoint import load_model
-    from crowdnav.agents.resume_state import REPLAY_ARRAYS, load_replay_buffer
+    from crowdnav.agents.runs.checkpoint import load_model
+    from crowdnav.agents.runs.resume_state import REPLAY_ARRAYS, load_replay_buffer
 
     model = load_model(checkpoint)
     load_replay_buffer(model.replay_buffer, checkpoint / REPLAY_ARRAYS)

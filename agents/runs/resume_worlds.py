@@ -1,0 +1,142 @@
+"""``rollout_state.npz``: an interrupted rollout and the worlds mid-episode, as arrays (see :mod:`crowdnav.agents.runs.resume_state`).
+
+A world is stored as the index of the episode it plays and the actions it took since that
+episode's reset (recorded by :class:`~crowdnav.agents.runs.resume_state.ActionLog`). A resume resets
+it with the episode's seed and replays the actions: the simulator's generator, seeded at reset,
+is the episode's only randomness, so this rebuilds the world bit for bit. The observation the
+replay ends on must equal the stored last observation, or the resume is refused.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from crowdnav.agents.runs.resume_state import _ROLLOUT, ActionLog, ResumeStateError, _fill, _position, _read_npz, _write_npz
+from crowdnav.agents.sb3.vec_env import CrowdNavSB3VecEnv
+
+
+def save_rollout(path: Path, state: Mapping[str, Any]) -> None:
+    """Write :meth:`ResumePoint.rollout_state`'s dict: the rollout buffer (on-policy), last observation, worlds."""
+    arrays: dict[str, np.ndarray] = {f"last_obs/{key}": value for key, value in _as_dict(state["last_obs"]).items()}
+    arrays["last_episode_starts"] = np.asarray(state["last_episode_starts"])
+    meta: dict[str, Any] = {"episode_num": int(state.get("episode_num") or 0), "dict_obs": isinstance(state["last_obs"], dict)}
+    if state.get("last_original_obs") is not None:  # off-policy: the observation stored in the replay buffer
+        arrays.update({f"last_original_obs/{key}": value for key, value in _as_dict(state["last_original_obs"]).items()})
+    buffer = state.get("rollout_buffer")
+    if buffer is not None:
+        arrays.update({f"rollout/observations/{key}": value for key, value in buffer.observations.items()})
+        arrays.update({f"rollout/{name}": getattr(buffer, name) for name in _ROLLOUT})
+        meta["rollout"] = {"pos": int(buffer.pos), "full": bool(buffer.full)}
+    world_arrays, meta["worlds"] = _world_state(state["env"])
+    arrays.update(world_arrays)
+    _write_npz(path, arrays, meta)
+
+
+def load_rollout(path: Path, model: Any) -> dict[str, Any]:
+    """Fill the model's rollout buffer (if stored), rebuild its env's worlds; returns the state for ``restore_rollout``."""
+    arrays, meta = _read_npz(path)
+    env = model.get_env()
+    if not isinstance(env, ActionLog):
+        raise ResumeStateError(f"{path}: the run's environment does not record its worlds (an ActionLog is needed)")
+    try:
+        last_obs, original = (_observation(arrays, prefix, meta["dict_obs"]) for prefix in ("last_obs/", "last_original_obs/"))
+        state = {"last_obs": last_obs, "last_original_obs": original, "last_episode_starts": arrays["last_episode_starts"],
+                 "episode_num": int(meta["episode_num"])}
+        if "rollout" in meta:
+            buffer = model.rollout_buffer
+            for key in buffer.observations:
+                _fill(path, buffer.observations, key, arrays, f"rollout/observations/{key}")
+            for name in _ROLLOUT:
+                _fill(path, buffer, name, arrays, f"rollout/{name}")
+            buffer.pos, buffer.full = _position(path, meta["rollout"], buffer.buffer_size)
+            buffer.generator_ready = False
+            state["rollout_buffer"] = True
+        _restore_worlds(path, env, arrays, meta["worlds"], state["last_obs"])
+    except (KeyError, TypeError, ValueError, IndexError) as error:
+        if isinstance(error, ResumeStateError):
+            raise
+        raise ResumeStateError(f"{path}: cannot resume from it ({str(error).splitlines()[0][:200]})") from None
+    return state
+
+
+def _observation(arrays: Mapping[str, np.ndarray], prefix: str, is_dict: bool) -> Any:
+    found = {key.removeprefix(prefix): value for key, value in arrays.items() if key.startswith(prefix)}
+    return (found if is_dict else found[""]) if found else None
+
+
+def _as_dict(observation: Any) -> dict[str, np.ndarray]:
+    return dict(observation) if isinstance(observation, dict) else {"": np.asarray(observation)}
+
+
+def _world_state(env: Any) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
+    if not isinstance(env, ActionLog):
+        raise ResumeStateError("the run's environment does not record its worlds (an ActionLog is needed)")
+    longest = int(env.lengths.max(initial=0))
+    arrays = {"worlds/actions": env.actions[:, :longest], "worlds/lengths": env.lengths.copy()}
+    inner = env.venv
+    if not isinstance(inner, CrowdNavSB3VecEnv) or inner.episode_seeds is None:  # make_vec_env gives it its counter
+        raise ResumeStateError(f"cannot store the worlds of {type(inner).__name__}: expected crowdnav's training vector env")
+    counter = inner.episode_seeds
+    returns, lengths = inner.world_counts()
+    arrays.update({"worlds/returns": returns, "worlds/episode_lengths": lengths})
+    return arrays, {"kind": "vector", "run_seed": counter.run_seed, "next_episode": counter.next_episode,
+                    "episode_of": [counter.episode_of[i] for i in range(inner.num_envs)],
+                    "ended_of": {str(k): v for k, v in counter.ended_of.items()}}
+
+
+def _restore_worlds(path: Path, env: ActionLog, arrays: Mapping[str, np.ndarray], meta: Mapping[str, Any], last_obs: Any) -> None:
+    actions, lengths = arrays["worlds/actions"], arrays["worlds/lengths"]
+    n = env.num_envs
+    if lengths.shape != (n,) or lengths.dtype != np.int64 or actions.shape[:1] != (n,) or actions.shape[2:] != env.action_space.shape \
+            or (lengths < 0).any() or lengths.max(initial=0) > actions.shape[1] or not np.isfinite(actions).all():
+        raise ResumeStateError(f"{path}: its worlds' actions do not fit the run's {n} worlds")
+    inner = env.venv
+    if not isinstance(inner, CrowdNavSB3VecEnv):
+        raise ResumeStateError(f"{path}: the run's environment is {type(inner).__name__}, not crowdnav's training vector env")
+    if meta["kind"] == "vector":
+        observation = _replay_vector(inner, actions, lengths, meta, arrays["worlds/returns"], arrays["worlds/episode_lengths"])
+    elif meta["kind"] == "single" and n == 1:
+        observation = _replay_single(inner, actions, lengths, meta)
+    else:
+        raise ResumeStateError(f"{path}: its worlds are {meta['kind']!r}, the run's config builds {n} worlds")
+    expected = _as_dict(last_obs)
+    replayed = _as_dict(observation)
+    if expected.keys() != replayed.keys() or not all(np.array_equal(expected[key], replayed[key]) for key in expected):
+        raise ResumeStateError(f"{path}: replaying its worlds' episodes does not give the observation it holds "
+                               "(written by another crowdnav version, or damaged); start the run afresh")
+    env.actions = np.concatenate([actions, np.zeros((n, max(64, actions.shape[1]), *actions.shape[2:]))], axis=1)
+    env.lengths = lengths.copy()
+
+
+def _replay_vector(inner: CrowdNavSB3VecEnv, actions: np.ndarray, lengths: np.ndarray, meta: Mapping[str, Any],
+                   returns: np.ndarray, episode_lengths: np.ndarray) -> dict[str, np.ndarray]:
+    counter = inner.episode_seeds
+    if counter is None or int(meta["run_seed"]) != counter.run_seed:
+        raise ValueError(f"the worlds were seeded by run seed {meta['run_seed']}, the run's config has {getattr(counter, 'run_seed', None)}")
+    counter.next_episode = int(meta["next_episode"])
+    counter.episode_of = {i: int(episode) for i, episode in enumerate(meta["episode_of"])}
+    counter.ended_of = {int(k): int(v) for k, v in meta["ended_of"].items()}
+    return inner.restore_worlds([counter.episode_of[i] for i in range(inner.num_envs)], actions, lengths, returns, episode_lengths)
+
+
+def _replay_single(inner: CrowdNavSB3VecEnv, actions: np.ndarray, lengths: np.ndarray, meta: Mapping[str, Any]) -> Any:
+    """A ``num_envs: 1`` checkpoint written before every run collected from the vector env (kind "single": a
+    ``DummyVecEnv`` of one env, its world stored as the episode it plays, without its return so far).
+
+    Replayed through the one world's own steps, which count the return and length as the single env's ``Monitor``
+    did; the episode cannot end within them (it was mid-episode when stored).
+    """
+    counter = inner.episode_seeds
+    if counter is None or int(meta["run_seed"]) != counter.run_seed:
+        raise ValueError(f"the world was seeded by run seed {meta['run_seed']}, the run's config has {getattr(counter, 'run_seed', None)}")
+    counter.next_episode, counter.episode_of, counter.ended_of = int(meta["episode"]), {}, {}
+    observation = inner.reset()  # the stored episode, numbered by the counter
+    for action in actions[0, : int(lengths[0])]:
+        inner.step_async(action[None])
+        observation, _, dones, _ = inner.step_wait()
+        if dones[0]:
+            raise ValueError("its world's episode ends within the actions it stores")
+    return observation
