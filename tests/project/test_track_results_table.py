@@ -7,7 +7,7 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[2]
 TRACKS = ROOT / "docs" / "results" / "tracks"
-BASELINES = ("straight", "social_force", "orca", "onboard", "predictive", "oracle")
+BASELINES = ("straight", "social_force", "orca", "onboard", "predictive", "oracle", "straight_shield", "social_force_shield")
 
 
 def _percent(rate: float) -> str:
