@@ -9,9 +9,10 @@ of older checkpoints, whose pickled replay buffers name the same module. crowdna
 ``.npz``, tensors) name no module.
 
 :data:`MOVED` maps each old path to its module now; :func:`install` (run once by ``crowdnav.agents``)
-appends a finder to :data:`sys.meta_path` that answers an old path with the new module itself: one
-module object under both names, so a class unpickled by its old path is the class. Nothing is imported
-until an old path is. Code imports the new paths (tests/agents/test_legacy_paths.py checks both).
+appends a finder to :data:`sys.meta_path` (:class:`crowdnav.legacy_paths.LegacyPaths`, which also serves
+the core's moved modules) that answers an old path with the new module itself: one module object under
+both names, so a class unpickled by its old path is the class. Nothing is imported until an old path is.
+Code imports the new paths (tests/agents/test_legacy_paths.py checks both).
 
 Not covered: ``crowdnav.agents.marl`` and ``crowdnav.agents.training`` were modules and are now
 subpackages (their code is :mod:`crowdnav.agents.marl.robots` and :mod:`crowdnav.agents.training.run`);
@@ -20,13 +21,7 @@ no saved file names either.
 
 from __future__ import annotations
 
-import importlib
-import importlib.abc
-import importlib.util
-import sys
-from collections.abc import Sequence
-from importlib.machinery import ModuleSpec
-from types import ModuleType
+from crowdnav import legacy_paths
 
 MOVED: dict[str, str] = {
     "crowdnav.agents.batch_cache": "crowdnav.agents.networks.batch_cache",
@@ -73,20 +68,6 @@ MOVED: dict[str, str] = {
 """Old module path -> the module it is now."""
 
 
-class LegacyPaths(importlib.abc.MetaPathFinder, importlib.abc.Loader):
-    """Finds the old paths of :data:`MOVED` (only those) and loads each as its new module."""
-
-    def find_spec(self, fullname: str, path: Sequence[str] | None = None, target: ModuleType | None = None) -> ModuleSpec | None:
-        return importlib.util.spec_from_loader(fullname, self) if fullname in MOVED else None
-
-    def create_module(self, spec: ModuleSpec) -> ModuleType:
-        return importlib.import_module(MOVED[spec.name])  # its attributes (__name__, __spec__) stay the new module's
-
-    def exec_module(self, module: ModuleType) -> None:
-        """Nothing: the new module ran when it was imported."""
-
-
 def install() -> None:
-    """Put the finder on :data:`sys.meta_path` once, after the others (it never hides a module that exists)."""
-    if not any(isinstance(finder, LegacyPaths) for finder in sys.meta_path):
-        sys.meta_path.append(LegacyPaths())
+    """Put the finder for :data:`MOVED` on :data:`sys.meta_path` once, after the others (:func:`crowdnav.legacy_paths.install`)."""
+    legacy_paths.install(MOVED)

@@ -1,6 +1,6 @@
 """Load time of the most expensive geometry the scenario loader accepts (docs/scenarios.md#geometry-limits).
 
-Each family grows until the complexity checks of :mod:`crowdnav.obstacles` refuse it; the last
+Each family grows until the complexity checks of :mod:`crowdnav.worlds.obstacles` refuse it; the last
 accepted size is the worst case a file from a stranger can make every env and worker pay.
 
     python benchmarks/bench_geometry_load.py
@@ -13,7 +13,7 @@ import time
 import numpy as np
 
 from crowdnav import ScenarioError
-from crowdnav.world import load_world
+from crowdnav.worlds.compiled import load_world
 
 BASE = {"description": "geometry load benchmark", "robot": {"max_speed": 1.0}, "humans": {"count": 0}}
 CORNERS = {"start": {"type": "points", "points": [[0.5, 0.5]]}, "goal": {"type": "points", "points": [[99.5, 9.5]]}}

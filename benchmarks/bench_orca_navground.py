@@ -37,7 +37,7 @@ import numpy as np
 
 from crowdnav import Simulator
 from crowdnav.batch.simulator import BatchSimulator
-from crowdnav.world import load_world
+from crowdnav.worlds.compiled import load_world
 
 RADIUS = 0.3
 DT = 0.2

@@ -1,6 +1,6 @@
 """crowdnav's ORCA solver against an earlier version of it, interleaved in one process: microseconds per step.
 
-    git show COMMIT:crowdnav/orca.py > /tmp/orca_before.py
+    git show COMMIT:crowdnav/sim/orca_solver.py > /tmp/orca_before.py   (crowdnav/orca.py in commits before sim/)
     python benchmarks/bench_orca_solver.py /tmp/orca_before.py [--counts 10 100 1000] [--repeats 9]
 
 The earlier file's ``OrcaSolver`` serves one simulator, the installed one another, on the circle
@@ -18,7 +18,7 @@ import sys
 from pathlib import Path
 
 import crowdnav.crowd.orca as crowd_orca
-import crowdnav.orca
+import crowdnav.sim.orca_solver
 from crowdnav import Simulator
 
 sys.path.insert(0, str(Path(__file__).parent))
@@ -30,7 +30,7 @@ STEPS = {10: 100, 100: 100}
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("before", type=Path, help="an earlier crowdnav/orca.py")
+    parser.add_argument("before", type=Path, help="an earlier crowdnav/sim/orca_solver.py")
     parser.add_argument("--counts", type=int, nargs="+", default=[10, 100, 1000])
     parser.add_argument("--repeats", type=int, default=9)
     args = parser.parse_args()
@@ -42,11 +42,11 @@ def main() -> None:
     print(f"{'agents':>6}  {'step before':>11} {'step now':>9} {'ratio':>6}  {'ORCA before':>11} {'ORCA now':>9} {'ratio':>6}")
     for n in args.counts:
         simulators = {}
-        for name, module in (("before", before), ("now", crowdnav.orca)):
+        for name, module in (("before", before), ("now", crowdnav.sim.orca_solver)):
             crowd_orca.OrcaSolver = module.OrcaSolver  # type: ignore[attr-defined]  # the solver the next reset builds
             simulators[name] = simulator = Simulator("circle_crossing", overrides=overrides(n))
             simulator.reset(seed=0)
-        crowd_orca.OrcaSolver = crowdnav.orca.OrcaSolver  # type: ignore[attr-defined]
+        crowd_orca.OrcaSolver = crowdnav.sim.orca_solver.OrcaSolver  # type: ignore[attr-defined]
         steps = STEPS.get(n, 30)
         step: dict[str, list[float]] = {name: [] for name in simulators}
         orca: dict[str, list[float]] = {name: [] for name in simulators}

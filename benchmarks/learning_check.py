@@ -33,14 +33,14 @@ from crowdnav.agents.training.config import load_config
 
 from crowdnav.cli.common import CliError, parse_overrides
 from crowdnav.files import atomic_write_text
-from crowdnav.simulator import OUTCOMES
+from crowdnav.sim.simulator import OUTCOMES
 
 MODALITIES = ["closest_obstacle", "goal"]
 """The main job's input (``--set modalities=[lidar, goal]`` for another)."""
 
 
 def evaluate(policy_path: Path, seeds: list[int]) -> dict[str, float]:
-    """The rate of each outcome (:data:`crowdnav.simulator.OUTCOMES`) of the deterministic policy on the episodes with ``seeds``."""
+    """The rate of each outcome (:data:`crowdnav.sim.simulator.OUTCOMES`) of the deterministic policy on the episodes with ``seeds``."""
     policy = load_policy(policy_path)
     env = policy.make_env()
     outcomes = []

@@ -24,7 +24,7 @@ from crowdnav.envs import CrowdNavEnv
 from crowdnav.envs.reward import REWARD_TERMS
 from crowdnav.policies import SocialForceRobot, StraightToGoal
 from crowdnav.scenario.library import library_names
-from crowdnav.simulator import OUTCOMES
+from crowdnav.sim.simulator import OUTCOMES
 
 POLICIES = {"straight": StraightToGoal, "social-force": SocialForceRobot}
 

@@ -1,9 +1,19 @@
-"""crowdnav: a multi-modal training environment for human-aware social robot navigation."""
+"""crowdnav: a multi-modal training environment for human-aware social robot navigation.
 
+The core's packages, by concept: ``sim`` (the simulation step and its parts), ``worlds`` (a
+scenario's world compiled at load time), ``crowd`` (the crowd models), ``scenario`` (the YAML
+schema and loader), ``sensors``, ``envs`` (Gymnasium and PettingZoo), ``batch`` (K worlds at once),
+``planning``, ``rendering`` and ``cli``. :mod:`crowdnav.legacy_paths` keeps the module paths of
+the flat root before ``sim`` and ``worlds`` importable (``crowdnav.simulator``, ``crowdnav.world``, ...).
+"""
+
+from crowdnav import legacy_paths
 from crowdnav.envs import CrowdNavEnv, CrowdNavParallelEnv, SocialForcePolicy, env, parallel_env  # registers the Gymnasium ids
 from crowdnav.errors import CrowdNavError
 from crowdnav.scenario import Scenario, ScenarioError, load_scenario
-from crowdnav.simulator import Collision, SimulationError, Simulator, StepEvents
+from crowdnav.sim.simulator import Collision, SimulationError, Simulator, StepEvents
+
+legacy_paths.install()
 
 __all__ = [
     "Collision",

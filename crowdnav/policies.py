@@ -1,7 +1,7 @@
 """Scripted robot policies that read the simulator's state directly (baselines, demos, videos).
 
 Each policy is a callable ``policy(sim) -> action`` (:data:`ScriptedPolicy`; ``sim`` a simulator or
-one robot's :class:`crowdnav.robot_view.RobotView`, :class:`crowdnav.robot_view.RobotWorld`) returning the robot's normalized action
+one robot's :class:`crowdnav.sim.robot_view.RobotView`, :class:`crowdnav.sim.robot_view.RobotWorld`) returning the robot's normalized action
 (2 values in [-1, 1]) for the scenario's kinematics. All but one are privileged (they see the
 true state, not the observation), which is what a baseline for a video or a sanity check needs;
 ``onboard`` (:class:`crowdnav.planning.onboard.OnboardPlanner`) reads only what the robot's own
@@ -17,13 +17,13 @@ from typing import TypeAlias
 
 import numpy as np
 
-from crowdnav import social_force as sf
-from crowdnav.orca import OrcaSolver, SolverCache, obstacle_rings, pyrvo_module, toward_goal
 from crowdnav.planning.onboard import OnboardPlanner
 from crowdnav.planning.oracle import OraclePlanner
 from crowdnav.planning.predictive import PredictivePlanner
-from crowdnav.robot_view import RobotWorld
-from crowdnav.world import CompiledWorld
+from crowdnav.sim import forces as sf
+from crowdnav.sim.orca_solver import OrcaSolver, SolverCache, obstacle_rings, pyrvo_module, toward_goal
+from crowdnav.sim.robot_view import RobotWorld
+from crowdnav.worlds.compiled import CompiledWorld
 
 ScriptedPolicy: TypeAlias = Callable[[RobotWorld], np.ndarray]
 """``policy(sim) -> action``: float32 (2,) in [-1, 1]."""
@@ -106,7 +106,7 @@ WORLDS_KEPT = 8
 class OrcaRobot:
     """ORCA for the robot: the velocity nearest to full speed at the goal that stays collision-free.
 
-    Privileged like :class:`SocialForceRobot`: ORCA (:mod:`crowdnav.orca`, the scenario's
+    Privileged like :class:`SocialForceRobot`: ORCA (:mod:`crowdnav.sim.orca_solver`, the scenario's
     ``humans.orca`` parameters) sees every human's true position and velocity, each assumed to
     keep it (its preferred velocity), and the static obstacles. As in ORCA everywhere, the robot
     takes only half of the avoidance of each human, the other half being the human's: against

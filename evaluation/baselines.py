@@ -109,7 +109,7 @@ def is_baseline(configuration: str) -> bool:
 
 def scripted_policy(name: str) -> Any:
     """The scripted robot policy of a baseline name (:data:`BASELINES`; ``orca`` raises
-    :class:`crowdnav.orca.OrcaUnavailableError`, one line, without pyrvo)."""
+    :class:`crowdnav.sim.orca_solver.OrcaUnavailableError`, one line, without pyrvo)."""
     from crowdnav.policies import SCRIPTED_POLICIES
 
     return SCRIPTED_POLICIES[SHIELDED_BASELINES.get(name, name).replace("_", "-")]()
@@ -160,7 +160,7 @@ def evaluate_baseline(experiment: str, configuration: str, label: str, env_optio
     from crowdnav.evaluation.rollout import HeldOutEpisodes
     from crowdnav.evaluation.unit_spec import RUN_COLUMNS
 
-    from crowdnav.simulator import OUTCOMES
+    from crowdnav.sim.simulator import OUTCOMES
 
     out_dir = Path(out_dir)
     if (out_dir / META_FILE).is_file():

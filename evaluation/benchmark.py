@@ -41,7 +41,7 @@ from crowdnav.evaluation.storage import (
 )
 from crowdnav.evaluation.unit_spec import PRETRAINED
 
-from crowdnav.simulator import OUTCOMES
+from crowdnav.sim.simulator import OUTCOMES
 
 
 @dataclass

@@ -8,7 +8,7 @@ curve advances one test episode at a time and reaches ``N_k`` with that evaluati
 episode. The figure shows the mean over seeds and a band, clipped to [0, 1]: one standard
 deviation (the paper's style, the default) or a 95% bootstrap interval of the mean. Scripted
 baselines (:mod:`crowdnav.evaluation.baselines`) are grey horizontal lines at their rate on the same
-test episodes. One panel per outcome of :data:`crowdnav.simulator.OUTCOMES`; results written
+test episodes. One panel per outcome of :data:`crowdnav.sim.simulator.OUTCOMES`; results written
 before ``out_of_bounds`` existed draw a zero rate there. With a protocol in env steps the x axis
 is ``training_steps`` (training env steps) instead of ``training_episodes``, the same way.
 """
@@ -23,7 +23,7 @@ import numpy as np
 from crowdnav.evaluation.protocol import AXIS_LABELS, POINT_COLUMNS, protocol_unit
 
 from crowdnav.files import replacing
-from crowdnav.simulator import OUTCOMES
+from crowdnav.sim.simulator import OUTCOMES
 
 RUN_KEYS = ["experiment", "configuration", "label", "seed"]
 

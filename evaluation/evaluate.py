@@ -250,7 +250,7 @@ def evaluate_policy(spec: str, scenario: str | None, out: str | Path, *, modalit
     from crowdnav.evaluation.unit_spec import RUN_COLUMNS
 
     from crowdnav.paths import inside
-    from crowdnav.simulator import OUTCOMES
+    from crowdnav.sim.simulator import OUTCOMES
 
     if track is not None:
         if overrides:

@@ -5,7 +5,7 @@ Columns (definitions in docs/evaluation.md):
 * scenario and test set: the environment the rows were measured in (the scenario's name, with a
   short hash when it had overrides) and its held-out episodes (count and seeds). Rows measured on
   different test sets are never ranked together: the markdown has one table per test set;
-* final success / collision / out_of_bounds / truncated (:data:`crowdnav.simulator.OUTCOMES`):
+* final success / collision / out_of_bounds / truncated (:data:`crowdnav.sim.simulator.OUTCOMES`):
   per run, the rate over the test episodes of the last ``final_evaluations`` evaluations; mean
   and standard deviation (ddof 1; 0 with one seed) over seeds, and a 95% interval
   (:mod:`crowdnav.evaluation.intervals`: Wilson for one run, a two-stage bootstrap over runs and episodes
@@ -50,7 +50,7 @@ from crowdnav.evaluation.intervals import rate_interval
 from crowdnav.evaluation.protocol import Protocol, describe_budget
 from crowdnav.evaluation.storage import MissingRun
 
-from crowdnav.simulator import OUTCOMES
+from crowdnav.sim.simulator import OUTCOMES
 
 BOOTSTRAP_RESAMPLES = 2000
 BOOTSTRAP_SEED = 0

@@ -124,7 +124,7 @@ def robot_rates(tests: Any) -> Any:
     """
     import pandas as pd
 
-    from crowdnav.simulator import OUTCOMES
+    from crowdnav.sim.simulator import OUTCOMES
 
     if "robot" not in tests or tests["robot"].isna().all():
         return pd.DataFrame(columns=["experiment", "configuration", "label", "robot", "episodes", *OUTCOMES,

@@ -59,7 +59,7 @@ from crowdnav.evaluation.unit_spec import RUN_COLUMNS as RUN_COLUMNS
 from crowdnav.evaluation.unit_spec import UnitSpec as UnitSpec
 from crowdnav.evaluation.unit_spec import run_identity
 
-from crowdnav.simulator import OUTCOMES as OUTCOMES
+from crowdnav.sim.simulator import OUTCOMES as OUTCOMES
 
 if TYPE_CHECKING:
     from crowdnav.agents.marl.robots import RobotsPolicy

@@ -254,7 +254,7 @@ def table_damage(path: str | Path, rows: int, fixed: dict[str, Any] | None = Non
     import csv
     import math
 
-    from crowdnav.simulator import OUTCOMES
+    from crowdnav.sim.simulator import OUTCOMES
 
     path = Path(path)
     if not path.is_file():

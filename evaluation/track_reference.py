@@ -108,8 +108,8 @@ def write_reference(track: Track, out: str | Path, *, allow_dirty: bool = False,
     from crowdnav.evaluation.storage import atomic_write_text
 
     from crowdnav import __version__
-    from crowdnav.orca import OrcaUnavailableError
     from crowdnav.planning.oracle import PlannerUnavailable
+    from crowdnav.sim.orca_solver import OrcaUnavailableError
 
     unknown = [name for name in only or () if name not in REFERENCE_BASELINES]
     if unknown:

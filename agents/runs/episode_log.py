@@ -26,7 +26,7 @@ from pathlib import Path
 
 from crowdnav.errors import CrowdNavError
 from crowdnav.files import atomic_write_text, open_for_write, open_text_for_append
-from crowdnav.simulator import OUTCOMES
+from crowdnav.sim.simulator import OUTCOMES
 
 COLUMNS = ("episode", "seed", "outcome", "return", "length", "timesteps", "seconds")
 HEADER = ",".join(COLUMNS)

@@ -23,7 +23,7 @@ class EpisodeRecord:
     """0-based index over the whole run (continues after a resume)."""
     seed: int
     outcome: str
-    """One of :data:`crowdnav.simulator.OUTCOMES`: success, collision, out_of_bounds or truncated."""
+    """One of :data:`crowdnav.sim.simulator.OUTCOMES`: success, collision, out_of_bounds or truncated."""
     reward: float
     """Undiscounted return."""
     length: int

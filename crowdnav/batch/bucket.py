@@ -11,7 +11,7 @@ import numpy as np
 
 from crowdnav.batch.stacked_state import StackedState
 from crowdnav.batch.state import BoolArray, ComplexArray, FloatArray
-from crowdnav.sim_state import PairConstants, SimState
+from crowdnav.sim.state import PairConstants, SimState
 
 _GEOMETRY = ("pair_offset", "pair_distance", "gap", "repulsion", "humans_touch", "polygon_offset", "polygon_distance", "disc_offset", "disc_distance")
 """What a refresh measures, one row per world in a bucket (created by the first refresh)."""

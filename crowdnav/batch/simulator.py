@@ -13,7 +13,7 @@ A bucket's episode state is one :class:`crowdnav.batch.stacked_state.StackedStat
 its geometry the same arrays a :class:`crowdnav.Simulator` measures, stacked. Resets, and the
 goal rules of worlds where a human reached its goal or stalled, draw from each world's own generator: they
 run per world (the arrival and stall checks themselves run on all worlds at once). A reset draws on the world's own
-:class:`crowdnav.Simulator` (its *slot*) and its state is copied into the stack; the goal rules (:func:`crowdnav.groups.apply_goal_rules`) change
+:class:`crowdnav.Simulator` (its *slot*) and its state is copied into the stack; the goal rules (:func:`crowdnav.sim.groups.apply_goal_rules`) change
 the world's row of the stack in place, drawing from the slot's generator. Crowds large enough for the neighbour grid
 (``Simulator.grid_from`` humans) are not stacked (the vector env holds them as single envs). The humans' commands come from the crowd models
 (:mod:`crowdnav.crowd`) through :meth:`crowdnav.crowd.Crowd.commands_batch`, each world with its
@@ -27,19 +27,19 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from crowdnav import social_force as sf
 from crowdnav.batch.bucket import Bucket
 from crowdnav.batch.scalar_math import TWO_PI, cmul, remainder
 from crowdnav.batch.state import BatchState
-from crowdnav.contacts import deepest_contact, goal_distance, outside, push_humans_apart, push_out_of_obstacles, touching
 from crowdnav.crowd.passing import passing_force
 from crowdnav.crowd.views import BatchView
-from crowdnav.events import Collision, SimulationError
-from crowdnav.groups import apply_goal_rules, arrivals, stalled_humans
-from crowdnav.obstacles import EdgeSet, nearest_on_edges
-from crowdnav.sim_state import SELF_DISTANCE
-from crowdnav.simulator import Simulator
-from crowdnav.world import CompiledWorld
+from crowdnav.sim import forces as sf
+from crowdnav.sim.contacts import deepest_contact, goal_distance, outside, push_humans_apart, push_out_of_obstacles, touching
+from crowdnav.sim.events import Collision, SimulationError
+from crowdnav.sim.groups import apply_goal_rules, arrivals, stalled_humans
+from crowdnav.sim.simulator import Simulator
+from crowdnav.sim.state import SELF_DISTANCE
+from crowdnav.worlds.compiled import CompiledWorld
+from crowdnav.worlds.obstacles import EdgeSet, nearest_on_edges
 
 CHUNK_ELEMENTS = 65_536
 """Worlds are stepped in chunks of about this many agent-column entries ((n+1) x (n+1+obstacles) per world):
@@ -332,7 +332,7 @@ class BatchSimulator:
             stack[rows] = value
 
     def _resolve_overlaps(self, bucket: Bucket, rows: np.ndarray) -> None:
-        """:meth:`crowdnav.sim_geometry.Geometry.push_humans_apart` for ``rows`` (worlds where a human touches someone or something)."""
+        """:meth:`crowdnav.sim.geometry.Geometry.push_humans_apart` for ``rows`` (worlds where a human touches someone or something)."""
         n = bucket.n
         positions = bucket.state.positions[rows]
         push_humans_apart(positions, bucket.pair_offset[rows, 1:, 1:], bucket.pair_distance[rows, 1:, 1:], bucket.gap[rows, 1:, 1 : n + 1])
@@ -354,11 +354,11 @@ class BatchSimulator:
         result.goal_reached[worlds] = goal_distance(bucket.state.robot_goal[rows], robot) <= self.scenario.robot.goal_radius
 
     def _goal_rules(self, bucket: Bucket, rows: np.ndarray) -> None:
-        """:func:`crowdnav.groups.apply_goal_rules`: the arrival and stall checks vectorized, the rules per world where someone
+        """:func:`crowdnav.sim.groups.apply_goal_rules`: the arrival and stall checks vectorized, the rules per world where someone
         arrived or stalled."""
         tolerance, state = self.scenario.humans.social_force.goal_tolerance, bucket.state
         distance = np.abs(state.human_goals[rows] - state.positions[rows, 1:])
-        if self._together:  # groups that walk together arrive by their centre: crowdnav.groups.arrivals on every row at once
+        if self._together:  # groups that walk together arrive by their centre: crowdnav.sim.groups.arrivals on every row at once
             arrived = arrivals(distance, state.positions[rows, 1:], state.human_goals[rows], state.human_group[rows],
                                state.human_stopped[rows], self.slots[0])
         else:
@@ -368,7 +368,7 @@ class BatchSimulator:
         stalled = np.zeros_like(arrived)
         if self._stall_window:
             due = state.step_count[rows] % self._stall_window == 0
-            if due.any():  # crowdnav.groups.stall_check for the worlds whose check is due
+            if due.any():  # crowdnav.sim.groups.stall_check for the worlds whose check is due
                 check = rows[due]
                 stalled[due] = stalled_humans(distance[due], state.human_stall_mark[check], state.human_stopped[check] | arrived[due],
                                               self.scenario.humans.stall.progress)

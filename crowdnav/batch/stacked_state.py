@@ -1,11 +1,11 @@
 """K worlds' episode states as one: :class:`StackedState`, the state of a bucket of the batched simulator.
 
-A :class:`crowdnav.sim_state.SimState` is one world's (its robot's goal a ``complex``, its step
+A :class:`crowdnav.sim.state.SimState` is one world's (its robot's goal a ``complex``, its step
 count an ``int``); the batched simulator keeps the worlds that have the same number of humans as
 one :class:`StackedState`, the same fields in the same order, each with a leading world axis (K,).
 Rows move between the two with :meth:`StackedState.stack`, :meth:`StackedState.row`,
 :meth:`StackedState.set_row`, :meth:`StackedState.append` and :meth:`StackedState.take`. The
-meaning, unit and dtype of each field are declared once, in :class:`crowdnav.sim_state.StateFields`,
+meaning, unit and dtype of each field are declared once, in :class:`crowdnav.sim.state.StateFields`,
 the base of both (this module adds no field).
 """
 
@@ -18,14 +18,14 @@ from typing import Any
 import numpy as np
 
 from crowdnav.batch.state import ComplexArray, FloatArray, IntArray
-from crowdnav.sim_state import SimState, StateFields
+from crowdnav.sim.state import SimState, StateFields
 
 
 @dataclass(eq=False)
 class StackedState(StateFields[ComplexArray, FloatArray, IntArray]):
     """K worlds with the same number of humans n, row k being world k.
 
-    Every field of :class:`crowdnav.sim_state.StateFields` with a leading world axis (K,) (the
+    Every field of :class:`crowdnav.sim.state.StateFields` with a leading world axis (K,) (the
     robot's goal, heading and step count: (K,) complex128, float64 and int64 arrays).
     """
 

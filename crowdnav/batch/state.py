@@ -16,7 +16,7 @@ import numpy as np
 import numpy.typing as npt
 
 if TYPE_CHECKING:
-    from crowdnav.simulator import Simulator
+    from crowdnav.sim.simulator import Simulator
 
 ComplexArray: TypeAlias = npt.NDArray[np.complex128]
 """Points and vectors in the plane, ``x + y j``."""

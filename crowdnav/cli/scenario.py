@@ -53,7 +53,7 @@ def validate_command(args: argparse.Namespace) -> int:
     from crowdnav.envs.core import load_env_world
     from crowdnav.scenario import ScenarioError
     from crowdnav.scenario.library import resolve
-    from crowdnav.simulator import Simulator
+    from crowdnav.sim.simulator import Simulator
 
     overrides = parse_overrides(args.overrides)
     invalid = 0

@@ -22,7 +22,7 @@ from crowdnav.crowd.social_force import SocialForceModel
 from crowdnav.errors import CrowdNavError
 from crowdnav.scenario import crowd as crowd_schema
 from crowdnav.scenario.errors import ScenarioError, ScenarioIssue
-from crowdnav.world import CompiledWorld
+from crowdnav.worlds.compiled import CompiledWorld
 
 __all__ = ["CROWD_MODELS", "Crowd", "CrowdModel", "CrowdView", "OrcaModel", "ReplayModel", "SocialForceModel"]
 

@@ -28,7 +28,7 @@ from typing import ClassVar, Protocol
 
 import numpy as np
 
-from crowdnav.world import CompiledWorld
+from crowdnav.worlds.compiled import CompiledWorld
 
 
 def action_commands(actions: np.ndarray, max_speed: np.ndarray) -> np.ndarray:
@@ -97,7 +97,7 @@ class CrowdView(Protocol):
 
     def social_force(self) -> np.ndarray:
         """(..., n) complex: the social force's commands (m/s) in this state: the simulators' kernel
-        (:mod:`crowdnav.social_force`, on the geometry the step measured), computed once per view."""
+        (:mod:`crowdnav.sim.forces`, on the geometry the step measured), computed once per view."""
 
     def world(self, k: int) -> CrowdView:
         """World ``k`` of a K-world view as a one-world view (its arrays views of row ``k``)."""

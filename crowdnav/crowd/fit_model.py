@@ -7,7 +7,7 @@ position and velocity (the step before) and walks toward its destination, the la
 track records (where it leaves the scene or stops being annotated: the destination known, as in the
 social-force baselines of trajectory prediction), among the other people at their recorded
 positions and each other, by the kernels of
-:mod:`crowdnav.social_force` (the simulator's step without its overlap pushes) with two additions
+:mod:`crowdnav.sim.forces` (the simulator's step without its overlap pushes) with two additions
 the simulator does not have:
 
 - **per-person preferred speeds by quantile mapping**: people are ranked by their median speed
@@ -31,9 +31,9 @@ from pathlib import Path
 
 import numpy as np
 
-from crowdnav import social_force as sf
 from crowdnav.crowd.recording import read_recording
 from crowdnav.scenario.crowd import SocialForce
+from crowdnav.sim import forces as sf
 
 RADIUS = 0.3
 """Every person's body radius (m), humans.radius's default."""

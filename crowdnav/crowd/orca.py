@@ -1,4 +1,4 @@
-"""The ORCA crowd model (``model: orca``): optimal reciprocal collision avoidance through pyrvo (:mod:`crowdnav.orca`).
+"""The ORCA crowd model (``model: orca``): optimal reciprocal collision avoidance through pyrvo (:mod:`crowdnav.sim.orca_solver`).
 
 Every human is an ORCA agent (so ORCA humans also avoid social-force and standing ones), and so
 is each robot when the humans see it (``humans.see_robot``), at its current velocity; the
@@ -14,8 +14,8 @@ from typing import cast
 import numpy as np
 
 from crowdnav.crowd.base import CrowdModel, CrowdView
-from crowdnav.orca import OrcaSolver, SolverCache, obstacle_rings, pyrvo_module, toward_goal
-from crowdnav.world import CompiledWorld
+from crowdnav.sim.orca_solver import OrcaSolver, SolverCache, obstacle_rings, pyrvo_module, toward_goal
+from crowdnav.worlds.compiled import CompiledWorld
 
 
 class OrcaModel(CrowdModel):

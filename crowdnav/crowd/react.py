@@ -2,7 +2,7 @@
 
 A reacting person (:class:`crowdnav.crowd.replay.ReplayModel`) is no longer put at its recorded
 position: each step it takes the social force's velocity command, the kernels of
-:mod:`crowdnav.social_force` with the scenario's ``humans.social_force`` parameters, where
+:mod:`crowdnav.sim.forces` with the scenario's ``humans.social_force`` parameters, where
 
 - the goal is its own recorded position ``react_lookahead`` seconds ahead (its last recorded
   position near the end of its track), updated every step;
@@ -21,10 +21,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from crowdnav import social_force as sf
 from crowdnav.crowd.base import CrowdView
-from crowdnav.obstacles import nearest_on_edges
-from crowdnav.world import CompiledWorld
+from crowdnav.sim import forces as sf
+from crowdnav.worlds.compiled import CompiledWorld
+from crowdnav.worlds.obstacles import nearest_on_edges
 
 
 class Reaction:

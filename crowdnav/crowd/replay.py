@@ -37,7 +37,7 @@ from crowdnav.crowd.react import Reaction
 from crowdnav.crowd.recording import RecordingError, Resampled, read_recording
 from crowdnav.errors import CrowdNavError
 from crowdnav.scenario.crowd import MAX_REPLAY_CELLS, replay_cells
-from crowdnav.world import CompiledWorld
+from crowdnav.worlds.compiled import CompiledWorld
 
 PARKING = complex(2.0e7, 2.0e7)
 """Where the first empty place waits (m); the others wait 10 m apart along x from it."""

@@ -22,7 +22,7 @@ import math
 import numpy as np
 
 from crowdnav.planning.static_map import GeodesicField, GoalGrid, StaticMap
-from crowdnav.world import CompiledWorld
+from crowdnav.worlds.compiled import CompiledWorld
 
 SPACING = 0.1
 """Grid spacing (m) of the humans' goal distances (the planners' ``map_spacing``): passages down to ~2 radii + 0.1 m are found."""

@@ -1,6 +1,6 @@
 """The social-force crowd model (``model: social_force``, the default): Helbing's forces as velocity commands.
 
-The forces are kernels of :mod:`crowdnav.social_force` that both simulators sum on the geometry a
+The forces are kernels of :mod:`crowdnav.sim.forces` that both simulators sum on the geometry a
 step measures (the pair and obstacle repulsion are part of that geometry, which the contacts use
 too), so the model reads the summed command from the view: one world's, or K worlds' at once
 (the kernels take a leading world axis, so the batch needs no loop over worlds).

@@ -12,9 +12,9 @@ from typing import TYPE_CHECKING, Protocol
 import numpy as np
 
 if TYPE_CHECKING:
-    from crowdnav.robots import Team
     from crowdnav.scenario.schema import Scenario
-    from crowdnav.sim_state import SimState
+    from crowdnav.sim.robots import Team
+    from crowdnav.sim.state import SimState
 
 
 class OneWorld(Protocol):

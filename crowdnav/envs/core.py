@@ -20,12 +20,12 @@ from gymnasium import spaces
 from crowdnav.envs.reward import Reward
 from crowdnav.planning.shield import validate_shield
 from crowdnav.rendering.episode_view import RENDER_MODES, EpisodeView, RenderOptions
-from crowdnav.robot_view import RobotWorld
 from crowdnav.scenario import ScenarioIssue, library
 from crowdnav.scenario.loader import LoadedScenario
 from crowdnav.sensors import Modality, build_modalities
-from crowdnav.simulator import Simulator, StepEvents
-from crowdnav.world import CompiledWorld, WorldSource, load_world
+from crowdnav.sim.robot_view import RobotWorld
+from crowdnav.sim.simulator import Simulator, StepEvents
+from crowdnav.worlds.compiled import CompiledWorld, WorldSource, load_world
 from crowdnav.yaml_input import check_value
 
 ScenarioSource = WorldSource
@@ -80,7 +80,7 @@ def load_env_world(scenario: ScenarioSource | None, overrides: Mapping[str, Any]
     """Load ``scenario`` with ``overrides``, compile its world and build its modalities, each once.
 
     Every problem is a ScenarioError naming the path (and the file's line where there is one):
-    the scenario's (:func:`crowdnav.world.load_world`) and the modality names (checked by
+    the scenario's (:func:`crowdnav.worlds.compiled.load_world`) and the modality names (checked by
     :func:`crowdnav.sensors.build_modalities`, the one place that knows the registered ones).
     """
     if scenario is None:
@@ -98,7 +98,7 @@ def load_env_world(scenario: ScenarioSource | None, overrides: Mapping[str, Any]
 
 
 def _source(world: CompiledWorld) -> LoadedScenario:
-    """The file ``world`` was loaded from, for errors with file and line (:func:`crowdnav.world.load_world` records it)."""
+    """The file ``world`` was loaded from, for errors with file and line (:func:`crowdnav.worlds.compiled.load_world` records it)."""
     if world.source is None:
         raise RuntimeError("the world was compiled without load_world, so it has no source to name in an error")
     return world.source
@@ -344,7 +344,7 @@ class EnvCore:
 def step_info(events: StepEvents, terms: dict[str, float]) -> dict[str, Any]:
     """The robot's info: reward terms every step; outcome, is_success, collision kind/partner at the end.
 
-    ``info["outcome"]`` is one of :data:`crowdnav.simulator.OUTCOMES`: ``success``, ``collision``,
+    ``info["outcome"]`` is one of :data:`crowdnav.sim.simulator.OUTCOMES`: ``success``, ``collision``,
     ``out_of_bounds`` (the robot's centre left the world of a scenario without boundary walls) or
     ``truncated``; ``is_success`` is True only for ``success``. ``collision_kind`` and
     ``collision_partner`` are there after a collision only.

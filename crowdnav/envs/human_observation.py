@@ -40,9 +40,9 @@ from typing import Any
 import numpy as np
 from gymnasium import spaces
 
-from crowdnav.obstacles import StaticObstacles
 from crowdnav.scenario.schema import Scenario
-from crowdnav.simulator import Simulator
+from crowdnav.sim.simulator import Simulator
+from crowdnav.worlds.obstacles import StaticObstacles
 
 _ROUNDING = 1.0 + 1e-6
 """Bounds are the physical limits widened by this factor so float32 rounding stays inside them."""

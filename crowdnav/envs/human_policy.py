@@ -1,7 +1,7 @@
 """The social-force model as a policy for the ``human_<i>`` agents of the multi-agent env.
 
 It reads only the humans' observations (see :mod:`crowdnav.envs.human_observation`) and uses
-the functions of :mod:`crowdnav.social_force`, the same ones the simulator's built-in crowd
+the functions of :mod:`crowdnav.sim.forces`, the same ones the simulator's built-in crowd
 uses, so driving every human with this policy reproduces the built-in crowd (to float32
 precision, the observations' precision).
 
@@ -23,8 +23,8 @@ from collections.abc import Mapping
 
 import numpy as np
 
-from crowdnav import social_force as sf
 from crowdnav.scenario.schema import Scenario
+from crowdnav.sim import forces as sf
 
 _UNUSED_DISTANCE = 1.0
 """Distance given to padding slots and zero offsets: any positive value (a zero offset pushes with zero force)."""

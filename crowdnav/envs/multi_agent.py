@@ -41,7 +41,7 @@ from gymnasium import spaces
 
 from crowdnav.crowd.replay import empty_places
 from crowdnav.errors import CrowdNavError
-from crowdnav.simulator import Simulator
+from crowdnav.sim.simulator import Simulator
 from crowdnav.suggest import did_you_mean
 
 STATE_COLUMNS = ("x", "y", "vx", "vy", "gx", "gy", "radius", "active")

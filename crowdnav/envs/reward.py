@@ -15,7 +15,7 @@ after step ``t`` (in parentheses: the ``paper`` preset's weight):
 Every weight multiplies its quantity and the product is added: penalties have negative weights.
 ``F_social`` is :attr:`crowdnav.Simulator.robot_social_force`: the summed social-force
 repulsion of all humans on the robot at the new state (dimensionless, see
-:mod:`crowdnav.social_force`). A collision wins over a goal reached in the same step (the
+:mod:`crowdnav.sim.forces`). A collision wins over a goal reached in the same step (the
 simulator's outcome is then ``collision``), so at most one of the two event terms is paid.
 The reward is the sum of the terms, in the order above.
 """
@@ -27,10 +27,10 @@ from typing import TypeVar
 
 import numpy as np
 
-from crowdnav.events import StepEvents
-from crowdnav.robot_view import RobotWorld
 from crowdnav.scenario.reward_presets import REWARD_TERMS
 from crowdnav.scenario.schema import RewardWeights
+from crowdnav.sim.events import StepEvents
+from crowdnav.sim.robot_view import RobotWorld
 
 __all__ = ["REWARD_TERMS", "Reward", "reward_terms"]  # REWARD_TERMS: names in summation order, keys of info["reward_terms"]
 
@@ -38,7 +38,7 @@ F = TypeVar("F", float, np.ndarray)
 """A Python float (one world) or a (K,) array (K worlds)."""
 
 PAID_ON = {"goal_reached": ("success",), "collision": ("collision", "out_of_bounds")}
-"""The event terms and the outcomes (:data:`crowdnav.events.OUTCOMES`) whose step pays them."""
+"""The event terms and the outcomes (:data:`crowdnav.sim.events.OUTCOMES`) whose step pays them."""
 
 
 def reward_terms(
@@ -48,8 +48,8 @@ def reward_terms(
 
     ``weights``: term -> weight; ``previous_distance`` / ``distance``: the robot-goal centre
     distance before and after the step; ``social_force``: ``|F_social|`` after it; ``outcome``:
-    the step's outcome (:func:`crowdnav.events.outcome_of`, None while running; K worlds: the
-    (K,) object array of :func:`crowdnav.events.outcomes`). Only elementwise float operations, in
+    the step's outcome (:func:`crowdnav.sim.events.outcome_of`, None while running; K worlds: the
+    (K,) object array of :func:`crowdnav.sim.events.outcomes`). Only elementwise float operations, in
     the order of the module doc, so a world's terms have the same bits either way.
     """
     progress = weights["goal_progress"] * (previous_distance - distance)

@@ -9,10 +9,10 @@ import gymnasium as gym
 import numpy as np
 
 from crowdnav.envs.core import EnvCore, ScenarioSource, step_info
-from crowdnav.events import StepEvents
 from crowdnav.policies import SCRIPTED_POLICIES
 from crowdnav.rendering.episode_view import RENDER_MODES
-from crowdnav.robot_view import RobotWorld
+from crowdnav.sim.events import StepEvents
+from crowdnav.sim.robot_view import RobotWorld
 
 OTHER_ROBOT_POLICIES = tuple(name for name in SCRIPTED_POLICIES if name != "random")
 """Names ``other_robots`` accepts (:data:`crowdnav.policies.SCRIPTED_POLICIES` but ``random``, which has no episode seed)."""
@@ -22,7 +22,7 @@ class CrowdNavEnv(gym.Env):
     """A robot navigating to its goal among social-force humans and static obstacles.
 
     **Agent.** The robot. The humans follow the simulator's built-in social-force model (the
-    same :mod:`crowdnav.social_force` functions as :class:`crowdnav.SocialForcePolicy`); use
+    same :mod:`crowdnav.sim.forces` functions as :class:`crowdnav.SocialForcePolicy`); use
     :func:`crowdnav.parallel_env` to control them.
 
     **Action.** ``Box(-1, 1, (2,), float32)``. Holonomic robot: ``(vx, vy)`` in the robot frame
@@ -66,7 +66,7 @@ class CrowdNavEnv(gym.Env):
     collision) or ends the episode with outcome ``out_of_bounds`` (open space), a failure that
     pays the ``collision`` reward term. Precedence within one step: collision > out_of_bounds >
     success > truncated. Every step's info holds ``outcome``
-    (``"success" | "collision" | "out_of_bounds" | "truncated"``, :data:`crowdnav.simulator.OUTCOMES`)
+    (``"success" | "collision" | "out_of_bounds" | "truncated"``, :data:`crowdnav.sim.simulator.OUTCOMES`)
     and ``is_success`` (bool): on a terminating step how the episode ended, on any other step
     ``"truncated"`` and False, the outcome of an episode cut there (at ``max_steps``, or by a
     ``TimeLimit`` wrapper that the env cannot see); after a collision also ``collision_kind``

@@ -17,16 +17,16 @@ from gymnasium.vector.utils import batch_space
 
 from crowdnav.batch.memory import keep_freed_memory as _keep_freed_memory
 from crowdnav.batch.simulator import BatchSimulator, StepResult
-from crowdnav.contacts import goal_distance
 from crowdnav.envs.core import ScenarioSource, checked_residual, load_env_world, option_overrides
 from crowdnav.envs.reward import REWARD_TERMS, reward_terms
 from crowdnav.envs.vector_actions import checked_actions, checked_replay, executed
 from crowdnav.envs.vector_infos import end_infos, every_infos, reward_term_infos, same_step_infos
 from crowdnav.envs.vector_team import TeamWorlds
-from crowdnav.events import outcomes
 from crowdnav.planning.shield import validate_shield
-from crowdnav.simulator import Simulator
-from crowdnav.world import CompiledWorld
+from crowdnav.sim.contacts import goal_distance
+from crowdnav.sim.events import outcomes
+from crowdnav.sim.simulator import Simulator
+from crowdnav.worlds.compiled import CompiledWorld
 
 MAX_WORLDS = 4_096
 """Most worlds in one vector env (the training config's num_envs bound)."""
@@ -193,7 +193,7 @@ class CrowdNavVectorEnv(VectorEnv):
         self._reset_worlds(worlds, seeds)
 
     def _goal_distance(self, worlds: np.ndarray) -> np.ndarray:
-        """The robot-goal distance of ``worlds``: :func:`crowdnav.contacts.goal_distance`, the single simulator's kernel."""
+        """The robot-goal distance of ``worlds``: :func:`crowdnav.sim.contacts.goal_distance`, the single simulator's kernel."""
         assert isinstance(self.batch, BatchSimulator)
         out = np.zeros(self.num_envs)
         for bucket in self.batch.buckets.values():

@@ -15,7 +15,7 @@ import numpy as np
 from crowdnav.batch.simulator import BatchSimulator, StepResult
 from crowdnav.envs.reward import REWARD_TERMS
 from crowdnav.envs.vector_team import EveryStep, TeamWorlds
-from crowdnav.events import Collision
+from crowdnav.sim.events import Collision
 
 MASKED_TERMS = tuple((term, f"_{term}") for term in REWARD_TERMS)
 """Each reward term's key and its mask's, made once (not an f-string per term per step)."""

@@ -3,13 +3,13 @@
 :class:`crowdnav.envs.vector.CrowdNavVectorEnv` holds its worlds here, not in one stacked
 :class:`crowdnav.batch.simulator.BatchSimulator`, where stacking does not pay or does not apply:
 
-* a scenario with ``robots:``: the robots after the first are in each world's :class:`crowdnav.robots.Team`,
+* a scenario with ``robots:``: the robots after the first are in each world's :class:`crowdnav.sim.robots.Team`,
   whose per-robot work (each robot's kinematics, scripted policy, outcome and retirement) is not stacked;
 * one world (``num_envs=1``): a batch of one does the single env's array work with a world axis and
   per-step bookkeeping on top (0.36x its env-steps/s, docs/environments.md#one-world-and-crowds-of-200-humans-or-more), so the world is
   the single env itself and ``num_envs`` stays a size: every world count collects through the same vector env;
 * crowds of :attr:`crowdnav.Simulator.grid_from` humans or more: the single simulator measures them with
-  its neighbour grid (:mod:`crowdnav.crowd_grid`), which the all-pairs batch does not have.
+  its neighbour grid (:mod:`crowdnav.sim.crowd_grid`), which the all-pairs batch does not have.
 
 Each world is one :class:`crowdnav.envs.single.CrowdNavEnv` (its own :class:`crowdnav.Simulator`, the
 other robots' policies, the first robot's sensors and reward), all stepped by one :meth:`TeamWorlds.step`
@@ -32,12 +32,12 @@ import numpy as np
 from crowdnav.batch.simulator import StepResult
 from crowdnav.envs.reward import REWARD_TERMS
 from crowdnav.envs.single import CrowdNavEnv
-from crowdnav.events import Collision, StepEvents
-from crowdnav.robot_view import RobotWorld
 from crowdnav.sensors import Modality
 from crowdnav.sensors.lidar import LidarModality
-from crowdnav.simulator import Simulator
-from crowdnav.world import CompiledWorld
+from crowdnav.sim.events import Collision, StepEvents
+from crowdnav.sim.robot_view import RobotWorld
+from crowdnav.sim.simulator import Simulator
+from crowdnav.worlds.compiled import CompiledWorld
 
 
 class EveryStep(NamedTuple):

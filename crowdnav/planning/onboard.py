@@ -20,12 +20,12 @@ import numpy as np
 
 from crowdnav.planning.oracle import PlannerUnavailable, check_plannable
 from crowdnav.planning.predictive import PredictivePlanner
-from crowdnav.robot_view import RobotView, RobotWorld
 from crowdnav.sensors.plan import PlanModality
+from crowdnav.sim.robot_view import RobotView, RobotWorld
 
 if TYPE_CHECKING:
     from crowdnav.scenario.schema import Scenario
-    from crowdnav.world import CompiledWorld
+    from crowdnav.worlds.compiled import CompiledWorld
 
 WORLDS_KEPT = 512
 """Worlds one :class:`OnboardPlanner` keeps a ``plan`` modality for (the first seen freed first): a test set's envs,
@@ -36,7 +36,7 @@ class OnboardPlanner:
     """The ``plan`` modality's move as the action: the predictive planner from the tracker, the robot's pose and the map.
 
     Called with what a scripted policy reads (``policy(sim) -> action``; several robots: that
-    robot's :class:`crowdnav.robot_view.RobotView`), it reads only the tracker's rows of that view
+    robot's :class:`crowdnav.sim.robot_view.RobotView`), it reads only the tracker's rows of that view
     (the humans, the other robots left out as the ``plan`` modality leaves them), the robot's pose,
     velocity and goal, and the map. Holonomic robots only: elsewhere, and for a world too large
     for the planner's maps, a one-line :class:`crowdnav.planning.PlannerUnavailable`. One

@@ -32,7 +32,7 @@ import numpy as np
 from crowdnav.errors import CrowdNavError
 from crowdnav.planning.lattice import Lattice, disc_cells, search
 from crowdnav.planning.static_map import MapCache, StaticMap
-from crowdnav.robot_view import RobotWorld
+from crowdnav.sim.robot_view import RobotWorld
 
 STILL = np.zeros(2, dtype=np.float32)
 MAX_CELLS = 50_000_000

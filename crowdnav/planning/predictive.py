@@ -27,8 +27,8 @@ from crowdnav.crowd.replay import empty_places
 from crowdnav.planning.lattice import Lattice, SearchLayers, disc_cells, search, shifted
 from crowdnav.planning.oracle import EPSILON, check_plannable, to_action
 from crowdnav.planning.static_map import RASTER, MapCache, StaticMap, grid_shape
-from crowdnav.robot_view import RobotWorld
-from crowdnav.world import CompiledWorld
+from crowdnav.sim.robot_view import RobotWorld
+from crowdnav.worlds.compiled import CompiledWorld
 
 
 @dataclass

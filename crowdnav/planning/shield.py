@@ -23,7 +23,7 @@ import numpy as np
 
 from crowdnav.planning.predictive import CrowdEstimate, PlannerSettings, PredictivePlanner, moves_to_actions
 from crowdnav.sensors.humans import HumansModality
-from crowdnav.world import CompiledWorld
+from crowdnav.worlds.compiled import CompiledWorld
 
 
 def shield_settings(option: Any) -> PlannerSettings | None:

@@ -1,6 +1,6 @@
 """The room's map as a planner reads it: where the robot's centre may be, and how far the goal is around furniture.
 
-Both come from the compiled world's exact geometry (:attr:`crowdnav.world.CompiledWorld.obstacles`,
+Both come from the compiled world's exact geometry (:attr:`crowdnav.worlds.compiled.CompiledWorld.obstacles`,
 the nearest-point kernel the simulator's collision check uses), so a cell the map calls free is
 one where the simulator reports no contact with walls or furniture. The distance to the goal is
 geodesic (around obstacles) on a grid, computed once per goal by a vectorized wavefront.
@@ -13,8 +13,8 @@ import math
 import numpy as np
 
 from crowdnav.errors import CrowdNavError
-from crowdnav.obstacles import nearest_on_edges
-from crowdnav.world import CompiledWorld
+from crowdnav.worlds.compiled import CompiledWorld
+from crowdnav.worlds.obstacles import nearest_on_edges
 
 RASTER = 0.05
 """Spacing (m) of the clearance raster the per-step planners read (:meth:`StaticMap.free` with ``exact=False``)."""

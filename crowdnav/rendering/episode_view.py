@@ -18,7 +18,7 @@ import numpy as np
 from crowdnav.rendering.renderer import Overlays, Renderer, RenderOptions
 from crowdnav.sensors import build_modalities
 from crowdnav.sensors.lidar import LidarModality
-from crowdnav.simulator import Simulator, StepEvents
+from crowdnav.sim.simulator import Simulator, StepEvents
 
 RENDER_MODES = ["human", "rgb_array"]
 """``human``: a pygame window at ``metadata["render_fps"]``; ``rgb_array``: uint8 (H, W, 3) frames."""
@@ -108,6 +108,6 @@ class EpisodeView:
         if self._last_reward is not None and math.isfinite(self._last_reward):
             parts.append(f"reward {self._last_reward:+.1f}")
             parts.append(f"return {self._return:+.1f}")
-        if self._outcome:  # one of crowdnav.simulator.OUTCOMES: SUCCESS, COLLISION, OUT OF BOUNDS, TRUNCATED
+        if self._outcome:  # one of crowdnav.sim.simulator.OUTCOMES: SUCCESS, COLLISION, OUT OF BOUNDS, TRUNCATED
             parts.append(self._outcome.replace("_", " ").upper())
         return "   ".join(parts)

@@ -25,7 +25,7 @@ import numpy as np
 
 from crowdnav.crowd.replay import empty_places
 from crowdnav.rendering.group_links import draw_group_links
-from crowdnav.simulator import Simulator
+from crowdnav.sim.simulator import Simulator
 
 if TYPE_CHECKING:
     import pygame
@@ -96,7 +96,7 @@ class _History:
     robot: list[complex] = field(default_factory=list)
     humans: deque[np.ndarray] = field(default_factory=lambda: deque(maxlen=12))
     robots: list[np.ndarray] = field(default_factory=list)
-    """Several robots: every robot's centre per record (:data:`crowdnav.robots.PARKED` once it left)."""
+    """Several robots: every robot's centre per record (:data:`crowdnav.sim.robots.PARKED` once it left)."""
 
 
 class Renderer:

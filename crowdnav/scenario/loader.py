@@ -2,7 +2,7 @@
 
 Every failure becomes a :class:`ScenarioError` naming the file, the dotted path and, where
 the YAML node can be found, the line. The loader is pure (text in, :class:`Scenario` out):
-the geometry is checked when the world is compiled (:func:`crowdnav.world.load_world`) and
+the geometry is checked when the world is compiled (:func:`crowdnav.worlds.compiled.load_world`) and
 modality names when the sensors are built; :meth:`LoadedScenario.error` lets those later
 checks report their problems with the same file and lines.
 """
@@ -56,7 +56,7 @@ def load_scenario(source: str | Path | Mapping[str, Any], overrides: Overrides |
     ``source`` is a library name (``"room_furniture"``), a path to a YAML file, or an
     already-parsed mapping. ``overrides`` maps dotted paths to values, e.g.
     ``{"humans.count": 10, "walls.0.thickness": 0.2}``; they are validated like the file.
-    The geometry is checked when the world is compiled (:func:`crowdnav.world.load_world`).
+    The geometry is checked when the world is compiled (:func:`crowdnav.worlds.compiled.load_world`).
     """
     return read_scenario(source, overrides).scenario
 

@@ -5,7 +5,7 @@ and every field carries a one-line description (units included) that also ends u
 JSON Schema printed by ``crowdnav scenario schema``.
 
 Geometry that needs shapely (valid polygons, regions inside the world, crowd capacity)
-is checked when the scenario is compiled into a world, see :mod:`crowdnav.world`.
+is checked when the scenario is compiled into a world, see :mod:`crowdnav.worlds.compiled`.
 """
 
 from __future__ import annotations

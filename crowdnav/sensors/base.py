@@ -24,9 +24,9 @@ from pydantic import BaseModel
 
 if TYPE_CHECKING:  # imported for type hints only: the sensors never build a simulator
     from crowdnav.batch.state import BatchState
-    from crowdnav.robot_view import RobotWorld
     from crowdnav.scenario.schema import Sensors
-    from crowdnav.world import CompiledWorld
+    from crowdnav.sim.robot_view import RobotWorld
+    from crowdnav.worlds.compiled import CompiledWorld
 
 
 class Modality(abc.ABC):
@@ -67,8 +67,8 @@ class Modality(abc.ABC):
     def observe(self, sim: RobotWorld) -> np.ndarray:
         """A new array in :meth:`space` describing the world around the robot now.
 
-        ``sim``: what the robot's sensors read (:class:`crowdnav.robot_view.RobotWorld`): the
-        simulator itself for one robot, a :class:`crowdnav.robot_view.RobotView` for each robot of a ``robots:`` scenario.
+        ``sim``: what the robot's sensors read (:class:`crowdnav.sim.robot_view.RobotWorld`): the
+        simulator itself for one robot, a :class:`crowdnav.sim.robot_view.RobotView` for each robot of a ``robots:`` scenario.
         """
 
     def observe_batch(self, state: BatchState) -> np.ndarray:

@@ -21,7 +21,7 @@ from crowdnav.batch.scalar_math import cmul
 
 if TYPE_CHECKING:
     from crowdnav.batch.state import BatchState
-    from crowdnav.robot_view import RobotWorld
+    from crowdnav.sim.robot_view import RobotWorld
 
 Frame = Literal["polar", "cartesian"]
 

@@ -30,8 +30,8 @@ from crowdnav.sensors.frames import to_robot_frame, to_robot_frame_batch
 
 if TYPE_CHECKING:
     from crowdnav.batch.state import BatchState
-    from crowdnav.robot_view import RobotWorld
-    from crowdnav.world import CompiledWorld
+    from crowdnav.sim.robot_view import RobotWorld
+    from crowdnav.worlds.compiled import CompiledWorld
 
 UNREACHABLE_FACTOR = 4.0
 """Grids with no standing point connected to the goal read this many world diagonals (the Box's bound)."""

@@ -23,8 +23,8 @@ from crowdnav.sensors.frames import to_robot_frame, to_robot_frame_batch
 
 if TYPE_CHECKING:
     from crowdnav.batch.state import BatchState
-    from crowdnav.robot_view import RobotWorld
-    from crowdnav.world import CompiledWorld
+    from crowdnav.sim.robot_view import RobotWorld
+    from crowdnav.worlds.compiled import CompiledWorld
 
 COLUMNS = ("x", "y", "vx", "vy", "radius", "present")
 """The six entries of a row (one human), in order."""

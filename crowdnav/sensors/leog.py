@@ -30,8 +30,8 @@ from crowdnav.sensors.static_edges import oriented_edges
 
 if TYPE_CHECKING:
     from crowdnav.batch.state import BatchState
-    from crowdnav.robot_view import RobotWorld
-    from crowdnav.world import CompiledWorld
+    from crowdnav.sim.robot_view import RobotWorld
+    from crowdnav.worlds.compiled import CompiledWorld
 
 OCCUPIED = 255
 """Value of an occupied cell (free cells are 0): uint8 0/255 lets SB3 treat the grid as an image."""

@@ -31,8 +31,8 @@ from crowdnav.sensors.static_edges import oriented_edges
 
 if TYPE_CHECKING:
     from crowdnav.batch.state import BatchState
-    from crowdnav.robot_view import RobotWorld
-    from crowdnav.world import CompiledWorld
+    from crowdnav.sim.robot_view import RobotWorld
+    from crowdnav.worlds.compiled import CompiledWorld
 
 @register_modality
 class LidarModality(Modality):

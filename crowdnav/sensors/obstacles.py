@@ -28,8 +28,8 @@ from crowdnav.sensors.frames import to_robot_frame, to_robot_frame_batch
 
 if TYPE_CHECKING:
     from crowdnav.batch.state import BatchState
-    from crowdnav.robot_view import RobotWorld
-    from crowdnav.world import CompiledWorld
+    from crowdnav.sim.robot_view import RobotWorld
+    from crowdnav.worlds.compiled import CompiledWorld
 
 COLUMNS = ("x", "y", "present")
 """The three entries of a row (one static shape), in order."""

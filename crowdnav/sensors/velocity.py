@@ -13,8 +13,8 @@ from crowdnav.sensors.frames import encode_vector, encode_vectors, to_robot_fram
 
 if TYPE_CHECKING:
     from crowdnav.batch.state import BatchState
-    from crowdnav.robot_view import RobotWorld
-    from crowdnav.world import CompiledWorld
+    from crowdnav.sim.robot_view import RobotWorld
+    from crowdnav.worlds.compiled import CompiledWorld
 
 
 @register_modality

@@ -13,7 +13,7 @@ from crowdnav.agents.training.config import config_from_mapping
 from crowdnav.agents.training.wrappers import NormalizeObservation, normalize_observation, observation_scales
 
 from crowdnav.envs import CrowdNavEnv
-from crowdnav.simulator import OUTCOMES
+from crowdnav.sim.simulator import OUTCOMES
 from tests.agents.agents_tiny import tiny_config
 
 FLOAT_KEYS = ["goal", "closest_obstacle", "lidar", "velocity"]

@@ -7,7 +7,7 @@ import pytest
 from crowdnav.agents import train
 from crowdnav.agents.networks.extractor import MultiModalExtractor
 
-from crowdnav.simulator import OUTCOMES
+from crowdnav.sim.simulator import OUTCOMES
 from tests.agents.agents_tiny import tiny_config
 
 MODALITY_SETS = {"lidar+goal": ["lidar", "goal"], "leog+goal": ["leog", "goal"], "leog+lidar+goal": ["leog", "lidar", "goal"]}

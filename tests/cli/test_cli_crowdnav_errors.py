@@ -6,9 +6,9 @@ import pytest
 
 from crowdnav.cli import main
 from crowdnav.cli import schema as schema_cli
-from crowdnav.orca import OrcaUnavailableError
 from crowdnav.scenario import ScenarioError
 from crowdnav.scenario.errors import ScenarioIssue
+from crowdnav.sim.orca_solver import OrcaUnavailableError
 
 
 @pytest.mark.parametrize("error", [

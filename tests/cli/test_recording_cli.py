@@ -12,7 +12,7 @@ import yaml
 from crowdnav.cli import main
 from crowdnav.crowd.recording import read_recording
 from crowdnav.crowd.replay import PARKING
-from crowdnav.simulator import Simulator
+from crowdnav.sim.simulator import Simulator
 
 WALKERS = {  # id: (first s, last s, start, end): a flow along x both ways, one person crossing it late
     1: (0.0, 12.0, -6 - 1j, 6 - 1j),

@@ -21,9 +21,9 @@ from crowdnav.crowd.recording import MAX_GRID_STEPS, RecordingError, read_record
 from crowdnav.crowd.replay import ReplayError, check_replay_state, places_needed
 from crowdnav.scenario import ScenarioError
 from crowdnav.scenario.crowd import MAX_REPLAY_CELLS
-from crowdnav.sim_state import CONSTANTS_KEPT, ConstantsCache
-from crowdnav.simulator import Simulator
-from crowdnav.world import load_world
+from crowdnav.sim.simulator import Simulator
+from crowdnav.sim.state import CONSTANTS_KEPT, ConstantsCache
+from crowdnav.worlds.compiled import load_world
 
 FAR_APART = "0 1 0 0\n10 1 1 0\n20 1 2 0\n30 1 3 0\n2000000010 1 4 0\n"
 """Five rows whose frames span 0 to 2,000,000,010: 80,000,000 s at 0.4 s per 10 frames, 400 million steps of 0.2 s."""

@@ -5,9 +5,9 @@ from __future__ import annotations
 import numpy as np
 
 from crowdnav import Simulator
-from crowdnav.contacts import deepest_contact, goal_distance, outside, push_humans_apart, push_out_of_obstacles, touching
-from crowdnav.obstacles import nearest_on_edges
-from crowdnav.sim_state import SELF_DISTANCE
+from crowdnav.sim.contacts import deepest_contact, goal_distance, outside, push_humans_apart, push_out_of_obstacles, touching
+from crowdnav.sim.state import SELF_DISTANCE
+from crowdnav.worlds.obstacles import nearest_on_edges
 
 
 def _crowded_worlds(sim: Simulator, k: int) -> np.ndarray:

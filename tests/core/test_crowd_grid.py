@@ -7,10 +7,10 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from crowdnav.crowd_grid import PAIR_FORCE_TOLERANCE
 from crowdnav.envs import parallel_env
-from crowdnav.neighbours import close_pairs
-from crowdnav.simulator import Simulator
+from crowdnav.sim.crowd_grid import PAIR_FORCE_TOLERANCE
+from crowdnav.sim.neighbours import close_pairs
+from crowdnav.sim.simulator import Simulator
 
 
 def brute_force_pairs(points: np.ndarray, cutoff: float) -> set[tuple[int, int]]:

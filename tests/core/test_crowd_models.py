@@ -18,12 +18,12 @@ import pytest
 
 from crowdnav.crowd import CROWD_MODELS, Crowd, CrowdModel, CrowdView
 from crowdnav.crowd.views import WorldView
-from crowdnav.orca import toward_goal
 from crowdnav.scenario import ScenarioError
 from crowdnav.scenario import crowd as crowd_schema
 from crowdnav.scenario.schema import Scenario
-from crowdnav.simulator import Simulator
-from crowdnav.world import load_world
+from crowdnav.sim.orca_solver import toward_goal
+from crowdnav.sim.simulator import Simulator
+from crowdnav.worlds.compiled import load_world
 from tests.core.test_vector_env import check_batch_equals_singles
 
 

@@ -128,11 +128,11 @@ def test_an_unknown_modality_in_the_file_is_reported_with_its_line_when_the_env_
 
 @pytest.mark.parametrize("make", [CrowdNavEnv, crowdnav.envs.parallel_env], ids=["gymnasium", "pettingzoo"])
 def test_building_an_env_compiles_its_world_once(monkeypatch, make):
-    import crowdnav.world
+    import crowdnav.worlds.compiled
 
     calls = []
-    compile_world = crowdnav.world.compile_world
-    monkeypatch.setattr(crowdnav.world, "compile_world", lambda scenario: calls.append(scenario.name) or compile_world(scenario))
+    compile_world = crowdnav.worlds.compiled.compile_world
+    monkeypatch.setattr(crowdnav.worlds.compiled, "compile_world", lambda scenario: calls.append(scenario.name) or compile_world(scenario))
     env = make("room_furniture", modalities=["goal", "lidar"])
     env.reset(seed=0)
     assert calls == ["room_furniture"]

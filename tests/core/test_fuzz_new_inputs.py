@@ -301,7 +301,7 @@ def test_fuzzed_recordings_read_and_resample_or_fail_in_one_line(tmp_path_factor
 # ----------------------------------------------------------------- walking groups and stalls in scenario YAML
 
 from crowdnav.scenario import ScenarioError  # noqa: E402
-from crowdnav.simulator import Simulator  # noqa: E402
+from crowdnav.sim.simulator import Simulator  # noqa: E402
 
 ODD = st.one_of(st.none(), st.booleans(), st.integers(-10**6, 10**6), st.floats(allow_nan=True, allow_infinity=True),
                 st.just(1e300), st.just(-1e-300), st.text(max_size=4), st.lists(st.floats(-2, 2), max_size=3))

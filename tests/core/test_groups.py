@@ -11,8 +11,8 @@ import yaml
 
 from crowdnav.envs import parallel_env
 from crowdnav.scenario import ScenarioError
-from crowdnav.simulator import Simulator
-from crowdnav.world import load_world
+from crowdnav.sim.simulator import Simulator
+from crowdnav.worlds.compiled import load_world
 
 ROOM = {
     "description": "A test hall.",

@@ -15,7 +15,7 @@ import pytest
 from crowdnav import Simulator
 from crowdnav.scenario.errors import ScenarioError
 from crowdnav.scenario.loader import MAX_HUMAN_SUBSTEPS, human_substeps, load_scenario
-from crowdnav.world import load_world
+from crowdnav.worlds.compiled import load_world
 from tests.core.test_vector_env import check_batch_equals_singles
 
 # Computed with the code at 74994f8, before sub-steps existed (the same helper, the same episodes).

@@ -12,9 +12,9 @@ import numpy as np
 import pytest
 
 import crowdnav
-from crowdnav.events import OUTCOMES
 from crowdnav.policies import StraightToGoal
 from crowdnav.scenario.library import library_names
+from crowdnav.sim.events import OUTCOMES
 
 FAST = {"modalities": ["goal"]}
 """The loop is about the humans; the robot's sensors do not matter here."""

@@ -9,8 +9,8 @@ import pytest
 
 from crowdnav.scenario.errors import ScenarioError
 from crowdnav.scenario.loader import load_scenario
-from crowdnav.simulator import Simulator
-from crowdnav.world import load_world
+from crowdnav.sim.simulator import Simulator
+from crowdnav.worlds.compiled import load_world
 from tests.core.multi_robot_scenes import HALL, HEAD_ON, hall
 
 

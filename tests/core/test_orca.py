@@ -15,11 +15,11 @@ import pytest
 
 from crowdnav.cli import main
 from crowdnav.crowd.views import WorldView
-from crowdnav.orca import OrcaUnavailableError
 from crowdnav.scenario import ScenarioError
 from crowdnav.scenario.library import library_names
-from crowdnav.simulator import Simulator
-from crowdnav.world import load_world
+from crowdnav.sim.orca_solver import OrcaUnavailableError
+from crowdnav.sim.simulator import Simulator
+from crowdnav.worlds.compiled import load_world
 from tests.core.test_vector_env import check_batch_equals_singles
 from tests.paths import REPO
 

@@ -5,9 +5,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from crowdnav.orca import OrcaSolver, obstacle_rings, toward_goal
 from crowdnav.scenario.schema import Orca
-from crowdnav.world import load_world
+from crowdnav.sim.orca_solver import OrcaSolver, obstacle_rings, toward_goal
+from crowdnav.worlds.compiled import load_world
 
 pytest.importorskip("pyrvo")
 

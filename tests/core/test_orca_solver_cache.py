@@ -7,10 +7,10 @@ import gc
 
 import pytest
 
-from crowdnav.orca import SOLVERS_KEPT, SolverCache
 from crowdnav.policies import WORLDS_KEPT, OrcaRobot
-from crowdnav.simulator import Simulator
-from crowdnav.world import load_world
+from crowdnav.sim.orca_solver import SOLVERS_KEPT, SolverCache
+from crowdnav.sim.simulator import Simulator
+from crowdnav.worlds.compiled import load_world
 from tests.core.test_orca import _episode
 
 pytest.importorskip("pyrvo")

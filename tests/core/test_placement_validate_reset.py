@@ -11,10 +11,10 @@ from hypothesis import strategies as st
 from shapely.geometry import Polygon, box
 
 from crowdnav import ScenarioError
-from crowdnav.placement import PlacementError
 from crowdnav.scenario.library import library_names
-from crowdnav.simulator import Simulator
-from crowdnav.world import load_world
+from crowdnav.sim.simulator import Simulator
+from crowdnav.worlds.compiled import load_world
+from crowdnav.worlds.placement import PlacementError
 
 
 def _floor(simulator: Simulator):

@@ -9,7 +9,7 @@ import pytest
 from crowdnav.envs.vector import CrowdNavVectorEnv
 from crowdnav.planning import predictive
 from crowdnav.planning.predictive import CrowdEstimate, PlannerSettings, PredictivePlanner
-from crowdnav.world import load_world
+from crowdnav.worlds.compiled import load_world
 
 MAIN_JOB = {"modalities": ["closest_obstacle", "goal", "plan"], "shield": True,
             "overrides": {"humans.count": 5, "humans.preferred_speed": [0.5, 1.2]}}

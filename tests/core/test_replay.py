@@ -12,8 +12,8 @@ import pytest
 from crowdnav.crowd.recording import read_recording
 from crowdnav.crowd.replay import PARKING
 from crowdnav.scenario import ScenarioError
-from crowdnav.simulator import Simulator
-from crowdnav.world import load_world
+from crowdnav.sim.simulator import Simulator
+from crowdnav.worlds.compiled import load_world
 from tests.core.test_vector_env import check_batch_equals_singles
 
 PEOPLE = {  # id: (first s, last s, start point, end point)

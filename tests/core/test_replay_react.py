@@ -10,8 +10,8 @@ import pytest
 
 from crowdnav.crowd.recording import read_recording
 from crowdnav.crowd.replay import START_CLEARANCE, ReplayModel, empty_places
-from crowdnav.simulator import Simulator
-from crowdnav.world import load_world
+from crowdnav.sim.simulator import Simulator
+from crowdnav.worlds.compiled import load_world
 from tests.core.test_replay import _replay, _write, native_equals_sync
 from tests.core.test_vector_env import check_batch_equals_singles
 

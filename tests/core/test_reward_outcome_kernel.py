@@ -7,7 +7,7 @@ import itertools
 import numpy as np
 
 from crowdnav.envs.reward import reward_terms
-from crowdnav.events import OUTCOME_PRECEDENCE, Collision, StepEvents, outcome_of, outcomes
+from crowdnav.sim.events import OUTCOME_PRECEDENCE, Collision, StepEvents, outcome_of, outcomes
 
 EVENTS = list(itertools.product([False, True], repeat=4))  # (collided, left_world, goal_reached, truncated)
 

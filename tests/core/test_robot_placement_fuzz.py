@@ -16,10 +16,10 @@ import numpy as np
 import pytest
 
 from crowdnav.envs.core import load_env_world
-from crowdnav.placement import GAP
 from crowdnav.scenario import ScenarioError
 from crowdnav.scenario.library import library_names
-from crowdnav.simulator import Simulator
+from crowdnav.sim.simulator import Simulator
+from crowdnav.worlds.placement import GAP
 from tests.core.robot_placement_shapes import EAST_DOOR, SHAPES, WEST_DOOR, case
 
 RESETS = 200

@@ -11,7 +11,7 @@ from crowdnav.crowd.passing import passing_force
 from crowdnav.crowd.routing import Router
 from crowdnav.scenario.errors import ScenarioError
 from crowdnav.scenario.library import library_names
-from crowdnav.world import load_world
+from crowdnav.worlds.compiled import load_world
 
 L_ROOM = Path(__file__).with_name("routing_l_room.yaml")
 
@@ -81,7 +81,7 @@ def test_batched_simulator_gives_the_single_simulators_episodes_with_geodesic_ro
         sidesteps.append(int((force != 0).sum()))
         return force
 
-    monkeypatch.setattr("crowdnav.simulator.passing_force", counted)
+    monkeypatch.setattr("crowdnav.sim.simulator.passing_force", counted)
     world = load_world(L_ROOM, {"humans.routing": "geodesic"})
     batch = BatchSimulator(world, 3)
     batch.reset(range(3), [0, 1, 2])

@@ -1,5 +1,5 @@
 """``humans.routing: geodesic`` in a crowd: oncoming humans side-step (crowdnav.crowd.passing), walking groups arrive when
-gathered (crowdnav.groups.arrivals), and the L-shaped room of issue 52 keeps its groups moving."""
+gathered (crowdnav.sim.groups.arrivals), and the L-shaped room of issue 52 keeps its groups moving."""
 
 from pathlib import Path
 
@@ -8,7 +8,7 @@ import pytest
 
 from crowdnav import Simulator
 from crowdnav.crowd.passing import passing_force
-from crowdnav.groups import arrivals
+from crowdnav.sim.groups import arrivals
 
 L_ROOM = Path(__file__).with_name("routing_l_room.yaml")
 

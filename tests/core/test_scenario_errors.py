@@ -10,7 +10,7 @@ import pytest
 
 from crowdnav.cli import main
 from crowdnav.scenario import ScenarioError, load_scenario
-from crowdnav.world import load_world
+from crowdnav.worlds.compiled import load_world
 
 VALID = """\
 description: A small test room.

@@ -13,8 +13,8 @@ from crowdnav import Simulator
 from crowdnav.batch.simulator import BatchSimulator
 from crowdnav.batch.stacked_state import StackedState
 from crowdnav.envs.vector import CrowdNavVectorEnv
-from crowdnav.sim_state import SimState, StateFields
-from crowdnav.world import load_world
+from crowdnav.sim.state import SimState, StateFields
+from crowdnav.worlds.compiled import load_world
 from tests.paths import REPO
 
 ROOT = REPO
@@ -29,7 +29,7 @@ def _same_state(sim: Simulator, state: SimState) -> None:
 
 
 def test_every_state_field_is_declared_with_shape_dtype_and_meaning():
-    source = (ROOT / "crowdnav" / "sim_state.py").read_text()
+    source = (ROOT / "crowdnav" / "sim" / "state.py").read_text()
     tree = ast.parse(source)
     body = next(node for node in tree.body if isinstance(node, ast.ClassDef) and node.name == "StateFields").body
     docs = {}
@@ -135,11 +135,12 @@ def _writes_into(node: ast.AST) -> str | None:
 
 
 def test_only_the_simulators_and_goal_rules_write_a_worlds_state():
-    owners = {"simulator.py", "sim_state.py", "groups.py", "robots.py"}  # crowdnav/ and crowdnav/batch/ (robots.py: the other robots' state)
+    owners = {"crowdnav/sim/simulator.py", "crowdnav/sim/state.py", "crowdnav/sim/groups.py",
+              "crowdnav/sim/robots.py", "crowdnav/batch/simulator.py"}  # sim/robots.py: the other robots' state
     offenders = []
     for folder in ("crowdnav", "agents", "evaluation"):
         for path in (ROOT / folder).rglob("*.py"):
-            if path.name in owners and path.parent.name in ("crowdnav", "batch"):
+            if path.relative_to(ROOT).as_posix() in owners:
                 continue
             for node in ast.walk(ast.parse(path.read_text())):
                 targets = node.targets if isinstance(node, ast.Assign) else [node.target] if isinstance(node, ast.AugAssign) else []
@@ -178,12 +179,12 @@ def _class_body_names(path: str, name: str) -> set[str]:
 def test_state_fields_are_declared_once_for_one_world_and_for_k_worlds_in_the_same_order():
     assert issubclass(SimState, StateFields) and issubclass(StackedState, StateFields)
     assert [f.name for f in dataclasses.fields(StackedState)] == FIELDS == [f.name for f in dataclasses.fields(StateFields)]
-    for path, name in (("sim_state.py", "SimState"), ("batch/stacked_state.py", "StackedState")):
+    for path, name in (("sim/state.py", "SimState"), ("batch/stacked_state.py", "StackedState")):
         assert not _class_body_names(path, name) & set(FIELDS), f"{name} declares a field again"
 
 
 def test_neither_simulator_lists_the_state_fields_again_it_reads_them_from_the_declaration():
-    assert not _class_body_names("simulator.py", "Simulator") & set(FIELDS)
+    assert not _class_body_names("sim/simulator.py", "Simulator") & set(FIELDS)
     assert not _class_body_names("batch/bucket.py", "Bucket") & set(FIELDS)
     assert all(isinstance(getattr(Simulator, name), property) for name in FIELDS)
     sim = Simulator("room_furniture")

@@ -195,7 +195,7 @@ def test_with_boundary_walls_the_same_drive_ends_in_a_static_collision_inside_th
 
 
 def test_outcome_precedence_is_collision_then_out_of_bounds_then_success_then_truncated():
-    from crowdnav.simulator import OUTCOMES, Collision, StepEvents
+    from crowdnav.sim.simulator import OUTCOMES, Collision, StepEvents
 
     hit = Collision("human", "human_0", 0.0)
     assert StepEvents(goal_reached=True, collision=hit, truncated=True, left_world=True).outcome == "collision"
@@ -397,7 +397,7 @@ def test_shortest_force_ranges_with_a_dense_crowd_keep_every_state_and_reward_fi
 
 
 def test_repulsion_gain_never_overflows_to_inf():
-    from crowdnav import social_force as sf
+    from crowdnav.sim import forces as sf
 
     gain = sf.repulsion_gain(np.array([2.0]), np.array([1e6]), 1e-3)
     assert np.isfinite(gain).all()

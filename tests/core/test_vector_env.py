@@ -14,7 +14,7 @@ from crowdnav import Simulator
 from crowdnav.batch.scalar_math import TWO_PI, cmul, remainder
 from crowdnav.batch.simulator import BatchSimulator
 from crowdnav.envs.vector import CrowdNavVectorEnv
-from crowdnav.world import load_world
+from crowdnav.worlds.compiled import load_world
 
 ALL = ["goal", "closest_obstacle", "lidar", "leog", "velocity"]
 

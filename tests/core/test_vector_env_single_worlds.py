@@ -14,7 +14,7 @@ from crowdnav.batch.simulator import BatchSimulator
 from crowdnav.envs import CrowdNavEnv
 from crowdnav.envs.vector import CrowdNavVectorEnv, stacks
 from crowdnav.envs.vector_team import TeamWorlds
-from crowdnav.world import load_world
+from crowdnav.worlds.compiled import load_world
 from tests.core.test_vector_env import ALL, _compare_with_sync
 
 FIGURE4 = {"humans.count": 5, "humans.preferred_speed": [0.5, 1.2]}

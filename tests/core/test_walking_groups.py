@@ -6,11 +6,11 @@ import numpy as np
 import pytest
 
 from crowdnav import Simulator
-from crowdnav import social_force as sf
 from crowdnav.scenario.crowd import GroupForce
 from crowdnav.scenario.errors import ScenarioError
 from crowdnav.scenario.library import library_names
-from crowdnav.world import load_world
+from crowdnav.sim import forces as sf
+from crowdnav.worlds.compiled import load_world
 from tests.core.test_vector_env import check_batch_equals_singles
 
 

@@ -14,7 +14,7 @@ from crowdnav.evaluation.rollout import HeldOutEpisodes
 
 from crowdnav.planning import PlannerUnavailable
 from crowdnav.scenario.library import library_names
-from crowdnav.world import load_world
+from crowdnav.worlds.compiled import load_world
 
 OUTCOMES = {"success", "collision", "out_of_bounds", "truncated"}
 HAS_PYRVO = importlib.util.find_spec("pyrvo") is not None

@@ -16,7 +16,7 @@ from crowdnav.evaluation.leaderboard import bootstrap_iqm, interquartile_mean, l
 from crowdnav.evaluation.metrics import METRIC_COLUMNS
 
 from crowdnav.cli import main
-from crowdnav.simulator import OUTCOMES
+from crowdnav.sim.simulator import OUTCOMES
 from tests.evaluation.evaluation_tiny import tiny_results
 
 # configuration a: seed 0 always succeeds; seed 1 collides in evaluations 0-1 then succeeds; seed 2 is always truncated.

@@ -18,7 +18,7 @@ from crowdnav.evaluation.protocol import MAX_WORLDS, QUICK_STEPS, UNITS, Protoco
 from crowdnav.evaluation.runner import UnitSpec, run_unit
 from crowdnav.evaluation.storage import ResultsError, load_results
 
-from crowdnav.simulator import OUTCOMES
+from crowdnav.sim.simulator import OUTCOMES
 from tests.evaluation.evaluation_tiny import tiny_experiment_document, tiny_unit_spec
 
 STEPS = {"train_steps": 400, "eval_every_steps": 200}

@@ -81,7 +81,7 @@ def test_reference_results_refuse_a_checkout_with_changes(tmp_path, monkeypatch)
 
     from crowdnav.evaluation import track_reference
 
-    changes = [" M crowdnav/simulator.py", "?? docs/results/tracks/figure4/x.csv"]
+    changes = [" M crowdnav/sim/simulator.py", "?? docs/results/tracks/figure4/x.csv"]
 
     def fake_run(command, **kwargs):
         out = "abc123\n" if command[1] == "rev-parse" else "".join(line + "\n" for line in changes)
@@ -89,7 +89,7 @@ def test_reference_results_refuse_a_checkout_with_changes(tmp_path, monkeypatch)
 
     monkeypatch.setattr(track_reference.subprocess, "run", fake_run)
     out = Path(track_reference.__file__).resolve().parents[1] / "docs" / "results" / "tracks"
-    with pytest.raises(TrackError, match=r"uncommitted changes \(1 paths, e.g. crowdnav/simulator.py\): reference results are published "
+    with pytest.raises(TrackError, match=r"uncommitted changes \(1 paths, e.g. crowdnav/sim/simulator.py\): reference results are published "
                                          "from a clean commit"):
         track_reference.source_state(out)
     changes.pop(0)  # what it writes itself is no change of the source

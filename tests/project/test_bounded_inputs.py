@@ -20,7 +20,7 @@ from crowdnav.cli.common import CliError, parse_overrides
 from crowdnav.envs.core import load_env_world
 from crowdnav.envs.single import CrowdNavEnv
 from crowdnav.envs.vector import CrowdNavVectorEnv
-from crowdnav.placement import PlacementError
+from crowdnav.worlds.placement import PlacementError
 from crowdnav.yaml_input import MAX_DEPTH, YamlLimitError, check_value, parse_value, read_text_file
 
 ALIAS_BOMB = "{" + ", ".join(
@@ -198,7 +198,7 @@ def test_fuzzed_set_values_fail_in_one_line_or_give_a_world_that_resets(items):
         lines = str(error).splitlines()
         assert len(lines) == len(error.issues) and all(line.startswith(error.source + ":") for line in lines), str(error)
         return
-    from crowdnav.simulator import Simulator
+    from crowdnav.sim.simulator import Simulator
 
     simulator = Simulator(world)
     for seed in range(3):

@@ -17,8 +17,8 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from crowdnav import CrowdNavParallelEnv, ScenarioError, SimulationError
-from crowdnav.placement import PlacementError
 from crowdnav.scenario.library import library_dir, library_names
+from crowdnav.worlds.placement import PlacementError
 
 VALUES = st.one_of(
     st.none(), st.booleans(), st.integers(-10**6, 10**6), st.integers(), st.floats(allow_nan=True, allow_infinity=True),

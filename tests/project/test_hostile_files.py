@@ -15,7 +15,7 @@ from crowdnav.evaluation.experiment import ExperimentError, load_experiment
 
 from crowdnav import ScenarioError, load_scenario
 from crowdnav.scenario.library import library_dir
-from crowdnav.world import load_world
+from crowdnav.worlds.compiled import load_world
 
 BOMB = "\n".join(
     [f"l0: &l0 [{', '.join(['lol'] * 9)}]"] + [f"l{i}: &l{i} [{', '.join([f'*l{i - 1}'] * 9)}]" for i in range(1, 9)]
@@ -75,7 +75,7 @@ def test_a_huge_world_covered_by_regions_loads_on_a_bounded_lattice():
     document = _room(**{"world.min": [-5000, -5000], "world.max": [5000, 5000], "robot.start": full, "robot.goal": full,
                         "humans.spawn": [full, full], "humans.goal": [full], "furniture": [], "walls": []})
     world = load_world(document)
-    from crowdnav.placement import MAX_CANDIDATES
+    from crowdnav.worlds.placement import MAX_CANDIDATES
 
     assert len(world.placement.robot_start) <= 1.2 * MAX_CANDIDATES and len(world.placement.groups[0].spawn) <= 2.4 * MAX_CANDIDATES
 

@@ -82,7 +82,7 @@ def imports(module: str, *, in_functions: bool) -> set[str]:
 
 
 def test_every_source_file_maps_to_its_layer():
-    assert layer("crowdnav.world") == layer("crowdnav.rendering.episodes") == "core"
+    assert layer("crowdnav.worlds.compiled") == layer("crowdnav.rendering.episodes") == "core"
     assert layer("crowdnav.agents.runs.folder") == "agents" and layer("crowdnav.evaluation.jobs") == "evaluation"
     assert layer("crowdnav.cli.train") == layer("crowdnav.__main__") == "cli"
     assert {layer(module) for module in MODULES} == set(LAYERS)

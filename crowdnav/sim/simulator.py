@@ -4,7 +4,7 @@ State lives in numpy arrays indexed by agent, robot first: ``positions[0]`` is t
 ``positions[1:]`` the active humans; points and velocities are complex (``x + 1j*y``, m and m/s,
 world frame). A step costs a fixed number of array operations whatever the crowd size (no Python
 loop over humans, pairs or edges). Up to ``grid_from`` humans every pair is measured; larger
-crowds only pairs within the force's reach (:mod:`crowdnav.crowd_grid`, the same model within a
+crowds only pairs within the force's reach (:mod:`crowdnav.sim.crowd_grid`, the same model within a
 stated tolerance). Each walking group's humans take their commands from the group's crowd model
 (:mod:`crowdnav.crowd`, held as :attr:`Simulator.crowd`); everything after the command is the same.
 
@@ -13,23 +13,23 @@ Step order: humans' commands (a crowd model, or given actions) and robot kinemat
 that would move their radius in a step move in sub-steps, :func:`crowdnav.scenario.loader.human_substeps`) -> robot
 collision, world-exit and goal checks -> humans at their goals follow the scenario's ``on_goal``
 rule. The simulator is made of parts, not base classes: the measuring and what is read from it
-(overlap pushes, collision, world exit) are :class:`crowdnav.sim_geometry.Geometry`
-(:attr:`Simulator.geometry`), an episode's first draws :func:`crowdnav.episode_draw.draw_state`,
-every robot's readings :mod:`crowdnav.robot_view`; this module steps the episode.
+(overlap pushes, collision, world exit) are :class:`crowdnav.sim.geometry.Geometry`
+(:attr:`Simulator.geometry`), an episode's first draws :func:`crowdnav.sim.episode_draw.draw_state`,
+every robot's readings :mod:`crowdnav.sim.robot_view`; this module steps the episode.
 
 The robot cannot escape the task: leaving the world (its centre outside ``world.min`` /
 ``world.max``) is impossible with ``world.boundary_walls`` (touching them is a collision) and
 otherwise ends the episode with the outcome ``out_of_bounds``.
 
-The episode's state is one declared :class:`crowdnav.sim_state.SimState` the simulator owns
+The episode's state is one declared :class:`crowdnav.sim.state.SimState` the simulator owns
 (:attr:`Simulator.state`); its fields (read from the declaration, not listed again:
-:func:`crowdnav.sim_state.read_state_fields`), the measured geometry's and every robot's read as
+:func:`crowdnav.sim.state.read_state_fields`), the measured geometry's and every robot's read as
 the simulator's attributes (``sim.positions``, ``sim.robot_offset``, ``sim.robot_positions``).
 Only the simulator's methods change the state (:meth:`Simulator.step`, :meth:`Simulator.stop_humans`,
 the goal rules it runs); staging a scene by hand (tests, scripted set-ups) writes those arrays
 and then calls :meth:`Simulator.refresh`.
 A scenario with ``robots:`` keeps the robots after the first (ego, agent 0) in
-:attr:`Simulator.team` (:mod:`crowdnav.robots`; None for one robot); :attr:`Simulator.robot_events`
+:attr:`Simulator.team` (:mod:`crowdnav.sim.robots`; None for one robot); :attr:`Simulator.robot_events`
 holds every robot's events of the last step. Randomness comes only from the generator seeded by
 :meth:`Simulator.reset`.
 """
@@ -40,24 +40,24 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from crowdnav import robot_view as robots_read
-from crowdnav import social_force as sf
-from crowdnav.contacts import goal_distance
 from crowdnav.crowd import Crowd
 from crowdnav.crowd.base import action_commands
 from crowdnav.crowd.passing import passing_force
 from crowdnav.crowd.routing import Router, router_for
 from crowdnav.crowd.views import WorldView
-from crowdnav.episode_draw import draw_state
-from crowdnav.events import OUTCOMES, Collision, SimulationError, StepEvents  # noqa: F401  (re-exported: their public home)
-from crowdnav.groups import apply_goal_rules, stall_window, together_table
-from crowdnav.robot_view import RobotView, RobotWorld, robot_scenario
-from crowdnav.robots import Team, clipped_action, retire_robots, robot_kinematics
 from crowdnav.scenario.loader import Overrides, human_substeps
 from crowdnav.scenario.schema import Scenario
-from crowdnav.sim_geometry import Geometry
-from crowdnav.sim_state import ConstantsCache, PairConstants, SimState, StateFields, pair_constants, read_state_fields, read_through, read_with
-from crowdnav.world import CompiledWorld, WorldSource, load_world
+from crowdnav.sim import forces as sf
+from crowdnav.sim import robot_view as robots_read
+from crowdnav.sim.contacts import goal_distance
+from crowdnav.sim.episode_draw import draw_state
+from crowdnav.sim.events import OUTCOMES, Collision, SimulationError, StepEvents  # noqa: F401  (re-exported: their public home)
+from crowdnav.sim.geometry import Geometry
+from crowdnav.sim.groups import apply_goal_rules, stall_window, together_table
+from crowdnav.sim.robot_view import RobotView, RobotWorld, robot_scenario
+from crowdnav.sim.robots import Team, clipped_action, retire_robots, robot_kinematics
+from crowdnav.sim.state import ConstantsCache, PairConstants, SimState, StateFields, pair_constants, read_state_fields, read_through, read_with
+from crowdnav.worlds.compiled import CompiledWorld, WorldSource, load_world
 
 if TYPE_CHECKING:  # the state's fields as the simulator's attributes, for the type checker (read_state_fields adds them)
     _StateAttributes = StateFields[complex, float, int]
@@ -73,21 +73,21 @@ class Simulator(_StateAttributes):
     >>> events = sim.step(np.array([1.0, 0.0]))
 
     ``scenario``: a library name, YAML path, mapping or Scenario (loaded and compiled by
-    :func:`crowdnav.world.load_world`), or an already compiled world (then no ``overrides``).
+    :func:`crowdnav.worlds.compiled.load_world`), or an already compiled world (then no ``overrides``).
     """
 
     grid_from: int = 200
-    """Crowds of at least this many humans use the neighbour grid (:mod:`crowdnav.crowd_grid`) instead of
+    """Crowds of at least this many humans use the neighbour grid (:mod:`crowdnav.sim.crowd_grid`) instead of
     all pairs: the same model within a stated tolerance, at a cost that grows with n instead of n^2."""
 
-    # what refresh() measured (crowdnav.sim_geometry.Geometry), read as attributes
+    # what refresh() measured (crowdnav.sim.geometry.Geometry), read as attributes
     robot_offset: np.ndarray = read_through("geometry.robot_offset", doc="(n+1,) complex (m): from the robot to every agent.")
     robot_distance: np.ndarray = read_through("geometry.robot_distance", doc="(n+1,) (m): centre distances from the robot, its own huge.")
     polygon_offset: np.ndarray = read_through("geometry.polygon_offset", doc="(n+1, P) complex (m): to each polygon's nearest point.")
     polygon_distance: np.ndarray = read_through("geometry.polygon_distance", doc="(n+1, P) (m): their lengths.")
     disc_offset: np.ndarray = read_through("geometry.disc_offset", doc="(n+1, C) complex (m): to each round obstacle's centre.")
     disc_distance: np.ndarray = read_through("geometry.disc_distance", doc="(n+1, C) (m): their lengths (centre distance).")
-    # every robot at once (crowdnav.robot_view; one robot: the first and only)
+    # every robot at once (crowdnav.sim.robot_view; one robot: the first and only)
     robot_count: int = read_with(robots_read.robot_count)
     other_robot_discs: slice = read_with(robots_read.other_robot_discs)
     robot_positions: np.ndarray = read_with(robots_read.robot_positions)
@@ -109,7 +109,7 @@ class Simulator(_StateAttributes):
         self.groups = [group for _, group in scenario.humans.crowd]
         """The crowd's groups in file order (one, named ``crowd``, for a file without ``humans.groups``)."""
         self.together = together_table(self.groups)
-        """(G,) bool: the groups that walk together (``walk_together``; :func:`crowdnav.social_force.group_force`); None: none does."""
+        """(G,) bool: the groups that walk together (``walk_together``; :func:`crowdnav.sim.forces.group_force`); None: none does."""
         self.max_humans = scenario.humans.max_count
         force = scenario.humans.social_force
         self._force = force
@@ -121,18 +121,18 @@ class Simulator(_StateAttributes):
         self.substep_dt = self.dt / self.substeps
         """Seconds of one sub-step (``dt`` with one sub-step)."""
         self.stall_window = stall_window(scenario)
-        """Steps between stall checks (``humans.stall``; 0: none): :func:`crowdnav.groups.apply_goal_rules`."""
+        """Steps between stall checks (``humans.stall``; 0: none): :func:`crowdnav.sim.groups.apply_goal_rules`."""
         world = scenario.world
         self.bounds: tuple[float, float, float, float] | None = (
             None if world.boundary_walls else (float(world.min[0]), float(world.min[1]), float(world.max[0]), float(world.max[1])))
         """Open space: ``(x0, y0, x1, y1)`` (m), the rectangle the robot's centre must stay in (None: boundary walls keep it in)."""
         self.geometry = Geometry(self.obstacles, self.bounds)
-        """What :meth:`refresh` measures from the state (:class:`crowdnav.sim_geometry.Geometry`): not state, never written by others."""
+        """What :meth:`refresh` measures from the state (:class:`crowdnav.sim.geometry.Geometry`): not state, never written by others."""
         self._rng = np.random.default_rng()
         self._constants = ConstantsCache()
         """The pair constants of the last few crowd sizes (LRU): bounded whatever sizes ``humans.count`` draws."""
         self.team = Team(scenario, self.obstacles, self.placement) if scenario.robots is not None else None
-        """The robots after the first (:mod:`crowdnav.robots`) of a scenario with ``robots:``; None for one robot."""
+        """The robots after the first (:mod:`crowdnav.sim.robots`) of a scenario with ``robots:``; None for one robot."""
         self._robot_scenarios: list[Scenario] = [robot_scenario(scenario, k) for k in range(len(scenario.robot_specs))]
         self.robot_events: list[StepEvents | None] = []
         """Every robot's events of the last step, the ego robot first (None: it had left); one robot: ``[events]``."""
@@ -203,7 +203,7 @@ class Simulator(_StateAttributes):
                 self._state.human_stopped[index] = True
 
     def pair_constants(self, n: int) -> PairConstants:
-        """The repulsion constants of a crowd of ``n`` humans (:func:`crowdnav.sim_state.pair_constants`, the last few sizes kept)."""
+        """The repulsion constants of a crowd of ``n`` humans (:func:`crowdnav.sim.state.pair_constants`, the last few sizes kept)."""
         grid = n >= self.grid_from
         return self._constants.get((n, grid), lambda: pair_constants(self.scenario, self.obstacles, n, grid=grid))
 
@@ -253,7 +253,7 @@ class Simulator(_StateAttributes):
         """Measure the geometry at the current positions (once per step; after editing ``positions`` by hand).
 
         What it sets (``robot_offset``, ``pair_distance``, ``polygon_offset``, ``disc_distance``,
-        the repulsion, ...) is described on :class:`crowdnav.sim_geometry.Geometry` and read by the
+        the repulsion, ...) is described on :class:`crowdnav.sim.geometry.Geometry` and read by the
         sensors, the reward and the step; ``pair_*`` of crowds of ``grid_from`` or more are built when read.
         """
         self.geometry.measure(self._state.positions, self.team)
@@ -383,7 +383,7 @@ class Simulator(_StateAttributes):
 
     def group_terms(self, humans: np.ndarray, velocities: np.ndarray, preferred_speed: np.ndarray, group: np.ndarray,
                     stopped: np.ndarray) -> np.ndarray:
-        """:func:`crowdnav.social_force.group_force` on the humans (any leading world axes) of a scenario with walking groups."""
+        """:func:`crowdnav.sim.forces.group_force` on the humans (any leading world axes) of a scenario with walking groups."""
         assert self.together is not None
         member = self.together[group] & ~stopped
         return sf.group_force(humans, velocities, preferred_speed, member, group, len(self.together), self.scenario.humans.group_force,
@@ -403,14 +403,14 @@ class Simulator(_StateAttributes):
         return self._robot_scenarios[index]
 
     def robot_view(self, index: int, with_robots: bool = True) -> RobotWorld:
-        """The world from robot ``index`` (:class:`crowdnav.robot_view.RobotView`), what its sensors, reward and scripted policy read.
+        """The world from robot ``index`` (:class:`crowdnav.sim.robot_view.RobotView`), what its sensors, reward and scripted policy read.
 
         ``with_robots=False``: the other robots left out (what a people tracker sees). One robot: the simulator itself.
         """
         return self if self.team is None else RobotView(self, index, with_robots)
 
     def retire_robots(self, index: np.ndarray | list[int]) -> None:
-        """Robots ``index`` (0: the ego robot) leave the world for the rest of the episode (:data:`crowdnav.robots.PARKED`)."""
+        """Robots ``index`` (0: the ego robot) leave the world for the rest of the episode (:data:`crowdnav.sim.robots.PARKED`)."""
         if self.team is None:
             raise ValueError("retire_robots needs a scenario with robots:; the one robot's episode ends with it")
         retire_robots(self.team, self.state, index)

@@ -7,9 +7,9 @@ distinct lattice points, so it costs the same at any density, and a region that 
 hold the requested crowd is reported when the scenario loads instead of looping forever.
 
 Four modules: this one assembles a scenario's sets (:func:`build_placement`: each robot's
-start and goal, each group's spawns and goals); :mod:`crowdnav.placement_regions` declares the sets and turns one
-region into a :class:`CandidateSet` and draws from it; :mod:`crowdnav.placement_checks` holds
-the load-time capacity and reachability checks; :mod:`crowdnav.placement_team` the fine sets of
+start and goal, each group's spawns and goals); :mod:`crowdnav.worlds.placement_regions` declares the sets and turns one
+region into a :class:`CandidateSet` and draws from it; :mod:`crowdnav.worlds.placement_checks` holds
+the load-time capacity and reachability checks; :mod:`crowdnav.worlds.placement_team` the fine sets of
 several robots and the check that they all fit together. The names users import live on here.
 """
 
@@ -23,8 +23,9 @@ from shapely.geometry import Polygon as ShapelyPolygon
 from shapely.geometry import box
 from shapely.geometry.base import BaseGeometry
 
-from crowdnav.obstacles import GeometryError, StaticObstacles
-from crowdnav.placement_checks import (
+from crowdnav.scenario.schema import HumanGroup, Robot, Scenario
+from crowdnav.worlds.obstacles import GeometryError, StaticObstacles
+from crowdnav.worlds.placement_checks import (
     check_capacity,
     check_human_reachability,
     check_ring_start_goal,
@@ -34,17 +35,16 @@ from crowdnav.placement_checks import (
     inside_floor,
     ring_mirror_free,
 )
-from crowdnav.placement_regions import GAP as GAP  # the public names live on here
-from crowdnav.placement_regions import JITTER as JITTER
-from crowdnav.placement_regions import JITTER_REACH as JITTER_REACH
-from crowdnav.placement_regions import MAX_CANDIDATES as MAX_CANDIDATES
-from crowdnav.placement_regions import CandidateSet as CandidateSet
-from crowdnav.placement_regions import GroupPlacement as GroupPlacement
-from crowdnav.placement_regions import Placement as Placement
-from crowdnav.placement_regions import PlacementError as PlacementError
-from crowdnav.placement_regions import clear_of, merge_candidates, region_candidates
-from crowdnav.placement_team import check_team, team_fallback
-from crowdnav.scenario.schema import HumanGroup, Robot, Scenario
+from crowdnav.worlds.placement_regions import GAP as GAP  # the public names live on here
+from crowdnav.worlds.placement_regions import JITTER as JITTER
+from crowdnav.worlds.placement_regions import JITTER_REACH as JITTER_REACH
+from crowdnav.worlds.placement_regions import MAX_CANDIDATES as MAX_CANDIDATES
+from crowdnav.worlds.placement_regions import CandidateSet as CandidateSet
+from crowdnav.worlds.placement_regions import GroupPlacement as GroupPlacement
+from crowdnav.worlds.placement_regions import Placement as Placement
+from crowdnav.worlds.placement_regions import PlacementError as PlacementError
+from crowdnav.worlds.placement_regions import clear_of, merge_candidates, region_candidates
+from crowdnav.worlds.placement_team import check_team, team_fallback
 
 
 def build_placement(scenario: Scenario, obstacles: StaticObstacles) -> Placement:

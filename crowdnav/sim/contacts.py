@@ -17,9 +17,9 @@ from typing import Any
 
 import numpy as np
 
-from crowdnav.events import Collision
-from crowdnav.obstacles import nearest_on_edges
-from crowdnav.sim_state import OBSTACLE_PASSES
+from crowdnav.sim.events import Collision
+from crowdnav.sim.state import OBSTACLE_PASSES
+from crowdnav.worlds.obstacles import nearest_on_edges
 
 
 def push_humans_apart(positions: np.ndarray, pair_offset: np.ndarray, pair_distance: np.ndarray, pair_gap: np.ndarray) -> None:
@@ -35,7 +35,7 @@ def push_out_of_obstacles(positions: np.ndarray, surface: Any, contact: np.ndarr
     """Push humans out of walls and furniture, in place, up to ``passes`` times.
 
     ``positions``: (K, n+1) complex, robot first (the robot is not moved); ``surface``: the
-    obstacles' edges (:attr:`crowdnav.obstacles.StaticObstacles.surface`); ``contact``: (n, S)
+    obstacles' edges (:attr:`crowdnav.worlds.obstacles.StaticObstacles.surface`); ``contact``: (n, S)
     surface contact distance of each human to each obstacle. A pass measures the humans of the
     worlds still overlapping and moves each inside human out along its nearest points; a world
     whose humans are clear stops there (a second pass settles corners between two obstacles).

@@ -1,6 +1,6 @@
 """Several robots in one world (a scenario's ``robots:``): the robots after the first, and what they add to a step.
 
-The simulator's :class:`crowdnav.sim_state.SimState` keeps its layout whatever the number of
+The simulator's :class:`crowdnav.sim.state.SimState` keeps its layout whatever the number of
 robots: agent 0 is the *ego* robot (``robots[0]``, the one the Gymnasium env learns), humans
 are agents 1..n. The other robots live in a :class:`Team` the simulator holds only for a
 scenario with ``robots:`` (``sim.team``; None otherwise), so the one-robot step is the same
@@ -17,7 +17,7 @@ says so (:meth:`crowdnav.Simulator.retire_robots`): it is moved to :data:`PARKED
 far away that it no longer pushes, blocks or is seen by anyone (every repulsion is exactly 0
 there), and its ``active`` flag is cleared; :attr:`TeamState.left_at` keeps where it left.
 
-:class:`crowdnav.robot_view.RobotView` shows the world from one robot (sensors, reward and
+:class:`crowdnav.sim.robot_view.RobotView` shows the world from one robot (sensors, reward and
 scripted policies read it as they read a simulator).
 """
 
@@ -30,12 +30,12 @@ from typing import Any
 
 import numpy as np
 
-from crowdnav import social_force as sf
-from crowdnav.contacts import deepest_contact, goal_distance, outside, touching
-from crowdnav.events import Collision, StepEvents
-from crowdnav.obstacles import nearest_on_edges
-from crowdnav.placement import GAP, JITTER_REACH, PlacementError
-from crowdnav.sim_state import SELF_DISTANCE, SimState
+from crowdnav.sim import forces as sf
+from crowdnav.sim.contacts import deepest_contact, goal_distance, outside, touching
+from crowdnav.sim.events import Collision, StepEvents
+from crowdnav.sim.state import SELF_DISTANCE, SimState
+from crowdnav.worlds.obstacles import nearest_on_edges
+from crowdnav.worlds.placement import GAP, JITTER_REACH, PlacementError
 
 PARKED = complex(1.0e7, 1.0e7)
 """Where a robot that left the world is kept (m): every exponential repulsion and contact test of it is exactly 0 / False."""
@@ -143,7 +143,7 @@ class Team:
         Each start keeps clear of the robots drawn before it, each goal of their goals; both respect
         the robot's own start-goal rules as the ego robot's draw does. A draw takes a point of the
         robot's lattice when one is free (so what always drew the same still does), else a point of
-        its fine set, which the load-time check (:func:`crowdnav.placement_team.check_team`) proves is there.
+        its fine set, which the load-time check (:func:`crowdnav.worlds.placement_team.check_team`) proves is there.
         """
         starts, goals, headings = [start], [goal], []
         radii = self.all_radii

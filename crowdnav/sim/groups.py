@@ -4,13 +4,13 @@ The simulator calls these with itself (``sim``: its scenario, groups, placements
 what :class:`GroupWorld` declares):
 :func:`place_groups` and :func:`first_goals` at reset, :func:`apply_goal_rules` after each step,
 on the state it is given (the simulator's own, or one world's row of a batch: a
-:class:`crowdnav.sim_state.SimState`, changed in place). Groups are visited in file order, and a file
+:class:`crowdnav.sim.state.SimState`, changed in place). Groups are visited in file order, and a file
 without ``humans.groups`` is one group: it draws the same random numbers in the same order as
 before groups existed, so its episodes did not change. Loops run over groups (a scenario's
 constant), never over humans.
 
 A group with ``walk_together`` (Moussaïd et al. 2010, PLoS ONE 5(4): e10047; the forces are
-:func:`crowdnav.social_force.group_force`) starts on a small circle like a standing one, shares
+:func:`crowdnav.sim.forces.group_force`) starts on a small circle like a standing one, shares
 one goal, has arrived when its walking members' centre of mass is within the goal tolerance
 (plus its circle radius under geodesic routing: :func:`arrivals`), and takes its next goal as a
 whole, also when one member stalled.
@@ -23,15 +23,15 @@ from typing import TYPE_CHECKING, Protocol
 
 import numpy as np
 
-from crowdnav import social_force as sf
-from crowdnav.placement import GAP, JITTER_REACH, PlacementError
+from crowdnav.sim import forces as sf
+from crowdnav.worlds.placement import GAP, JITTER_REACH, PlacementError
 
 if TYPE_CHECKING:
-    from crowdnav.placement import GroupPlacement, Placement
-    from crowdnav.placement_regions import CandidateSet
-    from crowdnav.robots import Team
     from crowdnav.scenario.schema import HumanGroup, Scenario
-    from crowdnav.sim_state import SimState
+    from crowdnav.sim.robots import Team
+    from crowdnav.sim.state import SimState
+    from crowdnav.worlds.placement import GroupPlacement, Placement
+    from crowdnav.worlds.placement_regions import CandidateSet
 
 
 class GroupWorld(Protocol):
@@ -255,7 +255,7 @@ def _respawn(state: SimState, sim: GroupWorld, index: np.ndarray, group: HumanGr
 
 
 def _goal_candidates(places: GroupPlacement) -> CandidateSet:
-    """A group's goal candidates (a group whose rule draws its goals has them: :mod:`crowdnav.placement`)."""
+    """A group's goal candidates (a group whose rule draws its goals has them: :mod:`crowdnav.worlds.placement`)."""
     assert places.goal is not None
     return places.goal
 

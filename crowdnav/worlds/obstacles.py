@@ -30,7 +30,7 @@ FAR = 1.0e6
 
 
 class GeometryError(CrowdNavError, ValueError):
-    """A geometric problem at a dotted scenario path (turned into a ScenarioError by :func:`crowdnav.world.load_world`)."""
+    """A geometric problem at a dotted scenario path (turned into a ScenarioError by :func:`crowdnav.worlds.compiled.load_world`)."""
 
     def __init__(self, path: str, message: str):
         self.path, self.message = path, message

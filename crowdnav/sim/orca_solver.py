@@ -29,8 +29,8 @@ import numpy as np
 from shapely.geometry.polygon import orient
 
 from crowdnav.errors import CrowdNavError, install_line
-from crowdnav.obstacles import StaticObstacles
 from crowdnav.scenario.schema import Orca
+from crowdnav.worlds.obstacles import StaticObstacles
 
 INSTALL = install_line("orca")
 DISC_SIDES = 16

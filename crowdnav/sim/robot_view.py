@@ -16,14 +16,14 @@ from typing import TYPE_CHECKING, Protocol
 
 import numpy as np
 
-from crowdnav.sim_state import SELF_DISTANCE
+from crowdnav.sim.state import SELF_DISTANCE
 
 if TYPE_CHECKING:
-    from crowdnav.obstacles import StaticObstacles
-    from crowdnav.robots import Team
     from crowdnav.scenario.schema import Scenario
-    from crowdnav.sim_state import SimState
-    from crowdnav.world import CompiledWorld
+    from crowdnav.sim.robots import Team
+    from crowdnav.sim.state import SimState
+    from crowdnav.worlds.compiled import CompiledWorld
+    from crowdnav.worlds.obstacles import StaticObstacles
 
 
 class RobotWorld(Protocol):
@@ -237,7 +237,7 @@ def other_robot_discs(sim: Robots) -> slice:
 
 
 def robot_positions(sim: Robots) -> np.ndarray:
-    """(R,) complex (m): every robot's centre, the ego robot first (:data:`crowdnav.robots.PARKED` once it left)."""
+    """(R,) complex (m): every robot's centre, the ego robot first (:data:`crowdnav.sim.robots.PARKED` once it left)."""
     first: np.ndarray = sim.state.positions[:1]
     return first.copy() if sim.team is None else np.concatenate([first, sim.team.state.positions])
 

@@ -1,4 +1,4 @@
-"""The draws that start an episode: one world's first :class:`crowdnav.sim_state.SimState`.
+"""The draws that start an episode: one world's first :class:`crowdnav.sim.state.SimState`.
 
 :func:`draw_state` is what :meth:`crowdnav.Simulator.draw_episode` draws from the episode's
 generator, in a fixed order (the crowd's size per group, the robot's start, goal and heading,
@@ -12,10 +12,10 @@ from typing import TYPE_CHECKING, cast
 
 import numpy as np
 
-from crowdnav.groups import GroupWorld, first_goals, place_groups
-from crowdnav.placement import JITTER_REACH
-from crowdnav.robots import first_heading
-from crowdnav.sim_state import SimState
+from crowdnav.sim.groups import GroupWorld, first_goals, place_groups
+from crowdnav.sim.robots import first_heading
+from crowdnav.sim.state import SimState
+from crowdnav.worlds.placement import JITTER_REACH
 
 if TYPE_CHECKING:
     from crowdnav.scenario.schema import HumanGroup

@@ -3,7 +3,7 @@
 :func:`load_world` is the one place a scenario source (library name, YAML file, mapping or
 :class:`Scenario`) becomes what the simulator and the environments run on: the loader
 validates the file (:mod:`crowdnav.scenario.loader`, no geometry), then the static obstacles
-(:mod:`crowdnav.obstacles`) and the placement candidates (:mod:`crowdnav.placement`) are
+(:mod:`crowdnav.worlds.obstacles`) and the placement candidates (:mod:`crowdnav.worlds.placement`) are
 built, which checks the geometry. A geometry problem is a ScenarioError naming the file and
 line like any other.
 
@@ -20,11 +20,11 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from crowdnav.obstacles import GeometryError, StaticObstacles, build_obstacles
-from crowdnav.placement import Placement, build_placement
 from crowdnav.scenario.errors import ScenarioIssue
 from crowdnav.scenario.loader import LoadedScenario, Overrides, read_scenario
 from crowdnav.scenario.schema import Scenario
+from crowdnav.worlds.obstacles import GeometryError, StaticObstacles, build_obstacles
+from crowdnav.worlds.placement import Placement, build_placement
 
 WorldSource = Scenario | str | Path | Mapping[str, Any]
 """A library name (``"room_furniture"``), a YAML path, a parsed mapping or a :class:`Scenario`."""

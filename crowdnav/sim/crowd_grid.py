@@ -1,9 +1,9 @@
 """The geometry of a large crowd: the robot against everyone, each human against its neighbours.
 
 The simulator's all-pairs geometry costs ``(n + 1)^2`` per step. From
-:attr:`crowdnav.simulator.Simulator.grid_from` humans on, it uses this instead: human-human
+:attr:`crowdnav.sim.simulator.Simulator.grid_from` humans on, it uses this instead: human-human
 repulsion and overlaps only for pairs closer than a cut-off (found with a grid of cells,
-:func:`crowdnav.neighbours.close_pairs`), and the robot's row and column (the social term, the
+:func:`crowdnav.sim.neighbours.close_pairs`), and the robot's row and column (the social term, the
 robot's collisions, humans who see the robot) over everyone, exactly as before.
 
 **The cut-off and its tolerance.** Human-human repulsion is ``A * exp((2r - d) / B)``; beyond
@@ -22,8 +22,8 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from crowdnav import social_force as sf
-from crowdnav.neighbours import close_pairs
+from crowdnav.sim import forces as sf
+from crowdnav.sim.neighbours import close_pairs
 
 if TYPE_CHECKING:
     from crowdnav.scenario.crowd import SocialForce

@@ -5,8 +5,8 @@ not a base class: it turns the positions into what the sensors, the reward and t
 every agent's offset and distance to every other agent and obstacle, the surface gaps, the fused
 social-force repulsion (:meth:`Geometry.measure`), and from those the contacts: pushing
 overlapping humans apart, the robot's collision and its leaving the world. It is not state
-(:mod:`crowdnav.sim_state`): it is recomputed from the positions and never written by anyone
-else. Stepping, reset and the episode's draws stay in :mod:`crowdnav.simulator`, which reads the
+(:mod:`crowdnav.sim.state`): it is recomputed from the positions and never written by anyone
+else. Stepping, reset and the episode's draws stay in :mod:`crowdnav.sim.simulator`, which reads the
 measured arrays as its own attributes (``sim.robot_offset``, ...).
 """
 
@@ -17,16 +17,16 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from crowdnav import social_force as sf
-from crowdnav.contacts import deepest_contact, outside, push_humans_apart, push_out_of_obstacles, touching
-from crowdnav.events import Collision
-from crowdnav.obstacles import nearest_on_edges
-from crowdnav.sim_state import SELF_DISTANCE, PairConstants
+from crowdnav.sim import forces as sf
+from crowdnav.sim.contacts import deepest_contact, outside, push_humans_apart, push_out_of_obstacles, touching
+from crowdnav.sim.events import Collision
+from crowdnav.sim.state import SELF_DISTANCE, PairConstants
+from crowdnav.worlds.obstacles import nearest_on_edges
 
 if TYPE_CHECKING:
-    from crowdnav.crowd_grid import CrowdGrid, GridGeometry
-    from crowdnav.obstacles import StaticObstacles
-    from crowdnav.robots import Team
+    from crowdnav.sim.crowd_grid import CrowdGrid, GridGeometry
+    from crowdnav.sim.robots import Team
+    from crowdnav.worlds.obstacles import StaticObstacles
 
 _NO_TABLE = np.zeros((0, 0))
 """The all-pairs tables of a crowd on the neighbour grid, which has none (and never reads them)."""
@@ -41,11 +41,11 @@ class Geometry:
     """
 
     gain: np.ndarray
-    """(n+1, n+1+S): :attr:`crowdnav.sim_state.PairConstants.gain` (all pairs; empty on the grid)."""
+    """(n+1, n+1+S): :attr:`crowdnav.sim.state.PairConstants.gain` (all pairs; empty on the grid)."""
     decay: np.ndarray
-    """(n+1, n+1+S): :attr:`crowdnav.sim_state.PairConstants.decay` (all pairs; empty on the grid)."""
+    """(n+1, n+1+S): :attr:`crowdnav.sim.state.PairConstants.decay` (all pairs; empty on the grid)."""
     contact_all: np.ndarray
-    """(n+1, n+1+S): :attr:`crowdnav.sim_state.PairConstants.contact_all` (all pairs; empty on the grid)."""
+    """(n+1, n+1+S): :attr:`crowdnav.sim.state.PairConstants.contact_all` (all pairs; empty on the grid)."""
     grid: CrowdGrid | None
     """The neighbour-grid constants of a large crowd (None: all pairs)."""
     # what measure() sets, read by the sensors, the reward and the step

@@ -1,7 +1,7 @@
 """Several robots (``robots:``): room for every robot together, proved at load time, and the fallback draw that uses it.
 
 The robots after the first are drawn one after the other, each clear of those drawn before it
-(:meth:`crowdnav.robots.Team.draw`). A draw first picks a point of the robot's own lattice (as
+(:meth:`crowdnav.sim.robots.Team.draw`). A draw first picks a point of the robot's own lattice (as
 it always did, so every scenario that reset before draws the same episodes); robots sharing a
 region (all starting in one door, overlapping regions) can block every lattice point, since the
 robots before sit at jittered positions between them. The draw then falls back to the region's
@@ -26,9 +26,10 @@ import numpy as np
 from shapely.geometry import Polygon as ShapelyPolygon
 from shapely.geometry.base import BaseGeometry
 
-from crowdnav.obstacles import GeometryError
-from crowdnav.placement_checks import component_of, free_components, max_blocked, ring_samples
-from crowdnav.placement_regions import (
+from crowdnav.scenario.schema import CircleRegion, PointsRegion, Robot, Scenario
+from crowdnav.worlds.obstacles import GeometryError
+from crowdnav.worlds.placement_checks import component_of, free_components, max_blocked, ring_samples
+from crowdnav.worlds.placement_regions import (
     CHUNK,
     GAP,
     JITTER_REACH,
@@ -40,7 +41,6 @@ from crowdnav.placement_regions import (
     grown,
     region_polygon,
 )
-from crowdnav.scenario.schema import CircleRegion, PointsRegion, Robot, Scenario
 
 FINE_POINTS = 1_500
 """About how many points a robot region's fine set holds at most (a larger region gets a coarser one)."""

@@ -7,7 +7,7 @@ world and reads its fields as its attributes (:func:`read_state_fields`, not lis
 humans as one :class:`crowdnav.batch.stacked_state.StackedState`: the same fields, each with a
 leading world axis (K,) (its rows are :class:`SimState` views). Nothing outside the
 simulators writes into a state: the simulator's methods (:meth:`crowdnav.Simulator.stop_humans`)
-and the goal rules (:func:`crowdnav.groups.apply_goal_rules`, on the state they are given) do.
+and the goal rules (:func:`crowdnav.sim.groups.apply_goal_rules`, on the state they are given) do.
 
 The geometry a simulator measures from a state (distances, gaps, repulsion) is not state: it is
 recomputed from the positions by ``refresh`` and never written by anyone else.
@@ -23,8 +23,8 @@ from typing import Any, Generic, TypeVar
 
 import numpy as np
 
-from crowdnav import social_force as sf
-from crowdnav.crowd_grid import CrowdGrid
+from crowdnav.sim import forces as sf
+from crowdnav.sim.crowd_grid import CrowdGrid
 
 OBSTACLE_PASSES = 3
 """Obstacle pushes per overlapping step (corners between two obstacles need more than one)."""
@@ -139,7 +139,7 @@ def read_state_fields(owner: type) -> None:
     it); those in :data:`STAGED` may also be set.
     """
     for field in fields(SimState):
-        doc = f":attr:`crowdnav.sim_state.StateFields.{field.name}` of this world."
+        doc = f":attr:`crowdnav.sim.state.StateFields.{field.name}` of this world."
         setattr(owner, field.name, read_through(f"_state.{field.name}", STAGED.get(field.name), doc))
 
 

@@ -15,9 +15,9 @@ import shapely
 from shapely.geometry import Polygon as ShapelyPolygon
 from shapely.geometry.base import BaseGeometry
 
-from crowdnav.obstacles import GeometryError
-from crowdnav.placement_regions import CHUNK, GAP, JITTER_REACH, CandidateSet, GroupPlacement, Placement, clear_of
 from crowdnav.scenario.schema import Scenario
+from crowdnav.worlds.obstacles import GeometryError
+from crowdnav.worlds.placement_regions import CHUNK, GAP, JITTER_REACH, CandidateSet, GroupPlacement, Placement, clear_of
 
 
 def check_capacity(scenario: Scenario, robot_start: CandidateSet, robot_goal: CandidateSet, groups: list[GroupPlacement],
@@ -25,7 +25,7 @@ def check_capacity(scenario: Scenario, robot_start: CandidateSet, robot_goal: Ca
     """Every group finds room at reset whatever the robots' starts and the groups placed before it.
 
     ``other_robots``: the sets of the robots after the first (``robots:``); each blocks as the first does,
-    from its lattice or its fine set (:mod:`crowdnav.placement_team`).
+    from its lattice or its fine set (:mod:`crowdnav.worlds.placement_team`).
 
     Groups are placed in file order. Each agent placed earlier blocks at most ``max_blocked``
     of a group's candidates, so subtracting the worst case of all of them is a sufficient bound
@@ -126,7 +126,7 @@ def _blocked(spawn: CandidateSet, blockers: CandidateSet, reach: float) -> int:
 
 
 def _blocked_by_robot(spawn: CandidateSet, lattice: CandidateSet, fine: CandidateSet | None, reach: float) -> int:
-    """:func:`_blocked` for a robot drawn from its ``lattice`` or, when that is blocked, from its ``fine`` set (crowdnav.placement_team)."""
+    """:func:`_blocked` for a robot drawn from its ``lattice`` or, when that is blocked, from its ``fine`` set (crowdnav.worlds.placement_team)."""
     return max(_blocked(spawn, lattice, reach), _blocked(spawn, fine, reach) if fine is not None else 0)
 
 

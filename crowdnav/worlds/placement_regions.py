@@ -4,8 +4,8 @@ A region (rectangle, circle, polygon, points, circle perimeter) becomes a :class
 points of a hexagonal lattice free of static obstacles and far enough apart that two agents
 placed on different points (with their random jitter) never overlap. :meth:`CandidateSet.draw`
 picks distinct points at reset, so a reset costs the same at any density. The load-time checks
-that the sets hold the scenario's crowd are :mod:`crowdnav.placement_checks`; the scenario's
-sets are assembled by :mod:`crowdnav.placement`.
+that the sets hold the scenario's crowd are :mod:`crowdnav.worlds.placement_checks`; the scenario's
+sets are assembled by :mod:`crowdnav.worlds.placement`.
 """
 
 from __future__ import annotations
@@ -21,8 +21,8 @@ from shapely.geometry import Polygon as ShapelyPolygon
 from shapely.geometry.base import BaseGeometry
 
 from crowdnav.errors import CrowdNavError
-from crowdnav.obstacles import GeometryError
 from crowdnav.scenario.schema import CircleRegion, PointsRegion, PolygonRegion, RectangleRegion
+from crowdnav.worlds.obstacles import GeometryError
 
 AnyRegion: TypeAlias = RectangleRegion | PolygonRegion | PointsRegion | CircleRegion
 """A spawn, start or goal region of the schema (one of its four kinds)."""
@@ -121,7 +121,7 @@ class Placement:
     other_robots: list[Placement] = field(default_factory=list)
     """Scenarios with ``robots:``: the robot sets (start, goal, pairs, components) of robots 1, 2, ... (their ``groups`` empty)."""
     fallback: Any = None
-    """Robots after the first: their :class:`crowdnav.placement_team.Fallback` (fine sets drawn from when the lattice is blocked)."""
+    """Robots after the first: their :class:`crowdnav.worlds.placement_team.Fallback` (fine sets drawn from when the lattice is blocked)."""
 
 
 CHUNK = 512  # rows per block of the pairwise distance tables built at load time
