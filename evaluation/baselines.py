@@ -169,7 +169,7 @@ def evaluate_baseline(experiment: str, configuration: str, label: str, env_optio
                 and not run_damage(out_dir, meta):  # a missing or damaged table: played again (it is deterministic)
             return out_dir  # deterministic: the same episodes give the same rows
     started = time.perf_counter()
-    name = _baseline_name(configuration)
+    name = baseline_name(configuration)
     robots = env_options.get("agents") == ROBOTS_AGENTS
     episodes = (RobotEpisodes if robots else HeldOutEpisodes)(env_options, protocol.test_seeds)
     try:
@@ -206,7 +206,8 @@ def _episodes_of(protocol: Protocol) -> tuple[str, int, int, int, int]:
     return protocol.unit, protocol.budget, protocol.interval, protocol.test_episodes, protocol.test_seed_base
 
 
-def _baseline_name(configuration: str) -> str:
+def baseline_name(configuration: str) -> str:
+    """The baseline (:data:`BASELINES`) a configuration ``baseline_<name>[_<first configuration>]`` plays."""
     rest = configuration.removeprefix(BASELINE_PREFIX)
     return next(name for name in sorted(BASELINES, key=len, reverse=True) if rest == name or rest.startswith(name + "_"))
 

@@ -151,17 +151,24 @@ EVALUATED_STYLES = [("-.", "C3"), ((0, (5, 1, 1, 1, 1, 1)), "C4"), ((0, (1, 1)),
 HATCHES = ["", "//", "..", "xx", "\\\\", "oo", "--", "++"]
 
 
+BASELINE_LINESTYLES: dict[str, Any] = {
+    "straight": "--", "social_force": ":", "orca": (0, (3, 1, 1, 1)), "onboard": "-.", "predictive": (0, (6, 2, 1, 2, 1, 2)),
+    "oracle": (0, (10, 3)), "straight_shield": (0, (2, 2)), "social_force_shield": (0, (1, 3)),
+}
+"""Line style of each scripted baseline (:data:`crowdnav.evaluation.baselines.BASELINES`): grey lines told apart by their dashes."""
+
+
 def _baseline_style(baseline: Any, tests: Any, palette: dict[str, Any], k: int = 0) -> dict[str, Any]:
-    """Dashed for straight-to-goal, dotted for social force; grey, or the colour of the configuration whose
+    """The baseline's own dashes (:data:`BASELINE_LINESTYLES`); grey, or the colour of the configuration whose
     environment it shares when an experiment has several (``baseline_<name>_<configuration>``); the k-th
     policy evaluated without training gets the k-th of :data:`EVALUATED_STYLES`."""
-    from crowdnav.evaluation.baselines import is_baseline
+    from crowdnav.evaluation.baselines import baseline_name, is_baseline
 
     configuration = str(baseline["configuration"].iloc[0])
     if not is_baseline(configuration):  # an evaluated policy: a style of its own
         linestyle, color = EVALUATED_STYLES[k % len(EVALUATED_STYLES)]
         return {"linestyle": linestyle, "color": color}
-    linestyle = ":" if "social_force" in configuration else "--"
+    linestyle = BASELINE_LINESTYLES.get(baseline_name(configuration), "--")
     for name, label in tests[["configuration", "label"]].drop_duplicates().itertuples(index=False):
         if configuration.endswith(f"_{name}") and label in palette:
             return {"linestyle": linestyle, "color": palette[label]}

@@ -91,10 +91,11 @@ def test_benchmark_results_rank_the_baselines_and_draw_them_as_horizontal_lines(
                                                   "baseline_straight"]
     assert (baselines["seeds"] == 1).all() and all(map(is_baseline, baselines["configuration"]))
     figure = curves_figure(tests, window=3)
-    # one dashed / dotted horizontal line per baseline in every outcome panel
+    # one horizontal line per baseline in every outcome panel, each with dashes of its own
     for axis in figure.axes:
-        horizontal = [line for line in axis.get_lines() if len(set(line.get_ydata())) == 1 and line.get_linestyle() in ("--", ":")]
-        assert len(horizontal) == len(EXPERIMENT_BASELINES)
+        horizontal = [line for line in axis.get_lines() if line.get_label() in BASELINES.values()]
+        assert len(horizontal) == len(EXPERIMENT_BASELINES) and all(len(set(line.get_ydata())) == 1 for line in horizontal)
+        assert len({str(line.get_linestyle()) + str(line._dash_pattern) for line in horizontal}) == len(horizontal)
 
 
 def test_a_baseline_that_cannot_be_played_is_reported_and_the_others_are_played(tmp_path):
