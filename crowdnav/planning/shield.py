@@ -39,7 +39,10 @@ def shield_settings(option: Any) -> PlannerSettings | None:
     unknown = sorted(set(option) - set(PlannerSettings.__dataclass_fields__))
     if unknown:
         raise ValueError(f"shield: unknown setting(s) {unknown}; expected some of {sorted(PlannerSettings.__dataclass_fields__)}")
-    return PlannerSettings(**option)
+    try:
+        return PlannerSettings(**option)
+    except ValueError as error:  # say which option the bad value came from
+        raise ValueError(f"shield: {error}") from None
 
 
 class Shield:

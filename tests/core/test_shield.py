@@ -61,7 +61,8 @@ def test_shielded_vector_env_steps_every_world_as_the_single_env_does():
 
 
 @pytest.mark.parametrize("option, message", [
-    ({"horizon": -1}, "horizon must be a finite number >= 0"),
+    ({"horizon": -1}, "shield: horizon must be a finite number >= 0"),
+    ({"horizon": 1e9}, "planner settings: horizon 1e+09 s"),
     ({"lookahead": 2}, "unknown setting(s) ['lookahead']"),
     ("yes", "shield must be true, false or a mapping"),
 ])
