@@ -34,6 +34,8 @@ def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) ->
     traj.add_argument("--episodes", type=int, default=20, metavar="N", help="POLICY: test episodes (default: %(default)s)")
     traj.add_argument("--test-seed-base", type=int, default=0, metavar="S", help="POLICY: seed of the first test episode (default: %(default)s)")
     traj.add_argument("--out", default="trajectories", metavar="DIR", help="POLICY: output folder (default: %(default)s)")
+    traj.add_argument("--force", action="store_true", help="POLICY: replace files of this name that hold other episodes (another "
+                                                           "policy, --set or --modalities under the same name); same episodes are kept")
     add_override_option(traj)
     traj.set_defaults(handler=trajectories_command)
 
@@ -101,8 +103,21 @@ def _record(args: argparse.Namespace) -> int:
         raise CliError(str(error).splitlines()[0]) from None
     last = args.test_seed_base + args.episodes - 1
     scenario = f"__{_name(Path(args.scenario).stem)}" if args.scenario else ""  # none: a crowdnav run's own scenario
-    stem = f"{_name(args.source)}{scenario}__seeds{args.test_seed_base}-{last}"
-    for path in write_trajectories(episodes, Path(args.out) / stem):
+    stem = Path(args.out) / f"{_name(args.source)}{scenario}__seeds{args.test_seed_base}-{last}"
+    targets = [stem.with_name(stem.name + suffix) for suffix in (".csv", ".ndjson")]
+    if any(path.exists() for path in targets) and not args.force:
+        # the name carries neither --set nor --modalities: never replace other episodes silently
+        incoming = write_trajectories(episodes, stem.with_name(stem.name + ".incoming"))
+        same = all(old.is_file() and old.read_bytes() == new.read_bytes() for old, new in zip(targets, incoming, strict=True))
+        for path in incoming:
+            path.unlink()
+        if not same:
+            raise CliError(f"{targets[0]} exists with other episodes (another policy, --set or --modalities under this name); "
+                           "--force replaces it, or write to another --out")
+        for path in targets:
+            print(f"kept {path} (the same episodes)")
+        return 0
+    for path in write_trajectories(episodes, stem):
         print(f"wrote {path}")
     return 0
 

@@ -195,3 +195,15 @@ def test_a_planted_trajectories_symlink_is_refused_and_nothing_is_written_throug
     (run / "trajectories").symlink_to(elsewhere, target_is_directory=True)
     assert main(["trajectories", str(run)]) == 1
     assert "outside the output folder" in capsys.readouterr().err and not any(elsewhere.iterdir())
+
+
+def test_trajectories_of_other_episodes_under_the_same_name_are_refused_and_the_same_ones_kept(tmp_path, capsys):
+    argv = ["trajectories", "baseline:straight", "--scenario", "open_space", "--episodes", "1", "--out", str(tmp_path)]
+    assert main(argv) == 0
+    files = {path: path.read_bytes() for path in tmp_path.iterdir()}
+    capsys.readouterr()
+    assert main(argv) == 0 and capsys.readouterr().out.count("kept") == 2  # the same episodes: kept, nothing rewritten
+    assert main([*argv, "--set", "humans.count=2"]) == 1  # other episodes under this name: refused, the files as they were
+    assert "exists with other episodes" in capsys.readouterr().err and {path: path.read_bytes() for path in tmp_path.iterdir()} == files
+    assert main([*argv, "--set", "humans.count=2", "--force"]) == 0
+    assert {path: path.read_bytes() for path in tmp_path.iterdir()} != files and len(list(tmp_path.iterdir())) == 2
