@@ -1,7 +1,8 @@
 """Every scripted baseline crowdnav ships plays a whole episode in every library scenario, or refuses it in one line.
 
 The lattice planners (oracle, predictive, onboard) drive one holonomic robot; the oracle also needs a crowd that
-does not react to the robot. Elsewhere they raise :class:`crowdnav.planning.PlannerUnavailable`.
+does not react to the robot. Elsewhere they raise :class:`crowdnav.planning.PlannerUnavailable`. The shielded baselines
+play with the shield on, which shields one holonomic robot (a one-line ValueError elsewhere).
 """
 
 from __future__ import annotations
@@ -9,7 +10,7 @@ from __future__ import annotations
 import importlib.util
 
 import pytest
-from crowdnav.evaluation.baselines import BASELINES, scripted_policy
+from crowdnav.evaluation.baselines import BASELINES, SHIELDED_BASELINES, scripted_policy, shielded
 from crowdnav.evaluation.rollout import HeldOutEpisodes
 
 from crowdnav.planning import PlannerUnavailable
@@ -25,8 +26,13 @@ HAS_PYRVO = importlib.util.find_spec("pyrvo") is not None
     for name in BASELINES])
 @pytest.mark.parametrize("scenario", library_names())
 def test_the_baseline_plays_two_whole_episodes_of_the_library_scenario_with_defined_metrics(baseline, scenario):
-    episodes = HeldOutEpisodes({"scenario": scenario, "modalities": ["goal"]}, range(2))
+    episodes = HeldOutEpisodes(shielded(baseline, {"scenario": scenario, "modalities": ["goal"]}), range(2))
     spec = load_world(scenario).scenario
+    if baseline in SHIELDED_BASELINES and (spec.robot.kinematics != "holonomic" or spec.robots is not None):
+        with pytest.raises(ValueError) as refusal:
+            episodes.run(scripted_policy(baseline), privileged=True)
+        assert "\n" not in str(refusal.value) and "shield" in str(refusal.value)
+        return
     refuses = baseline in ("oracle", "predictive", "onboard") and (  # the planners drive the first robot (others: their own policy)
         spec.robot.kinematics != "holonomic" or (baseline == "oracle" and (spec.robots is not None or spec.humans.see_robot)))
     if refuses:
