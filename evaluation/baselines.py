@@ -145,10 +145,10 @@ def experiment_baselines(experiment: Any) -> list[tuple[str, str, dict[str, Any]
             guarded = {**options, "shield": configuration.train["shield"]}
             shields.setdefault(repr(sorted(guarded.items())), (configuration.name, guarded))
     several = len(environments) > 1 or len(shields) > 1
-    plain = [(f"{BASELINE_PREFIX}{name}" + (f"_{first}" if several else ""), label + (f" [{first}]" if several else ""), options)
-             for first, options in environments.values() for name, label in BASELINES.items() if name in EXPERIMENT_BASELINES]
-    return plain + [(f"{BASELINE_PREFIX}{name}" + (f"_{first}" if several else ""), BASELINES[name] + (f" [{first}]" if several else ""),
-                     options) for first, options in shields.values() for name in SHIELDED_BASELINES]
+    played = [(first, options, name) for first, options in environments.values() for name in EXPERIMENT_BASELINES]
+    played += [(first, options, name) for first, options in shields.values() for name in SHIELDED_BASELINES]
+    return [(f"{BASELINE_PREFIX}{name}" + (f"_{first}" if several else ""), BASELINES[name] + (f" [{first}]" if several else ""), options)
+            for first, options, name in played]
 
 
 def evaluate_baseline(experiment: str, configuration: str, label: str, env_options: Mapping[str, Any], protocol: Protocol,

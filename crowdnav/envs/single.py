@@ -130,17 +130,7 @@ class CrowdNavEnv(gym.Env):
         return observation, {}
 
     def step(self, action: np.ndarray) -> tuple[dict[str, np.ndarray], float, bool, bool, dict[str, Any]]:
-        if not self.core.plain:
-            return self.finish_step(*self.advance(action))
-        # one robot, no shield, plan or window (the common case): finish_step's work without its branches and calls
-        observation, events, reward, terms = self.core.step_plain(action)
-        terminated = events.terminated
-        info = step_info(events, terms)
-        info["human_stalls"] = int(np.add.reduce(self.simulator.human_stalls))  # .sum() without its Python wrapper
-        if not terminated:  # (as in finish_step: the outcome if a TimeLimit wrapper ends the episode here)
-            info.setdefault("outcome", "truncated")
-            info.setdefault("is_success", False)
-        return observation, reward, terminated, events.truncated and not terminated, info
+        return self.finish_step(*self.advance(action))
 
     def advance(self, action: np.ndarray) -> tuple[StepEvents, float, dict[str, float]]:
         """The first half of :meth:`step`: move the world (the other robots by their policies); (events, reward, terms)."""
