@@ -62,6 +62,13 @@ class AlgorithmSpec:
     """What replaces :attr:`defaults` entries when a run collects from ``num_envs > 1`` worlds."""
     n_critics: int = 2
     """Q-networks an off-policy SB3 policy has unless ``policy_kwargs`` say (DDPG: 1); the network-size count reads it."""
+    policy: str = "MultiInputPolicy"
+    """The SB3 class's alias of its policy for Dict observations (sb3-contrib's recurrent ones: ``"MultiInputLstmPolicy"``)."""
+    policy_kwargs: Mapping[str, Any] = field(default_factory=dict)
+    """crowdnav's ``policy_kwargs`` for this algorithm (e.g. the LSTM's width); the config's own ``policy_kwargs`` override them."""
+    recurrent: bool = False
+    """An LSTM policy (sb3-contrib's ``RecurrentActorCriticPolicy``): its state is carried between steps, so the network-size
+    count adds the LSTMs and behaviour cloning (a feed-forward fit) is refused."""
 
     @property
     def sb3(self) -> bool:
@@ -97,6 +104,13 @@ _ALGORITHM_SPECS: dict[str, AlgorithmSpec] = {
                                                     "n_steps": 2048}),
                          # a constant rate let a 6 M-step run collapse (79% -> 5% held-out success); decaying it did not (docs/agents.md)
                          batched_defaults=MappingProxyType({"n_steps": 64, "batch_size": 512, "learning_rate_schedule": "linear"})),
+    # PPO's settings (measured for PPO, not re-tuned); a 64-unit LSTM between the extractor and the heads keeps it a CPU network
+    "recurrent_ppo": AlgorithmSpec("Recurrent PPO (sb3-contrib): PPO with an LSTM policy that remembers the episode so far.",
+                                   builder=SB3_BUILDER, sb3_class="sb3_contrib:RecurrentPPO", policy="MultiInputLstmPolicy",
+                                   policy_kwargs=MappingProxyType({"lstm_hidden_size": 64}), recurrent=True,
+                                   defaults=MappingProxyType({"net_arch": [64, 64], "learning_rate": 3e-4, "batch_size": 64,
+                                                              "gamma": 0.95, "n_steps": 2048}),
+                                   batched_defaults=MappingProxyType({"n_steps": 64, "batch_size": 512, "learning_rate_schedule": "linear"})),
 }
 
 ALGORITHM_SPECS: Mapping[str, AlgorithmSpec] = MappingProxyType(_ALGORITHM_SPECS)

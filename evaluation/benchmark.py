@@ -15,7 +15,6 @@ finished runs and resumes the others from their checkpoints.
 from __future__ import annotations
 
 import os
-import shutil
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -41,6 +40,7 @@ from crowdnav.evaluation.storage import (
 )
 from crowdnav.evaluation.unit_spec import PRETRAINED
 
+from crowdnav.files import discard_leftovers, staging_beside, swap_folder
 from crowdnav.sim.simulator import OUTCOMES
 
 
@@ -180,13 +180,13 @@ def pretrain(experiment: Experiment, folder: Path, log: Callable[[str], None]) -
     log(f"pre-training the LEOG encoder on {settings['grids']} grids of {settings['scenario']} ...")
     torch.set_num_threads(max(1, min(4, os.cpu_count() or 1)))
     grids = collect_grids(settings["scenario"], settings["grids"], seed=settings["seed"], every=settings["every"], sensors=sensors)
-    staging = encoder_folder(folder).with_name(encoder_folder(folder).name + ".partial")
-    shutil.rmtree(staging, ignore_errors=True)
+    discard_leftovers(encoder_folder(folder))  # a killed pre-training's staging folder
+    staging = staging_beside(encoder_folder(folder))
     # the encoder must have the agents' LEOG architecture: leog_channels -> channels, ...
     architecture = {key.removeprefix("leog_"): extractor[key] for key in ("leog_channels", "leog_kernels", "leog_strides", "leog_latent")
                     if key in extractor}
     result = pretrain_encoder(grids, staging, epochs=settings["epochs"], seed=settings["seed"], **architecture)
-    staging.rename(encoder_folder(folder))
+    swap_folder(staging, encoder_folder(folder))
     log(f"encoder: held-out loss {result.initial_val_loss:.4f} -> {result.final_val_loss:.4f}, saved to {target}")
     return target
 

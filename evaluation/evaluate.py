@@ -197,17 +197,32 @@ def scenario_key(scenario: str, overrides: Mapping[str, Any]) -> str:
 
 
 def _guarded(act: Act, spec: str) -> Act:
-    """``act`` whose exceptions (and exits) become one PolicyError line naming the policy."""
-    def guarded(batch: Any) -> Any:
+    """``act`` whose exceptions (and exits) become one PolicyError line naming the policy (:class:`_Guarded`)."""
+    return _Guarded(act, spec)
+
+
+class _Guarded:
+    """A policy whose failures are one PolicyError line; a recurrent one keeps its ``recurrent`` flag and ``predict``."""
+
+    def __init__(self, act: Act, spec: str):
+        self.act, self.spec = act, spec
+        self.recurrent = bool(getattr(act, "recurrent", False))
+
+    def __call__(self, batch: Any) -> Any:
+        return self._guard(self.act, batch)
+
+    def predict(self, batch: Any, state: Any = None, episode_start: Any = None) -> Any:
+        return self._guard(self.act.predict, batch, state, episode_start)  # type: ignore[attr-defined]
+
+    def _guard(self, function: Callable[..., Any], *args: Any) -> Any:
         try:
-            return act(batch)
+            return function(*args)
         except PolicyError:
             raise
         except (Exception, SystemExit) as error:  # any failure of the user's policy is reported, not a crash
             message = str(error).splitlines()[0] if str(error) else ""
-            raise PolicyError(f"{spec} raised {type(error).__name__}{': ' + message if message else ''} while acting "
+            raise PolicyError(f"{self.spec} raised {type(error).__name__}{': ' + message if message else ''} while acting "
                               "(--traceback shows where)") from error
-    return guarded
 
 
 def _run_name(path: Path) -> str:

@@ -19,7 +19,9 @@ import numpy as np
 from crowdnav.evaluation.metrics import Trajectory, episode_metrics
 
 BatchPolicy = Callable[[Mapping[str, np.ndarray]], np.ndarray]
-"""Observations stacked per key, shape (N, ...) -> actions (N, 2); :class:`crowdnav.agents.AgentPolicy` is one."""
+"""Observations stacked per key, shape (N, ...) -> actions (N, 2); :class:`crowdnav.agents.AgentPolicy` is one. A policy
+whose ``recurrent`` attribute is True is played through its ``predict(observations, state, episode_start) -> (actions,
+state)`` instead, on every episode's row (:class:`_Acting`)."""
 ScriptedPolicy = Callable[[Any], np.ndarray]
 """A privileged robot policy: simulator -> action (2,), e.g. :class:`crowdnav.policies.StraightToGoal`."""
 
@@ -64,12 +66,14 @@ class HeldOutEpisodes:
         observations = [env.reset(seed=seed)[0] for env, seed in zip(envs, self.seeds, strict=True)]
         log = _Log([env.simulator.positions.copy() for env in envs], [_state(env.simulator) for env in envs] if record else None)
         running = list(range(len(envs)))
+        acting = None if privileged else _Acting(policy, len(envs))
         while running:
-            if privileged:
+            if acting is None:
                 actions = np.stack([policy(envs[i].simulator.robot_view(0)) for i in running])  # several robots: it sees the others
             else:
-                batch = {key: np.stack([observations[i][key] for i in running]) for key in observations[running[0]]}
-                actions = np.asarray(policy(batch)).reshape(len(running), -1)
+                rows = range(len(envs)) if acting.recurrent else running
+                batch = {key: np.stack([observations[i][key] for i in rows]) for key in observations[0]}
+                actions = acting(batch, np.asarray(running) if acting.recurrent else np.arange(len(running)))
             still = []
             for action, i in zip(actions, running, strict=True):
                 observations[i], reward, terminated, truncated, info = envs[i].step(action)
@@ -92,11 +96,12 @@ class HeldOutEpisodes:
         env, count = self._vector, len(self.seeds)
         observations, _ = env.reset(seed=self.seeds)
         log = _Log([env.positions(i) for i in range(count)], [_world_state(env, i) for i in range(count)] if record else None)
-        running = np.ones(count, dtype=bool)
+        running, acting = np.ones(count, dtype=bool), _Acting(policy, count)
         while running.any():
             live = np.flatnonzero(running)
             actions = np.zeros((count, 2))
-            actions[live] = np.asarray(policy({key: values[live] for key, values in observations.items()})).reshape(len(live), -1)
+            actions[live] = acting(observations if acting.recurrent else {key: values[live] for key, values in observations.items()},
+                                   live if acting.recurrent else np.arange(len(live)))
             observations, rewards, terminated, truncated, infos = env.step(actions)
             force = env.robot_social_force()
             for i in live.tolist():  # bookkeeping of the trajectories, per running episode
@@ -128,6 +133,28 @@ class HeldOutEpisodes:
             env.close()
         if self._vector is not None:
             self._vector.close()
+
+
+class _Acting:
+    """A learned policy's actions for the running episodes, one call per step.
+
+    A memoryless policy sees only the running rows. A recurrent one (``recurrent`` True) sees every episode's row, the
+    ended ones included (their actions are dropped), so that row ``i`` of its state stays episode ``i``'s memory; each
+    episode starts once, at the first step (every world plays one episode).
+    """
+
+    def __init__(self, policy: Any, count: int):
+        self.policy, self.recurrent = policy, bool(getattr(policy, "recurrent", False))
+        self.state: Any = None
+        self.starts = np.ones(count, dtype=bool)
+
+    def __call__(self, batch: Mapping[str, np.ndarray], rows: np.ndarray) -> np.ndarray:
+        """The actions of ``rows`` of ``batch`` (a recurrent policy: the batch holds every episode)."""
+        if not self.recurrent:
+            return np.asarray(self.policy(batch)).reshape(len(rows), -1)
+        actions, self.state = self.policy.predict(batch, self.state, self.starts)
+        self.starts = np.zeros_like(self.starts)
+        return np.asarray(actions).reshape(len(self.starts), -1)[rows]
 
 
 class _Log:

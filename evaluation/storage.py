@@ -20,18 +20,15 @@ never by position (``parents[2]``).
 
 Every file is written to a temporary name and renamed into place, so a file is either absent
 or complete, whatever kills the process. A ``crowdnav evaluate`` result is written whole: its
-files go to a hidden sibling folder (``.<run>.new-*``) that is renamed into place in one step,
-under a lock only one writer holds (:func:`result_lock`, :func:`install_result`). Folders whose
+files go to a hidden sibling folder (:func:`crowdnav.files.staging_beside`) that takes the run's place
+in one step, under a lock only one writer holds (:func:`result_lock`, :func:`install_result`). Folders whose
 name starts with ``.`` below a results folder are never results.
 """
 
 from __future__ import annotations
 
 import json
-import os
 import shutil
-import sys
-import uuid
 from collections.abc import Callable, Iterable, Iterator
 from contextlib import ExitStack, contextmanager
 from dataclasses import dataclass
@@ -151,12 +148,11 @@ def result_lock(folder: str | Path) -> Iterator[None]:
 
     The lock is a sibling file, ``.<name>.lock`` (the folder itself is replaced whole), held with the
     OS's ``flock`` and removed on release: a second writer gets
-    :class:`crowdnav.agents.runs.folder.RunBusyError` at once, one line naming the folder and the
+    :class:`crowdnav.files.RunBusyError` at once, one line naming the folder and the
     holder's PID. Once held, a replaced result a killed writer left aside is put back and unfinished
-    new ones are removed (:func:`install_result`). Folders made for the lock and left empty are removed.
+    new ones are removed (:func:`install_result`, :func:`crowdnav.files.recover_folder`). Folders made
+    for the lock and left empty are removed.
     """
-    from crowdnav.agents.runs.folder import hold_lock
-
     folder = Path(folder)
     made = [parent for parent in (folder.parent, *folder.parent.parents) if not parent.exists()]
 
@@ -168,17 +164,13 @@ def result_lock(folder: str | Path) -> Iterator[None]:
         for attempt in range(10):
             folder.parent.mkdir(parents=True, exist_ok=True)
             try:  # another writer's empty folder may vanish between the mkdir and the lock: make it again
-                stack.enter_context(hold_lock(folder.parent / f".{folder.name}.lock", busy, remove=True))
+                stack.enter_context(files.hold_lock(folder.parent / f".{folder.name}.lock", busy, remove=True))
                 break
             except FileNotFoundError:
                 if attempt == 9:
                     raise
         try:
-            aside = sorted(folder.parent.glob(f".{folder.name}.old-*"))
-            if aside and not folder.exists():  # killed between the two renames of a replacement: the old result is whole
-                aside.pop().rename(folder)
-            for leftover in aside + list(folder.parent.glob(f".{folder.name}.new-*")):
-                shutil.rmtree(leftover, ignore_errors=True)
+            files.recover_folder(folder)  # killed between the two renames of a replacement: the old result, whole, goes back
             yield
         finally:
             stack.close()  # the lock file goes first, then the folders made for it, if nothing else is in them
@@ -192,27 +184,16 @@ def result_lock(folder: str | Path) -> Iterator[None]:
 def install_result(folder: str | Path, write: Callable[[Path], object]) -> Path:
     """Write a result whole: ``write(staging)`` fills a hidden sibling folder, which then replaces ``folder`` in one step.
 
-    Call it under :func:`result_lock`. Readers see the old folder or the new one, never a mix:
-    a new folder is one ``rename``; replacing one is one exchange of the two folders where the
-    system has it (Linux's ``renameat2``), else the old one is renamed aside first and put back by
-    the next :func:`result_lock` if the process dies between the two renames.
+    Call it under :func:`result_lock`. Readers see the old folder or the new one, never a mix
+    (:func:`crowdnav.files.swap_folder`: one exchange of the two folders where the system has it,
+    else the old one is renamed aside first and put back by the next :func:`result_lock` if the
+    process dies between the two renames).
     """
     folder = Path(folder)
-    staging = folder.with_name(f".{folder.name}.new-{os.getpid()}-{uuid.uuid4().hex[:8]}")
-    staging.mkdir()
+    staging = files.staging_beside(folder)
     try:
         write(staging)
-        if folder.is_symlink():  # a link in the result's place goes; what it points to is left alone
-            folder.unlink()
-        if not folder.exists():
-            os.rename(staging, folder)
-        elif _exchange(staging, folder):
-            shutil.rmtree(staging)  # it holds the old result now
-        else:
-            aside = folder.with_name(f".{folder.name}.old-{uuid.uuid4().hex[:8]}")
-            os.rename(folder, aside)
-            os.rename(staging, folder)
-            shutil.rmtree(aside)
+        files.swap_folder(staging, folder)
     except BaseException:
         shutil.rmtree(staging, ignore_errors=True)
         raise
@@ -223,21 +204,6 @@ def write_result(folder: Path, tests: Any, meta: dict[str, Any]) -> None:
     """A finished result's two files in ``folder``: the test episodes (a DataFrame), then meta.json."""
     atomic_write_csv(tests, folder / TEST_FILE)
     atomic_write_json(folder / META_FILE, meta)
-
-
-def _exchange(first: Path, second: Path) -> bool:
-    """Swap two folders atomically (Linux ``renameat2(RENAME_EXCHANGE)``); False where the system or filesystem cannot."""
-    if not sys.platform.startswith("linux"):
-        return False
-    import ctypes
-
-    try:
-        renameat2 = ctypes.CDLL(None, use_errno=True).renameat2
-    except (OSError, AttributeError):  # a C library without it (glibc < 2.28, musl)
-        return False
-    renameat2.argtypes = [ctypes.c_int, ctypes.c_char_p, ctypes.c_int, ctypes.c_char_p, ctypes.c_uint]
-    at_fdcwd, rename_exchange = -100, 2
-    return bool(renameat2(at_fdcwd, os.fsencode(first), at_fdcwd, os.fsencode(second), rename_exchange) == 0)
 
 
 def read_json(path: str | Path) -> Any:

@@ -27,7 +27,7 @@ from pathlib import Path
 
 from crowdnav.evaluation.storage import ResultsError, atomic_write_text, experiment_of
 
-from crowdnav.files import is_temporary
+from crowdnav.files import is_swap_leftover, is_temporary, staging_beside, swap_folder
 
 STORAGE_ID_FILE = ".crowdnav-storage"
 """The storage root's id file (one random id, written once, kept)."""
@@ -71,9 +71,9 @@ def remove_work_folder(work_dir: str | Path) -> None:
 
 
 def _temporary(member: tarfile.TarInfo) -> bool:
-    """Files a crash can leave behind: atomic writes' temporaries (``.NAME.tmp``, ``.NAME.PID.HEX.tmp.mp4``) and checkpoints'
-    ``.partial`` / ``.old`` folders."""
-    return any(part.endswith((".tmp", ".partial", ".old")) or is_temporary(part) for part in Path(member.name).parts)
+    """Files a crash can leave behind: atomic writes' temporaries (``.NAME.tmp``, ``.NAME.PID.HEX.tmp.mp4``) and the copies of
+    a folder being swapped (:func:`crowdnav.files.swap_folder`; earlier crowdnavs' ``.partial`` / ``.old`` checkpoints)."""
+    return any(part.endswith((".tmp", ".partial", ".old")) or is_temporary(part) or is_swap_leftover(part) for part in Path(member.name).parts)
 
 
 def pack_folder(folder: str | Path, skip: tuple[str, ...] = ()) -> bytes:
@@ -99,7 +99,7 @@ def unpack_folder(data: bytes, target: str | Path, marker: str) -> bool:
     if (target / marker).is_file():
         return False
     target.parent.mkdir(parents=True, exist_ok=True)
-    staging = target.with_name(f".{target.name}.{uuid.uuid4().hex[:8]}.incoming")
+    staging = staging_beside(target)
     try:
         with tarfile.open(fileobj=io.BytesIO(data), mode="r") as tar:
             if hasattr(tarfile, "data_filter"):  # Python >= 3.10.12 / 3.11.4: refuse links and paths outside staging
@@ -108,20 +108,14 @@ def unpack_folder(data: bytes, target: str | Path, marker: str) -> bool:
                 tar.extractall(staging)
         if not (staging / marker).is_file():
             raise ResultsError(f"{target}: the transferred folder has no {marker} (incomplete run)")
-        if target.exists():  # a partial run (an interrupted local run, an error.log): the complete one replaces it
+        if (target / marker).is_file():  # another copy got there first
+            return False
+        try:
+            swap_folder(staging, target)  # a partial run (an interrupted local run, an error.log) is replaced
+        except OSError:  # another process put its copy there in between
             if (target / marker).is_file():
                 return False
-            aside = target.with_name(f".{target.name}.{uuid.uuid4().hex[:8]}.replaced")
-            target.rename(aside)
-            staging.rename(target)
-            shutil.rmtree(aside, ignore_errors=True)
-        else:
-            try:
-                staging.rename(target)
-            except OSError:  # another process renamed its copy in between
-                if (target / marker).is_file():
-                    return False
-                raise
+            raise
         return True
     finally:
         shutil.rmtree(staging, ignore_errors=True)

@@ -27,10 +27,10 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from crowdnav.agents.runs.folder import hold_lock, snapshot_dir
+from crowdnav.agents.runs.folder import snapshot_dir
 from crowdnav.agents.training.seeding import check_test_seeds
 
-from crowdnav.files import open_text_for_append, refuse_link
+from crowdnav.files import hold_lock, open_text_for_append, refuse_link
 
 VALIDATION_SEED_BASE = 500_000
 """First validation seed: above any protocol's test seeds in the shipped experiments, below every training seed."""

@@ -17,9 +17,9 @@ actions (:meth:`RobotsVecEnv.restore_worlds`; the rebuilt observation must equal
 rollout back, takes the update the checkpoint preceded, then collects as the uninterrupted run
 did: the same episodes and the same weights, bit for bit, wherever the run was killed.
 
-The folder is swapped in whole (``checkpoint.next`` is built, renamed ``checkpoint.partial``, then
-swapped through ``checkpoint.old`` as every checkpoint is), so a kill leaves a complete checkpoint
-for :func:`crowdnav.agents.runs.folder.recover_checkpoint` to pick.
+The folder is built whole in a staging folder beside ``checkpoint/`` (the checkpoint, then the
+state) and swapped in as every checkpoint is (:func:`crowdnav.files.swap_folder`), so a kill leaves
+a complete checkpoint for :func:`crowdnav.agents.runs.folder.recover_checkpoint` to pick.
 """
 
 from __future__ import annotations
@@ -34,7 +34,7 @@ from crowdnav.agents.marl.vec_env import RobotsVecEnv
 from crowdnav.agents.runs.checkpoint import save_checkpoint
 from crowdnav.agents.runs.resume_state import _ROLLOUT, ResumeStateError, _fill, _position, _read_npz, _write_npz
 
-from crowdnav.files import remove_tree
+from crowdnav.files import discard_leftovers, staging_beside, swap_folder
 
 STATE_FILE = "robots_state.npz"
 """The rollout and worlds of a resumable shared robot checkpoint."""
@@ -43,22 +43,11 @@ STATE_FILE = "robots_state.npz"
 def save_resumable(model: Any, folder: Path, info: Mapping[str, Any], worlds: list[RobotsTrainingEnv],
                    rows: Mapping[str, np.ndarray]) -> None:
     """Write the resumable checkpoint ``folder`` (module docstring); ``rows``: the episode log's per-row running sums."""
-    staging = folder.with_name(folder.name + ".next")
-    for stale in (staging, staging.with_name(staging.name + ".partial")):
-        remove_tree(stale)  # a link there is removed, not followed
+    discard_leftovers(folder)  # a killed save's copies (links removed, not followed)
+    staging = staging_beside(folder)
     save_checkpoint(model, staging, info, rng_state=True)
     _save_state(staging / STATE_FILE, model, worlds, rows)
-    partial = folder.with_name(folder.name + ".partial")
-    remove_tree(partial)
-    staging.rename(partial)  # complete from here on: recover_checkpoint may pick it
-    if folder.exists() or folder.is_symlink():
-        old = folder.with_name(folder.name + ".old")
-        remove_tree(old)
-        folder.rename(old)
-        partial.rename(folder)
-        remove_tree(old)
-    else:
-        partial.rename(folder)
+    swap_folder(staging, folder)  # only now complete: recover_checkpoint never picks a staging folder still being written
 
 
 def _save_state(path: Path, model: Any, worlds: list[RobotsTrainingEnv], rows: Mapping[str, np.ndarray]) -> None:

@@ -1,10 +1,11 @@
 """Shared-parameter PPO for the robots of a multi-robot scenario (``agents: robots`` in a TrainConfig).
 
-No training loop of crowdnav's own: :class:`crowdnav.agents.marl.vec_env.RobotsVecEnv` holds
+No episode loop of crowdnav's own: :class:`crowdnav.agents.marl.vec_env.RobotsVecEnv` holds
 ``num_envs`` worlds of the robots-only env (:class:`crowdnav.agents.marl.env.RobotsTrainingEnv`)
 and gives Stable-Baselines3 one vector row per robot per world, stepped in this process;
 SB3's PPO trains one ``MlpPolicy`` on every row, so every robot acts with the same network (told
-apart by the one-hot of ``agent_identity``).
+apart by the one-hot of ``agent_identity``). :class:`RobotsRun` is that run as a strategy of the one run loop
+(:class:`crowdnav.agents.training.run_loop.RunLoop`, which owns the run folder, the resume decision and the result).
 
 The output folder is a run folder like a single-agent run's (:mod:`crowdnav.agents.runs.folder`):
 ``config.yaml``, ``episodes.csv`` (one row per *robot* episode: a world's episode with three
@@ -25,12 +26,11 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable, Mapping
+from functools import partial
 from pathlib import Path
 from typing import Any, NoReturn
 
 import numpy as np
-import torch
-import yaml
 from crowdnav.agents.marl.actions import RobotActions
 from crowdnav.agents.marl.env import RobotObservations, robots_env
 from crowdnav.agents.marl.networks import KindActorCriticPolicy, robot_kinds
@@ -45,19 +45,19 @@ from crowdnav.agents.runs.checkpoint import (
     save_checkpoint,
 )
 from crowdnav.agents.runs.episode_log import EpisodeLogWriter, prepare_log
-from crowdnav.agents.runs.folder import checkpoint_dir, episode_log, recover_checkpoint, snapshot_dir, writing
+from crowdnav.agents.runs.folder import episode_log, snapshot_dir
 from crowdnav.agents.runs.result import TrainResult
 from crowdnav.agents.runs.resume_state import STATE_FILE, restore_training_state
 from crowdnav.agents.sb3.callbacks import EpisodeRecord
 from crowdnav.agents.sb3.factory import LinearDecay, env_options, hyperparameters
 from crowdnav.agents.sb3.model_zip import read_model_zip
 from crowdnav.agents.training.config import ConfigError, TrainConfig, config_from_mapping, config_to_dict
+from crowdnav.agents.training.run_loop import Progress, RunLoop, writing_run
 from stable_baselines3 import PPO
 from stable_baselines3.common.callbacks import BaseCallback
 from stable_baselines3.common.policies import ActorCriticPolicy
 from stable_baselines3.common.utils import set_random_seed
 
-from crowdnav.files import atomic_write_text
 from crowdnav.scenario.loader import load_scenario
 
 MAX_INPUTS = 65_536
@@ -120,7 +120,8 @@ class _RobotEpisodes(BaseCallback):
         self.every = (config.checkpoint_every_steps or config.timesteps or 1) if self.unit == "steps" else config.checkpoint_every
         self.done, self.successes = first_episode, successes
         self.records: list[EpisodeRecord] = []
-        self.log = EpisodeLogWriter(episode_log(out))
+        self.log: EpisodeLogWriter | None = None
+        """The episode log, opened when learning starts (a resume that plays nothing leaves it alone)."""
         self.started = time.perf_counter()
         self.returns = np.zeros(0)
         self.lengths = np.zeros(0, dtype=int)
@@ -131,6 +132,7 @@ class _RobotEpisodes(BaseCallback):
         self.pending: Callable[[], None] | None = None
 
     def _on_training_start(self) -> None:
+        self.log = EpisodeLogWriter(episode_log(self.out))
         if self.pending is not None:
             self.pending()
             self.pending = None
@@ -162,6 +164,7 @@ class _RobotEpisodes(BaseCallback):
     def _record(self, info: Mapping[str, Any], reward: float, length: int) -> None:
         record = EpisodeRecord(self.done, int(info["episode_seed"]), str(info["outcome"]), reward, length, self.num_timesteps,
                                time.perf_counter() - self.started)
+        assert self.log is not None  # opened at the training's start
         self.log.write(f"{record.episode},{record.seed},{record.outcome},{record.reward!r},{record.length},{record.timesteps},"
                        f"{record.seconds:.3f}")
         self.records.append(record)
@@ -176,92 +179,106 @@ def train_robots(config: TrainConfig, *, resume: bool = False, on_checkpoint: Ca
     """Train one shared PPO policy for every robot of ``config.scenario`` (``config.agents == "robots"``); see the module docstring."""
     if config.agents != ROBOTS_KIND:
         raise ConfigError(f"train_robots trains agents: robots; this config has agents: {config.agents}")
-    torch.set_num_threads(config.torch_threads)
-    with writing(config.out):
-        return _train(config, resume, on_checkpoint)
+    with writing_run(config):
+        return RobotsRun(config, resume, on_checkpoint).run()
 
 
-def _train(config: TrainConfig, resume: bool, on_checkpoint: Callable[[int], None] | None) -> TrainResult:
-    out = Path(config.out)
-    checkpoint = checkpoint_dir(out)
-    if not resume and checkpoint.exists():
-        raise ConfigError(f"{out} already holds a run (checkpoint/); resume it with --resume or choose another --out")
-    if resume:
-        recover_checkpoint(out)  # a kill during a checkpoint swap leaves a complete .partial or .old
-    state = read_policy_info(checkpoint) if resume and checkpoint.exists() else None
-    first_episode = int(state["episodes"]) if state else 0
-    spent = state is not None and _spent(config, state)  # a resume with nothing left to play writes nothing (below)
-    if not spent:
-        out.mkdir(parents=True, exist_ok=True)
-        atomic_write_text(out / "config.yaml", yaml.safe_dump(config_to_dict(config), sort_keys=False))  # replaces a link, never writes through it
-        prepare_log(episode_log(out), first_episode)  # a resume sets aside the rows after its checkpoint
-    vec = make_robots_vec_env(config, int(state["next_episode"]) if state else 0)
-    inputs = vec.worlds[0].inputs
-    if state and not inputs.matches(state["robots"]):
-        raise ConfigError(f"{checkpoint}: its robots' observations differ from this config's scenario and options; "
-                          "resume with the run's own config.yaml")
-    model = _ppo(config, vec)
-    if state:
-        load_parameters(model, checkpoint / MODEL_FILE, config.device)
-        model.num_timesteps = int(state["timesteps"])
-    if state and spent:  # its checkpoint left as it is: rewriting next_episode would move a later extension's seeds
-        vec.close()
-        return TrainResult(out=out, checkpoint=checkpoint, episodes=first_episode, timesteps=model.num_timesteps,
-                           successes=int(state["successes"]), seconds=0.0, steps_per_second=0.0, model=model)
+class RobotsRun(RunLoop):
+    """The shared robot PPO run as a strategy of the one run loop (:class:`~crowdnav.agents.training.run_loop.RunLoop`)."""
 
-    def info() -> dict[str, Any]:
+    def __init__(self, config: TrainConfig, resume: bool, on_checkpoint: Callable[[int], None] | None = None):
+        super().__init__(config, resume, on_checkpoint)
+        self.state: dict[str, Any] | None = None
+        """The resumed checkpoint's ``policy.json``."""
+
+    def read_checkpoint(self) -> Progress | None:
+        # a resume without a checkpoint starts the run (shared robot runs always have)
+        self.state = read_policy_info(self.checkpoint) if self.checkpoint.exists() else None
+        return Progress(int(self.state["episodes"]), int(self.state["timesteps"])) if self.state else None
+
+    def prepare_log(self) -> None:
+        """As shared robot runs always have: repaired without a warning, and left as it is by a resume with nothing to play."""
+        if not self.spent:
+            prepare_log(episode_log(self.out), self.first_episode)  # a resume sets aside the rows after its checkpoint
+
+    def build(self) -> None:
+        config, state, checkpoint = self.config, self.state, self.checkpoint
+        self.vec = vec = make_robots_vec_env(config, int(state["next_episode"]) if state else 0)
+        self.inputs = vec.worlds[0].inputs
+        if state and not self.inputs.matches(state["robots"]):
+            raise ConfigError(f"{checkpoint}: its robots' observations differ from this config's scenario and options; "
+                              "resume with the run's own config.yaml")
+        self.model = model = _ppo(config, vec)
+        if state:
+            load_parameters(model, checkpoint / MODEL_FILE, config.device)
+            model.num_timesteps = int(state["timesteps"])
+        self.callback = callback = _RobotEpisodes(config, self.out, self.first_episode, int(state["successes"]) if state else 0,
+                                                  partial(self.save, True), self.snapshot)
+        callback.returns, callback.lengths = np.zeros(vec.num_envs), np.zeros(vec.num_envs, dtype=int)
+        # a spent checkpoint is left as it is: rewriting next_episode would move a later extension's seeds
+        if state and not self.spent and has_state(checkpoint):
+            sums = {"returns": callback.returns, "lengths": callback.lengths}
+            load_state(checkpoint, model, vec, sums)
+            callback.returns, callback.lengths = sums["returns"], sums["lengths"]
+            restore_training_state(model, checkpoint / STATE_FILE)  # counters and every random stream, last
+            callback.pending = pending_update(model)
+        callback.point = model.num_timesteps // callback.every * callback.every if callback.unit == "steps" else 0
+        self.built = True
+
+    @property
+    def finished(self) -> bool:
+        return self.spent  # short of the budget, a run learns (and takes its final checkpoint)
+
+    @property
+    def timesteps(self) -> int:
+        return int(self.model.num_timesteps)
+
+    @property
+    def tally(self) -> _RobotEpisodes:
+        return self.callback
+
+    def learn(self) -> None:
+        # an upper bound in robot steps: the callback stops at the budget (episodes of at most max_steps each)
+        max_steps = self.vec.worlds[0].env.scenario.max_steps
+        config = self.config
+        total = config.timesteps if config.timesteps is not None else (config.episodes + self.vec.num_envs) * max_steps
+        remaining = max(total - self.model.num_timesteps, 0)
+        if remaining:
+            self.model.learn(remaining, callback=self.callback, reset_num_timesteps=self.state is None)
+
+    def info(self) -> dict[str, Any]:
+        """The checkpoint's ``policy.json``: what the run is and how far it got."""
+        config, callback = self.config, self.callback
         # the episode after every one any world has started: a resume's worlds start there, so no seed repeats
-        following = max(world.next_episode for world in vec.worlds)
-        return {"algo": config.algo, "agents": ROBOTS_KIND, "env": env_options(config), "robots": inputs.to_json(),
-                "episodes": callback.done, "timesteps": model.num_timesteps, "next_episode": following,
+        following = max(world.next_episode for world in self.vec.worlds)
+        return {"algo": config.algo, "agents": ROBOTS_KIND, "env": env_options(config), "robots": self.inputs.to_json(),
+                "episodes": callback.done, "timesteps": self.model.num_timesteps, "next_episode": following,
                 "successes": callback.successes, "hyperparameters": hyperparameters(config), "config": config_to_dict(config)}
 
-    def snapshot(point: int) -> None:
-        save_checkpoint(model, snapshot_dir(out, point, callback.unit), info())
+    def snapshot(self, point: int) -> None:
+        save_checkpoint(self.model, snapshot_dir(self.out, point, self.callback.unit), self.info())
 
-    def save(resumable: bool = False) -> None:
-        callback.log.sync()  # the log holds every episode the checkpoint counts
-        if resumable:  # at a rollout's end: the worlds, the rollout and the random streams, for an exact resume
-            save_resumable(model, checkpoint, info(), vec.worlds, {"returns": callback.returns, "lengths": callback.lengths})
+    def save(self, resumable: bool = False) -> None:
+        """The checkpoint; ``resumable``: at a rollout's end, with the worlds, the rollout and the random streams (exact resume)."""
+        callback = self.callback
+        if callback.log is not None:
+            callback.log.sync()  # the log holds every episode the checkpoint counts
+        if resumable:
+            save_resumable(self.model, self.checkpoint, self.info(), self.vec.worlds, {"returns": callback.returns, "lengths": callback.lengths})
         else:  # the budget's end, inside a step: a resume with a larger budget starts new episodes
-            save_checkpoint(model, checkpoint, info())
-        if on_checkpoint is not None:
-            on_checkpoint(callback.done)
+            save_checkpoint(self.model, self.checkpoint, self.info())
+        self.announce_checkpoint(callback.done)
 
-    callback = _RobotEpisodes(config, out, first_episode, int(state["successes"]) if state else 0, lambda: save(True), snapshot)
-    callback.returns, callback.lengths = np.zeros(vec.num_envs), np.zeros(vec.num_envs, dtype=int)
-    if state and has_state(checkpoint):
-        sums = {"returns": callback.returns, "lengths": callback.lengths}
-        load_state(checkpoint, model, vec, sums)
-        callback.returns, callback.lengths = sums["returns"], sums["lengths"]
-        restore_training_state(model, checkpoint / STATE_FILE)  # counters and every random stream, last
-        callback.pending = pending_update(model)
-    callback.point = model.num_timesteps // callback.every * callback.every if callback.unit == "steps" else 0
-    started, start_steps = time.perf_counter(), model.num_timesteps
-    rows = vec.num_envs
-    # an upper bound in robot steps: the callback stops at the budget (episodes of at most max_steps each)
-    max_steps = vec.worlds[0].env.scenario.max_steps
-    total = config.timesteps if config.timesteps is not None else (config.episodes + rows) * max_steps
-    remaining = max(total - model.num_timesteps, 0)
-    if remaining and not (callback.unit == "episodes" and first_episode >= config.episodes):
-        model.learn(remaining, callback=callback, reset_num_timesteps=state is None)
-    if callback.unit == "steps" and model.num_timesteps // callback.every * callback.every > callback.point:
-        snapshot(model.num_timesteps // callback.every * callback.every)
-    save()
-    callback.log.close()
-    seconds = time.perf_counter() - started
-    vec.close()
-    return TrainResult(out=out, checkpoint=checkpoint, episodes=callback.done, timesteps=model.num_timesteps,
-                       successes=callback.successes, seconds=seconds,
-                       steps_per_second=(model.num_timesteps - start_steps) / seconds if seconds > 0 else 0.0,
-                       records=callback.records, model=model)
+    def save_final(self) -> None:
+        callback = self.callback
+        if callback.unit == "steps" and self.model.num_timesteps // callback.every * callback.every > callback.point:
+            self.snapshot(self.model.num_timesteps // callback.every * callback.every)
+        self.save()
 
-
-def _spent(config: TrainConfig, state: Mapping[str, Any]) -> bool:
-    """Whether the checkpoint has played the config's whole budget (episodes, or env steps with ``timesteps``)."""
-    if config.timesteps is not None:
-        return int(state["timesteps"]) >= config.timesteps
-    return int(state["episodes"]) >= config.episodes
+    def close(self) -> None:
+        if self.callback.log is not None:
+            self.callback.log.close()
+        self.vec.close()
 
 
 class RobotsPolicy:

@@ -25,6 +25,11 @@ MAX_PARAMETERS = 50_000_000
 """Most parameters one model may hold, all its networks together (actor, critics, targets): 200 MB of float32.
 crowdnav's default networks hold about 100,000; a checkpoint of the biggest allowed model is under 1 GiB."""
 
+MAX_LSTM_UNITS = 4096
+"""Widest LSTM (``policy_kwargs.lstm_hidden_size``) a recurrent policy may declare: the widest layer a checkpoint may."""
+MAX_LSTM_LAYERS = 16
+
+
 class NetworkSizeError(ConfigError):
     """A model whose networks would hold more than :data:`MAX_PARAMETERS` parameters; one line, raised before building it."""
 
@@ -171,10 +176,37 @@ def model_parameters(config: Any, net_arch: Any, observation_space: Any, action_
     precomputed = config.encoder.mode == "frozen" and config.encoder.precompute  # the factory's precomputes_leog
     shapes = {key: tuple(space.shape) for key, space in observation_space.spaces.items()}
     extractor, features = extractor_size(shapes, config.extractor.model_dump(), leog_architecture, precomputed)
-    options = _head_options(config.policy_kwargs, algorithm_spec(config.algo).n_critics)
+    spec = algorithm_spec(config.algo)
+    policy_kwargs = {**spec.policy_kwargs, **config.policy_kwargs}  # the factory's merge
+    options = _head_options(policy_kwargs, spec.n_critics)
     if "use_sde" in config.algo_kwargs:  # an algorithm option SB3 hands to its policy
         options["use_sde"] = bool(config.algo_kwargs["use_sde"])
-    return heads(kind_of(config.algo), features, extractor, int(np.prod(action_space.shape)), net_arch, **options)
+    memory = 0
+    if spec.recurrent:  # the heads read the LSTM's output, not the extractor's
+        memory, features = lstms(features, policy_kwargs)
+    return memory + heads(kind_of(config.algo), features, extractor, int(np.prod(action_space.shape)), net_arch, **options)
+
+
+def lstms(features: int, policy_kwargs: Mapping[str, Any]) -> tuple[int, int]:
+    """(parameters, output width) of the LSTMs of sb3-contrib's ``RecurrentActorCriticPolicy`` on ``features`` inputs.
+
+    The actor's LSTM; the critic's own (``enable_critic_lstm``, the default), none (``shared_lstm``) or a linear layer
+    to the LSTM's width (neither). ``lstm_kwargs`` are not counted: torch's options there (no bias, a projection)
+    only make an LSTM smaller, and a bidirectional one does not fit the policy's heads.
+    """
+    hidden, layers = policy_kwargs.get("lstm_hidden_size", 256), policy_kwargs.get("n_lstm_layers", 1)
+    for name, value, most in (("lstm_hidden_size", hidden, MAX_LSTM_UNITS), ("n_lstm_layers", layers, MAX_LSTM_LAYERS)):
+        if isinstance(value, bool) or not isinstance(value, int) or not 1 <= value <= most:
+            raise NetworkSizeError(f"policy_kwargs.{name} must be an integer 1..{most}, got {str(value)[:40]}")
+    # torch's nn.LSTM: four gates, each with input and recurrent weights and two biases, per layer
+    lstm = sum(4 * hidden * ((features if layer == 0 else hidden) + hidden) + 8 * hidden for layer in range(layers))
+    if policy_kwargs.get("shared_lstm", False):
+        critic = 0
+    elif policy_kwargs.get("enable_critic_lstm", True):
+        critic = lstm
+    else:
+        critic = mlp(features, [hidden])[0]
+    return lstm + critic, hidden
 
 
 def _head_options(policy_kwargs: Mapping[str, Any], critics_by_default: int = 2) -> dict[str, Any]:

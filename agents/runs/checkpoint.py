@@ -45,7 +45,7 @@ from crowdnav.agents.training.wrappers import ObservationScales, agent_observati
 from stable_baselines3.common.base_class import BaseAlgorithm
 
 from crowdnav.errors import CrowdNavError
-from crowdnav.files import remove_tree
+from crowdnav.files import discard_leftovers, staging_beside, swap_folder
 from crowdnav.registry import algorithm_spec
 
 if TYPE_CHECKING:
@@ -98,23 +98,14 @@ def save_checkpoint(
 
 
 def staging_folder(folder: Path) -> Path:
-    """A new empty ``<folder>.partial`` to write a checkpoint into (:func:`replace_folder` then swaps it in)."""
-    staging = folder.with_name(folder.name + ".partial")
-    remove_tree(staging)  # a link there is removed, not followed: the checkpoint is written into a folder made here
-    staging.mkdir(parents=True)
-    return staging
+    """A new empty hidden folder beside ``folder`` to write a checkpoint into (:func:`replace_folder` then swaps it in)."""
+    discard_leftovers(folder)  # a killed save's copies (links removed, not followed); the run's lock keeps other writers out
+    return staging_beside(folder)
 
 
 def replace_folder(staging: Path, folder: Path) -> None:
-    """Put the complete ``staging`` folder in ``folder``'s place (a kill leaves a complete ``.partial`` or ``.old``)."""
-    if folder.exists() or folder.is_symlink():
-        old = folder.with_name(folder.name + ".old")
-        remove_tree(old)
-        folder.rename(old)
-        staging.rename(folder)
-        remove_tree(old)
-    else:
-        staging.rename(folder)
+    """Put the complete ``staging`` folder in ``folder``'s place (a kill leaves a complete copy for ``recover_checkpoint``)."""
+    swap_folder(staging, folder)
 
 
 def find_checkpoint(path: str | Path) -> Path:
@@ -236,9 +227,28 @@ class AgentPolicy:
         """A raw CrowdNavEnv observation (or batch) -> the model's input: normalised, LEOG encoded if trained so."""
         return agent_observation(observation, self.scales, self.encoder)
 
+    @property
+    def recurrent(self) -> bool:
+        """Whether the agent carries a state between steps (an LSTM policy): play it with :meth:`predict`, not a call."""
+        from crowdnav.agents.training.algorithm_protocol import is_recurrent
+
+        return is_recurrent(self.agent)
+
+    def predict(self, observation: Mapping[str, np.ndarray], state: Any = None,
+                episode_start: np.ndarray | None = None) -> tuple[np.ndarray, Any]:
+        """(actions, next state), deterministic: :meth:`Predictor.predict` on the preprocessed observation.
+
+        Keep the state and give it back at the next step with ``episode_start`` True for the rows whose episode has
+        just begun (a memoryless agent returns None and ignores both); the rows of a batch stay the same worlds.
+        """
+        action, state = self.agent.predict(self.preprocess(observation), state, episode_start, deterministic=True)
+        return np.asarray(action).astype(np.float32, copy=False), state
+
     def __call__(self, observation: Mapping[str, np.ndarray]) -> np.ndarray:
-        action = self.agent.predict(self.preprocess(observation), deterministic=True)
-        return action.astype(np.float32, copy=False)
+        if self.recurrent:  # a call keeps no state: each step would start a fresh memory
+            raise RecurrentPolicyError(f"{self.algo} carries a state between steps: play it with "
+                                       "policy.predict(observation, state, episode_start), keeping the state it returns")
+        return self.predict(observation)[0]
 
     def make_env(self, **extra: Any) -> CrowdNavEnv:
         """A CrowdNavEnv configured as in training (``extra`` adds e.g. ``render_mode``).
@@ -281,6 +291,10 @@ def load_policy(path: str | Path, device: str = "cpu", *, trusted: bool = False,
 
     # every algorithm by its registered builder (arrays and JSON, no pickle unless trusted): SB3's reads model.zip here
     return AgentPolicy(load_agent(folder, info, encoder=encoder, device=device, trusted=trusted, config=config), info, encoder)
+
+
+class RecurrentPolicyError(CrowdNavError, TypeError):
+    """A recurrent policy called as ``policy(observation)``, which would drop its memory at every step."""
 
 
 class SharedRobotPolicyError(CrowdNavError, ValueError):

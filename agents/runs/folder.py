@@ -15,15 +15,16 @@ Torch-free; a policy folder loads with :func:`crowdnav.agents.load_policy` (torc
 from __future__ import annotations
 
 import json
-import os
 import re
-from collections.abc import Callable, Iterator
+from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
 from crowdnav.errors import CrowdNavError
-from crowdnav.files import open_text_for_append, remove_tree
+from crowdnav.files import LockUnavailableError as LockUnavailableError  # the lock lives in the core; its names stay importable here
+from crowdnav.files import RunBusyError as RunBusyError
+from crowdnav.files import hold_lock, recover_folder
 
 CHECKPOINT_DIR = "checkpoint"
 SNAPSHOTS_DIR = "snapshots"
@@ -149,35 +150,15 @@ def _complete(folder: Path) -> int | None:
 def recover_checkpoint(train_dir: str | Path) -> int:
     """Make ``checkpoint/`` the newest complete checkpoint a kill left behind; returns its episodes (0: none).
 
-    A checkpoint is written into ``checkpoint.partial`` and swapped in through ``checkpoint.old``
-    (:func:`crowdnav.agents.runs.checkpoint.save_checkpoint`). A kill can leave any of the three; the
-    complete one with the most episodes becomes ``checkpoint/`` and the others are removed, so a
-    resume never restarts from scratch while a complete checkpoint exists.
+    A checkpoint is written into a staging folder beside ``checkpoint/`` and swapped in
+    (:func:`crowdnav.files.swap_folder`). A kill can leave it, its new copy or the old one set aside
+    (earlier crowdnavs' ``checkpoint.partial`` and ``checkpoint.old`` too); the complete one with the
+    most episodes becomes ``checkpoint/`` and the others are removed, so a resume never restarts
+    from scratch while a complete checkpoint exists.
     """
     current = checkpoint_dir(train_dir)
-    candidates = [current, current.with_name(current.name + ".partial"), current.with_name(current.name + ".old")]
-    # a link is never a checkpoint a kill left: it is removed, not followed
-    complete = [(episodes, k) for k, folder in enumerate(candidates)
-                if folder.is_dir() and not folder.is_symlink() and (episodes := _complete(folder)) is not None]
-    if not complete:
-        for folder in candidates[1:]:
-            remove_tree(folder)
-        return 0
-    best_episodes, best = max(complete, key=lambda item: (item[0], -item[1]))  # ties: the current one first
-    if best != 0:
-        remove_tree(current)
-        candidates[best].rename(current)
-    for folder in candidates[1:]:
-        remove_tree(folder)
-    return best_episodes
-
-
-class RunBusyError(CrowdNavError, RuntimeError):
-    """Another process is writing this run folder."""
-
-
-class LockUnavailableError(CrowdNavError, OSError):
-    """The file system of a folder crowdnav writes cannot lock files (``flock``), so one writer at a time cannot be kept."""
+    recover_folder(current, _complete)  # a link is never a checkpoint a kill left: it is removed, not followed
+    return (None if current.is_symlink() else _complete(current)) or 0
 
 
 @contextmanager
@@ -228,55 +209,6 @@ def _remove_untrained(folder: Path, created: Path) -> None:
             return
         if path == created:
             return
-
-
-@contextmanager
-def hold_lock(path: str | Path, busy: Callable[[str], str], *, remove: bool = False) -> Iterator[None]:
-    """Hold the OS lock (``flock``) of the file ``path``; :class:`RunBusyError` with ``busy(holder's PID)`` if another has it.
-
-    The file keeps the holder's PID; the lock goes with its holder's process, however it ends.
-    ``remove``: the file is deleted on release (while still held; a process that locked the
-    deleted file meanwhile sees it is no longer ``path`` and takes the new one). Where ``fcntl``
-    does not exist (Windows) no lock is taken.
-    """
-    try:
-        import fcntl
-    except ImportError:  # pragma: no cover - Windows
-        yield
-        return
-    path = Path(path)
-    while True:
-        handle = open_text_for_append(path, readable=True)  # never through a link; closed after the lock's whole life
-        try:
-            fcntl.flock(handle, fcntl.LOCK_EX | fcntl.LOCK_NB)
-        except BlockingIOError:
-            handle.seek(0)
-            holder = handle.read().strip() or "unknown"
-            handle.close()
-            raise RunBusyError(busy(holder)) from None
-        except OSError as error:  # a file system without flock (some network mounts): ENOLCK, EOPNOTSUPP
-            handle.close()
-            if remove:
-                path.unlink(missing_ok=True)
-            raise LockUnavailableError(f"{path.parent}: this file system cannot lock files ({error.strerror or error}), so "
-                                       "crowdnav cannot keep a second writer out; write to a folder on a local disk") from None
-        try:
-            current = os.stat(path).st_ino
-        except FileNotFoundError:
-            current = None
-        if current == os.fstat(handle.fileno()).st_ino:
-            break
-        handle.close()  # removed by the holder that just let go: lock the file now at ``path``
-    with handle:
-        handle.seek(0)
-        handle.truncate()
-        handle.write(f"{os.getpid()}\n")
-        handle.flush()
-        try:
-            yield
-        finally:
-            if remove:
-                path.unlink(missing_ok=True)
 
 
 def training_run(path: str | Path) -> Path:

@@ -16,6 +16,9 @@ with onnxruntime alone (no torch, no Stable-Baselines3, no crowdnav; docs/deploy
   ``export_module`` is refused in one line;
 * **output** ``action``: float32 ``(batch, 2)`` in [-1, 1], what ``policy(observation)`` returns
   (holonomic ``(vx, vy)`` in the robot frame, or unicycle ``(v, omega)``, times the max speeds).
+* a recurrent policy (an LSTM, :class:`RecurrentSB3Actor`) carries its state through the graph: inputs ``lstm_h``,
+  ``lstm_c`` (``(layers, batch, hidden)``) and ``episode_start`` (``(batch,)``, 1.0 where an episode begins) after the
+  observation keys, outputs ``next_lstm_h`` and ``next_lstm_c`` after ``action`` (docs/deploy.md).
 
 The file's metadata (``custom_metadata_map`` in onnxruntime) holds ``crowdnav.env_options`` (the
 CrowdNavEnv options, JSON), ``crowdnav.algo`` and ``crowdnav.observation`` (key -> shape and dtype).
@@ -44,6 +47,8 @@ from crowdnav.files import replacing
 
 OPSET = 17
 ACTION_OUTPUT = "action"
+EPISODE_START_INPUT = "episode_start"
+"""A recurrent policy's input: 1.0 for the rows whose episode begins at this step (their state is forgotten), else 0.0."""
 
 
 class ExportError(CrowdNavError, ValueError):
@@ -76,6 +81,43 @@ class SB3Actor(nn.Module):
         return torch.clamp(actions, self.low, self.high)
 
 
+class RecurrentSB3Actor(SB3Actor):
+    """An sb3-contrib LSTM policy's deterministic action and next state: ``(*inputs, h, c, episode_start) -> (action, h, c)``.
+
+    One step of ``RecurrentActorCriticPolicy._predict`` written without its data-dependent branch (which a trace
+    would freeze): the actor's LSTM state is zeroed where ``episode_start`` is 1, stepped once on the features, and its
+    output read by the actor's MLP and mean. ``h`` and ``c`` are what ``predict`` returns as its state:
+    ``(lstm layers, batch, hidden)``, batch on axis 1, zeros (or anything, with ``episode_start`` 1) at an episode's start.
+    """
+
+    state_names = ("lstm_h", "lstm_c")
+    """The ONNX inputs of the state (outputs ``next_lstm_h``, ``next_lstm_c``); then the input ``episode_start`` (batch,)."""
+
+    def __init__(self, model: Any, keys: list[str]):
+        super().__init__(model, keys)
+        self.state_shape = tuple(self.network.lstm_hidden_state_shape)  # (layers, 1, hidden): the batch axis is 1
+
+    def forward(self, *inputs: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:  # type: ignore[override]
+        *observation, h, c, start = inputs
+        policy = self.network
+        from stable_baselines3.common.policies import BaseModel
+
+        # the grandparent's extract_features, as sb3-contrib's policy calls it (SB3's input preprocessing, then the extractor)
+        features = BaseModel.extract_features(policy, dict(zip(self.keys, observation, strict=True)), policy.pi_features_extractor)
+        keep = (1.0 - start.float()).view(1, -1, 1)
+        output, (h, c) = policy.lstm_actor(features.unsqueeze(0), (keep * h, keep * c))
+        actions = policy.action_net(policy.mlp_extractor.forward_actor(output.flatten(0, 1)))
+        if self.squash:
+            return self.low + 0.5 * (actions + 1.0) * (self.high - self.low), h, c
+        return torch.clamp(actions, self.low, self.high), h, c
+
+
+def sb3_actor(model: Any, keys: list[str]) -> SB3Actor:
+    """The exported module of an SB3 model: :class:`RecurrentSB3Actor` for an LSTM policy, else :class:`SB3Actor`."""
+    recurrent = hasattr(model.policy, "lstm_hidden_state_shape")
+    return RecurrentSB3Actor(model, keys) if recurrent else SB3Actor(model, keys)
+
+
 class DeployablePolicy(nn.Module):
     """Raw observation tensors (in :attr:`keys` order) -> deterministic actions, as :class:`crowdnav.agents.AgentPolicy` computes them.
 
@@ -97,16 +139,16 @@ class DeployablePolicy(nn.Module):
         self.encoder = policy.encoder  # the frozen LEOG encoder whose latents the model was trained on, or None
         self.actor = actor
 
-    def forward(self, *inputs: torch.Tensor) -> torch.Tensor:
+    def forward(self, *inputs: torch.Tensor) -> Any:
         model_inputs = []
-        for i, (key, value) in enumerate(zip(self.keys, inputs, strict=True)):
+        carried = inputs[len(self.keys):]  # a recurrent actor's state and episode starts, passed as they are
+        for i, (key, value) in enumerate(zip(self.keys, inputs[:len(self.keys)], strict=True)):
             if self.scaled[i]:  # crowdnav.agents.training.wrappers.normalize_observation, in float32
                 value = (value.float() - getattr(self, f"offset_{i}")) / getattr(self, f"scale_{i}")
             elif key == "leog" and self.encoder is not None:  # crowdnav.agents.training.wrappers.encode_grids
                 value = self.encoder((value > 0).float())
             model_inputs.append(value)
-        result: torch.Tensor = self.actor(*model_inputs)
-        return result
+        return self.actor(*model_inputs, *carried)
 
 
 def actor_of(policy: Any, keys: list[str], policy_path: str | Path) -> nn.Module:
@@ -148,11 +190,19 @@ def export_onnx(policy_path: str | Path, out: str | Path, *, opset: int = OPSET)
     finally:
         env.close()
     keys = list(raw.spaces)
-    module = DeployablePolicy(policy, keys, actor_of(policy, keys, policy_path)).eval()
+    actor = actor_of(policy, keys, policy_path)
+    module = DeployablePolicy(policy, keys, actor).eval()
     inputs = tuple(torch.as_tensor(np.asarray(example[key])[None]) for key in keys)
+    states: tuple[str, ...] = tuple(getattr(actor, "state_names", ()))  # a recurrent actor: its state in and out, batch on axis 1
+    state_shape: list[int] = list(getattr(actor, "state_shape", ()))
+    if states:
+        inputs += (*(torch.zeros(state_shape) for _ in states), torch.ones(1))
     out = Path(out)
     out.parent.mkdir(parents=True, exist_ok=True)
-    axes = {name: {0: "batch"} for name in (*keys, ACTION_OUTPUT)}
+    outputs = [ACTION_OUTPUT, *(f"next_{name}" for name in states)]
+    names = [*keys, *states, *([EPISODE_START_INPUT] if states else [])]
+    axes = {name: {0: "batch"} for name in (*keys, ACTION_OUTPUT, *([EPISODE_START_INPUT] if states else []))}
+    axes.update({name: {1: "batch"} for name in (*states, *outputs[1:])})
     validate = torch.distributions.Distribution._validate_args
     # PPO / A2C build a Normal to take its mean: its argument checks only test values, and traced they become constants
     torch.distributions.Distribution.set_default_validate_args(False)
@@ -162,13 +212,16 @@ def export_onnx(policy_path: str | Path, out: str | Path, *, opset: int = OPSET)
             with torch.no_grad(), warnings.catch_warnings():
                 warnings.filterwarnings("ignore", category=DeprecationWarning, module=r"torch\.onnx.*|crowdnav\.agents\.onnx_export")
                 warnings.filterwarnings("ignore", category=DeprecationWarning, message=".*legacy TorchScript-based ONNX export.*")
-                torch.onnx.export(module, inputs, str(temporary), input_names=keys, output_names=[ACTION_OUTPUT],
+                # an LSTM's warning for graphs whose initial state is a constant; ours are inputs (tested at batch 2)
+                warnings.filterwarnings("ignore", category=UserWarning, message="Exporting a model to ONNX with a batch_size other than 1")
+                torch.onnx.export(module, inputs, str(temporary), input_names=names, output_names=outputs,
                                   dynamic_axes=axes, opset_version=opset, dynamo=False)
         finally:
             torch.distributions.Distribution.set_default_validate_args(validate)
         _add_metadata(temporary, {
             "crowdnav.env_options": json.dumps(policy.env_options, sort_keys=True),
             "crowdnav.algo": policy.algo,
+            **({"crowdnav.state": json.dumps({name: state_shape for name in states})} if states else {}),
             "crowdnav.observation": json.dumps({key: {"shape": list(box_space(raw, key).shape), "dtype": str(space.dtype)}
                                               for key, space in raw.spaces.items()}),
         })

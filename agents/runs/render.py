@@ -49,7 +49,17 @@ def resolve_policy(policy: str, seed: int) -> tuple[Act, dict[str, Any]]:
     except Exception as error:  # a checkpoint can fail in many ways; report one clear line
         raise PolicyLoadError(f"cannot load checkpoint {path}: {type(error).__name__}: {error}") from None
     options = {k: v for k, v in trained.env_options.items() if k not in ("scenario", "render_mode", "render_options")}
-    return (lambda env, observation: trained(observation)), options
+    if not trained.recurrent:
+        return (lambda env, observation: trained(observation)), options
+    memory: dict[str, Any] = {"state": None}
+
+    def act(env: Any, observation: Mapping[str, np.ndarray]) -> np.ndarray:  # its state kept, forgotten when an episode begins
+        start = np.array([env.simulator.step_count == 0])
+        batch = {key: np.asarray(value)[None] for key, value in observation.items()}
+        actions, memory["state"] = trained.predict(batch, memory["state"], start)
+        return actions[0]
+
+    return act, options
 
 
 def render_policy(scenario: str, policy: str = "social-force", *, seed: int = 0, **options: Any) -> list[Path]:

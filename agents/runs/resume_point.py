@@ -19,8 +19,8 @@ thing a resumed run does is the gradient update the checkpoint preceded.
 
 On-policy algorithms (A2C, PPO) cannot be rewound: their rollout spans episodes and is trained
 on as a whole. Their checkpoint (written when the rollout is complete, before SB3 trains on it)
-keeps the rollout buffer, the environments mid-episode and the last observation
-(:meth:`ResumePoint.rollout_state`, stored as arrays by :mod:`crowdnav.agents.runs.resume_worlds`: each world
+keeps the rollout buffer, the environments mid-episode, the last observation and a recurrent
+policy's LSTM states (:meth:`ResumePoint.rollout_state`, stored as arrays by :mod:`crowdnav.agents.runs.resume_worlds`: each world
 as its episode's seed and the actions taken since); a resumed run puts them back and takes
 that update first.
 
@@ -108,8 +108,9 @@ class ResumePoint:
         buffer = getattr(model, "rollout_buffer", None)
         if self.off_policy or buffer is None or not buffer.full:
             return None
+        # a recurrent policy's memory after the rollout's last step: where the next rollout starts from
         return {"env": model.get_env(), "rollout_buffer": buffer, "last_obs": model._last_obs,
-                "last_episode_starts": model._last_episode_starts}
+                "last_episode_starts": model._last_episode_starts, "lstm_states": getattr(model, "_last_lstm_states", None)}
 
     def restore_rollout(self, state: dict[str, Any]) -> None:
         """Take up what :func:`crowdnav.agents.runs.resume_worlds.load_rollout` read back (after loading the model, before ``learn``).
@@ -119,6 +120,9 @@ class ResumePoint:
         """
         model = self.model
         model._last_obs, model._last_episode_starts = state["last_obs"], state["last_episode_starts"]
+        if state.get("lstm_states") is not None:
+            recurrent: Any = model  # sb3-contrib's RecurrentPPO: an attribute SB3's BaseAlgorithm does not declare
+            recurrent._last_lstm_states = state["lstm_states"]
         if "rollout_buffer" not in state:  # batched off-policy
             model._last_original_obs, model._episode_num = state["last_original_obs"], state["episode_num"]
         self._pending_rollout = True

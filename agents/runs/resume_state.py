@@ -10,7 +10,7 @@ tensors, optimizers included, are read as in :mod:`crowdnav.agents.sb3.model_zip
 * ``replay_buffer.npz`` (off-policy, ``save_replay_buffer``): the buffer's arrays and its
   write position;
 * ``rollout_state.npz`` (on-policy, and batched runs): the collected rollout, the last
-  observation, and the worlds mid-episode. A world is stored as its episode's index (hence
+  observation, a recurrent policy's LSTM states, and the worlds mid-episode. A world is stored as its episode's index (hence
   its seed) and the actions it has taken since that episode began: the simulator's generator,
   seeded at reset, is an episode's only randomness, so resetting with that seed and replaying
   the actions rebuilds the world bit for bit. The rebuilt observation must equal the stored

@@ -5,6 +5,9 @@ episode's reset (recorded by :class:`~crowdnav.agents.runs.resume_state.ActionLo
 it with the episode's seed and replays the actions: the simulator's generator, seeded at reset,
 is the episode's only randomness, so this rebuilds the world bit for bit. The observation the
 replay ends on must equal the stored last observation, or the resume is refused.
+
+A recurrent policy's memory is stored too: the LSTM states the next rollout starts from (sb3-contrib's
+``_last_lstm_states``) and those its rollout buffer holds per step (what its update starts each sequence from).
 """
 
 from __future__ import annotations
@@ -17,9 +20,12 @@ import numpy as np
 from crowdnav.agents.runs.resume_state import _ROLLOUT, ActionLog, ResumeStateError, _fill, _position, _read_npz, _write_npz
 from crowdnav.agents.sb3.vec_env import CrowdNavSB3VecEnv
 
+_RECURRENT_ROLLOUT = ("hidden_states_pi", "cell_states_pi", "hidden_states_vf", "cell_states_vf")
+"""sb3-contrib's recurrent rollout buffers' LSTM states, one per step (absent from SB3's own buffers)."""
+
 
 def save_rollout(path: Path, state: Mapping[str, Any]) -> None:
-    """Write :meth:`ResumePoint.rollout_state`'s dict: the rollout buffer (on-policy), last observation, worlds."""
+    """Write :meth:`ResumePoint.rollout_state`'s dict: the rollout buffer (on-policy), last observation, worlds, LSTM states."""
     arrays: dict[str, np.ndarray] = {f"last_obs/{key}": value for key, value in _as_dict(state["last_obs"]).items()}
     arrays["last_episode_starts"] = np.asarray(state["last_episode_starts"])
     meta: dict[str, Any] = {"episode_num": int(state.get("episode_num") or 0), "dict_obs": isinstance(state["last_obs"], dict)}
@@ -28,8 +34,10 @@ def save_rollout(path: Path, state: Mapping[str, Any]) -> None:
     buffer = state.get("rollout_buffer")
     if buffer is not None:
         arrays.update({f"rollout/observations/{key}": value for key, value in buffer.observations.items()})
-        arrays.update({f"rollout/{name}": getattr(buffer, name) for name in _ROLLOUT})
+        arrays.update({f"rollout/{name}": getattr(buffer, name) for name in (*_ROLLOUT, *_RECURRENT_ROLLOUT) if hasattr(buffer, name)})
         meta["rollout"] = {"pos": int(buffer.pos), "full": bool(buffer.full)}
+    if state.get("lstm_states") is not None:
+        arrays.update(_lstm_arrays(state["lstm_states"]))
     world_arrays, meta["worlds"] = _world_state(state["env"])
     arrays.update(world_arrays)
     _write_npz(path, arrays, meta)
@@ -49,17 +57,40 @@ def load_rollout(path: Path, model: Any) -> dict[str, Any]:
             buffer = model.rollout_buffer
             for key in buffer.observations:
                 _fill(path, buffer.observations, key, arrays, f"rollout/observations/{key}")
-            for name in _ROLLOUT:
+            for name in (*_ROLLOUT, *(name for name in _RECURRENT_ROLLOUT if hasattr(buffer, name))):
                 _fill(path, buffer, name, arrays, f"rollout/{name}")
             buffer.pos, buffer.full = _position(path, meta["rollout"], buffer.buffer_size)
             buffer.generator_ready = False
             state["rollout_buffer"] = True
+        if getattr(model, "_last_lstm_states", None) is not None:  # a recurrent policy: without its memory the run would differ
+            state["lstm_states"] = _lstm_states(path, arrays, model._last_lstm_states)
         _restore_worlds(path, env, arrays, meta["worlds"], state["last_obs"])
     except (KeyError, TypeError, ValueError, IndexError) as error:
         if isinstance(error, ResumeStateError):
             raise
         raise ResumeStateError(f"{path}: cannot resume from it ({str(error).splitlines()[0][:200]})") from None
     return state
+
+
+def _lstm_arrays(states: Any) -> dict[str, np.ndarray]:
+    """sb3-contrib's ``RNNStates`` (actor ``pi`` and critic ``vf``, each a (hidden, cell) pair of tensors) as arrays."""
+    return {f"lstm_states/{head}/{i}": tensor.detach().cpu().numpy() for head in ("pi", "vf")
+            for i, tensor in enumerate(getattr(states, head))}
+
+
+def _lstm_states(path: Path, arrays: Mapping[str, np.ndarray], current: Any) -> Any:
+    """The stored LSTM states, as tensors shaped and placed like the freshly built model's ``current`` ones."""
+    import torch
+
+    heads = {}
+    for head in ("pi", "vf"):
+        tensors = []
+        for i, tensor in enumerate(getattr(current, head)):
+            built = {"state": tensor.detach().cpu().numpy()}
+            _fill(path, built, "state", arrays, f"lstm_states/{head}/{i}")  # refuses another shape or dtype (or none stored)
+            tensors.append(torch.as_tensor(built["state"], device=tensor.device))
+        heads[head] = tuple(tensors)
+    return type(current)(**heads)
 
 
 def _observation(arrays: Mapping[str, np.ndarray], prefix: str, is_dict: bool) -> Any:

@@ -59,6 +59,7 @@ from crowdnav.agents.sarl.network import ValueEnsemble, ValueNetwork, evaluate, 
 from crowdnav.agents.sarl.options import check_options, check_sizes
 from crowdnav.agents.sarl.sensing import check_shapes, check_world
 from crowdnav.agents.sb3.factory import observation_normalization
+from crowdnav.agents.training.algorithm_protocol import AgentState
 from crowdnav.agents.training.config import ConfigError
 
 if TYPE_CHECKING:
@@ -193,7 +194,13 @@ class SarlAgent:
         deep[rows, best] = refined
         return deep
 
-    def predict(self, observation: Mapping[str, np.ndarray], deterministic: bool = True) -> np.ndarray:
+    def predict(self, observation: Mapping[str, np.ndarray], state: AgentState = None, episode_start: np.ndarray | None = None,
+                deterministic: bool = True) -> tuple[np.ndarray, AgentState]:
+        """(actions, None): the best-scored move of each observation (SB3's signature; the agent has no memory)."""
+        return self.act(observation, deterministic), None
+
+    def act(self, observation: Mapping[str, np.ndarray], deterministic: bool = True) -> np.ndarray:
+        """The actions of :meth:`predict`: float (2,) for one observation, (N, 2) for a batch stacked per key."""
         batched = np.ndim(observation["humans"]) == 3
         check_shapes(self, {key: np.shape(value) for key, value in observation.items()}, batched)
         batch = observation if batched else {key: np.asarray(value)[None] for key, value in observation.items()}
@@ -278,8 +285,8 @@ class SarlAgent:
     def _actions(self, env: VecEnv, observation: Mapping[str, np.ndarray], teaching: np.ndarray) -> np.ndarray:
         """Every world's action: epsilon-greedy, or the teacher's (it reads that world's simulator: demonstrations only)."""
         if not teaching.any():
-            return self.predict(observation, deterministic=False)
-        actions = np.zeros((len(teaching), 2), dtype=np.float32) if teaching.all() else self.predict(observation, deterministic=False)
+            return self.act(observation, deterministic=False)
+        actions = np.zeros((len(teaching), 2), dtype=np.float32) if teaching.all() else self.act(observation, deterministic=False)
         simulators = world_simulators(env)
         for i in np.flatnonzero(teaching):
             actions[i] = np.asarray(self.teacher(simulators[i]), dtype=np.float32)

@@ -73,10 +73,11 @@ class SB3Algorithm(SB3Predictor):
         return cls(resume_model(folder, config, env), settings)
 
     def export_module(self, keys: Sequence[str]) -> nn.Module:
-        """The policy's deterministic action as a torch module (SAC: tanh of the mean; TD3 / DDPG: the actor; PPO / A2C: the mean)."""
-        from crowdnav.agents.runs.onnx_export import SB3Actor
+        """The policy's deterministic action as a torch module (SAC: tanh of the mean; TD3 / DDPG: the actor; PPO / A2C: the mean;
+        an LSTM policy: the mean and its next state, :class:`~crowdnav.agents.runs.onnx_export.RecurrentSB3Actor`)."""
+        from crowdnav.agents.runs.onnx_export import sb3_actor
 
-        return SB3Actor(self.model, list(keys))
+        return sb3_actor(self.model, list(keys))
 
 
 class _KeepGoing(BaseCallback):

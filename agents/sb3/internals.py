@@ -28,7 +28,8 @@ from dataclasses import dataclass
 from typing import Any, Literal
 
 TESTED_SB3 = ">=2.7,<2.10"
-"""The SB3 versions ``pyproject.toml`` allows: 2.7 brought the replay samples' ``discounts`` (n-step returns)."""
+"""The SB3 versions ``pyproject.toml`` allows: 2.7 brought the replay samples' ``discounts`` (n-step returns); sb3-contrib's
+(RecurrentPPO) too, whose releases follow SB3's."""
 
 Kind = Literal["attribute", "method", "local", "copied"]
 
@@ -47,6 +48,8 @@ _CRITIC = "stable_baselines3.common.policies.ContinuousCritic"
 _AC_POLICY = "stable_baselines3.common.policies.ActorCriticPolicy"
 _BASE_POLICY = "stable_baselines3.common.policies.BasePolicy"
 _DISTRIBUTIONS = "stable_baselines3.common.distributions"
+_RECURRENT_PPO = "sb3_contrib.ppo_recurrent.ppo_recurrent.RecurrentPPO"
+_RECURRENT_ROLLOUT = "sb3_contrib.common.recurrent.buffers.RecurrentDictRolloutBuffer"
 
 
 @dataclass(frozen=True)
@@ -145,6 +148,11 @@ SB3_INTERNALS: tuple[Internal, ...] = (
     *_attributes(_ROLLOUT, "observations actions rewards returns episode_starts values log_probs advantages pos full buffer_size "
                  "generator_ready", "agents/runs/resume_worlds.py (rollout_state.npz)"),
     Internal(_VEC_ENV, "_reset_seeds", "method", "agents/sb3/vec_env.py (reset, restore_worlds)"),
+    # sb3-contrib's RecurrentPPO (same version window): its LSTM memory, stored with a checkpoint's rollout
+    Internal(_RECURRENT_PPO, "_last_lstm_states", "attribute", "agents/runs/resume_point.py, agents/runs/resume_worlds.py (rollout_state.npz)"),
+    *_attributes(_RECURRENT_ROLLOUT, "hidden_states_pi cell_states_pi hidden_states_vf cell_states_vf",
+                 "agents/runs/resume_worlds.py (rollout_state.npz)"),
+    Internal(_RECURRENT_PPO, "collect_rollouts", "local", "agents/sb3/callbacks.py (EpisodeCallback._on_step: self.locals)", ("dones", "infos")),
 )
 
 

@@ -1,14 +1,16 @@
 """One Stable-Baselines3 training run as a session: ``restore``, ``build``, ``run``, with ``save`` between.
 
 :func:`crowdnav.agents.training.run.train` runs ``TrainingSession(config, resume, ...).run()`` for the algorithms whose
-registered builder is the Stable-Baselines3 one (:meth:`crowdnav.agents.sb3.algorithm.SB3SessionBuilder.train_run`):
+registered builder is the Stable-Baselines3 one (:meth:`crowdnav.agents.sb3.algorithm.SB3SessionBuilder.train_run`).
+The session is a strategy of the one run loop (:class:`crowdnav.agents.training.run_loop.RunLoop`: the run folder,
+the resume decision, the final checkpoint and the result); what it supplies:
 
-* :meth:`TrainingSession.restore`: on a resume, what the checkpoint continues from (refused in
-  one line when it cannot be); the run folder's ``config.yaml`` and ``episodes.csv``;
+* :meth:`TrainingSession.read_checkpoint`: on a resume, what the checkpoint continues from (refused in one line
+  when it cannot be), called by :meth:`~crowdnav.agents.training.run_loop.RunLoop.restore`;
 * :meth:`TrainingSession.build`: the environment the model collects from, the model (new, or the
   checkpoint's with its replay buffer, worlds mid-episode and random streams) and the episode
   callback, which calls :meth:`TrainingSession.save` and :meth:`TrainingSession.save_snapshot`;
-* :meth:`TrainingSession.run`: SB3's ``learn`` for the rest of the budget, the final checkpoint.
+* :meth:`TrainingSession.learn`: SB3's ``learn`` for the rest of the budget (:meth:`TrainingSession.budget`).
 
 Every piece of state is an attribute set by the step that makes it; nothing is a closure.
 """
@@ -16,17 +18,13 @@ Every piece of state is an attribute set by the step that makes it; nothing is a
 from __future__ import annotations
 
 import shutil
-import time
 import warnings
 from collections.abc import Callable
 from functools import partial
-from pathlib import Path
 from typing import Any
 
-import yaml
 from crowdnav.agents.runs.checkpoint import ENCODER_FILE, load_model, restore_pickled_rng_state, resume_model, save_checkpoint
-from crowdnav.agents.runs.folder import REPLAY_FILE, RNG_FILE, checkpoint_dir, episode_log, recover_checkpoint, snapshot_dir
-from crowdnav.agents.runs.result import TrainResult
+from crowdnav.agents.runs.folder import REPLAY_FILE, RNG_FILE, episode_log, snapshot_dir
 from crowdnav.agents.runs.resume_point import STEPS_AFTER_KEY, ResumePoint, end_open_episodes
 from crowdnav.agents.runs.resume_state import REPLAY_ARRAYS, ROLLOUT_ARRAYS, STATE_FILE, ActionLog, load_replay_buffer, restore_training_state
 from crowdnav.agents.sb3.callbacks import EpisodeCallback
@@ -44,32 +42,27 @@ from crowdnav.agents.training.checks import (
     ResumeInfo,
     encoder_path,
     next_episode,
-    prepare_episode_log,
     restart_hint,
     resume_errors,
     resume_info,
     set_aside_snapshots_after,
     tensorboard_folder,
 )
-from crowdnav.agents.training.config import ConfigError, TrainConfig, config_to_dict
+from crowdnav.agents.training.config import TrainConfig, config_to_dict
+from crowdnav.agents.training.run_loop import Progress, RunLoop
 from crowdnav.agents.training.seeding import train_seed
 from crowdnav.agents.training.wrappers import scales_from_json, scales_to_json
 
-from crowdnav.files import atomic_write_text
 from crowdnav.registry import algorithm_spec
 
 
-class TrainingSession:
+class TrainingSession(RunLoop):
     """One SB3 run of ``config`` in ``config.out`` (``resume``: from its checkpoint); see the module docstring."""
 
     def __init__(self, config: TrainConfig, resume: bool, on_checkpoint: Callable[[int], None] | None = None,
                  trust_pickle: bool = False):
-        self.config = config
-        self.resume = resume
-        self.on_checkpoint = on_checkpoint
+        super().__init__(config, resume, on_checkpoint)
         self.trust_pickle = trust_pickle
-        self.out = Path(config.out)
-        self.checkpoint = checkpoint_dir(self.out)
         self.batched = config.num_envs > 1
         """Several worlds: their episodes end out of order, so checkpoints keep every world mid-episode (one world:
         off-policy checkpoints are rewound to its last episode end). Every world count collects from the same stack, the
@@ -79,30 +72,18 @@ class TrainingSession:
         self.state: ResumeInfo | None = None
         self.exact = False
         """A resume that continues the interrupted run bit for bit (rewound to an episode end, or its worlds restored)."""
-        self.built = False
 
     # ---------------------------------------------------------------- restore
 
-    def restore(self) -> None:
-        """Read the checkpoint a resume continues from (refusing one it cannot), write ``config.yaml``, prepare ``episodes.csv``."""
-        if self.resume:
-            recover_checkpoint(self.out)  # a kill during a checkpoint swap leaves a complete .partial or .old
-            self.state = resume_info(self.checkpoint, self.config, self.trust_pickle)
-        elif self.checkpoint.exists():
-            raise ConfigError(f"{self.out} already holds a run (checkpoint/); resume it with --resume or choose another --out")
-        if self.state and self.state.normalization is None and self.config.normalize_observations:
+    def read_checkpoint(self) -> Progress:
+        """The checkpoint a resume continues from, refused in one line when it cannot continue this run."""
+        self.state = resume_info(self.checkpoint, self.config, self.trust_pickle)
+        if self.state.normalization is None and self.config.normalize_observations:
             # a checkpoint from before observation normalisation: its model was trained on raw observations
             warnings.warn(f"{self.checkpoint} predates observation normalisation; resuming on raw observations "
-                          "(normalize_observations: false)", stacklevel=3)
+                          "(normalize_observations: false)", stacklevel=3 + self.caller_frames)
             self.config = self.config.model_copy(update={"normalize_observations": False})
-        self.out.mkdir(parents=True, exist_ok=True)
-        if not (self.state and self.state.spent(self.config)):  # a resume with nothing left to play changes nothing
-            atomic_write_text(self.out / "config.yaml", yaml.safe_dump(config_to_dict(self.config), sort_keys=False))  # replaces a link
-        prepare_episode_log(self.out, self.first_episode)  # header on disk before anything can be killed mid-episode
-
-    @property
-    def first_episode(self) -> int:
-        return self.state.episodes if self.state else 0
+        return Progress(self.state.episodes, self.state.timesteps)
 
     # ------------------------------------------------------------------ build
 
@@ -226,30 +207,30 @@ class TrainingSession:
             save_checkpoint(self.model, self.checkpoint, self.info(episodes), encoder_file=self.encoder_copy,
                             replay_buffer=self.config.save_replay_buffer and self.off_policy,
                             rng_state=streams if streams is not None else True, rollout_state=rollout)
-        if self.on_checkpoint is not None:
-            self.on_checkpoint(episodes)
+        self.announce_checkpoint(episodes)
 
     # -------------------------------------------------------------------- run
 
-    def run(self) -> TrainResult:
-        """Restore and build (unless done already), train for the rest of the budget, save the final checkpoint."""
-        if not self.built:
-            self.restore()
-            self.build()
-        config, model, callback = self.config, self.model, self.callback
-        started = time.perf_counter()
-        start_steps = model.num_timesteps
-        if not callback.finished:
-            model.learn(self.budget(), callback=callback, reset_num_timesteps=self.state is None, tb_log_name=config.algo)
-            self.save(callback.done, final=True)
-        seconds = time.perf_counter() - started
+    @property
+    def finished(self) -> bool:
+        return self.callback.finished
+
+    @property
+    def timesteps(self) -> int:
+        return int(self.model.num_timesteps)
+
+    @property
+    def tally(self) -> EpisodeCallback:
+        return self.callback
+
+    def learn(self) -> None:
+        self.model.learn(self.budget(), callback=self.callback, reset_num_timesteps=self.state is None, tb_log_name=self.config.algo)
+
+    def save_final(self) -> None:
+        self.save(self.callback.done, final=True)
+
+    def close(self) -> None:
         self.collecting.close()
-        return TrainResult(
-            out=self.out, checkpoint=self.checkpoint, episodes=callback.done, timesteps=model.num_timesteps,
-            successes=callback.successes, seconds=seconds,
-            steps_per_second=(model.num_timesteps - start_steps) / seconds if seconds > 0 else 0.0,
-            records=callback.records, model=model,
-        )
 
     def budget(self) -> int:
         """The steps ``learn`` is given: an upper bound (the callback stops on the budget).

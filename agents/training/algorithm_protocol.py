@@ -31,7 +31,8 @@ The Stable-Baselines3 algorithms (``sac``, ``td3``, ``ddpg``, ``a2c``, ``ppo``, 
 the builder :data:`crowdnav.registry.SB3_BUILDER` (:class:`crowdnav.agents.sb3.algorithm.SB3Builder`): its agents are
 :class:`crowdnav.agents.sb3.algorithm.SB3Algorithm` (``learn``, ``save``, ``predict``, ``export_module``), and it is the
 one :class:`RunTrainer`: ``crowdnav train`` runs their :class:`crowdnav.agents.sb3.session.TrainingSession`
-(SB3's own loop with crowdnav's callbacks, collecting from the same :func:`~crowdnav.agents.sb3.factory.make_vec_env`
+(a strategy of the one run loop, :class:`crowdnav.agents.training.run_loop.RunLoop`, as crowdnav's episode loop is:
+SB3's own loop with crowdnav's callbacks, collecting from the same :func:`~crowdnav.agents.sb3.factory.make_vec_env`
 worlds, replay buffers and rollouts restored
 mid-episode for an exact resume), which a loop that sees the agent only between episodes could not give, and
 their checkpoints are SB3's ``model.zip`` at the checkpoint's top, read back as tensors only.
@@ -55,12 +56,23 @@ ALGORITHM_FOLDER = "algorithm"
 """Where :meth:`Algorithm.save` writes inside a checkpoint folder of crowdnav's episode loop (not a :class:`RunTrainer`'s)."""
 
 
+AgentState = Any
+"""What an agent carries from one step to the next (a recurrent network's hidden state: SB3's tuple of arrays, one row
+per world); ``None`` for an agent without memory, which is what every agent but a recurrent one returns."""
+
+
 @runtime_checkable
 class Predictor(Protocol):
-    """What a trained agent does in evaluation, rendering and experiments (:class:`crowdnav.agents.runs.checkpoint.AgentPolicy`)."""
+    """What a trained agent does in evaluation, rendering and experiments (:class:`crowdnav.agents.runs.checkpoint.AgentPolicy`).
 
-    def predict(self, observation: Mapping[str, np.ndarray], deterministic: bool = True) -> np.ndarray:
-        """Actions for one observation (float (2,)) or a batch of them stacked per key (float (N, 2))."""
+    Stable-Baselines3's own signature, so an SB3 model is one as it is: the caller keeps the returned state and gives
+    it back at the next step, with ``episode_start`` True for the worlds whose episode has just begun (the agent forgets
+    their memory). A batch always holds the same worlds in the same rows while a state is carried.
+    """
+
+    def predict(self, observation: Mapping[str, np.ndarray], state: AgentState = None, episode_start: np.ndarray | None = None,
+                deterministic: bool = True) -> tuple[np.ndarray, AgentState]:
+        """(actions, next state): for one observation float (2,), for a batch stacked per key float (N, 2)."""
 
 
 @runtime_checkable
@@ -108,14 +120,25 @@ class Exportable(Protocol):
 
 
 class SB3Predictor:
-    """A Stable-Baselines3 model seen as a :class:`Predictor`: ``predict`` without SB3's recurrent-state tuple."""
+    """A Stable-Baselines3 model seen as a :class:`Predictor`: SB3's ``predict``, its recurrent state passed through."""
 
     def __init__(self, model: Any):
         self.model = model
 
-    def predict(self, observation: Mapping[str, np.ndarray], deterministic: bool = True) -> np.ndarray:
-        action, _ = self.model.predict(observation, deterministic=deterministic)
-        return np.asarray(action)
+    @property
+    def recurrent(self) -> bool:
+        """Whether the policy carries a state between steps (sb3-contrib's LSTM policies: :func:`is_recurrent`)."""
+        return hasattr(self.model.policy, "lstm_hidden_state_shape")
+
+    def predict(self, observation: Mapping[str, np.ndarray], state: AgentState = None, episode_start: np.ndarray | None = None,
+                deterministic: bool = True) -> tuple[np.ndarray, AgentState]:
+        action, state = self.model.predict(observation, state, episode_start, deterministic)
+        return np.asarray(action), state
+
+
+def is_recurrent(agent: Any) -> bool:
+    """Whether ``agent`` (a :class:`Predictor`, or a policy holding one) carries a state: its callers must keep it per world."""
+    return bool(getattr(agent, "recurrent", False))
 
 
 def as_predictor(model: Any) -> Predictor:

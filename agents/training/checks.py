@@ -43,10 +43,6 @@ class ResumeInfo:
     timesteps: int = 0
     """The env steps the checkpoint's run had taken."""
 
-    def spent(self, config: TrainConfig) -> bool:
-        """Whether the checkpoint has already spent ``config``'s budget (:func:`budget_spent`)."""
-        return budget_spent(config, self.episodes, self.timesteps)
-
 
 def budget_spent(config: TrainConfig, episodes: int, timesteps: int) -> bool:
     """Whether a run of ``episodes`` episodes and ``timesteps`` env steps has spent ``config``'s budget (a resume plays nothing)."""

@@ -35,7 +35,7 @@ from pydantic_core import PydanticCustomError
 
 from crowdnav.config_errors import ConfigIssue, FieldProblems, YamlProblem, format_issues, read_yaml, validation_issues, yaml_line
 from crowdnav.errors import CrowdNavError
-from crowdnav.registry import ALGORITHM_NAMES, ENCODER_MODES, algorithm_names, modality_names, unknown_name_message
+from crowdnav.registry import ALGORITHM_NAMES, ENCODER_MODES, algorithm_names, algorithm_spec, modality_names, unknown_name_message
 from crowdnav.yaml_input import MAX_DEPTH, YamlLimitError, check_value, read_text_file
 
 __all__ = ["ALGORITHM_NAMES", "ENCODER_MODES", "ConfigError", "DemonstrationConfig", "EncoderConfig", "ExtractorConfig", "TrainConfig",
@@ -276,6 +276,8 @@ def cross_field_problems(config: TrainConfig) -> list[tuple[str, str]]:
     if demonstrations.episodes * (1 + demonstrations.dagger_rounds) > DEMONSTRATION_EPISODES:
         problems.append(("demonstrations.dagger_rounds", f"{demonstrations.episodes:,} episodes x (1 + {demonstrations.dagger_rounds:,} "
                          f"rounds) exceed the {DEMONSTRATION_EPISODES:,} demonstration seeds of a run (crowdnav.agents.training.seeding)"))
+    if demonstrations.episodes and algorithm_spec(config.algo).recurrent:  # cloning fits single steps, not a memory
+        problems.append(("demonstrations.episodes", f"{config.algo}'s LSTM policy cannot be warm-started by behaviour cloning; set it to 0"))
     problems.extend(robots_problems(config))
     problems.extend(planner_problems(config))
     extractor = config.extractor

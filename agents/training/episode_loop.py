@@ -1,10 +1,14 @@
 """crowdnav's episode loop around :meth:`Algorithm.learn <crowdnav.agents.training.algorithm_protocol.Algorithm.learn>`: :func:`train_registered`.
 
+:class:`EpisodeLoop` is a strategy of the one run loop (:class:`crowdnav.agents.training.run_loop.RunLoop`, which owns
+the run folder, the resume decision and the result): it builds the agent (new, or loaded from ``checkpoint/``), lets
+it learn, and counts, logs and checkpoints the episodes that end each time the agent calls ``keep_going``.
+
 It trains every algorithm whose registered builder is not a
 :class:`~crowdnav.agents.training.algorithm_protocol.RunTrainer` (:func:`crowdnav.agents.training.run.trainer_of`; the built-in
 Stable-Baselines3 algorithms have a loop of their own), into the run folder SB3 runs write too.
 
-The run folder is the one :mod:`crowdnav.agents.training.run` writes: ``config.yaml``, ``episodes.csv`` (a row per
+The run folder is the one every run writes (:mod:`crowdnav.agents.runs.folder`): ``config.yaml``, ``episodes.csv`` (a row per
 training episode, seeded ``train_seed(seed, i)``), ``checkpoint/`` (``policy.json`` and ``algorithm/``, what the
 agent's :meth:`~crowdnav.agents.training.algorithm_protocol.Algorithm.save` wrote) every ``checkpoint_every`` episodes and at
 the end, ``snapshots/episode_<N>/`` after N episodes. ``--resume`` loads the agent from ``checkpoint/`` and goes
@@ -29,60 +33,26 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-import yaml
 from crowdnav.agents.runs.checkpoint import POLICY_FORMAT, find_checkpoint, read_policy_info, replace_folder, staging_folder
 from crowdnav.agents.runs.episode_log import EpisodeLogWriter
-from crowdnav.agents.runs.folder import POLICY_FILE, checkpoint_dir, episode_log, recover_checkpoint, snapshot_dir
+from crowdnav.agents.runs.folder import POLICY_FILE, episode_log, snapshot_dir
 from crowdnav.agents.runs.result import TrainResult
 from crowdnav.agents.sb3.callbacks import EpisodeRecord
 from crowdnav.agents.sb3.factory import env_options, make_vec_env, observation_normalization
 from crowdnav.agents.sb3.vec_env import CrowdNavSB3VecEnv
-from crowdnav.agents.training.algorithm_protocol import ALGORITHM_FOLDER, Algorithm, Continuing, builder_of, load_algorithm
-from crowdnav.agents.training.checks import budget_spent, prepare_episode_log
+from crowdnav.agents.training.algorithm_protocol import ALGORITHM_FOLDER, Continuing, builder_of, load_algorithm
 from crowdnav.agents.training.config import ConfigError, TrainConfig, config_to_dict
+from crowdnav.agents.training.run_loop import Progress, RunLoop
 from crowdnav.agents.training.seeding import train_seed
 from crowdnav.agents.training.wrappers import scales_from_json, scales_to_json
 from stable_baselines3.common.vec_env import VecEnvWrapper
 from stable_baselines3.common.vec_env.base_vec_env import VecEnvObs, VecEnvStepReturn
 
-from crowdnav.files import atomic_write_text
-
 
 def train_registered(config: TrainConfig, resume: bool, on_checkpoint: Callable[[int], None] | None = None) -> TrainResult:
     """Train ``config.algo``, a registered algorithm (:mod:`crowdnav.agents.training.algorithm_protocol`); ``resume``: from ``checkpoint/``."""
-    out = Path(config.out)
-    checkpoint = checkpoint_dir(out)
     check_supported(config)
-    if resume:
-        recover_checkpoint(out)
-    info = _resume_info(checkpoint, config) if resume else None
-    if not resume and checkpoint.exists():
-        raise ConfigError(f"{out} already holds a run (checkpoint/); resume it with --resume or choose another --out")
-    out.mkdir(parents=True, exist_ok=True)
-    if not (info and budget_spent(config, int(info["episodes"]), int(info["timesteps"]))):  # nothing left to play: change nothing
-        atomic_write_text(out / "config.yaml", yaml.safe_dump(config_to_dict(config), sort_keys=False))  # replaces a link
-    first = int(info["episodes"]) if info else 0
-    prepare_episode_log(out, first, stacklevel=3)  # as before: the warning points at train_registered's caller
-    saved = info.get("observation_normalization") if info else None
-    first_started = int(info.get("next_episode", first)) if info else 0  # several worlds: past the count (episodes end out of order)
-    inner = make_vec_env(config, None, first_started, scales_from_json(saved) if saved is not None else None, reward_dtype=np.float64)
-    scales = observation_normalization(inner)
-    env = EpisodeEnds(inner, int(info["timesteps"]) if info else 0)
-    agent: Algorithm = load_algorithm(find_checkpoint(checkpoint), config.algo) if info else builder_of(config.algo)(env, config)
-    if info and isinstance(agent, Continuing):  # e.g. a learning-rate schedule over the resumed run's budget
-        agent.continue_with(config)
-    session = _Session(config, out, agent, env, first, int(info.get("successes", 0)) if info else 0,
-                       None if scales is None else scales_to_json(scales), on_checkpoint)
-    started, start_steps = time.perf_counter(), env.steps
-    if not session.finished:
-        agent.learn(env, session.keep_going)
-        session.flush()  # episodes that ended after the agent's last call
-    session.finish()
-    env.close()
-    seconds = time.perf_counter() - started
-    return TrainResult(out=out, checkpoint=checkpoint, episodes=session.done, timesteps=env.steps, successes=session.successes,
-                       seconds=seconds, steps_per_second=(env.steps - start_steps) / seconds if seconds > 0 else 0.0,
-                       records=session.records, model=agent)
+    return EpisodeLoop(config, resume, on_checkpoint).run()
 
 
 class EpisodeEnds(VecEnvWrapper):
@@ -113,26 +83,55 @@ class EpisodeEnds(VecEnvWrapper):
         return counter.next_episode - fresh
 
 
-class _Session:
-    """Counts, logs and checkpoints the episodes that end, each time the agent calls ``keep_going``."""
+class EpisodeLoop(RunLoop):
+    """The :class:`RunLoop` strategy that counts, logs and checkpoints the episodes that end, each time the agent calls ``keep_going``."""
 
-    def __init__(self, config: TrainConfig, out: Path, agent: Algorithm, env: EpisodeEnds, first: int, successes: int,
-                 normalization: dict[str, Any] | None, on_checkpoint: Callable[[int], None] | None):
-        self.config, self.out, self.agent, self.env = config, out, agent, env
-        self.done = self.saved = first
-        self.successes = successes
-        self.normalization = normalization
-        self.on_checkpoint = on_checkpoint
+    caller_frames = 2  # as before: warnings point at train_registered's caller
+
+    def __init__(self, config: TrainConfig, resume: bool, on_checkpoint: Callable[[int], None] | None = None):
+        super().__init__(config, resume, on_checkpoint)
+        self.info: dict[str, Any] | None = None
+        """The resumed checkpoint's ``policy.json``."""
+
+    def read_checkpoint(self) -> Progress:
+        self.info = _resume_info(self.checkpoint, self.config)
+        return Progress(int(self.info["episodes"]), int(self.info["timesteps"]))
+
+    def build(self) -> None:
+        config, info = self.config, self.info
+        saved = info.get("observation_normalization") if info else None
+        first_started = int(info.get("next_episode", self.first_episode)) if info else 0  # several worlds: past the count (episodes end out of order)
+        inner = make_vec_env(config, None, first_started, scales_from_json(saved) if saved is not None else None, reward_dtype=np.float64)
+        scales = observation_normalization(inner)
+        self.normalization = None if scales is None else scales_to_json(scales)
+        self.env = EpisodeEnds(inner, int(info["timesteps"]) if info else 0)
+        self.model = load_algorithm(find_checkpoint(self.checkpoint), config.algo) if info else builder_of(config.algo)(self.env, config)
+        if info and isinstance(self.model, Continuing):  # e.g. a learning-rate schedule over the resumed run's budget
+            self.model.continue_with(config)
+        self.done = self.saved = self.first_episode
+        self.successes = int(info.get("successes", 0)) if info else 0
         self.records: list[EpisodeRecord] = []
-        self._log = EpisodeLogWriter(episode_log(out))
+        self._log = EpisodeLogWriter(episode_log(self.out))
         self._start = time.perf_counter()
+        self.built = True
 
     @property
     def finished(self) -> bool:
-        """Whether the budget (episodes, or env steps with ``timesteps``) is spent."""
         if self.config.timesteps is not None:
             return self.env.steps >= self.config.timesteps
         return self.done >= self.config.episodes
+
+    @property
+    def timesteps(self) -> int:
+        return self.env.steps
+
+    @property
+    def tally(self) -> EpisodeLoop:
+        return self
+
+    def learn(self) -> None:
+        self.model.learn(self.env, self.keep_going)
+        self.flush()  # episodes that ended after the agent's last call
 
     def keep_going(self) -> bool:
         """The agent's call after each episode that ended: log the oldest one not yet logged (checkpoint on schedule), say whether to go on."""
@@ -167,16 +166,15 @@ class _Session:
     def _checkpoint(self) -> None:
         self._log.sync()  # the checkpoint about to claim these episodes: their rows on disk first
         self.save(snapshot_dir(self.out, self.done))  # first: once the checkpoint says N episodes, snapshot N exists
-        self.save(checkpoint_dir(self.out))
+        self.save(self.checkpoint)
         self.saved = self.done
-        if self.on_checkpoint is not None:
-            self.on_checkpoint(self.done)
+        self.announce_checkpoint(self.done)
 
     def save(self, folder: Path) -> None:
         """A checkpoint (or snapshot) folder: ``policy.json`` and the agent's own ``algorithm/``."""
         staging = staging_folder(folder)
         (staging / ALGORITHM_FOLDER).mkdir()
-        self.agent.save(staging / ALGORITHM_FOLDER)
+        self.model.save(staging / ALGORITHM_FOLDER)
         document = {"format": POLICY_FORMAT, "algo": self.config.algo, "env": env_options(self.config),
                     "observation_normalization": self.normalization, "episodes": self.done, "timesteps": self.env.steps,
                     "next_episode": self.env.next_episode(),
@@ -184,11 +182,14 @@ class _Session:
         (staging / POLICY_FILE).write_text(json.dumps(document, indent=2, default=str) + "\n", encoding="utf-8")
         replace_folder(staging, folder)
 
-    def finish(self) -> None:
-        """The final checkpoint (unless the last episode's was taken), and the log closed."""
-        if self.saved != self.done or not checkpoint_dir(self.out).is_dir():
+    def save_final(self) -> None:
+        """The final checkpoint, unless the last episode's was taken."""
+        if self.saved != self.done or not self.checkpoint.is_dir():
             self._checkpoint()
+
+    def close(self) -> None:
         self._log.close()
+        self.env.close()
 
 
 def check_supported(config: TrainConfig) -> None:

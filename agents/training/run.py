@@ -16,11 +16,13 @@ model and (if saved) the replay buffer carry on; the budget is still ``config.ep
 of the one vector stack (:func:`crowdnav.agents.sb3.factory.make_vec_env` over the native vector env), one world
 included: ``num_envs`` is a size, not a fork. An SB3 resume needs the same number.
 
-Which loop trains a run is read from the algorithm's registered builder, for every algorithm alike
-(:func:`trainer_of`): crowdnav's episode loop around the agent's ``learn``
-(:func:`crowdnav.agents.training.episode_loop.train_registered`), or the builder's own
+Every run goes through the one run loop (:class:`crowdnav.agents.training.run_loop.RunLoop`: the run folder, its
+writer lock, the resume decision, the final checkpoint, the result); what learns inside it is read from the
+algorithm's registered builder, for every algorithm alike (:func:`trainer_of`): crowdnav's episode loop around the
+agent's ``learn`` (:func:`crowdnav.agents.training.episode_loop.train_registered`), or the builder's own
 (:class:`crowdnav.agents.training.algorithm_protocol.RunTrainer`): the Stable-Baselines3 builder's
-:class:`crowdnav.agents.sb3.session.TrainingSession` (restore, build, run, save).
+:class:`crowdnav.agents.sb3.session.TrainingSession`. ``agents: robots`` runs the shared robot PPO loop
+(:func:`crowdnav.agents.marl.robots.train_robots`).
 """
 
 from __future__ import annotations
@@ -31,10 +33,10 @@ from functools import partial
 from pathlib import Path
 from typing import Any
 
-import torch
-from crowdnav.agents.runs.folder import snapshot_dir, writing
+from crowdnav.agents.runs.folder import snapshot_dir
 from crowdnav.agents.runs.result import TrainResult as TrainResult
 from crowdnav.agents.training.config import ConfigError, TrainConfig, config_from_mapping, load_config
+from crowdnav.agents.training.run_loop import writing_run
 
 
 def train(config: TrainConfig | Mapping[str, Any] | str | Path, *, resume: bool = False,
@@ -55,9 +57,8 @@ def train(config: TrainConfig | Mapping[str, Any] | str | Path, *, resume: bool 
         from crowdnav.agents.marl.robots import train_robots
 
         return train_robots(config, resume=resume, on_checkpoint=on_checkpoint)
-    torch.set_num_threads(config.torch_threads)
     trainer = trainer_of(config, trust_pickle)  # before the run folder is touched: refusals leave nothing behind
-    with writing(config.out):  # one process writes a run at a time
+    with writing_run(config):  # one process writes a run at a time
         return trainer(config, resume, on_checkpoint)
 
 

@@ -189,9 +189,10 @@ def train_command(args: argparse.Namespace) -> int:
 def _how_to_continue(out: Path) -> str:
     """What the user runs after a stopped training: resume from the checkpoint a kill keeps, or start again."""
     from crowdnav.agents.runs.folder import checkpoint_dir
+    from crowdnav.files import whole_copies
 
     current = checkpoint_dir(out)
-    if any(folder.is_dir() for folder in (current, current.with_name(current.name + ".partial"), current.with_name(current.name + ".old"))):
+    if current.is_dir() or whole_copies(current):  # a kill inside the checkpoint's swap keeps a whole copy beside it
         return f"the last checkpoint in {out} is kept: add --resume to the same command to continue from it"
     return f"{out} has no checkpoint yet: run the same command again to start over"
 

@@ -33,8 +33,8 @@ def test_a_bad_config_key_names_the_key_the_file_and_the_line(tmp_path):
 
 @pytest.mark.parametrize(("text", "message"), [
     ("episodes: many", "episodes: expected an integer, got 'many'"),
-    ("algo: dqn", "algo: expected one of 'sac', 'td3', 'ddpg', 'a2c', 'ppo', 'sarl'"),
-    ("algo: sca", "algo: expected one of 'sac', 'td3', 'ddpg', 'a2c', 'ppo', 'sarl', got 'sca'; did you mean 'sac'?"),
+    ("algo: dqn", "algo: expected one of 'sac', 'td3', 'ddpg', 'a2c', 'ppo', 'recurrent_ppo', 'sarl'"),
+    ("algo: sca", "algo: expected one of 'sac', 'td3', 'ddpg', 'a2c', 'ppo', 'recurrent_ppo', 'sarl', got 'sca'; did you mean 'sac'?"),
     ("modalities: [lidar, gaol]", "modalities.1: unknown modality 'gaol'; did you mean 'goal'?"),
     ("reward_weights: {preset: papr}", "reward_weights: unknown reward preset 'papr'; did you mean 'paper'?"),
     ("modalities: lidar", "modalities: expected a list of strings"),

@@ -164,7 +164,7 @@ def test_evaluation_feeds_the_policy_normalised_observations(normalized_run):
     policy = load_policy(out)
     seen = []
     predict = policy.model.predict
-    policy.model.predict = lambda observation, **kwargs: (seen.append(observation), predict(observation, **kwargs))[1]
+    policy.model.predict = lambda observation, *args, **kwargs: (seen.append(observation), predict(observation, *args, **kwargs))[1]
     episodes = HeldOutEpisodes(policy.env_options, [0])
     rows = episodes.run(policy)
     episodes.close()

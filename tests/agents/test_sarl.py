@@ -90,8 +90,8 @@ def test_predict_takes_one_observation_or_a_batch_and_agrees_between_them(tmp_pa
     for seed in range(3):
         obs, _ = env.reset(seed=seed)
         observations.append(policy.preprocess(obs))
-    single = np.stack([policy.model.predict(obs) for obs in observations])
-    batch = policy.model.predict({key: np.stack([obs[key] for obs in observations]) for key in observations[0]})
+    single = np.stack([policy.model.predict(obs)[0] for obs in observations])
+    batch = policy.model.predict({key: np.stack([obs[key] for obs in observations]) for key in observations[0]})[0]
     assert single.shape == (3, 2) and batch.shape == (3, 2) and single.dtype == np.float32
     np.testing.assert_allclose(batch, single, atol=1e-6)
     assert np.all(np.hypot(batch[:, 0], batch[:, 1]) <= 1.0 + 1e-6)
@@ -123,10 +123,10 @@ def test_depth_two_scores_the_best_one_step_actions_by_their_best_second_step(tm
         expected = first["reward"][0, action] + (0.0 if first["done"][0, action] else agent.discount * backup)
         assert two[0, action] == pytest.approx(expected, rel=1e-6, abs=1e-9)
     assert np.argmax(two[0]) in best
-    np.testing.assert_array_equal(agent.predict(obs), commands[0, np.argmax(two[0])])  # greedy acting searches deeper
+    np.testing.assert_array_equal(agent.predict(obs)[0], commands[0, np.argmax(two[0])])  # greedy acting searches deeper
     agent.rng = np.random.default_rng(0)
     agent.options.update(epsilon_start=0.0, epsilon_end=0.0)  # no random action: the training-time choice
-    np.testing.assert_array_equal(agent.predict(obs, deterministic=False), commands[0, np.argmax(one[0])])  # one step
+    np.testing.assert_array_equal(agent.act(obs, deterministic=False), commands[0, np.argmax(one[0])])  # one step
 
 
 def test_save_and_load_round_trip_without_pickle(tmp_path):
@@ -150,7 +150,7 @@ def test_save_and_load_round_trip_without_pickle(tmp_path):
     env = policy.make_env()
     for seed in range(3):
         obs = policy.preprocess(env.reset(seed=seed)[0])
-        np.testing.assert_array_equal(loaded.predict(obs), agent.predict(obs))
+        np.testing.assert_array_equal(loaded.predict(obs)[0], agent.predict(obs)[0])
 
 
 def test_resume_gives_the_uninterrupted_runs_episodes_and_weights(tmp_path):

@@ -100,7 +100,7 @@ def test_the_exported_sarl_acts_as_predict_one_observation_and_a_batch(tmp_path)
     preprocessed = policy.preprocess(observations)
     with torch.no_grad():
         traced = module(*(torch.as_tensor(preprocessed[key]) for key in observations)).numpy()
-    np.testing.assert_array_equal(traced, policy.model.predict(preprocessed))
+    np.testing.assert_array_equal(traced, policy.model.predict(preprocessed)[0])
 
 
 def test_the_exported_two_step_lookahead_acts_as_predict(tmp_path):

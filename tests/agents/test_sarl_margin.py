@@ -65,6 +65,6 @@ def test_an_agent_with_a_margin_acts_as_the_same_network_without_it_wherever_no_
     observation, _ = env.reset(seed=3)
     far = {key: np.asarray(value) for key, value in observation.items()}
     far["humans"] = np.zeros_like(far["humans"])  # nobody tracked: the margin has nothing to act on
-    with_margin = agent.predict(far)
+    with_margin = agent.act(far)
     agent.options["human_margin"] = 0.0
-    assert np.array_equal(with_margin, agent.predict(far))
+    assert np.array_equal(with_margin, agent.act(far))

@@ -39,7 +39,7 @@ def assert_exports_as_predict(policy):
     module = policy.model.export_module(list(batch)).eval()
     with torch.no_grad():
         traced = module(*(torch.as_tensor(batch[key]) for key in batch)).numpy()
-    np.testing.assert_array_equal(traced, policy.model.predict(batch))
+    np.testing.assert_array_equal(traced, policy.model.predict(batch)[0])
 
 
 def test_an_ensemble_values_a_state_at_its_members_mean_and_every_member_learns(tmp_path):

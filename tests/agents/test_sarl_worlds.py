@@ -53,7 +53,7 @@ def single_env_loop(document):
             state = agent._observed(observation)
             shown, done = ([], []), False
             while not done:
-                action = teacher(env.unwrapped.simulator) if demonstrating else agent.predict(observation, deterministic=False)
+                action = teacher(env.unwrapped.simulator) if demonstrating else agent.act(observation, deterministic=False)
                 observation, reward, terminated, truncated, info = env.step(action)
                 following = agent._observed(observation)
                 agent.memory.add(state, float(reward), following, bool(terminated))

@@ -37,6 +37,7 @@ class _TinyDictEnv(gym.Env):
 @cache
 def _instances() -> tuple[Any, ...]:
     """Objects SB3 builds the way crowdnav has it build them: models, their buffers, networks and env."""
+    from sb3_contrib import RecurrentPPO
     from stable_baselines3 import PPO, SAC, TD3
 
     def small() -> dict[str, Any]:  # a fresh dict each: SB3 writes into policy_kwargs
@@ -46,8 +47,10 @@ def _instances() -> tuple[Any, ...]:
     sac = SAC("MultiInputPolicy", _TinyDictEnv(), buffer_size=8, learning_starts=0, ent_coef=0.1, **small())
     td3 = TD3("MultiInputPolicy", _TinyDictEnv(), buffer_size=8, learning_starts=0, **small())
     ppo = PPO("MultiInputPolicy", _TinyDictEnv(), n_steps=8, batch_size=8, **small())
-    return (sac, td3, ppo, sac.replay_buffer, ppo.rollout_buffer, sac.policy, td3.policy, ppo.policy, sac.actor, sac.critic,
-            sac.get_env())
+    recurrent = RecurrentPPO("MultiInputLstmPolicy", _TinyDictEnv(), n_steps=8, batch_size=8,
+                             **{**small(), "policy_kwargs": {"net_arch": [4], "lstm_hidden_size": 4}})
+    return (sac, td3, ppo, recurrent, sac.replay_buffer, ppo.rollout_buffer, recurrent.rollout_buffer, sac.policy, td3.policy,
+            ppo.policy, sac.actor, sac.critic, sac.get_env())
 
 
 def _resolve(path: str) -> Any:
@@ -105,13 +108,17 @@ def test_every_sb3_internal_is_listed_once() -> None:
 
 def test_pyproject_bounds_sb3_to_the_tested_versions() -> None:
     text = (ROOT / "pyproject.toml").read_text(encoding="utf-8")
-    requirement = re.search(r'"stable-baselines3([^"]*)"', text)
-    assert requirement is not None and requirement.group(1) == TESTED_SB3, (requirement and requirement.group(0), TESTED_SB3)
+    for package in ("stable-baselines3", "sb3-contrib"):  # RecurrentPPO's internals are checked here too
+        requirement = re.search(rf'"{package}([^"]*)"', text)
+        assert requirement is not None and requirement.group(1) == TESTED_SB3, (package, requirement and requirement.group(0), TESTED_SB3)
     bounds = re.fullmatch(r">=(\d+)\.(\d+),<(\d+)\.(\d+)", TESTED_SB3)
     assert bounds is not None, TESTED_SB3
     low, high = (int(bounds[1]), int(bounds[2])), (int(bounds[3]), int(bounds[4]))
-    installed = tuple(int(part) for part in stable_baselines3.__version__.split(".")[:2])
-    assert low <= installed < high, f"SB3 {stable_baselines3.__version__} outside {TESTED_SB3}"
+    import sb3_contrib
+
+    for name, version in (("SB3", stable_baselines3.__version__), ("sb3-contrib", sb3_contrib.__version__)):
+        installed = tuple(int(part) for part in version.split(".")[:2])
+        assert low <= installed < high, f"{name} {version} outside {TESTED_SB3}"
 
 
 _LOOP = '''
@@ -133,7 +140,7 @@ def test_fingerprint_ignores_docstrings_comments_and_layout_but_not_code() -> No
 
 def test_a_missing_or_changed_internal_is_reported_with_what_changed() -> None:
     algorithm = "stable_baselines3.common.base_class.BaseAlgorithm"
-    assert _problem(Internal(algorithm, "_no_such_counter", "attribute", "nowhere")) == "attribute missing on SAC, TD3, PPO"
+    assert _problem(Internal(algorithm, "_no_such_counter", "attribute", "nowhere")) == "attribute missing on SAC, TD3, PPO, RecurrentPPO"
     assert "takes" in (_problem(Internal(algorithm, "_update_learning_rate", "method", "nowhere", ("no_such",))) or "")
     assert "has no local" in (_problem(Internal(algorithm, "learn", "local", "nowhere", ("no_such",))) or "")
     assert "its code changed" in (_problem(Internal(algorithm, "learn", "copied", "nowhere", fingerprints=("0" * 16,))) or "")

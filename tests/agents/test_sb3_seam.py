@@ -117,7 +117,7 @@ def test_an_sb3_algorithm_trains_in_crowdnavs_episode_loop_like_the_toy_and_load
     policy = load_policy(sb3)  # builder.load(checkpoint/algorithm): the tensors, no pickle
     assert isinstance(policy.agent, SB3Algorithm) and isinstance(load_policy(toy).agent, RandomSearchAgent)
     observations = recorded_observations(policy, steps=10)
-    expected = result.model.predict(policy.preprocess(observations))
+    expected = result.model.predict(policy.preprocess(observations))[0]
     np.testing.assert_array_equal(policy(observations), expected)
     import torch
 

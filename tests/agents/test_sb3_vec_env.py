@@ -79,6 +79,7 @@ def test_resume_rebuilds_worlds_through_public_methods_and_touches_no_private_me
     tree = ast.parse((REPO / "agents" / "runs" / "resume_worlds.py").read_text(encoding="utf-8"))
     names = {node.attr for node in ast.walk(tree) if isinstance(node, ast.Attribute)}
     private = {name for name in names if name.startswith("_") and not name.startswith("__")}
-    # only the DummyVecEnv internals of the one-env path, which agents/sb3/internals.py checks against SB3
-    assert private <= {"_save_obs", "_obs_from_buf", "_reset_seeds"}, private
+    # only the DummyVecEnv internals of the one-env path and a recurrent model's LSTM state (not the env's), which
+    # agents/sb3/internals.py checks against SB3 and sb3-contrib
+    assert private <= {"_save_obs", "_obs_from_buf", "_reset_seeds", "_last_lstm_states"}, private
     assert hasattr(CrowdNavSB3VecEnv, "restore_worlds") and hasattr(CrowdNavSB3VecEnv, "world_counts")

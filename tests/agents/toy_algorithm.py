@@ -54,8 +54,9 @@ class RandomSearchAgent:
                 if not keep_going():
                     return
 
-    def predict(self, observation: Mapping[str, np.ndarray], deterministic: bool = True) -> np.ndarray:
-        return self._act(self.weights, observation)
+    def predict(self, observation: Mapping[str, np.ndarray], state: Any = None, episode_start: np.ndarray | None = None,
+                deterministic: bool = True) -> tuple[np.ndarray, None]:
+        return self._act(self.weights, observation), None  # no memory: no state
 
     def save(self, folder: Path) -> None:
         arrays = {"weights": self.weights, **({"delta": self.delta} if self.delta is not None else {})}

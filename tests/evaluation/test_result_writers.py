@@ -121,7 +121,8 @@ def test_a_kill_between_the_two_files_leaves_the_old_result_whole_and_unranked_l
     old = _snapshot(_folder(out))
     replacing = _crowdnav(out, "baseline:social_force", "--force", cwd=tmp_path, patch=kill_at_meta)
     assert replacing.wait(timeout=300) == 9
-    assert any(path.name.startswith(f".{_folder(out).name}.new-") for path in _folder(out).parent.iterdir())  # its rows, hidden
+    assert any(path.name.startswith(f".{_folder(out).name}.") and path.name.endswith(".new")
+               for path in _folder(out).parent.iterdir())  # its rows, hidden
     assert _snapshot(_folder(out)) == old and _assert_whole(_folder(out), reference) == "baseline:straight"
     table, _ = write_leaderboard([out], tmp_path / "board")
     assert len(table) == 1 and list(finished_results(out)) == [_folder(out)]
@@ -135,9 +136,9 @@ def test_a_kill_between_the_renames_of_a_replacement_gets_the_old_result_back(tm
     assert main(["evaluate", "baseline:straight", *ARGS, "--out", str(out)]) == 0
     old = _snapshot(_folder(out))
     # a system without an atomic exchange of two folders: the old one is renamed aside first; the kill comes right after
-    kill_aside = ("import os\nimport crowdnav.evaluation.storage as storage\nstorage._exchange = lambda a, b: False\n"
+    kill_aside = ("import os\nimport crowdnav.files as files\nfiles._exchange = lambda a, b: False\n"
                   "rename = os.rename\n"
-                  "def killing(source, target):\n    rename(source, target)\n    if '.old-' in str(target): os._exit(9)\n"
+                  "def killing(source, target):\n    rename(source, target)\n    if str(target).endswith('.old'): os._exit(9)\n"
                   "os.rename = killing\n")
     replacing = _crowdnav(out, "baseline:social_force", "--force", cwd=tmp_path, patch=kill_aside)
     assert replacing.wait(timeout=300) == 9

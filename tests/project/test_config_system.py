@@ -28,7 +28,7 @@ def test_bad_train_config_errors_read_file_line_field_expectation_and_did_you_me
     with pytest.raises(ConfigError) as caught:
         load_config(path)
     lines = str(caught.value).splitlines()
-    assert f"{path}:1: algo: expected one of 'sac', 'td3', 'ddpg', 'a2c', 'ppo', 'sarl', got 'sca'; did you mean 'sac'?" in lines
+    assert f"{path}:1: algo: expected one of 'sac', 'td3', 'ddpg', 'a2c', 'ppo', 'recurrent_ppo', 'sarl', got 'sca'; did you mean 'sac'?" in lines
     assert any(line.startswith(f"{path}:4: extractor.leog_latnt: unknown key 'leog_latnt'; did you mean 'leog_latent'?")
                for line in lines)
     assert f"{path}:5: seed: expected an integer, got 'many'" in lines
@@ -52,8 +52,8 @@ def test_bad_experiment_file_errors_read_file_line_field_expectation_and_did_you
     line = next(n for n, text in enumerate(path.read_text().splitlines(), 1) if "tdd3" in text)
     with pytest.raises(ExperimentError) as caught:
         load_experiment(path)
-    assert str(caught.value) == (f"{path}:{line}: configurations.0.train.algo: expected one of 'sac', 'td3', 'ddpg', 'a2c', 'ppo', 'sarl', "
-                                 "got 'tdd3'; did you mean 'td3'? (configuration 'lidar')")
+    assert str(caught.value) == (f"{path}:{line}: configurations.0.train.algo: expected one of 'sac', 'td3', 'ddpg', 'a2c', 'ppo', "
+                                 "'recurrent_ppo', 'sarl', got 'tdd3'; did you mean 'td3'? (configuration 'lidar')")
 
 
 def test_an_experiment_train_error_in_the_defaults_points_at_the_defaults(tmp_path):
@@ -153,7 +153,9 @@ def test_factory_algorithm_classes_cover_exactly_the_registry_names():
     from crowdnav.agents.networks.size import kind_of, policy_kind
 
     # the head layout the network-size count reads from a registry entry is the one of SB3's policy class
-    assert all(kind_of(name) == policy_kind(CLASSES[name].policy_aliases["MultiInputPolicy"]) for name in ALGORITHM_NAMES)
+    from crowdnav.registry import ALGORITHM_SPECS
+
+    assert all(kind_of(name) == policy_kind(CLASSES[name].policy_aliases[ALGORITHM_SPECS[name].policy]) for name in ALGORITHM_NAMES)
     assert all(description.endswith(".") for description in ALGORITHMS.values())
 
 
@@ -186,7 +188,7 @@ def test_algorithm_properties_come_from_the_registry_entries_and_registered_name
 
     assert OFF_POLICY_ALGORITHMS == tuple(name for name, spec in ALGORITHM_SPECS.items() if spec.off_policy) == ("sac", "td3", "ddpg")
     assert [name for name, spec in ALGORITHM_SPECS.items() if spec.exploration_noise] == ["td3", "ddpg"]
-    with pytest.raises(ConfigError, match="algo: expected one of 'sac', 'td3', 'ddpg', 'a2c', 'ppo', 'sarl', got 'walker'"):
+    with pytest.raises(ConfigError, match="algo: expected one of 'sac', 'td3', 'ddpg', 'a2c', 'ppo', 'recurrent_ppo', 'sarl', got 'walker'"):
         config_from_mapping({"algo": "walker"})
     spec = AlgorithmSpec("A test walker.", off_policy=True, builder=object)
     register_algorithm("walker", spec)
