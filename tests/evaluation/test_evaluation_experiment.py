@@ -27,7 +27,7 @@ def test_shipped_experiments_cover_figure_4_the_default_and_the_reference_agents
                                           "anticipate_circle_sarl_deep", "anticipate_circle_sarl_rl_short", "anticipate_circle_sarl_rl_memory",
                                           "anticipate_circle_sarl_rl_bound", "robots_goal_frame", "room_sarl_figure4",
                                           "track_crowded_open_space", "track_station_hall", "track_robots_crossing_hall",
-                                          "recurrent_crowded_open_space"}
+                                          "recurrent_crowded_open_space", "room_sarl_ensemble_figure4"}
     labels = {name: [c.name for c in load_experiment(name).configurations] for name in shipped_experiments()}
     assert labels["encoders"] == ["frozen", "finetune", "scratch"]
     assert labels["modalities"] == labels["modalities_paper"] == ["leog", "lidar", "closest_obstacle"]
