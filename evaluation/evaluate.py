@@ -17,7 +17,13 @@
   classes and sb3-contrib's algorithms are refused; a crowdnav checkpoint's own ``model.zip``
   loads as its checkpoint folder;
 * a crowdnav training run folder or checkpoint (its own modalities and scenario settings unless
-  ``--scenario`` names another scenario); only its parameters are loaded.
+  ``--scenario`` names another scenario); only its parameters are loaded;
+* a shared robot policy's run or checkpoint (``crowdnav train --agents robots``): its network drives
+  every robot of the scenario (:class:`crowdnav.evaluation.robot_rollout.RobotEpisodes`), one row per
+  robot per test episode, as an experiment with ``agents: robots`` evaluates it; on a track with
+  several robots it drives the first robot only, the others social-force robots, as the track
+  defines (:class:`crowdnav.evaluation.robot_rollout.FirstRobot`). Another scenario, ``--set`` or
+  ``--modalities`` is refused in one line where it changes its robots or what its network reads.
 
 The episodes are the test seeds ``test_seed_base``, ``test_seed_base + 1``, ... (default 0-19,
 the protocol's held-out episodes; use e.g. 500 for final rankings): the same for every policy.
@@ -47,6 +53,8 @@ from typing import Any
 
 import numpy as np
 from crowdnav.evaluation.played_options import OptionRefusedError, check_played_world, refuse_modalities, run_env_options
+from crowdnav.evaluation.result_table import episode_csv
+from crowdnav.evaluation.robot_rollout import ROBOTS_AGENTS
 
 from crowdnav.errors import CrowdNavError
 
@@ -279,8 +287,21 @@ def evaluate_policy(spec: str, scenario: str | None, out: str | Path, *, modalit
     options: dict[str, Any] = {"scenario": scenario, "modalities": list(modalities) if modalities else None,
                                "overrides": dict(overrides or {})}
     options = {key: value for key, value in options.items() if value is not None}
-    configuration, label, act, privileged, env_options = resolve_policy(spec, options)
-    declared = _declared_observations(spec, privileged, env_options)
+    robots: Any = None
+    declared: list[str] | str
+    from crowdnav.evaluation.evaluate_robots import RobotsPolicyError, is_shared_robots_policy, resolve_robots_policy, robot_keys
+
+    if is_shared_robots_policy(spec):  # one network for every robot: its own rows (load_policy refuses it)
+        try:
+            run, robots, env_options = resolve_robots_policy(spec, options, track)
+        except (OptionRefusedError, RobotsPolicyError) as error:
+            raise PolicyError(str(error)) from None
+        label = _run_name(run)  # the run's name, also for its checkpoint's model.zip
+        configuration = _safe(label)
+        act, privileged, declared = robots, False, robot_keys(env_options)
+    else:
+        configuration, label, act, privileged, env_options = resolve_policy(spec, options)
+        declared = _declared_observations(spec, privileged, env_options)
     if track is not None:
         env_options = {**env_options, "scenario": track.scenario, "overrides": dict(options["overrides"])}  # a run's own settings never win
         if isinstance(declared, list):  # what it reads must be allowed (baseline:onboard: the plan observation's inputs)
@@ -306,9 +327,19 @@ def evaluate_policy(spec: str, scenario: str | None, out: str | Path, *, modalit
 
             bar = tqdm(total=episodes, unit="ep", desc=f"evaluate {label}", leave=False)
         leading = dict(zip((*RUN_COLUMNS, "training_episodes", "evaluation"), (EXPERIMENT, configuration, label, 0, 0, 0), strict=True))
+        on_end = bar.update if bar is not None else None
         try:
-            table, steps, outcomes = _play(_guarded(act, spec), env_options, protocol.test_seeds, privileged, leading,
-                                           bar.update if bar is not None else None)
+            if robots is not None and track is None:  # every robot driven by the shared network: one row per robot
+                from crowdnav.evaluation.evaluate_robots import play_robots
+
+                table, steps, outcomes = play_robots(robots, env_options, protocol.test_seeds, leading, on_end)
+            else:
+                if robots is not None:  # the track's game: the first robot evaluated, the env's social-force robots the others
+                    from crowdnav.evaluation.evaluate_robots import observation_space
+                    from crowdnav.evaluation.robot_rollout import FirstRobot
+
+                    act = FirstRobot(robots, observation_space(env_options))
+                table, steps, outcomes = _play(_guarded(act, spec), env_options, protocol.test_seeds, privileged, leading, on_end)
         except PolicyError:
             raise
         except (ValueError, TypeError) as error:  # an action of the wrong shape or type, from the user's policy
@@ -330,6 +361,10 @@ def evaluate_policy(spec: str, scenario: str | None, out: str | Path, *, modalit
         }
         if track is not None:
             meta["track"] = track.identity()
+        if robots is not None:  # whom the shared network drove; env.agents: the robots-only env played every robot
+            meta["robots"] = robots.robots if track is None else robots.robots[:1]
+            if track is None:
+                meta["env"] = {**env_options, "agents": ROBOTS_AGENTS}
         return install_result(folder, lambda staging: (atomic_write_text(staging / TEST_FILE, table), atomic_write_json(staging / META_FILE, meta)))
 
 
@@ -385,27 +420,3 @@ def _observation_keys(env_options: Mapping[str, Any]) -> list[str]:
         return list(env.observation_space.keys())  # type: ignore[attr-defined]
     finally:
         env.close()
-
-
-def _cell(value: Any) -> str:
-    """A CSV cell as pandas writes it (``nan`` for missing numbers; floats at full precision)."""
-    if isinstance(value, (bool, np.bool_)):
-        return str(bool(value))
-    if isinstance(value, (int, np.integer)):
-        return str(int(value))
-    if isinstance(value, (float, np.floating)):
-        return "nan" if value != value else repr(float(value))
-    return "" if value is None else str(value)
-
-
-def episode_csv(rows: Sequence[Mapping[str, Any]]) -> str:
-    """Per-episode rows (dicts with the same keys, in order) as the result table's CSV text, without pandas."""
-    import csv
-    import io
-
-    buffer = io.StringIO()
-    writer = csv.writer(buffer, lineterminator="\n")
-    columns = list(rows[0]) if rows else []
-    writer.writerow(columns)
-    writer.writerows([_cell(row[column]) for column in columns] for row in rows)
-    return buffer.getvalue()

@@ -12,6 +12,10 @@ Each robot's row has the columns of a single-robot test episode (:mod:`crowdnav.
 :func:`crowdnav.evaluation.metrics.episode_metrics`, measured on that robot and the humans) plus
 ``robot``, the robot's name. The leaderboard's rates over these rows are the mean over robots
 and episodes; :func:`robot_rates` breaks them down per robot.
+
+:class:`FirstRobot` plays a shared robot policy the other way, as a track with several robots
+defines its game: the network drives the first robot of the Gymnasium env, which drives the others
+with the social-force robot (one row per episode, the first robot's).
 """
 
 from __future__ import annotations
@@ -51,15 +55,18 @@ class RobotEpisodes:
         self.env = parallel_env(**self.env_options, humans_as_agents=False, fixed_agents=True, flat_observations=True)
         self.robots = list(self.env.possible_agents)
 
-    def run(self, policy: Any, *, privileged: bool = False) -> list[dict[str, Any]]:
+    def run(self, policy: Any, *, privileged: bool = False, on_end: Callable[[], None] | None = None) -> list[dict[str, Any]]:
         """One row per robot per seed (seed order, robots in scenario order).
 
         ``policy``: a shared robot policy (``policy.act(observations, infos) -> {robot: action}``),
         or with ``privileged`` a scripted robot policy called with each running robot's view.
+        ``on_end`` is called once per episode as it ends (a progress bar).
         """
         rows = []
         for i, seed in enumerate(self.seeds):
             rows.extend(self._episode(i, seed, policy, privileged))
+            if on_end is not None:
+                on_end()
         return rows
 
     def _episode(self, i: int, seed: int, policy: Any, privileged: bool) -> list[dict[str, Any]]:
@@ -103,6 +110,32 @@ class RobotEpisodes:
 
     def close(self) -> None:
         self.env.close()
+
+
+class FirstRobot:
+    """A shared robot policy driving the first robot only, as a batch policy of the Gymnasium env's test episodes.
+
+    What a track with several robots plays (:data:`crowdnav.evaluation.track.FIRST_ROBOT_NOTE`): the
+    first robot is evaluated, the env drives the others with the social-force robot. The shared
+    network reads the first robot's observation as it did in training: the Gymnasium env's Dict is
+    that robot's observation, flattened in its keys' order as the robots-only env flattens it, then
+    scaled and given robot 0's one-hot (:meth:`crowdnav.agents.marl.robots.RobotsPolicy.inputs`).
+    ``space``: the Gymnasium env's observation space.
+    """
+
+    def __init__(self, policy: Any, space: Any):
+        self.policy, self.space, self.name = policy, space, policy.robots[0]
+
+    def __call__(self, batch: Mapping[str, np.ndarray]) -> np.ndarray:
+        from gymnasium import spaces
+
+        count = len(next(iter(batch.values())))
+        flat = [np.asarray(spaces.flatten(self.space, {key: batch[key][i] for key in self.space.spaces}), np.float32)
+                for i in range(count)]
+        actions, _ = self.policy.network.predict(np.stack([self.policy.observe(0, row) for row in flat]), deterministic=True)
+        robots = self.policy.robots  # every robot named, only the first acting: its kinematics turn its command
+        return np.stack([np.asarray(self.policy.commands({self.name: np.asarray(action, np.float32)}, robots, {self.name: row})[self.name],
+                                    np.float32) for action, row in zip(actions, flat, strict=True)])
 
 
 def _final(previous: np.ndarray, sim: Any) -> np.ndarray:

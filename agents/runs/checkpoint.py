@@ -276,8 +276,9 @@ def load_policy(path: str | Path, device: str = "cpu", *, trusted: bool = False,
     if info.get("agents") == "robots":  # crowdnav.agents.marl.robots's shared policy: not one robot's policy, whatever its zip holds
         raise SharedRobotPolicyError(f"{folder} is a shared robot policy (agents: robots), one network driving every robot of its "
                                      "scenario at once, not one robot's policy: "
-                                     "play it with `crowdnav render`, rank it in an experiment with agents: robots, or load it "
-                                     "with crowdnav.agents.load_robots_policy (docs/agents.md#several-robots-shared-parameter-ppo)")
+                                     "play it with `crowdnav render`, score it with `crowdnav evaluate` (one row per robot), rank it "
+                                     "in an experiment with agents: robots, or load it with crowdnav.agents.load_robots_policy "
+                                     "(docs/agents.md#several-robots-shared-parameter-ppo)")
     encoder = None
     if info.get("leog_encoder"):
         from crowdnav.agents.networks.pretrain import load_encoder

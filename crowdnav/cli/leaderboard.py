@@ -38,8 +38,9 @@ def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) ->
 
     evaluate = subparsers.add_parser(
         "evaluate", help="evaluate any policy on a scenario's or a track's fixed test episodes, ranked by `crowdnav leaderboard`",
-        description="POLICY: a crowdnav run folder or checkpoint, an SB3 model .zip, module:function (one observation dict "
-                    "-> 2 numbers), or baseline:NAME (straight, social_force, orca, predictive, oracle). Plays the test "
+        description="POLICY: a crowdnav run folder or checkpoint (a shared robot policy, train --agents robots, drives every "
+                    "robot: one row per robot per episode; on a track, the first robot), an SB3 model .zip, module:function "
+                    "(one observation dict -> 2 numbers), or baseline:NAME (straight, social_force, orca, predictive, oracle). Plays the test "
                     "episodes with seeds --test-seed-base, +1, ... (or the track's) and writes "
                     "OUT/evaluate/<name>--<scenario>/seeds_<first>-<last>/ in the protocol's format (docs/evaluate.md); "
                     "existing results are kept unless --force.",
@@ -165,9 +166,12 @@ def evaluate_command(args: argparse.Namespace) -> int:
             return stopped.exit_status
     from crowdnav.evaluation.storage import META_FILE, read_json
 
-    final = read_json(folder / META_FILE)["final"]
-    print(f"{args.policy}: " + ", ".join(f"{outcome} {rate:.0%}" for outcome, rate in final.items()) + f" on {episodes} test episodes"
-          + (f" of track {track.label}" if track else ""))
+    meta = read_json(folder / META_FILE)
+    robots = meta.get("robots") or []
+    # a shared robot policy: rates over every robot's row, or (a track) the first robot's, the others the track's social-force robots
+    played = f" x {len(robots)} robots ({', '.join(robots)})" if len(robots) > 1 else f" (it drives {robots[0]})" if robots else ""
+    print(f"{args.policy}: " + ", ".join(f"{outcome} {rate:.0%}" for outcome, rate in meta["final"].items()) + f" on {episodes} test episodes"
+          + played + (f" of track {track.label}" if track else ""))
     rank = f"crowdnav leaderboard --track {track.name} {args.out}" if track else f"crowdnav leaderboard {args.out}"
     print(f"wrote {folder}; rank with: {rank}")
     return 0

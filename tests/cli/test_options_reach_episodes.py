@@ -160,10 +160,14 @@ def test_more_episodes_than_the_bound_are_refused_in_one_line(runs, form, tmp_pa
     assert not (tmp_path / "evaluate").exists()
 
 
-@pytest.mark.parametrize("options", [[], ["--set", "max_steps=3"], ["--modalities", "goal"], ["--episodes", "1"]])
-def test_evaluate_refuses_a_shared_robot_policy_whatever_the_options(runs, options, tmp_path, capsys):
-    assert main(["evaluate", runs["robots"], "--scenario", HALL, "--out", str(tmp_path), *options]) == 1
-    assert "is a shared robot policy (agents: robots)" in _one_line(capsys)
+def test_evaluate_plays_a_shared_robot_policy_with_set_and_episodes_and_refuses_other_modalities(runs, tmp_path, capsys):
+    """Its rows, one per robot per episode, and the other refusals: tests/cli/test_robots_evaluate.py."""
+    assert main(["evaluate", runs["robots"], "--scenario", HALL, "--out", str(tmp_path), "--episodes", "1", "--set", "max_steps=3",
+                 "--no-progress"]) == 0
+    meta, rows = _result(tmp_path)
+    assert meta["env"]["overrides"] == {"max_steps": 3} and len(rows) == 3 and all(int(row["steps"]) <= 3 for row in rows)
+    assert main(["evaluate", runs["robots"], "--scenario", HALL, "--out", str(tmp_path / "other"), "--modalities", "goal"]) == 1
+    assert "--modalities goal: " in _one_line(capsys) and not (tmp_path / "other").exists()
 
 
 def _render(policy: str, out: Path, *options: str, scenario: str = "open_space") -> int:

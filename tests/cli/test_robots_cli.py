@@ -1,5 +1,6 @@
-"""The command line with a several-robots checkpoint (`crowdnav train --agents robots`): render plays it, the commands
-that take one robot's policy refuse it in one line saying what to use instead; export's zips; render's raising policy."""
+"""The command line with a several-robots checkpoint (`crowdnav train --agents robots`): render plays it (evaluate too:
+test_robots_evaluate.py), the commands that take one robot's policy refuse it in one line saying what to use instead;
+export's zips; render's raising policy."""
 
 from __future__ import annotations
 
@@ -74,11 +75,10 @@ def test_render_takes_the_scenario_file_a_robots_run_was_trained_in_written_rela
 
 
 @pytest.mark.parametrize("command", [
-    ["evaluate", "{run}", "--scenario", HALL, "--episodes", "1", "--out", "{tmp}/results"],
     ["trajectories", "{run}", "--episodes", "1", "--out", "{tmp}/trajectories"],
     ["export", "{run}", "--out", "{tmp}/policy.onnx"],
     ["export", "{run}/checkpoint/model.zip", "--out", "{tmp}/policy.onnx"],  # its own model.zip: the same checkpoint
-], ids=["evaluate", "trajectories", "export", "export-model-zip"])
+], ids=["trajectories", "export", "export-model-zip"])  # evaluate plays it: tests/cli/test_robots_evaluate.py
 def test_one_robot_commands_refuse_a_robots_checkpoint_saying_what_it_is_and_what_to_use(robots_run, tmp_path, capsys, command):
     argv = [part.format(run=robots_run, tmp=tmp_path) for part in command]
     assert main(argv) == 1
