@@ -28,7 +28,7 @@ FIGURE4_EXPERIMENTS = ("modalities", "fusion", "paradigms", "modalities_paper", 
 """The experiments benchmarks/run_figure4.sh runs (its command is named beside theirs)."""
 
 
-def facts(folder: Path) -> str:
+def facts(folder: Path, workers: int = 2) -> str:
     experiment = yaml.safe_load((folder / "experiment.yaml").read_text(encoding="utf-8"))
     protocol = experiment["protocol"]
     metas = [json.loads(path.read_text(encoding="utf-8")) for path in sorted(folder.glob("*/*/meta.json"))]
@@ -47,7 +47,7 @@ def facts(folder: Path) -> str:
     first = experiment["configurations"][0].get("train", {})
     defaults = experiment.get("defaults") or {key: first[key] for key in ("scenario", "overrides", "reward_weights") if key in first}
     lines = [
-        "```bash", f"crowdnav benchmark {folder.name} --workers 2 --no-video"
+        "```bash", f"crowdnav benchmark {folder.name} --workers {workers} --no-video"
         + ("   # or benchmarks/run_figure4.sh" if folder.name in FIGURE4_EXPERIMENTS else ""), "```", "",
         f"* **Protocol:** {_budget(protocol)} on the same "
         f"{protocol['test_episodes']} held-out test episodes, {protocol['seeds']} seeds per configuration, sliding window "
@@ -55,7 +55,7 @@ def facts(folder: Path) -> str:
         f"* **Setting:** scenario `{defaults.get('scenario')}`, overrides `{defaults.get('overrides', {})}`, reward "
         f"`{defaults.get('reward_weights', {}) or {'preset': 'default'}}`; configurations: "
         + ", ".join(f"`{c['name']}` ({c.get('label', c['name'])})" for c in experiment["configurations"]) + ".",
-        f"* **Runs:** {len(learned)} ({elapsed}{total / 3600:.1f} h summed over runs, 2 at a time on the 2-core machine).",
+        f"* **Runs:** {len(learned)} ({elapsed}{total / 3600:.1f} h summed over runs, {_at_a_time(workers)} on the 2-core machine).",
         f"* **Code:** commit(s) {', '.join(commits)}.",
     ]
     return "\n".join(lines) + "\n"
@@ -68,13 +68,18 @@ def _budget(protocol: dict) -> str:
     return f"{protocol['train_episodes']} training episodes, evaluation every {protocol['eval_every']}"
 
 
+def _at_a_time(workers: int) -> str:
+    return "one at a time" if workers == 1 else f"{workers} at a time"
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("folder", type=Path, help="RESULTS/<experiment> written by crowdnav benchmark")
     parser.add_argument("--docs", type=Path, default=Path("docs/results"))
+    parser.add_argument("--workers", type=int, default=2, help="the --workers the benchmark ran with (the facts say it)")
     args = parser.parse_args()
     folder = args.folder.resolve()
-    block = facts(folder)
+    block = facts(folder, args.workers)
     target = args.docs / folder.name
     target.mkdir(parents=True, exist_ok=True)
     for name in FILES:
