@@ -12,26 +12,13 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-import yaml
 
 from crowdnav.cli import main
+from tests.cli.conftest import HALL
 
 pytest.importorskip("torch")
 
-HALL = "robots_crossing_hall"
 ROBOTS = ["east_bound", "west_bound", "north_bound"]
-
-
-@pytest.fixture(scope="module")
-def robots_run(tmp_path_factory) -> Path:
-    """The smallest run the CLI trains: one rollout of 2 worlds x 3 robots x 16 steps (96 robot steps, ~2 s)."""
-    folder = tmp_path_factory.mktemp("robots")
-    config = {"scenario": HALL, "algo": "ppo", "num_envs": 2, "timesteps": 96, "n_steps": 16, "batch_size": 48,
-              "net_arch": [16], "seed": 0, "out": str(folder / "run"), "progress": False, "overrides": {"max_steps": 20},
-              "sensors": {"lidar": {"beams": 16}}}
-    (folder / "robots.yaml").write_text(yaml.safe_dump(config), encoding="utf-8")
-    assert main(["train", "--config", str(folder / "robots.yaml"), "--agents", "robots"]) == 0
-    return folder / "run"
 
 
 def _evaluate(policy: Path, out: Path, *options: str) -> int:
