@@ -71,9 +71,7 @@ class HeldOutEpisodes:
             if acting is None:
                 actions = np.stack([policy(envs[i].simulator.robot_view(0)) for i in running])  # several robots: it sees the others
             else:
-                rows = range(len(envs)) if acting.recurrent else running
-                batch = {key: np.stack([observations[i][key] for i in rows]) for key in observations[0]}
-                actions = acting(batch, np.asarray(running) if acting.recurrent else np.arange(len(running)))
+                actions = acting(partial(_stacked, observations), running)
             still = []
             for action, i in zip(actions, running, strict=True):
                 observations[i], reward, terminated, truncated, info = envs[i].step(action)
@@ -100,8 +98,7 @@ class HeldOutEpisodes:
         while running.any():
             live = np.flatnonzero(running)
             actions = np.zeros((count, 2))
-            actions[live] = acting(observations if acting.recurrent else {key: values[live] for key, values in observations.items()},
-                                   live if acting.recurrent else np.arange(len(live)))
+            actions[live] = acting(partial(_rows_of, observations), live)
             observations, rewards, terminated, truncated, infos = env.step(actions)
             force = env.robot_social_force()
             for i in live.tolist():  # bookkeeping of the trajectories, per running episode
@@ -135,6 +132,16 @@ class HeldOutEpisodes:
             self._vector.close()
 
 
+def _rows_of(observations: Mapping[str, np.ndarray], rows: Any) -> dict[str, np.ndarray]:
+    """Rows ``rows`` of a vector env's observations, per key."""
+    return {key: values[rows] for key, values in observations.items()}
+
+
+def _stacked(observations: Sequence[Mapping[str, np.ndarray]], rows: Any) -> dict[str, np.ndarray]:
+    """The single envs' observations ``rows``, stacked per key."""
+    return {key: np.stack([observations[i][key] for i in rows]) for key in observations[0]}
+
+
 class _Acting:
     """A learned policy's actions for the running episodes, one call per step.
 
@@ -148,13 +155,13 @@ class _Acting:
         self.state: Any = None
         self.starts = np.ones(count, dtype=bool)
 
-    def __call__(self, batch: Mapping[str, np.ndarray], rows: np.ndarray) -> np.ndarray:
-        """The actions of ``rows`` of ``batch`` (a recurrent policy: the batch holds every episode)."""
+    def __call__(self, stack: Callable[[Any], Mapping[str, np.ndarray]], running: Sequence[int] | np.ndarray) -> np.ndarray:
+        """The actions of the ``running`` episodes; ``stack(rows)`` stacks those episodes' observations per key."""
         if not self.recurrent:
-            return np.asarray(self.policy(batch)).reshape(len(rows), -1)
-        actions, self.state = self.policy.predict(batch, self.state, self.starts)
+            return np.asarray(self.policy(stack(running))).reshape(len(running), -1)
+        actions, self.state = self.policy.predict(stack(np.arange(len(self.starts))), self.state, self.starts)
         self.starts = np.zeros_like(self.starts)
-        return np.asarray(actions).reshape(len(self.starts), -1)[rows]
+        return np.asarray(actions).reshape(len(self.starts), -1)[np.asarray(running)]
 
 
 class _Log:

@@ -205,12 +205,14 @@ class AgentPolicy:
     """
 
     def __init__(self, model: BaseAlgorithm | Algorithm, info: Mapping[str, Any], encoder: Any = None):
-        from crowdnav.agents.training.algorithm_protocol import SB3Predictor, as_predictor
+        from crowdnav.agents.training.algorithm_protocol import SB3Predictor, as_predictor, is_recurrent
 
         self.agent = as_predictor(model)
         """The agent that acts (crowdnav.agents.training.algorithm_protocol): an SB3 model through its SB3Algorithm (or SB3Predictor)."""
         self.model = self.agent.model if isinstance(self.agent, SB3Predictor) else self.agent
         """The SB3 model of an SB3 algorithm, else the agent itself."""
+        self.recurrent = is_recurrent(self.agent)
+        """Whether the agent carries a state between steps (an LSTM policy): play it with :meth:`predict`, not a call."""
         self.info = dict(info)
         self.env_options: dict[str, Any] = dict(info["env"])
         """Keyword arguments of CrowdNavEnv that give the observations this policy expects."""
@@ -226,13 +228,6 @@ class AgentPolicy:
     def preprocess(self, observation: Mapping[str, np.ndarray]) -> dict[str, np.ndarray]:
         """A raw CrowdNavEnv observation (or batch) -> the model's input: normalised, LEOG encoded if trained so."""
         return agent_observation(observation, self.scales, self.encoder)
-
-    @property
-    def recurrent(self) -> bool:
-        """Whether the agent carries a state between steps (an LSTM policy): play it with :meth:`predict`, not a call."""
-        from crowdnav.agents.training.algorithm_protocol import is_recurrent
-
-        return is_recurrent(self.agent)
 
     def predict(self, observation: Mapping[str, np.ndarray], state: Any = None,
                 episode_start: np.ndarray | None = None) -> tuple[np.ndarray, Any]:

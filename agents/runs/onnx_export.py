@@ -114,8 +114,9 @@ class RecurrentSB3Actor(SB3Actor):
 
 def sb3_actor(model: Any, keys: list[str]) -> SB3Actor:
     """The exported module of an SB3 model: :class:`RecurrentSB3Actor` for an LSTM policy, else :class:`SB3Actor`."""
-    recurrent = hasattr(model.policy, "lstm_hidden_state_shape")
-    return RecurrentSB3Actor(model, keys) if recurrent else SB3Actor(model, keys)
+    from crowdnav.agents.training.algorithm_protocol import has_lstm_policy
+
+    return RecurrentSB3Actor(model, keys) if has_lstm_policy(model) else SB3Actor(model, keys)
 
 
 class DeployablePolicy(nn.Module):

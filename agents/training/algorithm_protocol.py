@@ -127,13 +127,18 @@ class SB3Predictor:
 
     @property
     def recurrent(self) -> bool:
-        """Whether the policy carries a state between steps (sb3-contrib's LSTM policies: :func:`is_recurrent`)."""
-        return hasattr(self.model.policy, "lstm_hidden_state_shape")
+        """Whether the policy carries a state between steps (:func:`has_lstm_policy`)."""
+        return has_lstm_policy(self.model)
 
     def predict(self, observation: Mapping[str, np.ndarray], state: AgentState = None, episode_start: np.ndarray | None = None,
                 deterministic: bool = True) -> tuple[np.ndarray, AgentState]:
         action, state = self.model.predict(observation, state, episode_start, deterministic)
         return np.asarray(action), state
+
+
+def has_lstm_policy(model: Any) -> bool:
+    """Whether an SB3 model's policy is one of sb3-contrib's LSTM policies (``RecurrentActorCriticPolicy``)."""
+    return hasattr(model.policy, "lstm_hidden_state_shape")
 
 
 def is_recurrent(agent: Any) -> bool:

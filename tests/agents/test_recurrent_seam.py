@@ -12,6 +12,7 @@ from crowdnav.evaluation.rollout import HeldOutEpisodes
 from sb3_contrib import RecurrentPPO
 
 import crowdnav  # noqa: F401  (registers the envs)
+from crowdnav.scenario.library import library_names
 
 pytestmark = pytest.mark.filterwarnings("ignore::DeprecationWarning")
 
@@ -136,3 +137,24 @@ def test_a_trained_recurrent_run_exports_to_onnx_with_its_state_in_and_out(train
         action, h, c = session.run(None, {**batch, "lstm_h": h, "lstm_c": c, EPISODE_START_INPUT: start.astype(np.float32)})
         np.testing.assert_allclose(action, expected, atol=1e-5)
         observations = [env.step(a)[0] for env, a in zip(envs, expected, strict=True)]
+
+
+@pytest.mark.parametrize("scenario", library_names())
+def test_a_recurrent_run_trains_evaluates_and_exports_in_every_library_scenario(tmp_path, scenario):
+    ort = pytest.importorskip("onnxruntime")
+    from crowdnav.agents import load_policy, train
+    from crowdnav.agents.runs.onnx_export import EPISODE_START_INPUT, export_onnx
+
+    train({"scenario": scenario, "algo": "recurrent_ppo", "modalities": ["humans", "closest_obstacle", "goal"], "num_envs": 2,
+           "n_steps": 16, "batch_size": 32, "timesteps": 64, "net_arch": [16], "policy_kwargs": {"lstm_hidden_size": 8},
+           "overrides": {"max_steps": 15}, "out": str(tmp_path / "run"), "progress": False})
+    policy = load_policy(tmp_path / "run")
+    rows = HeldOutEpisodes(policy.env_options, [0, 1]).run(policy)
+    assert [row["test_seed"] for row in rows] == [0, 1] and all(row["steps"] <= 15 for row in rows)
+    session = ort.InferenceSession(str(export_onnx(tmp_path / "run", tmp_path / "policy.onnx")), providers=["CPUExecutionProvider"])
+    observation, _ = policy.make_env().reset(seed=0)
+    batch = {key: np.asarray(value)[None] for key, value in observation.items()}
+    expected, _ = policy.predict(batch, None, np.array([True]))
+    zeros = np.zeros((1, 1, 8), np.float32)
+    action = session.run(["action"], {**batch, "lstm_h": zeros, "lstm_c": zeros, EPISODE_START_INPUT: np.ones(1, np.float32)})[0]
+    np.testing.assert_allclose(action, expected, atol=1e-5)
