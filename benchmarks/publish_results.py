@@ -1,6 +1,6 @@
 """Copy a finished experiment's report into docs/results/<experiment>/ with a README of its facts.
 
-    python benchmarks/publish_results.py results/modalities [--docs docs/results]
+    python benchmarks/publish_results.py results/modalities [--docs docs/results] [--workers N]
 
 Copies the curves (png, pdf), the leaderboard (md, csv) and the per-evaluation rates
 (evaluation_rates.csv) that ``crowdnav benchmark`` wrote, and writes the README's facts block
