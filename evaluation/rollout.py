@@ -18,6 +18,8 @@ from typing import Any
 import numpy as np
 from crowdnav.evaluation.metrics import Trajectory, episode_metrics
 
+from crowdnav.envs.engine import world_frame
+
 BatchPolicy = Callable[[Mapping[str, np.ndarray]], np.ndarray]
 """Observations stacked per key, shape (N, ...) -> actions (N, 2); :class:`crowdnav.agents.AgentPolicy` is one. A policy
 whose ``recurrent`` attribute is True is played through its ``predict(observations, state, episode_start) -> (actions,
@@ -64,7 +66,7 @@ class HeldOutEpisodes:
             return self._run_batched(policy, record, ended)
         envs = self.envs
         observations = [env.reset(seed=seed)[0] for env, seed in zip(envs, self.seeds, strict=True)]
-        log = _Log([env.simulator.positions.copy() for env in envs], [_state(env.simulator) for env in envs] if record else None)
+        log = _Log([env.simulator.positions.copy() for env in envs], [world_frame(env.simulator) for env in envs] if record else None)
         running = list(range(len(envs)))
         acting = None if privileged else _Acting(policy, len(envs))
         while running:
@@ -76,7 +78,7 @@ class HeldOutEpisodes:
             for action, i in zip(actions, running, strict=True):
                 observations[i], reward, terminated, truncated, info = envs[i].step(action)
                 sim = envs[i].simulator  # it updates its arrays in place: the log copies them
-                log.step(i, sim.positions.copy(), partial(_state, sim), complex(sim.robot_social_force), reward)
+                log.step(i, sim.positions.copy(), partial(world_frame, sim), complex(sim.robot_social_force), reward)
                 if terminated or truncated:
                     log.ends[i] = info
                     ended()
@@ -93,7 +95,7 @@ class HeldOutEpisodes:
             self._vector = CrowdNavVectorEnv(num_envs=len(self.seeds), autoreset_mode="Disabled", **self.env_options)
         env, count = self._vector, len(self.seeds)
         observations, _ = env.reset(seed=self.seeds)
-        log = _Log([env.positions(i) for i in range(count)], [_world_state(env, i) for i in range(count)] if record else None)
+        log = _Log([env.positions(i) for i in range(count)], [env.engine.frame(i) for i in range(count)] if record else None)
         running, acting = np.ones(count, dtype=bool), _Acting(policy, count)
         while running.any():
             live = np.flatnonzero(running)
@@ -102,7 +104,7 @@ class HeldOutEpisodes:
             observations, rewards, terminated, truncated, infos = env.step(actions)
             force = env.robot_social_force()
             for i in live.tolist():  # bookkeeping of the trajectories, per running episode
-                log.step(i, env.positions(i), partial(_world_state, env, i), force[i], rewards[i])
+                log.step(i, env.positions(i), partial(env.engine.frame, i), force[i], rewards[i])
                 if terminated[i] or truncated[i]:
                     log.ends[i] = {"outcome": infos["outcome"][i]}
                     if infos.get("_collision_kind", np.zeros(count, dtype=bool))[i]:
@@ -207,28 +209,3 @@ def walking_groups(sim: Any) -> np.ndarray | None:
         return None
     labels: np.ndarray = np.where(together[sim.human_group], sim.human_group, -1)
     return labels
-
-
-def _world_state(env: Any, i: int) -> dict[str, np.ndarray]:
-    """:func:`_state` of world ``i`` of a vector env (several robots: its own simulator's, the other robots included)."""
-    from crowdnav.envs.vector_team import TeamWorlds
-
-    if isinstance(env.batch, TeamWorlds):
-        return _state(env.batch.envs[i].simulator)
-    return {"positions": env.positions(i), "velocities": env.velocities(i),
-            "goals": np.concatenate([[env.robot_goal(i)], env.human_goals(i)]), "respawns": env.human_respawns(i)}
-
-
-def _state(sim: Any) -> dict[str, np.ndarray]:
-    """Positions, velocities and goals of the robot (index 0) and the humans, copied (complex, (n + 1,)); each human's respawns (n,).
-
-    Several robots (``robots:``): the other robots follow the humans (n + R,); NaN once a robot has left the world.
-    """
-    if sim.team is None:
-        return {"positions": sim.positions.copy(), "velocities": sim.velocities.copy(),
-                "goals": np.concatenate([[sim.robot_goal], sim.human_goals]), "respawns": sim.human_respawns.copy()}
-    team = sim.team.state
-    gone = np.where(team.active[1:], 0j, complex(np.nan, np.nan))
-    return {"positions": np.concatenate([sim.positions, team.positions + gone]),
-            "velocities": np.concatenate([sim.velocities, team.velocities + gone]),
-            "goals": np.concatenate([[sim.robot_goal], sim.human_goals, team.goals]), "respawns": sim.human_respawns.copy()}

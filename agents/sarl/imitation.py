@@ -33,18 +33,13 @@ def make_teacher(name: str) -> Any:
 def world_simulators(env: Any) -> list[Any]:
     """Each world's simulator of a :func:`crowdnav.agents.sb3.factory.make_vec_env` env (or a VecEnvWrapper of it), for the teacher.
 
-    Where the vector env holds single envs (one world, or crowds too large to stack) these are their live simulators
-    (read, never stepped: the teacher of one world reads what it read before the vector stack); stacked worlds give
-    a snapshot per call (:meth:`crowdnav.envs.vector.CrowdNavVectorEnv.simulator`), so a teacher that keeps a plan per
-    episode state (the oracle) plans again at every step there.
+    The vector env's engine gives them (:meth:`crowdnav.envs.engine.WorldEngine.simulators`): where it holds single
+    envs (one world, or crowds too large to stack) their live simulators (read, never stepped: the teacher of one
+    world reads what it read before the vector stack); stacked worlds a snapshot per call, so a teacher that keeps a
+    plan per episode state (the oracle) plans again at every step there.
     """
-    from crowdnav.envs.vector_team import TeamWorlds
-
-    batch = env.get_attr("batch")[0]
-    if isinstance(batch, TeamWorlds):
-        return list(batch.simulators())
-    vector = env.unwrapped.env
-    return [vector.simulator(world) for world in range(env.num_envs)]
+    simulators: list[Any] = env.get_attr("engine")[0].simulators()
+    return simulators
 
 
 def discounted_returns(rewards: list[float], discount: float) -> np.ndarray:

@@ -16,15 +16,13 @@ from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
 from crowdnav.batch.memory import keep_freed_memory as _keep_freed_memory
-from crowdnav.batch.simulator import BatchSimulator, StepResult
 from crowdnav.envs.core import ScenarioSource, checked_residual, load_env_world, option_overrides
-from crowdnav.envs.reward import REWARD_TERMS, reward_terms
+from crowdnav.envs.engine import WorldEngine
 from crowdnav.envs.vector_actions import checked_actions, checked_replay, executed
 from crowdnav.envs.vector_infos import end_infos, every_infos, reward_term_infos, same_step_infos
+from crowdnav.envs.vector_stacked import StackedWorlds
 from crowdnav.envs.vector_team import TeamWorlds
 from crowdnav.planning.shield import validate_shield
-from crowdnav.sim.contacts import goal_distance
-from crowdnav.sim.events import outcomes
 from crowdnav.sim.simulator import Simulator
 from crowdnav.worlds.compiled import CompiledWorld
 
@@ -64,11 +62,12 @@ class CrowdNavVectorEnv(VectorEnv):
     * ``DISABLED``: an ended world stays as it ended (its actions are ignored, its flags repeat,
       reward 0) until ``reset(options={"reset_mask": mask})`` resets it (for evaluation).
 
-    A step loops over the crowd sizes present, never over worlds, humans, beams or cells
-    (:mod:`crowdnav.batch.simulator`); resets and goal-rule draws run per world that needs one.
-    One world (``num_envs=1``) and crowds of ``Simulator.grid_from`` humans or more (the single
-    simulator's neighbour grid) are held as single envs instead (:func:`stacks`,
-    :mod:`crowdnav.envs.vector_team`): the same episodes, at the single env's speed per world.
+    **Engine.** The worlds are its ``engine`` (:class:`crowdnav.envs.engine.WorldEngine`), chosen once by
+    :func:`stacks`: stacked in one batch (:class:`crowdnav.envs.vector_stacked.StackedWorlds`: a step loops over
+    the crowd sizes present, never over worlds, humans, beams or cells; resets and goal-rule draws run per world
+    that needs one), or, for one world (``num_envs=1``) and crowds of ``Simulator.grid_from`` humans or more (the
+    single simulator's neighbour grid), held as single envs (:class:`crowdnav.envs.vector_team.TeamWorlds`): the
+    same episodes, at the single env's speed per world. The env itself keeps Gymnasium's conventions only.
 
     **Several robots** (a scenario with ``robots:``): world ``i`` is :class:`crowdnav.envs.CrowdNavEnv`
     with the same ``other_robots`` option (the first robot learns, the others follow their scripted
@@ -119,35 +118,33 @@ class CrowdNavVectorEnv(VectorEnv):
         self.episode_seeds = episode_seeds
         _check_agents(num_envs, world.scenario.humans.max_count)
         self.shield = validate_shield(dict(shield) if isinstance(shield, Mapping) else shield, world)
-        self.batch: BatchSimulator | TeamWorlds
-        if stacks(world, num_envs):
-            self.batch = BatchSimulator(world, num_envs)
-        else:  # one single env per world, stepped in one call (crowdnav.envs.vector_team)
-            self.batch = TeamWorlds(world, num_envs, other_robots)
-            self.modalities = self.batch.modalities  # several robots: the first robot's own (robots.0.modalities)
+        self.engine: WorldEngine
         # worlds that are plain single envs (one robot): when all step, TeamWorlds.step_every steps them
-        self._single_worlds = self.batch if isinstance(self.batch, TeamWorlds) and self.batch.plain else None
+        self._single_worlds: TeamWorlds | None = None
+        if stacks(world, num_envs):
+            self.engine = StackedWorlds(world, num_envs, self.modalities)
+        else:  # one single env per world, stepped in one call (crowdnav.envs.vector_team)
+            team = TeamWorlds(world, num_envs, other_robots)
+            self.engine, self.modalities = team, team.modalities  # several robots: the first robot's own (robots.0.modalities)
+            self._single_worlds = team if team.plain else None
         self.residual = checked_residual(residual, self.modalities)
         if keep_freed_memory:
             _keep_freed_memory()
-        self.num_envs = self.batch.num_worlds
+        self.num_envs = self.engine.num_worlds
         self.metadata = {**self.metadata, "autoreset_mode": self.autoreset_mode}
         self.single_observation_space = spaces.Dict({key: modality.space() for key, modality in self.modalities.items()})
         self.single_action_space = spaces.Box(-1.0, 1.0, shape=(2,), dtype=np.float32)
         self.observation_space = batch_space(self.single_observation_space, self.num_envs)
         self.action_space = batch_space(self.single_action_space, self.num_envs)
-        self._sensors = tuple((key, self.modalities[key]) for key in self.single_observation_space.spaces)
-        weights = self.scenario.reward
-        self._weights = {term: float(getattr(weights, term)) for term in REWARD_TERMS}
         b = self.num_envs
-        self._previous_distance = np.zeros(b)
         self._started = np.zeros(b, dtype=bool)
         self._all_started = False
         self._ended = np.zeros(b, dtype=bool)  # the episode ended at the last step (NEXT_STEP: reset next; DISABLED: wait)
         self._none_ended = True  # not self._ended.any(), kept as a bool: every world steps next (one world: all steps but a reset's)
         self._last_flags = (np.zeros(b, dtype=bool), np.zeros(b, dtype=bool))
         # the modalities' own Boxes (the same objects as the Dict's): a Box's shape is never None
-        self._observations = {key: np.zeros((b, *modality.space().shape), dtype=modality.space().dtype) for key, modality in self._sensors}
+        boxes = {key: self.modalities[key].space() for key in self.single_observation_space.spaces}
+        self._observations = {key: np.zeros((b, *box.shape), dtype=box.dtype) for key, box in boxes.items()}
 
     # ------------------------------------------------------------------ reset
 
@@ -178,28 +175,17 @@ class CrowdNavVectorEnv(VectorEnv):
         return self._copy_observations(), {}
 
     def _reset_worlds(self, worlds: np.ndarray, seeds: Sequence[int | None]) -> None:
-        self.batch.reset(worlds, seeds)
+        self.engine.reset(worlds, seeds)
         self._started[worlds] = True
         self._all_started = bool(self._started.all())
         self._ended[worlds] = False
         self._none_ended = not self._ended.any()
         for flags in self._last_flags:
             flags[worlds] = False
-        if isinstance(self.batch, BatchSimulator):  # single envs keep their own (their Reward)
-            self._previous_distance[worlds] = self._goal_distance(worlds)
 
     def _autoreset(self, worlds: np.ndarray) -> None:
         seeds = [None] * len(worlds) if self.episode_seeds is None else list(self.episode_seeds(worlds))
         self._reset_worlds(worlds, seeds)
-
-    def _goal_distance(self, worlds: np.ndarray) -> np.ndarray:
-        """The robot-goal distance of ``worlds``: :func:`crowdnav.sim.contacts.goal_distance`, the single simulator's kernel."""
-        assert isinstance(self.batch, BatchSimulator)
-        out = np.zeros(self.num_envs)
-        for bucket in self.batch.buckets.values():
-            out[bucket.world] = goal_distance(bucket.state.robot_goal, bucket.state.positions[:, 0])
-        distances: np.ndarray = out[worlds]
-        return distances
 
     # ------------------------------------------------------------------- step
 
@@ -226,12 +212,12 @@ class CrowdNavVectorEnv(VectorEnv):
             every_infos(infos, stepped, stepping)
             none_ended: bool | None = not stepped.ended  # (every world stepped, so in every mode self._ended becomes theirs)
         else:
-            result = self.batch.step(actions, None if every else stepping)
+            result = self.engine.step(actions, None if every else stepping)
             terminated = result.terminated if every else result.terminated & stepping
             truncated = result.truncated & ~terminated if every else result.truncated & stepping & ~terminated
-            outcome, rewards, terms = self._judged(result, stepping, every)
+            outcome, rewards, terms = self.engine.judged(result, stepping, every)
             reward_term_infos(infos, terms, stepping, every)
-            end_infos(infos, self.batch, result, outcome, stepping, self._add_info, every)
+            end_infos(infos, self.engine, result, outcome, stepping, self._add_info, every)
             none_ended = None
         ended = terminated | truncated
         self._observe_all()
@@ -249,7 +235,7 @@ class CrowdNavVectorEnv(VectorEnv):
 
     def _executed(self, actions: np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:
         """The actions the robots execute: the plan plus the policy's action (``residual``), through the shield (and which it replaced)."""
-        return executed(actions, self._observations["plan"] if self.residual else None, self.shield, self.batch)
+        return executed(actions, self._observations["plan"] if self.residual else None, self.shield, self.engine)
 
     def restore_worlds(self, seeds: Sequence[int | None], actions: Any, lengths: Any) -> dict[str, np.ndarray]:
         """Rebuild every world mid-episode (a training resume): world ``i`` reset with ``seeds[i]``, then stepped with ``actions[i, :lengths[i]]``.
@@ -266,11 +252,10 @@ class CrowdNavVectorEnv(VectorEnv):
         for step in range(int(lengths.max(initial=0))):
             active = lengths > step
             applied, _ = self._executed(checked_actions(actions[:, step], b))
-            self.batch.step(applied, None if active.all() else active)
+            self.engine.step(applied, None if active.all() else active)
             if self.residual:  # the next plan is observed after this step
                 self._observe_all()
-        if isinstance(self.batch, BatchSimulator):  # what a step's reward code keeps (single envs: their Reward did)
-            self._previous_distance[:] = self._goal_distance(np.arange(b))
+        self.engine.settle()  # what a step's reward code keeps (the goal distance now)
         self._observe_all()
         return self._copy_observations()
 
@@ -279,26 +264,6 @@ class CrowdNavVectorEnv(VectorEnv):
         if self.autoreset_mode is AutoresetMode.DISABLED:
             return self._last_flags[0] & self._ended, self._last_flags[1] & self._ended
         return np.zeros(self.num_envs, dtype=bool), np.zeros(self.num_envs, dtype=bool)
-
-    def _judged(self, result: StepResult, stepping: np.ndarray, every: bool) -> tuple[np.ndarray, np.ndarray, dict[str, np.ndarray]]:
-        """Every world's outcome ("truncated" where a stepping world runs on, the infos' convention of
-        :func:`crowdnav.envs.vector_infos.end_infos`; None where it did not step), every world's reward (0 where it did not
-        step) and the stepping worlds' reward terms; ``every``: all worlds stepped."""
-        if isinstance(self.batch, TeamWorlds):  # each world's single env judged its own step (the same kernels)
-            return self.batch.judged(None if every else stepping)
-        outcome = outcomes(result.collided & stepping, result.left_world & stepping, result.goal_reached & stepping, stepping)
-        rewards = np.zeros(self.num_envs)
-        rewards[stepping], terms = self._rewards(outcome, stepping)
-        return outcome, rewards, terms
-
-    def _rewards(self, outcome: np.ndarray, stepping: np.ndarray) -> tuple[np.ndarray, dict[str, np.ndarray]]:
-        """:func:`crowdnav.envs.reward.reward_terms` (the single env's kernel) for the stepping worlds."""
-        worlds = np.flatnonzero(stepping)
-        distance = self._goal_distance(worlds)
-        previous = self._previous_distance[worlds]
-        self._previous_distance[worlds] = distance
-        force = self.robot_social_force()[worlds]
-        return reward_terms(self._weights, previous, distance, np.hypot(force.real, force.imag), outcome[worlds])
 
     def _same_step_reset(self, infos: dict[str, Any], ended: np.ndarray) -> dict[str, Any]:
         """Reset the ended worlds now; their last observation and info move to ``final_obs`` / ``final_info``
@@ -313,18 +278,7 @@ class CrowdNavVectorEnv(VectorEnv):
     # ----------------------------------------------------------- observations
 
     def _observe_all(self) -> None:
-        if isinstance(self.batch, TeamWorlds):  # each world's single env observed its first robot
-            for i, observation in enumerate(self.batch.observations):
-                for key, values in self._observations.items():
-                    values[i] = observation[key]
-            return
-        for bucket in self.batch.buckets.values():
-            rows, size = np.arange(len(bucket)), self.batch.chunk_size(bucket.n)
-            for start in range(0, len(rows), size):  # chunks of worlds, as the simulator steps them
-                chunk = rows[start : start + size]
-                state = self.batch.state(bucket, chunk)
-                for key, modality in self._sensors:
-                    self._observations[key][bucket.world[chunk]] = modality.observe_batch(state)
+        self.engine.observe(self._observations)
 
     def _copy_observations(self) -> dict[str, np.ndarray]:
         return {key: values.copy() for key, values in self._observations.items()}
@@ -333,41 +287,26 @@ class CrowdNavVectorEnv(VectorEnv):
 
     def robot_social_force(self) -> np.ndarray:
         """(num_envs,) complex: the humans' social-force repulsion on each robot (the reward's social term reads its length)."""
-        if isinstance(self.batch, TeamWorlds):
-            return self.batch.social_force()
-        out = np.zeros(self.num_envs, dtype=complex)
-        for bucket in self.batch.buckets.values():
-            out[bucket.world] = bucket.repulsion[:, 0]
-        return out
+        return self.engine.social_force()
 
     def positions(self, world: int) -> np.ndarray:
         """(n+1,) complex: robot then humans of ``world`` (a copy)."""
-        return self._row("positions", world)
+        return self.engine.row("positions", world)
 
     def velocities(self, world: int) -> np.ndarray:
         """(n+1,) complex: velocities over the last step of ``world`` (a copy)."""
-        return self._row("velocities", world)
+        return self.engine.row("velocities", world)
 
     def human_goals(self, world: int) -> np.ndarray:
         """(n,) complex: the humans' current goals in ``world`` (a copy)."""
-        return self._row("human_goals", world)
+        return self.engine.row("human_goals", world)
 
     def human_respawns(self, world: int) -> np.ndarray:
         """(n,) int: how many times each human of ``world`` respawned this episode (a copy; ``Simulator.human_respawns``)."""
-        return self._row("human_respawns", world)
-
-    def _row(self, name: str, world: int) -> np.ndarray:
-        if isinstance(self.batch, TeamWorlds):
-            return self.batch.row(name, world)
-        bucket, row = self.batch.locate(world)
-        values: np.ndarray = getattr(bucket.state, name)[row].copy()
-        return values
+        return self.engine.row("human_respawns", world)
 
     def robot_goal(self, world: int) -> complex:
-        if isinstance(self.batch, TeamWorlds):
-            return complex(self.batch.envs[world].simulator.robot_goal)
-        bucket, row = self.batch.locate(world)
-        return complex(bucket.state.robot_goal[row])
+        return self.engine.robot_goal(world)
 
     def simulator(self, world: int) -> Simulator:
         """A snapshot of ``world`` as a :class:`crowdnav.Simulator`, built on each call: a copy of its current state.
@@ -375,11 +314,11 @@ class CrowdNavVectorEnv(VectorEnv):
         Its state and geometry are the world's at the moment of the call (call again after a step);
         it shares nothing writable with the vector env, so stepping it leaves the world as it is.
         """
-        return self.batch.simulator(world)
+        return self.engine.simulator(world)
 
 
 def stacks(world: CompiledWorld, num_envs: int) -> bool:
-    """Whether the vector env steps ``num_envs`` worlds of ``world`` as one :class:`BatchSimulator`, else as single envs
+    """Whether the vector env steps ``num_envs`` worlds of ``world`` stacked (:class:`StackedWorlds`), else as single envs
     (:class:`TeamWorlds`): one robot per world, more than one world, crowds below :attr:`Simulator.grid_from` humans."""
     return world.scenario.robots is None and num_envs > 1 and world.scenario.humans.max_count < Simulator.grid_from
 

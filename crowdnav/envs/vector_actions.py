@@ -12,9 +12,8 @@ from typing import Any
 
 import numpy as np
 
-from crowdnav.batch.simulator import BatchSimulator
 from crowdnav.envs.core import real_array
-from crowdnav.envs.vector_team import TeamWorlds
+from crowdnav.envs.engine import WorldEngine
 from crowdnav.planning.shield import Shield
 
 SMALL_BATCH = 8
@@ -34,31 +33,16 @@ def checked_actions(actions: Any, num_envs: int) -> np.ndarray:
 
 
 def executed(
-    actions: np.ndarray, plan: np.ndarray | None, shield: Shield | None, batch: BatchSimulator | TeamWorlds
+    actions: np.ndarray, plan: np.ndarray | None, shield: Shield | None, engine: WorldEngine
 ) -> tuple[np.ndarray, np.ndarray | None]:
     """The actions the robots execute: ``plan`` (the residual env's observed plans) plus the policy's action, through the
-    shield (and which worlds' actions it replaced; None without a shield)."""
+    shield (the engine's call, as the single env's world by world bit for bit; and which worlds' actions it replaced;
+    None without a shield)."""
     if plan is not None:  # each policy action corrects the plan its world observed
         actions = actions + plan
     if shield is None:
         return actions, None
-    return shielded(shield, batch, actions)
-
-
-def shielded(shield: Shield, batch: BatchSimulator | TeamWorlds, actions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Every world's action through the shield (as the single env's, world by world bit for bit), and which it replaced."""
-    out, replaced = actions.copy(), np.zeros(batch.num_worlds, dtype=bool)
-    if isinstance(batch, TeamWorlds):  # single envs (one robot each: the shield refuses several): the single env's own call
-        for i, env in enumerate(batch.envs):
-            out[i], replaced[i] = shield.single(env.simulator, actions[i])
-        return out, replaced
-    for bucket in batch.buckets.values():
-        rows, size = np.arange(len(bucket)), batch.chunk_size(bucket.n)
-        for start in range(0, len(rows), size):
-            chunk = rows[start : start + size]
-            worlds = bucket.world[chunk]
-            out[worlds], replaced[worlds] = shield.batch(batch.state(bucket, chunk), actions[worlds])
-    return out, replaced
+    return engine.shielded(shield, actions)
 
 
 def checked_replay(actions: Any, lengths: Any, num_envs: int) -> tuple[np.ndarray, np.ndarray]:

@@ -12,9 +12,10 @@ from typing import Any
 
 import numpy as np
 
-from crowdnav.batch.simulator import BatchSimulator, StepResult
+from crowdnav.batch.simulator import StepResult
+from crowdnav.envs.engine import WorldEngine
 from crowdnav.envs.reward import REWARD_TERMS
-from crowdnav.envs.vector_team import EveryStep, TeamWorlds
+from crowdnav.envs.vector_team import EveryStep
 from crowdnav.sim.events import Collision
 
 MASKED_TERMS = tuple((term, f"_{term}") for term in REWARD_TERMS)
@@ -51,7 +52,7 @@ def every_infos(infos: dict[str, Any], stepped: EveryStep, stepping: np.ndarray)
 
 def end_infos(
     infos: dict[str, Any],
-    batch: BatchSimulator | TeamWorlds,
+    engine: WorldEngine,
     result: StepResult,
     outcome: np.ndarray,
     stepping: np.ndarray,
@@ -61,17 +62,11 @@ def end_infos(
     """``outcome`` / ``is_success`` of every world that stepped, as CrowdNavEnv's info: "truncated" / False unless it terminated;
     ``human_stalls``, the collisions' ``collision_kind`` / ``collision_partner`` and, with several robots, ``other_robots``
     (through ``add_info``, the vector env's ``_add_info``); ``every``: all worlds stepped."""
-    b = len(stepping)
     infos["outcome"], infos["_outcome"] = outcome, stepping.copy()
     infos["is_success"], infos["_is_success"] = outcome == "success", stepping.copy()
-    stalls = np.zeros(b, dtype=np.int64)
-    if isinstance(batch, TeamWorlds):
-        stalls = batch.stalls()
-        for i in np.flatnonzero(stepping) if batch.team else ():  # per world: its robots' outcomes, as SyncVectorEnv lays out a dict
-            add_info(infos, {"other_robots": batch.other_robots[int(i)]}, int(i))
-    else:
-        for bucket in batch.buckets.values():  # per crowd size
-            stalls[bucket.world] = bucket.state.human_stalls.sum(1)
+    stalls = engine.stalls()
+    for i, robots in engine.other_robots(stepping).items():  # per world: its robots' outcomes, as SyncVectorEnv lays out a dict
+        add_info(infos, {"other_robots": robots}, i)
     infos["human_stalls"], infos["_human_stalls"] = stalls if every else np.where(stepping, stalls, 0), stepping.copy()
     if result.collisions:
         collision_infos(infos, result.collisions, outcome == "collision")  # the collisions of worlds that stepped

@@ -24,14 +24,16 @@ docs/environments.md#several-robots measures it.
 
 from __future__ import annotations
 
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from typing import Any, NamedTuple
 
 import numpy as np
 
 from crowdnav.batch.simulator import StepResult
+from crowdnav.envs.engine import Judged, world_frame
 from crowdnav.envs.reward import REWARD_TERMS
 from crowdnav.envs.single import CrowdNavEnv
+from crowdnav.planning.shield import Shield
 from crowdnav.sensors import Modality
 from crowdnav.sensors.lidar import LidarModality
 from crowdnav.sim.events import Collision, StepEvents
@@ -83,7 +85,7 @@ class TeamWorlds:
         """Each reward term's value in every world at its last step."""
         self.outcomes = np.full(self.num_worlds, None, dtype=object)
         """World i's outcome at its last step ("truncated" while it runs on: the vector infos' convention)."""
-        self.other_robots: list[dict[str, str | None]] = [{} for _ in range(self.num_worlds)]
+        self._other_robots: list[dict[str, str | None]] = [{} for _ in range(self.num_worlds)]
         self.team = world.scenario.robots is not None
         """Several robots per world (``robots:``): the other robots' infos and the batched first-robot LIDAR."""
         self.plain = all(env.core.plain for env in self.envs)
@@ -121,7 +123,7 @@ class TeamWorlds:
             events = env.simulator.robot_events[0]  # the first robot's: it is in the world until its episode ends
             assert events is not None
             self._record(result, i, events, info["reward_terms"])
-            self.other_robots[i] = info["other_robots"]
+            self._other_robots[i] = info["other_robots"]
         return result
 
     def step_every(self, actions: np.ndarray) -> EveryStep:
@@ -165,11 +167,11 @@ class TeamWorlds:
         for term, values in self.terms.items():
             values[i] = terms[term]
 
-    def judged(self, stepping: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, dict[str, np.ndarray]]:
-        """What the single envs said of the last step of the ``stepping`` worlds (a bool mask; None: all): every world's
-        outcome (None where it did not step), every world's reward (0 where it did not step) and the stepping worlds'
-        values of each reward term (as the vector env's own kernels give them), all new arrays."""
-        if stepping is None:
+    def judged(self, result: StepResult, stepping: np.ndarray, every: bool) -> Judged:
+        """What the single envs said of the last step of the ``stepping`` worlds (``every``: all; each world's single env
+        judged its own step, with the same kernels): every world's outcome (None where it did not step), every world's
+        reward (0 where it did not step) and the stepping worlds' values of each reward term, all new arrays."""
+        if every:
             return self.outcomes.copy(), self.rewards.copy(), {term: values.copy() for term, values in self.terms.items()}
         worlds = np.flatnonzero(stepping)
         outcome = np.full(self.num_worlds, None, dtype=object)
@@ -177,6 +179,25 @@ class TeamWorlds:
         rewards = np.zeros(self.num_worlds)
         rewards[worlds] = self.rewards[worlds]
         return outcome, rewards, {term: values[worlds] for term, values in self.terms.items()}
+
+    def settle(self) -> None:
+        """Nothing to settle: each world's single env kept its reward's memory through the replayed steps."""
+
+    def observe(self, out: Mapping[str, np.ndarray]) -> None:
+        for i, observation in enumerate(self.observations):  # each world's single env observed its first robot
+            for key, values in out.items():
+                values[i] = observation[key]
+
+    def shielded(self, shield: Shield, actions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The single env's own call per world (one robot each: the shield refuses several)."""
+        out, replaced = actions.copy(), np.zeros(self.num_worlds, dtype=bool)
+        for i, env in enumerate(self.envs):
+            out[i], replaced[i] = shield.single(env.simulator, actions[i])
+        return out, replaced
+
+    def other_robots(self, stepping: np.ndarray) -> dict[int, dict[str, str | None]]:
+        """Per stepping world, its other robots' outcomes as its single env's ``info["other_robots"]`` (several robots only)."""
+        return {int(i): self._other_robots[int(i)] for i in np.flatnonzero(stepping)} if self.team else {}
 
     def _scans(self, views: list[RobotWorld]) -> dict[str, np.ndarray]:
         """Each LIDAR modality's readings of ``views`` (the first robots' after a step), row k of ``views[k]``.
@@ -212,6 +233,13 @@ class TeamWorlds:
     def stalls(self) -> np.ndarray:
         """(num_worlds,) int64: how many times a human stalled this episode, per world."""
         return np.array([int(sim.human_stalls.sum()) for sim in self.simulators()], dtype=np.int64)
+
+    def robot_goal(self, world: int) -> complex:
+        return complex(self.envs[world].simulator.robot_goal)
+
+    def frame(self, world: int) -> dict[str, np.ndarray]:
+        """World ``world``'s simulator as :func:`crowdnav.envs.engine.world_frame` gives it (the other robots included)."""
+        return world_frame(self.envs[world].simulator)
 
     def row(self, name: str, world: int) -> np.ndarray:
         """A copy of world ``world``'s simulator array ``name`` (``positions``: the first robot then the humans)."""

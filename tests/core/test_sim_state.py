@@ -93,7 +93,7 @@ def test_vector_env_simulator_hands_out_every_worlds_current_state_at_every_step
         resets += int((terminated | truncated).sum())
         for i in range(4):
             sim = env.simulator(i)
-            bucket, row = env.batch.locate(i)
+            bucket, row = env.engine.batch.locate(i)
             _same_state(sim, bucket.state.row(row))
             assert sim.positions.tobytes() == env.positions(i).tobytes()
             assert sim.robot_distance.tobytes() == bucket.pair_distance[row, 0].tobytes()

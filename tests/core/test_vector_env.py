@@ -181,5 +181,5 @@ def test_worlds_stepped_in_small_chunks_still_equal_sync(monkeypatch):
 
     monkeypatch.setattr(batch_simulator, "CHUNK_ELEMENTS", 200)  # two worlds per chunk in room_furniture with 5 humans
     env = CrowdNavVectorEnv("room_furniture", 5, modalities=["goal"], overrides={"humans.count": 5})
-    assert env.batch.chunk_size(5) == 2
+    assert env.engine.batch.chunk_size(5) == 2
     assert _compare_with_sync("RoomFurniture", AutoresetMode.NEXT_STEP, 80, num_envs=5, modalities=ALL, overrides={"humans.count": 5}) > 0

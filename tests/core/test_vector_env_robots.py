@@ -122,7 +122,7 @@ def test_batched_lidar_of_worlds_with_different_robots_left_equals_single_envs()
     for _ in range(300):
         actions = rng.uniform(-1, 1, (k, 2))
         observation, *_ = vector.step(actions)
-        mixed += len({sim.robots_active.tobytes() for sim in vector.batch.simulators()}) > 1
+        mixed += len({sim.robots_active.tobytes() for sim in vector.engine.simulators()}) > 1
         for i, env in enumerate(singles):
             if restart[i]:
                 single_obs, _ = env.reset()

@@ -13,6 +13,7 @@ from crowdnav import Simulator
 from crowdnav.batch.simulator import BatchSimulator
 from crowdnav.envs import CrowdNavEnv
 from crowdnav.envs.vector import CrowdNavVectorEnv, stacks
+from crowdnav.envs.vector_stacked import StackedWorlds
 from crowdnav.envs.vector_team import TeamWorlds
 from crowdnav.worlds.compiled import load_world
 from tests.core.test_vector_env import ALL, _compare_with_sync
@@ -26,8 +27,8 @@ def test_the_vector_env_stacks_several_one_robot_worlds_of_small_crowds_only(mon
     monkeypatch.setattr(Simulator, "grid_from", world.scenario.humans.max_count)  # (no library scenario holds 200 humans)
     assert not stacks(world, 2)
     monkeypatch.undo()
-    assert isinstance(CrowdNavVectorEnv("room_furniture", 1, modalities=["goal"]).batch, TeamWorlds)
-    assert isinstance(CrowdNavVectorEnv("room_furniture", 2, modalities=["goal"]).batch, BatchSimulator)
+    assert isinstance(CrowdNavVectorEnv("room_furniture", 1, modalities=["goal"]).engine, TeamWorlds)
+    assert isinstance(CrowdNavVectorEnv("room_furniture", 2, modalities=["goal"]).engine, StackedWorlds)
 
 
 @pytest.mark.parametrize("mode", [AutoresetMode.NEXT_STEP, AutoresetMode.SAME_STEP])
@@ -41,7 +42,7 @@ def test_crowds_of_the_neighbour_grid_run_as_single_envs_and_equal_sync_bit_for_
         BatchSimulator(load_world("open_space", {"humans.count": 5}), 2)
     env = CrowdNavVectorEnv("open_space", 3, modalities=["goal"], overrides={"humans.count": [5, 6]})
     env.reset(seed=0)
-    assert isinstance(env.batch, TeamWorlds) and all(sim.geometry.grid is not None for sim in env.batch.simulators())
+    assert isinstance(env.engine, TeamWorlds) and all(sim.geometry.grid is not None for sim in env.engine.simulators())
     assert _compare_with_sync("OpenSpace", AutoresetMode.SAME_STEP, 120, num_envs=3, modalities=["goal", "lidar", "closest_obstacle"],
                               overrides={"humans.count": [5, 6]}) > 0
 

@@ -1,0 +1,97 @@
+"""The engine protocol: what :class:`crowdnav.envs.vector.CrowdNavVectorEnv` asks of the worlds it holds.
+
+The vector env keeps Gymnasium's conventions (autoreset modes, seeding, reset masks, the infos' layout, the residual
+plan); everything about the worlds themselves, their episodes, rewards and observations, is its engine's. Two
+engines implement :class:`WorldEngine`, and the vector env reads neither's insides:
+
+* :class:`crowdnav.envs.vector_stacked.StackedWorlds`: the worlds stacked in one
+  :class:`crowdnav.batch.simulator.BatchSimulator` (array work over the world axis, the reward's kernels batched);
+* :class:`crowdnav.envs.vector_team.TeamWorlds`: one single env per world stepped in one call (several robots, one
+  world, crowds too large to stack).
+
+Either plays world ``i`` as the single env plays it after ``reset(seed=s_i)``, bit for bit. Which one a vector env
+uses is :func:`crowdnav.envs.vector.stacks`' choice, made once.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from typing import TYPE_CHECKING, Any, Protocol
+
+import numpy as np
+
+if TYPE_CHECKING:
+    from crowdnav.batch.simulator import StepResult
+    from crowdnav.planning.shield import Shield
+    from crowdnav.sensors import Modality
+    from crowdnav.sim.simulator import Simulator
+
+Judged = tuple[np.ndarray, np.ndarray, dict[str, np.ndarray]]
+"""(outcome, rewards, terms): every world's outcome (object; "truncated" where a stepping world runs on, None where it did
+not step), every world's reward (0 where it did not step) and the stepping worlds' value of each reward term."""
+
+
+class WorldEngine(Protocol):
+    """``num_worlds`` worlds of one compiled scenario, reset by seed and stepped together (see the module docstring)."""
+
+    num_worlds: int
+    modalities: dict[str, Modality]
+    """The observation's modalities by key (several robots: the first robot's own)."""
+
+    def reset(self, worlds: Sequence[int] | np.ndarray, seeds: Sequence[int | None] | np.ndarray) -> None:
+        """Start a new episode in each of ``worlds`` (``seeds[k]`` for ``worlds[k]``; None continues its generator)."""
+
+    def step(self, actions: np.ndarray, active: np.ndarray | None = None) -> StepResult:
+        """Step every world (or those of the bool mask ``active``) with its row of ``actions`` ((num_worlds, 2))."""
+
+    def judged(self, result: StepResult, stepping: np.ndarray, every: bool) -> Judged:
+        """The outcomes and rewards of the last :meth:`step` (``stepping``: the worlds that stepped; ``every``: all of them)."""
+
+    def settle(self) -> None:
+        """After worlds were stepped without :meth:`judged` (a resume's replay): the reward's memory of the last step made current."""
+
+    def observe(self, out: Mapping[str, np.ndarray]) -> None:
+        """Every world's observation written into ``out`` (per key, a (num_worlds, ...) array)."""
+
+    def shielded(self, shield: Shield, actions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Every world's action through the shield (as the single env's, bit for bit), and which worlds' it replaced."""
+
+    def stalls(self) -> np.ndarray:
+        """(num_worlds,) int64: how many times a human stalled this episode, per world."""
+
+    def other_robots(self, stepping: np.ndarray) -> dict[int, dict[str, str | None]]:
+        """World -> its other robots' outcomes (``info["other_robots"]``), for the stepping worlds that have other robots."""
+
+    def social_force(self) -> np.ndarray:
+        """(num_worlds,) complex: the humans' social-force repulsion on each world's (first) robot."""
+
+    def row(self, name: str, world: int) -> np.ndarray:
+        """A copy of ``world``'s array ``name`` (``positions``, ``velocities``: the robot then the humans; ``human_goals``,
+        ``human_respawns``)."""
+
+    def robot_goal(self, world: int) -> complex:
+        """``world``'s (first) robot's goal."""
+
+    def frame(self, world: int) -> dict[str, np.ndarray]:
+        """``world`` now as :func:`world_frame` gives a simulator's (what evaluation records per step)."""
+
+    def simulator(self, world: int) -> Simulator:
+        """A snapshot of ``world`` as a :class:`crowdnav.Simulator` (a copy: stepping it leaves the world as it is)."""
+
+    def simulators(self) -> list[Simulator]:
+        """Each world's simulator to read, never to step: the live one where a world is one, else a snapshot."""
+
+
+def world_frame(sim: Any) -> dict[str, np.ndarray]:
+    """Positions, velocities and goals of the robot (index 0) and the humans, copied (complex, (n + 1,)); each human's respawns (n,).
+
+    Several robots (``robots:``): the other robots follow the humans (n + R,); NaN once a robot has left the world.
+    """
+    if sim.team is None:
+        return {"positions": sim.positions.copy(), "velocities": sim.velocities.copy(),
+                "goals": np.concatenate([[sim.robot_goal], sim.human_goals]), "respawns": sim.human_respawns.copy()}
+    team = sim.team.state
+    gone = np.where(team.active[1:], 0j, complex(np.nan, np.nan))
+    return {"positions": np.concatenate([sim.positions, team.positions + gone]),
+            "velocities": np.concatenate([sim.velocities, team.velocities + gone]),
+            "goals": np.concatenate([[sim.robot_goal], sim.human_goals, team.goals]), "respawns": sim.human_respawns.copy()}
