@@ -75,7 +75,7 @@ def vector(args: argparse.Namespace, mode: str) -> float:
 def kernels(args: argparse.Namespace) -> float:
     env = gym.make_vec(env_id(args.scenario), num_envs=args.batch, vectorization_mode="vector_entry_point", **_options(args)).unwrapped
     env.reset(seed=0)
-    batch = env.batch
+    batch = env.engine  # the worlds behind the engine protocol (stacked: StackedWorlds)
     actions = np.random.default_rng(0).uniform(-1, 1, (args.steps, args.batch, 2))
     start = CLOCK()
     for action in actions:

@@ -7,14 +7,19 @@ A reset adds, replaces or removes a world's row here; the simulator's refresh fi
 
 from __future__ import annotations
 
+from typing import cast
+
 import numpy as np
 
 from crowdnav.batch.stacked_state import StackedState
 from crowdnav.batch.state import BoolArray, ComplexArray, FloatArray
+from crowdnav.sim.geometry import MEASURED, Measured
 from crowdnav.sim.state import PairConstants, SimState
 
-_GEOMETRY = ("pair_offset", "pair_distance", "gap", "repulsion", "humans_touch", "polygon_offset", "polygon_distance", "disc_offset", "disc_distance")
-"""What a refresh measures, one row per world in a bucket (created by the first refresh)."""
+_GEOMETRY = MEASURED
+"""What a refresh measures (:class:`crowdnav.sim.geometry.Measured`), one row per world in a bucket (created by the first refresh)."""
+_ROBOT_ROW = frozenset({"polygon_offset", "polygon_distance", "disc_offset", "disc_distance"})
+"""Those a bucket keeps for the robot only (its row: what the sensors read), (K, P) and (K, C)."""
 
 
 class Bucket:
@@ -63,6 +68,18 @@ class Bucket:
     def replace(self, row: int, state: SimState) -> None:
         """Overwrite ``row`` with its world's ``state`` after a reset (same crowd size)."""
         self.state.set_row(row, state)
+
+    def store(self, rows: np.ndarray, measured: Measured) -> None:
+        """Keep what a refresh of ``rows`` measured (the stacks are created by the first)."""
+        for name, measured_value in zip(_GEOMETRY, measured, strict=True):
+            value = cast(np.ndarray, measured_value)  # K worlds measured: every entry an array
+            if name in _ROBOT_ROW:
+                value = value[:, 0]
+            stack = getattr(self, name, None)
+            if stack is None:
+                stack = np.zeros((len(self), *value.shape[1:]), dtype=value.dtype)
+                setattr(self, name, stack)
+            stack[rows] = value
 
     def remove(self, row: int) -> None:
         keep = np.arange(len(self)) != row

@@ -30,16 +30,15 @@ import numpy as np
 from crowdnav.batch.bucket import Bucket
 from crowdnav.batch.scalar_math import TWO_PI, cmul, remainder
 from crowdnav.batch.state import BatchState
-from crowdnav.crowd.passing import passing_force
-from crowdnav.crowd.views import BatchView
-from crowdnav.sim import forces as sf
-from crowdnav.sim.contacts import deepest_contact, goal_distance, outside, push_humans_apart, push_out_of_obstacles, touching
-from crowdnav.sim.events import Collision, SimulationError
-from crowdnav.sim.groups import apply_goal_rules, arrivals, stalled_humans
-from crowdnav.sim.simulator import Simulator
-from crowdnav.sim.state import SELF_DISTANCE
+from crowdnav.crowd.base import CrowdView
+from crowdnav.crowd.views import worlds_view
+from crowdnav.sim.contacts import deepest_contact, goal_distance, outside, resolve_overlaps, touching
+from crowdnav.sim.events import Collision, check_finite
+from crowdnav.sim.geometry import measure
+from crowdnav.sim.groups import apply_goal_rules, goal_checks
+from crowdnav.sim.simulator import Simulator, place_humans
 from crowdnav.worlds.compiled import CompiledWorld
-from crowdnav.worlds.obstacles import EdgeSet, nearest_on_edges
+from crowdnav.worlds.obstacles import EdgeSet
 
 CHUNK_ELEMENTS = 65_536
 """Worlds are stepped in chunks of about this many agent-column entries ((n+1) x (n+1+obstacles) per world):
@@ -97,22 +96,17 @@ class BatchSimulator:
             raise ValueError(f"the batched simulator handles crowds below {first.grid_from} humans (all pairs); this scenario allows "
                              f"{first.max_humans}: step its worlds with crowdnav.envs.vector.CrowdNavVectorEnv (single envs, the neighbour grid)")
         obstacles = world.obstacles
-        assert obstacles.surface is not None  # a compiled world has its edge table
-        self._surface: EdgeSet = obstacles.surface
+        self._surface: EdgeSet | None = first.geometry.surface
         self._polygons = obstacles.polygon_count
-        self._static_count = obstacles.polygon_count + obstacles.disc_count
+        self._static_count = first.geometry.static_count
         self._labels = obstacles.labels + obstacles.disc_labels
-        self._force, self._relax, self._bounds = self.scenario.humans.social_force, first.relaxation, first.bounds
-        self._router = first.router
+        self._bounds = first.bounds
         self._substeps, self._substep_dt = first.substeps, first.substep_dt
         self._crowd = first.crowd
         """The first world's crowd models, for what all worlds share (which models, which groups)."""
         self._crowds = np.empty(self.num_worlds, dtype=object)
         self._crowds[:] = [slot.crowd for slot in self.slots]
         """Each world's own crowd models (its slot's), indexed by world."""
-        self._stall_window = first.stall_window
-        self._together = first.together is not None
-        """Some groups walk together: the group terms and the groups' arrivals (the first world's tables, shared by all)."""
         robot = self.scenario.robot
         self._unicycle = robot.kinematics != "holonomic"
         self.buckets: dict[int, Bucket] = {}
@@ -194,8 +188,7 @@ class BatchSimulator:
         velocities = state.velocities[rows]
         robot_re, robot_im, heading = self._robot_velocity(actions, state.robot_heading[rows])
         if n:
-            view = BatchView(state, rows, positions, velocities, bucket.radii, self.scenario.robot.max_speed,
-                             lambda: self.social_force_commands(bucket, rows, positions, velocities))
+            view = self._view(bucket, rows, positions, velocities)
             commands = self._crowd.commands_batch(view, self._crowds[bucket.world[rows]])
             stopped = state.human_stopped[rows]
             if stopped.any():  # np.where picks the command itself where not stopped: exact for the others
@@ -207,7 +200,7 @@ class BatchSimulator:
         positions[:, 1:] += velocities[:, 1:] * self._substep_dt
         state.robot_heading[rows] = heading
         state.step_count[rows] += 1
-        self._check_finite(bucket, rows, positions, velocities)
+        check_finite(positions, velocities, state.step_count[rows], bucket.world[rows])
         state.positions[rows], state.velocities[rows] = positions, velocities
         self._refresh(bucket, rows)
         if n:
@@ -230,34 +223,25 @@ class BatchSimulator:
         result.truncated[bucket.world[rows]] = state.step_count[rows] >= self.scenario.max_steps
 
     def _place(self, bucket: Bucket, rows: np.ndarray) -> None:
-        """:meth:`Simulator._place_humans` for ``rows``, world by world (each world's own model instances, e.g. its recording window)."""
+        """:func:`crowdnav.sim.simulator.place_humans` for ``rows``, world by world (each world's own model instances, e.g. its
+        recording window), on the views of their rows of the stack."""
         state = bucket.state
-        positions, velocities = state.positions[rows], state.velocities[rows]
-        view = BatchView(state, rows, positions, velocities, bucket.radii, self.scenario.robot.max_speed,
-                         lambda: self.social_force_commands(bucket, rows, positions, velocities))
+        view = self._view(bucket, rows, state.positions[rows], state.velocities[rows])
         for k, row in enumerate(rows):  # per world
-            for index, placed, moving in self._crowds[bucket.world[row]].place(view.world(k)):
-                state.positions[row, 1:][index] = placed
-                state.velocities[row, 1:][index] = moving
+            place_humans(self._crowds[bucket.world[row]], view.world(k), state.positions[row], state.velocities[row])
+
+    def _view(self, bucket: Bucket, rows: np.ndarray, positions: np.ndarray, velocities: np.ndarray) -> CrowdView:
+        """The crowd models' view of ``rows`` (``positions``, ``velocities``: their (K, n+1) arrays now)."""
+        return worlds_view(bucket.state, rows, positions, velocities, bucket.radii, self.scenario.robot.max_speed,
+                           lambda: self.social_force_commands(bucket, rows, positions, velocities))
 
     def social_force_commands(self, bucket: Bucket, rows: np.ndarray, positions: np.ndarray, velocities: np.ndarray) -> np.ndarray:
         """(K, n) :meth:`Simulator.social_force_commands` of ``rows``, every world's at once (``positions`` and ``velocities``:
-        the step's (K, n+1) copies of the rows)."""
-        force, state = self._force, bucket.state
-        goals = state.human_goals[rows]
-        # humans.routing: geodesic, every world's at once (the slots' shared router)
-        to_goal = goals - positions[:, 1:] if self._router is None else self._router.to_goal(positions[:, 1:], goals)
-        total = sf.goal_force(to_goal, force.goal_weight, force.goal_saturation_distance)
-        if self._router is not None:  # routed humans side-step oncoming ones, as Simulator.social_force_commands
-            total += passing_force(positions[:, 1:], to_goal, ~state.human_stopped[rows], self.scenario.humans.radius, force.goal_weight,
-                                   state.human_group[rows], self.slots[0].together)
-        total += bucket.repulsion[rows, 1:]
-        if self._together:  # the walking groups' terms, every world's at once
-            total += self.slots[0].group_terms(positions[:, 1:], velocities[:, 1:], state.human_preferred_speed[rows],
-                                               state.human_group[rows], state.human_stopped[rows])
-        commands: np.ndarray = sf.velocity_command(total, velocities[:, 1:], state.human_preferred_speed[rows], state.command_cap[rows],
-                                                   self._relax)
-        return commands
+        the step's (K, n+1) copies of the rows): the single simulator's kernel, :meth:`Simulator.social_force`."""
+        state = bucket.state
+        return self.slots[0].social_force(positions[:, 1:], velocities[:, 1:], state.human_goals[rows], state.human_group[rows],
+                                          state.human_stopped[rows], state.human_preferred_speed[rows], state.command_cap[rows],
+                                          bucket.repulsion[rows, 1:])
 
     def _robot_velocity(self, actions: np.ndarray, heading: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """:meth:`crowdnav.Simulator._robot_velocity` for every row: (velocity re, im, new heading), in CPython's scalar arithmetic."""
@@ -289,55 +273,16 @@ class BatchSimulator:
         # displacement / dt: CPython divides by complex(dt, 0)
         return (dr + di * 0.0) / dt, (di - dr * 0.0) / dt, remainder(new_heading, TWO_PI)
 
-    def _check_finite(self, bucket: Bucket, rows: np.ndarray, positions: np.ndarray, velocities: np.ndarray) -> None:
-        finite = np.isfinite(positions)
-        if finite.all():
-            return
-        k, agent = np.argwhere(~finite)[0]
-        who = "the robot" if agent == 0 else f"human {agent - 1}"
-        raise SimulationError(f"world {bucket.world[rows[k]]}, step {bucket.state.step_count[rows[k]]}: the position of {who} became "
-                              f"non-finite (its velocity: {velocities[k, agent]}); check the scenario's social_force parameters")
-
     # --------------------------------------------------------------- geometry
 
     def _refresh(self, bucket: Bucket, rows: np.ndarray) -> None:
-        """:meth:`Simulator.refresh` for ``rows`` of ``bucket`` (the stacks are filled on first use)."""
-        z = bucket.state.positions[rows]
-        k, m = z.shape
-        offset = z[:, None, :] - z[:, :, None]  # [world, i, j]: from agent i to agent j
-        distance = np.abs(offset)
-        distance.reshape(k, m * m)[:, :: m + 1] = SELF_DISTANCE
-        geometry = {"pair_offset": offset, "pair_distance": distance}
-        if self._static_count:
-            static_offset, static_distance = nearest_on_edges(z.reshape(-1), self._surface)
-            static_offset = static_offset.reshape(k, m, -1)
-            static_distance = static_distance.reshape(k, m, -1)
-            offset = np.concatenate([offset, static_offset], axis=2)
-            distance = np.concatenate([distance, static_distance], axis=2)
-            p = self._polygons
-            geometry.update(polygon_offset=static_offset[:, 0, :p], polygon_distance=static_distance[:, 0, :p],
-                            disc_offset=static_offset[:, 0, p:], disc_distance=static_distance[:, 0, p:])
-        else:
-            empty = np.zeros((k, 0))
-            geometry.update(polygon_offset=empty.astype(complex), polygon_distance=empty, disc_offset=empty.astype(complex), disc_distance=empty)
-        gap = distance - bucket.contact_all
-        geometry["gap"] = gap
-        geometry["humans_touch"] = gap[:, 1:].reshape(k, -1).min(1) < 0.0 if m > 1 else np.zeros(k, dtype=bool)
-        geometry["repulsion"] = sf.repulsion(offset, distance, bucket.gain, bucket.decay)
-        for name, value in geometry.items():
-            stack = getattr(bucket, name, None)
-            if stack is None:
-                stack = np.zeros((len(bucket), *value.shape[1:]), dtype=value.dtype)
-                setattr(bucket, name, stack)
-            stack[rows] = value
+        """:meth:`Simulator.refresh` for ``rows`` of ``bucket``: the same kernel, :func:`crowdnav.sim.geometry.measure`."""
+        bucket.store(rows, measure(bucket.state.positions[rows], self._surface, self._polygons, bucket.contact_all, bucket.gain, bucket.decay))
 
     def _resolve_overlaps(self, bucket: Bucket, rows: np.ndarray) -> None:
         """:meth:`crowdnav.sim.geometry.Geometry.push_humans_apart` for ``rows`` (worlds where a human touches someone or something)."""
-        n = bucket.n
         positions = bucket.state.positions[rows]
-        push_humans_apart(positions, bucket.pair_offset[rows, 1:, 1:], bucket.pair_distance[rows, 1:, 1:], bucket.gap[rows, 1:, 1 : n + 1])
-        if self._static_count:
-            push_out_of_obstacles(positions, self._surface, bucket.contact_all[1:, n + 1 :])
+        resolve_overlaps(positions, bucket.pair_offset[rows], bucket.pair_distance[rows], bucket.gap[rows], bucket.contact_all, self._surface)
         bucket.state.positions[rows] = positions
 
     # ----------------------------------------------------------------- events
@@ -354,30 +299,16 @@ class BatchSimulator:
         result.goal_reached[worlds] = goal_distance(bucket.state.robot_goal[rows], robot) <= self.scenario.robot.goal_radius
 
     def _goal_rules(self, bucket: Bucket, rows: np.ndarray) -> None:
-        """:func:`crowdnav.sim.groups.apply_goal_rules`: the arrival and stall checks vectorized, the rules per world where someone
-        arrived or stalled."""
-        tolerance, state = self.scenario.humans.social_force.goal_tolerance, bucket.state
-        distance = np.abs(state.human_goals[rows] - state.positions[rows, 1:])
-        if self._together:  # groups that walk together arrive by their centre: crowdnav.sim.groups.arrivals on every row at once
-            arrived = arrivals(distance, state.positions[rows, 1:], state.human_goals[rows], state.human_group[rows],
-                               state.human_stopped[rows], self.slots[0])
-        else:
-            arrived = distance <= tolerance
-        arrived &= ~state.human_stopped[rows]
-        state.human_arrived[rows] = arrived
-        stalled = np.zeros_like(arrived)
-        if self._stall_window:
-            due = state.step_count[rows] % self._stall_window == 0
-            if due.any():  # crowdnav.sim.groups.stall_check for the worlds whose check is due
-                check = rows[due]
-                stalled[due] = stalled_humans(distance[due], state.human_stall_mark[check], state.human_stopped[check] | arrived[due],
-                                              self.scenario.humans.stall.progress)
-                state.human_stall_mark[check] = distance[due]
+        """The single simulator's goal checks on every row at once (:func:`crowdnav.sim.groups.goal_checks`), then its goal rules
+        (:func:`crowdnav.sim.groups.apply_goal_rules`) in the worlds where they have something to do (someone arrived or stalled)."""
+        state = bucket.state
+        checks = goal_checks(state, self.slots[0], rows)
         moved = []
-        for k in np.flatnonzero(arrived.any(1) | stalled.any(1)):  # per event: the rules draw from the world's generator
+        for k in np.flatnonzero(checks.rules):  # per event: the rules draw from the world's generator
             row = rows[k]
+            stalled = None if checks.stalled is None else checks.stalled[k]
             # on the world's row of the stack, in place (views), with its slot's groups and generator
-            if apply_goal_rules(state.row(row), self.slots[bucket.world[row]], stalled[k]):
+            if apply_goal_rules(state.row(row), self.slots[bucket.world[row]], checks.arrived[k], stalled):
                 moved.append(row)
         if moved:  # respawned humans: the geometry of the new positions, as the single simulator's refresh
             self._refresh(bucket, np.array(moved))

@@ -18,7 +18,7 @@ from typing import Any
 import numpy as np
 
 from crowdnav.batch.state import ComplexArray, FloatArray, IntArray
-from crowdnav.sim.state import SimState, StateFields
+from crowdnav.sim.state import ONE_WORLD_SCALARS, SimState, StateFields
 
 
 @dataclass(eq=False)
@@ -37,8 +37,7 @@ class StackedState(StateFields[ComplexArray, FloatArray, IntArray]):
     def row(self, k: int) -> SimState:
         """World ``k``: its arrays are views (writing them writes the stack), its scalars Python numbers."""
         out: dict[str, Any] = {name: value[k] for name, value in self._items()}
-        return SimState(**{**out, "robot_goal": complex(out["robot_goal"]), "robot_heading": float(out["robot_heading"]),
-                           "step_count": int(out["step_count"])})
+        return SimState(**{**out, **{name: convert(out[name]) for name, convert in ONE_WORLD_SCALARS.items()}})
 
     def set_row(self, k: int, state: SimState) -> None:
         """Overwrite world ``k`` with one world's ``state`` (same number of humans)."""

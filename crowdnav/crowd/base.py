@@ -103,6 +103,10 @@ class CrowdView(Protocol):
         """World ``k`` of a K-world view as a one-world view (its arrays views of row ``k``)."""
 
 
+SHARED_BY_WORLDS = frozenset({"robot_count", "agent_radii", "robot_max_speeds"})
+"""The :class:`CrowdView` properties that have no world axis: the same for every world of a K-world view."""
+
+
 class CrowdModel:
     """A crowd model: one instance per simulator (per world), built once when the simulator is.
 

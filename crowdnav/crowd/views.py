@@ -1,24 +1,39 @@
-"""The views the simulators give their crowd models (:class:`crowdnav.crowd.base.CrowdView`): one world, K worlds, one row of K.
+"""The view the simulators give their crowd models: one class, built from :class:`crowdnav.crowd.base.CrowdView`'s declaration.
 
-Each reads the simulator's state when asked (nothing is copied for a name no model reads), and
-the social force's commands are computed once per view, on first use.
+:class:`StateView` has a property for every property the protocol declares (:data:`VIEWED`: not listed
+again here), each read through one function the simulator hands the view, ``read(source, name)``, the
+first time a model asks, and kept for the view's life: nothing is copied for a name no model reads, and the
+social force's commands are computed once per view. Those that are state fields
+(:class:`crowdnav.sim.state.StateFields`: :data:`FROM_STATE`) read one world's state (:func:`world_view`)
+or the rows of K worlds' (:func:`worlds_view`, a leading world axis (K,)); ``view.world(k)`` is row k of a
+K-world view as one world, its Python numbers converted as :data:`crowdnav.sim.state.ONE_WORLD_SCALARS` says.
 """
 
 from __future__ import annotations
 
 from collections.abc import Callable
-from typing import TYPE_CHECKING, Protocol
+from dataclasses import fields
+from operator import methodcaller
+from typing import TYPE_CHECKING, Any, Protocol, cast
 
 import numpy as np
+
+from crowdnav.crowd.base import SHARED_BY_WORLDS, CrowdView
+from crowdnav.sim.state import ONE_WORLD_SCALARS, StateFields
 
 if TYPE_CHECKING:
     from crowdnav.scenario.schema import Scenario
     from crowdnav.sim.robots import Team
     from crowdnav.sim.state import SimState
 
+VIEWED: tuple[str, ...] = tuple(name for name, member in vars(CrowdView).items() if isinstance(member, property))
+"""The properties :class:`CrowdView` declares, in its order: :class:`StateView`'s."""
+FROM_STATE = frozenset(VIEWED) & {field.name for field in fields(StateFields)}
+"""The viewed names that are state fields (``human_goals``, ..., ``step_count``): read from the state itself."""
+
 
 class OneWorld(Protocol):
-    """What :class:`WorldView` reads of a :class:`crowdnav.Simulator`."""
+    """What :func:`world_view` reads of a :class:`crowdnav.Simulator`."""
 
     @property
     def state(self) -> SimState: ...
@@ -31,193 +46,91 @@ class OneWorld(Protocol):
     def social_force_commands(self) -> np.ndarray: ...
 
 
-class Stacked(Protocol):
-    """What :class:`BatchView` reads of a bucket's :class:`crowdnav.batch.stacked_state.StackedState` (K worlds' rows)."""
+class StateView:
+    """A :class:`CrowdView` whose names are read through ``read(source, name)`` once, on first use.
 
-    @property
-    def human_goals(self) -> np.ndarray: ...
-    @property
-    def human_preferred_speed(self) -> np.ndarray: ...
-    @property
-    def human_max_speed(self) -> np.ndarray: ...
-    @property
-    def human_group(self) -> np.ndarray: ...
-    @property
-    def step_count(self) -> np.ndarray: ...
+    ``social_force``: computes the social force's commands (once, when first asked); ``worlds``: the
+    arrays have a leading world axis (K,) (then :meth:`world` is row k as one world); ``taken``:
+    names already known (read no further).
+    """
 
+    __slots__ = ("_read", "_social", "_social_force", "_source", "_taken", "_worlds")
 
-class WorldView:
-    """One simulator's world now: the ego robot, a ``robots:`` scenario's other robots, then the humans."""
-
-    __slots__ = ("_sim", "_social")
-
-    def __init__(self, sim: OneWorld):
-        self._sim = sim
+    def __init__(self, read: Callable[[Any, str], Any], source: Any, social_force: Callable[[], np.ndarray], worlds: bool,
+                 taken: dict[str, Any] | None = None):
+        self._read, self._source, self._social_force, self._worlds = read, source, social_force, worlds
+        self._taken: dict[str, Any] = {} if taken is None else taken
         self._social: np.ndarray | None = None
 
-    @property
-    def robot_count(self) -> int:
-        team = self._sim.team
+    def _field(self, name: str) -> Any:
+        taken = self._taken
+        if name not in taken:
+            taken[name] = self._read(self._source, name)
+        return taken[name]
+
+    def social_force(self) -> np.ndarray:
+        social = self._social
+        if social is None:
+            social = self._social = self._social_force()
+        return social
+
+    def world(self, k: int) -> CrowdView:
+        if self._worlds:
+            return cast(CrowdView, StateView(_read_row, (self, k), lambda: self.social_force()[k], worlds=False))
+        if k != 0:
+            raise IndexError(f"a one-world view has world 0 only, not {k}")
+        return cast(CrowdView, self)
+
+
+def _read_row(row: tuple[StateView, int], name: str) -> Any:
+    """Name ``name`` of world ``k`` of a K-world view (``row``: the view and k; arrays: views of row k)."""
+    view, k = row
+    value = view._field(name)
+    if name in SHARED_BY_WORLDS:
+        return value
+    convert = ONE_WORLD_SCALARS.get(name)
+    return value[k] if convert is None else convert(value[k])
+
+
+for _name in VIEWED:  # every declared property, its docstring the protocol's
+    setattr(StateView, _name, property(methodcaller("_field", _name), doc=getattr(CrowdView, _name).__doc__))
+
+
+def world_view(sim: OneWorld) -> CrowdView:
+    """One simulator's world now: the ego robot, a ``robots:`` scenario's other robots, then the humans."""
+    return cast(CrowdView, StateView(_read_world, sim, sim.social_force_commands, False))  # positional: once per step
+
+
+WorldView = world_view
+"""The one-world view's former class name (tests and scripts build ``WorldView(sim)``)."""
+
+
+def _read_world(sim: OneWorld, name: str) -> Any:
+    """What a one-world view reads of ``sim``: its state's fields and every agent (robots first)."""
+    if name in FROM_STATE:
+        return getattr(sim.state, name)
+    team = sim.team
+    if name == "robot_count":
         return 1 if team is None else 1 + len(team.state.positions)
-
-    @property
-    def agent_positions(self) -> np.ndarray:
-        positions, team = self._sim.state.positions, self._sim.team
-        return positions if team is None else np.concatenate([positions[:1], team.state.positions, positions[1:]])
-
-    @property
-    def agent_velocities(self) -> np.ndarray:
-        velocities, team = self._sim.state.velocities, self._sim.team
-        return velocities if team is None else np.concatenate([velocities[:1], team.state.velocities, velocities[1:]])
-
-    @property
-    def human_goals(self) -> np.ndarray:
-        return self._sim.state.human_goals
-
-    @property
-    def human_preferred_speed(self) -> np.ndarray:
-        return self._sim.state.human_preferred_speed
-
-    @property
-    def human_max_speed(self) -> np.ndarray:
-        return self._sim.state.human_max_speed
-
-    @property
-    def human_group(self) -> np.ndarray:
-        return self._sim.state.human_group
-
-    @property
-    def agent_radii(self) -> np.ndarray:
-        radii, team = self._sim.radii, self._sim.team
-        return radii if team is None else np.concatenate([team.all_radii, radii[1:]])
-
-    @property
-    def robot_max_speeds(self) -> np.ndarray:
-        speed, team = self._sim.scenario.robot.max_speed, self._sim.team
+    if name == "agent_radii":
+        return sim.radii if team is None else np.concatenate([team.all_radii, sim.radii[1:]])
+    if name == "robot_max_speeds":
+        speed = sim.scenario.robot.max_speed
         return np.atleast_1d(speed) if team is None else np.concatenate([[speed], team.max_speeds])
-
-    @property
-    def step_count(self) -> int:
-        return self._sim.state.step_count
-
-    def social_force(self) -> np.ndarray:
-        if self._social is None:
-            self._social = self._sim.social_force_commands()
-        return self._social
-
-    def world(self, k: int) -> WorldView:
-        if k != 0:
-            raise IndexError(f"a one-world view has world 0 only, not {k}")
-        return self
+    field = name.removeprefix("agent_")  # agent_positions, agent_velocities: the state's, a team's robots after the first
+    ours = getattr(sim.state, field)
+    return ours if team is None else np.concatenate([ours[:1], getattr(team.state, field), ours[1:]])
 
 
-class BatchView:
-    """Rows ``rows`` of a batched simulator's bucket (one robot per world), during a step: ``positions`` and
-    ``velocities`` are the step's (K, n+1) copies of those rows; ``social_force`` computes the rows' social-force commands."""
-
-    robot_count = 1
-
-    def __init__(self, state: Stacked, rows: np.ndarray, positions: np.ndarray, velocities: np.ndarray, radii: np.ndarray,
-                 robot_max_speed: float, social_force: Callable[[], np.ndarray]):
-        self._state, self._rows = state, rows
-        self.agent_positions = positions
-        self.agent_velocities = velocities
-        self.agent_radii = radii
-        self.robot_max_speeds = np.atleast_1d(robot_max_speed)
-        self._social_force = social_force
-        self._rows_of: dict[str, np.ndarray] = {}
-
-    def _field(self, name: str) -> np.ndarray:
-        """The rows of the state's field ``name``, taken once per view."""
-        value = self._rows_of.get(name)
-        if value is None:
-            value = self._rows_of[name] = _take(getattr(self._state, name), self._rows)
-        return value
-
-    @property
-    def human_goals(self) -> np.ndarray:
-        return self._field("human_goals")
-
-    @property
-    def human_preferred_speed(self) -> np.ndarray:
-        return self._field("human_preferred_speed")
-
-    @property
-    def human_max_speed(self) -> np.ndarray:
-        return self._field("human_max_speed")
-
-    @property
-    def human_group(self) -> np.ndarray:
-        return self._field("human_group")
-
-    @property
-    def step_count(self) -> np.ndarray:
-        return self._field("step_count")
-
-    def social_force(self) -> np.ndarray:
-        value = self._rows_of.get("social_force")
-        if value is None:
-            value = self._rows_of["social_force"] = self._social_force()
-        return value
-
-    def world(self, k: int) -> RowView:
-        return RowView(self, k)
+def worlds_view(state: StateFields[Any, Any, Any], rows: np.ndarray, positions: np.ndarray, velocities: np.ndarray, radii: np.ndarray,
+                robot_max_speed: float, social_force: Callable[[], np.ndarray]) -> CrowdView:
+    """Rows ``rows`` of K worlds' ``state`` (one robot per world) during a step: ``positions`` and ``velocities`` are the
+    step's (K, n+1) copies of those rows; ``social_force()`` computes the rows' social-force commands."""
+    agents = {"robot_count": 1, "agent_positions": positions, "agent_velocities": velocities, "agent_radii": radii,
+              "robot_max_speeds": np.atleast_1d(robot_max_speed)}
+    return cast(CrowdView, StateView(_read_rows, (state, rows), social_force, worlds=True, taken=agents))
 
 
-class RowView:
-    """World ``k`` of a :class:`BatchView`, as one world (arrays are views of row ``k``)."""
-
-    robot_count = 1
-
-    def __init__(self, batch: BatchView, k: int):
-        self._batch, self._k = batch, k
-
-    @property
-    def agent_positions(self) -> np.ndarray:
-        return _take(self._batch.agent_positions, self._k)
-
-    @property
-    def agent_velocities(self) -> np.ndarray:
-        return _take(self._batch.agent_velocities, self._k)
-
-    @property
-    def human_goals(self) -> np.ndarray:
-        return _take(self._batch.human_goals, self._k)
-
-    @property
-    def human_preferred_speed(self) -> np.ndarray:
-        return _take(self._batch.human_preferred_speed, self._k)
-
-    @property
-    def human_max_speed(self) -> np.ndarray:
-        return _take(self._batch.human_max_speed, self._k)
-
-    @property
-    def human_group(self) -> np.ndarray:
-        return _take(self._batch.human_group, self._k)
-
-    @property
-    def agent_radii(self) -> np.ndarray:
-        return self._batch.agent_radii
-
-    @property
-    def robot_max_speeds(self) -> np.ndarray:
-        return self._batch.robot_max_speeds
-
-    @property
-    def step_count(self) -> int:
-        return int(self._batch.step_count[self._k])
-
-    def social_force(self) -> np.ndarray:
-        return _take(self._batch.social_force(), self._k)
-
-    def world(self, k: int) -> RowView:
-        if k != 0:
-            raise IndexError(f"a one-world view has world 0 only, not {k}")
-        return self
-
-
-def _take(array: np.ndarray, index: np.ndarray | int) -> np.ndarray:
-    """``array[index]``: the rows of a K-world array (or one row), typed."""
-    taken: np.ndarray = array[index]
-    return taken
+def _read_rows(source: tuple[StateFields[Any, Any, Any], np.ndarray], name: str) -> Any:
+    state, rows = source
+    return getattr(state, name)[rows]

@@ -55,12 +55,27 @@ def push_out_of_obstacles(positions: np.ndarray, surface: Any, contact: np.ndarr
         positions[rows, 1:] = humans
 
 
+def resolve_overlaps(positions: np.ndarray, pair_offset: np.ndarray, pair_distance: np.ndarray, gap: np.ndarray, contact_all: np.ndarray,
+                     surface: Any) -> None:
+    """Humans apart (:func:`push_humans_apart`), then out of walls and furniture (:func:`push_out_of_obstacles`), in place.
+
+    ``positions``: (K, n+1) complex, robot first; ``pair_offset`` / ``pair_distance`` (K, n+1, n+1) and
+    ``gap`` (K, n+1, n+1+S) as measured (:class:`crowdnav.sim.geometry.Measured`); ``contact_all``:
+    (n+1, n+1+S) the crowd size's contact distances; ``surface``: the obstacles' edges (None: no obstacles).
+    Obstacles go last, from the positions after the pair push: a neighbour's push can move a human into furniture.
+    """
+    n = positions.shape[-1] - 1
+    push_humans_apart(positions, pair_offset[:, 1:, 1:], pair_distance[:, 1:, 1:], gap[:, 1:, 1 : n + 1])
+    if surface is not None:
+        push_out_of_obstacles(positions, surface, contact_all[1:, n + 1 :])
+
+
 def touching(robot_gap: np.ndarray) -> np.ndarray:
     """(...,) bool: whether the robot touches anything (touching counts); ``robot_gap``: (..., n+1+S) its surface gaps.
 
     Columns: the robot itself (a huge gap), every human, every obstacle (polygons, then discs).
     """
-    touches: np.ndarray = robot_gap.min(-1) <= 0.0
+    touches: np.ndarray = np.minimum.reduce(robot_gap, axis=-1) <= 0.0  # ndarray.min without its Python wrapper
     return touches
 
 

@@ -85,3 +85,21 @@ class StepEvents:
 
 class SimulationError(CrowdNavError, RuntimeError):
     """The simulated state became non-finite; the message names the agent and the step."""
+
+
+def check_finite(positions: np.ndarray, velocities: np.ndarray, step_count: int | np.ndarray, worlds: np.ndarray | None = None) -> None:
+    """Raise :class:`SimulationError` naming the first agent whose position became non-finite, if any.
+
+    One world: ``positions`` and ``velocities`` (n+1,), ``step_count`` its int. K worlds: (K, n+1)
+    arrays, ``step_count`` (K,) and ``worlds`` (K,) their indices in the batch (named in the message).
+    One cheap check per step, so a non-finite state stops the episode with its name instead of
+    leaking NaN into rewards while the observations stay finite.
+    """
+    finite = np.isfinite(positions)
+    if np.logical_and.reduce(finite, axis=None):  # ndarray.all() without its Python wrapper (a step's cost)
+        return
+    bad = tuple(np.argwhere(~finite)[0])  # (agent,) or (world, agent)
+    who = "the robot" if bad[-1] == 0 else f"human {bad[-1] - 1}"
+    at = f"step {step_count}" if worlds is None else f"world {worlds[bad[0]]}, step {step_count[bad[0]]}"  # type: ignore[index]
+    raise SimulationError(f"{at}: the position of {who} became non-finite (its velocity: {velocities[bad]}); "
+                          "check the scenario's social_force parameters")

@@ -50,7 +50,8 @@ def repulsion(offset: np.ndarray, distance: np.ndarray, gain: np.ndarray, neg_in
     # array op at high density; 1e-7 relative error on a force is far below the model's fidelity.
     magnitude = gain * np.exp(np.multiply(distance, neg_inv_range, dtype=np.float32))
     magnitude /= distance
-    force: np.ndarray = (offset * magnitude).sum(axis=-1)  # the last axis: one world (N, M) or a batch (K, N, M)
+    # the last axis: one world (N, M) or a batch (K, N, M); np.add.reduce is ndarray.sum without its Python wrapper
+    force: np.ndarray = np.add.reduce(offset * magnitude, axis=-1)
     return force
 
 

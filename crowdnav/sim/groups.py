@@ -2,9 +2,11 @@
 
 The simulator calls these with itself (``sim``: its scenario, groups, placements and generator,
 what :class:`GroupWorld` declares):
-:func:`place_groups` and :func:`first_goals` at reset, :func:`apply_goal_rules` after each step,
-on the state it is given (the simulator's own, or one world's row of a batch: a
-:class:`crowdnav.sim.state.SimState`, changed in place). Groups are visited in file order, and a file
+:func:`place_groups` and :func:`first_goals` at reset; after each step :func:`goal_checks` (who
+arrived or stalled: one kernel for one world and for a batch's rows, a leading world axis) and,
+where they have something to do, :func:`apply_goal_rules`, on the state it is given (the simulator's
+own, or one world's row of a batch: a :class:`crowdnav.sim.state.SimState`, changed in place; its
+draws come from that world's generator). Groups are visited in file order, and a file
 without ``humans.groups`` is one group: it draws the same random numbers in the same order as
 before groups existed, so its episodes did not change. Loops run over groups (a scenario's
 constant), never over humans.
@@ -19,7 +21,7 @@ whole, also when one member stalled.
 from __future__ import annotations
 
 import math
-from typing import TYPE_CHECKING, Protocol
+from typing import TYPE_CHECKING, Any, NamedTuple, Protocol
 
 import numpy as np
 
@@ -29,7 +31,7 @@ from crowdnav.worlds.placement import GAP, JITTER_REACH, PlacementError
 if TYPE_CHECKING:
     from crowdnav.scenario.schema import HumanGroup, Scenario
     from crowdnav.sim.robots import Team
-    from crowdnav.sim.state import SimState
+    from crowdnav.sim.state import SimState, StateFields
     from crowdnav.worlds.placement import GroupPlacement, Placement
     from crowdnav.worlds.placement_regions import CandidateSet
 
@@ -51,6 +53,10 @@ class GroupWorld(Protocol):
     def together(self) -> np.ndarray | None: ...
     @property
     def stall_window(self) -> int: ...
+    @property
+    def rules_when_stopped(self) -> np.ndarray | None: ...
+    @property
+    def rules_every_step(self) -> bool: ...
 
 
 def place_groups(sim: GroupWorld, start: np.ndarray, goal: complex | np.ndarray, counts: list[int]) -> list[np.ndarray]:
@@ -115,22 +121,90 @@ def first_goals(sim: GroupWorld, spawn: list[np.ndarray]) -> list[np.ndarray]:
     return goals
 
 
-def apply_goal_rules(state: SimState, sim: GroupWorld, stalled: np.ndarray | None = None) -> bool:
+def goal_checks(state: StateFields[Any, Any, Any], sim: GroupWorld, rows: np.ndarray | None = None) -> GoalChecks:
+    """A step's arrival and stall checks, written once for one world and K: ``state`` one world's (``rows`` None) or K
+    worlds' (:class:`crowdnav.batch.stacked_state.StackedState`), checked in its ``rows`` (a leading world axis).
+
+    Writes ``human_arrived`` (the arrivals of humans not stopped: :func:`arrivals`) and, where a stall
+    check is due (every ``sim.stall_window`` steps), ``human_stall_mark``; returns what the goal rules
+    (:func:`apply_goal_rules`) read and where they have something to do. ``sim``: the simulator (a
+    batch: any world's, they share the scenario and its tables).
+    """
+    if rows is None:
+        humans, goals, group, stopped, steps = state.positions[1:], state.human_goals, state.human_group, state.human_stopped, state.step_count
+    else:
+        humans, goals, group = state.positions[rows, 1:], state.human_goals[rows], state.human_group[rows]
+        stopped, steps = state.human_stopped[rows], state.step_count[rows]
+    where = ... if rows is None else rows
+    distance = np.abs(goals - humans)
+    arrived = arrivals(distance, humans, goals, group, stopped, sim)
+    if rows is None:  # one world: straight into its array
+        walked_in = np.logical_and(arrived, ~stopped, out=state.human_arrived)
+    else:
+        walked_in = state.human_arrived[rows] = arrived & ~stopped
+    rules = _any(arrived)  # nobody at a goal: the rules have nothing to do but stalls (most steps)
+    if rules is True or (rules is not False and rules.any()):
+        rules = _any(walked_in)
+        acting = sim.rules_when_stopped
+        if acting is not None:  # stopped members at their goals whose group's rule still acts (rule_tables)
+            rules = rules | _any(arrived & stopped & acting[group])
+    stalled, window = None, sim.stall_window
+    due = window and steps % window == 0  # a bool, or (K,) bools
+    if due is True or (isinstance(due, np.ndarray) and due.any()):
+        mark = state.human_stall_mark[where]
+        stalled = stalled_humans(distance, mark, stopped | walked_in, sim.scenario.humans.stall.progress)
+        if due is True:
+            state.human_stall_mark[where] = distance
+        else:  # only the worlds whose check is due
+            stalled &= due[:, None]
+            state.human_stall_mark[where] = np.where(due[:, None], distance, mark)
+        rules = rules | _any(stalled)
+    if sim.rules_every_step:
+        rules = True if rows is None else np.ones(len(rows), dtype=bool)
+    return GoalChecks(arrived, stalled, rules)
+
+
+def _any(flags: np.ndarray) -> Any:
+    """Whether any of the last axis is set: one world's bool (a count: cheaper than numpy's any), or K worlds' (K,) bools."""
+    return bool(np.count_nonzero(flags)) if flags.ndim == 1 else flags.any(1)
+
+
+class GoalChecks(NamedTuple):
+    """What :func:`goal_checks` found: per human (..., n), per world (...) (the leading world axis of the rows checked, if any)."""
+
+    arrived: np.ndarray
+    """(..., n) bool: the humans at their goals (:func:`arrivals`; stopped ones too, as the goal rules read them)."""
+    stalled: np.ndarray | None
+    """(..., n) bool: the humans a due stall check found stalled (:func:`stalled_humans`); None: no check was due."""
+    rules: Any
+    """One world's bool, or (K,) bools: the worlds where :func:`apply_goal_rules` has something to do (elsewhere it changes nothing)."""
+
+
+def rule_tables(groups: list[HumanGroup], places: bool) -> tuple[np.ndarray | None, bool]:
+    """Where the goal rules act besides the arrivals of walking humans and the stalls: ``(when_stopped, every_step)``.
+
+    ``when_stopped``: (G,) bool, the walking groups whose rule acts on a member at its goal even
+    when it is stopped (``on_goal`` new_goal or respawn: a recorded person, a human a multi-agent env
+    stopped); None where no group does. ``every_step``: a walking group stops at its goal (its rule
+    zeroes every stopped human's velocity) and a crowd model ``places`` its humans (their velocities are
+    the recording's, not 0).
+    """
+    walking = [not group.standing and group.max_count > 0 for group in groups]
+    table = np.array([walk and group.on_goal != "stop" for walk, group in zip(walking, groups, strict=True)], dtype=bool)
+    stops = any(walk and group.on_goal == "stop" for walk, group in zip(walking, groups, strict=True))
+    return (table if table.any() else None), places and stops
+
+
+def apply_goal_rules(state: SimState, sim: GroupWorld, arrived: np.ndarray, stalled: np.ndarray | None) -> bool:
     """After a step: humans of ``state`` at their goals follow their group's ``on_goal`` and ``goal_rule``; stalled ones take a new goal.
 
-    ``state`` is changed in place (``human_arrived``, ``human_stopped``, ``human_goals``, the stall
-    fields, and for respawns ``positions``, ``velocities``, ``human_respawns``); draws come from
-    ``sim.rng``. ``stalled``: (n,) bool, the humans a stall check found (the batched simulator
-    checks every world at once, :func:`stalled_humans`); None: check here when one is due
-    (:func:`stall_check`). A stalled human takes a new goal by its group's ``goal_rule`` (sample:
-    drawn from the goal regions; mirror: the mirror image, so it turns back), whatever its
+    ``arrived`` and ``stalled``: that world's (n,) :class:`GoalChecks` (``stalled`` None: no check
+    was due). ``state`` is changed in place (``human_stopped``, ``human_goals``, ``human_stalls``,
+    the stall marks of new goals, and for respawns ``positions``, ``velocities``, ``human_respawns``);
+    draws come from ``sim.rng``. A stalled human takes a new goal by its group's ``goal_rule``
+    (sample: drawn from the goal regions; mirror: the mirror image, so it turns back), whatever its
     ``on_goal``. Returns whether anyone respawned (moved): the caller then measures the new geometry.
     """
-    distance = np.abs(state.human_goals - state.positions[1:])
-    arrived = arrivals(distance, state.positions[1:], state.human_goals, state.human_group, state.human_stopped, sim)
-    np.logical_and(arrived, ~state.human_stopped, out=state.human_arrived)
-    if stalled is None:
-        stalled = stall_check(state, sim, distance)
     if stalled is not None and stalled.any():
         state.human_stalls[stalled] += 1
     else:
@@ -210,16 +284,6 @@ def stall_window(scenario: Scenario) -> int:
     """Steps between stall checks (``humans.stall.time`` rounded to whole steps, at least 1); 0: no stall checks."""
     time = scenario.humans.stall.time
     return 0 if time is None else max(1, round(time / scenario.time_step))
-
-
-def stall_check(state: SimState, sim: GroupWorld, distance: np.ndarray) -> np.ndarray | None:
-    """One world's stall check when one is due (every ``sim.stall_window`` steps): the stalled humans, the marks moved on; else None."""
-    window = sim.stall_window
-    if not window or state.step_count % window:
-        return None
-    stalled = stalled_humans(distance, state.human_stall_mark, state.human_stopped | state.human_arrived, sim.scenario.humans.stall.progress)
-    state.human_stall_mark[...] = distance
-    return stalled
 
 
 def stalled_humans(distance: np.ndarray, mark: np.ndarray, resting: np.ndarray, progress: float) -> np.ndarray:

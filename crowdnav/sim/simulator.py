@@ -41,19 +41,19 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from crowdnav.crowd import Crowd
-from crowdnav.crowd.base import action_commands
+from crowdnav.crowd.base import CrowdView, action_commands
 from crowdnav.crowd.passing import passing_force
 from crowdnav.crowd.routing import Router, router_for
-from crowdnav.crowd.views import WorldView
+from crowdnav.crowd.views import world_view
 from crowdnav.scenario.loader import Overrides, human_substeps
 from crowdnav.scenario.schema import Scenario
 from crowdnav.sim import forces as sf
 from crowdnav.sim import robot_view as robots_read
 from crowdnav.sim.contacts import goal_distance
 from crowdnav.sim.episode_draw import draw_state
-from crowdnav.sim.events import OUTCOMES, Collision, SimulationError, StepEvents  # noqa: F401  (re-exported: their public home)
+from crowdnav.sim.events import OUTCOMES, Collision, SimulationError, StepEvents, check_finite  # noqa: F401  (re-exported: their public home)
 from crowdnav.sim.geometry import Geometry
-from crowdnav.sim.groups import apply_goal_rules, stall_window, together_table
+from crowdnav.sim.groups import apply_goal_rules, goal_checks, rule_tables, stall_window, together_table
 from crowdnav.sim.robot_view import RobotView, RobotWorld, robot_scenario
 from crowdnav.sim.robots import Team, clipped_action, retire_robots, robot_kinematics
 from crowdnav.sim.state import ConstantsCache, PairConstants, SimState, StateFields, pair_constants, read_state_fields, read_through, read_with
@@ -121,7 +121,7 @@ class Simulator(_StateAttributes):
         self.substep_dt = self.dt / self.substeps
         """Seconds of one sub-step (``dt`` with one sub-step)."""
         self.stall_window = stall_window(scenario)
-        """Steps between stall checks (``humans.stall``; 0: none): :func:`crowdnav.sim.groups.apply_goal_rules`."""
+        """Steps between stall checks (``humans.stall``; 0: none): :func:`crowdnav.sim.groups.goal_checks`."""
         world = scenario.world
         self.bounds: tuple[float, float, float, float] | None = (
             None if world.boundary_walls else (float(world.min[0]), float(world.min[1]), float(world.max[0]), float(world.max[1])))
@@ -141,6 +141,8 @@ class Simulator(_StateAttributes):
         fails here, at load, in one line naming the scenario field that asked for it."""
         self.router: Router | None = router_for(self.world) if scenario.humans.routing == "geodesic" else None
         """``humans.routing: geodesic``: the compiled world's shared router (:mod:`crowdnav.crowd.routing`); None: straight."""
+        self.rules_when_stopped, self.rules_every_step = rule_tables(self.groups, self.crowd.places)
+        """Where the goal rules act besides walking arrivals and stalls (:func:`crowdnav.sim.groups.rule_tables`)."""
         self._ready = False
 
     # ----------------------------------------------------------------- state views
@@ -197,9 +199,9 @@ class Simulator(_StateAttributes):
         n = self._state.n_humans
         self._use_pair_constants(n)
         self._ready = True
-        self.crowd.start_episode(WorldView(self), rng)
+        self.crowd.start_episode(world_view(self), rng)
         if self.crowd.places:  # recorded people where the recording has them, stopped humans for the whole episode
-            for index, _, _ in self._place_humans():
+            for index, _, _ in place_humans(self.crowd, world_view(self), self._state.positions, self._state.velocities):
                 self._state.human_stopped[index] = True
 
     def pair_constants(self, n: int) -> PairConstants:
@@ -302,7 +304,7 @@ class Simulator(_StateAttributes):
             commands = self.crowd_commands()
         else:
             commands = action_commands(human_actions, self._state.human_max_speed)
-        if state.human_stopped.any():  # standing groups, arrivals under on_goal: stop, humans a multi-agent env let leave
+        if np.count_nonzero(state.human_stopped):  # standing groups, arrivals under on_goal: stop, humans a multi-agent env let leave
             commands = np.where(state.human_stopped, 0.0, commands)
         velocities, positions = state.velocities, state.positions
         velocities[0] = robot_velocity
@@ -313,13 +315,7 @@ class Simulator(_StateAttributes):
         if self.team is not None:
             self.team.move(other_robot_actions, self.dt)
         state.step_count += 1
-        # one cheap check per step, so a non-finite state stops the episode with its name
-        # instead of leaking NaN into rewards while the observations stay finite
-        if not np.isfinite(positions).all():
-            bad = np.flatnonzero(~np.isfinite(positions))
-            who = "the robot" if bad[0] == 0 else f"human {bad[0] - 1}"
-            raise SimulationError(f"step {state.step_count}: the position of {who} became non-finite (its velocity: {velocities[bad[0]]}); "
-                                  "check the scenario's social_force parameters")
+        check_finite(positions, velocities, state.step_count)
         self.refresh()
         n = len(positions) - 1
         for _ in range(1, self.substeps if n else 1):  # fast humans: contacts after every sub-step, so none passes through a wall
@@ -331,11 +327,11 @@ class Simulator(_StateAttributes):
             self.geometry.push_humans_apart(positions)
             self.refresh()
         if n and self.crowd.places:  # after the pushes: placed humans are exactly where their model puts them
-            self._place_humans()
+            place_humans(self.crowd, world_view(self), positions, velocities)
             self.refresh()
         truncated = state.step_count >= self.scenario.max_steps
         collision = self.geometry.robot_collision(n)
-        left_world = self.geometry.robot_left_world(complex(positions[0]))
+        left_world = self.bounds is not None and self.geometry.robot_left_world(complex(positions[0]))
         goal_reached = goal_distance(state.robot_goal, positions[0]) <= self.scenario.robot.goal_radius
         events = StepEvents(goal_reached=bool(goal_reached), collision=collision, truncated=truncated, left_world=left_world)
         if self.team is None:
@@ -343,8 +339,10 @@ class Simulator(_StateAttributes):
         else:  # the ego robot's events gain its robot contacts; a robot that left has none: report a quiet step for it
             self.robot_events = self.team.outcomes(self, events, truncated)
             events = self.robot_events[0] or StepEvents(goal_reached=False, collision=None, truncated=truncated)
-        if n and apply_goal_rules(state, self):  # someone respawned: the geometry of the new positions
-            self.refresh()
+        if n:
+            checks = goal_checks(state, self)
+            if checks.rules and apply_goal_rules(state, self, checks.arrived, checks.stalled):  # someone respawned: measure again
+                self.refresh()
         return events
 
     def stop_humans(self, index: np.ndarray) -> None:
@@ -355,31 +353,29 @@ class Simulator(_StateAttributes):
 
     def crowd_commands(self) -> np.ndarray:
         """(n_humans,) complex velocity commands (m/s) of the crowd's models in the current state (stopped humans not zeroed)."""
-        return self.crowd.commands(WorldView(self))
-
-    def _place_humans(self) -> list[tuple[np.ndarray, np.ndarray, np.ndarray]]:
-        """Put the humans of placing models (:attr:`crowdnav.crowd.Crowd.places`) where they say; returns what they said."""
-        placed = self.crowd.place(WorldView(self))
-        state = self._state
-        for index, positions, velocities in placed:
-            state.positions[1:][index] = positions
-            state.velocities[1:][index] = velocities
-        return placed
+        return self.crowd.commands(world_view(self))
 
     def social_force_commands(self) -> np.ndarray:
         """(n_humans,) complex velocity commands (m/s) of the social-force model in the current state."""
-        force, state = self._force, self._state
-        to_goal = (state.human_goals - state.positions[1:] if self.router is None  # humans.routing: geodesic below
-                   else self.router.to_goal(state.positions[1:], state.human_goals))
+        state = self._state
+        return self.social_force(state.positions[1:], state.velocities[1:], state.human_goals, state.human_group, state.human_stopped,
+                                 state.human_preferred_speed, state.command_cap, self.geometry.repulsion[1:])
+
+    def social_force(self, humans: np.ndarray, velocities: np.ndarray, goals: np.ndarray, group: np.ndarray, stopped: np.ndarray,
+                     preferred_speed: np.ndarray, command_cap: np.ndarray, repulsion: np.ndarray) -> np.ndarray:
+        """The social-force model's velocity commands (m/s), written once for one world and K: its kernels
+        (:mod:`crowdnav.sim.forces`) summed on the humans' (..., n) arrays (any leading world axes) and the measured
+        ``repulsion`` on them. One world: :meth:`social_force_commands`; K: the batched simulator, every world's at once."""
+        force, router = self._force, self.router
+        to_goal = goals - humans if router is None else router.to_goal(humans, goals)  # humans.routing: geodesic
         total = sf.goal_force(to_goal, force.goal_weight, force.goal_saturation_distance)
-        if self.router is not None:  # routed humans side-step oncoming ones (crowdnav.crowd.passing)
-            total += passing_force(state.positions[1:], to_goal, ~state.human_stopped, self.scenario.humans.radius, force.goal_weight,
-                                   state.human_group, self.together)
-        total += self.geometry.repulsion[1:]
+        if router is not None:  # routed humans side-step oncoming ones (crowdnav.crowd.passing)
+            total += passing_force(humans, to_goal, ~stopped, self.scenario.humans.radius, force.goal_weight, group, self.together)
+        total += repulsion
         if self.together is not None:  # the walking groups' terms (Moussaïd et al. 2010)
-            total += self.group_terms(state.positions[1:], state.velocities[1:], state.human_preferred_speed, state.human_group,
-                                      state.human_stopped)
-        return sf.velocity_command(total, state.velocities[1:], state.human_preferred_speed, state.command_cap, self.relaxation)
+            total += self.group_terms(humans, velocities, preferred_speed, group, stopped)
+        commands: np.ndarray = sf.velocity_command(total, velocities, preferred_speed, command_cap, self.relaxation)
+        return commands
 
     def group_terms(self, humans: np.ndarray, velocities: np.ndarray, preferred_speed: np.ndarray, group: np.ndarray,
                     stopped: np.ndarray) -> np.ndarray:
@@ -418,3 +414,16 @@ class Simulator(_StateAttributes):
 
 
 read_state_fields(Simulator)  # sim.positions is sim.state.positions, and so on for every field of SimState
+
+
+def place_humans(crowd: Crowd, view: CrowdView, positions: np.ndarray, velocities: np.ndarray) -> list[tuple[np.ndarray, np.ndarray, np.ndarray]]:
+    """Put one world's humans of placing models (:attr:`crowdnav.crowd.Crowd.places`) where they say; returns what they said.
+
+    ``view``: that world's (one world); ``positions``, ``velocities``: its (n+1,) arrays, written in
+    place (the simulator's own, or a view of a batch's row).
+    """
+    placed = crowd.place(view)
+    for index, where, moving in placed:
+        positions[1:][index] = where
+        velocities[1:][index] = moving
+    return placed

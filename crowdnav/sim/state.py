@@ -7,7 +7,8 @@ world and reads its fields as its attributes (:func:`read_state_fields`, not lis
 humans as one :class:`crowdnav.batch.stacked_state.StackedState`: the same fields, each with a
 leading world axis (K,) (its rows are :class:`SimState` views). Nothing outside the
 simulators writes into a state: the simulator's methods (:meth:`crowdnav.Simulator.stop_humans`)
-and the goal rules (:func:`crowdnav.sim.groups.apply_goal_rules`, on the state they are given) do.
+and the goal checks and rules (:func:`crowdnav.sim.groups.goal_checks`, :func:`crowdnav.sim.groups.apply_goal_rules`, on the
+state they are given) do.
 
 The geometry a simulator measures from a state (distances, gaps, repulsion) is not state: it is
 recomputed from the positions by ``refresh`` and never written by anyone else.
@@ -19,7 +20,7 @@ from collections import OrderedDict
 from collections.abc import Callable
 from dataclasses import dataclass, fields
 from operator import attrgetter
-from typing import Any, Generic, TypeVar
+from typing import Any, Generic, TypeVar, get_args
 
 import numpy as np
 
@@ -99,6 +100,19 @@ class SimState(StateFields[complex, float, int]):
 
     def _items(self) -> list[tuple[str, Any]]:
         return [(f.name, getattr(self, f.name)) for f in fields(self)]
+
+
+def _one_world_scalars() -> dict[str, Callable[[Any], Any]]:
+    """The fields :class:`SimState` holds as Python numbers, each with its type, read from the two declarations above."""
+    parameters = StateFields.__parameters__  # type: ignore[attr-defined]  # (Goal, Heading, Count)
+    kinds = get_args(SimState.__orig_bases__[0])  # type: ignore[attr-defined]  # (complex, float, int)
+    by_parameter = {parameter.__name__: kind for parameter, kind in zip(parameters, kinds, strict=True)}
+    return {field.name: by_parameter[field.type] for field in fields(StateFields) if field.type in by_parameter}
+
+
+ONE_WORLD_SCALARS = _one_world_scalars()
+"""Field name -> the Python type one world holds it as (``robot_goal``: complex, ``robot_heading``: float, ``step_count``: int):
+K worlds hold (K,) arrays of them, and a row read as one world converts its entries (:meth:`StackedState.row`, a crowd view's world)."""
 
 
 def read_through(path: str, convert: Callable[[Any], Any] | None = None, doc: str | None = None) -> Any:
