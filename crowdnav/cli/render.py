@@ -74,7 +74,7 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
-HIDEABLE = ("lidar", "leog", "closest_obstacle")
+HIDEABLE = ("lidar", "leog", "closest_obstacle", "tracks")
 """Overlays `--hide` can leave out (crowdnav.rendering.renderer.RenderOptions)."""
 
 

@@ -12,6 +12,7 @@ from __future__ import annotations
 import dataclasses
 import math
 from collections.abc import Mapping, Sequence
+from functools import partial
 from typing import Any
 
 import numpy as np
@@ -23,6 +24,8 @@ from crowdnav.rendering.episode_view import RENDER_MODES, EpisodeView, RenderOpt
 from crowdnav.scenario import ScenarioIssue, library
 from crowdnav.scenario.loader import LoadedScenario
 from crowdnav.sensors import Modality, build_modalities
+from crowdnav.sensors.tracked import TrackedView, attach
+from crowdnav.sensors.tracker import make_tracker
 from crowdnav.sim.robot_view import RobotWorld
 from crowdnav.sim.simulator import Simulator, StepEvents
 from crowdnav.worlds.compiled import CompiledWorld, WorldSource, load_world
@@ -30,6 +33,8 @@ from crowdnav.yaml_input import check_value
 
 ScenarioSource = WorldSource
 """A library name (``"room_furniture"``), a YAML path, a :class:`Scenario` or a parsed mapping."""
+WORLD = np.zeros(1, dtype=np.intp)
+"""The one world of an env's tracker (:class:`crowdnav.sensors.tracker.PeopleTracker` rows)."""
 
 
 def option_overrides(
@@ -171,6 +176,10 @@ class EnvCore:
         world, self.modalities = load_env_world(scenario, option_overrides(modalities, sensors, reward_weights, overrides))
         self.scenario = world.scenario
         self.simulator = Simulator(world)
+        self.tracker = make_tracker(world, 1)
+        """The robot's people tracker (``sensors.tracker``; None: ``perfect``), stepped with the simulator."""
+        if self.tracker is not None:  # a scripted policy called with the simulator reads these tracks too
+            attach(self.simulator, partial(self.tracker.columns, WORLD))
         self.shield = validate_shield(dict(shield) if isinstance(shield, Mapping) else shield, world)
         self.shielded = False
         """Whether the shield replaced the last step's action (docs/agents.md#the-safety-shield)."""
@@ -184,8 +193,8 @@ class EnvCore:
         self.render_mode = render_mode
         self.view = EpisodeView(self.simulator, render_mode, render_options) if render_mode else None
         self._observation: dict[str, np.ndarray] = {}
-        self.plain = self.simulator.team is None and self.shield is None and not self.residual and self.view is None
-        """One robot, no shield, residual plan or render_mode: :meth:`step_plain` steps it (the envs' common case)."""
+        self.plain = self.simulator.team is None and self.shield is None and not self.residual and self.view is None and self.tracker is None
+        """One robot, no shield, residual plan, render_mode or tracker: :meth:`step_plain` steps it (the envs' common case)."""
         self.robot_names: list[str] = self.scenario.robot_names
         """Every robot's agent name, the ego robot first (``["robot"]`` for one robot)."""
         self.robot_spaces: list[spaces.Dict] = [self.observation_space]
@@ -219,6 +228,10 @@ class EnvCore:
 
     def reset(self, seed: int | None) -> dict[str, np.ndarray]:
         self.simulator.reset(seed=seed)
+        if self.tracker is not None:
+            sim = self.simulator
+            self.tracker.start(WORLD, [seed])
+            self.tracker.update(WORLD, sim.positions[None], sim.velocities[:1], np.array([sim.robot_heading]), sim.radii)
         self.reward.reset(self.simulator)
         for k, reward in enumerate(self.robot_rewards[1:], start=1):
             reward.reset(self.simulator.robot_view(k))
@@ -257,7 +270,10 @@ class EnvCore:
         ``view`` / ``given`` (several robots): as for :meth:`observe_robot`.
         """
         sim = self.simulator
-        if sim.team is None:
+        if self.tracker is not None:
+            people = self.people()
+            self._observation = {key: modality.observe(people if modality.reads_tracker else sim) for key, modality in self._sensors}
+        elif sim.team is None:
             self._observation = {key: modality.observe(sim) for key, modality in self._sensors}
         else:
             self._observation = self.observe_robot(0, view, given)
@@ -277,8 +293,11 @@ class EnvCore:
         if self.residual:  # the policy's action corrects the plan it observed
             action = action + self._observation["plan"]
         if self.shield is not None:
-            action, self.shielded = self.shield.single(self.simulator, action)
+            action, self.shielded = self.shield.single(self.people(), action)
         events = self.simulator.step(action, human_actions, other_robot_actions)
+        if self.tracker is not None:
+            sim = self.simulator
+            self.tracker.update(WORLD, sim.positions[None], sim.velocities[:1], np.array([sim.robot_heading]), sim.radii)
         reward, terms = self.reward(self.simulator, events)
         if events.terminated or events.truncated:
             self._running = False
@@ -329,6 +348,12 @@ class EnvCore:
         if self.view is not None and results[0] is not None:
             self.view.on_step(results[0][1], results[0][0])
         return results
+
+    def people(self) -> RobotWorld:
+        """The world as the robot's tracker reports the people now (:mod:`crowdnav.sensors.tracked`; ``perfect``: the simulator)."""
+        if self.tracker is None:
+            return self.simulator
+        return TrackedView(self.simulator, self.tracker.columns(WORLD, self.simulator.n_humans))
 
     def render(self) -> np.ndarray | None:
         """The current frame (``rgb_array``), a window update (``human``) or None without a render_mode."""

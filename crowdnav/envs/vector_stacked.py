@@ -14,10 +14,13 @@ from collections.abc import Mapping, Sequence
 import numpy as np
 
 from crowdnav.batch.simulator import BatchSimulator, StepResult
+from crowdnav.batch.state import BatchState
 from crowdnav.envs.engine import Judged
 from crowdnav.envs.reward import REWARD_TERMS, reward_terms
 from crowdnav.planning.shield import Shield
 from crowdnav.sensors import Modality
+from crowdnav.sensors.tracked import attach, tracked_state
+from crowdnav.sensors.tracker import make_tracker
 from crowdnav.sim.contacts import goal_distance
 from crowdnav.sim.events import outcomes
 from crowdnav.sim.simulator import Simulator
@@ -39,14 +42,44 @@ class StackedWorlds:
         self._weights = {term: float(getattr(weights, term)) for term in REWARD_TERMS}
         self._previous_distance = np.zeros(self.num_worlds)
         """Each world's robot-goal distance after its last step (the goal-progress term's memory; the single env's Reward keeps it)."""
+        self.tracker = make_tracker(world, self.num_worlds)
+        """The robots' people tracker, one row per world (``sensors.tracker``; None: ``perfect``)."""
+        self._tracked = any(modality.reads_tracker for modality in modalities.values()) and self.tracker is not None
+        """Some observed modality reads the tracker's people."""
 
     def reset(self, worlds: Sequence[int] | np.ndarray, seeds: Sequence[int | None] | np.ndarray) -> None:
         self.batch.reset(worlds, seeds)
         worlds = np.asarray(worlds, dtype=np.int64)
         self._previous_distance[worlds] = self._goal_distance(worlds)
+        if self.tracker is not None:  # their first detections come with the next step's (or a reading's catch-up)
+            self.tracker.start(worlds, list(seeds))
 
     def step(self, actions: np.ndarray, active: np.ndarray | None = None) -> StepResult:
-        return self.batch.step(actions, active)
+        result = self.batch.step(actions, active)
+        if self.tracker is not None:  # the stepped worlds' tracks, and the first ones of the worlds reset since (one call)
+            self._track(None if active is None else active | self._pending_mask())
+        return result
+
+    def _pending_mask(self) -> np.ndarray:
+        assert self.tracker is not None
+        mask = np.zeros(self.num_worlds, dtype=bool)
+        mask[self.tracker.pending] = True
+        return mask
+
+    def _track(self, worlds: np.ndarray | None) -> None:
+        """The tracker's update of ``worlds`` (a bool mask; None: all), one call per crowd size."""
+        assert self.tracker is not None
+        for bucket in self.batch.buckets.values():
+            rows = np.arange(len(bucket)) if worlds is None else np.flatnonzero(worlds[bucket.world])
+            if len(rows):
+                state = bucket.state
+                self.tracker.update(bucket.world[rows], state.positions[rows], state.velocities[rows, 0], state.robot_heading[rows],
+                                    bucket.radii)
+
+    def _catch_up(self) -> None:
+        """The first tracks of the worlds reset and not stepped since, before anything reads the tracker."""
+        if self.tracker is not None and len(self.tracker.pending):
+            self._track(self._pending_mask())
 
     def judged(self, result: StepResult, stepping: np.ndarray, every: bool) -> Judged:
         outcome = outcomes(result.collided & stepping, result.left_world & stepping, result.goal_reached & stepping, stepping)
@@ -71,22 +104,30 @@ class StackedWorlds:
         return distances
 
     def observe(self, out: Mapping[str, np.ndarray]) -> None:
+        self._catch_up()
         for bucket in self.batch.buckets.values():
             rows, size = np.arange(len(bucket)), self.batch.chunk_size(bucket.n)
             for start in range(0, len(rows), size):  # chunks of worlds, as the simulator steps them
                 chunk = rows[start : start + size]
                 state = self.batch.state(bucket, chunk)
+                people = self._people(state, bucket.world[chunk]) if self._tracked else state
                 for key, values in out.items():
-                    values[bucket.world[chunk]] = self.modalities[key].observe_batch(state)
+                    modality = self.modalities[key]
+                    values[bucket.world[chunk]] = modality.observe_batch(people if modality.reads_tracker else state)
+
+    def _people(self, state: BatchState, worlds: np.ndarray) -> BatchState:
+        """``state`` of ``worlds`` with the people as their tracker reports them (``state`` itself for ``perfect``)."""
+        return state if self.tracker is None else tracked_state(state, self.tracker.columns(worlds, state.n_humans))
 
     def shielded(self, shield: Shield, actions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        self._catch_up()
         out, replaced = actions.copy(), np.zeros(self.num_worlds, dtype=bool)
         for bucket in self.batch.buckets.values():
             rows, size = np.arange(len(bucket)), self.batch.chunk_size(bucket.n)
             for start in range(0, len(rows), size):
                 chunk = rows[start : start + size]
                 worlds = bucket.world[chunk]
-                out[worlds], replaced[worlds] = shield.batch(self.batch.state(bucket, chunk), actions[worlds])
+                out[worlds], replaced[worlds] = shield.batch(self._people(self.batch.state(bucket, chunk), worlds), actions[worlds])
         return out, replaced
 
     def stalls(self) -> np.ndarray:
@@ -119,7 +160,11 @@ class StackedWorlds:
                 "respawns": self.row("human_respawns", world)}
 
     def simulator(self, world: int) -> Simulator:
-        return self.batch.simulator(world)
+        snapshot = self.batch.simulator(world)
+        self._catch_up()
+        if self.tracker is not None:  # its tracks as they are now (a scripted policy reading the snapshot sees them)
+            attach(snapshot, self.tracker.frozen(world))
+        return snapshot
 
     def simulators(self) -> list[Simulator]:
-        return [self.batch.simulator(world) for world in range(self.num_worlds)]
+        return [self.simulator(world) for world in range(self.num_worlds)]

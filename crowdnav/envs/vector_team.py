@@ -36,6 +36,7 @@ from crowdnav.envs.single import CrowdNavEnv
 from crowdnav.planning.shield import Shield
 from crowdnav.sensors import Modality
 from crowdnav.sensors.lidar import LidarModality
+from crowdnav.sensors.tracked import attach
 from crowdnav.sim.events import Collision, StepEvents
 from crowdnav.sim.robot_view import RobotWorld
 from crowdnav.sim.simulator import Simulator
@@ -192,7 +193,7 @@ class TeamWorlds:
         """The single env's own call per world (one robot each: the shield refuses several)."""
         out, replaced = actions.copy(), np.zeros(self.num_worlds, dtype=bool)
         for i, env in enumerate(self.envs):
-            out[i], replaced[i] = shield.single(env.simulator, actions[i])
+            out[i], replaced[i] = shield.single(env.core.people(), actions[i])
         return out, replaced
 
     def other_robots(self, stepping: np.ndarray) -> dict[int, dict[str, str | None]]:
@@ -248,4 +249,8 @@ class TeamWorlds:
 
     def simulator(self, world: int) -> Simulator:
         """A snapshot of ``world``'s simulator (:meth:`crowdnav.Simulator.clone`): stepping it leaves the world as it is."""
-        return self.envs[world].simulator.clone()
+        core = self.envs[world].core
+        snapshot = core.simulator.clone()
+        if core.tracker is not None:  # its tracks as they are now (a scripted policy reading the snapshot sees them)
+            attach(snapshot, core.tracker.frozen(0))
+        return snapshot

@@ -4,7 +4,8 @@ At every step :class:`OnboardPlanner` takes as its action exactly what the ``pla
 (:class:`crowdnav.sensors.plan.PlanModality`) observes for that robot at that step: the move
 :class:`crowdnav.planning.predictive.PredictivePlanner` makes from the humans the robot's tracker
 reports (the ``humans`` modality with the scenario's ``sensors.humans`` settings: its k nearest
-within range, never anyone else, nor the other robots), its own pose, velocity and goal, and the
+within range, never anyone else, nor the other robots; with a ``sensors.tracker`` profile the tracks
+the env's tracker holds for that simulator, :func:`crowdnav.sensors.tracked.sensed_people`), its own pose, velocity and goal, and the
 static map, the humans predicted at constant velocity. It reads nothing the robot does not have:
 not privileged, unlike ``baseline:predictive`` (the same planner fed the true state of every
 human). It is the level a learned agent has to beat; an agent observing ``plan`` can reach it by
@@ -21,6 +22,7 @@ import numpy as np
 from crowdnav.planning.oracle import PlannerUnavailable, check_plannable
 from crowdnav.planning.predictive import PredictivePlanner
 from crowdnav.sensors.plan import PlanModality
+from crowdnav.sensors.tracked import sensed_people
 from crowdnav.sim.robot_view import RobotView, RobotWorld
 
 if TYPE_CHECKING:
@@ -53,7 +55,8 @@ class OnboardPlanner:
 
     def __call__(self, sim: RobotWorld) -> np.ndarray:
         check_plannable(sim, "the onboard planner", needs_fixed_future=False)
-        people = sim.without_robots() if isinstance(sim, RobotView) else sim  # the tracker's view (a simulator: one robot)
+        # the tracker's view: one robot's simulator as its env's tracker reports the people; several robots, the humans
+        people = sim.without_robots() if isinstance(sim, RobotView) else sensed_people(sim)
         action: np.ndarray = self.modality(sim).observe(people)
         return action
 

@@ -2,7 +2,8 @@
 
 Before the simulator moves the robot, the shield checks the action a policy chose: it predicts
 the humans the robot's tracker reports (the ``humans`` modality's k nearest within range, with
-the scenario's sensor settings: the shield never sees anyone the robot's sensors would not)
+the scenario's sensor settings and its ``sensors.tracker``, which the env hands it: the shield never
+sees anyone the robot's sensors would not)
 at constant velocity for ``horizon`` seconds and asks the predictive planner's lattice
 (:class:`crowdnav.planning.predictive.Layers`) which moves keep the robot clear of every
 prediction and of the walls and furniture of the map to the horizon. An action whose move is

@@ -18,6 +18,7 @@ import numpy as np
 from crowdnav.rendering.renderer import Overlays, Renderer, RenderOptions
 from crowdnav.sensors import build_modalities
 from crowdnav.sensors.lidar import LidarModality
+from crowdnav.sensors.tracked import sensed_people
 from crowdnav.sim.simulator import Simulator, StepEvents
 
 RENDER_MODES = ["human", "rgb_array"]
@@ -85,6 +86,12 @@ class EpisodeView:
 
     def _overlays(self, observation: Mapping[str, np.ndarray]) -> Overlays:
         overlays = Overlays(human_goals=self.options.human_goals)
+        tracker = self.sim.scenario.sensors.tracker.values
+        if tracker is not None and self.options.tracks:  # what the robot sees of the crowd, beside the true crowd
+            people = sensed_people(self.sim)
+            shown = ~np.isnan(people.positions[1:])
+            overlays.tracks = (people.positions[1:][shown], people.velocities[1:][shown])
+            overlays.field_of_view = (math.radians(tracker.fov_deg), tracker.max_range)
         lidar = self._reading("lidar", observation) if self.options.lidar else None
         if lidar is not None:
             sensor = cast(LidarModality, self._sensors["lidar"])  # the registry's "lidar"

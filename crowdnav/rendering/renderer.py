@@ -30,6 +30,9 @@ from crowdnav.sim.simulator import Simulator
 if TYPE_CHECKING:
     import pygame
 
+TRACK_ARROW = 1.0
+"""Seconds of estimated velocity a track's arrow shows (the metres a tracked person walks in that time)."""
+
 
 @dataclass(frozen=True)
 class Palette:
@@ -50,6 +53,10 @@ class Palette:
     lidar: tuple[int, int, int] = (235, 140, 20)
     lidar_ray: tuple[int, int, int] = (250, 225, 175)
     closest: tuple[int, int, int] = (190, 40, 190)
+    track: tuple[int, int, int] = (0, 160, 170)
+    """The people tracker's estimates (rings, velocity arrows)."""
+    field_of_view: tuple[int, int, int] = (150, 210, 215)
+    """The people tracker's field of view and range."""
     text: tuple[int, int, int] = (20, 20, 20)
     outline: tuple[int, int, int] = (30, 30, 30)
     groups: tuple[tuple[int, int, int], ...] = ((66, 120, 200), (215, 135, 40), (125, 80, 175), (70, 155, 90), (200, 80, 140), (110, 110, 110))
@@ -71,6 +78,10 @@ class Overlays:
     """Closest obstacle point in the robot frame (x forward, y left), metres."""
     human_goals: bool = False
     """Mark every human's goal."""
+    tracks: tuple[np.ndarray, np.ndarray] | None = None
+    """The people the robot's tracker reports: (estimated centres, estimated velocities), complex, world frame."""
+    field_of_view: tuple[float, float] | None = None
+    """The tracker's (field of view in rad, range in m), centred on the robot's heading."""
 
 
 @dataclass
@@ -89,6 +100,8 @@ class RenderOptions:
     """Mark the humans' goals."""
     trail_length: int = 12
     """Steps of trail behind each human."""
+    tracks: bool = True
+    """With a tracker profile (``sensors.tracker``): draw the people it reports, their estimated velocities and its field of view."""
 
 
 @dataclass
@@ -252,6 +265,8 @@ class Renderer:
                 pygame.draw.line(surface, palette.lidar_ray, _xy(start), _xy(end), 1)
             for end in ends[ranges < max_range]:  # beams that hit something
                 pygame.draw.circle(surface, palette.lidar, _xy(end), 2)
+        if overlays.field_of_view is not None:
+            self._draw_field_of_view(surface, *overlays.field_of_view)
         # the goal above the LIDAR rays and trails, below the agents
         goal, goal_px = self.to_pixels(sim.robot_goal), max(6.0, sim.scenario.robot.goal_radius * scale)
         if sim.team is None or sim.team.state.active[0]:
@@ -268,6 +283,11 @@ class Renderer:
             if abs(velocity) > 1e-6:
                 tip = position + radius * np.array([velocity.real, -velocity.imag]) / abs(velocity)
                 pygame.draw.line(surface, palette.outline, _xy(position), _xy(tip), 2)
+        if overlays.tracks is not None:  # what the robot believes, over the true crowd
+            estimates, velocities = overlays.tracks
+            for position, tip in zip(self.to_pixels(estimates), self.to_pixels(estimates + velocities * TRACK_ARROW), strict=True):
+                pygame.draw.circle(surface, palette.track, _xy(position), radius, 2)
+                pygame.draw.line(surface, palette.track, _xy(position), _xy(tip), 2)
         centre = self.to_pixels(robot)
         robot_radius = sim.scenario.robot.radius * scale
         if sim.team is not None:
@@ -289,6 +309,15 @@ class Renderer:
         if hud:
             surface.blit(self._font.render(_fit(self._font, hud, self.size[0] - 12), True, palette.text), (6, 4))
         return surface
+
+    def _draw_field_of_view(self, surface: pygame.Surface, angle: float, reach: float) -> None:
+        """The tracker's field of view: a wedge (a circle all around) of its range, centred on the heading."""
+        import pygame
+
+        robot, heading = self.sim.robot_position, self.sim.robot_heading
+        edge = robot + reach * np.exp(1j * (heading + np.linspace(-angle / 2, angle / 2, max(8, int(angle * 12)))))
+        outline = edge if angle >= 2 * math.pi else np.concatenate([[robot], edge])
+        pygame.draw.lines(surface, self.palette.field_of_view, True, _xy(self.to_pixels(outline)), 2)
 
     def _draw_inset(self, surface: pygame.Surface, grid: np.ndarray, left: int, top: int) -> tuple[int, int]:
         """The LEOG in the panel with its caption; returns its right edge and the y below the caption."""
@@ -357,6 +386,10 @@ class Renderer:
             entries.append(("line", "LIDAR beam, hit", palette.lidar))
         if overlays.closest_point is not None:
             entries.append(("line", "closest obstacle", palette.closest))
+        if overlays.tracks is not None:
+            entries.append(("ring", "tracked (estimate)", palette.track))
+        if overlays.field_of_view is not None:
+            entries.append(("line", "tracker's view", palette.field_of_view))
         return entries
 
     def _draw_legend(self, surface: pygame.Surface, overlays: Overlays, left: int, top: int) -> None:
@@ -380,6 +413,8 @@ class Renderer:
                 pygame.draw.circle(surface, colour, (x + 8, cy), 7, 2)
             elif kind == "cross":
                 _cross(surface, colour, np.array([x + 8, cy]), 5)
+            elif kind == "ring":
+                pygame.draw.circle(surface, colour, (x + 8, cy), 7, 2)
             elif kind == "box":
                 pygame.draw.rect(surface, colour, (x + 1, cy - 6, 14, 12))
             else:

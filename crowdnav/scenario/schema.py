@@ -60,6 +60,7 @@ from crowdnav.scenario.fields import (  # noqa: F401  (re-exported: the schema's
     _pair_of,
 )
 from crowdnav.scenario.reward_presets import DEFAULT_PRESET, REWARD_PRESETS, REWARD_TERMS, unknown_preset_message
+from crowdnav.scenario.tracker import PERFECT, TRACKER_PROFILES, TrackerProfile, TrackerSettings  # noqa: F401  (re-exported)
 
 # ----------------------------------------------------------------------------- agents
 
@@ -202,6 +203,11 @@ class Sensors(StrictModel):
     humans: HumansSensor = Field(default_factory=HumansSensor, description="Nearest-humans settings.")
     obstacles: ObstaclesSensor = Field(default_factory=ObstaclesSensor, description="Nearest walls and furniture settings.")
     geodesic: GeodesicSensor = Field(default_factory=GeodesicSensor, description="Distance-to-goal-around-obstacles settings.")
+    tracker: TrackerSettings = Field(
+        default_factory=TrackerSettings,
+        description="The people tracker behind humans, plan, the shield and baseline:onboard: a profile name (default perfect) "
+                    "or profile and overrides (docs/sensors.md#the-people-tracker).",
+    )
 
 
 def _preset_term(description: str) -> Any:
@@ -299,6 +305,13 @@ class Scenario(StrictModel):
         if repeated:
             raise FieldProblems([("robots", f"expected unique robot names, got {', '.join(map(repr, repeated))} more than once")])
         self.__dict__["robot"] = self.robots[0]  # not setattr: that would validate (and call this) again
+        return self
+
+    @model_validator(mode="after")
+    def _one_robot_tracker(self) -> Scenario:
+        if self.robots is not None and self.sensors.tracker.profile != PERFECT:  # each robot would need its own tracker state
+            raise FieldProblems([("sensors.tracker", f"profile {self.sensors.tracker.profile!r} tracks people for one robot; "
+                                  f"a scenario with robots: uses {PERFECT!r}")])
         return self
 
     @model_validator(mode="after")

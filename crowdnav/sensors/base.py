@@ -36,6 +36,9 @@ class Modality(abc.ABC):
     """Observation key, e.g. ``lidar``; unique in :data:`MODALITIES`."""
     sees_robots: ClassVar[bool] = True
     """With several robots (``robots:``): whether the other robots appear in it (as discs among the humans)."""
+    reads_tracker: ClassVar[bool] = False
+    """It reads the people as the robot's tracker reports them (``sensors.tracker``): the env gives it the tracked world
+    (:mod:`crowdnav.sensors.tracked`) instead of the simulator's true people, the same tracks for every such modality."""
     settings_type: ClassVar[type[BaseModel] | None] = None
     """Pydantic model of the settings (``None``: the modality takes no settings)."""
 

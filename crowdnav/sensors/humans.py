@@ -51,6 +51,7 @@ class HumansModality(Modality):
 
     key = "humans"
     sees_robots = False  # a tracker of people: the range sensors see the other robots
+    reads_tracker = True
     settings_type = HumansSensor
 
     def __init__(self, world: CompiledWorld, settings: HumansSensor | None = None):

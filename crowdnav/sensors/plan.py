@@ -2,7 +2,8 @@
 
 The move :class:`crowdnav.planning.predictive.PredictivePlanner` would make now, given the
 humans the robot's tracker reports (the ``humans`` modality with the scenario's sensor settings:
-its k nearest within range, never anyone else), the robot's pose in the map (localisation), its
+its k nearest within range, never anyone else; ``reads_tracker``: with a ``sensors.tracker`` profile
+the env hands it the tracks), the robot's pose in the map (localisation), its
 own velocity (odometry) and its goal; the humans are predicted at constant velocity. It is the
 base of a residual agent (env option ``residual``: the executed action is this plan plus the
 policy's action; docs/agents.md#agents-that-anticipate-the-crowd) and a hint any policy may read.
@@ -35,6 +36,7 @@ class PlanModality(Modality):
 
     key = "plan"
     sees_robots = False  # it plans around the people its tracker reports
+    reads_tracker = True
 
     def __init__(self, world: CompiledWorld, settings: None = None):
         super().__init__(world, settings)

@@ -1,0 +1,72 @@
+"""What the people tracker (``sensors.tracker``) adds to a native vector-env step, against the ``perfect`` profile.
+
+    nice .venv/bin/python benchmarks/bench_tracker.py [--scenario room_furniture] [--humans 10] [--batch 32] [--steps 200] [--repeats 7]
+
+The same B worlds (random actions, autoreset) are stepped with each profile of ``--profiles`` (first: the
+reference, ``perfect``), the cases interleaved repeat by repeat so every profile sees the same machine
+load, each timed with the process's CPU time (``--clock wall`` for the wall clock). Printed per
+profile: the median milliseconds per vector step and the median of the per-repeat ratios to the
+reference (the tracker's share: issue 51 asks for at most 1.20 at 32 worlds and 10 humans).
+``--modalities`` picks the observation (default: ``goal humans velocity``, a SARL-style agent's
+tracker reader; ``--modalities goal closest_obstacle plan`` is the main job's, whose planner costs more).
+"""
+
+from __future__ import annotations
+
+import argparse
+import statistics
+import time
+from collections.abc import Callable
+
+import numpy as np
+
+from crowdnav.envs.vector import CrowdNavVectorEnv
+
+CLOCK: Callable[[], float] = time.process_time
+
+
+def stepper(args: argparse.Namespace, profile: str) -> Callable[[], float]:
+    """A vector env of ``profile``, reset once; its timing run returns the seconds per vector step."""
+    env = CrowdNavVectorEnv(args.scenario, num_envs=args.batch, modalities=args.modalities,
+                            overrides={"humans.count": args.humans, "sensors.tracker.profile": profile})
+    env.reset(seed=0)
+    actions = np.random.default_rng(0).uniform(-1, 1, (args.steps, args.batch, 2)).astype(np.float32)
+    for action in actions[:10]:  # warm caches (the planner's maps, numpy's dispatch)
+        env.step(action)
+
+    def run() -> float:
+        start = CLOCK()
+        for action in actions:
+            env.step(action)
+        return (CLOCK() - start) / len(actions)
+    return run
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser.add_argument("--scenario", default="room_furniture")
+    parser.add_argument("--humans", type=int, default=10)
+    parser.add_argument("--batch", type=int, default=32)
+    parser.add_argument("--steps", type=int, default=200, help="vector steps per measurement")
+    parser.add_argument("--repeats", type=int, default=7)
+    parser.add_argument("--modalities", nargs="+", default=["goal", "humans", "velocity"])
+    parser.add_argument("--profiles", nargs="+", default=["perfect", "lidar_tracker", "camera_front"])
+    parser.add_argument("--clock", choices=["wall", "cpu"], default="cpu", help="cpu: the process's CPU time (a shared machine)")
+    args = parser.parse_args()
+    global CLOCK
+    CLOCK = time.perf_counter if args.clock == "wall" else time.process_time
+    runs = {profile: stepper(args, profile) for profile in args.profiles}
+    seconds: dict[str, list[float]] = {profile: [] for profile in args.profiles}
+    for _ in range(args.repeats):  # interleaved: every profile sees the same load
+        for profile, run in runs.items():
+            seconds[profile].append(run())
+    reference = args.profiles[0]
+    print(f"{args.scenario}, {args.humans} humans, {args.batch} worlds, modalities {' '.join(args.modalities)}; "
+          f"median of {args.repeats} x {args.steps} steps ({args.clock} clock)")
+    for profile, values in seconds.items():
+        ratios = [value / base for value, base in zip(values, seconds[reference], strict=True)]
+        print(f"  {profile:14s} {statistics.median(values) * 1e3:7.3f} ms/step   x{statistics.median(ratios):.3f} of {reference}")
+
+
+if __name__ == "__main__":
+    main()
