@@ -69,6 +69,10 @@ class AlgorithmSpec:
     recurrent: bool = False
     """An LSTM policy (sb3-contrib's ``RecurrentActorCriticPolicy``): its state is carried between steps, so the network-size
     count adds the LSTMs and behaviour cloning (a feed-forward fit) is refused."""
+    robots_trainer: Callable[..., Any] | str | None = None
+    """What trains it as ``agents: robots`` (one shared policy for every robot of a ``robots:`` scenario):
+    ``trainer(config, resume=..., on_checkpoint=...) -> TrainResult``, or its ``"module:attribute"`` (imported when first
+    used, :func:`crowdnav.agents.training.run.robots_trainer_of`). None: ``agents: robots`` is refused for it."""
 
     @property
     def sb3(self) -> bool:
@@ -100,6 +104,7 @@ _ALGORITHM_SPECS: dict[str, AlgorithmSpec] = {
                          defaults=MappingProxyType({"net_arch": [64, 64], "learning_rate": 7e-4, "gamma": 0.95, "n_steps": 5}),
                          batched_defaults=MappingProxyType({"n_steps": 8})),
     "ppo": AlgorithmSpec("Proximal Policy Optimization: on-policy, clipped updates.", builder=SB3_BUILDER, sb3_class="stable_baselines3:PPO",
+                         robots_trainer="crowdnav.agents.marl.robots:train_robots",
                          defaults=MappingProxyType({"net_arch": [64, 64], "learning_rate": 3e-4, "batch_size": 64, "gamma": 0.95,
                                                     "n_steps": 2048}),
                          # a constant rate let a 6 M-step run collapse (79% -> 5% held-out success); decaying it did not (docs/agents.md)

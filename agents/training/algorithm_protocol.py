@@ -36,7 +36,8 @@ SB3's own loop with crowdnav's callbacks, collecting from the same :func:`~crowd
 worlds, replay buffers and rollouts restored
 mid-episode for an exact resume), which a loop that sees the agent only between episodes could not give, and
 their checkpoints are SB3's ``model.zip`` at the checkpoint's top, read back as tensors only.
-``agents: robots`` (shared-parameter PPO, :mod:`crowdnav.agents.marl.robots`) is SB3's PPO only.
+``agents: robots`` (one shared policy for every robot) is trained by the ``robots_trainer`` of the algorithm's registry
+entry (PPO's: :func:`crowdnav.agents.marl.robots.train_robots`); an algorithm without one is refused with it.
 """
 
 from __future__ import annotations

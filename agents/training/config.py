@@ -331,8 +331,10 @@ def robots_problems(config: TrainConfig) -> list[tuple[str, str]]:
         problems.append(("robot_actions", f"goal_velocity turns commands by the observed goal direction; add goal to modalities {config.modalities}"))
     if config.robot_networks == "per_kind" and not config.agent_identity:
         problems.append(("robot_networks", "per_kind picks each robot's network by its one-hot; set agent_identity: true"))
-    if config.algo != "ppo":
-        problems.append(("algo", f"agents: robots trains shared-parameter PPO; set algo: ppo (got {config.algo!r})"))
+    shared = [name for name in algorithm_names() if algorithm_spec(name).robots_trainer is not None]
+    if config.algo not in shared:  # the registry says which algorithms train one policy for every robot
+        problems.append(("algo", f"agents: robots trains a shared policy with {' or '.join(shared)} (their registry entry's "
+                                 f"robots_trainer); set algo: {shared[0]} (got {config.algo!r})"))
     if config.demonstrations.episodes:
         problems.append(("demonstrations.episodes", "agents: robots has no warm start from demonstrations; set it to 0"))
     if config.encoder.mode != "scratch" or "leog" in config.modalities:

@@ -53,13 +53,24 @@ def train(config: TrainConfig | Mapping[str, Any] | str | Path, *, resume: bool 
     elif isinstance(config, Mapping):
         config = config_from_mapping(config)
     # a TrainConfig was checked when it was built: not again here (one validation per run)
-    if config.agents == "robots":  # every robot of a multi-robot scenario, one shared policy: SB3's PPO on RobotsVecEnv
-        from crowdnav.agents.marl.robots import train_robots
-
-        return train_robots(config, resume=resume, on_checkpoint=on_checkpoint)
+    if config.agents == "robots":  # every robot of a multi-robot scenario, one shared policy: the registry's robots trainer
+        return robots_trainer_of(config.algo)(config, resume=resume, on_checkpoint=on_checkpoint)
     trainer = trainer_of(config, trust_pickle)  # before the run folder is touched: refusals leave nothing behind
     with writing_run(config):  # one process writes a run at a time
         return trainer(config, resume, on_checkpoint)
+
+
+def robots_trainer_of(algo: str) -> Callable[..., TrainResult]:
+    """The ``robots_trainer`` of the registered algorithm ``algo`` (``agents: robots``), imported if its spec names it."""
+    from crowdnav.agents.training.algorithm_protocol import import_reference
+
+    from crowdnav.registry import algorithm_spec
+
+    trainer = algorithm_spec(algo).robots_trainer
+    if trainer is None:  # a config validated before the registry changed
+        raise ConfigError(f"algo: {algo!r} has no robots_trainer in its registry entry; agents: robots cannot train it")
+    found: Callable[..., TrainResult] = import_reference(trainer) if isinstance(trainer, str) else trainer
+    return found
 
 
 Trainer = Callable[[TrainConfig, bool, "Callable[[int], None] | None"], TrainResult]

@@ -214,3 +214,28 @@ def test_a_shared_robot_checkpoint_renders_every_robot_to_a_video_named_by_how_m
         render_policy(HALL, checkpoint, out=tmp_path / "videos", overrides={"humans.count": 2})
     with pytest.raises(PolicyLoadError, match=r"drives the robots of 'robots_crossing_hall', not 'open_space'$"):
         render_policy("open_space", checkpoint, out=tmp_path / "videos")
+
+
+def test_agents_robots_trains_with_the_robots_trainer_its_algorithms_registry_entry_names(tmp_path):
+    """No name list: an algorithm registered with a ``robots_trainer`` is accepted by ``agents: robots`` and trained by it;
+    one without is refused in one line naming the algorithms that have one."""
+    import dataclasses
+
+    from crowdnav.agents.runs.result import TrainResult
+
+    from crowdnav.registry import algorithm_spec, register_algorithm, unregister_algorithm
+
+    calls = []
+
+    def shared_trainer(config, *, resume=False, on_checkpoint=None):
+        calls.append((config.algo, resume))
+        return TrainResult(Path(config.out), Path(config.out), 0, 0, 0, 0.0, 0.0)
+
+    register_algorithm("shared_toy", dataclasses.replace(algorithm_spec("ppo"), robots_trainer=shared_trainer))
+    try:
+        train(robots_config(tmp_path / "run", algo="shared_toy"))
+        assert calls == [("shared_toy", False)]
+        with pytest.raises(ConfigError, match=r"agents: robots trains a shared policy with ppo or shared_toy .*got 'a2c'"):
+            config_from_mapping(robots_config(tmp_path / "run2", algo="a2c"))
+    finally:
+        unregister_algorithm("shared_toy")
