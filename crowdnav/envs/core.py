@@ -189,6 +189,8 @@ class EnvCore:
         self.reward = Reward(self.scenario.reward)
         # Observe in the space's key order so observations print like the space.
         self._sensors = tuple((key, self.modalities[key]) for key in self.observation_space.spaces)
+        # the tracker's view is built only where an observation reads it (a profile with, e.g., goal + lidar reads none)
+        self._reads_tracker = self.tracker is not None and any(modality.reads_tracker for _, modality in self._sensors)
         self._running = False
         self.render_mode = render_mode
         self.view = EpisodeView(self.simulator, render_mode, render_options) if render_mode else None
@@ -270,7 +272,7 @@ class EnvCore:
         ``view`` / ``given`` (several robots): as for :meth:`observe_robot`.
         """
         sim = self.simulator
-        if self.tracker is not None:
+        if self._reads_tracker:
             people = self.people()
             self._observation = {key: modality.observe(people if modality.reads_tracker else sim) for key, modality in self._sensors}
         elif sim.team is None:
