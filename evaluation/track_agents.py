@@ -16,6 +16,13 @@ McNemar's test pairs one policy's outcome with another's on the same episode, wh
 over seeds (three outcomes per episode) would not allow. The spread between the seeds' rows is
 the seed-to-seed variance a reader expects to see.
 
+With ``played`` (``--played``) the rows are not copied: each seed's final policy is played on the
+track's test episodes (:mod:`crowdnav.evaluation.track_played`), so a network trained with perfect
+sensing is ranked on a track that differs from its training's in the sensing only (keys under
+``sensors.``, e.g. ``figure4_lidar_tracker``); the entry records what differed
+(``trained_setting``, the trained values) and which policy played (``played``), and its label says
+it (``...; trained with perfect sensing, played through lidar_tracker``).
+
 Before writing anything it checks, each refused in one line naming the difference: that the
 experiment's setting is the track's (scenario and overrides, time limit, test seeds and count,
 observation keys), that every seed the protocol names is finished, that at least
@@ -38,6 +45,7 @@ from typing import Any
 
 from crowdnav.evaluation.track import FINGERPRINT_SEEDS, Track, TrackError
 from crowdnav.evaluation.track_leaderboard import MAX_TABLE_BYTES, REFERENCE_FILE, read_bounded, read_index
+from crowdnav.evaluation.track_played import play_final, played_label
 from crowdnav.evaluation.track_reference import AGENT_PREFIX, COLUMNS, DIRTY, publishing_commit, reference_csv
 
 MIN_SEEDS = 3
@@ -68,11 +76,18 @@ def _read_rows(path: Path) -> list[dict[str, str]]:
         return list(csv.DictReader(file))
 
 
-def check_setting(track: Track, config: Mapping[str, Any], protocol: Mapping[str, Any], where: str) -> None:
-    """Refuse, in one line naming the first difference, an experiment whose setting is not ``track``'s."""
+def check_setting(track: Track, config: Mapping[str, Any], protocol: Mapping[str, Any], where: str, *,
+                  sensing: bool = False) -> dict[str, tuple[Any, Any]]:
+    """Refuse, in one line naming the first difference, an experiment whose setting is not ``track``'s.
+
+    ``sensing`` (``--played``): the run's ``sensors`` options count as its setting too, and differences
+    in keys under ``sensors.`` (the sensing) are allowed: returned, key -> (trained value, the track's).
+    """
     from crowdnav.scenario import ScenarioError, load_scenario
 
     scenario, overrides = str(config.get("scenario")), dict(config.get("overrides") or {})
+    if sensing:  # the env's sensor options win over overrides of the same path, as they did in training
+        overrides.update({f"sensors.{key}": value for key, value in _flat(config.get("sensors") or {}).items()})
     if scenario != track.scenario:
         raise TrackError(f"{where} ran scenario {scenario}; track {track.name} is {track.scenario}")
     try:
@@ -83,15 +98,19 @@ def check_setting(track: Track, config: Mapping[str, Any], protocol: Mapping[str
     if ran.get("max_steps") != fixed["max_steps"]:
         raise TrackError(f"{where} ran with a time limit of {ran.get('max_steps')} steps; track {track.name}'s is {fixed['max_steps']}")
     differences = [key for key in sorted(set(ran) | set(fixed)) if ran.get(key) != fixed.get(key)]
-    if differences:
-        shown = "; ".join(f"{key}: {json.dumps(ran.get(key))} (track {json.dumps(fixed.get(key))})" for key in differences[:3])
-        more = f" and {len(differences) - 3} more" if len(differences) > 3 else ""
-        raise TrackError(f"{where} ran another setting than track {track.name}: {shown}{more}")
+    allowed = {key: (ran.get(key), fixed.get(key)) for key in differences if sensing and key.startswith("sensors.")}
+    refused = [key for key in differences if key not in allowed]
+    if refused:
+        shown = "; ".join(f"{key}: {json.dumps(ran.get(key))} (track {json.dumps(fixed.get(key))})" for key in refused[:3])
+        more = f" and {len(refused) - 3} more" if len(refused) > 3 else ""
+        played = " (played, only the sensing may differ: keys under sensors.)" if sensing else ""
+        raise TrackError(f"{where} ran another setting than track {track.name}: {shown}{more}{played}")
     base, count = protocol.get("test_seed_base"), protocol.get("test_episodes")
     if (base, count) != (track.test_seed_base, track.test_episodes):
         raise TrackError(f"{where} was tested on {count} episodes from seed {base}; track {track.name} is {track.test_episodes} "
                          f"episodes from seed {track.test_seed_base}")
     track.check_observations(list(config.get("modalities") or []))
+    return allowed
 
 
 def _seed_folders(folder: Path) -> dict[int, Path]:
@@ -153,8 +172,13 @@ def _straight_check(track: Track, folder: Path) -> str:
     return f"straight-to-goal as the track's on its first {len(seeds)} test episodes"
 
 
-def read_agents(track: Track, folder: str | Path, *, log: Callable[[str], None] = print) -> list[tuple[dict[str, Any], str]]:
-    """Check an experiment configuration folder against ``track``; (entry, CSV text) per training seed."""
+def read_agents(track: Track, folder: str | Path, *, played: bool = False,
+                log: Callable[[str], None] = print) -> list[tuple[dict[str, Any], str]]:
+    """Check an experiment configuration folder against ``track``; (entry, CSV text) per training seed.
+
+    ``played``: each seed's final policy is played on the track (:mod:`crowdnav.evaluation.track_played`), whose
+    setting may differ from its training's in the sensing only, instead of its recorded final evaluation copied.
+    """
     from crowdnav.evaluation.storage import META_FILE, read_json
 
     folder = Path(folder)
@@ -179,6 +203,7 @@ def read_agents(track: Track, folder: str | Path, *, log: Callable[[str], None] 
     if len(metas) < MIN_SEEDS:
         raise TrackError(f"{folder}: {len(metas)} training seed{'s' if len(metas) != 1 else ''}; reference agents are published with at "
                          f"least {MIN_SEEDS} (train more: protocol seeds: {MIN_SEEDS})")
+    sensing: dict[int, dict[str, tuple[Any, Any]]] = {}
     for seed, meta in sorted(metas.items()):
         where = f"{folder.parent.name}/{folder.name}/seed_{seed}"
         for key in ("experiment", "configuration", "label"):
@@ -188,12 +213,18 @@ def read_agents(track: Track, folder: str | Path, *, log: Callable[[str], None] 
         if any(commit in ("None", "unknown", "") or commit.endswith(DIRTY) for commit in commits):
             raise TrackError(f"{where} ran from {', '.join(commits)}: reference agents are published only from experiments run from a "
                              "clean commit (no uncommitted changes); run it again from one")
-        check_setting(track, meta["config"], meta.get("protocol", {}), where)
+        sensing[seed] = check_setting(track, meta["config"], meta.get("protocol", {}), where, sensing=played)
     checked = _straight_check(track, folder)
-    log(f"{track.name}: {folder}: the track's setting; {len(metas)} seeds finished from clean commits; episodes {checked}")
+    trained = played_label(sensing[min(sensing)]) if played else ""
+    log(f"{track.name}: {folder}: the track's setting{' but its sensing (' + trained + ')' if trained else ''}; {len(metas)} seeds "
+        f"finished from clean commits; episodes {checked}")
     out = []
     for seed, meta in sorted(metas.items()):
-        rows, raw = _final_rows(track, runs[seed], f"{folder.parent.name}/{folder.name}/seed_{seed}")
+        where = f"{folder.parent.name}/{folder.name}/seed_{seed}"
+        rows, raw = _final_rows(track, runs[seed], where)
+        if played:
+            log(f"{track.name}: playing {where}'s final policy on {track.test_episodes} episodes")
+            rows, policy = play_final(track, runs[seed], meta, raw, where)
         config = meta["config"]
         modalities = list(config.get("modalities") or [])
         steps = int(raw["training_steps"]) if raw.get("training_steps", "") not in ("", "nan") else None
@@ -204,19 +235,25 @@ def read_agents(track: Track, folder: str | Path, *, log: Callable[[str], None] 
         name = re.sub(r"[^A-Za-z0-9_.-]", "_", f"{AGENT_PREFIX}{meta['experiment']}_{meta['configuration']}_seed{seed}")
         observations = ", ".join(modalities) + ("; shield: the humans its sensors report + the map" if config.get("shield") else "")
         success = sum(row["outcome"] == "success" for row in rows) / len(rows)
-        entry = {"name": name, "label": f"{label} ({budget}, seed {seed})", "kind": "policy", "observations": observations,
+        how = played_label(sensing[seed]) if played else ""
+        entry = {"name": name, "label": f"{label} ({budget}, seed {seed}{'; ' + how if how else ''})", "kind": "policy",
+                 "observations": observations,
                  "file": f"{name}.csv", "episodes": len(rows), "success": round(success, 4), "experiment": meta["experiment"],
                  "configuration": meta["configuration"], "seed": seed, "algo": config.get("algo"), "modalities": modalities,
                  "training_steps": steps, "training_episodes": int(raw.get("training_episodes") or 0),
                  "experiment_commit": meta["git_commit"], "episodes_checked": checked,
-                 **({"experiment_commits": meta["git_commits"]} if len(meta.get("git_commits") or []) > 1 else {})}
+                 **({"experiment_commits": meta["git_commits"]} if len(meta.get("git_commits") or []) > 1 else {}),
+                 **({"played": policy, "trained_setting": {key: value for key, (value, _) in sensing[seed].items()}} if played else {})}
         out.append((entry, reference_csv(rows)))
     return out
 
 
 def write_agents(track: Track, folders: list[str | Path], out: str | Path, *, allow_dirty: bool = False, force: bool = False,
-                 log: Callable[[str], None] = print) -> Path:
-    """Add every seed of every experiment configuration in ``folders`` to ``out/<track>/``; returns that folder."""
+                 played: bool = False, log: Callable[[str], None] = print) -> Path:
+    """Add every seed of every experiment configuration in ``folders`` to ``out/<track>/``; returns that folder.
+
+    ``played``: their final policies played on the track (:func:`read_agents`), not their recorded evaluations.
+    """
     from crowdnav.evaluation.storage import atomic_write_text
 
     from crowdnav import __version__
@@ -231,7 +268,7 @@ def write_agents(track: Track, folders: list[str | Path], out: str | Path, *, al
         recorded = document.get("track") or {}
         raise TrackError(f"{index} holds results of track {recorded.get('name')} v{recorded.get('version')}, not {track.label}: "
                          f"write the baselines of this version first (crowdnav track reference {track.name} --force)")
-    agents = [pair for folder in folders for pair in read_agents(track, folder, log=log)]  # every check before any write
+    agents = [pair for folder in folders for pair in read_agents(track, folder, played=played, log=log)]  # every check before any write
     names = [entry["name"] for entry, _ in agents]
     twice = sorted({name for name in names if names.count(name) > 1})
     if twice:

@@ -1,4 +1,4 @@
-"""``crowdnav track list | show NAME | check [NAME...] | reference NAME [--agents DIR]``: the named, versioned test sets to rank on."""
+"""``crowdnav track list | show NAME | check [NAME...] | reference NAME [--agents DIR [--played]]``: the named, versioned test sets to rank on."""
 
 from __future__ import annotations
 
@@ -38,12 +38,19 @@ def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) ->
                     "uncommitted changes. With --agents, plays "
                     "nothing: it adds each training seed of a finished `crowdnav benchmark` configuration (its final "
                     "evaluation's episodes) as agent_<experiment>_<configuration>_seed<K>.csv, after checking that the "
-                    "experiment ran the track's setting, from a clean commit, with every seed finished (at least 3).",
+                    "experiment ran the track's setting, from a clean commit, with every seed finished (at least 3). With "
+                    "--played, each seed's final policy is played on the track instead, whose setting may differ from its "
+                    "training's in the sensing only (sensors.*, e.g. figure4_lidar_tracker for a run trained on figure4).",
     )
     reference.add_argument("name", metavar="NAME")
     reference.add_argument("--agents", action="append", default=[], metavar="RESULTS_DIR/CONFIGURATION",
                            help="add this experiment configuration's seeds as reference agents (repeatable); the baselines "
                                 "already there are kept")
+    reference.add_argument("--played", action="store_true",
+                           help="with --agents: play each seed's final policy (the snapshot its final evaluation played) on the "
+                                "track's episodes with the track's setting, instead of copying its recorded final evaluation; the "
+                                "track may differ from the training's setting in the sensing only (keys under sensors., e.g. "
+                                "sensors.tracker), which the entry records (trained_setting) and its label says")
     reference.add_argument("--baseline", action="append", default=None, metavar="NAME", dest="baselines",
                            help="play only this reference baseline (repeatable), e.g. one added since the track's results "
                                 "were published; the other baselines are kept as published")
@@ -101,11 +108,13 @@ def reference_command(args: argparse.Namespace) -> int:
     from crowdnav.evaluation.track_reference import write_reference
 
     track = _track(args.name)
+    if args.played and not args.agents:
+        raise CliError("--played plays the trained policies of --agents RESULTS_DIR/CONFIGURATION: name one")
     if args.agents and args.baselines:
         raise CliError("--agents adds reference agents and plays nothing; --baseline plays baselines: one or the other")
     try:
         if args.agents:
-            folder = write_agents(track, args.agents, args.out, allow_dirty=args.allow_dirty, force=args.force,
+            folder = write_agents(track, args.agents, args.out, allow_dirty=args.allow_dirty, force=args.force, played=args.played,
                                   log=lambda line: print(line, flush=True))
         else:
             folder = write_reference(track, args.out, allow_dirty=args.allow_dirty, force=args.force, only=args.baselines,
