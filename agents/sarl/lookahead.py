@@ -24,6 +24,12 @@ never more than the true clearance of a convex shape, so a predicted clear move 
 
 :func:`features` turns one into the value network's input, rotated so that the goal lies on the x axis (the
 value of a state does not depend on which way the robot frame points).
+
+The maths is written once for two array libraries: every function that computes takes ``xp``
+(:class:`~crowdnav.agents.sarl.ops.Ops`), numpy's by default (:data:`~crowdnav.agents.sarl.ops.NUMPY`, float64, as
+the agent acts in training, evaluation and the published runs), torch's in the ONNX export
+(:class:`crowdnav.agents.sarl.export.TorchOps`, traced into the graph). Arrays are ``np.ndarray`` with numpy and
+``torch.Tensor`` with torch (:data:`~crowdnav.agents.sarl.ops.Array`).
 """
 
 from __future__ import annotations
@@ -33,6 +39,7 @@ from dataclasses import asdict, dataclass
 from typing import Any
 
 import numpy as np
+from crowdnav.agents.sarl.ops import NUMPY, Array, Ops
 
 SPEEDS = 5
 """Speeds of the action set, exponentially spaced up to the robot's max speed."""
@@ -94,7 +101,7 @@ def bounded_weights(physics: Physics) -> bool:
     return w["step"] <= 0 and w["social"] <= 0 and w["collision"] <= 0 and w["goal_progress"] >= 0 and w["goal_reached"] >= 0
 
 
-def value_ceiling(distance: np.ndarray, physics: Physics, discount: float) -> np.ndarray:
+def value_ceiling(distance: Array, physics: Physics, discount: float, xp: Ops = NUMPY) -> Array:
     """The largest discounted return any policy can collect from a state whose episode goes on, at goal ``distance`` (m).
 
     At least ``k = ceil((distance - goal_radius) / (max_speed * dt))`` more steps (1 at least), each paying the step
@@ -103,9 +110,9 @@ def value_ceiling(distance: np.ndarray, physics: Physics, discount: float) -> np
     only cost. Valid when :func:`bounded_weights` holds; times the reward scale, as the lookahead's rewards.
     """
     w = physics.weights
-    steps = np.maximum(np.ceil((distance - physics.goal_radius) / (physics.max_speed * physics.time_step) - 1e-9), 1.0)
-    paid = w["step"] * (1.0 - discount ** steps) / (1.0 - discount)
-    return (paid + w["goal_progress"] * distance + discount ** (steps - 1.0) * w["goal_reached"]) * physics.reward_scale
+    steps = xp.maximum(xp.ceil((distance - physics.goal_radius) / (physics.max_speed * physics.time_step) - 1e-9), 1.0)
+    paid = w["step"] * (1.0 - xp.power(discount, steps)) / (1.0 - discount)
+    return (paid + w["goal_progress"] * distance + xp.power(discount, steps - 1.0) * w["goal_reached"]) * physics.reward_scale
 
 
 def action_set(max_speed: float) -> np.ndarray:
@@ -117,83 +124,96 @@ def action_set(max_speed: float) -> np.ndarray:
     return np.stack([moves.real, moves.imag], axis=-1)
 
 
-def decode(observation: Mapping[str, np.ndarray], scales: Mapping[str, tuple[np.ndarray, np.ndarray]]) -> dict[str, np.ndarray]:
-    """The joint state (robot frame, float64) of a raw or normalised observation, batched (leading axis) or not."""
+def decode(observation: Mapping[str, Array], scales: Mapping[str, tuple[Array, Array]], xp: Ops = NUMPY,
+           empty_static: bool = True) -> dict[str, Array]:
+    """The joint state (robot frame, float64) of a raw or normalised observation, batched (leading axis) or not.
+
+    Without the ``obstacles`` modality the state's ``static`` is empty (s = 0: the replay memory and the network take
+    (..., 0, 4) features), or absent with ``empty_static=False`` (the exported graph then holds no zero-size tensor).
+    """
     keys = (*REQUIRED_KEYS, *(key for key in OPTIONAL_KEYS if key in observation))
-    raw = {key: np.asarray(observation[key], dtype=np.float64) for key in keys}
+    raw = {key: xp.float64(observation[key]) for key in keys}
     for key, (offset, scale) in scales.items():
         if key in raw:
             raw[key] = raw[key] * scale + offset
     goal = raw["goal"]
-    if goal.shape[-1] == 3:  # polar: distance, sin, cos
-        goal = goal[..., :1] * np.stack([goal[..., 2], goal[..., 1]], axis=-1)
+    if xp.size(goal.shape[-1]) == 3:  # polar: distance, sin, cos
+        goal = goal[..., :1] * xp.stack([goal[..., 2], goal[..., 1]])
     rows, velocity = raw["humans"], raw["velocity"]
-    present = (rows[..., 5] > 0.5).astype(np.float64)
-    static = raw.get(STATIC_KEY, np.zeros((*velocity.shape[:-1], 0, 3)))
-    static_present = (static[..., 2] > 0.5).astype(np.float64)
+    batch: tuple[Any, ...] = velocity.shape[:-1]
+    present = xp.float64(rows[..., 5] > 0.5)
     state = {"goal": goal, "velocity": velocity, "positions": rows[..., 0:2],
-             "velocities": (rows[..., 2:4] + velocity[..., None, :]) * present[..., None], "radii": rows[..., 4], "present": present,
-             "static": static[..., 0:2] * static_present[..., None], "static_present": static_present}
+             "velocities": (rows[..., 2:4] + velocity[..., None, :]) * present[..., None], "radii": rows[..., 4], "present": present}
+    static = raw.get(STATIC_KEY)
+    if static is None and empty_static:
+        static = xp.zeros((*batch, 0, 3))
+    if static is not None:
+        static_present = xp.float64(static[..., 2] > 0.5)
+        state.update(static=static[..., 0:2] * static_present[..., None], static_present=static_present)
     if GEODESIC_KEY in raw:
-        state.update(geodesic=raw[GEODESIC_KEY], origin=np.zeros_like(velocity))
+        state.update(geodesic=raw[GEODESIC_KEY], origin=xp.zeros_like(velocity))
     return state
 
 
-def geodesic_at(grid: np.ndarray, origin: np.ndarray, spacing: float) -> np.ndarray:
+def geodesic_at(grid: Array, origin: Array, spacing: float, xp: Ops = NUMPY) -> Array:
     """The distance to the goal (m) at ``origin`` (..., 2) on ``grid`` (..., g, g): bilinear, clamped to the grid's edge."""
-    size = grid.shape[-1]
+    size = xp.size(grid.shape[-1])
     if size == 1:
-        return grid[..., 0, 0].copy()
+        return xp.copy(grid[..., 0, 0])
     centre = size // 2
-    u = np.clip(origin[..., 0] / spacing + centre, 0.0, size - 1.0)
-    v = np.clip(origin[..., 1] / spacing + centre, 0.0, size - 1.0)
-    i, j = np.minimum(np.floor(u), size - 2.0), np.minimum(np.floor(v), size - 2.0)
+    u = xp.clip(origin[..., 0] / spacing + centre, 0.0, size - 1.0)
+    v = xp.clip(origin[..., 1] / spacing + centre, 0.0, size - 1.0)
+    i, j = xp.minimum(xp.floor(u), size - 2.0), xp.minimum(xp.floor(v), size - 2.0)
     fu, fv = u - i, v - j
-    i, j = i.astype(np.int64), j.astype(np.int64)
+    i, j = xp.int64(i), xp.int64(j)
     flat = grid.reshape(*grid.shape[:-2], size * size)
 
-    def at(di: int, dj: int) -> np.ndarray:
-        return np.take_along_axis(flat, ((i + di) * size + (j + dj))[..., None], axis=-1)[..., 0]
+    def at(di: int, dj: int) -> Array:
+        return xp.take(flat, ((i + di) * size + (j + dj))[..., None])[..., 0]
 
     return (at(0, 0) * (1 - fu) * (1 - fv) + at(1, 0) * fu * (1 - fv) + at(0, 1) * (1 - fu) * fv + at(1, 1) * fu * fv)
 
 
-def _rotate(vectors: np.ndarray, cos: np.ndarray, sin: np.ndarray) -> np.ndarray:
+def _rotate(vectors: Array, cos: Array, sin: Array, xp: Ops = NUMPY) -> Array:
     """``vectors`` (..., 2) rotated by minus the angle of (cos, sin) (..., 1)."""
     x, y = vectors[..., 0], vectors[..., 1]
-    return np.stack([x * cos + y * sin, y * cos - x * sin], axis=-1)
+    return xp.stack([x * cos + y * sin, y * cos - x * sin])
 
 
-def goal_direction(goal: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def goal_direction(goal: Array, xp: Ops = NUMPY) -> tuple[Array, Array, Array]:
     """(distance, cos, sin) of the goal vectors (..., 2); at the goal itself the x axis."""
-    distance = np.hypot(goal[..., 0], goal[..., 1])
-    safe = np.where(distance > 1e-9, distance, 1.0)
-    return distance, np.where(distance > 1e-9, goal[..., 0] / safe, 1.0), np.where(distance > 1e-9, goal[..., 1] / safe, 0.0)
+    distance = xp.norm(goal)
+    safe = xp.where(distance > 1e-9, distance, 1.0)
+    return distance, xp.where(distance > 1e-9, goal[..., 0] / safe, 1.0), xp.where(distance > 1e-9, goal[..., 1] / safe, 0.0)
 
 
-def features(state: Mapping[str, np.ndarray], physics: Physics) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def features(state: Mapping[str, Array], physics: Physics, xp: Ops = NUMPY) -> tuple[Array, Array, Array]:
     """The value network's input of joint states: robot (..., 3), humans (..., k, 7), static (..., s, 4) float32, goal frame.
 
-    With the ``geodesic`` grid the robot's row has a fourth entry: the distance to the goal around obstacles.
+    With the ``geodesic`` grid the robot's row has a fourth entry: the distance to the goal around obstacles. The
+    static features are None where the state has no ``static`` (:func:`decode` with ``empty_static=False``).
     """
     radius = physics.radius
-    distance, cos, sin = goal_direction(state["goal"])
-    parts = [distance[..., None], _rotate(state["velocity"], cos, sin)]
+    distance, cos, sin = goal_direction(state["goal"], xp)
+    parts = [distance[..., None], _rotate(state["velocity"], cos, sin, xp)]
     if "geodesic" in state:
-        parts.append(geodesic_at(state["geodesic"], state["origin"], physics.geodesic_spacing)[..., None])
-    robot = np.concatenate(parts, axis=-1) * FEATURE_SCALE
+        parts.append(geodesic_at(state["geodesic"], state["origin"], physics.geodesic_spacing, xp)[..., None])
+    robot = xp.concatenate(parts) * FEATURE_SCALE
     c, s = cos[..., None], sin[..., None]
     positions, present = state["positions"], state["present"]
-    gap = np.hypot(positions[..., 0], positions[..., 1]) - radius - state["radii"]
-    humans = np.concatenate([_rotate(positions, c, s) * FEATURE_SCALE, _rotate(state["velocities"], c, s) * FEATURE_SCALE,
-                             state["radii"][..., None], gap[..., None] * FEATURE_SCALE, present[..., None]], axis=-1)
-    static, here = state["static"], state["static_present"]
-    static_gap = np.hypot(static[..., 0], static[..., 1]) - radius
-    statics = np.concatenate([_rotate(static, c, s) * FEATURE_SCALE, static_gap[..., None] * FEATURE_SCALE, here[..., None]], axis=-1)
-    return robot.astype(np.float32), (humans * present[..., None]).astype(np.float32), (statics * here[..., None]).astype(np.float32)
+    gap = xp.norm(positions) - radius - state["radii"]
+    humans = xp.concatenate([_rotate(positions, c, s, xp) * FEATURE_SCALE, _rotate(state["velocities"], c, s, xp) * FEATURE_SCALE,
+                             state["radii"][..., None], gap[..., None] * FEATURE_SCALE, present[..., None]])
+    statics: Any = None
+    if "static" in state:
+        static, here = state["static"], state["static_present"]
+        static_gap = xp.norm(static) - radius
+        statics = xp.concatenate([_rotate(static, c, s, xp) * FEATURE_SCALE, static_gap[..., None] * FEATURE_SCALE, here[..., None]])
+        statics = xp.float32(statics * here[..., None])
+    return xp.float32(robot), xp.float32(humans * present[..., None]), statics
 
 
-def lookahead(state: Mapping[str, np.ndarray], physics: Physics, actions: np.ndarray, human_margin: float = 0.0) -> dict[str, Any]:
+def lookahead(state: Mapping[str, Array], physics: Physics, actions: Array, human_margin: float = 0.0, xp: Ops = NUMPY) -> dict[str, Any]:
     """Every action's next joint state, predicted reward and end, for B joint states (leading axis B) and M actions.
 
     ``actions`` (M, 2): velocities in the goal frame (:func:`action_set`). The robot moves at the action's velocity
@@ -204,50 +224,52 @@ def lookahead(state: Mapping[str, np.ndarray], physics: Physics, actions: np.nda
     reward scale; ``done``
     (B, M): a predicted collision or goal; ``commands`` (B, M, 2): the env actions in [-1, 1] (robot frame).
     """
-    _, cos, sin = goal_direction(state["goal"])
+    _, cos, sin = goal_direction(state["goal"], xp)
     # goal frame -> robot frame: rotate the actions by the goal's angle
     ax, ay = actions[None, :, 0], actions[None, :, 1]
     c, s = cos[:, None], sin[:, None]
-    velocity = np.stack([ax * c - ay * s, ax * s + ay * c], axis=-1)  # (B, M, 2) m/s, robot frame
+    velocity = xp.stack([ax * c - ay * s, ax * s + ay * c])  # (B, M, 2) m/s, robot frame
     dt = physics.time_step
     goal = state["goal"][:, None, :] - velocity * dt
     relative = state["velocities"][:, None, :, :] - velocity[:, :, None, :]  # (B, M, k, 2)
     positions = state["positions"][:, None, :, :]
     after = positions + relative * dt
     # closest approach during the step (relative motion is a straight segment)
-    speed2 = np.sum(relative * relative, axis=-1)
-    toward = -np.sum(positions * relative, axis=-1)
-    t = np.clip(np.divide(toward, speed2, out=np.zeros_like(speed2), where=speed2 > 1e-12), 0.0, dt)
-    closest = np.hypot(*np.moveaxis(positions + relative * t[..., None], -1, 0))
-    present = np.broadcast_to(state["present"][:, None, :], closest.shape)
-    radii = np.broadcast_to(state["radii"][:, None, :], closest.shape)
+    speed2 = xp.sum(relative * relative, axis=-1)
+    toward = -xp.sum(positions * relative, axis=-1)
+    moving = speed2 > 1e-12
+    t = xp.clip(xp.where(moving, toward / xp.where(moving, speed2, 1.0), 0.0), 0.0, dt)
+    closest = xp.norm(positions + relative * t[..., None])
+    present = xp.broadcast_to(state["present"][:, None, :], closest.shape)
+    radii = xp.broadcast_to(state["radii"][:, None, :], closest.shape)
     # the margin: people leave the constant-velocity line within a step (by ~0.1 m in the figure4 room), so a move
     # predicted to pass closer than that is a collision to the chooser, not a near miss
-    collision = np.any((closest <= physics.radius + radii + human_margin) & (present > 0), axis=-1)
+    collision = xp.any((closest <= physics.radius + radii + human_margin) & (present > 0))
     # walls and furniture: the supporting half-plane at each nearest point (linear in time: the end of the step is closest)
-    static, here = state["static"][:, None, :, :], state["static_present"][:, None, :]
-    gap = np.hypot(static[..., 0], static[..., 1])
-    normal = static / np.where(gap > 1e-12, gap, 1.0)[..., None]
-    clearance = gap - np.sum(velocity[:, :, None, :] * normal, axis=-1) * dt  # (B, M, s)
-    collision |= np.any((clearance <= physics.radius) & (here > 0), axis=-1)
-    distance_before = np.hypot(state["goal"][:, 0], state["goal"][:, 1])[:, None]
-    distance_after = np.hypot(goal[..., 0], goal[..., 1])
+    if "static" in state:  # absent only in the exported graph of an agent that reads no obstacles
+        static, here = state["static"][:, None, :, :], state["static_present"][:, None, :]
+        gap = xp.norm(static)
+        normal = static / xp.where(gap > 1e-12, gap, 1.0)[..., None]
+        clearance = gap - xp.sum(velocity[:, :, None, :] * normal, axis=-1) * dt  # (B, M, s)
+        collision = collision | xp.any((clearance <= physics.radius) & (here > 0))
+    distance_before = xp.norm(state["goal"])[:, None]
+    distance_after = xp.norm(goal)
     reached = distance_after <= physics.goal_radius
-    centre = np.maximum(np.hypot(after[..., 0], after[..., 1]), 1e-9)
-    push = physics.social_strength * np.exp((physics.radius + radii - centre) / physics.social_range) * present / centre
-    social = np.hypot(*np.moveaxis(-np.sum(after * push[..., None], axis=-2), -1, 0))
+    centre = xp.maximum(xp.norm(after), 1e-9)
+    push = physics.social_strength * xp.exp((physics.radius + radii - centre) / physics.social_range) * present / centre
+    social = xp.norm(-xp.sum(after * push[..., None], axis=-2))
     w = physics.weights
     reward = w["step"] + w["goal_progress"] * (distance_before - distance_after) + w["social"] * social
-    reward = reward + np.where(collision, w["collision"], np.where(reached, w["goal_reached"], 0.0))
+    reward = reward + xp.where(collision, w["collision"], xp.where(reached, w["goal_reached"], 0.0))
     commands = velocity / physics.max_speed
-    commands /= np.maximum(np.hypot(commands[..., 0], commands[..., 1]), 1.0)[..., None]
-    shape = velocity.shape[:2]
+    commands = commands / xp.maximum(xp.norm(commands), 1.0)[..., None]
+    shape: tuple[Any, ...] = velocity.shape[:2]  # (B, M)
     next_state = {"goal": goal, "velocity": velocity, "positions": after,
-                  "velocities": np.broadcast_to(state["velocities"][:, None], (*shape, *state["velocities"].shape[1:])),
-                  "radii": radii, "present": present, "static": normal * (clearance * here)[..., None],
-                  "static_present": np.broadcast_to(here, clearance.shape)}
+                  "velocities": xp.broadcast_to(state["velocities"][:, None], (*shape, *state["velocities"].shape[1:])),
+                  "radii": radii, "present": present}
+    if "static" in state:
+        next_state.update(static=normal * (clearance * here)[..., None], static_present=xp.broadcast_to(here, clearance.shape))
     if "geodesic" in state:  # the grid stays where it was observed; the robot moves on it
-        next_state.update(geodesic=np.broadcast_to(state["geodesic"][:, None], (*shape, *state["geodesic"].shape[1:])),
+        next_state.update(geodesic=xp.broadcast_to(state["geodesic"][:, None], (*shape, *state["geodesic"].shape[1:])),
                           origin=state["origin"][:, None, :] + velocity * dt)
-    return {"next": next_state, "reward": reward * physics.reward_scale, "done": collision | reached,
-            "commands": commands.astype(np.float32)}
+    return {"next": next_state, "reward": reward * physics.reward_scale, "done": collision | reached, "commands": xp.float32(commands)}

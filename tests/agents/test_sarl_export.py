@@ -53,6 +53,68 @@ def check_choices(policy, observations, actions):
     return ties
 
 
+def random_observation(rng, room, geodesic, polar, batch=6, humans=5, statics=4, size=9):
+    """Observations with humans (one at the robot's centre, one moving with it), walls (one at the robot) and a grid."""
+    goal = rng.normal(size=(batch, 2)) * 3
+    goal[0] = 0.0  # at the goal
+    if polar:
+        distance = np.hypot(goal[:, 0], goal[:, 1])
+        safe = np.where(distance > 0, distance, 1.0)
+        goal = np.stack([distance, goal[:, 1] / safe, goal[:, 0] / safe], axis=1)  # distance, sin, cos
+    rows = np.concatenate([rng.normal(size=(batch, humans, 4)) * [1.5, 1.5, 1, 1], rng.uniform(0.2, 0.4, (batch, humans, 1)),
+                           rng.random((batch, humans, 1)) < 0.7], axis=-1)
+    velocity = rng.normal(size=(batch, 2)) * 0.5
+    rows[1, 0, 0:2], rows[2, 1, 2:4] = 0.0, 0.0
+    observation = {"humans": rows, "goal": goal, "velocity": velocity}
+    if room:
+        observation["obstacles"] = np.concatenate([rng.normal(size=(batch, statics, 2)), rng.random((batch, statics, 1)) < 0.8], axis=-1)
+        observation["obstacles"][3, 0, 0:2] = 0.0
+    if geodesic:
+        observation["geodesic"] = rng.uniform(0, 10, size=(batch, size, size))
+    return observation
+
+
+@pytest.mark.parametrize("room, geodesic, polar, size", [(False, False, True, 9), (True, True, False, 8), (True, True, True, 1),
+                                                         (False, True, False, 2)])
+def test_the_lookahead_maths_in_torch_agrees_with_numpys(room, geodesic, polar, size):
+    """The export runs lookahead.py's very functions on torch tensors (TorchOps): the same numbers as numpy's, two steps out."""
+    from crowdnav.agents.sarl.export import TORCH
+    from crowdnav.agents.sarl.lookahead import Physics, action_set, decode, features, lookahead, value_ceiling
+
+    physics = Physics(0.3, 1.0, 0.25, 0.3, 2.0, 0.6, {"step": -0.01, "goal_progress": 0.1, "social": -0.05, "goal_reached": 1.0,
+                                                      "collision": -0.25}, 0.7, 0.1)
+    rng = np.random.default_rng(size)
+    observation = random_observation(rng, room, geodesic, polar, size=size)
+    scales = {"goal": (rng.normal(size=observation["goal"].shape[1:]), rng.uniform(0.5, 2.0, size=observation["goal"].shape[1:]))}
+    actions = action_set(physics.max_speed)
+    ours = decode(observation, scales)
+    theirs = decode({key: torch.as_tensor(value) for key, value in observation.items()},
+                    {key: tuple(torch.as_tensor(part) for part in pair) for key, pair in scales.items()}, TORCH, empty_static=False)
+    assert ours["static"].shape[-2] == (4 if room else 0) and ("static" in theirs) == room  # no zero-size tensor in torch
+    for depth in range(2):
+        assert sorted(theirs) == sorted(key for key in ours if room or not key.startswith("static"))
+        for key, value in theirs.items():
+            np.testing.assert_allclose(value.numpy(), ours[key], rtol=0, atol=1e-12, err_msg=f"{depth} {key}")
+        for got, expected in zip(features(theirs, physics, TORCH), features(ours, physics), strict=True):
+            if got is None:
+                assert not room and expected.shape[-2] == 0
+            else:
+                assert got.dtype == torch.float32 and expected.dtype == np.float32
+                np.testing.assert_allclose(got.numpy(), expected, rtol=1e-6, atol=1e-7)
+        mine, yours = lookahead(ours, physics, actions, 0.1), lookahead(theirs, physics, torch.as_tensor(actions), 0.1, TORCH)
+        assert 0 < mine["done"].sum() < mine["done"].size  # collisions, goals and free moves alike
+        np.testing.assert_array_equal(yours["done"].numpy(), mine["done"])
+        np.testing.assert_allclose(yours["reward"].numpy(), mine["reward"], rtol=0, atol=1e-12)
+        np.testing.assert_allclose(yours["commands"].numpy(), mine["commands"], rtol=0, atol=1e-7)
+        distance = np.hypot(mine["next"]["goal"][..., 0], mine["next"]["goal"][..., 1])
+        np.testing.assert_allclose(value_ceiling(torch.as_tensor(distance), physics, 0.95, TORCH).numpy(),
+                                   value_ceiling(distance, physics, 0.95), rtol=0, atol=1e-12)
+        pick = rng.integers(0, len(actions), size=3)  # a second step from a few of the next states, as depth 2 looks
+        rows = len(mine["done"]) * len(pick)
+        ours = {key: value[:, pick].reshape(rows, *value.shape[2:]) for key, value in mine["next"].items()}
+        theirs = {key: value[:, torch.as_tensor(pick)].reshape(rows, *value.shape[2:]) for key, value in yours["next"].items()}
+
+
 @pytest.mark.slow
 @pytest.mark.parametrize("scenario", library_names())
 def test_onnxruntime_chooses_predicts_actions_in_every_library_scenario_sarl_drives(tmp_path, scenario):
