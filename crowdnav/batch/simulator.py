@@ -33,10 +33,12 @@ from crowdnav.batch.state import BatchState
 from crowdnav.crowd.base import CrowdView
 from crowdnav.crowd.views import worlds_view
 from crowdnav.sim.contacts import deepest_contact, goal_distance, outside, resolve_overlaps, touching
+from crowdnav.sim.episode_state import EpisodeState, capture, restore
 from crowdnav.sim.events import Collision, check_finite
 from crowdnav.sim.geometry import measure
 from crowdnav.sim.groups import apply_goal_rules, goal_checks
 from crowdnav.sim.simulator import Simulator, place_humans
+from crowdnav.sim.state import SimState
 from crowdnav.worlds.compiled import CompiledWorld
 from crowdnav.worlds.obstacles import EdgeSet
 
@@ -120,23 +122,27 @@ class BatchSimulator:
         for world, seed in zip(worlds, seeds, strict=True):  # per reset event: placement draws from each world's generator
             slot = self.slots[world]
             slot.draw_episode(seed)
-            state = slot.state
-            n = state.n_humans
-            size, row = self._where[world]
-            if size == n:
-                self.buckets[n].replace(row, state)
-            else:
-                if size >= 0:
-                    self._drop(world, size, row)
-                bucket = self.buckets.get(n)
-                if bucket is None:
-                    bucket = self.buckets[n] = Bucket(n, slot.pair_constants(n), world, state)
-                else:
-                    bucket.add(world, state)
-                self._where[world] = n, len(bucket) - 1
+            n = self._stack(int(world), slot.state)
             fresh.setdefault(n, []).append(int(world))
         for n, fresh_worlds in fresh.items():  # one geometry pass per crowd size for all the new episodes
             self._refresh(self.buckets[n], self._where[fresh_worlds, 1])
+
+    def _stack(self, world: int, state: SimState) -> int:
+        """``world``'s row of the stack of its crowd size becomes (a copy of) ``state`` (moved from another size's); returns the size."""
+        n = state.n_humans
+        size, row = self._where[world]
+        if size == n:
+            self.buckets[n].replace(row, state)
+        else:
+            if size >= 0:
+                self._drop(world, size, row)
+            bucket = self.buckets.get(n)
+            if bucket is None:
+                bucket = self.buckets[n] = Bucket(n, self.slots[world].pair_constants(n), world, state)
+            else:
+                bucket.add(world, state)
+            self._where[world] = n, len(bucket) - 1
+        return n
 
     def _drop(self, world: int, size: int, row: int) -> None:
         bucket = self.buckets[size]
@@ -160,6 +166,21 @@ class BatchSimulator:
         """
         bucket, row = self.locate(world)
         return self.slots[world].clone(bucket.state.row(row))
+
+    def snapshot(self, world: int) -> EpisodeState:
+        """``world``'s episode now (:func:`crowdnav.sim.episode_state.capture`): its row of the stack, its slot's generator and crowd models."""
+        bucket, row = self.locate(world)
+        return capture(self.slots[world], bucket.state.row(row))
+
+    def load(self, world: int, episode: EpisodeState) -> None:
+        """Make ``episode`` (a :meth:`snapshot` of a world of this scenario, or a single simulator's) ``world``'s: its slot takes
+        the generator and crowd models' state, its row of the stack the state, measured as a reset's."""
+        if not 0 <= world < self.num_worlds:
+            raise ValueError(f"world must be in [0, {self.num_worlds}), got {world}")
+        slot = self.slots[world]
+        restore(slot, episode)
+        n = self._stack(int(world), slot.state)
+        self._refresh(self.buckets[n], self._where[[world], 1])
 
     # ------------------------------------------------------------------- step
 

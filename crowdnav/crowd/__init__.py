@@ -10,8 +10,8 @@ scenario's walking groups use and their composition (docs/architecture.md, "How 
 from __future__ import annotations
 
 import copy
-from collections.abc import Iterator, Sequence
-from typing import overload
+from collections.abc import Iterator, Mapping, Sequence
+from typing import Any, overload
 
 import numpy as np
 
@@ -88,6 +88,15 @@ class Crowd:
         """Every model's :meth:`CrowdModel.start_episode` for the episode just drawn (``rng``: the episode's generator)."""
         for model in self.models.values():
             model.start_episode(view, rng)
+
+    def episode_state(self) -> dict[str, dict[str, Any]]:
+        """Model name -> its :meth:`CrowdModel.episode_state` (what the models' commands depend on besides the view and the generator)."""
+        return {name: model.episode_state() for name, model in self.models.items()}
+
+    def resume(self, view: CrowdView, states: Mapping[str, Mapping[str, Any]]) -> None:
+        """Every model's :meth:`CrowdModel.resume` from ``states`` (an :meth:`episode_state` of a crowd of the same scenario)."""
+        for name, model in self.models.items():
+            model.resume(view, states[name])
 
     def place(self, view: CrowdView) -> list[tuple[np.ndarray, np.ndarray, np.ndarray]]:
         """(index, positions, velocities) of every model that :attr:`CrowdModel.places` its humans (one world)."""

@@ -23,8 +23,8 @@ The recipe for adding a model is in docs/architecture.md ("How to add a crowd mo
 
 from __future__ import annotations
 
-from collections.abc import Sequence
-from typing import ClassVar, Protocol
+from collections.abc import Mapping, Sequence
+from typing import Any, ClassVar, Protocol
 
 import numpy as np
 
@@ -136,6 +136,15 @@ class CrowdModel:
     def start_episode(self, view: CrowdView, rng: np.random.Generator) -> None:
         """A new episode was drawn (one-world ``view``; ``rng``: the episode's generator, for any draw): set any
         per-episode state (default: none)."""
+
+    def episode_state(self) -> dict[str, Any]:
+        """What this model's commands depend on besides the view and the world's generator (its episode state so far), as
+        plain values and new arrays; :meth:`resume` takes it back (:mod:`crowdnav.envs.world_state`). Default: nothing."""
+        return {}
+
+    def resume(self, view: CrowdView, state: Mapping[str, Any]) -> None:
+        """Go on with an episode from ``state`` (an :meth:`episode_state`, maybe another instance's) in the one-world ``view``
+        of the world's state just loaded: set what :meth:`start_episode` and the steps since would have set (default: nothing)."""
 
     def commands(self, view: CrowdView) -> np.ndarray:
         """(n,) complex: a velocity command (m/s) for every human of the one-world ``view``; only those of the

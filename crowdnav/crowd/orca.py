@@ -8,8 +8,8 @@ holds one world's agents, so a batch steps its worlds one by one, each with its 
 
 from __future__ import annotations
 
-from collections.abc import Sequence
-from typing import cast
+from collections.abc import Mapping, Sequence
+from typing import Any, cast
 
 import numpy as np
 
@@ -34,6 +34,13 @@ class OrcaModel(CrowdModel):
 
     def start_episode(self, view: CrowdView, rng: np.random.Generator) -> None:
         """Pick (or build) the solver for this episode's agents and set their radii and max speeds."""
+        self._configure(view)
+
+    def resume(self, view: CrowdView, state: Mapping[str, Any]) -> None:
+        """The solver of the loaded episode's agents, set for them (RVO2 keeps nothing else between steps that a step does not set)."""
+        self._configure(view)
+
+    def _configure(self, view: CrowdView) -> None:
         robots = view.robot_count
         n = len(view.human_max_speed)
         count = n + self._see_robot * robots

@@ -28,7 +28,9 @@ drawn again, up to :data:`WINDOW_TRIES` times (then the last draw is kept).
 from __future__ import annotations
 
 import copy
+from collections.abc import Mapping
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -170,8 +172,22 @@ class ReplayModel(CrowdModel):
 
     def start_episode(self, view: CrowdView, rng: np.random.Generator) -> None:
         """Draw the episode's window and give each of its people a place for as long as they are recorded."""
+        self._lay_out(self._draw_window(view, rng))
+        self.reacting = np.zeros(self.count, dtype=bool)
+        self._moving = np.zeros(self.count, dtype=complex)
+
+    def episode_state(self) -> dict[str, Any]:
+        """The episode's window (its places follow from it) and who reacts now, at which velocity."""
+        return {"start": int(self.start), "reacting": self.reacting.copy(), "moving": self._moving.copy()}
+
+    def resume(self, view: CrowdView, state: Mapping[str, Any]) -> None:
+        self._lay_out(int(state["start"]))
+        self.reacting, self._moving = np.array(state["reacting"], dtype=bool), np.array(state["moving"], dtype=complex)
+
+    def _lay_out(self, start: int) -> None:
+        """The window starting at the recording's step ``start``: each of its people in a place for as long as they are recorded."""
         steps, dt = self._steps, self.dt
-        self.start = self._draw_window(view, rng)
+        self.start = start
         """The recording's time step (of the scenario's ``dt``) this episode starts at."""
         stop = self.start + steps  # the window's tracks, in the order Resampled.window() gives them (read here track by track)
         chosen = np.flatnonzero((self._track_start < stop) & (self._track_start + self._track_length > self.start))
@@ -197,8 +213,6 @@ class ReplayModel(CrowdModel):
             if self._reaction is not None:  # its own position `ahead` steps on, its last near the track's end
                 targets[first : last + 1, place] = self._ahead_of(index, first, last)
         self._positions, self._velocities, self._targets, self._holder = places, velocities, targets, holder
-        self.reacting = np.zeros(self.count, dtype=bool)
-        self._moving = np.zeros(self.count, dtype=complex)
 
     def _ahead_of(self, track_index: int, first: int, last: int) -> np.ndarray:
         """(last - first + 1,) complex: track ``track_index`` at window steps first+ahead .. last+ahead, held at its last

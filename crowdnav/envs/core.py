@@ -12,13 +12,14 @@ from __future__ import annotations
 import dataclasses
 import math
 from collections.abc import Mapping, Sequence
-from functools import partial
+from functools import cached_property, partial
 from typing import Any
 
 import numpy as np
 from gymnasium import spaces
 
 from crowdnav.envs.reward import Reward
+from crowdnav.envs.world_state import EnvState, WorldKey, WorldState, check_state, make_state, world_key
 from crowdnav.planning.shield import validate_shield
 from crowdnav.rendering.episode_view import RENDER_MODES, EpisodeView, RenderOptions
 from crowdnav.scenario import ScenarioIssue, library
@@ -26,6 +27,7 @@ from crowdnav.scenario.loader import LoadedScenario
 from crowdnav.sensors import Modality, build_modalities
 from crowdnav.sensors.tracked import TrackedView, attach
 from crowdnav.sensors.tracker import make_tracker
+from crowdnav.sim.episode_state import capture, restore
 from crowdnav.sim.robot_view import RobotWorld
 from crowdnav.sim.simulator import Simulator, StepEvents
 from crowdnav.worlds.compiled import CompiledWorld, WorldSource, load_world
@@ -350,6 +352,33 @@ class EnvCore:
         if self.view is not None and results[0] is not None:
             self.view.on_step(results[0][1], results[0][0])
         return results
+
+    @cached_property
+    def world_key(self) -> WorldKey:
+        """What a world state must match to load here (:func:`crowdnav.envs.world_state.world_key`, made on first use)."""
+        return world_key(self.scenario)
+
+    def snapshot(self, other_outcomes: dict[str, str | None]) -> WorldState:
+        """The world now (:class:`crowdnav.envs.world_state.WorldState`, copies), the env's ``other_outcomes`` with it."""
+        observation = {key: values.copy() for key, values in self._observation.items()}
+        return make_state(self.world_key, capture(self.simulator), tuple(reward.previous_distance for reward in self.robot_rewards),
+                          None if self.tracker is None else self.tracker.row_state(0), EnvState(self._running, dict(other_outcomes), observation))
+
+    def load(self, state: WorldState) -> tuple[dict[str, np.ndarray], EnvState | None]:
+        """Make ``state`` (checked: :func:`crowdnav.envs.world_state.check_state`) the world's, on copies: (the observation, its env
+        part). Without one (the stacked engine's) it runs on, observed again, a tracker waiting for its first detections making them."""
+        state = check_state(state, self.world_key)
+        sim, env = self.simulator, state.env
+        restore(sim, state.episode)
+        for reward, distance in zip(self.robot_rewards, state.rewards, strict=True):
+            reward.previous_distance = distance
+        if self.tracker is not None and state.tracker is not None:  # (the same sensors: checked)
+            self.tracker.load_row(0, state.tracker)
+            if len(self.tracker.pending):  # as reset() does
+                self.tracker.update(WORLD, sim.positions[None], sim.velocities[:1], np.array([sim.robot_heading]), sim.radii)
+        self._running = True if env is None else env.running
+        self._observation = self.observe() if env is None else {key: values.copy() for key, values in env.observation.items()}
+        return self._observation, env
 
     def people(self) -> RobotWorld:
         """The world as the robot's tracker reports the people now (:mod:`crowdnav.sensors.tracked`; ``perfect``: the simulator)."""

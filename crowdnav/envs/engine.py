@@ -9,8 +9,9 @@ engines implement :class:`WorldEngine`, and the vector env reads neither's insid
 * :class:`crowdnav.envs.vector_team.TeamWorlds`: one single env per world stepped in one call (several robots, one
   world, crowds too large to stack).
 
-Either plays world ``i`` as the single env plays it after ``reset(seed=s_i)``, bit for bit. Which one a vector env
-uses is :func:`crowdnav.envs.vector.stacks`' choice, made once.
+Either plays world ``i`` as the single env plays it after ``reset(seed=s_i)``, bit for bit, and gives a world's
+state as data (:meth:`WorldEngine.snapshot`, :mod:`crowdnav.envs.world_state`) that either loads into any of its
+worlds. Which one a vector env uses is :func:`crowdnav.envs.vector.stacks`' choice, made once.
 """
 
 from __future__ import annotations
@@ -22,6 +23,7 @@ import numpy as np
 
 if TYPE_CHECKING:
     from crowdnav.batch.simulator import StepResult
+    from crowdnav.envs.world_state import WorldState
     from crowdnav.planning.shield import Shield
     from crowdnav.sensors import Modality
     from crowdnav.sim.simulator import Simulator
@@ -80,6 +82,13 @@ class WorldEngine(Protocol):
 
     def simulators(self) -> list[Simulator]:
         """Each world's simulator to read, never to step: the live one where a world is one, else a snapshot."""
+
+    def snapshot(self, world: int) -> WorldState:
+        """Everything ``world``'s future depends on given the actions, copied (:class:`crowdnav.envs.world_state.WorldState`)."""
+
+    def load(self, world: int, state: WorldState) -> None:
+        """Make ``state`` (a :meth:`snapshot` of a world of this scenario and options, either engine's) ``world``'s: it plays on
+        as the captured world would, bit for bit. A ValueError in one line names what differs (scenario, settings, robots, version)."""
 
 
 def world_frame(sim: Any) -> dict[str, np.ndarray]:

@@ -79,6 +79,15 @@ class Reward:
         """Remember the initial robot-goal distance (the potential of the progress term)."""
         self._previous_distance = float(sim.robot_goal_distance)
 
+    @property
+    def previous_distance(self) -> float:
+        """The robot-goal distance at the last step (or reset): the progress term's memory (a world state keeps it)."""
+        return self._previous_distance
+
+    @previous_distance.setter
+    def previous_distance(self, distance: float) -> None:
+        self._previous_distance = float(distance)
+
     def __call__(self, sim: RobotWorld, events: StepEvents) -> tuple[float, dict[str, float]]:
         """(reward, terms) for the step the simulator just took; ``terms`` is a new dict."""
         distance = float(sim.robot_goal_distance)

@@ -9,6 +9,7 @@ import gymnasium as gym
 import numpy as np
 
 from crowdnav.envs.core import EnvCore, ScenarioSource, step_info
+from crowdnav.envs.world_state import WorldState
 from crowdnav.policies import SCRIPTED_POLICIES
 from crowdnav.rendering.episode_view import RENDER_MODES
 from crowdnav.sim.events import StepEvents
@@ -179,6 +180,19 @@ class CrowdNavEnv(gym.Env):
         if ended and not over:
             self.simulator.retire_robots(ended)
         return dict(self._other_outcomes)
+
+    def snapshot(self) -> WorldState:
+        """The world now: everything its future depends on given the actions (:class:`crowdnav.envs.world_state.WorldState`, a copy
+        that pickles; the state of a callable ``other_robots`` excepted)."""
+        return self.core.snapshot(self._other_outcomes)
+
+    def load(self, state: WorldState) -> dict[str, np.ndarray]:
+        """Make ``state`` (a :meth:`snapshot` of a world of this scenario and options, or a vector env engine's) this env's world:
+        it plays on as the captured world would. Returns the observation (the captured one). A ValueError names what differs."""
+        observation, env = self.core.load(state)
+        self._np_random = self.simulator.rng
+        self._other_outcomes = dict.fromkeys(self._other_names) if env is None else dict(env.other_outcomes)
+        return observation
 
     def render(self) -> np.ndarray | None:
         """The current frame in ``rgb_array`` mode (None in ``human`` mode, which draws at each step)."""

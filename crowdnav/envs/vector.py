@@ -22,6 +22,7 @@ from crowdnav.envs.vector_actions import checked_actions, checked_replay, execut
 from crowdnav.envs.vector_infos import end_infos, every_infos, reward_term_infos, same_step_infos
 from crowdnav.envs.vector_stacked import StackedWorlds
 from crowdnav.envs.vector_team import TeamWorlds
+from crowdnav.envs.world_state import VectorWorldState
 from crowdnav.planning.shield import validate_shield
 from crowdnav.sim.simulator import Simulator
 from crowdnav.worlds.compiled import CompiledWorld
@@ -80,6 +81,10 @@ class CrowdNavVectorEnv(VectorEnv):
     autoreset starts, for ``worlds`` in ascending order (training numbers its episodes this way,
     :class:`crowdnav.agents.training.seeding.EpisodeSeedCounter`); without it an autoreset continues each
     world's generator.
+
+    **World states.** ``snapshot(world)`` gives a world as data that pickles (:mod:`crowdnav.envs.world_state`: its
+    simulator's episode and generator, its reward memory, its tracker, Gymnasium's flags of it); ``load(world, state)``
+    makes it any world's of an env of the same scenario and options, which then plays on bit for bit.
 
     **Memory.** With ``keep_freed_memory`` (default) the env raises glibc malloc's trim threshold
     to 64 MB for its process (:mod:`crowdnav.batch.memory`): the batch's temporaries are then reused
@@ -258,6 +263,37 @@ class CrowdNavVectorEnv(VectorEnv):
         self.engine.settle()  # what a step's reward code keeps (the goal distance now)
         self._observe_all()
         return self._copy_observations()
+
+    def snapshot(self, world: int) -> VectorWorldState:
+        """World ``world`` now, as data that pickles (:class:`crowdnav.envs.world_state.VectorWorldState`, a copy): its engine's
+        :class:`crowdnav.envs.world_state.WorldState` and Gymnasium's flags of it (its episode ended and waits for its autoreset
+        or a reset mask, the flags a waiting world repeats). :meth:`load` makes it any world's of an env of the same options."""
+        world = self._world(world)
+        if not self._started[world]:
+            raise RuntimeError(f"world {world} has not been reset: nothing to snapshot")
+        terminated, truncated = self._last_flags
+        return VectorWorldState(self.engine.snapshot(world), bool(self._ended[world]), bool(terminated[world]), bool(truncated[world]))
+
+    def load(self, world: int, state: VectorWorldState) -> None:
+        """Make ``state`` (a :meth:`snapshot`) world ``world``'s: with the same actions it plays on, episodes and autoresets included,
+        as the captured world would, bit for bit (its later episodes continue its generator, or take ``episode_seeds``' seeds).
+        The next step's observation is the captured world's; a ValueError in one line names what differs (scenario, settings, robots)."""
+        world = self._world(world)
+        if not isinstance(state, VectorWorldState):
+            raise ValueError(f"expected a VectorWorldState (CrowdNavVectorEnv.snapshot), got {type(state).__name__}")
+        self.engine.load(world, state.world)
+        self._started[world] = True
+        self._all_started = bool(self._started.all())
+        self._ended[world] = state.ended
+        self._none_ended = not self._ended.any()
+        self._last_flags[0][world], self._last_flags[1][world] = state.terminated, state.truncated
+        if self._all_started:  # (a world not reset yet has nothing to observe; the load or reset that starts the last observes all)
+            self._observe_all()
+
+    def _world(self, world: int) -> int:
+        if isinstance(world, bool) or not isinstance(world, (int, np.integer)) or not 0 <= world < self.num_envs:
+            raise ValueError(f"world must be an integer in [0, {self.num_envs}), got {world!r}")
+        return int(world)
 
     def _waiting_flags(self) -> tuple[np.ndarray, np.ndarray]:
         """(terminated, truncated) when no world stepped: waiting worlds repeat theirs (DISABLED), others are False."""

@@ -4,12 +4,14 @@ One :class:`crowdnav.batch.simulator.BatchSimulator` steps the worlds (array wor
 crowd size); this engine adds what a world needs beyond its simulator (:class:`crowdnav.envs.engine.WorldEngine`):
 the reward (the single env's kernels, :func:`crowdnav.envs.reward.reward_terms`, over the stepping worlds, with each
 world's goal distance at its last step as the progress term's memory), the observations (each modality's
-``observe_batch``, chunk by chunk as the simulator steps them), the shield's batched call and the worlds' rows.
+``observe_batch``, chunk by chunk as the simulator steps them), the shield's batched call, the worlds' rows and a
+world's state as data (its simulator's episode, its reward memory, its tracker's row).
 """
 
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
+from functools import cached_property
 
 import numpy as np
 
@@ -17,6 +19,7 @@ from crowdnav.batch.simulator import BatchSimulator, StepResult
 from crowdnav.batch.state import BatchState
 from crowdnav.envs.engine import Judged
 from crowdnav.envs.reward import REWARD_TERMS, reward_terms
+from crowdnav.envs.world_state import WorldKey, WorldState, check_state, make_state, world_key
 from crowdnav.planning.shield import Shield
 from crowdnav.sensors import Modality
 from crowdnav.sensors.tracked import attach, tracked_state
@@ -168,3 +171,19 @@ class StackedWorlds:
 
     def simulators(self) -> list[Simulator]:
         return [self.simulator(world) for world in range(self.num_worlds)]
+
+    def snapshot(self, world: int) -> WorldState:
+        return make_state(self.world_key, self.batch.snapshot(world), (float(self._previous_distance[world]),),
+                          None if self.tracker is None else self.tracker.row_state(world))
+
+    def load(self, world: int, state: WorldState) -> None:
+        state = check_state(state, self.world_key)
+        self.batch.load(world, state.episode)
+        (self._previous_distance[world],) = state.rewards
+        if self.tracker is not None and state.tracker is not None:  # (the same sensors: checked)
+            self.tracker.load_row(world, state.tracker)
+
+    @cached_property
+    def world_key(self) -> WorldKey:
+        """What a world state must match to load here (made on first use)."""
+        return world_key(self.batch.scenario)

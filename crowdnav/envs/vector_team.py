@@ -33,6 +33,7 @@ from crowdnav.batch.simulator import StepResult
 from crowdnav.envs.engine import Judged, world_frame
 from crowdnav.envs.reward import REWARD_TERMS
 from crowdnav.envs.single import CrowdNavEnv
+from crowdnav.envs.world_state import WorldState
 from crowdnav.planning.shield import Shield
 from crowdnav.sensors import Modality
 from crowdnav.sensors.lidar import LidarModality
@@ -246,6 +247,14 @@ class TeamWorlds:
         """A copy of world ``world``'s simulator array ``name`` (``positions``: the first robot then the humans)."""
         values: np.ndarray = np.array(getattr(self.envs[world].simulator, name), copy=True)
         return values
+
+    def snapshot(self, world: int) -> WorldState:
+        """World ``world``'s single env's :meth:`CrowdNavEnv.snapshot`."""
+        return self.envs[world].snapshot()
+
+    def load(self, world: int, state: WorldState) -> None:
+        """World ``world``'s single env's :meth:`CrowdNavEnv.load` (its observation then the world's)."""
+        self.observations[world] = self.envs[world].load(state)
 
     def simulator(self, world: int) -> Simulator:
         """A snapshot of ``world``'s simulator (:meth:`crowdnav.Simulator.clone`): stepping it leaves the world as it is."""

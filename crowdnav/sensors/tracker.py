@@ -41,6 +41,12 @@ if TYPE_CHECKING:
     from crowdnav.scenario.tracker import TrackerProfile
     from crowdnav.worlds.compiled import CompiledWorld
 
+ROW_STATE = ("_episode", "_key", "_step", "_fresh", "_robot", "_alive", "_hits", "_confirmed", "_last_seen", "_measured",
+             "_measured_at", "_moments", "_sums", "_latest", "_position", "_velocity")
+"""The tracker's per-world arrays (row ``world``; :data:`ROW_SECOND`: column ``world``): with ``_entropy`` and ``_columns``, a
+world's whole tracker state (:meth:`PeopleTracker.row_state`); the tracker's other attributes are settings."""
+ROW_SECOND = frozenset({"_moments", "_sums"})
+"""The per-world arrays whose world axis is the second."""
 GATE = 1.0
 """Metres between a detection and its track's one-step prediction beyond which the detection starts a new track."""
 
@@ -204,6 +210,32 @@ class PeopleTracker:
         """World ``world``'s columns now, kept: for a snapshot of the world that must not follow later steps."""
         kept = TrackedColumns(*(values[world : world + 1].copy() for values in self._columns))
         return lambda n: TrackedColumns(*(values[:, : n + 1] for values in kept))
+
+    # ------------------------------------------------------------ world states
+
+    def row_state(self, world: int) -> dict[str, Any]:
+        """World ``world``'s tracks and draws now, copied (:data:`ROW_STATE`; :meth:`load_row` takes them back, into any row)."""
+        out: dict[str, Any] = {"entropy": self._entropy[world]}
+        for name in ROW_STATE:  # keyed without the attribute's underscore
+            values = getattr(self, name)
+            out[name[1:]] = values[:, world].copy() if name in ROW_SECOND else values[world].copy()
+        out["columns"] = tuple(values[world].copy() for values in self._columns)
+        return out
+
+    def load_row(self, world: int, state: dict[str, Any]) -> None:
+        """Make ``state`` (a :meth:`row_state` of a tracker of the same scenario) world ``world``'s tracks and draws."""
+        people = np.shape(state["alive"])[-1]
+        if people != self._alive.shape[1]:
+            raise ValueError(f"a people tracker's state of {people} people cannot load into a tracker of {self._alive.shape[1]}")
+        self._entropy[world] = state["entropy"]
+        for name in ROW_STATE:
+            values = getattr(self, name)
+            if name in ROW_SECOND:
+                values[:, world] = state[name[1:]]
+            else:
+                values[world] = state[name[1:]]
+        for values, row in zip(self._columns, state["columns"], strict=True):
+            values[world] = row
 
     # ---------------------------------------------------------------- one step
 

@@ -224,8 +224,9 @@ class Simulator(_StateAttributes):
     def load_state(self, state: SimState) -> None:
         """Make ``state`` (one world's, owned by this simulator from now on) the episode's state and measure its geometry.
 
-        For a state of the episode this simulator drew last (:meth:`draw_episode`): its groups'
-        ORCA solver and its generator stay this simulator's.
+        For a state of the episode this simulator drew last (:meth:`draw_episode`): its groups' ORCA solver
+        and its generator stay this simulator's (another episode's, with its generator and crowd models:
+        :func:`crowdnav.sim.episode_state.restore`).
         """
         self._state = state
         self._use_pair_constants(state.n_humans)
