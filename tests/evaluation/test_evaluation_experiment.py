@@ -27,7 +27,8 @@ def test_shipped_experiments_cover_figure_4_the_default_and_the_reference_agents
                                           "anticipate_circle_sarl_deep", "anticipate_circle_sarl_rl_short", "anticipate_circle_sarl_rl_memory",
                                           "anticipate_circle_sarl_rl_bound", "robots_goal_frame", "room_sarl_figure4",
                                           "track_crowded_open_space", "track_station_hall", "track_robots_crossing_hall",
-                                          "recurrent_crowded_open_space", "room_sarl_ensemble_figure4"}
+                                          "recurrent_crowded_open_space", "room_sarl_ensemble_figure4",
+                                          "room_sarl_figure4_lidar_tracker"}
     labels = {name: [c.name for c in load_experiment(name).configurations] for name in shipped_experiments()}
     assert labels["encoders"] == ["frozen", "finetune", "scratch"]
     assert labels["modalities"] == labels["modalities_paper"] == ["leog", "lidar", "closest_obstacle"]
@@ -261,3 +262,15 @@ def test_pretrained_encoder_is_trained_once_per_experiment_and_given_to_frozen_r
     written = encoder.stat().st_mtime_ns
     run_experiment(experiment, tmp_path, workers=1, progress=False, video=False, log=lambda line: None)
     assert encoder.stat().st_mtime_ns == written
+
+
+def test_room_sarl_lidar_tracker_experiment_is_room_sarl_figure4_in_the_figure4_lidar_tracker_setting():
+    """The same recipe as room_sarl_figure4, only seen through the track's tracker (what training through it buys)."""
+    from crowdnav.evaluation.track import load_track
+
+    perfect, lidar = load_experiment("room_sarl_figure4"), load_experiment("room_sarl_figure4_lidar_tracker")
+    track = load_track("figure4_lidar_tracker")
+    (trained,), (perfect_trained,) = [c.train for c in lidar.configurations], [c.train for c in perfect.configurations]
+    assert trained["overrides"] == track.overrides and trained["scenario"] == track.scenario
+    assert {**trained, "overrides": None} == {**perfect_trained, "overrides": None}
+    assert lidar.protocol == perfect.protocol
