@@ -9,10 +9,12 @@ Four ways to step the same B worlds (all modalities unless ``--modalities``), ra
 * ``native``: ``gymnasium.make_vec(..., vectorization_mode="vector_entry_point")``;
 * ``kernels``: the native env's batched simulator step and batched sensors alone, no rewards,
   infos, autoreset bookkeeping or copies (the floor the env's own work adds to);
-* ``sb3_single`` / ``sb3_native``: the two ways ``crowdnav train`` can collect from B worlds for SB3 (on-policy,
-  so both behind its ``ActionLog``): ``DummyVecEnv`` of B ``make_env`` stacks (CrowdNavEnv, observation
-  normalisation, episode seeds, Monitor) against ``make_vec_env`` (the native env through
-  ``CrowdNavSB3VecEnv``), with the training config's options (``--modalities``, ``--humans``).
+* ``sb3_single`` / ``sb3_native``: the two ways ``crowdnav train`` could collect from B worlds for SB3:
+  ``DummyVecEnv`` of B ``make_env`` stacks (CrowdNavEnv, observation normalisation, episode seeds,
+  Monitor) against ``make_vec_env`` (the native env through ``CrowdNavSB3VecEnv``), with the training
+  config's options (``--modalities``, ``--humans``). Neither records its actions any more (the
+  ``ActionLog`` that training wrapped them in until its checkpoints stored world states cost 4-7 us
+  per step of all worlds).
 
 Printed: median env-steps/s over the repeats and the ratios native / sync, native / single, native /
 kernels and sb3_native / sb3_single. ``--clock cpu`` times with the process's CPU time instead of the
@@ -91,14 +93,13 @@ def sb3(args: argparse.Namespace, native: bool) -> Callable[[], float]:
     """The SB3 collection stack ``crowdnav train`` builds for ``native`` (or not), made once; returns its timing run."""
     from functools import partial
 
-    from crowdnav.agents.runs.resume_state import ActionLog
     from crowdnav.agents.sb3.factory import make_env, make_vec_env
     from crowdnav.agents.training.config import config_from_mapping
     from stable_baselines3.common.vec_env import DummyVecEnv
 
     config = config_from_mapping({"scenario": args.scenario, "modalities": args.modalities, "algo": "ppo", "seed": 0,
                                   "out": tempfile.mkdtemp(), "overrides": {"humans.count": args.humans}, "num_envs": args.batch})
-    env = ActionLog(make_vec_env(config) if native else DummyVecEnv([partial(make_env, config)] * args.batch))
+    env = make_vec_env(config) if native else DummyVecEnv([partial(make_env, config)] * args.batch)
     env.reset()
     actions = np.random.default_rng(0).uniform(-1, 1, (args.steps, args.batch, 2)).astype(np.float32)
 

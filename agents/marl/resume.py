@@ -3,7 +3,9 @@
 The robots' vector env (:class:`crowdnav.agents.marl.vec_env.RobotsVecEnv`) holds no state of its
 own between steps: every world is a :class:`crowdnav.agents.marl.env.RobotsTrainingEnv`, and an
 episode's only randomness is the simulator's generator seeded at reset. So a run is stored
-as a single-robot on-policy run is (:mod:`crowdnav.agents.runs.resume_worlds`), when a rollout is
+as a single-robot on-policy run was before its checkpoints stored world states (format 1 of
+:mod:`crowdnav.agents.runs.resume_worlds`: each world's actions, replayed; these worlds are
+PettingZoo parallel envs, not the vector env whose worlds snapshot), when a rollout is
 complete and before SB3 trains on it:
 
 * ``model.zip`` (parameters and optimizer) and ``training_state.json`` (SB3's counters and every

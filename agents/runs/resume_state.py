@@ -10,11 +10,12 @@ tensors, optimizers included, are read as in :mod:`crowdnav.agents.sb3.model_zip
 * ``replay_buffer.npz`` (off-policy, ``save_replay_buffer``): the buffer's arrays and its
   write position;
 * ``rollout_state.npz`` (on-policy, and batched runs): the collected rollout, the last
-  observation, a recurrent policy's LSTM states, and the worlds mid-episode. A world is stored as its episode's index (hence
-  its seed) and the actions it has taken since that episode began: the simulator's generator,
-  seeded at reset, is an episode's only randomness, so resetting with that seed and replaying
-  the actions rebuilds the world bit for bit. The rebuilt observation must equal the stored
-  one, or the resume is refused.
+  observation, a recurrent policy's LSTM states, and the worlds mid-episode, each as its world
+  state (:mod:`crowdnav.envs.world_state`, stored as arrays and JSON by
+  :mod:`crowdnav.envs.world_state_codec`), loaded back as it was; files of format 1 stored each
+  world as its episode's index (hence its seed) and the actions it had taken since, replayed on
+  resume (:mod:`crowdnav.agents.runs.resume_worlds`). Either way the rebuilt observation must
+  equal the stored one, or the resume is refused.
 
 Arrays are read with ``numpy.load(..., allow_pickle=False)`` and must have the shapes and
 dtypes of the buffers the run's config builds.
@@ -39,6 +40,9 @@ from crowdnav.errors import CrowdNavError
 
 RESUME_FORMAT = "crowdnav-resume/1"
 """Format of ``training_state.json`` and of the ``.npz`` files' ``meta.json``: a name and a version, raised on a change."""
+ROLLOUT_FORMAT = "crowdnav-resume/2"
+"""Format of ``rollout_state.npz`` since its worlds are stored as states (version 2; version 1 files, their worlds as actions
+to replay, still resume): an older crowdnav refuses it in one line, saying to upgrade."""
 STATE_FILE = "training_state.json"
 REPLAY_ARRAYS = "replay_buffer.npz"
 ROLLOUT_ARRAYS = "rollout_state.npz"
@@ -49,8 +53,9 @@ class ResumeStateError(CrowdNavError, ValueError):
     """A checkpoint's resume files that are missing, damaged or do not fit the run's config; one line."""
 
 
-def check_format(found: object, expected: str) -> None:
-    """ValueError (one line) unless ``found`` is the ``expected`` format ("name/version").
+def check_format(found: object, expected: str, oldest: int | None = None) -> None:
+    """ValueError (one line) unless ``found`` is the ``expected`` format ("name/version"), or (``oldest``) one of its versions
+    from ``oldest`` on.
 
     A newer version of the same format is named as such: the file was written by a newer crowdnav.
     """
@@ -61,7 +66,10 @@ def check_format(found: object, expected: str) -> None:
         written = found.removeprefix(name + "/")
         if written.isdigit() and int(written) > int(version):
             raise ValueError(f"format {found!r} is a newer crowdnav's (this one reads {expected!r}): upgrade crowdnav to read it")
-    raise ValueError(f"format {str(found)[:80]!r}, expected {expected!r}")
+        if oldest is not None and written.isdigit() and written == str(int(written)) and oldest <= int(written):
+            return
+    readable = repr(expected) if oldest is None or oldest >= int(version) else f"{f'{name}/{oldest}'!r} to {expected!r}"
+    raise ValueError(f"format {str(found)[:80]!r}, expected {readable}")
 
 
 # ------------------------------------------------------------------ random streams and counters
@@ -123,13 +131,14 @@ def restore_training_state(model: Any, path: Path) -> dict[str, Any]:
 
 # ------------------------------------------------------------------ arrays
 
-def _write_npz(path: Path, arrays: Mapping[str, np.ndarray], meta: Mapping[str, Any]) -> None:
+def _write_npz(path: Path, arrays: Mapping[str, np.ndarray], meta: Mapping[str, Any], file_format: str = RESUME_FORMAT) -> None:
     # typed as savez's keyword arguments: a dict of arrays alone would be matched against allow_pickle too
-    contents: dict[str, Any] = {**arrays, "meta.json": np.array(json.dumps({"format": RESUME_FORMAT, **meta}))}
+    contents: dict[str, Any] = {**arrays, "meta.json": np.array(json.dumps({"format": file_format, **meta}))}
     np.savez(path, **contents)
 
 
-def _read_npz(path: Path) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
+def _read_npz(path: Path, newest: str = RESUME_FORMAT) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
+    """The arrays and ``meta.json`` of a file of format ``newest`` or an older version of it (``meta`` without ``format``)."""
     try:
         with np.load(path, allow_pickle=False) as archive:
             arrays = {name: archive[name] for name in archive.files}
@@ -139,7 +148,7 @@ def _read_npz(path: Path) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
     if not isinstance(meta, dict):
         raise ResumeStateError(f"{path}: its meta.json is not an object")
     try:  # files written before the field existed have none: the first version
-        check_format(meta.pop("format", RESUME_FORMAT), RESUME_FORMAT)
+        check_format(meta.pop("format", RESUME_FORMAT), newest, oldest=1)
     except ValueError as error:
         raise ResumeStateError(f"{path}: cannot resume from it ({error})") from None
     return arrays, meta
@@ -192,10 +201,12 @@ def _position(path: Path, meta: Mapping[str, Any], size: int) -> tuple[int, bool
 # ------------------------------------------------------------------ worlds mid-episode
 
 class ActionLog(VecEnvWrapper):
-    """Records, per world, the actions taken since its episode began (what :func:`world_state` stores).
+    """Records, per world, the actions taken since its episode began: how format-1 checkpoints stored their worlds.
 
     Vectorized: one array write per step. A world whose episode ended in a step (SB3 resets it in
-    the same step) starts again from no actions.
+    the same step) starts again from no actions. Training no longer wraps its env in it (its
+    checkpoints store world states, so no step records anything); a run that does (the tests'
+    format-1 checkpoints, the published one-world stack) still writes its worlds as actions to replay.
     """
 
     def __init__(self, venv: VecEnv):

@@ -1,10 +1,19 @@
 """``rollout_state.npz``: an interrupted rollout and the worlds mid-episode, as arrays (see :mod:`crowdnav.agents.runs.resume_state`).
 
-A world is stored as the index of the episode it plays and the actions it took since that
-episode's reset (recorded by :class:`~crowdnav.agents.runs.resume_state.ActionLog`). A resume resets
-it with the episode's seed and replays the actions: the simulator's generator, seeded at reset,
-is the episode's only randomness, so this rebuilds the world bit for bit. The observation the
-replay ends on must equal the stored last observation, or the resume is refused.
+A world is stored as its state (format ``crowdnav-resume/2``, kind "states"): the vector env's
+:meth:`~crowdnav.envs.vector.CrowdNavVectorEnv.snapshot` of it, as arrays and JSON
+(:mod:`crowdnav.envs.world_state_codec`: arrays under ``worlds/<i>/``, their description in
+``worlds/states.json``), with the episode counter that seeds the later episodes and each
+world's return and length so far. A resume resets the worlds to their episodes' seeds (what the
+stored states are checked against: their parts' shapes and dtypes, the scenario, settings and
+robots), then loads the states (:meth:`~crowdnav.agents.sb3.vec_env.CrowdNavSB3VecEnv.load_worlds`).
+
+Format 1 (kinds "vector" and "single", still resumed) stored each world as the index of the
+episode it plays and the actions it took since that episode's reset (recorded by
+:class:`~crowdnav.agents.runs.resume_state.ActionLog`); a resume resets it with the episode's seed
+and replays the actions: the simulator's generator, seeded at reset, is the episode's only
+randomness, so this rebuilds the world bit for bit. Either way the observation the worlds are
+rebuilt to must equal the stored last observation, or the resume is refused.
 
 A recurrent policy's memory is stored too: the LSTM states the next rollout starts from (sb3-contrib's
 ``_last_lstm_states``) and those its rollout buffer holds per step (what its update starts each sequence from).
@@ -17,8 +26,21 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from crowdnav.agents.runs.resume_state import _ROLLOUT, ActionLog, ResumeStateError, _fill, _position, _read_npz, _write_npz
+from crowdnav.agents.runs.resume_state import (
+    _ROLLOUT,
+    RESUME_FORMAT,
+    ROLLOUT_FORMAT,
+    ActionLog,
+    ResumeStateError,
+    _fill,
+    _position,
+    _read_npz,
+    _write_npz,
+)
 from crowdnav.agents.sb3.vec_env import CrowdNavSB3VecEnv
+from crowdnav.agents.training.seeding import train_seed
+
+from crowdnav.envs.world_state_codec import from_arrays, to_arrays
 
 _RECURRENT_ROLLOUT = ("hidden_states_pi", "cell_states_pi", "hidden_states_vf", "cell_states_vf")
 """sb3-contrib's recurrent rollout buffers' LSTM states, one per step (absent from SB3's own buffers)."""
@@ -38,17 +60,18 @@ def save_rollout(path: Path, state: Mapping[str, Any]) -> None:
         meta["rollout"] = {"pos": int(buffer.pos), "full": bool(buffer.full)}
     if state.get("lstm_states") is not None:
         arrays.update(_lstm_arrays(state["lstm_states"]))
-    world_arrays, meta["worlds"] = _world_state(state["env"])
+    env = state["env"]
+    world_arrays, meta["worlds"] = _recorded_worlds(env) if isinstance(env, ActionLog) else _world_states(env)
     arrays.update(world_arrays)
-    _write_npz(path, arrays, meta)
+    _write_npz(path, arrays, meta, RESUME_FORMAT if isinstance(env, ActionLog) else ROLLOUT_FORMAT)
 
 
 def load_rollout(path: Path, model: Any) -> dict[str, Any]:
     """Fill the model's rollout buffer (if stored), rebuild its env's worlds; returns the state for ``restore_rollout``."""
-    arrays, meta = _read_npz(path)
+    arrays, meta = _read_npz(path, ROLLOUT_FORMAT)
     env = model.get_env()
-    if not isinstance(env, ActionLog):
-        raise ResumeStateError(f"{path}: the run's environment does not record its worlds (an ActionLog is needed)")
+    if not isinstance(_training_env(env), CrowdNavSB3VecEnv):
+        raise ResumeStateError(f"{path}: the run's environment is {type(env).__name__}, not crowdnav's training vector env")
     try:
         last_obs, original = (_observation(arrays, prefix, meta["dict_obs"]) for prefix in ("last_obs/", "last_original_obs/"))
         state = {"last_obs": last_obs, "last_original_obs": original, "last_episode_starts": arrays["last_episode_starts"],
@@ -102,55 +125,90 @@ def _as_dict(observation: Any) -> dict[str, np.ndarray]:
     return dict(observation) if isinstance(observation, dict) else {"": np.asarray(observation)}
 
 
-def _world_state(env: Any) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
-    if not isinstance(env, ActionLog):
-        raise ResumeStateError("the run's environment does not record its worlds (an ActionLog is needed)")
-    longest = int(env.lengths.max(initial=0))
-    arrays = {"worlds/actions": env.actions[:, :longest], "worlds/lengths": env.lengths.copy()}
-    inner = env.venv
+def _training_env(env: Any) -> Any:
+    """The training vector env a run collects from (behind an ActionLog where one records its actions)."""
+    return env.venv if isinstance(env, ActionLog) else env
+
+
+def _counter_meta(inner: Any) -> dict[str, Any]:
     if not isinstance(inner, CrowdNavSB3VecEnv) or inner.episode_seeds is None:  # make_vec_env gives it its counter
         raise ResumeStateError(f"cannot store the worlds of {type(inner).__name__}: expected crowdnav's training vector env")
     counter = inner.episode_seeds
+    return {"run_seed": counter.run_seed, "next_episode": counter.next_episode,
+            "episode_of": [counter.episode_of[i] for i in range(inner.num_envs)],
+            "ended_of": {str(k): v for k, v in counter.ended_of.items()}}
+
+
+def _world_states(inner: Any) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
+    """Kind "states": every world's state (arrays under ``worlds/<i>/``), its return and length so far, the episode counter."""
+    meta = {"kind": "states", **_counter_meta(inner)}
+    arrays = to_arrays([inner.env.snapshot(i) for i in range(inner.num_envs)], "worlds")
     returns, lengths = inner.world_counts()
     arrays.update({"worlds/returns": returns, "worlds/episode_lengths": lengths})
-    return arrays, {"kind": "vector", "run_seed": counter.run_seed, "next_episode": counter.next_episode,
-                    "episode_of": [counter.episode_of[i] for i in range(inner.num_envs)],
-                    "ended_of": {str(k): v for k, v in counter.ended_of.items()}}
+    return arrays, meta
 
 
-def _restore_worlds(path: Path, env: ActionLog, arrays: Mapping[str, np.ndarray], meta: Mapping[str, Any], last_obs: Any) -> None:
-    actions, lengths = arrays["worlds/actions"], arrays["worlds/lengths"]
-    n = env.num_envs
-    if lengths.shape != (n,) or lengths.dtype != np.int64 or actions.shape[:1] != (n,) or actions.shape[2:] != env.action_space.shape \
-            or (lengths < 0).any() or lengths.max(initial=0) > actions.shape[1] or not np.isfinite(actions).all():
-        raise ResumeStateError(f"{path}: its worlds' actions do not fit the run's {n} worlds")
-    inner = env.venv
-    if not isinstance(inner, CrowdNavSB3VecEnv):
-        raise ResumeStateError(f"{path}: the run's environment is {type(inner).__name__}, not crowdnav's training vector env")
-    if meta["kind"] == "vector":
-        observation = _replay_vector(inner, actions, lengths, meta, arrays["worlds/returns"], arrays["worlds/episode_lengths"])
-    elif meta["kind"] == "single" and n == 1:
-        observation = _replay_single(inner, actions, lengths, meta)
+def _recorded_worlds(env: ActionLog) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
+    """Kind "vector" (format 1): every world as the actions an ActionLog recorded since its reset, replayed on resume."""
+    inner: Any = env.venv
+    meta = {"kind": "vector", **_counter_meta(inner)}
+    longest = int(env.lengths.max(initial=0))
+    returns, lengths = inner.world_counts()
+    return {"worlds/actions": env.actions[:, :longest], "worlds/lengths": env.lengths.copy(),
+            "worlds/returns": returns, "worlds/episode_lengths": lengths}, meta
+
+
+def _restore_worlds(path: Path, env: Any, arrays: Mapping[str, np.ndarray], meta: Mapping[str, Any], last_obs: Any) -> None:
+    inner = _training_env(env)
+    n = inner.num_envs
+    if meta["kind"] == "states":
+        if isinstance(env, ActionLog):
+            raise ResumeStateError(f"{path}: its worlds are stored as states; a run recording its worlds' actions cannot continue them")
+        observation = _load_states(inner, arrays, meta)
+        how = "loading its worlds' states"
     else:
-        raise ResumeStateError(f"{path}: its worlds are {meta['kind']!r}, the run's config builds {n} worlds")
+        actions, lengths = arrays["worlds/actions"], arrays["worlds/lengths"]
+        if lengths.shape != (n,) or lengths.dtype != np.int64 or actions.shape[:1] != (n,) or actions.shape[2:] != env.action_space.shape \
+                or (lengths < 0).any() or lengths.max(initial=0) > actions.shape[1] or not np.isfinite(actions).all():
+            raise ResumeStateError(f"{path}: its worlds' actions do not fit the run's {n} worlds")
+        if meta["kind"] == "vector":
+            episodes = _set_counter(inner, meta)
+            observation = inner.restore_worlds(episodes, actions, lengths, arrays["worlds/returns"], arrays["worlds/episode_lengths"])
+        elif meta["kind"] == "single" and n == 1:
+            observation = _replay_single(inner, actions, lengths, meta)
+        else:
+            raise ResumeStateError(f"{path}: its worlds are {meta['kind']!r}, the run's config builds {n} worlds")
+        if isinstance(env, ActionLog):  # it goes on recording from the replayed actions
+            env.actions = np.concatenate([actions, np.zeros((n, max(64, actions.shape[1]), *actions.shape[2:]))], axis=1)
+            env.lengths = lengths.copy()
+        how = "replaying its worlds' episodes"
     expected = _as_dict(last_obs)
-    replayed = _as_dict(observation)
-    if expected.keys() != replayed.keys() or not all(np.array_equal(expected[key], replayed[key]) for key in expected):
-        raise ResumeStateError(f"{path}: replaying its worlds' episodes does not give the observation it holds "
+    rebuilt = _as_dict(observation)
+    if expected.keys() != rebuilt.keys() or not all(np.array_equal(expected[key], rebuilt[key]) for key in expected):
+        raise ResumeStateError(f"{path}: {how} does not give the observation it holds "
                                "(written by another crowdnav version, or damaged); start the run afresh")
-    env.actions = np.concatenate([actions, np.zeros((n, max(64, actions.shape[1]), *actions.shape[2:]))], axis=1)
-    env.lengths = lengths.copy()
 
 
-def _replay_vector(inner: CrowdNavSB3VecEnv, actions: np.ndarray, lengths: np.ndarray, meta: Mapping[str, Any],
-                   returns: np.ndarray, episode_lengths: np.ndarray) -> dict[str, np.ndarray]:
+def _set_counter(inner: CrowdNavSB3VecEnv, meta: Mapping[str, Any]) -> list[int]:
+    """The run's episode counter as the checkpoint left it (the seeds of the worlds' next episodes); returns the episode each
+    world plays."""
     counter = inner.episode_seeds
     if counter is None or int(meta["run_seed"]) != counter.run_seed:
         raise ValueError(f"the worlds were seeded by run seed {meta['run_seed']}, the run's config has {getattr(counter, 'run_seed', None)}")
     counter.next_episode = int(meta["next_episode"])
     counter.episode_of = {i: int(episode) for i, episode in enumerate(meta["episode_of"])}
     counter.ended_of = {int(k): int(v) for k, v in meta["ended_of"].items()}
-    return inner.restore_worlds([counter.episode_of[i] for i in range(inner.num_envs)], actions, lengths, returns, episode_lengths)
+    return [counter.episode_of[i] for i in range(inner.num_envs)]
+
+
+def _load_states(inner: CrowdNavSB3VecEnv, arrays: Mapping[str, np.ndarray], meta: Mapping[str, Any]) -> dict[str, np.ndarray]:
+    """Kind "states": the worlds reset to their episodes (what the stored states must fit), then the states loaded."""
+    episodes = _set_counter(inner, meta)
+    run_seed = int(meta["run_seed"])  # (the counter's: checked)
+    inner.env.reset(seed=[train_seed(run_seed, episode) for episode in episodes])
+    like = [inner.env.snapshot(i) for i in range(inner.num_envs)]
+    states = from_arrays(arrays, "worlds", like)
+    return inner.load_worlds(states, arrays["worlds/returns"], arrays["worlds/episode_lengths"])
 
 
 def _replay_single(inner: CrowdNavSB3VecEnv, actions: np.ndarray, lengths: np.ndarray, meta: Mapping[str, Any]) -> Any:

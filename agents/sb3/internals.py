@@ -147,7 +147,7 @@ SB3_INTERNALS: tuple[Internal, ...] = (
     Internal(_REPLAY, "_normalize_reward", "method", "agents/sb3/replay_buffer.py (PackedGridReplayBuffer._get_samples)", ("reward", "env")),
     *_attributes(_ROLLOUT, "observations actions rewards returns episode_starts values log_probs advantages pos full buffer_size "
                  "generator_ready", "agents/runs/resume_worlds.py (rollout_state.npz)"),
-    Internal(_VEC_ENV, "_reset_seeds", "method", "agents/sb3/vec_env.py (reset, restore_worlds)"),
+    Internal(_VEC_ENV, "_reset_seeds", "method", "agents/sb3/vec_env.py (reset, restore_worlds, load_worlds)"),
     # sb3-contrib's RecurrentPPO (same version window): its LSTM memory, stored with a checkpoint's rollout
     Internal(_RECURRENT_PPO, "_last_lstm_states", "attribute", "agents/runs/resume_point.py, agents/runs/resume_worlds.py (rollout_state.npz)"),
     *_attributes(_RECURRENT_ROLLOUT, "hidden_states_pi cell_states_pi hidden_states_vf cell_states_vf",

@@ -26,7 +26,7 @@ from typing import Any
 from crowdnav.agents.runs.checkpoint import ENCODER_FILE, load_model, restore_pickled_rng_state, resume_model, save_checkpoint
 from crowdnav.agents.runs.folder import REPLAY_FILE, RNG_FILE, episode_log, snapshot_dir
 from crowdnav.agents.runs.resume_point import STEPS_AFTER_KEY, ResumePoint, end_open_episodes
-from crowdnav.agents.runs.resume_state import REPLAY_ARRAYS, ROLLOUT_ARRAYS, STATE_FILE, ActionLog, load_replay_buffer, restore_training_state
+from crowdnav.agents.runs.resume_state import REPLAY_ARRAYS, ROLLOUT_ARRAYS, STATE_FILE, load_replay_buffer, restore_training_state
 from crowdnav.agents.sb3.callbacks import EpisodeCallback
 from crowdnav.agents.sb3.factory import (
     env_options,
@@ -66,7 +66,7 @@ class TrainingSession(RunLoop):
         self.batched = config.num_envs > 1
         """Several worlds: their episodes end out of order, so checkpoints keep every world mid-episode (one world:
         off-policy checkpoints are rewound to its last episode end). Every world count collects from the same stack, the
-        native vector env (:func:`make_vec_env`, one world held as one env inside) behind an ``ActionLog``."""
+        native vector env (:func:`make_vec_env`, one world held as one env inside); a checkpoint stores its worlds' states."""
         self.off_policy = algorithm_spec(config.algo).off_policy
         self.unit = "steps" if config.checkpoint_every_steps is not None else "episodes"  # what snapshots and checkpoints count
         self.state: ResumeInfo | None = None
@@ -137,9 +137,10 @@ class TrainingSession(RunLoop):
         # (only used when the checkpoint's own vector env is not restored: its counter goes on)
         first_started = (state.next_episode or state.episodes) if state and self.batched else self.first_episode
         saved_scales = scales_from_json(state.normalization) if state and state.normalization is not None else None
-        # on-policy and batched checkpoints store the collecting env's worlds mid-episode (crowdnav.agents.runs.resume_worlds)
+        # on-policy and batched checkpoints store the collecting env's worlds mid-episode, as their states
+        # (crowdnav.agents.runs.resume_worlds): nothing records the steps (format 1's ActionLog did)
         self.env = make_vec_env(config, leog, first_started, saved_scales)
-        self.collecting = ActionLog(self.env)
+        self.collecting = self.env
         self.max_steps = self.env.env.scenario.max_steps
         self.scales = observation_normalization(self.env)
 

@@ -37,6 +37,7 @@ from gymnasium.vector import AutoresetMode
 from stable_baselines3.common.vec_env.base_vec_env import VecEnv, VecEnvObs, VecEnvStepReturn
 
 from crowdnav.envs.vector import CrowdNavVectorEnv
+from crowdnav.envs.world_state import VectorWorldState
 from crowdnav.sensors.base import checked_scale, normalized_box
 
 
@@ -109,11 +110,25 @@ class CrowdNavSB3VecEnv(VecEnv):
         counter = self.episode_seeds
         if counter is None:
             raise ValueError("restore_worlds needs the training episode counter (episode_seeds) that numbered the episodes")
+        self._check_counts("restore_worlds", returns, episode_lengths)
+        observation = self.env.restore_worlds([train_seed(counter.run_seed, int(e)) for e in episodes], actions, lengths)
+        return self._resumed(observation, returns, episode_lengths)
+
+    def load_worlds(self, states: Sequence[VectorWorldState], returns: np.ndarray, episode_lengths: np.ndarray) -> dict[str, np.ndarray]:
+        """A training resume from stored world states: world ``i`` becomes ``states[i]``
+        (:meth:`CrowdNavVectorEnv.load_worlds`); ``returns`` and ``episode_lengths`` are :meth:`world_counts` as saved, and
+        later episodes take their seeds from ``episode_seeds`` (whose counter the caller has set to the checkpoint's).
+        Returns the (normalised) observation."""
+        self._check_counts("load_worlds", returns, episode_lengths)
+        return self._resumed(self.env.load_worlds(states), returns, episode_lengths)
+
+    def _check_counts(self, call: str, returns: np.ndarray, episode_lengths: np.ndarray) -> None:
         for name, value, kind in (("returns", returns, "f"), ("episode_lengths", episode_lengths, "i")):
             if np.shape(value) != (self.num_envs,) or np.asarray(value).dtype.kind != kind:
-                raise ValueError(f"restore_worlds: {name} must be one {'float' if kind == 'f' else 'integer'} per world "
+                raise ValueError(f"{call}: {name} must be one {'float' if kind == 'f' else 'integer'} per world "
                                  f"({self.num_envs}), got {np.asarray(value).dtype}{np.shape(value)}")
-        observation = self.env.restore_worlds([train_seed(counter.run_seed, int(e)) for e in episodes], actions, lengths)
+
+    def _resumed(self, observation: dict[str, np.ndarray], returns: np.ndarray, episode_lengths: np.ndarray) -> dict[str, np.ndarray]:
         self._returns[:] = returns
         self._lengths[:] = episode_lengths
         self._reset_seeds()  # SB3 seeded the new env; its worlds are seeded by the counter

@@ -131,7 +131,7 @@ def restart_hint(out: Path) -> str:
 
 
 def next_episode(model: BaseAlgorithm) -> int:
-    """A batched run's first episode not yet started: its worlds' episode counter (an ActionLog forwards the attribute)."""
+    """A batched run's first episode not yet started: its worlds' episode counter (a wrapper such as an ActionLog forwards it)."""
     counter = getattr(model.get_env(), "episode_seeds", None)
     if not isinstance(counter, EpisodeSeedCounter):
         raise TypeError(f"a batched run's env counts its episodes with an EpisodeSeedCounter, got {counter!r}")

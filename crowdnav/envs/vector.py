@@ -22,7 +22,7 @@ from crowdnav.envs.vector_actions import checked_actions, checked_replay, execut
 from crowdnav.envs.vector_infos import end_infos, every_infos, reward_term_infos, same_step_infos
 from crowdnav.envs.vector_stacked import StackedWorlds
 from crowdnav.envs.vector_team import TeamWorlds
-from crowdnav.envs.world_state import VectorWorldState
+from crowdnav.envs.world_state import VectorWorldState, check_state, world_key
 from crowdnav.planning.shield import validate_shield
 from crowdnav.sim.simulator import Simulator
 from crowdnav.worlds.compiled import CompiledWorld
@@ -84,7 +84,9 @@ class CrowdNavVectorEnv(VectorEnv):
 
     **World states.** ``snapshot(world)`` gives a world as data that pickles (:mod:`crowdnav.envs.world_state`: its
     simulator's episode and generator, its reward memory, its tracker, Gymnasium's flags of it); ``load(world, state)``
-    makes it any world's of an env of the same scenario and options, which then plays on bit for bit.
+    makes it any world's of an env of the same scenario and options, which then plays on bit for bit;
+    ``load_worlds(states)`` loads every world at once (a training resume; stored without pickle by
+    :mod:`crowdnav.envs.world_state_codec`).
 
     **Memory.** With ``keep_freed_memory`` (default) the env raises glibc malloc's trim threshold
     to 64 MB for its process (:mod:`crowdnav.batch.memory`): the batch's temporaries are then reused
@@ -278,7 +280,26 @@ class CrowdNavVectorEnv(VectorEnv):
         """Make ``state`` (a :meth:`snapshot`) world ``world``'s: with the same actions it plays on, episodes and autoresets included,
         as the captured world would, bit for bit (its later episodes continue its generator, or take ``episode_seeds``' seeds).
         The next step's observation is the captured world's; a ValueError in one line names what differs (scenario, settings, robots)."""
-        world = self._world(world)
+        self._load(self._world(world), state)
+        if self._all_started:  # (a world not reset yet has nothing to observe; the load or reset that starts the last observes all)
+            self._observe_all()
+
+    def load_worlds(self, states: Sequence[VectorWorldState]) -> dict[str, np.ndarray]:
+        """Make ``states[i]`` (:meth:`snapshot` s) world ``i``'s, every world at once (a training resume): as :meth:`load` world
+        by world, every state checked before any loads, the worlds observed once. Returns the observations, as ``reset`` does."""
+        if len(states) != self.num_envs:
+            raise ValueError(f"load_worlds: one state per world ({self.num_envs}), got {len(states)}")
+        key = world_key(self.scenario)
+        for state in states:
+            if not isinstance(state, VectorWorldState):
+                raise ValueError(f"expected a VectorWorldState (CrowdNavVectorEnv.snapshot), got {type(state).__name__}")
+            check_state(state.world, key)
+        for world, state in enumerate(states):
+            self._load(world, state)
+        self._observe_all()
+        return self._copy_observations()
+
+    def _load(self, world: int, state: VectorWorldState) -> None:
         if not isinstance(state, VectorWorldState):
             raise ValueError(f"expected a VectorWorldState (CrowdNavVectorEnv.snapshot), got {type(state).__name__}")
         self.engine.load(world, state.world)
@@ -287,8 +308,6 @@ class CrowdNavVectorEnv(VectorEnv):
         self._ended[world] = state.ended
         self._none_ended = not self._ended.any()
         self._last_flags[0][world], self._last_flags[1][world] = state.terminated, state.truncated
-        if self._all_started:  # (a world not reset yet has nothing to observe; the load or reset that starts the last observes all)
-            self._observe_all()
 
     def _world(self, world: int) -> int:
         if isinstance(world, bool) or not isinstance(world, (int, np.integer)) or not 0 <= world < self.num_envs:

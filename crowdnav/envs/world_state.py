@@ -13,8 +13,9 @@ scenario and options, whichever engine holds it) plays on bit for bit as the cap
   robots' outcomes so far, the last observation); None from the stacked engine, which keeps none of it (a world
   loaded into a single env then observes its state again and runs).
 
-It is plain data (dataclasses of numpy arrays, Python numbers, dicts): it pickles, and it shares nothing with the
-world it came from (snapshots are copies, and loading copies again). ``version`` is :data:`WORLD_STATE_VERSION`, and
+It is plain data (dataclasses of numpy arrays, Python and numpy numbers, texts, dicts, tuples): it pickles, it is
+stored without pickle as arrays and JSON (:mod:`crowdnav.envs.world_state_codec`: a training checkpoint's worlds),
+and it shares nothing with the world it came from (snapshots are copies, and loading copies again). ``version`` is :data:`WORLD_STATE_VERSION`, and
 a state loads only into a world of the same scenario with the same settings (options applied) and robot count
 (:func:`check_state`: a ValueError in one line naming what differs).
 
@@ -44,7 +45,7 @@ if TYPE_CHECKING:
     from crowdnav.scenario.schema import Scenario
 
 WORLD_STATE_VERSION = 1
-"""The layout of :class:`WorldState`; a state of another version is refused (a checkpoint of it resumes by replay)."""
+"""The layout of :class:`WorldState`; a state of another version is refused in one line (raise it when the layout changes)."""
 UNCHECKED_SECTIONS = frozenset({"name", "description"})
 """Scenario fields a state does not depend on (the name is compared on its own, to say so)."""
 

@@ -11,6 +11,7 @@ from crowdnav.agents.runs.checkpoint import POLICY_FORMAT, read_policy_info, sav
 from crowdnav.agents.runs.resume_state import (
     REPLAY_ARRAYS,
     RESUME_FORMAT,
+    ROLLOUT_FORMAT,
     STATE_FILE,
     ResumeStateError,
     _read_npz,
@@ -64,6 +65,19 @@ def test_npz_meta_carries_the_format_and_files_without_one_still_load(tmp_path: 
     np.savez(newer, a=np.arange(3), **{"meta.json": np.array(json.dumps({"format": _newer(RESUME_FORMAT), "pos": 2}))})
     with pytest.raises(ResumeStateError, match="newer crowdnav"):
         _read_npz(newer)
+
+
+def test_a_rollout_file_storing_world_states_is_version_2_refused_by_a_reader_of_version_1_and_both_read_by_this_one(tmp_path: Path) -> None:
+    assert ROLLOUT_FORMAT == _newer(RESUME_FORMAT)  # its worlds as states (tests/agents/test_resume_states.py)
+    states, actions = tmp_path / "states.npz", tmp_path / "actions.npz"
+    _write_npz(states, {"a": np.arange(3)}, {"pos": 2}, ROLLOUT_FORMAT)
+    _write_npz(actions, {"a": np.arange(3)}, {"pos": 1})
+    with pytest.raises(ResumeStateError, match=r"format 'crowdnav-resume/2' is a newer crowdnav's .*: upgrade crowdnav") as older:
+        _read_npz(states)  # what crowdnav before world states reads every .npz with
+    assert "\n" not in str(older.value)
+    assert _read_npz(states, ROLLOUT_FORMAT)[1] == {"pos": 2} and _read_npz(actions, ROLLOUT_FORMAT)[1] == {"pos": 1}
+    with pytest.raises(ValueError, match=r"^format 'crowdnav-resume/0', expected 'crowdnav-resume/1' to 'crowdnav-resume/2'$"):
+        check_format("crowdnav-resume/0", ROLLOUT_FORMAT, oldest=1)
 
 
 def test_a_saved_checkpoint_writes_the_format_into_every_file_that_has_one(tmp_path: Path) -> None:

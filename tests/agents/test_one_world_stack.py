@@ -3,7 +3,8 @@
 Those runs collected from one wrapped ``gymnasium.Env`` (``make_env``; on-policy in a ``DummyVecEnv`` behind an
 ``ActionLog``). ``TrainingSession`` now collects from the vector env for every world count; :class:`PublishedStack`
 rebuilds the old stack here as the reference: the same episodes and final weights, fresh and resumed after a
-checkpoint, and the checkpoints that stack wrote (one world stored as kind "single") still resume bit for bit.
+checkpoint, and the checkpoints that stack wrote (one world stored as kind "single", its actions replayed) still resume
+bit for bit.
 """
 
 from __future__ import annotations
@@ -25,6 +26,7 @@ from crowdnav.agents.training.config import config_from_mapping
 from stable_baselines3.common.vec_env import DummyVecEnv
 
 from tests.agents.agents_tiny import tiny_config
+from tests.agents.format1 import RecordingSession
 
 
 class Stopped(Exception):
@@ -54,12 +56,13 @@ def _same(env: Any) -> Any:
     return env
 
 
-def _run(config: dict, *, published: bool = False, resume: bool = False, stop_at: int | None = None) -> TrainResult:
+def _run(config: dict, *, published: bool = False, resume: bool = False, stop_at: int | None = None,
+         session_class: type[TrainingSession] | None = None) -> TrainResult:
     def stop(episodes: int) -> None:
         if episodes == stop_at:
             raise Stopped
 
-    session_class = PublishedStack if published else TrainingSession
+    session_class = session_class or (PublishedStack if published else TrainingSession)
     return session_class(config_from_mapping(config), resume, stop if stop_at is not None else None).run()
 
 
@@ -75,7 +78,7 @@ def test_every_world_count_collects_from_the_vector_env(tmp_path):
     session = TrainingSession(config_from_mapping(tiny_config(tmp_path / "run", algo="sac", episodes=1)), False)
     session.restore()
     session.build()
-    assert type(session.collecting) is ActionLog and type(session.collecting.venv).__name__ == "CrowdNavSB3VecEnv"
+    assert type(session.collecting).__name__ == "CrowdNavSB3VecEnv"  # nothing records its steps: checkpoints store states
     assert session.collecting.num_envs == 1
 
 
@@ -103,7 +106,8 @@ def test_one_world_resumes_to_the_published_stacks_uninterrupted_run(tmp_path, a
 
 
 def _as_single_stack_checkpoint(path: Path) -> None:
-    """Rewrite a one-world ``rollout_state.npz`` as the single-env stack wrote it: kind "single", no returns or lengths."""
+    """Rewrite a one-world format-1 ``rollout_state.npz`` (kind "vector": its actions recorded) as the single-env stack
+    wrote it: kind "single", no returns or lengths."""
     with np.load(path, allow_pickle=False) as archive:
         arrays = {name: archive[name] for name in archive.files}
     meta = json.loads(str(arrays.pop("meta.json")))
@@ -119,7 +123,7 @@ def test_a_single_env_stack_checkpoint_mid_episode_resumes_bit_for_bit(tmp_path)
     whole = _run(tiny_config(tmp_path / "whole", algo="ppo", episodes=6, algo_kwargs=algo_kwargs))
     config = tiny_config(tmp_path / "stopped", algo="ppo", episodes=6, algo_kwargs=algo_kwargs)
     with pytest.raises(Stopped):
-        _run(config, stop_at=2)
+        _run(config, stop_at=2, session_class=RecordingSession)
     rollout = checkpoint_dir(tmp_path / "stopped") / ROLLOUT_ARRAYS
     assert rollout.is_file()  # the world mid-episode: what the old stack stored as kind "single"
     _as_single_stack_checkpoint(rollout)

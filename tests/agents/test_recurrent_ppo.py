@@ -165,7 +165,7 @@ def test_a_run_stopped_after_a_checkpoint_and_resumed_trains_bit_for_bit_like_th
     def stop(episodes):
         # the first checkpoint that leaves worlds mid-episode, the LSTM's memory of them non-zero: the resume must continue both
         with np.load(checkpoint_dir(tmp_path / "stopped") / ROLLOUT_ARRAYS, allow_pickle=False) as saved:
-            if (saved["worlds/lengths"] > 0).any():
+            if (saved["worlds/episode_lengths"] > 0).any():
                 stored.update(episodes=episodes, **{key: saved[key] for key in saved.files if key.startswith("lstm_states/")})
                 raise Stopped
 

@@ -167,7 +167,8 @@ def test_a_batched_run_stopped_after_a_checkpoint_and_resumed_trains_bit_for_bit
     def stop(episodes):
         # the first checkpoint that leaves worlds mid-episode (often all 4 time out together): the resume must continue them
         with np.load(checkpoint_dir(tmp_path / "stopped") / ROLLOUT_ARRAYS, allow_pickle=False) as saved:
-            mid_episode = (saved["worlds/lengths"] > 0).any()
+            mid_episode = (saved["worlds/episode_lengths"] > 0).any()
+            assert "worlds/0/world/episode/state/positions" in saved.files  # stored as states (tests/agents/test_resume_states.py)
         if mid_episode:
             stopped_at.append(episodes)
             raise Stopped

@@ -105,11 +105,14 @@ def test_a_run_resumes_exactly_with_pickle_broken(tmp_path, monkeypatch, algo, f
         if not rollout.is_file():
             return True
         with np.load(rollout, allow_pickle=False) as saved:
-            return bool((saved["worlds/lengths"] > 0).any())
+            return bool((saved["worlds/episode_lengths"] > 0).any())
 
     _stop_at_first_checkpoint(config, mid_episode)
     checkpoint = tmp_path / "stopped" / "checkpoint"
     assert not list(checkpoint.glob("*.pkl")) and (checkpoint / STATE_FILE).is_file()
+    if algo == "ppo":  # the worlds as their states: arrays and JSON
+        with np.load(checkpoint / ROLLOUT_ARRAYS, allow_pickle=False) as saved:
+            assert json.loads(str(saved["meta.json"]))["worlds"]["kind"] == "states"
     with monkeypatch.context() as patch:
         _break_pickle(patch)
         resumed = train(config, resume=True)
@@ -230,10 +233,10 @@ def test_a_damaged_resume_state_is_refused_with_one_line(tmp_path):
     rollout = tmp_path / "checkpoint" / ROLLOUT_ARRAYS
     with np.load(rollout, allow_pickle=False) as saved:
         arrays = dict(saved)
-    assert arrays["worlds/lengths"][0] > 0  # 32 steps into a 40-step episode
-    arrays["worlds/actions"][0, 0] = -arrays["worlds/actions"][0, 0] + 0.5  # another first step: another world
+    assert arrays["worlds/episode_lengths"][0] > 0  # 32 steps into a 40-step episode, stored as the world's state
+    arrays["worlds/0/world/env/observation/goal"] += 0.5  # the one world's env (a single env) loads its last observation
     np.savez(rollout, **arrays)
-    with pytest.raises(ConfigError, match="replaying its worlds' episodes does not give the observation it holds"):
+    with pytest.raises(ConfigError, match="loading its worlds' states does not give the observation it holds"):
         train(config, resume=True)
     (tmp_path / "checkpoint" / STATE_FILE).write_text("{")
     rollout.unlink()
