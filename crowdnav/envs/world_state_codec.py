@@ -39,6 +39,7 @@ from typing import Any
 import numpy as np
 
 from crowdnav.envs.world_state import WORLD_STATE_VERSION, EnvState, VectorWorldState, WorldKey, WorldState, check_state
+from crowdnav.errors import CrowdNavError
 from crowdnav.sim.episode_state import EpisodeState
 from crowdnav.sim.robots import TeamState
 from crowdnav.sim.state import ONE_WORLD_SCALARS, SimState
@@ -50,7 +51,7 @@ _AGENT_FIELDS = frozenset({"positions", "velocities"})
 _TAGS = ("object", "array", "numpy", "complex", "dict", "tuple", "list")
 
 
-class WorldStateFileError(ValueError):
+class WorldStateFileError(CrowdNavError, ValueError):
     """A stored world state that cannot be read back or does not fit the worlds it would load into; one line."""
 
 
