@@ -27,8 +27,7 @@ evaluation's (tested).
 from __future__ import annotations
 
 import json
-from collections.abc import Iterator, Mapping
-from contextlib import contextmanager
+from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
@@ -47,19 +46,6 @@ def played_label(differences: Mapping[str, tuple[Any, Any]]) -> str:
         else:
             parts.append(f"trained with {key} {json.dumps(trained)}, played with {json.dumps(now)}")
     return "; ".join(parts)
-
-
-@contextmanager
-def _one_torch_thread() -> Iterator[None]:
-    """torch on one thread while the policy plays: the same sums in the same order, run after run."""
-    import torch
-
-    threads = torch.get_num_threads()
-    torch.set_num_threads(1)
-    try:
-        yield
-    finally:
-        torch.set_num_threads(threads)
 
 
 def final_policy(run: Path, meta: Mapping[str, Any], final_row: Mapping[str, str], where: str) -> Path:
@@ -86,6 +72,7 @@ def play_final(track: Track, run: Path, meta: Mapping[str, Any], final_row: Mapp
     """(rows for :func:`crowdnav.evaluation.track_reference.reference_csv`, the policy's folder relative to the experiment's)
     of the run's final policy played on every test episode of ``track``, with the track's setting."""
     from crowdnav.agents import load_policy
+    from crowdnav.agents.training.run_loop import torch_threads
     from crowdnav.evaluation.played_options import OptionRefusedError, check_played_world
     from crowdnav.evaluation.rollout import HeldOutEpisodes
 
@@ -103,7 +90,7 @@ def play_final(track: Track, run: Path, meta: Mapping[str, Any], final_row: Mapp
         raise TrackError(f"{where}: {error}") from None
     episodes = HeldOutEpisodes(played, track.seeds)
     try:
-        with _one_torch_thread():
+        with torch_threads(1):  # the same sums in the same order, run after run
             rows = episodes.run(policy)
     finally:
         episodes.close()

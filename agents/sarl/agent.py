@@ -61,6 +61,7 @@ from crowdnav.agents.sarl.sensing import check_shapes, check_world
 from crowdnav.agents.sb3.factory import observation_normalization
 from crowdnav.agents.training.algorithm_protocol import AgentState
 from crowdnav.agents.training.config import ConfigError
+from crowdnav.agents.training.run_loop import torch_threads
 
 if TYPE_CHECKING:
     from stable_baselines3.common.vec_env import VecEnv
@@ -231,12 +232,8 @@ class SarlAgent:
         self.decay_episodes = _decay_episodes(config)
 
     def learn(self, env: VecEnv, keep_going: Callable[[], bool]) -> None:
-        threads = torch.get_num_threads()
-        torch.set_num_threads(1)  # a small network: more threads only contend (25x slower on a busy 2-core machine)
-        try:
+        with torch_threads(1):  # a small network: more threads only contend (25x slower on a busy 2-core machine)
             self._learn(env, keep_going)
-        finally:
-            torch.set_num_threads(threads)
 
     def _learn(self, env: VecEnv, keep_going: Callable[[], bool]) -> None:
         """Step all worlds together; every ended episode (world order) is learnt from, then ``keep_going`` is asked."""

@@ -175,3 +175,15 @@ class RunLoop(ABC):
         return TrainResult(out=self.out, checkpoint=self.checkpoint, episodes=tally.done, timesteps=steps, successes=tally.successes,
                            seconds=seconds, steps_per_second=(steps - start_steps) / seconds if seconds > 0 else 0.0,
                            records=tally.records, model=self.model)
+
+
+@contextmanager
+def torch_threads(count: int) -> Iterator[None]:
+    """torch on ``count`` threads inside the block, the process's setting restored after it (a small network acts faster on
+    one thread than contending for many, and one thread sums in the same order run after run)."""
+    before = torch.get_num_threads()
+    torch.set_num_threads(count)
+    try:
+        yield
+    finally:
+        torch.set_num_threads(before)
