@@ -79,12 +79,27 @@ EXPERIMENT_BASELINES = ("straight", "social_force", "onboard", "predictive", "or
 oracle or a predictive planner (onboard, predictive) refuses a scenario (the crowd reacts to the robot,
 several robots, a unicycle), the experiment says so in one line and goes on without it."""
 
-ONBOARD_BASELINES: dict[str, list[str]] = {"onboard": ["plan"]}
-"""Baselines that read only what the robot senses -> the observation key that carries what they read (``plan``:
-the tracker's rows, the robot's pose and the map); every other baseline reads the simulator's state (privileged)."""
+ONBOARD_BASELINES: dict[str, list[str]] = {"onboard": ["plan"], "straight": ["goal"], "straight_shield": ["goal", "plan"]}
+"""Baselines that read only what the robot senses -> the observation keys that carry what they read (``goal``: its
+pose and goal; ``plan``: the tracker's rows, the robot's pose and the map, which the shield reads too); every other
+baseline reads the simulator's state (privileged)."""
 
 PRIVILEGED_OBSERVATIONS = "privileged: the simulator's state"
 """What a privileged baseline's results declare it observed."""
+
+SHIELD_READS = "the shield: the humans its tracker reports and the map"
+BASELINE_READS: dict[str, str] = {
+    "straight": "onboard: its pose and goal",
+    "social_force": PRIVILEGED_OBSERVATIONS,
+    "orca": PRIVILEGED_OBSERVATIONS,
+    "onboard": "onboard: the humans its tracker reports, its pose, velocity and goal, the map (the plan observation's inputs)",
+    "predictive": PRIVILEGED_OBSERVATIONS,
+    "oracle": PRIVILEGED_OBSERVATIONS,
+    "straight_shield": f"onboard: its pose and goal; {SHIELD_READS}",
+    "social_force_shield": f"privileged: the simulator's state (its forces); {SHIELD_READS}",
+}
+"""Baseline name -> what it reads, in words (a track's reference entry says it): the shield reads the robot's tracker
+and the map, never the simulator's state, so a shielded robot is as privileged as the robot inside it."""
 
 
 def baseline_observations(name: str) -> list[str] | str:

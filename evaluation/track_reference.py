@@ -37,9 +37,6 @@ from crowdnav.evaluation.track_leaderboard import REFERENCE_FILE, baseline_kind,
 
 REFERENCE_BASELINES = ("straight", "social_force", "orca", "onboard", "predictive", "oracle", "straight_shield", "social_force_shield")
 COLUMNS = ("test_seed", "outcome", "collision_kind", "steps", "return", "time_to_goal", "path_length", "spl", "min_human_distance", "psc")
-PRIVILEGED = "privileged: the simulator's state"
-ONBOARD = "onboard: the humans its tracker reports, its pose, velocity and goal, the map (the plan observation's inputs)"
-"""What ``baseline:onboard`` reads, as its entry says (:class:`crowdnav.planning.onboard.OnboardPlanner`)."""
 AGENT_PREFIX = "agent_"
 DIRTY = "+dirty"
 """The suffix of a commit with uncommitted changes."""
@@ -103,7 +100,15 @@ def reference_csv(rows: list[dict[str, Any]]) -> str:
 def write_reference(track: Track, out: str | Path, *, allow_dirty: bool = False, force: bool = False,
                     only: Sequence[str] | None = None, log: Callable[[str], None] = print) -> Path:
     """Play every reference baseline (``only``: those named) on ``track`` into ``out/<track>/``; returns that folder."""
-    from crowdnav.evaluation.baselines import BASELINE_PREFIX, BASELINES, SHIELDED_BASELINES, baseline_observations, scripted_policy, shielded
+    from crowdnav.evaluation.baselines import (
+        BASELINE_PREFIX,
+        BASELINE_READS,
+        BASELINES,
+        SHIELDED_BASELINES,
+        baseline_observations,
+        scripted_policy,
+        shielded,
+    )
     from crowdnav.evaluation.rollout import HeldOutEpisodes
     from crowdnav.evaluation.storage import atomic_write_text
 
@@ -183,7 +188,7 @@ def write_reference(track: Track, out: str | Path, *, allow_dirty: bool = False,
         atomic_write_text(folder / file, reference_csv(rows))
         success = sum(row["outcome"] == "success" for row in rows) / len(rows)
         add({"name": configuration, "label": BASELINES[name], "policy": f"baseline:{name}", "kind": baseline_kind(name),
-             "observations": PRIVILEGED if isinstance(observations, str) else ONBOARD, "file": file, "episodes": len(rows),
+             "observations": BASELINE_READS[name], "file": file, "episodes": len(rows),
              "success": round(success, 4), "git_commit": commit})
         atomic_write_text(index, index_text())  # after each one: resumable
         log(f"{track.name}: {configuration} success {success:.0%} on {len(rows)} episodes")

@@ -97,7 +97,8 @@ def test_reference_results_refuse_a_checkout_with_changes(tmp_path, monkeypatch)
 
 
 def test_a_baseline_added_later_is_played_alone_and_the_published_ones_are_kept_with_their_commit(tmp_path):
-    from crowdnav.evaluation.track_reference import ONBOARD, REFERENCE_BASELINES
+    from crowdnav.evaluation.baselines import BASELINE_READS
+    from crowdnav.evaluation.track_reference import REFERENCE_BASELINES
 
     track = load_track("figure4")
     short = track.__class__(**{**track.__dict__, "test_episodes": 3})
@@ -115,7 +116,7 @@ def test_a_baseline_added_later_is_played_alone_and_the_published_ones_are_kept_
     assert document["git_commit"] == "0123abc" and {path.name: path.read_bytes() for path in folder.glob("*.csv") if path.name in files} == files
     assert [entries[entry["name"]] for entry in published["entries"]] == published["entries"]  # the published ones, as they were
     onboard = entries["baseline_onboard"]
-    assert onboard["kind"] == "scripted, onboard" and onboard["observations"] == ONBOARD and onboard["policy"] == "baseline:onboard"
+    assert onboard["kind"] == "scripted, onboard" and onboard["observations"] == BASELINE_READS["onboard"] and onboard["policy"] == "baseline:onboard"
     assert onboard["git_commit"] not in (None, "0123abc") and list(entries).index("baseline_onboard") == REFERENCE_BASELINES.index("onboard")
     assert sum("kept (as published at 0123abc" in line for line in lines) == len(older) and any("baseline_onboard success" in line for line in lines)
     board = rank(short, read_entries(short, [folder]))
@@ -125,6 +126,22 @@ def test_a_baseline_added_later_is_played_alone_and_the_published_ones_are_kept_
     assert document["git_commit"] == onboard["git_commit"] and not any("git_commit" in entry for entry in document["entries"])
     with pytest.raises(TrackError, match="unknown reference baseline 'onbord'"):
         write_reference(short, tmp_path, allow_dirty=True, only=["onbord"], log=lambda line: None)
+
+
+def test_each_reference_baseline_is_labelled_by_what_it_reads_and_a_shield_adds_the_tracker_not_privilege(tmp_path):
+    """Straight reads its pose and goal (onboard), the shield the tracker and the map: only the robot inside decides privilege."""
+    track = load_track("figure4")
+    short = track.__class__(**{**track.__dict__, "test_episodes": 1})
+    folder = write_reference(short, tmp_path, allow_dirty=True, only=["straight", "straight_shield", "social_force", "social_force_shield"],
+                             log=lambda line: None)
+    entries = {entry["name"].removeprefix("baseline_"): entry for entry in read_json(folder / "reference.json")["entries"]}
+    assert {name: entry["kind"] for name, entry in entries.items()} == {
+        "straight": "scripted, onboard", "straight_shield": "scripted, onboard",
+        "social_force": "scripted, privileged", "social_force_shield": "scripted, privileged"}
+    assert entries["straight"]["observations"] == "onboard: its pose and goal"
+    for shielded in ("straight_shield", "social_force_shield"):
+        assert entries[shielded]["observations"].endswith("the shield: the humans its tracker reports and the map")
+    assert entries["social_force"]["observations"] == "privileged: the simulator's state"
 
 
 def test_the_onboard_baseline_is_refused_in_one_line_on_a_track_that_does_not_allow_its_tracker(tmp_path):
