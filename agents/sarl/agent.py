@@ -48,8 +48,10 @@ from crowdnav.agents.sarl.lookahead import (
     STATIC_KEY,
     Physics,
     action_set,
+    backup,
     bounded_weights,
     decode,
+    deepen,
     features,
     lookahead,
     value_ceiling,
@@ -163,37 +165,21 @@ class SarlAgent:
     def scores(self, observation: Mapping[str, np.ndarray], depth: int = 1) -> tuple[np.ndarray, np.ndarray]:
         """(scores (B, 81), env actions (B, 81, 2)) of a batch of observations (leading axis B), looking ``depth`` steps ahead."""
         state = decode(observation, self.scales)
-        ahead = lookahead(state, self.physics, self.actions, float(self.options["human_margin"]))
-        scores = self._backup(ahead)
+        human_margin = float(self.options["human_margin"])
+        ahead = lookahead(state, self.physics, self.actions, human_margin)
+        scores = backup(ahead, self._value, self.discount)
         if depth > 1:
-            scores = self._deepen(ahead, scores)
+            scores = deepen(ahead, scores, int(self.options["lookahead_width"]), self._value, self.physics, self.actions, human_margin,
+                            self.discount)
         return scores, ahead["commands"]
 
-    def _backup(self, ahead: Mapping[str, Any]) -> np.ndarray:
-        """``r + discount * V(next)`` of every action (no value after a predicted collision or goal)."""
-        values = evaluate(self.network, *features(ahead["next"], self.physics))
+    def _value(self, state: Mapping[str, np.ndarray]) -> np.ndarray:
+        """V of joint states (B, M): the network on their features, under the value ceiling with ``value_bound``."""
+        values = evaluate(self.network, *features(state, self.physics))
         if self.options["value_bound"]:
-            goal = ahead["next"]["goal"]
+            goal = state["goal"]
             values = np.minimum(values, value_ceiling(np.hypot(goal[..., 0], goal[..., 1]), self.physics, self.discount))
-        return ahead["reward"] + self.discount * values * ~ahead["done"]
-
-    def _deepen(self, ahead: Mapping[str, Any], scores: np.ndarray) -> np.ndarray:
-        """Depth 2 (as SG-D3QN's pruned tree): the ``lookahead_width`` best actions score ``r + discount * max_a' score'``.
-
-        The other actions score -inf (the choice is among the expanded ones); an expanded action predicted to end
-        the episode keeps its one-step reward.
-        """
-        batch, width = scores.shape[0], min(int(self.options["lookahead_width"]), scores.shape[1])
-        best = np.argsort(-scores, axis=1, kind="stable")[:, :width]  # (B, w)
-        rows = np.arange(batch)[:, None]
-        chosen = {key: value[rows, best] for key, value in ahead["next"].items()}
-        flat = {key: value.reshape(batch * width, *value.shape[2:]) for key, value in chosen.items()}
-        further = lookahead(flat, self.physics, self.actions, float(self.options["human_margin"]))
-        second = self._backup(further).max(axis=1).reshape(batch, width)
-        refined = ahead["reward"][rows, best] + self.discount * second * ~ahead["done"][rows, best]
-        deep = np.full_like(scores, -np.inf)
-        deep[rows, best] = refined
-        return deep
+        return values
 
     def predict(self, observation: Mapping[str, np.ndarray], state: AgentState = None, episode_start: np.ndarray | None = None,
                 deterministic: bool = True) -> tuple[np.ndarray, AgentState]:

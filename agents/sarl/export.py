@@ -12,14 +12,14 @@ acts with, run here on torch tensors (:class:`TorchOps`, float64 as numpy's, the
 * :func:`~crowdnav.agents.sarl.lookahead.lookahead`: the 81 actions, the humans at constant velocity, the closest
   approach during the step, the predicted reward and end;
 * :func:`~crowdnav.agents.sarl.lookahead.features` and
-  :func:`~crowdnav.agents.sarl.lookahead.value_ceiling` (``value_bound``).
+  :func:`~crowdnav.agents.sarl.lookahead.value_ceiling` (``value_bound``);
+* :func:`~crowdnav.agents.sarl.lookahead.backup` (``r + discount * V * (not done)``) and, with ``lookahead_depth: 2``,
+  :func:`~crowdnav.agents.sarl.lookahead.deepen` (the ``lookahead_width`` best actions looked ahead once more: ``topk``,
+  ``gather`` and ``scatter`` here where numpy sorts and indexes).
 
-Written here, in torch, as ``SarlAgent`` writes them in numpy (they batch, index and pick, they hold no maths of the
-state): the module and its buffers (actions, scales), the value network on the features and
-``r + discount * V * (not done)`` (``SarlAgent._backup``); with ``lookahead_depth: 2`` the ``lookahead_width`` best
-actions looked ahead once more (``topk``, ``gather`` and ``scatter``: ``SarlAgent._deepen``); the first best action
-(``argmax`` as numpy's) and its command. Without the ``obstacles`` modality the graph holds no static tensors at all
-(``decode(..., empty_static=False)``), where numpy carries empty ones.
+Written here: the module and its buffers (actions, scales), the value network on the features, and the first best
+action (``argmax`` as numpy's) and its command. Without the ``obstacles`` modality the graph holds no static tensors at
+all (``decode(..., empty_static=False)``), where numpy carries empty ones.
 
 The only differences left are those of the kernels: ``hypot`` is ``sqrt(x * x + y * y)`` here (ONNX has none), and
 onnxruntime's float32 matrix products and ``exp`` may round otherwise than torch's. They move a score by about 1e-7
@@ -30,11 +30,11 @@ none seen so far: the graph's actions have equalled ``predict``'s bit for bit).
 from __future__ import annotations
 
 import warnings
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from typing import Any
 
 import torch
-from crowdnav.agents.sarl.lookahead import GEODESIC_KEY, REQUIRED_KEYS, STATIC_KEY, decode, features, lookahead, value_ceiling
+from crowdnav.agents.sarl.lookahead import GEODESIC_KEY, REQUIRED_KEYS, STATIC_KEY, backup, decode, deepen, features, lookahead, value_ceiling
 from crowdnav.agents.sarl.ops import Ops
 from torch import nn
 
@@ -116,6 +116,22 @@ class TorchOps:
             warnings.filterwarnings("ignore", message="Converting a tensor to a Python")  # torch's TracerWarning
             return int(n)
 
+    def keep(self, done: Any) -> Any:
+        return (~done).to(F64)
+
+    def best(self, scores: Any, width: int) -> Any:  # onnxruntime's topk keeps the lower index of equal scores first
+        return torch.topk(scores, width, dim=1).indices
+
+    def rows(self, x: Any, index: Any) -> Any:
+        picked = torch.gather(x, 1, index.reshape(*index.shape, *([1] * (x.dim() - 2))).expand(-1, -1, *x.shape[2:]))
+        return picked.reshape(-1, *x.shape[2:])
+
+    def row_max(self, x: Any) -> Any:
+        return x.max(dim=1).values
+
+    def spread(self, scores: Any, index: Any, values: Any) -> Any:
+        return torch.full_like(scores, float("-inf")).scatter(1, index, values)
+
 
 TORCH: Ops = TorchOps()
 """The backend the export traces (:mod:`~crowdnav.agents.sarl.lookahead`'s ``xp``)."""
@@ -161,42 +177,15 @@ class SarlPolicyModule(nn.Module):
         return decode({key: inputs[self.index[key]] for key in self.read}, scales, TORCH, empty_static=False)
 
     def forward(self, *inputs: torch.Tensor) -> torch.Tensor:
-        ahead = self.lookahead(self.decode(inputs))
-        scores = self.backup(ahead)
+        state = self.decode(inputs)
+        ahead = lookahead(state, self.physics, self.actions, self.human_margin, TORCH)
+        scores = backup(ahead, self.value, self.discount, TORCH)
         if self.depth > 1:
-            scores = self.deepen(ahead, scores)
+            scores = deepen(ahead, scores, self.width, self.value, self.physics, self.actions, self.human_margin, self.discount, TORCH)
         choice = torch.argmax(scores, dim=1)  # the first best, as numpy's
         return torch.gather(ahead["commands"], 1, choice[:, None, None].expand(-1, 1, 2))[:, 0, :]
 
-    def lookahead(self, state: dict[str, torch.Tensor]) -> dict[str, Any]:
-        """Every action's next joint state, reward, end and command (:func:`~crowdnav.agents.sarl.lookahead.lookahead`)."""
-        return lookahead(state, self.physics, self.actions, self.human_margin, TORCH)
-
-    def backup(self, ahead: dict[str, Any]) -> torch.Tensor:
-        """``r + discount * V(next)`` of every action (B, M), V left out after a predicted end (``SarlAgent._backup``)."""
-        values = self.value(ahead["next"])
-        result: torch.Tensor = ahead["reward"] + self.discount * values * (~ahead["done"]).to(F64)
-        return result
-
-    def deepen(self, ahead: dict[str, Any], scores: torch.Tensor) -> torch.Tensor:
-        """Depth 2: the ``width`` best actions score ``r + discount * max_a' score'``, the others -inf (``SarlAgent._deepen``).
-
-        ``topk`` keeps the lower index of equal scores first in onnxruntime, as numpy's stable sort does (in the graph
-        only which actions are expanded matters, not their order).
-        """
-        width = min(self.width, self.count)
-        best = torch.topk(scores, width, dim=1).indices  # (B, w)
-
-        def take(value: torch.Tensor) -> torch.Tensor:  # value (B, M, ...) -> (B, w, ...) at the best actions
-            index = best.reshape(*best.shape, *([1] * (value.dim() - 2))).expand(-1, -1, *value.shape[2:])
-            return torch.gather(value, 1, index)
-
-        flat = {key: take(value).reshape(-1, *value.shape[2:]) for key, value in ahead["next"].items()}
-        second = self.backup(self.lookahead(flat)).max(dim=1).values.reshape(-1, width)
-        refined = take(ahead["reward"]) + self.discount * second * (~take(ahead["done"])).to(F64)
-        return torch.full_like(scores, float("-inf")).scatter(1, best, refined)
-
-    def value(self, state: dict[str, torch.Tensor]) -> torch.Tensor:
+    def value(self, state: Mapping[str, torch.Tensor]) -> torch.Tensor:
         """V of joint states (B, M) in float64: :func:`~crowdnav.agents.sarl.lookahead.features`, then the network."""
         robot, humans, statics = features(state, self.physics, TORCH)
         values = self.network(robot.reshape(-1, robot.shape[-1]), humans.reshape(-1, *humans.shape[-2:]),

@@ -34,7 +34,7 @@ the agent acts in training, evaluation and the published runs), torch's in the O
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import asdict, dataclass
 from typing import Any
 
@@ -273,3 +273,26 @@ def lookahead(state: Mapping[str, Array], physics: Physics, actions: Array, huma
         next_state.update(geodesic=xp.broadcast_to(state["geodesic"][:, None], (*shape, *state["geodesic"].shape[1:])),
                           origin=state["origin"][:, None, :] + velocity * dt)
     return {"next": next_state, "reward": reward * physics.reward_scale, "done": collision | reached, "commands": xp.float32(commands)}
+
+
+def backup(ahead: Mapping[str, Any], value: Callable[[Mapping[str, Array]], Array], discount: float, xp: Ops = NUMPY) -> Array:
+    """``r + discount * V(next)`` of every action (B, M) of a :func:`lookahead` (no value after a predicted collision or goal).
+
+    ``value``: the joint states (B, M, ...) -> V (B, M) (the agent's network on :func:`features`, bounded or not).
+    """
+    return ahead["reward"] + discount * value(ahead["next"]) * xp.keep(ahead["done"])
+
+
+def deepen(ahead: Mapping[str, Any], scores: Array, width: int, value: Callable[[Mapping[str, Array]], Array], physics: Physics,
+           actions: Array, human_margin: float, discount: float, xp: Ops = NUMPY) -> Array:
+    """Depth 2 (as SG-D3QN's pruned tree): the ``width`` best of :func:`backup`'s ``scores`` score ``r + discount * max_a' score'``.
+
+    The other actions score -inf (the choice is among the expanded ones); an expanded action predicted to end the
+    episode keeps its one-step reward.
+    """
+    width = min(width, xp.size(scores.shape[1]))
+    best = xp.best(scores, width)  # (B, w)
+    flat = {key: xp.rows(item, best) for key, item in ahead["next"].items()}  # (B * w, ...)
+    second = xp.row_max(backup(lookahead(flat, physics, actions, human_margin, xp), value, discount, xp)).reshape(-1, width)
+    refined = xp.rows(ahead["reward"], best).reshape(-1, width) + discount * second * xp.keep(xp.rows(ahead["done"], best).reshape(-1, width))
+    return xp.spread(scores, best, refined)

@@ -47,6 +47,12 @@ class Ops(Protocol):
     def zeros(self, shape: Sequence[int]) -> Any: ...  # float64
     def copy(self, x: Any) -> Any: ...
     def size(self, n: Any) -> int: ...  # a length read from a shape, as a Python int (fixed in a traced graph)
+    # the backup's picking (the lookahead's depth 2), on (B, M, ...) arrays
+    def keep(self, done: Any) -> Any: ...  # not done, as a factor of values
+    def best(self, scores: Any, width: int) -> Any: ...  # (B, width) indices of the best scores, the lower index first on a tie
+    def rows(self, x: Any, index: Any) -> Any: ...  # x (B, M, ...) at index (B, w) -> (B * w, ...)
+    def row_max(self, x: Any) -> Any: ...  # the maximum along axis 1
+    def spread(self, scores: Any, index: Any, values: Any) -> Any: ...  # -inf like scores, values at index
 
 
 class NumpyOps:
@@ -117,6 +123,23 @@ class NumpyOps:
 
     def size(self, n: Any) -> int:
         return int(n)
+
+    def keep(self, done: Any) -> Any:
+        return ~done
+
+    def best(self, scores: Any, width: int) -> Any:
+        return np.argsort(-scores, axis=1, kind="stable")[:, :width]
+
+    def rows(self, x: Any, index: Any) -> Any:  # numpy's arrays may be empty (no static shapes): no -1 in the shape
+        return x[np.arange(x.shape[0])[:, None], index].reshape(index.size, *x.shape[2:])
+
+    def row_max(self, x: Any) -> Any:
+        return x.max(axis=1)
+
+    def spread(self, scores: Any, index: Any, values: Any) -> Any:
+        spread = np.full_like(scores, -np.inf)
+        spread[np.arange(scores.shape[0])[:, None], index] = values
+        return spread
 
 
 NUMPY: Ops = NumpyOps()
