@@ -18,7 +18,7 @@ Arrays are pairs ``(re, im)`` of float64 arrays.
 from __future__ import annotations
 
 import math
-from typing import TypeVar
+from typing import Any, TypeVar
 
 import numpy as np
 
@@ -46,3 +46,38 @@ def remainder(x: np.ndarray | float, y: float) -> np.ndarray:
     quotient_odd = np.fmod(np.trunc((x - f) / y), 2.0) != 0.0
     over = (np.abs(f) > half) | ((np.abs(f) == half) & quotient_odd)
     return np.where(over, f - np.copysign(y, f), f)
+
+
+def cdiv_real(ar: np.ndarray, ai: np.ndarray, b: np.ndarray | float) -> tuple[np.ndarray, np.ndarray]:
+    """CPython's ``(ar + ai j) / b`` for a real ``b`` (made ``complex(b, 0.0)``: ``_Py_c_quot``'s branch for ``|b.real| >= |b.imag|``)."""
+    return (ar + ai * 0.0) / b, (ai - ar * 0.0) / b
+
+
+def robot_velocity(robot: Any, dt: float, actions: np.ndarray, heading: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """:func:`crowdnav.sim.robots.robot_kinematics` of one robot spec in every row (``actions`` (K, 2), ``heading`` (K,)),
+    its action clipped first: (velocity re, im, new heading), in CPython's scalar arithmetic."""
+    a0 = np.minimum(1.0, np.maximum(-1.0, actions[:, 0]))
+    a1 = np.minimum(1.0, np.maximum(-1.0, actions[:, 1]))
+    if robot.kinematics == "holonomic":
+        norm = np.hypot(a0, a1)
+        over = norm > 1.0
+        # command /= norm: CPython divides by complex(norm, 0): (re + im * 0) / norm, (im - re * 0) / norm
+        divisor = np.where(over, norm, 1.0)  # only the rows over 1 are divided (a zero action has norm 0)
+        cr = np.where(over, (a0 + a1 * 0.0) / divisor, a0)
+        ci = np.where(over, (a1 - a0 * 0.0) / divisor, a1)
+        cr, ci = cmul(cr, ci, robot.max_speed, 0.0)
+        h = 0.0 + heading  # 1j * heading: its imaginary part is 0 * 0 + 1 * h
+        re, im = cmul(cr, ci, np.cos(h), np.sin(h))
+        return re, im, heading
+    speed, turn = a0 * robot.max_speed, a1 * robot.max_angular_speed
+    new_heading = heading + turn * dt
+    turning = np.abs(turn) > 1e-9
+    with np.errstate(divide="ignore", invalid="ignore"):
+        # (speed / turn) * -1j * (exp(1j new) - exp(1j old)); -1j is complex(-0.0, -1.0)
+        kr, ki = cmul(speed / turn, 0.0, -0.0, -1.0)
+        h_new, h_old = 0.0 + new_heading, 0.0 + heading
+        arc_re, arc_im = cmul(kr, ki, np.cos(h_new) - np.cos(h_old), np.sin(h_new) - np.sin(h_old))
+    line_re, line_im = cmul(speed * dt, 0.0, np.cos(0.0 + heading), np.sin(0.0 + heading))
+    dr, di = np.where(turning, arc_re, line_re), np.where(turning, arc_im, line_im)
+    # displacement / dt: CPython divides by complex(dt, 0)
+    return (dr + di * 0.0) / dt, (di - dr * 0.0) / dt, remainder(new_heading, TWO_PI)

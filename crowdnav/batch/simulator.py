@@ -15,7 +15,10 @@ goal rules of worlds where a human reached its goal or stalled, draw from each w
 run per world (the arrival and stall checks themselves run on all worlds at once). A reset draws on the world's own
 :class:`crowdnav.Simulator` (its *slot*) and its state is copied into the stack; the goal rules (:func:`crowdnav.sim.groups.apply_goal_rules`) change
 the world's row of the stack in place, drawing from the slot's generator. Crowds large enough for the neighbour grid
-(``Simulator.grid_from`` humans) are not stacked (the vector env holds them as single envs). The humans' commands come from the crowd models
+(``Simulator.grid_from`` humans) are not stacked (the vector env holds them as single envs). A ``robots:`` scenario's other
+robots are every world's :class:`crowdnav.batch.team.TeamStack` (indexed by world): they move after the robot and the
+humans, measure their geometry and push the humans in every refresh, and end, as the single simulator's :class:`Team`
+does (its operations with a world axis). The humans' commands come from the crowd models
 (:mod:`crowdnav.crowd`) through :meth:`crowdnav.crowd.Crowd.commands_batch`, each world with its
 slot's own model instances (ORCA: the slot's solver, one world per pyrvo call).
 """
@@ -28,8 +31,9 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from crowdnav.batch.bucket import Bucket
-from crowdnav.batch.scalar_math import TWO_PI, cmul, remainder
+from crowdnav.batch.scalar_math import robot_velocity
 from crowdnav.batch.state import BatchState
+from crowdnav.batch.team import TeamStack
 from crowdnav.crowd.base import CrowdView
 from crowdnav.crowd.views import worlds_view
 from crowdnav.sim.contacts import deepest_contact, goal_distance, outside, resolve_overlaps, touching
@@ -82,9 +86,6 @@ class BatchSimulator:
     def __init__(self, world: CompiledWorld, num_worlds: int):
         if isinstance(num_worlds, bool) or not isinstance(num_worlds, (int, np.integer)) or num_worlds < 1:
             raise ValueError(f"num_worlds must be a positive integer, got {num_worlds!r}")
-        if world.scenario.robots is not None:  # one robot per world row; the team's per-robot work is not stacked
-            raise ValueError(f"the batched simulator holds one robot per world; this scenario declares {len(world.scenario.robots)} "
-                             "(robots:): step its worlds with crowdnav.envs.vector.CrowdNavVectorEnv (crowdnav.envs.vector_team.TeamWorlds)")
         self.num_worlds = int(num_worlds)
         self.slots = [Simulator(world) for _ in range(self.num_worlds)]
         """One single simulator per world: its resets and goal rules (each world's own generator)."""
@@ -109,8 +110,9 @@ class BatchSimulator:
         self._crowds = np.empty(self.num_worlds, dtype=object)
         self._crowds[:] = [slot.crowd for slot in self.slots]
         """Each world's own crowd models (its slot's), indexed by world."""
-        robot = self.scenario.robot
-        self._unicycle = robot.kinematics != "holonomic"
+        self.team = None if first.team is None else TeamStack(first.team, self.num_worlds, first.bounds, first.dt,
+                                                                     self.scenario.humans.social_force)
+        """A ``robots:`` scenario's other robots, every world's (:mod:`crowdnav.batch.team`); None for one robot."""
         self.buckets: dict[int, Bucket] = {}
         self._where = np.full((self.num_worlds, 2), -1, dtype=np.intp)  # world -> (crowd size, row); -1: never reset
 
@@ -122,6 +124,8 @@ class BatchSimulator:
         for world, seed in zip(worlds, seeds, strict=True):  # per reset event: placement draws from each world's generator
             slot = self.slots[world]
             slot.draw_episode(seed)
+            if self.team is not None and slot.team is not None:
+                self.team.set_world(int(world), slot.team.state)
             n = self._stack(int(world), slot.state)
             fresh.setdefault(n, []).append(int(world))
         for n, fresh_worlds in fresh.items():  # one geometry pass per crowd size for all the new episodes
@@ -165,12 +169,19 @@ class BatchSimulator:
         batch do not change it, and stepping it does not change the batch (its own generator copy).
         """
         bucket, row = self.locate(world)
-        return self.slots[world].clone(bucket.state.row(row))
+        return self._synced(world).clone(bucket.state.row(row))
 
     def snapshot(self, world: int) -> EpisodeState:
         """``world``'s episode now (:func:`crowdnav.sim.episode_state.capture`): its row of the stack, its slot's generator and crowd models."""
         bucket, row = self.locate(world)
-        return capture(self.slots[world], bucket.state.row(row))
+        return capture(self._synced(world), bucket.state.row(row))
+
+    def _synced(self, world: int) -> Simulator:
+        """``world``'s slot, its other robots (if any) set to the world's now (what a capture, a clone or a goal rule reads)."""
+        slot = self.slots[world]
+        if self.team is not None and slot.team is not None:
+            slot.team.state = self.team.state_of(world)
+        return slot
 
     def load(self, world: int, episode: EpisodeState) -> None:
         """Make ``episode`` (a :meth:`snapshot` of a world of this scenario, or a single simulator's) ``world``'s: its slot takes
@@ -179,13 +190,16 @@ class BatchSimulator:
             raise ValueError(f"world must be in [0, {self.num_worlds}), got {world}")
         slot = self.slots[world]
         restore(slot, episode)
+        if self.team is not None and slot.team is not None:
+            self.team.set_world(int(world), slot.team.state)
         n = self._stack(int(world), slot.state)
         self._refresh(self.buckets[n], self._where[[world], 1])
 
     # ------------------------------------------------------------------- step
 
-    def step(self, actions: np.ndarray, active: np.ndarray | None = None) -> StepResult:
-        """Advance the worlds where ``active`` is True (default: all) by one step; ``actions`` (num_worlds, 2), checked finite.
+    def step(self, actions: np.ndarray, active: np.ndarray | None = None, other_actions: np.ndarray | None = None) -> StepResult:
+        """Advance the worlds where ``active`` is True (default: all) by one step; ``actions`` (num_worlds, 2), checked finite;
+        ``other_actions``: a ``robots:`` scenario's other robots' (num_worlds, m, 2) (None: they stand still).
 
         Inactive worlds are left exactly as they are.
         """
@@ -196,18 +210,19 @@ class BatchSimulator:
             size = self.chunk_size(bucket.n)
             for start in range(0, len(rows), size):  # a loop over chunks of worlds, for the caches
                 chunk = rows[start : start + size]
-                self._advance(bucket, chunk, actions[bucket.world[chunk]], result)
+                worlds = bucket.world[chunk]
+                self._advance(bucket, chunk, actions[worlds], result, None if other_actions is None else other_actions[worlds])
         return result
 
     def chunk_size(self, n: int) -> int:
         """Worlds of ``n`` humans stepped (and observed) together: :data:`CHUNK_ELEMENTS` over one world's (n+1) x (n+1+obstacles)."""
         return max(1, CHUNK_ELEMENTS // ((n + 1) * (n + 1 + self._static_count)))
 
-    def _advance(self, bucket: Bucket, rows: np.ndarray, actions: np.ndarray, result: StepResult) -> None:
+    def _advance(self, bucket: Bucket, rows: np.ndarray, actions: np.ndarray, result: StepResult, other_actions: np.ndarray | None) -> None:
         n, dt, state = bucket.n, self.dt, bucket.state
         positions = state.positions[rows]
         velocities = state.velocities[rows]
-        robot_re, robot_im, heading = self._robot_velocity(actions, state.robot_heading[rows])
+        robot_re, robot_im, heading = self._robot_velocity(actions, state.robot_heading[rows])  # (the ego robot never leaves: retire)
         if n:
             view = self._view(bucket, rows, positions, velocities)
             commands = self._crowd.commands_batch(view, self._crowds[bucket.world[rows]])
@@ -220,6 +235,10 @@ class BatchSimulator:
         positions[:, :1] += velocities[:, :1] * dt
         positions[:, 1:] += velocities[:, 1:] * self._substep_dt
         state.robot_heading[rows] = heading
+        if self.team is not None:  # the other robots, each by its own kinematics (standing still without actions)
+            worlds = bucket.world[rows]
+            still = np.zeros((len(rows), len(self.team.specs), 2))
+            self.team.move(worlds, still if other_actions is None else other_actions, dt)
         state.step_count[rows] += 1
         check_finite(positions, velocities, state.step_count[rows], bucket.world[rows])
         state.positions[rows], state.velocities[rows] = positions, velocities
@@ -266,45 +285,35 @@ class BatchSimulator:
 
     def _robot_velocity(self, actions: np.ndarray, heading: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """:meth:`crowdnav.Simulator._robot_velocity` for every row: (velocity re, im, new heading), in CPython's scalar arithmetic."""
-        robot = self.scenario.robot
-        a0 = np.minimum(1.0, np.maximum(-1.0, actions[:, 0]))
-        a1 = np.minimum(1.0, np.maximum(-1.0, actions[:, 1]))
-        if not self._unicycle:
-            norm = np.hypot(a0, a1)
-            over = norm > 1.0
-            # command /= norm: CPython divides by complex(norm, 0): (re + im * 0) / norm, (im - re * 0) / norm
-            divisor = np.where(over, norm, 1.0)  # only the rows over 1 are divided (a zero action has norm 0)
-            cr = np.where(over, (a0 + a1 * 0.0) / divisor, a0)
-            ci = np.where(over, (a1 - a0 * 0.0) / divisor, a1)
-            cr, ci = cmul(cr, ci, robot.max_speed, 0.0)
-            h = 0.0 + heading  # 1j * heading: its imaginary part is 0 * 0 + 1 * h
-            re, im = cmul(cr, ci, np.cos(h), np.sin(h))
-            return re, im, heading
-        dt = self.dt
-        speed, turn = a0 * robot.max_speed, a1 * robot.max_angular_speed
-        new_heading = heading + turn * dt
-        turning = np.abs(turn) > 1e-9
-        with np.errstate(divide="ignore", invalid="ignore"):
-            # (speed / turn) * -1j * (exp(1j new) - exp(1j old)); -1j is complex(-0.0, -1.0)
-            kr, ki = cmul(speed / turn, 0.0, -0.0, -1.0)
-            h_new, h_old = 0.0 + new_heading, 0.0 + heading
-            arc_re, arc_im = cmul(kr, ki, np.cos(h_new) - np.cos(h_old), np.sin(h_new) - np.sin(h_old))
-        line_re, line_im = cmul(speed * dt, 0.0, np.cos(0.0 + heading), np.sin(0.0 + heading))
-        dr, di = np.where(turning, arc_re, line_re), np.where(turning, arc_im, line_im)
-        # displacement / dt: CPython divides by complex(dt, 0)
-        return (dr + di * 0.0) / dt, (di - dr * 0.0) / dt, remainder(new_heading, TWO_PI)
+        return robot_velocity(self.scenario.robot, self.dt, actions, heading)
 
     # --------------------------------------------------------------- geometry
 
     def _refresh(self, bucket: Bucket, rows: np.ndarray) -> None:
         """:meth:`Simulator.refresh` for ``rows`` of ``bucket``: the same kernel, :func:`crowdnav.sim.geometry.measure`."""
-        bucket.store(rows, measure(bucket.state.positions[rows], self._surface, self._polygons, bucket.contact_all, bucket.gain, bucket.decay))
+        z = bucket.state.positions[rows]
+        measured = measure(z, self._surface, self._polygons, bucket.contact_all, bucket.gain, bucket.decay)
+        if self.team is not None:  # the other robots measure theirs and push the humans (Geometry.measure)
+            self.team.refresh(bucket.world[rows], z, measured.repulsion)
+        bucket.store(rows, measured)
 
     def _resolve_overlaps(self, bucket: Bucket, rows: np.ndarray) -> None:
         """:meth:`crowdnav.sim.geometry.Geometry.push_humans_apart` for ``rows`` (worlds where a human touches someone or something)."""
         positions = bucket.state.positions[rows]
         resolve_overlaps(positions, bucket.pair_offset[rows], bucket.pair_distance[rows], bucket.gap[rows], bucket.contact_all, self._surface)
         bucket.state.positions[rows] = positions
+
+    def retire(self, robots: np.ndarray) -> None:
+        """The other robots ``robots`` ((num_worlds, m) bool) leave their worlds (:meth:`crowdnav.Simulator.retire_robots`), measured again.
+
+        The first robot does not leave: a world's episode (the single env's) ends with it."""
+        assert self.team is not None
+        for bucket in self.buckets.values():
+            rows = np.flatnonzero(robots[bucket.world].any(1))
+            if len(rows):
+                worlds = bucket.world[rows]
+                self.team.retire(worlds, robots[worlds])
+                self._refresh(bucket, rows)
 
     # ----------------------------------------------------------------- events
 
@@ -318,6 +327,8 @@ class BatchSimulator:
         if self._bounds is not None:
             result.left_world[worlds] = outside(robot.real, robot.imag, self._bounds)
         result.goal_reached[worlds] = goal_distance(bucket.state.robot_goal[rows], robot) <= self.scenario.robot.goal_radius
+        if self.team is not None:  # the ego robot's contacts with the other robots, every other robot's outcome (Team.outcomes)
+            self.team.events(worlds, n, result.collisions)
 
     def _goal_rules(self, bucket: Bucket, rows: np.ndarray) -> None:
         """The single simulator's goal checks on every row at once (:func:`crowdnav.sim.groups.goal_checks`), then its goal rules
@@ -329,7 +340,7 @@ class BatchSimulator:
             row = rows[k]
             stalled = None if checks.stalled is None else checks.stalled[k]
             # on the world's row of the stack, in place (views), with its slot's groups and generator
-            if apply_goal_rules(state.row(row), self.slots[bucket.world[row]], checks.arrived[k], stalled):
+            if apply_goal_rules(state.row(row), self._synced(int(bucket.world[row])), checks.arrived[k], stalled):
                 moved.append(row)
         if moved:  # respawned humans: the geometry of the new positions, as the single simulator's refresh
             self._refresh(bucket, np.array(moved))

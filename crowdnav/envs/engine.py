@@ -6,8 +6,9 @@ engines implement :class:`WorldEngine`, and the vector env reads neither's insid
 
 * :class:`crowdnav.envs.vector_stacked.StackedWorlds`: the worlds stacked in one
   :class:`crowdnav.batch.simulator.BatchSimulator` (array work over the world axis, the reward's kernels batched);
-* :class:`crowdnav.envs.vector_team.TeamWorlds`: one single env per world stepped in one call (several robots, one
-  world, crowds too large to stack).
+  several robots per world: :class:`crowdnav.envs.vector_stacked_team.StackedTeamWorlds` (the other robots stacked too);
+* :class:`crowdnav.envs.vector_team.TeamWorlds`: one single env per world stepped in one call (one world, crowds too
+  large to stack, other robots driven by ORCA or a callable).
 
 Either plays world ``i`` as the single env plays it after ``reset(seed=s_i)``, bit for bit, and gives a world's
 state as data (:meth:`WorldEngine.snapshot`, :mod:`crowdnav.envs.world_state`) that either loads into any of its

@@ -16,11 +16,13 @@ from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
 from crowdnav.batch.memory import keep_freed_memory as _keep_freed_memory
+from crowdnav.batch.robot_policies import batched_policy as team_policy
 from crowdnav.envs.core import ScenarioSource, checked_residual, load_env_world, option_overrides
 from crowdnav.envs.engine import WorldEngine
 from crowdnav.envs.vector_actions import checked_actions, checked_replay, executed
 from crowdnav.envs.vector_infos import end_infos, every_infos, reward_term_infos, same_step_infos
 from crowdnav.envs.vector_stacked import StackedWorlds
+from crowdnav.envs.vector_stacked_team import StackedTeamWorlds, first_robot_modalities
 from crowdnav.envs.vector_team import TeamWorlds
 from crowdnav.envs.world_state import VectorWorldState, check_state, world_key
 from crowdnav.planning.shield import validate_shield
@@ -73,9 +75,11 @@ class CrowdNavVectorEnv(VectorEnv):
     **Several robots** (a scenario with ``robots:``): world ``i`` is :class:`crowdnav.envs.CrowdNavEnv`
     with the same ``other_robots`` option (the first robot learns, the others follow their scripted
     policy); its infos gain ``other_robots`` (a dict of per-robot arrays, as ``SyncVectorEnv`` lays out the
-    single env's dict). The worlds are then a group of per-world simulators stepped in one call
-    (:class:`crowdnav.envs.vector_team.TeamWorlds`), not one stacked batch: the same episodes, at about the
-    single env's speed per world. The shield is refused there, as by the single env.
+    single env's dict). The worlds are stacked too (:class:`crowdnav.envs.vector_stacked_team.StackedTeamWorlds`:
+    the other robots of every world in the batch, their scripted policy batched), where ``other_robots`` names a
+    policy with a batched twin (``social-force``, ``straight``) and the crowd walks by the social force; else
+    (ORCA, a callable) a group of single envs (:class:`crowdnav.envs.vector_team.TeamWorlds`): the same episodes
+    either way. The shield is refused there, as by the single env.
 
     **Episode seeds.** ``episode_seeds(worlds)`` (optional) gives the seeds of the episodes an
     autoreset starts, for ``worlds`` in ascending order (training numbers its episodes this way,
@@ -128,7 +132,11 @@ class CrowdNavVectorEnv(VectorEnv):
         self.engine: WorldEngine
         # worlds that are plain single envs (one robot): when all step, TeamWorlds.step_every steps them
         self._single_worlds: TeamWorlds | None = None
-        if stacks(world, num_envs):
+        policy = team_policy(other_robots) if world.scenario.robots is not None else None
+        if policy is not None and stacks(world, num_envs, other_robots):  # several robots, stacked
+            stacked = StackedTeamWorlds(world, num_envs, first_robot_modalities(world), policy)
+            self.engine, self.modalities = stacked, stacked.modalities
+        elif stacks(world, num_envs, other_robots):
             self.engine = StackedWorlds(world, num_envs, self.modalities)
         else:  # one single env per world, stepped in one call (crowdnav.envs.vector_team)
             team = TeamWorlds(world, num_envs, other_robots)
@@ -372,10 +380,19 @@ class CrowdNavVectorEnv(VectorEnv):
         return self.engine.simulator(world)
 
 
-def stacks(world: CompiledWorld, num_envs: int) -> bool:
-    """Whether the vector env steps ``num_envs`` worlds of ``world`` stacked (:class:`StackedWorlds`), else as single envs
-    (:class:`TeamWorlds`): one robot per world, more than one world, crowds below :attr:`Simulator.grid_from` humans."""
-    return world.scenario.robots is None and num_envs > 1 and world.scenario.humans.max_count < Simulator.grid_from
+def stacks(world: CompiledWorld, num_envs: int, other_robots: str | Callable[..., Any] = "social-force") -> bool:
+    """Whether the vector env steps ``num_envs`` worlds of ``world`` stacked (:class:`StackedWorlds`; several robots:
+    :class:`crowdnav.envs.vector_stacked_team.StackedTeamWorlds`), else as single envs (:class:`TeamWorlds`): more than one
+    world, crowds below :attr:`Simulator.grid_from` humans; several robots where the stacked team plays what the single env
+    does: the other robots driven by a policy with a batched twin (``other_robots``: :func:`team_policy`) and the crowd's
+    social-force model alone (a view of stacked worlds lists one robot to the other models; a ``robots:`` scenario has no
+    people tracker)."""
+    if num_envs <= 1 or world.scenario.humans.max_count >= Simulator.grid_from:
+        return False
+    if world.scenario.robots is None:
+        return True
+    models = {group.model for _, group in world.scenario.humans.crowd if not group.standing and group.model is not None}
+    return team_policy(other_robots) is not None and models <= {"social_force"}
 
 
 def _check_num_envs(num_envs: Any) -> None:

@@ -3,8 +3,9 @@
 :class:`crowdnav.envs.vector.CrowdNavVectorEnv` holds its worlds here, not in one stacked
 :class:`crowdnav.batch.simulator.BatchSimulator`, where stacking does not pay or does not apply:
 
-* a scenario with ``robots:``: the robots after the first are in each world's :class:`crowdnav.sim.robots.Team`,
-  whose per-robot work (each robot's kinematics, scripted policy, outcome and retirement) is not stacked;
+* a scenario with ``robots:`` whose other robots follow a policy without a batched twin (ORCA, a callable; the
+  named scripted ones run stacked, :mod:`crowdnav.envs.vector_stacked_team`) or whose crowd has ORCA humans:
+  the robots after the first are in each world's :class:`crowdnav.sim.robots.Team`;
 * one world (``num_envs=1``): a batch of one does the single env's array work with a world axis and
   per-step bookkeeping on top (0.36x its env-steps/s, docs/environments.md#one-world-and-crowds-of-200-humans-or-more), so the world is
   the single env itself and ``num_envs`` stays a size: every world count collects through the same vector env;

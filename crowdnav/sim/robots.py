@@ -113,18 +113,18 @@ class Team:
         """(R,) body radii (m), the ego robot first."""
         self.max_speeds = np.array([robot.max_speed for robot in self.specs])
         self.goal_radii = np.array([robot.goal_radius for robot in self.specs])
-        self._human_radius = humans.radius
+        self.human_radius = humans.radius
         # humans pushed by each robot (the ego robot's column of the pair tables, per robot radius)
-        self._push_gain = sf.repulsion_gain(force.robot_strength if humans.see_robot else 0.0, humans.radius + self.radii, force.robot_range)
-        self._push_decay = -1.0 / force.robot_range
+        self.push_gain = sf.repulsion_gain(force.robot_strength if humans.see_robot else 0.0, humans.radius + self.radii, force.robot_range)
+        self.push_decay = -1.0 / force.robot_range
         # the humans' force on each robot: the reward's social term, with the human parameters (row 0 for the ego robot)
-        self._social_gain = sf.repulsion_gain(force.human_strength, humans.radius + self.radii, force.human_range)[:, None]
-        self._social_decay = -1.0 / force.human_range
-        self._obstacles = obstacles
-        self._static_count = obstacles.polygon_count + obstacles.disc_count
-        self._static_contact = self.radii[:, None] + obstacles.surface_radius[None, :]
+        self.social_gain = sf.repulsion_gain(force.human_strength, humans.radius + self.radii, force.human_range)[:, None]
+        self.social_decay = -1.0 / force.human_range
+        self.obstacles = obstacles
+        self.static_count = obstacles.polygon_count + obstacles.disc_count
+        self.static_contact = self.radii[:, None] + obstacles.surface_radius[None, :]
         self._static_labels = obstacles.labels + obstacles.disc_labels
-        self._pair_contact = self.radii[:, None] + self.radii[None, :]
+        self.pair_contact = self.radii[:, None] + self.radii[None, :]
         count = len(self.specs)
         self.state = TeamState(np.zeros(count, complex), np.zeros(count, complex), np.zeros(count, complex), np.zeros(count),
                                np.ones(count + 1, bool), np.full(count + 1, complex(np.nan, np.nan)))
@@ -216,15 +216,15 @@ class Team:
         n = len(positions) - 1
         if n:
             # the (m,) and (m, 1) gains broadcast against the (n, m) and (m, n) pairs
-            repulsion[1:] += sf.repulsion(offset[1:], distance[1:], self._push_gain, self._push_decay)
-            self.social = sf.repulsion(-offset[1:].T, distance[1:].T, self._social_gain, self._social_decay)
+            repulsion[1:] += sf.repulsion(offset[1:], distance[1:], self.push_gain, self.push_decay)
+            self.social = sf.repulsion(-offset[1:].T, distance[1:].T, self.social_gain, self.social_decay)
         else:
             self.social = np.zeros(len(robots), dtype=complex)
         pair = robots[None, :] - robots[:, None]
         self.pair_offset, self.pair_distance = pair, np.abs(pair)
         self.pair_distance.flat[:: len(robots) + 1] = SELF_DISTANCE
-        if self._static_count:
-            self.static_offset, self.static_distance = nearest_on_edges(robots, self._obstacles.surface)
+        if self.static_count:
+            self.static_offset, self.static_distance = nearest_on_edges(robots, self.obstacles.surface)
         else:
             self.static_offset = np.zeros((len(robots), 0), dtype=complex)
             self.static_distance = np.zeros((len(robots), 0))
@@ -242,15 +242,15 @@ class Team:
         if state.active[0]:
             to_robots = self.distance[0] - r0 - self.radii
             to_robots[gone] = np.inf
-            events.append(replace(ego, collision=_with_robot_contact(ego.collision, to_robots, self.names[1:])))
+            events.append(replace(ego, collision=with_robot_contact(ego.collision, to_robots, self.names[1:])))
         else:
             events.append(None)
         # row j: robot j's surface gaps to the ego robot, the other robots, the humans, the obstacles
         to_ego = self.distance[0] - r0 - self.radii if state.active[0] else np.full(len(self.radii), np.inf)
-        to_others = self.pair_distance - self._pair_contact  # the diagonal (itself): a huge gap
+        to_others = self.pair_distance - self.pair_contact  # the diagonal (itself): a huge gap
         to_others[:, gone] = np.inf
-        gaps = np.concatenate([to_ego[:, None], to_others, self.distance[1:].T - self._human_radius - self.radii[:, None],
-                               self.static_distance - self._static_contact], axis=1)
+        gaps = np.concatenate([to_ego[:, None], to_others, self.distance[1:].T - self.human_radius - self.radii[:, None],
+                               self.static_distance - self.static_contact], axis=1)
         touches = touching(gaps)
         positions = state.positions
         reached = goal_distance(state.goals, positions) <= self.goal_radii
@@ -263,7 +263,7 @@ class Team:
             collision = None
             if touches[j]:
                 gap = np.concatenate([[SELF_DISTANCE], gaps[j, 1 + m :]])  # as the ego robot's: itself, the humans, the obstacles
-                collision = _with_robot_contact(deepest_contact(gap, n, self._static_labels) if touching(gap) else None,
+                collision = with_robot_contact(deepest_contact(gap, n, self._static_labels) if touching(gap) else None,
                                                 gaps[j, : 1 + m], self.names)
             events.append(StepEvents(goal_reached=bool(reached[j]), collision=collision, truncated=truncated, left_world=bool(left[j])))
         return events
@@ -290,7 +290,7 @@ def retire_robots(team: Team, ego: SimState, index: np.ndarray | list[int]) -> N
             state.positions[k - 1], state.velocities[k - 1] = PARKED, 0.0
 
 
-def _with_robot_contact(collision: Collision | None, to_robots: np.ndarray, robot_names: list[str]) -> Collision | None:
+def with_robot_contact(collision: Collision | None, to_robots: np.ndarray, robot_names: list[str]) -> Collision | None:
     """A robot's contact with humans or obstacles (``collision``), or its deepest robot contact where that is deeper.
 
     ``to_robots``: its surface gaps to the robots it can touch (``robot_names``, the same order).

@@ -9,19 +9,21 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from crowdnav.batch.robot_policies import social_force_robots
 from crowdnav.envs.core import load_env_world
 from crowdnav.envs.engine import WorldEngine
 from crowdnav.envs.vector_stacked import StackedWorlds
+from crowdnav.envs.vector_stacked_team import StackedTeamWorlds, first_robot_modalities
 from crowdnav.envs.vector_team import TeamWorlds
 from crowdnav.planning.shield import validate_shield
 from crowdnav.worlds.compiled import load_world
 
 ROOT = Path(__file__).resolve().parents[2]
-ENGINE_TYPES = {"BatchSimulator", "TeamWorlds", "StackedWorlds"}
+ENGINE_TYPES = {"BatchSimulator", "TeamWorlds", "StackedWorlds", "StackedTeamWorlds"}
 PROTOCOL = [name for name, member in vars(WorldEngine).items() if inspect.isfunction(member) and not name.startswith("_")]
 
 
-@pytest.mark.parametrize("engine", [StackedWorlds, TeamWorlds])
+@pytest.mark.parametrize("engine", [StackedWorlds, StackedTeamWorlds, TeamWorlds])
 def test_each_engine_has_every_method_of_the_protocol_with_its_parameters(engine: type) -> None:
     for name in PROTOCOL:
         ours = inspect.signature(getattr(engine, name)).parameters
@@ -43,15 +45,18 @@ def test_no_module_branches_on_which_engine_holds_the_worlds() -> None:
 
 def _engines(scenario: str, overrides: dict[str, object], keys: list[str]) -> tuple[StackedWorlds, TeamWorlds, dict[str, np.ndarray]]:
     world, modalities = load_env_world(scenario, {**overrides, "sensors.modalities": keys})
-    stacked = StackedWorlds(world, 3, modalities)
+    if world.scenario.robots is not None:  # several robots: the first robot's modalities, the others driven by the social-force robot
+        stacked: StackedWorlds = StackedTeamWorlds(world, 3, first_robot_modalities(world), social_force_robots)
+    else:
+        stacked = StackedWorlds(world, 3, modalities)
     team = TeamWorlds(world, 3)
     out = {key: np.zeros((3, *modality.space().shape), dtype=modality.space().dtype) for key, modality in team.modalities.items()}
     return stacked, team, out
 
 
-@pytest.mark.parametrize("scenario", ["room_furniture", "open_space"])
+@pytest.mark.parametrize("scenario", ["room_furniture", "open_space", "robots_crossing_hall"])
 def test_stacked_and_single_env_engines_play_the_same_worlds_bit_for_bit(scenario: str) -> None:
-    stacked, team, out = _engines(scenario, {"humans.count": 4}, ["goal", "lidar", "humans", "velocity"])
+    stacked, team, out = _engines(scenario, {"humans.count": 4}, ["goal", "lidar", "humans", "velocity", "closest_obstacle"])
     seeds = [11, 12, 13]
     for engine in (stacked, team):
         engine.reset(np.arange(3), seeds)
@@ -74,6 +79,7 @@ def test_stacked_and_single_env_engines_play_the_same_worlds_bit_for_bit(scenari
             observed.append(values)
         for key in out:
             np.testing.assert_array_equal(observed[0][key], observed[1][key])
+        assert stacked.other_robots(active) == team.other_robots(active)
         np.testing.assert_array_equal(stacked.stalls(), team.stalls())
         np.testing.assert_array_equal(stacked.social_force(), team.social_force())
         for world in range(3):

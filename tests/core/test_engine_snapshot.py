@@ -1,7 +1,8 @@
 """World states (crowdnav.envs.world_state): a world's snapshot, loaded into any world of either engine, plays on bit for bit.
 
-For each engine and every library scenario (plus the tracker profiles, ORCA and reacting recorded crowds, several
-robots driven by ORCA, the residual plan with the shield), a vector env plays seeded random actions, world K is
+For each engine and every library scenario (several robots too: stacked, crowdnav.envs.vector_stacked_team, and as
+single envs; plus the tracker profiles, ORCA and reacting recorded crowds, several robots driven by ORCA, the residual
+plan with the shield), a vector env plays seeded random actions, world K is
 snapshot, and the env plays on, episode ends and autoresets included, recording everything observable of world K
 (observation, reward, flags, infos, frame). The snapshot is then loaded into world K again, and (pickled) into world
 J of fresh envs of each engine reset with other seeds, and the same actions replayed: every record must be equal bit
@@ -26,7 +27,6 @@ from crowdnav.envs.single import CrowdNavEnv
 from crowdnav.envs.vector import CrowdNavVectorEnv
 from crowdnav.envs.world_state import VectorWorldState, WorldState
 from crowdnav.scenario.library import library_names
-from crowdnav.scenario.loader import load_scenario
 from tests.core.test_replay import _replay, _write
 
 K, J, WORLDS = 1, 2, 3
@@ -35,15 +35,15 @@ WARM, AFTER = 20, 50
 MAX_STEPS = {"max_steps": 40}
 
 
-def _robots(name: str) -> bool:
-    return load_scenario(name).robots is not None
+ENGINES = ("stacked", "team")
+STACKED = {"StackedWorlds", "StackedTeamWorlds"}
+"""The stacked engine's classes: one robot per world, several (``robots:``)."""
 
 
 def _cases() -> list[Any]:
     cases = []
     for name in library_names():
-        engines = ("team",) if _robots(name) else ("stacked", "team")
-        cases += [pytest.param(name, {}, engine, id=f"{name}-{engine}") for engine in engines]
+        cases += [pytest.param(name, {}, engine, id=f"{name}-{engine}") for engine in ENGINES]
     tracked = {"modalities": ["goal", "humans", "lidar"]}
     for profile in ("lidar_tracker", "camera_front"):
         cases += [pytest.param("room_furniture", {**tracked, "sensors": {"tracker": profile}}, engine, id=f"{profile}-{engine}")
@@ -54,7 +54,9 @@ def _cases() -> list[Any]:
     cases.append(pytest.param("robots_crossing_hall", {"other_robots": "orca"}, "team", id="robots_orca-team"))
     planned = {"modalities": ["goal", "plan"], "residual": True, "shield": True, "overrides": {"humans.count": 4}}
     for profile in ("perfect", "camera_front"):  # the plan observed at load steers the next step (and reads the tracker's columns)
-        cases += [pytest.param("room_furniture", {**planned, "sensors": {"tracker": profile}}, engine, id=f"residual_shield_{profile}-{engine}")
+        # 10-16 s each: one (the tracker's columns, the stacked engine) stays in the default suite, the others run with -m slow
+        cases += [pytest.param("room_furniture", {**planned, "sensors": {"tracker": profile}}, engine, id=f"residual_shield_{profile}-{engine}",
+                               marks=() if (profile, engine) == ("camera_front", "stacked") else pytest.mark.slow)
                   for engine in ("stacked", "team")]
     return cases
 
@@ -74,9 +76,9 @@ def _options(options: dict[str, Any], tmp_path: Any) -> dict[str, Any]:
 def _env(name: str, options: dict[str, Any], engine: str, monkeypatch: pytest.MonkeyPatch, **extra: Any) -> CrowdNavVectorEnv:
     with monkeypatch.context() as patch:
         if engine == "team":  # one single env per world (the stacked engine's scenarios too)
-            patch.setattr(vector_module, "stacks", lambda world, num_envs: False)
+            patch.setattr(vector_module, "stacks", lambda *args: False)
         env = CrowdNavVectorEnv(name, num_envs=WORLDS, **options, **extra)
-    assert type(env.engine).__name__ == {"stacked": "StackedWorlds", "team": "TeamWorlds"}[engine]
+    assert type(env.engine).__name__ in {"stacked": STACKED, "team": {"TeamWorlds"}}[engine]
     return env
 
 
@@ -162,7 +164,8 @@ def test_a_loaded_world_plays_on_bit_for_bit_in_its_own_world_and_in_another_wor
     assert pickle.dumps(state) == frozen, "a snapshot is a copy: stepping the world leaves it as it was"
     env.load(K, state)
     _assert_same(played, _play(env, K, actions), "loaded into its own world")
-    engines = ("team",) if _robots(name) else ("stacked", "team")
+    # several robots driven by ORCA are single envs either way (no batched ORCA robot)
+    engines = ("team",) if options.get("other_robots") == "orca" else ENGINES
     for target in engines:  # a fresh env of either engine, its worlds reset with other seeds; the pickled state into world J
         other = _env(name, options, target, monkeypatch)
         other.reset(seed=500)
@@ -218,8 +221,10 @@ def test_an_env_never_reset_takes_every_world_from_snapshots_and_plays_on_as_the
         assert _same(expected, got)
 
 
-def test_a_world_whose_other_robot_has_finished_keeps_its_outcome_and_stays_out_alike(monkeypatch):
-    env = _env("robots_crossing_hall", {}, "team", monkeypatch)
+@pytest.mark.parametrize("target", ENGINES)
+@pytest.mark.parametrize("engine", ENGINES)
+def test_a_world_whose_other_robot_has_finished_keeps_its_outcome_and_stays_out_alike_in_either_engine(engine, target, monkeypatch):
+    env = _env("robots_crossing_hall", {}, engine, monkeypatch)
     env.reset(seed=7)
     still = np.zeros((WORLDS, 2))
     for _ in range(150):  # the robots' own policies drive them; the first robot waits
@@ -235,7 +240,7 @@ def test_a_world_whose_other_robot_has_finished_keeps_its_outcome_and_stays_out_
     state = env.snapshot(world)
     actions = _actions(8, 40)
     played = _play(env, world, actions, source=world)
-    other = _env("robots_crossing_hall", {}, "team", monkeypatch)
+    other = _env("robots_crossing_hall", {}, target, monkeypatch)
     other.reset(seed=1)
     target = (world + 1) % WORLDS
     other.load(target, state)
@@ -332,8 +337,19 @@ ATTRIBUTES: dict[str, dict[str, str]] = {
                       **dict.fromkeys(["_tracked", "_weights", "modalities", "num_worlds", "world_key"], NOT_STATE)},
     "BatchSimulator": {"buckets": "episode.state (a row; the geometry is measured again)", "slots": "episode (generator, crowd models)",
                        "_where": "episode.state's crowd size (load moves the row)",
+                       "team": "episode.team (a world's row)",
                        **dict.fromkeys(["_bounds", "_crowd", "_crowds", "_labels", "_polygons", "_static_count", "_substep_dt", "_substeps",
-                                        "_surface", "_unicycle", "dt", "num_worlds", "scenario", "world"], NOT_STATE)},
+                                        "_surface", "dt", "num_worlds", "scenario", "world"], NOT_STATE)},
+    "StackedTeamWorlds": {"_previous_distance": "rewards", "_other_distance": "rewards", "tracker": "tracker", "batch": "episode",
+                          "team": "episode.team", "_outcomes": "env.other_outcomes", "_loaded": "env.observation",
+                          "_leaving": "episode.team (the robots that ended are out of the world in a snapshot)",
+                          **dict.fromkeys(["_policy", "_sees_robots", "_tracked", "_weights", "modalities", "num_worlds", "world_key"], NOT_STATE)},
+    "TeamStack": {**dict.fromkeys(["positions", "velocities", "goals", "headings", "active", "left_at"], "episode.team"),
+                  **dict.fromkeys(["social", "static_offset", "static_distance", "pair_distance", "_agent_distance"],
+                                  "measured again from the positions"),
+                  **dict.fromkeys(["ended", "outcome"], "made by each step before anyone reads them"),
+                  **dict.fromkeys(["_bounds", "_surface", "force", "names", "specs", "static_count", "surface_radius", "team", "team_dt"],
+                                  NOT_STATE)},
     "Simulator": {"_state": "episode.state", "_rng": "episode.rng", "team": "episode.team", "crowd": "episode.crowd",
                   "geometry": "measured again from the positions", "radii": "the crowd size's constants",
                   "robot_events": "made by each step before anyone reads them", "_ready": "set by load",
@@ -383,6 +399,11 @@ def test_every_attribute_of_what_holds_a_world_is_in_a_world_state_or_said_not_t
         else:
             single = env.engine.envs[K]
             held += [env.engine, single, single.core, single.core.reward, single.simulator]
+    robots = _env("robots_crossing_hall", {"overrides": MAX_STEPS}, "stacked", monkeypatch)
+    robots.reset(seed=0)
+    robots.step(np.zeros((WORLDS, 2)))
+    robots.snapshot(K)
+    held += [robots.engine, robots.engine.batch, robots.engine.team, robots.engine.batch.slots[K]]
     for thing in held:
         declared = ATTRIBUTES[type(thing).__name__]
         unknown = sorted(set(vars(thing)) - set(declared))

@@ -14,6 +14,7 @@ from crowdnav.batch.simulator import BatchSimulator
 from crowdnav.envs import CrowdNavEnv
 from crowdnav.envs.vector import CrowdNavVectorEnv, stacks
 from crowdnav.envs.vector_stacked import StackedWorlds
+from crowdnav.envs.vector_stacked_team import StackedTeamWorlds
 from crowdnav.envs.vector_team import TeamWorlds
 from crowdnav.worlds.compiled import load_world
 from tests.core.test_vector_env import ALL, _compare_with_sync
@@ -21,14 +22,19 @@ from tests.core.test_vector_env import ALL, _compare_with_sync
 FIGURE4 = {"humans.count": 5, "humans.preferred_speed": [0.5, 1.2]}
 
 
-def test_the_vector_env_stacks_several_one_robot_worlds_of_small_crowds_only(monkeypatch):
-    world = load_world("room_furniture")
-    assert stacks(world, 2) and not stacks(world, 1) and not stacks(load_world("robots_crossing_hall"), 2)
+def test_the_vector_env_stacks_several_worlds_of_small_crowds_and_robot_teams_whose_policy_and_crowd_it_batches(monkeypatch):
+    world, robots = load_world("room_furniture"), load_world("robots_crossing_hall")
+    assert stacks(world, 2) and not stacks(world, 1)
+    assert stacks(robots, 2) and stacks(robots, 2, "straight") and not stacks(robots, 1)
+    assert not stacks(robots, 2, "orca") and not stacks(robots, 2, lambda view: np.zeros(2))  # no batched twin: single envs
+    assert not stacks(load_world("robots_crossing_hall", {"humans.model": "orca"}), 2)  # the stacked crowd view lists one robot
     monkeypatch.setattr(Simulator, "grid_from", world.scenario.humans.max_count)  # (no library scenario holds 200 humans)
     assert not stacks(world, 2)
     monkeypatch.undo()
     assert isinstance(CrowdNavVectorEnv("room_furniture", 1, modalities=["goal"]).engine, TeamWorlds)
     assert isinstance(CrowdNavVectorEnv("room_furniture", 2, modalities=["goal"]).engine, StackedWorlds)
+    assert isinstance(CrowdNavVectorEnv("robots_crossing_hall", 2).engine, StackedTeamWorlds)
+    assert isinstance(CrowdNavVectorEnv("robots_crossing_hall", 2, other_robots=lambda view: np.zeros(2)).engine, TeamWorlds)
 
 
 @pytest.mark.parametrize("mode", [AutoresetMode.NEXT_STEP, AutoresetMode.SAME_STEP])
