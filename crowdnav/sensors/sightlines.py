@@ -26,7 +26,6 @@ from typing import TYPE_CHECKING, NamedTuple
 
 import numpy as np
 
-from crowdnav.sensors.runs import expand_runs
 from crowdnav.sensors.static_edges import oriented_edges
 
 if TYPE_CHECKING:
@@ -42,7 +41,9 @@ TURN = 2.0 * math.pi
 BINS = 64
 """Bearing bins per turn (5.6 degrees each): a blocker is paired with the rays of every bin its bearing interval touches."""
 _SCALE = BINS / TURN
-_SLACK = BEARING_SLACK * _SCALE
+_SLACKS = np.array([[-BEARING_SLACK * _SCALE], [BEARING_SLACK * _SCALE]])
+"""Added to the (low, high) bearings of a blocker, in bin units (``low + -s`` is ``low - s``, exactly)."""
+_ONES = np.ones(RAYS, dtype=np.uint8)
 
 
 class Sightlines:
@@ -55,7 +56,7 @@ class Sightlines:
         self._edge_cross = (self._edge_start.conj() * self._edge_vector).imag  # cross(start, vector): from the origin
         self._disc_center = np.asarray(world.obstacles.disc_center, dtype=complex)
         self._disc_radius = np.asarray(world.obstacles.disc_radius, dtype=float)
-        self._radii: dict[bytes, tuple[np.ndarray, np.ndarray]] = {}
+        self._tables: dict[tuple[bytes, int], Tables] = {}
 
     def visible_fraction(self, robot: np.ndarray, toward: np.ndarray, distance: np.ndarray, radii: np.ndarray,
                          candidate: np.ndarray) -> np.ndarray:
@@ -65,108 +66,142 @@ class Sightlines:
         robot (complex) and its length; ``radii``: (n,) their radii; ``candidate``: (K, n) bool, the people
         to test (the robot outside their disc). Every person blocks the others' rays, candidate or not.
         """
-        out = np.zeros(toward.shape)
-        world, person = np.nonzero(candidate)
-        if not len(world):
+        k, n = toward.shape
+        out = np.zeros((k, n))
+        flat = np.flatnonzero(candidate)
+        if not len(flat):
             return out
-        centre = toward[world, person][:, None]
-        rays = (centre + (radii[person] / distance[world, person])[:, None] * (centre * _ACROSS)).ravel()
+        world, person = np.divmod(flat, n)
+        centre = toward.ravel()[flat][:, None]
+        rays = (centre + (radii[person] / distance.ravel()[flat])[:, None] * (centre * _ACROSS)).ravel()
         count = len(rays)
+        tables = self._tables_of(radii, k)
+        scene = self._scene(robot, toward, distance, tables)
+        # bearings in bin units from -pi, in one arctan2: the rays, then the blockers' points
+        points = np.concatenate([rays, scene.points])
+        bearing = (np.arctan2(points.imag, points.real) + math.pi) * _SCALE
         # each ray in its bearing bin and again a turn later, per world: 2 * BINS slots a world
-        slot = np.minimum(((np.arctan2(rays.imag, rays.real) + math.pi) * _SCALE).astype(np.intp), BINS - 1)
-        slot += world.repeat(RAYS) * (2 * BINS)
+        slot = bearing[:count].astype(np.intp)
+        np.minimum(slot, BINS - 1, out=slot)
+        slot += (world * (2 * BINS)).repeat(RAYS)
         slots = np.concatenate([slot, slot + BINS])
-        order = np.argsort(slots, kind="stable")
-        starts = np.zeros(len(toward) * 2 * BINS + 1, dtype=np.intp)
-        np.cumsum(np.bincount(slots, minlength=len(toward) * 2 * BINS), out=starts[1:])
-        blockers = self._blockers(robot, toward, distance, radii)
-        position, ends = expand_runs(starts[blockers.first], starts[blockers.end] - starts[blockers.first])
-        ray = order[position] % count
-        edge_pairs = int(ends[blockers.edges - 1]) if blockers.edges else 0
-        blocker = np.arange(len(blockers.first)).repeat(np.diff(ends, prepend=0))
-        blocked = np.zeros(count, dtype=bool)
+        if k * 2 * BINS <= 1 << 16:  # 16-bit keys: numpy's stable sort is then a radix sort (the same order, faster)
+            slots = slots.astype(np.uint16)
+        order = slots.argsort(kind="stable") % count
+        starts = np.zeros(k * 2 * BINS + 1, dtype=np.intp)
+        np.cumsum(np.bincount(slots, minlength=k * 2 * BINS), out=starts[1:])
+        # the (ray, blocker) pairs: blocker b meets the sorted rays at positions [start, stop) (none if it cannot block)
+        start, stop = starts[_blocker_slots(bearing[count:], scene, tables)]
+        runs = stop - start
+        ends = runs.cumsum()
+        blocker = np.arange(len(runs)).repeat(runs)
+        ray = order[np.arange(int(ends[-1])) + (start + runs - ends)[blocker]]
+        edge_pairs = int(ends[scene.edges - 1]) if scene.edges else 0
         # Edge a + s v (s in [0, 1]), ray t z (t in (0, 1)): t = cross(a, v) / cross(z, v), s = cross(a, z) / cross(z, v).
         # With cross(a, v) < 0 (a facing edge) both hold exactly when cross(z, v) < cross(a, v) and cross(z, v) <= cross(a, z) <= 0.
         e, re = blocker[:edge_pairs], ray[:edge_pairs]
         z = rays[re]
-        den = (z.conj() * blockers.vector[e]).imag
-        along = (blockers.start[e].conj() * z).imag
-        blocked[re[(den < blockers.cross[e]) & (den <= along) & (along <= 0.0)]] = True
+        den = (z.conj() * tables.vector[e]).imag
+        along = (scene.start[e].conj() * z).imag
+        hit_edge = (den < scene.cross[e]) & (den <= along) & (along <= 0.0)
         # Disc: the segment [0, z] passes closer than r to the centre c: the nearest point is tau z, tau = clip(<z, c> / |z|^2, 0, 1).
-        d, rd = blocker[edge_pairs:] - blockers.edges, ray[edge_pairs:]
-        z, c = rays[rd], blockers.center[d]
-        tau = np.clip((z.conj() * c).real / (z.real * z.real + z.imag * z.imag), 0.0, 1.0)
+        d, rd = blocker[edge_pairs:] - scene.edges, ray[edge_pairs:]
+        # a ray never blocks on its own person's disc (disc world * discs + person): those pairs are dropped first
+        other = np.flatnonzero(d != (world * len(tables.radius) + person).repeat(RAYS)[rd])
+        d, rd = d[other], rd[other]
+        z, c = rays[rd], scene.center[d]
+        tau = ((z.conj() * c).real / (z.real * z.real + z.imag * z.imag)).clip(0.0, 1.0)
         gap = c - tau * z
-        hit = (gap.real * gap.real + gap.imag * gap.imag < blockers.radius2[d]) & (blockers.person[d] != person[rd // RAYS])
-        blocked[rd[hit]] = True  # (a ray never blocks on its own person)
-        out[world, person] = (~blocked).reshape(-1, RAYS).sum(1) * (1.0 / RAYS)
+        hit_disc = gap.real * gap.real + gap.imag * gap.imag < tables.radius2[d]
+        blocked = np.zeros(count, dtype=bool)
+        blocked[np.concatenate([re[hit_edge], rd[hit_disc]])] = True
+        clear = RAYS - blocked.view(np.uint8).reshape(-1, RAYS) @ _ONES  # a matrix product: numpy's row sum is slow
+        out.reshape(-1)[flat] = clear * (1.0 / RAYS)
         return out
 
-    def _blockers(self, robot: np.ndarray, toward: np.ndarray, distance: np.ndarray, radii: np.ndarray) -> Blockers:
-        """Every world's facing polygon edges, then its discs (people, then round furniture) that do not hold the robot."""
-        k, n = toward.shape
+    def _scene(self, robot: np.ndarray, toward: np.ndarray, distance: np.ndarray, tables: Tables) -> Scene:
+        """Every world's every edge, then its every disc (people, then round furniture), relative to its robot.
+
+        Dense (world-major, one row per blocker whether or not it can block): what cannot block (an edge facing away,
+        a disc holding the robot's centre) is a blocker with no bins, cheaper than gathering the others."""
+        n = toward.shape[1]
         cross = self._edge_cross - (robot.conj()[:, None] * self._edge_vector).imag  # cross(start - robot, vector): < 0 facing
-        edge_world, edge = np.nonzero(cross < 0.0)
-        start = self._edge_start[edge] - robot[edge_world]
-        vector = self._edge_vector[edge]
+        start = self._edge_start - robot[:, None]
         if len(self._disc_center):
-            furniture = self._disc_center - robot[:, None]
-            centers, distances = np.concatenate([toward, furniture], axis=1), np.concatenate([distance, np.abs(furniture)], axis=1)
+            centers = np.concatenate([toward, self._disc_center - robot[:, None]], axis=1)
+            distances = np.concatenate([distance, np.abs(centers[:, n:])], axis=1)
         else:
             centers, distances = toward, distance
-        radius, person_of = self._disc_tables(radii)
-        disc_world, disc = np.nonzero(distances > radius)  # a disc holding the robot's centre is transparent
-        center, r = centers[disc_world, disc], radius[disc]
-        # Bearings in bin units from -pi, in one arctan2: edge ends, edge starts, disc centres. Seen from outside, an
-        # edge runs clockwise: from its end to its start; a disc spans its centre's bearing +- arcsin(r / d) <= r / d pi / 2.
-        m = len(edge)
-        points = np.concatenate([start + vector, start, center])
-        bearing = (np.arctan2(points.imag, points.real) + math.pi) * _SCALE
-        half = np.minimum(r / distances[disc_world, disc], 2.0) * (BINS / 4.0)
-        low = np.concatenate([bearing[:m], bearing[2 * m :] - half])
-        high = np.concatenate([bearing[m : 2 * m], bearing[2 * m :] + half])
-        high[:m][high[:m] < low[:m]] += BINS  # an edge across the turn
-        first = np.floor(low - _SLACK).astype(np.intp)
-        end = np.minimum(np.floor(high + _SLACK).astype(np.intp) + 1, first + BINS)  # at most a turn (each ray once)
-        turned = BINS * (first < 0)  # an interval from below -pi: its run a turn later
-        first += turned
-        end += turned
-        base = np.concatenate([edge_world, disc_world]) * (2 * BINS)
-        return Blockers(edges=m, first=first + base, end=end + base, start=start, vector=vector, cross=cross[edge_world, edge],
-                        center=center, radius2=r * r, person=person_of[disc])
+        # an edge facing away, a disc holding the robot's centre (transparent)
+        idle = np.concatenate([cross >= 0.0, distances <= tables.radius], axis=None)
+        # Seen from outside, an edge runs clockwise: from its end to its start; a disc spans its centre's bearing +- arcsin(r / d)
+        # <= r / d pi / 2 (r / d < 1; an idle disc: any finite span, it has no bins)
+        half = tables.radius / np.maximum(distances, tables.radius) * (BINS / 4.0)
+        points = np.concatenate([start + self._edge_vector, start, centers], axis=None)  # edge ends, edge starts, disc centres
+        return Scene(edges=start.size, points=points, half=half.ravel(), idle=idle, start=start.ravel(), cross=cross.ravel(),
+                     center=centers.ravel())
 
-    def _disc_tables(self, radii: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """(radius, person index or -1) of every disc: the people (``radii``), then the round furniture."""
-        key = radii.tobytes()
-        tables = self._radii.get(key)
+    def _tables_of(self, radii: np.ndarray, k: int) -> Tables:
+        """The per-blocker constants of K worlds of people of ``radii`` (cached: one entry per crowd size and world count)."""
+        key = (radii.tobytes(), k)
+        tables = self._tables.get(key)
         if tables is None:
-            if len(self._radii) > 64:  # bounded: one entry per crowd size
-                self._radii.clear()
-            n = len(radii)
-            person = np.concatenate([np.arange(n), np.full(len(self._disc_radius), -1)])
-            tables = self._radii[key] = (np.concatenate([radii, self._disc_radius]), person)
+            if len(self._tables) > 64:  # bounded
+                self._tables.clear()
+            radius = np.concatenate([radii, self._disc_radius])
+            base = np.arange(k) * (2 * BINS)
+            tables = self._tables[key] = Tables(radius=radius, radius2=np.tile(radius * radius, k), vector=np.tile(self._edge_vector, k),
+                                                base=np.concatenate([base.repeat(len(self._edge_vector)), base.repeat(len(radius))]))
         return tables
 
 
-class Blockers(NamedTuple):
-    """What can block a ray, over all worlds: ``edges`` facing polygon edges, then discs; per blocker the run of
-    (world, bin) slots its bearing interval covers, and its geometry relative to the robot."""
+def _blocker_slots(bearing: np.ndarray, scene: Scene, tables: Tables) -> np.ndarray:
+    """(2, blockers) int: each blocker's first slot (world * 2 BINS + bin) and one past its last, from the bearings (bin
+    units) of its points; equal (no bins) for one that cannot block."""
+    m = scene.edges
+    bounds = np.empty((2, len(scene.idle)))  # the low and high bearing of every blocker
+    bounds[:, :m] = bearing[: 2 * m].reshape(2, m)
+    np.subtract(bearing[2 * m :], scene.half, out=bounds[0, m:])
+    np.add(bearing[2 * m :], scene.half, out=bounds[1, m:])
+    np.add(bounds[1, :m], BINS, out=bounds[1, :m], where=bounds[1, :m] < bounds[0, :m])  # an edge across the turn
+    slots: np.ndarray = np.floor(bounds + _SLACKS).astype(np.intp)
+    first, end = slots
+    end += 1
+    np.minimum(end, first + BINS, out=end)  # at most a turn (each ray once)
+    slots += BINS * (first < 0) + tables.base  # an interval from below -pi: its run a turn later; then the world's slots
+    np.copyto(end, first, where=scene.idle)
+    return slots
+
+
+class Scene(NamedTuple):
+    """Every world's every blocker relative to its robot (world-major): ``edges`` polygon edges, then discs."""
 
     edges: int
-    first: np.ndarray
-    """(edges + discs,) its first slot (world * 2 BINS + bin)."""
-    end: np.ndarray
-    """(edges + discs,) one past its last slot."""
+    points: np.ndarray
+    """(2 edges + discs,) complex: the edges' ends, their starts, the discs' centres (from the robot)."""
+    half: np.ndarray
+    """(discs,) a disc's bearing half-width bound, in bins."""
+    idle: np.ndarray
+    """(edges + discs,) bool: it cannot block (an edge facing away from the robot, a disc holding the robot's centre)."""
     start: np.ndarray
-    """The facing edges' starts (complex, from the robot)."""
-    vector: np.ndarray
+    """(edges,) complex: the edges' starts (from the robot)."""
     cross: np.ndarray
-    """The facing edges' cross(start, vector) < 0."""
+    """(edges,) cross(start, vector), < 0 facing."""
     center: np.ndarray
-    """The discs' centres (complex, from the robot)."""
+    """(discs,) complex: the discs' centres (from the robot)."""
+
+
+class Tables(NamedTuple):
+    """The constants of K worlds' blockers for one crowd: per disc, and per blocker of every world (world-major)."""
+
+    radius: np.ndarray
+    """(n + round furniture,) the disc radii: the people, then the round furniture."""
     radius2: np.ndarray
-    person: np.ndarray
-    """A disc's person index (-1: furniture): a ray never blocks on its own person."""
+    """(K discs,) squared radius."""
+    vector: np.ndarray
+    """(K edges,) complex: the edge's vector."""
+    base: np.ndarray
+    """(K edges + K discs,) the blocker's world's first slot."""
 
 
 def _may_block(start: np.ndarray, vector: np.ndarray, world: CompiledWorld) -> np.ndarray:

@@ -161,25 +161,26 @@ class PeopleTracker:
         ``radii``: (n+1,) shared by the K worlds.
         """
         rows = np.asarray(worlds, dtype=np.intp)
-        fresh = self._fresh[rows]
-        self._step[rows] += ~fresh
-        self._fresh[rows] = False
-        self._robot[rows] = positions[:, 0]
         n = positions.shape[1] - 1
         if n > self._alive.shape[1]:  # more people than the scenario's max_count (a scene staged by hand)
             self._allocate(n)
         full = self._covers(rows, n)
         # every world's every person (the usual batch): views of the state, updated in place; else gathered copies
         at: tuple[Any, Any] = (slice(None), slice(None)) if full else (rows[:, None], np.arange(n)[None, :])
+        sel = slice(None) if full else rows  # the worlds' rows of the per-world state
+        fresh = self._fresh[rows]
+        self._step[sel] += ~fresh
+        self._fresh[sel] = False
+        self._robot[sel] = positions[:, 0]
         if n:
-            self._observe(at, not full, rows, fresh, positions, heading, radii[1:])
-        self._publish(at, rows, n, positions[:, 0], robot_velocity)
+            self._observe(at, not full, sel, fresh, positions, heading, radii[1:])
+        self._publish(at, sel, n, positions[:, 0], robot_velocity)
 
     def _covers(self, rows: np.ndarray, n: int) -> bool:
         """``rows`` are all the worlds in order and ``n`` all the people: the state's own arrays serve, as views."""
         return len(rows) == self.num_worlds and n == self._alive.shape[1] and bool((rows == self._all).all())
 
-    def _publish(self, at: tuple[Any, Any], rows: np.ndarray, n: int, robot: np.ndarray, robot_velocity: np.ndarray) -> None:
+    def _publish(self, at: tuple[Any, Any], rows: np.ndarray | slice, n: int, robot: np.ndarray, robot_velocity: np.ndarray) -> None:
         """Make the readers' columns of ``rows`` from the tracks now."""
         positions, velocities, offset, distance = self._columns
         reported = self._alive[at] & self._confirmed[at]
@@ -239,15 +240,19 @@ class PeopleTracker:
 
     # ---------------------------------------------------------------- one step
 
-    def _observe(self, at: tuple[Any, Any], gathered: bool, rows: np.ndarray, fresh: np.ndarray, positions: np.ndarray,
+    def _observe(self, at: tuple[Any, Any], gathered: bool, rows: np.ndarray | slice, fresh: np.ndarray, positions: np.ndarray,
                  heading: np.ndarray, radius: np.ndarray) -> None:
         """This step's detections and the tracks' new estimates; ``at`` indexes the state arrays' (rows, people), as views
-        (``gathered`` False) or copies written back at the end."""
+        (``gathered`` False) or copies written back at the end.
+
+        Every (world, person) entry is updated on its own, as dense arrays: a detection's updates are ufuncs with
+        ``where=detected`` (the entries not detected keep their values, bit for bit), cheaper than gathering the detections.
+        """
         values, now, window = self.values, self._step[rows], self.values.window
         detected, measured, draws = self._detect(rows, now, positions, heading, radius)
         alive, hits, last_seen = self._alive[at], self._hits[at], self._last_seen[at]
-        count, steps, squares = self._moments[:, at[0], at[1]]
-        total, weighted = self._sums[:, at[0], at[1]]
+        moments, sums = self._moments[:, at[0], at[1]], self._sums[:, at[0], at[1]]
+        count, steps, squares, total, weighted = moments[0], moments[1], moments[2], sums[0], sums[1]
         # the window's detections are a step older (a fresh world's tracks are empty: nothing moves)
         squares += count - 2.0 * steps
         steps -= count
@@ -257,31 +262,33 @@ class PeopleTracker:
         alive &= (draws[..., 1] >= values.drop_probability) & (detected | (now[:, None] - last_seen <= values.max_missed))
         new = detected & (~alive | (np.abs(measured - predicted) > GATE))
         hits[new] = 0
-        for moment in (count, steps, squares, total, weighted):
-            moment[new] = 0.0
-        world, person = np.nonzero(detected)
-        slot = hits[world, person] % window
-        ring, ring_at = self._measured[at], self._measured_at[at]
+        moments[:, new] = 0.0
+        sums[:, new] = 0.0
+        # each track's window slot for this detection, as an index into the flat ring (C-contiguous: views or fresh copies)
+        k, n = hits.shape
+        slot = _ring_rows(k, n, window) + hits % window
+        ring, ring_at = self._measured[at].reshape(-1), self._measured_at[at].reshape(-1)
+        held, held_at = ring[slot], ring_at[slot]
         # a full window drops its oldest detection (the slot the new one takes)
-        full = count[world, person] >= window
-        old_at = np.where(full, ring_at[world, person, slot] - now[world], 0.0)
-        old = np.where(full, ring[world, person, slot], 0.0)
-        count[world, person] -= full
-        steps[world, person] -= old_at
-        squares[world, person] -= old_at * old_at
-        total[world, person] -= old
-        weighted[world, person] -= old_at * old
+        full = count >= window
+        old_at = np.where(full, held_at - now[:, None], 0.0)
+        old = np.where(full, held, 0.0)
+        np.subtract(count, full, out=count, where=detected)
+        np.subtract(steps, old_at, out=steps, where=detected)
+        np.subtract(squares, old_at * old_at, out=squares, where=detected)
+        np.subtract(total, old, out=total, where=detected)
+        np.subtract(weighted, old_at * old, out=weighted, where=detected)
         # ... and takes the new one, at 0 steps before now
-        ring[world, person, slot] = measured[world, person]
-        ring_at[world, person, slot] = now[world]
-        count[world, person] += 1.0
-        total[world, person] += measured[world, person]
+        ring[slot] = np.where(detected, measured, held)
+        ring_at[slot] = np.where(detected, now[:, None], held_at)
+        np.add(count, 1.0, out=count, where=detected)
+        np.add(total, measured, out=total, where=detected)
         hits += detected
         alive |= detected
         confirmed = (self._confirmed[at] & ~new) | (hits >= values.confirm_hits) | (alive & fresh[:, None])
-        last_seen[detected] = np.broadcast_to(now[:, None], detected.shape)[detected]
+        np.copyto(last_seen, now[:, None], where=detected)
         latest = self._latest[at]
-        latest[detected] = measured[detected]
+        np.copyto(latest, measured, where=detected)
         # least squares through the window: slope = cov(step, position) / var(step); one detection: slope 0
         tracks = np.maximum(count, 1.0)
         mean = steps / tracks
@@ -289,15 +296,14 @@ class PeopleTracker:
         slope = (weighted - mean * total) / np.where(spread > 0.0, spread, np.inf)  # metres per step
         if gathered:
             self._alive[at], self._hits[at], self._last_seen[at], self._latest[at] = alive, hits, last_seen, latest
-            self._measured[at], self._measured_at[at] = ring, ring_at
-            self._moments[:, at[0], at[1]] = np.stack([count, steps, squares])
-            self._sums[:, at[0], at[1]] = np.stack([total, weighted])
+            self._measured[at], self._measured_at[at] = ring.reshape(k, n, window), ring_at.reshape(k, n, window)
+            self._moments[:, at[0], at[1]], self._sums[:, at[0], at[1]] = moments, sums
         self._confirmed[at] = confirmed
         # the latest detection, moved on at the estimated velocity while the track coasts
         self._position[at] = np.where(alive, latest + slope * (now[:, None] - last_seen), 0.0)
         self._velocity[at] = np.where(alive, slope * (1.0 / self.dt), 0.0)
 
-    def _detect(self, rows: np.ndarray, now: np.ndarray, positions: np.ndarray, heading: np.ndarray,
+    def _detect(self, rows: np.ndarray | slice, now: np.ndarray, positions: np.ndarray, heading: np.ndarray,
                 radius: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(detected (K, n) bool, measured positions (K, n) complex, this step's draws (K, n, 4))."""
         values, robot, people = self.values, positions[:, 0], positions[:, 1:]
@@ -312,10 +318,26 @@ class PeopleTracker:
         if self.sight is not None:
             detected &= self.sight.visible_fraction(robot, toward, distance, radius, detected) >= self.values.min_visible - 1e-9
         across, along = normal_pair(draws[..., 2], draws[..., 3])
-        sigma = values.position_noise + values.position_noise_per_m * distance
+        # the spread (a number where it does not grow with distance: p + 0 * d is p + 0, bit for bit, as d >= 0)
+        per_m = values.position_noise_per_m
+        sigma = values.position_noise + per_m * distance if per_m else values.position_noise + per_m
         noise = np.empty(people.shape, dtype=complex)
         noise.real, noise.imag = sigma * across, sigma * along
         return detected, people + noise, draws
+
+
+_RING_ROWS: dict[tuple[int, int, int], np.ndarray] = {}
+
+
+def _ring_rows(k: int, n: int, window: int) -> np.ndarray:
+    """(k, n) int: each track's first index in a flat (k, n, window) detection ring (cached: one entry per batch shape)."""
+    rows = _RING_ROWS.get((k, n, window))
+    if rows is None:
+        if len(_RING_ROWS) > 64:  # bounded
+            _RING_ROWS.clear()
+        rows = _RING_ROWS[k, n, window] = np.arange(0, k * n * window, window).reshape(k, n)
+    return rows
+
 
 def make_tracker(world: CompiledWorld, num_worlds: int) -> PeopleTracker | None:
     """The tracker of ``world``'s scenario (``sensors.tracker``) for ``num_worlds`` worlds; None for ``perfect``."""

@@ -26,7 +26,8 @@ DRAWS = 4
 _GAMMA = np.uint64(0x9E3779B97F4A7C15)  # SplitMix64's increment: counter c maps to key + c * gamma, then the mix
 _MIX1 = np.uint64(0xBF58476D1CE4E5B9)
 _MIX2 = np.uint64(0x94D049BB133111EB)
-_STEP_SHIFT = np.uint64(24)  # counter = step << 24 | person << 8 | draw
+_STEP_GAMMA = np.uint64((0x9E3779B97F4A7C15 << 24) % 2**64)  # counter = step << 24 | person << 8 | draw: (step << 24) * gamma
+_30, _27, _31, _11 = (np.uint64(bits) for bits in (30, 27, 31, 11))
 _TAILS: dict[int, np.ndarray] = {}
 
 
@@ -59,14 +60,19 @@ def uniforms(keys: np.ndarray, steps: np.ndarray, persons: int) -> np.ndarray:
     (k, person, draw) is SplitMix64's output at ``keys[k] + counter * gamma`` (counter = step << 24 |
     person << 8 | draw): it depends on its key, step, person and draw alone. uint64 arithmetic wraps.
     """
-    base = keys + (steps.astype(np.uint64) << _STEP_SHIFT) * _GAMMA
+    base = keys + steps.astype(np.uint64) * _STEP_GAMMA  # (step << 24) * gamma, modulo 2^64
     z = base[:, None, None] + _tail(persons)
-    z ^= z >> np.uint64(30)
+    shifted = z >> _30  # the mix in place, one scratch array
+    z ^= shifted
     z *= _MIX1
-    z ^= z >> np.uint64(27)
+    np.right_shift(z, _27, out=shifted)
+    z ^= shifted
     z *= _MIX2
-    z ^= z >> np.uint64(31)
-    draws: np.ndarray = (z >> np.uint64(11)).astype(np.float64) * 2.0**-53  # the top 53 bits: every double of [0, 1) on a 2^-53 grid
+    np.right_shift(z, _31, out=shifted)
+    z ^= shifted
+    np.right_shift(z, _11, out=z)
+    draws: np.ndarray = z.astype(np.float64)
+    draws *= 2.0**-53  # the top 53 bits: every double of [0, 1) on a 2^-53 grid
     return draws
 
 
