@@ -28,7 +28,8 @@ def test_shipped_experiments_cover_figure_4_the_default_and_the_reference_agents
                                           "anticipate_circle_sarl_rl_bound", "robots_goal_frame", "room_sarl_figure4",
                                           "track_crowded_open_space", "track_station_hall", "track_robots_crossing_hall",
                                           "recurrent_crowded_open_space", "room_sarl_ensemble_figure4",
-                                          "room_sarl_figure4_lidar_tracker", "room_sarl_room", "room_sarl_station_hall"}
+                                          "room_sarl_figure4_lidar_tracker", "room_sarl_room", "room_sarl_station_hall",
+                                          "room_sarl_crowded_open_space"}
     labels = {name: [c.name for c in load_experiment(name).configurations] for name in shipped_experiments()}
     assert labels["encoders"] == ["frozen", "finetune", "scratch"]
     assert labels["modalities"] == labels["modalities_paper"] == ["leog", "lidar", "closest_obstacle"]
@@ -276,7 +277,8 @@ def test_room_sarl_lidar_tracker_experiment_is_room_sarl_figure4_in_the_figure4_
     assert lidar.protocol == perfect.protocol
 
 
-@pytest.mark.parametrize("experiment_name, track_name", [("room_sarl_room", "room"), ("room_sarl_station_hall", "station_hall")])
+@pytest.mark.parametrize("experiment_name, track_name", [("room_sarl_room", "room"), ("room_sarl_station_hall", "station_hall"),
+                                                              ("room_sarl_crowded_open_space", "crowded_open_space")])
 def test_room_sarl_track_experiments_are_room_sarl_figure4s_recipe_in_their_tracks_setting(experiment_name, track_name):
     """The Figure-4 recipe unchanged (not tuned per track), trained in the setting of the track it is published on."""
     from crowdnav.evaluation.track import load_track
