@@ -11,6 +11,7 @@ from crowdnav.agents import GridDataset, collect_grids, load_dataset, load_encod
 from crowdnav.agents.training.wrappers import TRAIN_SEED_BASE, dataset_seed
 
 
+@pytest.mark.slow  # 19 s of pre-training
 def test_pretraining_cuts_the_held_out_reconstruction_loss_at_least_5x_on_the_furniture_room(tmp_path):
     torch.set_num_threads(1)
     grids = collect_grids("room_furniture", 2_000, seed=0)

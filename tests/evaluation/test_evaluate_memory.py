@@ -6,6 +6,7 @@ from __future__ import annotations
 import subprocess
 import sys
 
+import pytest
 from crowdnav.evaluation import evaluate
 
 TINY = {"max_steps": 3, "humans.count": 1}
@@ -28,6 +29,7 @@ def _peak_kb(episodes: int) -> int:
     return int(done.stdout.split()[-1])
 
 
+@pytest.mark.slow  # a 10 s soak
 def test_peak_memory_of_an_evaluation_does_not_grow_with_its_episodes():
     few, many = _peak_kb(300), _peak_kb(1300)
     assert many - few < PER_EPISODE_KB * 1000, f"{few} KiB for 300 episodes, {many} KiB for 1300"

@@ -151,6 +151,7 @@ def test_ray_on_a_running_cluster_gives_row_for_row_the_local_executors_results(
     assert {path: path.stat().st_mtime_ns for path in stamps} == stamps  # finished runs skipped, never rewritten
 
 
+@pytest.mark.slow  # 6-19 s on a cluster; the row-for-row cluster test stays in the default suite
 def test_pretrained_encoder_reaches_runs_that_work_outside_the_results_folder(cluster, tmp_path):
     document = tiny_frozen_encoder_document()
     experiment = experiment_from_mapping(document)
@@ -195,6 +196,7 @@ def _kill_in_the_middle_of_training(cluster: Cluster, run_dir: Path, killed: lis
     return thread
 
 
+@pytest.mark.slow  # 6-19 s on a cluster; the row-for-row cluster test stays in the default suite
 def test_killed_worker_is_retried_and_its_run_resumes_from_its_checkpoint(cluster, tmp_path):
     experiment = experiment_from_mapping(tiny_experiment_document(seeds=1, train_episodes=12, eval_every=2))
     killed = []  # default storage: the results folder itself, where the killer watches the run
@@ -213,6 +215,7 @@ def test_killed_worker_is_retried_and_its_run_resumes_from_its_checkpoint(cluste
     assert meta["resumed"]  # the retry went on from the checkpoint instead of starting over
 
 
+@pytest.mark.slow  # 6-19 s on a cluster; the row-for-row cluster test stays in the default suite
 def test_worker_killed_more_often_than_the_retries_allow_is_a_failed_run(cluster, tmp_path):
     document = tiny_experiment_document(seeds=1, train_episodes=12, eval_every=2)
     document["configurations"] = document["configurations"][:1]
@@ -229,6 +232,7 @@ def test_worker_killed_more_often_than_the_retries_allow_is_a_failed_run(cluster
     assert not (tmp_path / "tiny" / "lidar" / "seed_0" / "meta.json").exists()
 
 
+@pytest.mark.slow  # 6-19 s on a cluster; the row-for-row cluster test stays in the default suite
 def test_run_that_raises_is_reported_with_its_traceback_and_the_others_finish(cluster, tmp_path):
     scenario = tmp_path / "doomed.yaml"
     shutil.copy(library_dir() / "open_space.yaml", scenario)
