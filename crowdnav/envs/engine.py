@@ -27,6 +27,7 @@ if TYPE_CHECKING:
     from crowdnav.envs.world_state import WorldState
     from crowdnav.planning.shield import Shield
     from crowdnav.sensors import Modality
+    from crowdnav.sim.robots import TeamState
     from crowdnav.sim.simulator import Simulator
 
 Judged = tuple[np.ndarray, np.ndarray, dict[str, np.ndarray]]
@@ -100,8 +101,14 @@ def world_frame(sim: Any) -> dict[str, np.ndarray]:
     if sim.team is None:
         return {"positions": sim.positions.copy(), "velocities": sim.velocities.copy(),
                 "goals": np.concatenate([[sim.robot_goal], sim.human_goals]), "respawns": sim.human_respawns.copy()}
-    team = sim.team.state
+    own = {"positions": sim.positions, "velocities": sim.velocities, "goals": np.concatenate([[sim.robot_goal], sim.human_goals]),
+           "respawns": sim.human_respawns.copy()}
+    return with_team(own, sim.team.state)
+
+
+def with_team(frame: Mapping[str, np.ndarray], team: TeamState) -> dict[str, np.ndarray]:
+    """``frame`` (the robot and the humans) with the other robots of ``team`` after the humans; NaN for a robot that left."""
     gone = np.where(team.active[1:], 0j, complex(np.nan, np.nan))
-    return {"positions": np.concatenate([sim.positions, team.positions + gone]),
-            "velocities": np.concatenate([sim.velocities, team.velocities + gone]),
-            "goals": np.concatenate([[sim.robot_goal], sim.human_goals, team.goals]), "respawns": sim.human_respawns.copy()}
+    return {"positions": np.concatenate([frame["positions"], team.positions + gone]),
+            "velocities": np.concatenate([frame["velocities"], team.velocities + gone]),
+            "goals": np.concatenate([frame["goals"], team.goals]), "respawns": frame["respawns"]}

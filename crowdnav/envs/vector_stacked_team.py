@@ -26,6 +26,7 @@ from crowdnav.batch.robot_policies import RobotPolicy
 from crowdnav.batch.simulator import StepResult
 from crowdnav.batch.state import BatchState
 from crowdnav.batch.team import TeamStack
+from crowdnav.envs.engine import with_team
 from crowdnav.envs.vector_stacked import StackedWorlds
 from crowdnav.envs.world_state import EnvState, WorldState, check_state, make_state
 from crowdnav.sensors import Modality, build_modalities
@@ -193,12 +194,7 @@ class StackedTeamWorlds(StackedWorlds):
             self._loaded[world] = {key: values.copy() for key, values in env.observation.items()}
 
     def frame(self, world: int) -> dict[str, np.ndarray]:
-        frame = super().frame(world)
-        state = self._team_now(world)
-        gone = np.where(state.active[1:], 0j, complex(np.nan, np.nan))
-        return {"positions": np.concatenate([frame["positions"], state.positions + gone]),
-                "velocities": np.concatenate([frame["velocities"], state.velocities + gone]),
-                "goals": np.concatenate([frame["goals"], state.goals]), "respawns": frame["respawns"]}
+        return with_team(super().frame(world), self._team_now(world))
 
     def simulator(self, world: int) -> Simulator:
         snapshot = self.batch.simulator(world)
