@@ -266,7 +266,7 @@ class PeopleTracker:
         sums[:, new] = 0.0
         # each track's window slot for this detection, as an index into the flat ring (C-contiguous: views or fresh copies)
         k, n = hits.shape
-        slot = _ring_rows(k, n, window) + hits % window
+        slot = np.arange(0, k * n * window, window).reshape(k, n) + hits % window
         ring, ring_at = self._measured[at].reshape(-1), self._measured_at[at].reshape(-1)
         held, held_at = ring[slot], ring_at[slot]
         # a full window drops its oldest detection (the slot the new one takes)
@@ -324,19 +324,6 @@ class PeopleTracker:
         noise = np.empty(people.shape, dtype=complex)
         noise.real, noise.imag = sigma * across, sigma * along
         return detected, people + noise, draws
-
-
-_RING_ROWS: dict[tuple[int, int, int], np.ndarray] = {}
-
-
-def _ring_rows(k: int, n: int, window: int) -> np.ndarray:
-    """(k, n) int: each track's first index in a flat (k, n, window) detection ring (cached: one entry per batch shape)."""
-    rows = _RING_ROWS.get((k, n, window))
-    if rows is None:
-        if len(_RING_ROWS) > 64:  # bounded
-            _RING_ROWS.clear()
-        rows = _RING_ROWS[k, n, window] = np.arange(0, k * n * window, window).reshape(k, n)
-    return rows
 
 
 def make_tracker(world: CompiledWorld, num_worlds: int) -> PeopleTracker | None:
