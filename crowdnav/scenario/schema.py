@@ -173,6 +173,10 @@ class ObstaclesSensor(StrictModel):
     max_range: PositiveFloat = Field(
         default=4.0, description="Shapes whose nearest surface point is farther than this (m) are absent."
     )
+    world_edge: bool = Field(
+        default=False,
+        description="Without boundary walls, also list the world rectangle's four sides (leaving it ends the episode) as shapes.",
+    )
 
 
 class GeodesicSensor(StrictModel):

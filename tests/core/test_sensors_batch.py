@@ -33,7 +33,8 @@ BUILT_IN = ["goal", "velocity", "closest_obstacle", "lidar", "leog", "humans", "
 
 
 def all_modalities(world) -> dict[str, Modality]:
-    """The scenario's built-in modalities plus variants: partial-fov LIDARs, cartesian frames, short ranges, a coarse grid, k humans."""
+    """The scenario's built-in modalities plus variants: partial-fov LIDARs, cartesian frames, short ranges, a coarse grid, k humans,
+    the world's sides as shapes."""
     modalities = build_modalities(BUILT_IN, world, world.scenario.sensors)
     modalities["lidar_fov180"] = LidarModality(world, LidarSensor(beams=90, fov_deg=180))
     modalities["lidar_fov270_odd"] = LidarModality(world, LidarSensor(beams=77, fov_deg=270, max_range=8.0))
@@ -46,6 +47,7 @@ def all_modalities(world) -> dict[str, Modality]:
     modalities["humans_all"] = HumansModality(world, HumansSensor(count=64, max_range=100.0))
     modalities["obstacles_short"] = ObstaclesModality(world, ObstaclesSensor(count=2, max_range=0.8))
     modalities["obstacles_all"] = ObstaclesModality(world, ObstaclesSensor(count=64, max_range=100.0))
+    modalities["obstacles_edge"] = ObstaclesModality(world, ObstaclesSensor(count=3, max_range=3.0, world_edge=True))
     return modalities
 
 

@@ -8,7 +8,7 @@ import gymnasium as gym
 import numpy as np
 import pytest
 from gymnasium.utils.env_checker import check_env
-from shapely.geometry import Point
+from shapely.geometry import LineString, Point
 
 import crowdnav  # noqa: F401  (registers the ids)
 from crowdnav import Simulator, load_scenario
@@ -91,12 +91,50 @@ def test_a_world_without_walls_or_furniture_reads_all_absent():
     env.close()
 
 
+OPEN = {**SCENARIO, "world": {"min": [-5, -4], "max": [6, 4], "boundary_walls": False},
+        "robot": {**SCENARIO["robot"], "goal": {"type": "points", "points": [[0, -3]]}}}
+
+
+def open_room(**sensor) -> tuple[Simulator, ObstaclesModality]:
+    sim = Simulator(load_scenario({**OPEN, "sensors": {"obstacles": sensor}}))
+    sim.reset(seed=0)
+    return sim, ObstaclesModality(sim.world, sim.scenario.sensors.obstacles)
+
+
+@pytest.mark.parametrize("robot, heading", [(0j, 0.0), (5.2 - 3.5j, 1.0), (-4.6 + 3.9j, -2.5), (6.5 + 4.5j, 0.4)])
+def test_world_edge_lists_the_world_rectangles_sides_as_shapes_without_boundary_walls(robot, heading):
+    sim, modality = open_room(count=8, max_range=20.0, world_edge=True)
+    place(sim, robot, heading)
+    # the sides as shapely lines (the last robot is outside the world, past its top-right corner)
+    sides = [LineString([(-5, -4), (6, -4)]), LineString([(-5, 4), (6, 4)]), LineString([(-5, -4), (-5, 4)]),
+             LineString([(6, -4), (6, 4)])]
+    here = Point(robot.real, robot.imag)
+    points = [complex(*side.interpolate(side.project(here)).coords[0]) - robot for side in sides]
+    turn = complex(math.cos(heading), -math.sin(heading))  # into the robot frame
+    sides_rows = [((p * turn).real, (p * turn).imag, 1.0) for p in points]
+    furniture_rows = [tuple(row) for row in expected_rows(sim, 8, 20.0)[:2]]  # the table and the round table
+    rows = sorted(furniture_rows + sides_rows, key=lambda row: math.hypot(row[0], row[1]))
+    np.testing.assert_allclose(modality.observe(sim)[:6], np.array(rows), atol=2e-4)
+    assert not modality.observe(sim)[6:].any()
+
+
+def test_world_edge_changes_nothing_with_boundary_walls_and_nothing_by_default():
+    walled_sim, walled = room(count=8, max_range=20.0)
+    edged_sim, edged = room(count=8, max_range=20.0, world_edge=True)
+    open_sim, plain = open_room(count=8, max_range=20.0)
+    for robot, heading in [(0j, 0.0), (1.0 - 0.5j, 1.0), (4.2 + 0.1j, math.pi)]:
+        for sim in (walled_sim, edged_sim, open_sim):
+            place(sim, robot, heading)
+        assert walled.observe(walled_sim).tobytes() == edged.observe(edged_sim).tobytes()
+        assert plain.observe(open_sim)[:, 2].sum() == 2  # without world_edge an open world lists its furniture only
+
+
 def test_settings_are_validated_with_a_one_line_error():
     with pytest.raises(ScenarioError, match="count"):
         load_scenario({**SCENARIO, "sensors": {"obstacles": {"count": 0}}})
     with pytest.raises(ScenarioError, match="max_range"):
         load_scenario({**SCENARIO, "sensors": {"obstacles": {"max_range": -1}}})
-    assert ObstaclesSensor().count == 8 and ObstaclesSensor().max_range == 4.0
+    assert ObstaclesSensor().count == 8 and ObstaclesSensor().max_range == 4.0 and not ObstaclesSensor().world_edge
 
 
 def assert_observed_inside_its_space(scenario: str, key: str) -> None:

@@ -29,7 +29,7 @@ def test_shipped_experiments_cover_figure_4_the_default_and_the_reference_agents
                                           "track_crowded_open_space", "track_station_hall", "track_robots_crossing_hall",
                                           "recurrent_crowded_open_space", "room_sarl_ensemble_figure4",
                                           "room_sarl_figure4_lidar_tracker", "room_sarl_room", "room_sarl_station_hall",
-                                          "room_sarl_crowded_open_space"}
+                                          "room_sarl_crowded_open_space", "room_sarl_edge_crowded_open_space"}
     labels = {name: [c.name for c in load_experiment(name).configurations] for name in shipped_experiments()}
     assert labels["encoders"] == ["frozen", "finetune", "scratch"]
     assert labels["modalities"] == labels["modalities_paper"] == ["leog", "lidar", "closest_obstacle"]
@@ -289,3 +289,11 @@ def test_room_sarl_track_experiments_are_room_sarl_figure4s_recipe_in_their_trac
     assert trained.get("overrides", {}) == track.overrides and trained["scenario"] == track.scenario
     assert {**trained, "overrides": None, "scenario": None} == {**figure4_trained, "overrides": None, "scenario": None}
     assert other.protocol == figure4.protocol
+
+
+def test_room_sarl_edge_experiment_is_the_open_space_recipe_plus_the_world_edge_only():
+    """One sensing change (the world's sides as obstacles), which is a no-op in walled scenarios; nothing else tuned."""
+    plain, edge = load_experiment("room_sarl_crowded_open_space"), load_experiment("room_sarl_edge_crowded_open_space")
+    (plain_trained,), (edge_trained,) = [c.train for c in plain.configurations], [c.train for c in edge.configurations]
+    assert edge_trained == {**plain_trained, "sensors": {"obstacles": {"world_edge": True}}}
+    assert edge.protocol == plain.protocol
