@@ -21,9 +21,11 @@ network's two values into each robot's env action:
   ``goal`` observation (which must be observed), so training and a loaded policy rotate alike.
 
 The adapter has no state: the action and (``goal_velocity``) the observation the network acted on
-give the env action. It is applied where actions enter the env: in training
-(:class:`crowdnav.agents.marl.env.RobotsTrainingEnv`, which still records the network's own
-actions for an exact resume) and in a loaded policy's ``act`` (:class:`crowdnav.agents.marl.robots.RobotsPolicy`).
+give the env action. It is applied where actions enter the env: in training, every world's robots at
+once (:meth:`RobotActions.batch` in :class:`crowdnav.agents.marl.vec_env.RobotsVecEnv`, which still records
+the network's own actions for an exact resume), in one world's robots-only env
+(:class:`crowdnav.agents.marl.env.RobotsTrainingEnv`) and in a loaded policy's ``act``
+(:class:`crowdnav.agents.marl.robots.RobotsPolicy`).
 """
 
 from __future__ import annotations
@@ -36,6 +38,8 @@ from typing import Any
 import numpy as np
 from crowdnav.agents.training.config import ConfigError
 from gymnasium import spaces
+
+from crowdnav.batch.scalar_math import cdiv_real, cmul, phase
 
 ROBOT_ACTION_MODES: tuple[str, ...] = ("native", "velocity", "goal_velocity")
 """The values of ``robot_actions`` (the first is the default)."""
@@ -139,3 +143,49 @@ class RobotActions:
                 continue
             adapted[name] = unicycle_action(velocity, limit, self.dt)
         return adapted
+
+    def batch(self, actions: np.ndarray, observations: np.ndarray | None = None) -> np.ndarray:
+        """:meth:`__call__` of every robot of many worlds: ``actions`` (W, R, 2) float32, ``observations`` the (W, R, D) raw flat
+        observations they answer (``goal_velocity``) -> (W, R, 2) float32, each row the bits :meth:`__call__` gives it.
+
+        Python's scalar complex arithmetic written as separately rounded array operations (:mod:`crowdnav.batch.scalar_math`;
+        the bearing by libm's ``atan2`` per entry, as ``cmath.phase``), a loop over the robots only. A row that is not
+        finite passes as it is (the engine refuses it for a robot in the world, as the env does).
+        """
+        actions = np.asarray(actions, dtype=np.float32)
+        if not self.changes_actions:
+            return actions
+        if self.mode == "goal_velocity" and observations is None:
+            raise ValueError("robot_actions: goal_velocity needs the observations the actions answer")
+        wide = actions.astype(np.float64)
+        a0, a1 = np.minimum(1.0, np.maximum(-1.0, wide[..., 0])), np.minimum(1.0, np.maximum(-1.0, wide[..., 1]))
+        norm = np.hypot(a0, a1)
+        over = norm > 1.0
+        vr, vi = cdiv_real(a0, a1, np.where(over, norm, 1.0))  # local / abs(local) where the norm is over 1
+        vr, vi = np.where(over, vr, a0), np.where(over, vi, a1)
+        if self.mode == "goal_velocity":
+            assert observations is not None
+            vr, vi = cmul(vr, vi, *self._goal_directions(np.asarray(observations)))
+        out = actions.copy()
+        for k, limit in enumerate(self.turn_limits):  # each robot its own kinematics
+            if limit is None:
+                if self.mode == "goal_velocity":
+                    out[:, k, 0], out[:, k, 1] = vr[:, k], vi[:, k]  # (float32, as np.array([re, im], float32))
+                continue
+            speed = np.hypot(vr[:, k], vi[:, k])
+            bearing = np.where(speed > 1e-9, phase(vr[:, k], vi[:, k]), 0.0)
+            forward = np.where(vr[:, k] > 0.0, vr[:, k], 0.0)  # max(0.0, x)
+            out[:, k] = np.clip(np.stack([forward, bearing / (limit * self.dt)], axis=1).astype(np.float32), -1.0, 1.0)
+        finite = np.isfinite(actions).all(axis=-1, keepdims=True)
+        return np.where(finite, out, actions)
+
+    def _goal_directions(self, observations: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """:meth:`goal_direction` of (..., D) raw flat observations: (re, im) of each unit vector toward the goal."""
+        assert self.goal is not None
+        start, frame = self.goal
+        wide = observations.astype(np.float64)
+        re, im = (wide[..., start + 2], wide[..., start + 1]) if frame == "polar" else (wide[..., start], wide[..., start + 1])
+        length = np.hypot(re, im)
+        usable = (length > 1e-12) & np.isfinite(length)
+        dr, di = cdiv_real(re, im, np.where(usable, length, 1.0))
+        return np.where(usable, dr, 1.0), np.where(usable, di, 0.0)

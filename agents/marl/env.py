@@ -4,7 +4,9 @@
 (``crowdnav.parallel_env(..., humans_as_agents=False, fixed_agents=True, flat_observations=True)``):
 every robot is an agent every step (a robot that ended is inactive: zero observation, reward 0),
 the humans follow the scenario's crowd model. :class:`crowdnav.agents.marl.vec_env.RobotsVecEnv`
-steps ``num_envs`` of them as one SB3 vector env. What it adds for shared-parameter training:
+plays ``num_envs`` such worlds as one SB3 vector env through one engine (:mod:`crowdnav.envs.robots_engine`),
+with the same additions, row for row and bit for bit (this env per world is its reference in the tests, and
+what SuperSuit's chain takes). What it adds for shared-parameter training:
 
 * **observations** through :class:`RobotObservations`: each modality scaled by the scale it
   declares (as the single-agent runs' ``normalize_observations``), then, with
@@ -93,6 +95,16 @@ class RobotObservations:
         one_hot = np.zeros(len(self.robots), np.float32)
         one_hot[index] = 1.0
         return np.concatenate([scaled, one_hot]).astype(np.float32, copy=False)
+
+    def rows(self, flat: np.ndarray, active: np.ndarray) -> np.ndarray:
+        """:meth:`__call__` of every robot of many worlds: ``flat`` (W, R, D) raw observations, ``active`` (W, R) bool ->
+        (W * R, inputs) float32, row ``w * R + k`` robot ``k`` of world ``w`` (the same elementwise float32 operations)."""
+        scaled = (np.asarray(flat, np.float32) - self.offset) / self.scale
+        scaled = np.where(active[..., None], scaled, np.float32(0.0)).astype(np.float32, copy=False)
+        if self.identity:
+            one_hot = np.broadcast_to(np.eye(len(self.robots), dtype=np.float32), (*scaled.shape[:2], len(self.robots)))
+            scaled = np.concatenate([scaled, one_hot], axis=2)
+        return scaled.reshape(-1, scaled.shape[2])
 
     @classmethod
     def from_json(cls, document: Mapping[str, Any]) -> RobotObservations:

@@ -1,11 +1,10 @@
 """Exact resume of shared robot training (``agents: robots``): the checkpoint at a PPO rollout's end, and its way back.
 
-The robots' vector env (:class:`crowdnav.agents.marl.vec_env.RobotsVecEnv`) holds no state of its
-own between steps: every world is a :class:`crowdnav.agents.marl.env.RobotsTrainingEnv`, and an
-episode's only randomness is the simulator's generator seeded at reset. So a run is stored
+The robots' vector env (:class:`crowdnav.agents.marl.vec_env.RobotsVecEnv`) keeps each world's episode
+counters and the network's actions since each world's reset, and an episode's only randomness is the
+simulator's generator seeded at reset. So a run is stored
 as a single-robot on-policy run was before its checkpoints stored world states (format 1 of
-:mod:`crowdnav.agents.runs.resume_worlds`: each world's actions, replayed; these worlds are
-PettingZoo parallel envs, not the vector env whose worlds snapshot), when a rollout is
+:mod:`crowdnav.agents.runs.resume_worlds`: each world's actions, replayed), when a rollout is
 complete and before SB3 trains on it:
 
 * ``model.zip`` (parameters and optimizer) and ``training_state.json`` (SB3's counters and every
@@ -31,7 +30,6 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from crowdnav.agents.marl.env import RobotsTrainingEnv
 from crowdnav.agents.marl.vec_env import RobotsVecEnv
 from crowdnav.agents.runs.checkpoint import save_checkpoint
 from crowdnav.agents.runs.resume_state import _ROLLOUT, ResumeStateError, _fill, _position, _read_npz, _write_npz
@@ -42,31 +40,23 @@ STATE_FILE = "robots_state.npz"
 """The rollout and worlds of a resumable shared robot checkpoint."""
 
 
-def save_resumable(model: Any, folder: Path, info: Mapping[str, Any], worlds: list[RobotsTrainingEnv],
-                   rows: Mapping[str, np.ndarray]) -> None:
+def save_resumable(model: Any, folder: Path, info: Mapping[str, Any], vec: RobotsVecEnv, rows: Mapping[str, np.ndarray]) -> None:
     """Write the resumable checkpoint ``folder`` (module docstring); ``rows``: the episode log's per-row running sums."""
     discard_leftovers(folder)  # a killed save's copies (links removed, not followed)
     staging = staging_beside(folder)
     save_checkpoint(model, staging, info, rng_state=True)
-    _save_state(staging / STATE_FILE, model, worlds, rows)
+    _save_state(staging / STATE_FILE, model, vec, rows)
     swap_folder(staging, folder)  # only now complete: recover_checkpoint never picks a staging folder still being written
 
 
-def _save_state(path: Path, model: Any, worlds: list[RobotsTrainingEnv], rows: Mapping[str, np.ndarray]) -> None:
+def _save_state(path: Path, model: Any, vec: RobotsVecEnv, rows: Mapping[str, np.ndarray]) -> None:
     buffer = model.rollout_buffer
-    if any(world.actions is None for world in worlds):
-        raise ResumeStateError("a world took a step without an action for every robot; it cannot be replayed")
-    lengths = np.array([len(world.actions or []) for world in worlds], dtype=np.int64)
-    robots = len(worlds[0].possible_agents)
-    actions = np.zeros((len(worlds), int(lengths.max(initial=0)), robots, 2), np.float32)
-    for w, world in enumerate(worlds):
-        if world.actions:
-            actions[w, : lengths[w]] = np.stack(world.actions)
+    actions, lengths = vec.episode_actions()
     arrays = {"last_obs": np.asarray(model._last_obs), "last_episode_starts": np.asarray(model._last_episode_starts),
               "rollout/observations": buffer.observations, **{f"rollout/{name}": getattr(buffer, name) for name in _ROLLOUT},
               "worlds/actions": actions, "worlds/lengths": lengths, **{f"log/{key}": value for key, value in rows.items()}}
     meta = {"rollout": {"pos": int(buffer.pos), "full": bool(buffer.full)},
-            "worlds": [{"first_episode": world.first_episode, "played": world.played} for world in worlds]}
+            "worlds": [{"first_episode": first, "played": played} for first, played in vec.episode_counters()]}
     _write_npz(path, arrays, meta)
 
 
@@ -103,7 +93,7 @@ def load_state(folder: Path, model: Any, vec: RobotsVecEnv, rows: dict[str, np.n
 
 def _replay_worlds(path: Path, vec: RobotsVecEnv, arrays: Mapping[str, np.ndarray], meta: Mapping[str, Any],
                    last_obs: np.ndarray) -> None:
-    worlds = vec.worlds
+    worlds = range(vec.num_worlds)
     counters, actions, lengths = meta.get("worlds"), arrays.get("worlds/actions"), arrays.get("worlds/lengths")
     robots = len(vec.robots)
     if not isinstance(counters, list) or len(counters) != len(worlds) or actions is None or lengths is None \

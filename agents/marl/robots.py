@@ -1,8 +1,8 @@
 """Shared-parameter PPO for the robots of a multi-robot scenario (``agents: robots`` in a TrainConfig).
 
-No episode loop of crowdnav's own: :class:`crowdnav.agents.marl.vec_env.RobotsVecEnv` holds
-``num_envs`` worlds of the robots-only env (:class:`crowdnav.agents.marl.env.RobotsTrainingEnv`)
-and gives Stable-Baselines3 one vector row per robot per world, stepped in this process;
+No episode loop of crowdnav's own: :class:`crowdnav.agents.marl.vec_env.RobotsVecEnv` plays
+``num_envs`` worlds of the robots-only env (stacked in one batch where the scenario allows,
+:mod:`crowdnav.envs.robots_engine`) and gives Stable-Baselines3 one vector row per robot per world;
 SB3's PPO trains one ``MlpPolicy`` on every row, so every robot acts with the same network (told
 apart by the one-hot of ``agent_identity``). :class:`RobotsRun` is that run as a strategy of the one run loop
 (:class:`crowdnav.agents.training.run_loop.RunLoop`, which owns the run folder, the resume decision and the result).
@@ -79,8 +79,8 @@ def _ppo(config: TrainConfig, vec: RobotsVecEnv) -> PPO:
     schedule = LinearDecay(rate) if chosen["learning_rate_schedule"] == "linear" else rate
     kwargs = {"n_steps": chosen["n_steps"], "batch_size": min(chosen["batch_size"], chosen["n_steps"] * vec.num_envs),
               "gamma": chosen["gamma"], "learning_rate": schedule, **config.algo_kwargs}
-    kinds = robot_kinds(vec.worlds[0].env.scenario) if config.robot_networks == "per_kind" else None
-    robots_network_size(config, vec.worlds[0].inputs.space.shape[0], "config", len(set(kinds or [0])))
+    kinds = robot_kinds(vec.scenario) if config.robot_networks == "per_kind" else None
+    robots_network_size(config, vec.inputs.space.shape[0], "config", len(set(kinds or [0])))
     set_random_seed(config.seed)  # not PPO(seed=...): the worlds seed their own episodes, and the runs before kept this order
     extra: dict[str, Any] = {} if kinds is None else {"robot_kinds": kinds}
     policy: str | type[ActorCriticPolicy] = "MlpPolicy" if kinds is None else KindActorCriticPolicy
@@ -204,7 +204,7 @@ class RobotsRun(RunLoop):
     def build(self) -> None:
         config, state, checkpoint = self.config, self.state, self.checkpoint
         self.vec = vec = make_robots_vec_env(config, int(state["next_episode"]) if state else 0)
-        self.inputs = vec.worlds[0].inputs
+        self.inputs = vec.inputs
         if state and not self.inputs.matches(state["robots"]):
             raise ConfigError(f"{checkpoint}: its robots' observations differ from this config's scenario and options; "
                               "resume with the run's own config.yaml")
@@ -239,7 +239,7 @@ class RobotsRun(RunLoop):
 
     def learn(self) -> None:
         # an upper bound in robot steps: the callback stops at the budget (episodes of at most max_steps each)
-        max_steps = self.vec.worlds[0].env.scenario.max_steps
+        max_steps = self.vec.scenario.max_steps
         config = self.config
         total = config.timesteps if config.timesteps is not None else (config.episodes + self.vec.num_envs) * max_steps
         remaining = max(total - self.model.num_timesteps, 0)
@@ -250,7 +250,7 @@ class RobotsRun(RunLoop):
         """The checkpoint's ``policy.json``: what the run is and how far it got."""
         config, callback = self.config, self.callback
         # the episode after every one any world has started: a resume's worlds start there, so no seed repeats
-        following = max(world.next_episode for world in self.vec.worlds)
+        following = self.vec.next_episode
         return {"algo": config.algo, "agents": ROBOTS_KIND, "env": env_options(config), "robots": self.inputs.to_json(),
                 "episodes": callback.done, "timesteps": self.model.num_timesteps, "next_episode": following,
                 "successes": callback.successes, "hyperparameters": hyperparameters(config), "config": config_to_dict(config)}
@@ -264,7 +264,7 @@ class RobotsRun(RunLoop):
         if callback.log is not None:
             callback.log.sync()  # the log holds every episode the checkpoint counts
         if resumable:
-            save_resumable(self.model, self.checkpoint, self.info(), self.vec.worlds, {"returns": callback.returns, "lengths": callback.lengths})
+            save_resumable(self.model, self.checkpoint, self.info(), self.vec, {"returns": callback.returns, "lengths": callback.lengths})
         else:  # the budget's end, inside a step: a resume with a larger budget starts new episodes
             save_checkpoint(self.model, self.checkpoint, self.info())
         self.announce_checkpoint(callback.done)

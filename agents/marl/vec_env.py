@@ -1,10 +1,12 @@
 """The robots of ``num_envs`` worlds as one Stable-Baselines3 ``VecEnv``: one row per robot per world (``agents: robots``).
 
-:class:`RobotsVecEnv` holds the run's worlds, each a
-:class:`crowdnav.agents.marl.env.RobotsTrainingEnv` (crowdnav's robots-only env with the shared
-network's observations, actions and training seeds), and steps them in one call. Row ``w * R + k``
-is robot ``k`` (the scenario's order) of world ``w``; the observations are float32
-``(num_envs * R, inputs)``, rewards float32, dones bool. Its conventions are SB3's, as the
+:class:`RobotsVecEnv` plays the run's worlds through a robots-only engine
+(:func:`crowdnav.envs.robots_engine.robots_engine`: the worlds stacked in one batch where the scenario stacks, one
+robots-only env per world otherwise) and adds what shared-parameter training needs, as
+:class:`crowdnav.agents.marl.env.RobotsTrainingEnv` adds it to one world: the network's observations
+(:class:`crowdnav.agents.marl.env.RobotObservations`), its actions (:class:`crowdnav.agents.marl.actions.RobotActions`)
+and the training band's episode seeds. Row ``w * R + k`` is robot ``k`` (the scenario's order) of world ``w``; the
+observations are float32 ``(num_envs * R, inputs)``, rewards float32, dones bool. Its conventions are SB3's, as the
 single-robot vector env's (:class:`crowdnav.agents.sb3.vec_env.CrowdNavSB3VecEnv`):
 
 * every robot is a row every step; a robot that ended is inactive until its world's episode ends
@@ -13,137 +15,236 @@ single-robot vector env's (:class:`crowdnav.agents.sb3.vec_env.CrowdNavSB3VecEnv
   each of its rows is done, its last observation in ``infos[row]["terminal_observation"]``, the
   new episode's first observation returned, the reset's infos merged over the last step's
   (``active`` True again); ``TimeLimit.truncated`` marks a time-limit end, so PPO bootstraps there;
-* seeds come from the worlds (each plays its own episodes of the run's training band), never from
-  ``VecEnv.seed``.
+* every row's info has its world's ``episode_seed``; a robot that acted has ``reward_terms`` and, at its end,
+  ``outcome``, ``is_success`` and after a collision ``collision_kind`` / ``collision_partner``;
+* seeds come from the worlds' counters: world ``w`` of ``W`` plays its ``p``-th episode with
+  :func:`crowdnav.agents.training.seeding.train_seed` ``(seed, first_episode + p * W + w)``, never from ``VecEnv.seed``.
 
-These are, row for row and bit for bit, what SuperSuit's ``concat_vec_envs_v1`` over
-``pettingzoo_env_to_vec_env_v1`` made of the same env, the chain that collected for ``agents:
-robots`` before (tests/agents/test_marl_vec_env.py steps both). :meth:`RobotsVecEnv.restore_worlds`
-puts the worlds back mid-episode for an exact resume (:mod:`crowdnav.agents.marl.resume`).
+These are, row for row and bit for bit, what the run's worlds as :class:`RobotsTrainingEnv` give stepped one by one,
+and what SuperSuit's ``concat_vec_envs_v1`` over ``pettingzoo_env_to_vec_env_v1`` made of them, the chain that
+collected for ``agents: robots`` before (tests/agents/test_marl_vec_env.py steps all three). :meth:`RobotsVecEnv.
+restore_worlds` puts the worlds back mid-episode for an exact resume (:mod:`crowdnav.agents.marl.resume`) from each
+world's counters and the network's actions since its episode's reset (:meth:`RobotsVecEnv.episode_actions`).
 """
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
+from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
-from crowdnav.agents.marl.env import RobotsTrainingEnv
+from crowdnav.agents.marl.actions import RobotActions
+from crowdnav.agents.marl.env import RobotObservations, robots_env
 from crowdnav.agents.sb3.factory import env_options
 from crowdnav.agents.training.config import TrainConfig
+from crowdnav.agents.training.seeding import MAX_TRAIN_EPISODES, train_seed
+from gymnasium import spaces
 from stable_baselines3.common.vec_env.base_vec_env import VecEnv, VecEnvObs, VecEnvStepReturn
+
+from crowdnav.envs.engine import RobotsEngine, RobotsStep
+from crowdnav.envs.reward import REWARD_TERMS
+from crowdnav.envs.robots_engine import robots_engine
+from crowdnav.scenario.schema import Scenario
 
 
 class RobotsVecEnv(VecEnv):
-    """``worlds`` (the run's :class:`RobotsTrainingEnv`, world ``w`` told it is ``w`` of ``len(worlds)``) as one SB3 VecEnv."""
+    """``engine``'s worlds (every robot driven) as one SB3 VecEnv with the shared network's ``inputs`` and ``commands``;
+    their episodes numbered from ``first_episode`` in the band of ``run_seed`` (see the module docstring)."""
 
-    def __init__(self, worlds: Sequence[RobotsTrainingEnv]):
-        if not worlds:
-            raise ValueError("RobotsVecEnv needs at least one world")
-        self.worlds = list(worlds)
-        first = self.worlds[0]
-        self.robots = list(first.possible_agents)
+    def __init__(self, engine: RobotsEngine, inputs: RobotObservations, commands: RobotActions, scenario: Scenario, *,
+                 run_seed: int, first_episode: int = 0):
+        self.engine, self.inputs, self.commands, self.scenario = engine, inputs, commands, scenario
+        self.robots = list(engine.robot_names)
         """The robots' names, each world's rows in this order."""
         self.render_mode = None
-        super().__init__(len(self.worlds) * len(self.robots), first.inputs.space, first.action_space(self.robots[0]))
+        worlds = engine.num_worlds
+        super().__init__(worlds * len(self.robots), inputs.space, spaces.Box(-1.0, 1.0, shape=(2,), dtype=np.float32))
+        self.run_seed = int(run_seed)
+        self.first_episode = np.full(worlds, int(first_episode), dtype=np.int64)
+        self.played = np.zeros(worlds, dtype=np.int64)
+        """Per world: its counters (the episode it starts next is ``first_episode + played * W + w``)."""
+        self.episode_seeds = [0] * worlds
+        """Each world's current episode's seed."""
+        self._raw = np.zeros((worlds, len(self.robots), engine.observation_size), np.float32)
+        """The raw observations the network acts on next (``goal_velocity`` reads each robot's goal direction there)."""
+        self._active = np.ones((worlds, len(self.robots)), dtype=bool)
+        self._history: list[np.ndarray] = []
+        """The network's (W, R, 2) actions of the steps since the oldest running episode's reset."""
+        self._began = np.zeros(worlds, dtype=np.int64)
+        self._steps = 0
+        """Steps taken so far, and (``_began``) the step each world's episode started at (``_history[0]`` is step
+        ``_steps - len(_history)``)."""
         self._actions: np.ndarray | None = None
 
     @classmethod
     def make(cls, config: TrainConfig, first_episode: int = 0) -> RobotsVecEnv:
         """``config.num_envs`` worlds of the run's robots; their episodes are numbered from ``first_episode``."""
-        worlds = [RobotsTrainingEnv(env_options(config), normalize=config.normalize_observations, identity=config.agent_identity,
-                                    run_seed=config.seed, first_episode=first_episode, actions=config.robot_actions)
-                  for _ in range(config.num_envs)]
-        for world, env in enumerate(worlds):
-            env.assign_world(world, config.num_envs)
-        return cls(worlds)
+        options = env_options(config)
+        template = robots_env(options)  # one world's env: the scenario refused in the env's words, the inputs' scales
+        try:
+            inputs = RobotObservations(template, normalize=config.normalize_observations, identity=config.agent_identity)
+            commands = RobotActions.for_env(config.robot_actions, template)
+            scenario = template.scenario
+        finally:
+            template.close()
+        return cls(robots_engine(options, config.num_envs), inputs, commands, scenario, run_seed=config.seed, first_episode=first_episode)
 
-    def _rows(self, observations: Sequence[Mapping[str, np.ndarray]]) -> np.ndarray:
-        """Every world's robots' observations as the (rows, inputs) float32 array."""
-        out = np.empty((self.num_envs, *self.worlds[0].inputs.space.shape), dtype=np.float32)
-        return np.stack([world[name] for world in observations for name in self.robots], out=out)
+    @property
+    def num_worlds(self) -> int:
+        return self.engine.num_worlds
+
+    @property
+    def next_episode(self) -> int:
+        """The episode after every one any world has started (a resume's worlds start there, so no seed repeats)."""
+        worlds = self.num_worlds
+        return int((self.first_episode + self.played * worlds + np.arange(worlds)).max())
+
+    # ------------------------------------------------------------------ reset
+
+    def _start(self, worlds: np.ndarray) -> None:
+        """New episodes in ``worlds`` (ascending), each with its next training seed."""
+        episodes = self.first_episode[worlds] + self.played[worlds] * self.num_worlds + worlds
+        if len(episodes) and episodes.max() >= MAX_TRAIN_EPISODES:
+            raise RuntimeError(f"a run may start at most {MAX_TRAIN_EPISODES:,} training episodes (crowdnav.agents.training.seeding)")
+        self.played[worlds] += 1
+        seeds = [train_seed(self.run_seed, int(episode)) for episode in episodes]
+        for world, seed in zip(worlds.tolist(), seeds, strict=True):
+            self.episode_seeds[world] = seed
+        self.engine.reset(worlds, seeds)
+        self._active[worlds] = True
+        self._began[worlds] = self._steps
+        oldest = int(self._began.min()) - (self._steps - len(self._history))
+        if oldest > 0:  # no running episode needs the steps before its reset
+            del self._history[:oldest]
 
     def reset(self) -> VecEnvObs:
         """Start a new episode in every world (each with its next training seed)."""
-        observations: list[Mapping[str, np.ndarray]] = []
-        self.reset_infos = []
-        for world in self.worlds:
-            observed, infos = world.reset()
-            observations.append(observed)
-            self.reset_infos.extend(infos.get(name, {}) for name in self.robots)
+        self._start(np.arange(self.num_worlds))
+        self._raw = self.engine.observe()
+        self.reset_infos = [{"active": True} for _ in range(self.num_envs)]
         self._reset_seeds()
         self._reset_options()
-        return self._rows(observations)
+        return self.inputs.rows(self._raw, self._active)
+
+    # ------------------------------------------------------------------- step
 
     def step_async(self, actions: np.ndarray) -> None:
         self._actions = actions
 
+    def _act(self, actions: np.ndarray, active: np.ndarray | None = None) -> RobotsStep:
+        """One step of the network's (W, R, 2) ``actions`` in the worlds of ``active`` (None: all), recorded for a resume."""
+        self._history.append(actions)
+        self._steps += 1
+        step = self.engine.step(self.commands.batch(actions, self._raw), active)
+        stepped = np.ones(self.num_worlds, dtype=bool) if active is None else active
+        self._active = np.where(stepped[:, None], step.stepped, self._active)
+        self._raw = self.engine.observe()
+        return step
+
     def step_wait(self) -> VecEnvStepReturn:
         assert self._actions is not None, "step_async before step_wait"
+        actions = np.array(self._actions, dtype=np.float32).reshape(self.num_worlds, len(self.robots), 2)
+        step = self._act(actions)
+        observations = self.inputs.rows(self._raw, self._active)
+        infos = self._infos(step)
+        dones = np.repeat(step.over, len(self.robots))
+        ended = np.flatnonzero(step.over)
+        if len(ended):
+            for row in np.flatnonzero(dones).tolist():
+                infos[row]["terminal_observation"] = observations[row].copy()
+                infos[row]["active"] = True  # the new episode's reset info, merged over the last step's
+            self._start(ended)
+            self._raw = self.engine.observe()
+            observations = self.inputs.rows(self._raw, self._active)
+        return observations, step.rewards.astype(np.float32).reshape(-1), dones, infos
+
+    def _infos(self, step: RobotsStep) -> list[dict[str, Any]]:
+        """Every row's info of ``step``, what the robots-only env's ``infos[name]`` holds under ``fixed_agents`` (one dict per
+        row: SB3's layout)."""
         count = len(self.robots)
-        actions = np.array(self._actions, dtype=np.float32).reshape(self.num_envs, -1)
-        observations: list[Mapping[str, np.ndarray]] = []
-        rewards = np.zeros(self.num_envs, dtype=np.float32)
-        dones = np.zeros(self.num_envs, dtype=bool)
+        acted, outcome = step.stepped.reshape(-1).tolist(), step.outcome.reshape(-1).tolist()
+        terms = {term: step.terms[term].reshape(-1).tolist() for term in REWARD_TERMS}
+        seeds, truncated = self.episode_seeds, step.truncated.tolist()
         infos: list[dict[str, Any]] = []
-        for w, world in enumerate(self.worlds):
-            own = actions[w * count : (w + 1) * count]
-            playing = set(world.agents)
-            observed, earned, terminations, truncations, stepped = world.step(
-                {name: own[k] for k, name in enumerate(self.robots) if name in playing})
-            ended = all(terminations[name] or truncations[name] for name in terminations)
-            rows = [stepped.get(name, {}) for name in self.robots]
-            for k, name in enumerate(self.robots):
-                rewards[w * count + k] = earned.get(name, 0)
-                dones[w * count + k] = terminations.get(name, False) or truncations.get(name, False)
-            if ended:
-                for row, name in zip(rows, self.robots, strict=True):
-                    row["terminal_observation"] = observed[name]
-                observed, first = world.reset()
-                rows = [{**row, **first.get(name, {})} for row, name in zip(rows, self.robots, strict=True)]
-            observations.append(observed)
-            infos.extend(rows)
-        return self._rows(observations), rewards, dones, infos
+        for row in range(self.num_envs):  # the infos are SB3's list of dicts: built per row
+            world = row // count
+            info: dict[str, Any] = {"active": False}
+            if acted[row]:
+                info = {"reward_terms": {term: values[row] for term, values in terms.items()}}
+                if outcome[row] is not None:
+                    info["outcome"], info["is_success"] = outcome[row], outcome[row] == "success"
+                    contact = step.collisions.get((world, row % count))
+                    if contact is not None:
+                        info["collision_kind"], info["collision_partner"] = contact.kind, contact.partner
+                info["active"] = True
+            info["episode_seed"] = seeds[world]
+            if truncated[world]:
+                info["TimeLimit.truncated"] = True
+            infos.append(info)
+        return infos
+
+    # ------------------------------------------------------------------ resume
+
+    def episode_counters(self) -> list[tuple[int, int]]:
+        """Each world's ``(first_episode, played)``, what :meth:`restore_worlds` takes back."""
+        return [(int(first), int(played)) for first, played in zip(self.first_episode, self.played, strict=True)]
+
+    def episode_actions(self) -> tuple[np.ndarray, np.ndarray]:
+        """The network's actions since each world's episode began: ``(actions (W, steps, R, 2) float32, lengths (W,))``."""
+        lengths = self._steps - self._began
+        actions = np.zeros((self.num_worlds, int(lengths.max(initial=0)), len(self.robots), 2), np.float32)
+        if len(self._history):
+            history = np.stack(self._history, axis=1)  # (W, kept steps, R, 2)
+            for world, length in enumerate(lengths.tolist()):  # a resume's save, once per checkpoint
+                if length:
+                    actions[world, :length] = history[world, len(self._history) - length :]
+        return actions, lengths
 
     def restore_worlds(self, counters: Sequence[tuple[int, int]], actions: np.ndarray, lengths: np.ndarray) -> np.ndarray:
         """A training resume: world ``w`` back in its episode after its first ``lengths[w]`` steps of ``actions[w]``
         ((worlds, steps, robots, 2), the network's own actions), its counters ``(first_episode, played)`` as saved.
 
-        Each world is reset with its episode's seed and replays the actions
-        (:meth:`RobotsTrainingEnv.replay`): the simulator's generator, seeded at reset, is an episode's
-        only randomness, so the worlds are as they were, bit for bit. Returns the rows' observations.
+        Every world is reset with its episode's seed and replays its actions (a world whose replay is over waits): the
+        simulator's generator, seeded at reset, is an episode's only randomness, so the worlds are as they were, bit for
+        bit. Returns the rows' observations.
         """
-        if len(counters) != len(self.worlds) or len(actions) != len(self.worlds) or len(lengths) != len(self.worlds):
-            raise ValueError(f"restore_worlds: one counter pair, action array and length per world ({len(self.worlds)})")
-        observations = [world.replay(first, played, actions[w, : int(lengths[w])])
-                        for w, (world, (first, played)) in enumerate(zip(self.worlds, counters, strict=True))]
+        worlds = self.num_worlds
+        if len(counters) != worlds or len(actions) != worlds or len(lengths) != worlds:
+            raise ValueError(f"restore_worlds: one counter pair, action array and length per world ({worlds})")
+        self.first_episode = np.array([int(first) for first, _ in counters], dtype=np.int64)
+        self.played = np.array([int(played) - 1 for _, played in counters], dtype=np.int64)
+        self._history, self._steps = [], 0
+        self._start(np.arange(worlds))
+        self._raw = self.engine.observe()
+        lengths = np.asarray(lengths, dtype=np.int64)
+        steps = int(lengths.max(initial=0))
+        wait = steps - lengths  # the shorter replays start later, so that every world's steps are the last ones recorded
+        everyone = np.arange(worlds)
+        for t in range(steps):
+            playing = t >= wait
+            row = np.asarray(actions[everyone, np.where(playing, t - wait, 0)], dtype=np.float32)
+            self._act(np.where(playing[:, None, None], row, np.float32(0.0)), playing)
+        self._began[:] = self._steps - lengths
         self._reset_seeds()
-        return self._rows(observations)
+        return self.inputs.rows(self._raw, self._active)
 
     def close(self) -> None:
-        for world in self.worlds:
-            world.close()
+        self.engine.close()
 
-    # Attributes and methods are the worlds' own; SB3 asks for render_mode only.
+    # SB3 asks for render_mode only; the worlds take their settings from the run's config.
 
     def get_attr(self, attr_name: str, indices: Any = None) -> list[Any]:
-        return [getattr(self, attr_name) if attr_name == "render_mode" else getattr(self.worlds[self._world(i)], attr_name)
-                for i in self._get_indices(indices)]
+        return [getattr(self, attr_name) for _ in self._get_indices(indices)]
 
     def set_attr(self, attr_name: str, value: Any, indices: Any = None) -> None:
         raise ValueError(f"set_attr({attr_name!r}): refused, the robots' worlds take their settings from the run's config")
 
     def env_method(self, method_name: str, *method_args: Any, indices: Any = None, **method_kwargs: Any) -> list[Any]:
-        """``method_name`` called once on each world that holds one of the rows ``indices``; each row gets its world's result."""
-        rows = [self._world(i) for i in self._get_indices(indices)]
-        results = {w: getattr(self.worlds[w], method_name)(*method_args, **method_kwargs) for w in dict.fromkeys(rows)}
-        return [results[w] for w in rows]
-
-    def _world(self, row: int) -> int:
-        return int(row) // len(self.robots)
+        raise ValueError(f"env_method({method_name!r}): refused, the robots' worlds are one engine (call RobotsVecEnv's own methods)")
 
     def env_is_wrapped(self, wrapper_class: type, indices: Any = None) -> list[bool]:
         return [False for _ in self._get_indices(indices)]
 
     def get_images(self) -> Sequence[np.ndarray | None]:
         return [None] * self.num_envs
+

@@ -53,6 +53,16 @@ def cdiv_real(ar: np.ndarray, ai: np.ndarray, b: np.ndarray | float) -> tuple[np
     return (ar + ai * 0.0) / b, (ai - ar * 0.0) / b
 
 
+_ATAN2 = np.frompyfunc(math.atan2, 2, 1)
+
+
+def phase(re: np.ndarray, im: np.ndarray) -> np.ndarray:
+    """``cmath.phase(complex(re, im))`` for each entry: libm's ``atan2`` called per entry (numpy's vectorized ``arctan2``
+    differs from it in the last bit)."""
+    out: np.ndarray = _ATAN2(im, re).astype(float)
+    return out
+
+
 def robot_velocity(robot: Any, dt: float, actions: np.ndarray, heading: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """:func:`crowdnav.sim.robots.robot_kinematics` of one robot spec in every row (``actions`` (K, 2), ``heading`` (K,)),
     its action clipped first: (velocity re, im, new heading), in CPython's scalar arithmetic."""

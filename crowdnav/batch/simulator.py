@@ -41,6 +41,7 @@ from crowdnav.sim.episode_state import EpisodeState, capture, restore
 from crowdnav.sim.events import Collision, check_finite
 from crowdnav.sim.geometry import measure
 from crowdnav.sim.groups import apply_goal_rules, goal_checks
+from crowdnav.sim.robots import PARKED
 from crowdnav.sim.simulator import Simulator, place_humans
 from crowdnav.sim.state import SimState
 from crowdnav.worlds.compiled import CompiledWorld
@@ -205,6 +206,8 @@ class BatchSimulator:
         """
         b = self.num_worlds
         result = StepResult(np.zeros(b, dtype=bool), np.zeros(b, dtype=bool), np.zeros(b, dtype=bool))
+        if self.team is not None:
+            self.team.collisions.clear()  # this step's contacts of the other robots only
         for bucket in self.buckets.values():
             rows = np.arange(len(bucket)) if active is None else np.flatnonzero(active[bucket.world])
             size = self.chunk_size(bucket.n)
@@ -222,7 +225,12 @@ class BatchSimulator:
         n, dt, state = bucket.n, self.dt, bucket.state
         positions = state.positions[rows]
         velocities = state.velocities[rows]
-        robot_re, robot_im, heading = self._robot_velocity(actions, state.robot_heading[rows])  # (the ego robot never leaves: retire)
+        robot_re, robot_im, heading = self._robot_velocity(actions, state.robot_heading[rows])
+        if self.team is not None:
+            here = self.team.active[bucket.world[rows], 0]
+            if not here.all():  # a first robot that left stays parked, its heading kept (Simulator._robot_velocity)
+                robot_re, robot_im = np.where(here, robot_re, 0.0), np.where(here, robot_im, 0.0)
+                heading = np.where(here, heading, state.robot_heading[rows])
         if n:
             view = self._view(bucket, rows, positions, velocities)
             commands = self._crowd.commands_batch(view, self._crowds[bucket.world[rows]])
@@ -303,16 +311,26 @@ class BatchSimulator:
         resolve_overlaps(positions, bucket.pair_offset[rows], bucket.pair_distance[rows], bucket.gap[rows], bucket.contact_all, self._surface)
         bucket.state.positions[rows] = positions
 
-    def retire(self, robots: np.ndarray) -> None:
-        """The other robots ``robots`` ((num_worlds, m) bool) leave their worlds (:meth:`crowdnav.Simulator.retire_robots`), measured again.
+    def retire(self, robots: np.ndarray, first: np.ndarray | None = None) -> None:
+        """The other robots ``robots`` ((num_worlds, m) bool) and the first robots ``first`` ((num_worlds,) bool; None: none) leave
+        their worlds (:meth:`crowdnav.Simulator.retire_robots`), measured again.
 
-        The first robot does not leave: a world's episode (the single env's) ends with it."""
+        The Gymnasium env's first robot never leaves (its world's episode ends with it); a caller that drives every robot
+        retires it as the robots-only PettingZoo env does: parked, still, its place kept in ``left_at``."""
         assert self.team is not None
+        team = self.team
         for bucket in self.buckets.values():
-            rows = np.flatnonzero(robots[bucket.world].any(1))
+            ego = np.zeros(len(bucket), dtype=bool) if first is None else first[bucket.world]
+            rows = np.flatnonzero(robots[bucket.world].any(1) | ego)
             if len(rows):
                 worlds = bucket.world[rows]
-                self.team.retire(worlds, robots[worlds])
+                parked = rows[ego[rows]]
+                if len(parked):  # retire_robots' branch for robot 0: its centre and velocity live in the world's own state
+                    state, home = bucket.state, bucket.world[parked]
+                    team.active[home, 0] = False
+                    team.left_at[home, 0] = state.positions[parked, 0]
+                    state.positions[parked, 0], state.velocities[parked, 0] = PARKED, 0.0
+                team.retire(worlds, robots[worlds])
                 self._refresh(bucket, rows)
 
     # ----------------------------------------------------------------- events

@@ -17,7 +17,7 @@ import numpy as np
 from crowdnav.batch.scalar_math import robot_velocity
 from crowdnav.scenario.crowd import SocialForce
 from crowdnav.sim import forces as sf
-from crowdnav.sim.contacts import goal_distance, outside
+from crowdnav.sim.contacts import deepest_contact, goal_distance, outside, touching
 from crowdnav.sim.events import Collision, outcomes
 from crowdnav.sim.robots import PARKED, Team, TeamState, with_robot_contact
 from crowdnav.sim.state import SELF_DISTANCE
@@ -65,6 +65,10 @@ class TeamStack:
         """Which other robots ended at their world's last step (success, collision, out of the world)."""
         self.outcome = np.full((w, m), None, dtype=object)
         """Their outcome at that step (None: running)."""
+        self.collisions: dict[tuple[int, int], Collision] = {}
+        """(world, j) -> other robot j's deepest contact, for the robots that touched something in the batch's last step
+        (:meth:`Team.outcomes` names it the same way; the batch clears it when a step starts)."""
+        self._labels = obstacles.labels + obstacles.disc_labels
 
     # ------------------------------------------------------------------ rows
 
@@ -153,6 +157,12 @@ class TeamStack:
         left = outside(positions.real, positions.imag, self._bounds) if self._bounds is not None else np.zeros(positions.shape, dtype=bool)
         on = ~gone
         touches, left, reached = touches & on, left & on, reached & on
+        m = len(self.specs)
+        for k, j in zip(*np.nonzero(touches), strict=True):  # per contact event: the contact named as Team.outcomes names it
+            gap = np.concatenate([[SELF_DISTANCE], gaps[k, j, 1 + m :]])  # itself, the humans, the obstacles
+            contact = with_robot_contact(deepest_contact(gap, n, self._labels) if touching(gap) else None, gaps[k, j, : 1 + m], self.names)
+            if contact is not None:  # (always: it touches something)
+                self.collisions[int(worlds[k]), int(j)] = contact
         outcome = outcomes(touches.ravel(), left.ravel(), reached.ravel(), np.zeros(touches.size, dtype=bool)).reshape(touches.shape)
         self.outcome[worlds] = outcome
         self.ended[worlds] = touches | left | reached

@@ -13,11 +13,16 @@ engines implement :class:`WorldEngine`, and the vector env reads neither's insid
 Either plays world ``i`` as the single env plays it after ``reset(seed=s_i)``, bit for bit, and gives a world's
 state as data (:meth:`WorldEngine.snapshot`, :mod:`crowdnav.envs.world_state`) that either loads into any of its
 worlds. Which one a vector env uses is :func:`crowdnav.envs.vector.stacks`' choice, made once.
+
+:class:`RobotsEngine` is the same for the robots-only env, every robot of a ``robots:`` scenario driven by the caller
+(:mod:`crowdnav.envs.robots_engine`): :class:`crowdnav.envs.vector_stacked_robots.StackedRobots` stacked,
+:class:`crowdnav.envs.robots_engine.SingleRobots` one env per world; a step's per-robot results are a :class:`RobotsStep`.
 """
 
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any, Protocol
 
 import numpy as np
@@ -27,6 +32,7 @@ if TYPE_CHECKING:
     from crowdnav.envs.world_state import WorldState
     from crowdnav.planning.shield import Shield
     from crowdnav.sensors import Modality
+    from crowdnav.sim.events import Collision
     from crowdnav.sim.robots import TeamState
     from crowdnav.sim.simulator import Simulator
 
@@ -91,6 +97,49 @@ class WorldEngine(Protocol):
     def load(self, world: int, state: WorldState) -> None:
         """Make ``state`` (a :meth:`snapshot` of a world of this scenario and options, either engine's) ``world``'s: it plays on
         as the captured world would, bit for bit. A ValueError in one line names what differs (scenario, settings, robots, version)."""
+
+
+@dataclass
+class RobotsStep:
+    """What one step did to every robot of every world (W worlds, R robots; zeros / None / False where a world did not step)."""
+
+    stepped: np.ndarray
+    """(W, R) bool: the robots that acted (in the world when the step began): the env's ``infos[name]["active"]``."""
+    rewards: np.ndarray
+    """(W, R) float64: each stepped robot's reward (0 for the others)."""
+    terms: dict[str, np.ndarray]
+    """Reward term -> (W, R) float64 (``infos[name]["reward_terms"]`` of the stepped robots)."""
+    outcome: np.ndarray
+    """(W, R) object: a stepped robot's outcome (``success``, ``collision``, ``out_of_bounds``, ``truncated``; None: runs on)."""
+    collisions: dict[tuple[int, int], Collision]
+    """(world, robot) -> the contact of a robot whose outcome is ``collision``."""
+    truncated: np.ndarray
+    """(W,) bool: the time limit ended the world's episode (some robot was still running)."""
+    over: np.ndarray
+    """(W,) bool: the world's episode ended (every robot ended, or the time limit)."""
+
+
+class RobotsEngine(Protocol):
+    """``num_worlds`` worlds of a ``robots:`` scenario, every robot driven by the caller (:mod:`crowdnav.envs.robots_engine`)."""
+
+    num_worlds: int
+    robot_names: list[str]
+    """Every robot's agent name, the scenario's order."""
+    observation_size: int
+    """D: the length of a robot's flat observation (every robot's is the same)."""
+
+    def reset(self, worlds: Sequence[int] | np.ndarray, seeds: Sequence[int | None]) -> None:
+        """Start a new episode in each of ``worlds`` (``seeds[k]`` for ``worlds[k]``; None continues its generator)."""
+
+    def step(self, actions: np.ndarray, active: np.ndarray | None = None) -> RobotsStep:
+        """Step the worlds of the bool mask ``active`` (None: all) with their (W, R, 2) ``actions`` rows; a robot that left
+        ignores its action (it is not checked), a robot in the world needs 2 finite values (clipped to [-1, 1])."""
+
+    def observe(self) -> np.ndarray:
+        """(W, R, D) float32: each robot's flat observation now (all zero for a robot that had left when the last step began)."""
+
+    def close(self) -> None:
+        """Release what the worlds hold."""
 
 
 def world_frame(sim: Any) -> dict[str, np.ndarray]:

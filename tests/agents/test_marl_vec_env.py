@@ -1,18 +1,41 @@
 """The robots' vector env (agents: robots collects through it): one row per robot per world, each world's rows what
-stepping that world's robots-only env gives, autoresets included, bit for bit; what SuperSuit's chain gave; restorable."""
+stepping that world's robots-only env gives, autoresets included, bit for bit, whichever engine plays the worlds
+(stacked in one batch, or one env per world); what SuperSuit's chain gave; restorable."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
+from crowdnav.agents.marl.env import RobotsTrainingEnv
 from crowdnav.agents.marl.vec_env import RobotsVecEnv
-from crowdnav.agents.training.config import config_from_mapping
+from crowdnav.agents.sb3.factory import env_options
+from crowdnav.agents.training.config import TrainConfig, config_from_mapping
 
+from crowdnav.envs.robots_engine import SingleRobots
+from crowdnav.envs.vector_stacked_robots import StackedRobots
 from tests.agents.test_marl import robots_config
 
 
-def _vec(tmp_path, **fields) -> RobotsVecEnv:
-    return RobotsVecEnv.make(config_from_mapping(robots_config(tmp_path / "run", **fields)))
+def _config(tmp_path, **fields) -> TrainConfig:
+    return config_from_mapping(robots_config(tmp_path / "run", **fields))
+
+
+def _vec(tmp_path, engine: str = "stacked", **fields) -> RobotsVecEnv:
+    vec = RobotsVecEnv.make(_config(tmp_path, **fields))
+    if engine == "single":  # the same worlds, one robots-only env each (what a scenario that does not stack gets)
+        vec.engine = SingleRobots(env_options(_config(tmp_path, **fields)), vec.num_worlds)
+    assert isinstance(vec.engine, StackedRobots if engine == "stacked" else SingleRobots)
+    return vec
+
+
+def _alone(tmp_path, **fields) -> list[RobotsTrainingEnv]:
+    """The run's worlds as plain robots-only envs, each told its place (the per-world path, the reference)."""
+    config = _config(tmp_path, **fields)
+    worlds = [RobotsTrainingEnv(env_options(config), normalize=config.normalize_observations, identity=config.agent_identity,
+                                run_seed=config.seed, actions=config.robot_actions) for _ in range(config.num_envs)]
+    for world, env in enumerate(worlds):
+        env.assign_world(world, config.num_envs)
+    return worlds
 
 
 def _actions(rng: np.random.Generator, rows: int) -> np.ndarray:
@@ -24,17 +47,19 @@ def _info(info: dict) -> dict:
     return {key: value.tobytes() if isinstance(value, np.ndarray) else value for key, value in info.items()}
 
 
-@pytest.mark.parametrize("fields", [{}, {"num_envs": 1, "robot_actions": "goal_velocity"}, {"num_envs": 3, "robot_actions": "velocity"}],
-                         ids=["two-worlds", "one-world-goal-frame", "three-worlds-velocity"])
-def test_each_worlds_rows_are_its_robots_env_stepped_alone_resets_included(tmp_path, fields):
-    vec = _vec(tmp_path, **fields)
-    alone = _vec(tmp_path, **fields).worlds  # the same worlds, stepped one by one as plain robots-only envs
+@pytest.mark.parametrize("engine", ["stacked", "single"])
+@pytest.mark.parametrize("fields", [{}, {"num_envs": 1, "robot_actions": "goal_velocity"}, {"num_envs": 3, "robot_actions": "velocity"},
+                                    {"num_envs": 4, "robot_actions": "goal_velocity", "overrides": {"max_steps": 24, "humans.count": [0, 6]}}],
+                         ids=["two-worlds", "one-world-goal-frame", "three-worlds-velocity", "four-worlds-crowd-sizes-goal-frame"])
+def test_each_worlds_rows_are_its_robots_env_stepped_alone_resets_included(tmp_path, fields, engine):
+    vec = _vec(tmp_path, engine, **fields)
+    alone = _alone(tmp_path, **fields)
     robots = len(vec.robots)
     observation = vec.reset()
     expected = [world.reset()[0] for world in alone]
     assert observation.dtype == np.float32 and observation.shape == (len(alone) * robots, *vec.observation_space.shape)
     rng, ends = np.random.default_rng(0), 0
-    for _ in range(70):  # episodes of at most 20 steps: every world resets a few times
+    for _ in range(70):  # episodes of at most 20 (24) steps: every world resets a few times
         assert np.array_equal(observation, np.stack([world[name] for world in expected for name in vec.robots]))
         actions = _actions(rng, vec.num_envs)
         observation, rewards, dones, infos = vec.step(actions)
@@ -60,7 +85,7 @@ def test_the_rows_are_what_supersuits_chain_made_of_the_same_worlds_bit_for_bit(
     published then reproduce through RobotsVecEnv only if it lays out and resets the rows as that chain did."""
     ss = pytest.importorskip("supersuit")
     vec = _vec(tmp_path, robot_actions="velocity")
-    base = _vec(tmp_path, num_envs=1, robot_actions="velocity").worlds[0]
+    base = _alone(tmp_path, num_envs=1, robot_actions="velocity")[0]
     chain = ss.concat_vec_envs_v1(ss.pettingzoo_env_to_vec_env_v1(base), 2, base_class="stable_baselines3")
     for world, markov in enumerate(chain.venv.vec_envs):
         markov.par_env.assign_world(world, 2)
@@ -75,20 +100,18 @@ def test_the_rows_are_what_supersuits_chain_made_of_the_same_worlds_bit_for_bit(
         assert [_info(info) for info in ours[3]] == [_info(info) for info in theirs[3]]
 
 
-def test_restored_worlds_continue_as_the_worlds_that_played_on(tmp_path):
-    vec, restored = _vec(tmp_path), _vec(tmp_path)
+@pytest.mark.parametrize("engine", ["stacked", "single"])
+def test_restored_worlds_continue_as_the_worlds_that_played_on(tmp_path, engine):
+    fields = {"num_envs": 3, "robot_actions": "goal_velocity", "overrides": {"max_steps": 80}}
+    vec, restored = _vec(tmp_path, engine, **fields), _vec(tmp_path, engine, **fields)
     last = vec.reset()
     restored.reset()
     rng = np.random.default_rng(2)
-    for _ in range(27):  # past the first episodes' ends: the worlds are in their second episodes
-        last = vec.step(_actions(rng, vec.num_envs))[0]
-    counters = [(world.first_episode, world.played) for world in vec.worlds]
-    lengths = np.array([len(world.actions or []) for world in vec.worlds])
-    assert counters[0][1] >= 2 and lengths.max() > 0
-    actions = np.zeros((len(vec.worlds), lengths.max(), len(vec.robots), 2), np.float32)
-    for w, world in enumerate(vec.worlds):
-        if world.actions:
-            actions[w, : lengths[w]] = np.stack(world.actions)
+    for _ in range(45):  # at the goals, noisily: the first episodes end at different steps, the worlds are in their second
+        last = vec.step(rng.normal([1.0, 0.0], 0.3, (vec.num_envs, 2)).astype(np.float32))[0]
+    counters = vec.episode_counters()
+    actions, lengths = vec.episode_actions()
+    assert counters[0][1] >= 2 and lengths.max() > 0 and len(set(lengths.tolist())) > 1
     assert np.array_equal(restored.restore_worlds(counters, actions, lengths), last)
     for _ in range(30):
         move = _actions(rng, vec.num_envs)
@@ -96,6 +119,8 @@ def test_restored_worlds_continue_as_the_worlds_that_played_on(tmp_path):
         observation, again, ended, told = restored.step(move)
         assert np.array_equal(observation, expected) and np.array_equal(again, rewards) and np.array_equal(ended, dones)
         assert [_info(info) for info in told] == [_info(info) for info in infos]
+    assert restored.episode_counters() == vec.episode_counters()
+    assert all(np.array_equal(mine, theirs) for mine, theirs in zip(restored.episode_actions(), vec.episode_actions(), strict=True))
 
 
 def test_a_restore_with_another_world_count_is_refused(tmp_path):

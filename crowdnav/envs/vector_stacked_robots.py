@@ -1,0 +1,188 @@
+"""Every robot of every world driven by the caller, the worlds stacked: :class:`StackedRobots` (a
+:class:`crowdnav.envs.engine.RobotsEngine`).
+
+The worlds are one :class:`crowdnav.batch.simulator.BatchSimulator`, their robots after the first its
+:class:`crowdnav.batch.team.TeamStack`; this engine does, as array work over the worlds, what the robots-only PettingZoo
+env (:class:`crowdnav.envs.parallel.CrowdNavParallelEnv`, ``humans_as_agents=False, fixed_agents=True,
+flat_observations=True``) does around its simulator, so world ``i`` plays that env's episodes bit for bit:
+
+* **actions**: each robot in the world moves by its action (the first robot included: one that left stays parked);
+  a robot that left ignores its action;
+* **outcomes**: each robot's own (the first robot's from the batch's events, the others' from the team's, their
+  contacts named as the single simulator names them), ``truncated`` for those still running at the time limit;
+* **rewards**: the single env's kernels (:func:`crowdnav.envs.reward.reward_terms`) over (W, R), each robot's goal
+  distance at its last step as its progress memory, the humans' social force on it;
+* **leaving**: a robot that ended leaves its world (:meth:`BatchSimulator.retire`) after the step's observation (the
+  env's ``retire_robots`` after its observation): here when the next step starts, so the observation shows it;
+* **observations**: each robot's modalities (``robots.<k>.modalities``, built with its own spec, as the env's core
+  builds them) on its view (:func:`crowdnav.batch.robot_views.robot_view`), the worlds grouped by which robots are in
+  them (a view lists only those), flattened in its Dict's key order as ``flat_observations`` flattens.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Sequence
+
+import numpy as np
+from gymnasium import spaces
+
+from crowdnav.batch.robot_views import robot_view
+from crowdnav.batch.simulator import BatchSimulator
+from crowdnav.batch.state import BatchState
+from crowdnav.batch.team import TeamStack
+from crowdnav.envs.engine import RobotsStep
+from crowdnav.envs.reward import REWARD_TERMS, reward_terms
+from crowdnav.sensors import Modality, build_modalities
+from crowdnav.sim.contacts import goal_distance
+from crowdnav.sim.events import outcomes
+from crowdnav.worlds.compiled import CompiledWorld
+
+ENDED = ("collision", "out_of_bounds", "success")
+"""The outcomes that end a robot's part of the episode (``truncated`` ends the whole episode instead)."""
+
+
+class StackedRobots:
+    """``num_worlds`` worlds of ``world`` (a ``robots:`` scenario, every env option applied) in one batch (module docstring)."""
+
+    def __init__(self, world: CompiledWorld, num_worlds: int):
+        self.batch = BatchSimulator(world, num_worlds)
+        if self.batch.team is None:
+            raise ValueError("StackedRobots plays a scenario with several robots (robots:)")
+        self.team: TeamStack = self.batch.team
+        self.num_worlds = self.batch.num_worlds
+        self.robot_names: list[str] = list(self.team.names)
+        scenario, slot = world.scenario, self.batch.slots[0]
+        self.sensors: list[tuple[tuple[str, Modality], ...]] = []
+        """Each robot's modalities in its Dict's key order (the flat observation's)."""
+        for k, robot in enumerate(scenario.robot_specs):
+            own = getattr(robot, "modalities", None)
+            built = build_modalities(own if own is not None else scenario.sensors.modalities,
+                                     dataclasses.replace(world, scenario=slot.robot_scenario(k)), scenario.sensors)
+            space = spaces.Dict({key: modality.space() for key, modality in built.items()})
+            self.sensors.append(tuple((key, built[key]) for key in space.spaces))
+        sizes = {sum(int(spaces.flatdim(modality.space())) for _, modality in own) for own in self.sensors}
+        if len(sizes) != 1:
+            raise ValueError(f"the robots observe vectors of different lengths {sorted(sizes)}; a batch of robots needs one length")
+        self.observation_size = sizes.pop()
+        self._weights = {term: float(getattr(scenario.reward, term)) for term in REWARD_TERMS}
+        r = len(self.robot_names)
+        self._previous = np.zeros((self.num_worlds, r))
+        """Each robot's goal distance at its last step or reset (its reward's progress memory)."""
+        self._leaving = np.zeros((self.num_worlds, r), dtype=bool)
+        """Robots that ended at their world's last step, leaving it before anything else happens there."""
+
+    # ------------------------------------------------------------------ reset
+
+    def reset(self, worlds: Sequence[int] | np.ndarray, seeds: Sequence[int | None]) -> None:
+        self.batch.reset(worlds, seeds)
+        worlds = np.asarray(worlds, dtype=np.int64)
+        self._leaving[worlds] = False
+        self._previous[worlds] = self._goal_distance()[worlds]
+
+    # ------------------------------------------------------------------- step
+
+    def step(self, actions: np.ndarray, active: np.ndarray | None = None) -> RobotsStep:
+        team, w = self.team, self.num_worlds
+        stepping = np.ones(w, dtype=bool) if active is None else active
+        self._leave(stepping)
+        here = team.active & stepping[:, None]  # the robots that act: in a stepping world, not left
+        actions = np.where(here[:, :, None], np.asarray(actions, dtype=np.float64), 0.0)  # a robot that left stands (unchecked)
+        _check(actions, here, self.robot_names)
+        result = self.batch.step(actions[:, 0], active, actions[:, 1:])
+        outcome = np.full((w, len(self.robot_names)), None, dtype=object)
+        outcome[:, 0] = outcomes(result.collided, result.left_world, result.goal_reached, result.truncated)
+        running = np.full(outcome.shape, None, dtype=object)  # an other robot's outcome when it did not end: the time limit's
+        running[result.truncated] = "truncated"
+        outcome[:, 1:] = np.where(team.ended, team.outcome, running[:, 1:])
+        outcome[~here] = None
+        ended = np.logical_or.reduce([outcome == name for name in ENDED])  # (None among the names: no isin on objects)
+        going = (here & ~ended).any(1)
+        truncated = going & result.truncated & stepping
+        over = stepping & (~going | truncated)
+        self._leaving |= ended & ~over[:, None]  # (the stepping worlds' were cleared as they left)
+        collisions = {(world, 0): contact for world, contact in result.collisions.items() if here[world, 0]}
+        collisions.update(((world, j + 1), contact) for (world, j), contact in team.collisions.items() if here[world, j + 1])
+        rewards, terms = self._rewards(here, outcome)
+        return RobotsStep(here, rewards, terms, outcome, collisions, truncated, over)
+
+    def _leave(self, stepping: np.ndarray) -> None:
+        """The robots that ended at their world's last step leave the ``stepping`` worlds (the env's ``retire_robots`` after its
+        observation); a world that waits keeps them, its observation unchanged."""
+        leaving = self._leaving & stepping[:, None]
+        if leaving.any():
+            self.batch.retire(leaving[:, 1:], leaving[:, 0])
+            self._leaving &= ~leaving
+
+    def _rewards(self, here: np.ndarray, outcome: np.ndarray) -> tuple[np.ndarray, dict[str, np.ndarray]]:
+        """Each acting robot's reward and terms (the env's Reward on its view), its progress memory moved on."""
+        distance, force = self._goal_distance(), self._social_force()
+        previous = self._previous
+        self._previous = np.where(here, distance, previous)
+        reward, terms = reward_terms(self._weights, previous, distance, np.hypot(force.real, force.imag), outcome)
+        return np.where(here, reward, 0.0), {term: np.where(here, values, 0.0) for term, values in terms.items()}
+
+    def _goal_distance(self) -> np.ndarray:
+        """(W, R): every robot's goal distance now (:func:`crowdnav.sim.contacts.goal_distance`, the view's ``robot_goal_distance``)."""
+        out = np.zeros((self.num_worlds, len(self.robot_names)))
+        for bucket in self.batch.buckets.values():
+            out[bucket.world, 0] = goal_distance(bucket.state.robot_goal, bucket.state.positions[:, 0])
+        out[:, 1:] = goal_distance(self.team.goals, self.team.positions)
+        return out
+
+    def _social_force(self) -> np.ndarray:
+        """(W, R) complex: the humans' social force on every robot (the first robot's row of the repulsion, the team's)."""
+        out = np.zeros((self.num_worlds, len(self.robot_names)), dtype=complex)
+        for bucket in self.batch.buckets.values():
+            out[bucket.world, 0] = bucket.repulsion[:, 0]
+        out[:, 1:] = self.team.social
+        return out
+
+    # ------------------------------------------------------------------ observations
+
+    def observe(self) -> np.ndarray:
+        out = np.zeros((self.num_worlds, len(self.robot_names), self.observation_size), dtype=np.float32)
+        team = self.team
+        for bucket in self.batch.buckets.values():
+            rows, size = np.arange(len(bucket)), self.batch.chunk_size(bucket.n)
+            for start in range(0, len(rows), size):  # chunks of worlds, as the simulator steps them
+                chunk = rows[start : start + size]
+                state, worlds = self.batch.state(bucket, chunk), bucket.world[chunk]
+                patterns, which = np.unique(team.active[worlds], axis=0, return_inverse=True)
+                which = which.reshape(-1)
+                for p, pattern in enumerate(patterns):  # worlds holding the same robots: their views list the same discs
+                    group = np.flatnonzero(which == p)
+                    part = _rows(state, group)
+                    for k in np.flatnonzero(pattern).tolist():  # each robot in those worlds, by its own sensors
+                        out[worlds[group], k] = self._flat(part, worlds[group], k, np.flatnonzero(pattern))
+        return out
+
+    def _flat(self, state: BatchState, worlds: np.ndarray, robot: int, present: np.ndarray) -> np.ndarray:
+        """Robot ``robot``'s flat observations in ``worlds`` (``state``: their rows; ``present``: the robots in them)."""
+        seen = present[present != robot]
+        views: dict[bool, BatchState] = {}  # with the other robots, without them (a modality that tracks people): made once if read
+        parts = []
+        for _, modality in self.sensors[robot]:
+            wanted = modality.sees_robots
+            if wanted not in views:
+                views[wanted] = robot_view(state, self.team, worlds, robot, seen if wanted else seen[:0])
+            parts.append(np.asarray(modality.observe_batch(views[wanted]), dtype=modality.space().dtype).reshape(len(worlds), -1))
+        return np.concatenate(parts, axis=1)
+
+    def close(self) -> None:
+        """Nothing to release (the worlds are arrays)."""
+
+
+def _rows(state: BatchState, rows: np.ndarray) -> BatchState:
+    """Rows ``rows`` of a :class:`crowdnav.batch.state.BatchState` (its shared ``radii`` kept)."""
+    return dataclasses.replace(state, **{field.name: getattr(state, field.name)[rows] for field in dataclasses.fields(state)
+                                         if field.name != "radii"})
+
+
+def _check(actions: np.ndarray, here: np.ndarray, names: Sequence[str]) -> None:
+    """The env's refusal of an acting robot's non-finite action (ValueError naming the robot), before anything moves."""
+    bad = here & ~np.isfinite(actions).all(axis=2)
+    if bad.any():
+        world, k = (int(i) for i in np.argwhere(bad)[0])
+        raise ValueError(f"the action of {names[k]} in world {world}: the robot action must be finite (no NaN or inf), "
+                         f"got {actions[world, k].tolist()}")
