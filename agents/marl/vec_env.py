@@ -43,7 +43,7 @@ from stable_baselines3.common.vec_env.base_vec_env import VecEnv, VecEnvObs, Vec
 
 from crowdnav.envs.engine import RobotsEngine, RobotsStep
 from crowdnav.envs.reward import REWARD_TERMS
-from crowdnav.envs.robots_engine import robots_engine
+from crowdnav.envs.robots_engine import SingleRobots, robots_engine
 from crowdnav.scenario.schema import Scenario
 
 
@@ -77,8 +77,10 @@ class RobotsVecEnv(VecEnv):
         self._actions: np.ndarray | None = None
 
     @classmethod
-    def make(cls, config: TrainConfig, first_episode: int = 0) -> RobotsVecEnv:
-        """``config.num_envs`` worlds of the run's robots; their episodes are numbered from ``first_episode``."""
+    def make(cls, config: TrainConfig, first_episode: int = 0, *, stacked: bool = True) -> RobotsVecEnv:
+        """``config.num_envs`` worlds of the run's robots; their episodes are numbered from ``first_episode``.
+        ``stacked=False``: one robots-only env per world even where the worlds stack (the same rows; what the stack is
+        measured against, ``benchmarks/bench_robots_vec.py``)."""
         options = env_options(config)
         template = robots_env(options)  # one world's env: the scenario refused in the env's words, the inputs' scales
         try:
@@ -87,7 +89,8 @@ class RobotsVecEnv(VecEnv):
             scenario = template.scenario
         finally:
             template.close()
-        return cls(robots_engine(options, config.num_envs), inputs, commands, scenario, run_seed=config.seed, first_episode=first_episode)
+        engine = robots_engine(options, config.num_envs) if stacked else SingleRobots(options, config.num_envs)
+        return cls(engine, inputs, commands, scenario, run_seed=config.seed, first_episode=first_episode)
 
     @property
     def num_worlds(self) -> int:

@@ -16,7 +16,8 @@ worlds. Which one a vector env uses is :func:`crowdnav.envs.vector.stacks`' choi
 
 :class:`RobotsEngine` is the same for the robots-only env, every robot of a ``robots:`` scenario driven by the caller
 (:mod:`crowdnav.envs.robots_engine`): :class:`crowdnav.envs.vector_stacked_robots.StackedRobots` stacked,
-:class:`crowdnav.envs.robots_engine.SingleRobots` one env per world; a step's per-robot results are a :class:`RobotsStep`.
+:class:`crowdnav.envs.robots_engine.SingleRobots` one env per world; a step's per-robot results are a :class:`RobotsStep`,
+where everyone is a :class:`RobotsFrame`.
 """
 
 from __future__ import annotations
@@ -119,6 +120,25 @@ class RobotsStep:
     """(W,) bool: the world's episode ended (every robot ended, or the time limit)."""
 
 
+@dataclass
+class RobotsFrame:
+    """Where every robot and human of every world is now (W worlds, R robots, N: the largest crowd), what evaluation's
+    metrics record per step; zeros for a world never reset."""
+
+    robots: np.ndarray
+    """(W, R) complex128: each robot's centre (a robot that left: where it is parked)."""
+    goals: np.ndarray
+    """(W, R) complex128: each robot's goal."""
+    social_force: np.ndarray
+    """(W, R) float64: the magnitude of the humans' social force on each robot (``abs(view.robot_social_force)``)."""
+    humans: np.ndarray
+    """(W, N) complex128: each human's centre, in the simulator's order; NaN past a world's crowd."""
+    crowd: np.ndarray
+    """(W,) int64: each world's number of humans."""
+    human_stalls: np.ndarray
+    """(W,) int64: how many times a human stalled this episode, per world."""
+
+
 class RobotsEngine(Protocol):
     """``num_worlds`` worlds of a ``robots:`` scenario, every robot driven by the caller (:mod:`crowdnav.envs.robots_engine`)."""
 
@@ -137,6 +157,12 @@ class RobotsEngine(Protocol):
 
     def observe(self) -> np.ndarray:
         """(W, R, D) float32: each robot's flat observation now (all zero for a robot that had left when the last step began)."""
+
+    def frame(self) -> RobotsFrame:
+        """Every robot and human of every world now (:class:`RobotsFrame`)."""
+
+    def radii(self, world: int) -> tuple[np.ndarray, np.ndarray]:
+        """``world``'s body radii (m): its robots' (R,) and its humans' (n,), the simulator's order."""
 
     def close(self) -> None:
         """Release what the worlds hold."""

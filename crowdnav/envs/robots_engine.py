@@ -26,7 +26,7 @@ import numpy as np
 from gymnasium import spaces
 
 from crowdnav.envs.core import load_env_world, option_overrides
-from crowdnav.envs.engine import RobotsEngine, RobotsStep
+from crowdnav.envs.engine import RobotsEngine, RobotsFrame, RobotsStep
 from crowdnav.envs.vector_stacked_robots import StackedRobots
 from crowdnav.sensors.tracker import make_tracker
 from crowdnav.sim.simulator import Simulator
@@ -104,6 +104,28 @@ class SingleRobots:
     def observe(self) -> np.ndarray:
         observations: np.ndarray = self._observations.copy()
         return observations
+
+    def frame(self) -> RobotsFrame:
+        w, r = self.num_worlds, len(self.robot_names)
+        sims = [env.simulator for env in self.envs]
+        crowd = np.array([len(sim.positions) - 1 for sim in sims], dtype=np.int64)
+        frame = RobotsFrame(np.zeros((w, r), complex), np.zeros((w, r), complex), np.zeros((w, r)),
+                            np.full((w, int(crowd.max(initial=0))), complex(np.nan, np.nan)), crowd, np.zeros(w, dtype=np.int64))
+        for world, sim in enumerate(sims):  # the per-world engine: its simulators read one by one
+            team = sim.team
+            assert team is not None  # a robots: scenario's
+            frame.robots[world] = [sim.positions[0], *team.state.positions]
+            frame.goals[world] = [sim.robot_goal, *team.state.goals]
+            force = np.array([sim.robot_social_force, *team.social])
+            frame.social_force[world] = np.hypot(force.real, force.imag)  # abs(complex): libm's hypot
+            frame.humans[world, : crowd[world]] = sim.positions[1:]
+            frame.human_stalls[world] = sim.human_stalls.sum()
+        return frame
+
+    def radii(self, world: int) -> tuple[np.ndarray, np.ndarray]:
+        sim = self.envs[world].simulator
+        assert sim.team is not None  # a robots: scenario's
+        return sim.team.all_radii.copy(), sim.radii[1:].copy()
 
     def close(self) -> None:
         for env in self.envs:

@@ -16,7 +16,9 @@ flat_observations=True``) does around its simulator, so world ``i`` plays that e
   env's ``retire_robots`` after its observation): here when the next step starts, so the observation shows it;
 * **observations**: each robot's modalities (``robots.<k>.modalities``, built with its own spec, as the env's core
   builds them) on its view (:func:`crowdnav.batch.robot_views.robot_view`), the worlds grouped by which robots are in
-  them (a view lists only those), flattened in its Dict's key order as ``flat_observations`` flattens.
+  them (a view lists only those), flattened in its Dict's key order as ``flat_observations`` flattens;
+* **frames**: every robot's and human's place, the humans' force on each robot (:meth:`StackedRobots.frame`, what
+  evaluation records per step), read from the stack a crowd size at a time.
 """
 
 from __future__ import annotations
@@ -31,7 +33,7 @@ from crowdnav.batch.robot_views import robot_view
 from crowdnav.batch.simulator import BatchSimulator
 from crowdnav.batch.state import BatchState
 from crowdnav.batch.team import TeamStack
-from crowdnav.envs.engine import RobotsStep
+from crowdnav.envs.engine import RobotsFrame, RobotsStep
 from crowdnav.envs.reward import REWARD_TERMS, reward_terms
 from crowdnav.sensors import Modality, build_modalities
 from crowdnav.sim.contacts import goal_distance
@@ -168,6 +170,29 @@ class StackedRobots:
                 views[wanted] = robot_view(state, self.team, worlds, robot, seen if wanted else seen[:0])
             parts.append(np.asarray(modality.observe_batch(views[wanted]), dtype=modality.space().dtype).reshape(len(worlds), -1))
         return np.concatenate(parts, axis=1)
+
+    # ------------------------------------------------------------------ frames
+
+    def frame(self) -> RobotsFrame:
+        w, team = self.num_worlds, self.team
+        crowd = np.zeros(w, dtype=np.int64)
+        for n, bucket in self.batch.buckets.items():
+            crowd[bucket.world] = n
+        force = self._social_force()
+        frame = RobotsFrame(np.zeros((w, len(self.robot_names)), complex), np.zeros((w, len(self.robot_names)), complex),
+                            np.hypot(force.real, force.imag), np.full((w, int(crowd.max(initial=0))), complex(np.nan, np.nan)),
+                            crowd, np.zeros(w, dtype=np.int64))
+        for n, bucket in self.batch.buckets.items():  # each crowd size's worlds at once
+            state, worlds = bucket.state, bucket.world
+            frame.robots[worlds, 0], frame.goals[worlds, 0] = state.positions[:, 0], state.robot_goal
+            frame.humans[worlds, :n] = state.positions[:, 1:]
+            frame.human_stalls[worlds] = state.human_stalls.sum(axis=1)
+        frame.robots[:, 1:], frame.goals[:, 1:] = team.positions, team.goals
+        return frame
+
+    def radii(self, world: int) -> tuple[np.ndarray, np.ndarray]:
+        bucket, _ = self.batch.locate(world)
+        return self.team.team.all_radii.copy(), bucket.radii[1:].copy()
 
     def close(self) -> None:
         """Nothing to release (the worlds are arrays)."""

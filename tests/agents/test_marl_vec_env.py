@@ -21,9 +21,8 @@ def _config(tmp_path, **fields) -> TrainConfig:
 
 
 def _vec(tmp_path, engine: str = "stacked", **fields) -> RobotsVecEnv:
-    vec = RobotsVecEnv.make(_config(tmp_path, **fields))
-    if engine == "single":  # the same worlds, one robots-only env each (what a scenario that does not stack gets)
-        vec.engine = SingleRobots(env_options(_config(tmp_path, **fields)), vec.num_worlds)
+    # "single": the same worlds, one robots-only env each (what a scenario that does not stack gets)
+    vec = RobotsVecEnv.make(_config(tmp_path, **fields), stacked=engine == "stacked")
     assert isinstance(vec.engine, StackedRobots if engine == "stacked" else SingleRobots)
     return vec
 

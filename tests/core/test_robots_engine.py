@@ -1,6 +1,7 @@
 """Every robot driven by the caller (crowdnav.envs.robots_engine): the stacked engine plays each world's robots as the
 robots-only PettingZoo env does (one per world: SingleRobots), bit for bit: observations, rewards and terms, outcomes
-with their named contacts, the first robot leaving (parked) while the others go on, the time limit, partial steps."""
+with their named contacts, the first robot leaving (parked) while the others go on, the time limit, partial steps, and
+the frames evaluation records (where everyone is, the humans' force on each robot)."""
 
 from __future__ import annotations
 
@@ -22,6 +23,18 @@ def _same(stacked: RobotsStep, single: RobotsStep) -> None:
     assert stacked.collisions == single.collisions  # kind, partner and depth
     for term, values in single.terms.items():
         assert np.where(stacked.stepped, stacked.terms[term], 0.0).tobytes() == values.tobytes(), term
+
+
+def _same_frame(stacked: StackedRobots, single: SingleRobots, running: np.ndarray) -> None:
+    """Both engines' frames (what evaluation records) the same bits: every human, goal and stall count; the position of
+    and force on every ``running`` robot (one that just ended leaves the stack's world only when the next step starts)."""
+    a, b = stacked.frame(), single.frame()
+    for name in ("goals", "humans", "crowd", "human_stalls"):
+        assert getattr(a, name).tobytes() == getattr(b, name).tobytes(), name
+    for name in ("robots", "social_force"):
+        assert getattr(a, name)[running].tobytes() == getattr(b, name)[running].tobytes(), name
+    for world in range(stacked.num_worlds):
+        assert all(x.tobytes() == y.tobytes() for x, y in zip(stacked.radii(world), single.radii(world), strict=True))
 
 
 OPEN = {"max_steps": 80, "world.boundary_walls": False}
@@ -52,6 +65,7 @@ def test_stacked_robots_play_each_world_as_the_robots_only_env_bit_for_bit(overr
         active = None if t % 3 else rng.random(WORLDS) < 0.6  # some steps step some worlds only
         step = stacked.step(actions, active)
         _same(step, single.step(actions, active))
+        _same_frame(stacked, single, step.stepped & (step.outcome == None))  # noqa: E711  (entry by entry)
         first_left += int((~step.stepped[:, 0] & step.stepped[:, 1:].any(1)).sum())
         ends |= set(step.outcome.ravel().tolist())
         kinds |= {contact.kind for contact in step.collisions.values()}
