@@ -41,8 +41,10 @@ OPEN = {"max_steps": 80, "world.boundary_walls": False}
 """No walls around the hall: a robot may leave the world (out_of_bounds), and a parked first robot is outside it."""
 
 
-@pytest.mark.parametrize("overrides", [OPEN, {"max_steps": 60, "humans.count": [0, 7]},
-                                       {**OPEN, "humans.count": 0, "world.min": [-6.8, -5], "world.max": [6.8, 5]}],
+@pytest.mark.parametrize("overrides", [OPEN,  # the default suite's case (the others: 10-17 s each, marked slow)
+                                       pytest.param({"max_steps": 60, "humans.count": [0, 7]}, marks=pytest.mark.slow),
+                                       pytest.param({**OPEN, "humans.count": 0, "world.min": [-6.8, -5], "world.max": [6.8, 5]},
+                                                    marks=pytest.mark.slow)],
                          ids=["open_hall", "crowd_sizes_0_to_7", "no_humans_narrow_open_hall"])
 def test_stacked_robots_play_each_world_as_the_robots_only_env_bit_for_bit(overrides):
     modalities = ["goal", "lidar", "velocity", "obstacles", "humans"]  # the last two see no robots: a view of the humans alone

@@ -145,6 +145,7 @@ def test_a_scripted_baseline_gives_the_rows_of_one_env_per_seed_several_worlds_a
     _same_rows(rows, expected)
 
 
+@pytest.mark.slow  # 8 s; the shared-policy cases at 4 and 16 worlds check several at once in the default suite
 def test_the_rows_do_not_depend_on_how_many_episodes_play_at_once(robots_policy):
     played = {}
     for worlds in (1, 5):
