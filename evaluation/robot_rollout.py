@@ -202,7 +202,7 @@ class _Tracks:
         self.running &= ~ends
         self.acting = np.where(playing[:, None], step.stepped, self.acting)
         frame = self.engine.frame()
-        self.stalls[worlds] = frame.human_stalls[worlds]
+        self.stalls[worlds] = frame.stalls[worlds]
         self._write(frame, worlds)
 
     def _write(self, frame: RobotsFrame, worlds: np.ndarray) -> None:

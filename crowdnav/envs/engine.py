@@ -135,7 +135,7 @@ class RobotsFrame:
     """(W, N) complex128: each human's centre, in the simulator's order; NaN past a world's crowd."""
     crowd: np.ndarray
     """(W,) int64: each world's number of humans."""
-    human_stalls: np.ndarray
+    stalls: np.ndarray
     """(W,) int64: how many times a human stalled this episode, per world."""
 
 

@@ -119,7 +119,7 @@ class SingleRobots:
             force = np.array([sim.robot_social_force, *team.social])
             frame.social_force[world] = np.hypot(force.real, force.imag)  # abs(complex): libm's hypot
             frame.humans[world, : crowd[world]] = sim.positions[1:]
-            frame.human_stalls[world] = sim.human_stalls.sum()
+            frame.stalls[world] = sim.human_stalls.sum()
         return frame
 
     def radii(self, world: int) -> tuple[np.ndarray, np.ndarray]:

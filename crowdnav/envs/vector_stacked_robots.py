@@ -186,7 +186,7 @@ class StackedRobots:
             state, worlds = bucket.state, bucket.world
             frame.robots[worlds, 0], frame.goals[worlds, 0] = state.positions[:, 0], state.robot_goal
             frame.humans[worlds, :n] = state.positions[:, 1:]
-            frame.human_stalls[worlds] = state.human_stalls.sum(axis=1)
+            frame.stalls[worlds] = state.human_stalls.sum(axis=1)
         frame.robots[:, 1:], frame.goals[:, 1:] = team.positions, team.goals
         return frame
 

@@ -29,7 +29,7 @@ def _same_frame(stacked: StackedRobots, single: SingleRobots, running: np.ndarra
     """Both engines' frames (what evaluation records) the same bits: every human, goal and stall count; the position of
     and force on every ``running`` robot (one that just ended leaves the stack's world only when the next step starts)."""
     a, b = stacked.frame(), single.frame()
-    for name in ("goals", "humans", "crowd", "human_stalls"):
+    for name in ("goals", "humans", "crowd", "stalls"):
         assert getattr(a, name).tobytes() == getattr(b, name).tobytes(), name
     for name in ("robots", "social_force"):
         assert getattr(a, name)[running].tobytes() == getattr(b, name)[running].tobytes(), name
