@@ -120,6 +120,30 @@ def _meta(path: Path) -> dict:
     return meta
 
 
+# First among the tests in this file: Ray reads its authentication mode once per process, so the cluster's token
+# mode must reach Ray before a test below initialises it without a cluster (the unreachable-address case).
+def test_a_task_learns_within_seconds_that_its_driver_is_gone(cluster, tmp_path):
+    """The board actor dies with the driver; the task's reporter notices it and stops the task (not Ray's ~90 s)."""
+    import ray
+    from crowdnav.evaluation.protocol import Protocol
+    from crowdnav.evaluation.ray_executor import _Board, _ProgressReporter
+
+    handler = signal.getsignal(signal.SIGTERM)
+    ray.init(address=cluster.address, include_dashboard=False, log_to_driver=False)
+    try:
+        board = _Board.options(num_cpus=0).remote()
+        lost = threading.Event()
+        protocol = Protocol(train_episodes=1, eval_every=1, test_episodes=1, seeds=1)
+        reporter = _ProgressReporter(board, "run", tmp_path, protocol, on_driver_lost=lost.set)
+        assert reporter.driver_alive() and not lost.wait(timeout=3)
+        ray.kill(board)
+        assert lost.wait(timeout=15)
+        reporter.stop()
+    finally:
+        ray.shutdown()
+        signal.signal(signal.SIGTERM, handler)  # ray.init installs its own and leaves it behind
+
+
 @pytest.mark.slow  # 20-26 s (two benchmarks of a tiny experiment, one through the cluster); the driver-gone case stays in the default suite
 def test_ray_on_a_running_cluster_gives_row_for_row_the_local_executors_results(cluster, tmp_path, capsys):
     experiment = write_tiny_experiment(tmp_path / "tiny.yaml")
@@ -321,25 +345,3 @@ def test_unpacked_run_replaces_a_partial_one_but_never_a_finished_one(tmp_path):
     with pytest.raises(ResultsError, match="no meta.json"):
         unpack_folder(pack_folder(_run_folder(tmp_path / "broken", **{"spec.json": "x"})), tmp_path / "results" / "seed_1", "meta.json")
     assert sorted(path.name for path in (tmp_path / "results").iterdir()) == ["seed_0"]  # no staging folder left behind
-
-
-def test_a_task_learns_within_seconds_that_its_driver_is_gone(cluster, tmp_path):
-    """The board actor dies with the driver; the task's reporter notices it and stops the task (not Ray's ~90 s)."""
-    import ray
-    from crowdnav.evaluation.protocol import Protocol
-    from crowdnav.evaluation.ray_executor import _Board, _ProgressReporter
-
-    handler = signal.getsignal(signal.SIGTERM)
-    ray.init(address=cluster.address, include_dashboard=False, log_to_driver=False)
-    try:
-        board = _Board.options(num_cpus=0).remote()
-        lost = threading.Event()
-        protocol = Protocol(train_episodes=1, eval_every=1, test_episodes=1, seeds=1)
-        reporter = _ProgressReporter(board, "run", tmp_path, protocol, on_driver_lost=lost.set)
-        assert reporter.driver_alive() and not lost.wait(timeout=3)
-        ray.kill(board)
-        assert lost.wait(timeout=15)
-        reporter.stop()
-    finally:
-        ray.shutdown()
-        signal.signal(signal.SIGTERM, handler)  # ray.init installs its own and leaves it behind
