@@ -33,6 +33,7 @@ def test_sac_trains_on_lidar_and_goal():
     assert action.shape == (2,) and np.all(np.abs(action) <= 1.0)
 
 
+@pytest.mark.slow  # 5 s; each modality trains in the default suite elsewhere (test_sac_trains_on_lidar_and_goal, the batched grids and lidar case)
 def test_ppo_trains_with_all_modalities():
     env = gym.make("crowdnav/RoomFurniture-v0", modalities=["goal", "closest_obstacle", "lidar", "leog", "velocity"])
     model = sb3.PPO(

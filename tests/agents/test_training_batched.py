@@ -154,7 +154,8 @@ def test_a_finished_batched_run_resumed_with_a_larger_budget_logs_new_episodes_w
 
 @pytest.mark.parametrize(("algo", "fields"), [
     ("sac", {}),
-    ("sac", {"algo_kwargs": {"train_freq": 2, "gradient_steps": -1}}),  # rollouts of 2 steps of every world, 8 updates after each
+    pytest.param("sac", {"algo_kwargs": {"train_freq": 2, "gradient_steps": -1}},  # rollouts of 2 steps of every world, 8 updates after each
+                 marks=pytest.mark.slow),  # 6 s; the plain sac case stays in the default suite
     ("td3", {}),
     ("ppo", {}),
     ("a2c", {}),

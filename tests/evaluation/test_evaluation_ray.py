@@ -122,6 +122,7 @@ def _meta(path: Path) -> dict:
 
 # First among the tests in this file: Ray reads its authentication mode once per process, so the cluster's token
 # mode must reach Ray before a test below initialises it without a cluster (the unreachable-address case).
+@pytest.mark.slow  # 20-28 s with the cluster's start and stop; the default suite checks the executor's errors without a cluster
 def test_a_task_learns_within_seconds_that_its_driver_is_gone(cluster, tmp_path):
     """The board actor dies with the driver; the task's reporter notices it and stops the task (not Ray's ~90 s)."""
     import ray
@@ -144,7 +145,7 @@ def test_a_task_learns_within_seconds_that_its_driver_is_gone(cluster, tmp_path)
         signal.signal(signal.SIGTERM, handler)  # ray.init installs its own and leaves it behind
 
 
-@pytest.mark.slow  # 20-26 s (two benchmarks of a tiny experiment, one through the cluster); the driver-gone case stays in the default suite
+@pytest.mark.slow  # 20-26 s (two benchmarks of a tiny experiment, one through the cluster); the cluster cases all run with -m slow
 def test_ray_on_a_running_cluster_gives_row_for_row_the_local_executors_results(cluster, tmp_path, capsys):
     experiment = write_tiny_experiment(tmp_path / "tiny.yaml")
     common = [str(experiment), "--no-video", "--no-progress"]
@@ -176,7 +177,7 @@ def test_ray_on_a_running_cluster_gives_row_for_row_the_local_executors_results(
     assert {path: path.stat().st_mtime_ns for path in stamps} == stamps  # finished runs skipped, never rewritten
 
 
-@pytest.mark.slow  # 6-19 s on a cluster; the driver-gone cluster case stays in the default suite
+@pytest.mark.slow  # 6-19 s on a cluster
 def test_pretrained_encoder_reaches_runs_that_work_outside_the_results_folder(cluster, tmp_path):
     document = tiny_frozen_encoder_document()
     experiment = experiment_from_mapping(document)
@@ -221,7 +222,7 @@ def _kill_in_the_middle_of_training(cluster: Cluster, run_dir: Path, killed: lis
     return thread
 
 
-@pytest.mark.slow  # 6-19 s on a cluster; the driver-gone cluster case stays in the default suite
+@pytest.mark.slow  # 6-19 s on a cluster
 def test_killed_worker_is_retried_and_its_run_resumes_from_its_checkpoint(cluster, tmp_path):
     experiment = experiment_from_mapping(tiny_experiment_document(seeds=1, train_episodes=12, eval_every=2))
     killed = []  # default storage: the results folder itself, where the killer watches the run
@@ -240,7 +241,7 @@ def test_killed_worker_is_retried_and_its_run_resumes_from_its_checkpoint(cluste
     assert meta["resumed"]  # the retry went on from the checkpoint instead of starting over
 
 
-@pytest.mark.slow  # 6-19 s on a cluster; the driver-gone cluster case stays in the default suite
+@pytest.mark.slow  # 6-19 s on a cluster
 def test_worker_killed_more_often_than_the_retries_allow_is_a_failed_run(cluster, tmp_path):
     document = tiny_experiment_document(seeds=1, train_episodes=12, eval_every=2)
     document["configurations"] = document["configurations"][:1]
@@ -257,7 +258,7 @@ def test_worker_killed_more_often_than_the_retries_allow_is_a_failed_run(cluster
     assert not (tmp_path / "tiny" / "lidar" / "seed_0" / "meta.json").exists()
 
 
-@pytest.mark.slow  # 6-19 s on a cluster; the driver-gone cluster case stays in the default suite
+@pytest.mark.slow  # 6-19 s on a cluster
 def test_run_that_raises_is_reported_with_its_traceback_and_the_others_finish(cluster, tmp_path):
     scenario = tmp_path / "doomed.yaml"
     shutil.copy(library_dir() / "open_space.yaml", scenario)
