@@ -126,6 +126,10 @@ class SarlAgent:
         if not self.statics and _furnished(scenario):
             warnings.warn(f"algorithm {name!r} reads no walls nor furniture, and this scenario has them inside its floor: "
                           f"add the modality {STATIC_KEY!r} (docs/agents.md#agents-that-read-the-room)", UserWarning, stacklevel=2)
+        if self.statics and not scenario.world.boundary_walls and not scenario.sensors.obstacles.world_edge:
+            # room_sarl_crowded_open_space: 8 of its 18 failures left a world whose edge nothing it read marked
+            warnings.warn(f"algorithm {name!r} reads the walls and furniture but not the world's edge, and leaving this world ends "
+                          "the episode: set sensors.obstacles.world_edge: true (docs/sensors.md#obstacles)", UserWarning, stacklevel=2)
         self.gamma = float(config.gamma if config.gamma is not None else GAMMA)
         self.learning_rate = float(config.learning_rate if config.learning_rate is not None else LEARNING_RATE)
         # linear: Adam's rate falls to 0 over the run's budget (as SB3's "linear"), so the last episodes move V less

@@ -122,6 +122,17 @@ def test_an_agent_that_reads_no_obstacles_warns_in_a_furnished_room_and_not_in_o
         train(config(tmp_path / "open", scenario="open_space", modalities=blind, episodes=1))
 
 
+def test_an_agent_that_reads_obstacles_but_not_the_world_edge_warns_where_leaving_the_world_ends_the_episode(tmp_path):
+    from crowdnav.agents import train
+
+    with pytest.warns(UserWarning, match="not the world's edge.*world_edge: true") as caught:
+        train(config(tmp_path / "edgeless", scenario="open_space", episodes=1))
+    assert all("\n" not in str(item.message) for item in caught)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", UserWarning)
+        train(config(tmp_path / "edge", scenario="open_space", sensors={"obstacles": {"world_edge": True}}, episodes=1))
+
+
 def test_onnx_export_of_an_agent_that_reads_the_room_acts_as_predict(tmp_path):
     ort = pytest.importorskip("onnxruntime", reason='the onnx extra (pip install -e ".[onnx]") runs the exported policies')
     from crowdnav.agents import load_policy, train
