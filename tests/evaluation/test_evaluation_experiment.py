@@ -29,7 +29,8 @@ def test_shipped_experiments_cover_figure_4_the_default_and_the_reference_agents
                                           "track_crowded_open_space", "track_station_hall", "track_robots_crossing_hall",
                                           "recurrent_crowded_open_space", "room_sarl_ensemble_figure4",
                                           "room_sarl_figure4_lidar_tracker", "room_sarl_room", "room_sarl_station_hall",
-                                          "room_sarl_crowded_open_space", "room_sarl_edge_crowded_open_space"}
+                                          "room_sarl_crowded_open_space", "room_sarl_edge_crowded_open_space",
+                                          "room_sarl_room_lidar_tracker"}
     labels = {name: [c.name for c in load_experiment(name).configurations] for name in shipped_experiments()}
     assert labels["encoders"] == ["frozen", "finetune", "scratch"]
     assert labels["modalities"] == labels["modalities_paper"] == ["leog", "lidar", "closest_obstacle"]
@@ -263,6 +264,18 @@ def test_pretrained_encoder_is_trained_once_per_experiment_and_given_to_frozen_r
     written = encoder.stat().st_mtime_ns
     run_experiment(experiment, tmp_path, workers=1, progress=False, video=False, log=lambda line: None)
     assert encoder.stat().st_mtime_ns == written
+
+
+def test_room_sarl_room_lidar_tracker_experiment_is_room_sarl_room_in_the_room_lidar_tracker_setting():
+    """room_sarl_room's recipe, only seen through the room_lidar_tracker track's tracker."""
+    from crowdnav.evaluation.track import load_track
+
+    perfect, lidar = load_experiment("room_sarl_room"), load_experiment("room_sarl_room_lidar_tracker")
+    track = load_track("room_lidar_tracker")
+    (trained,), (perfect_trained,) = [c.train for c in lidar.configurations], [c.train for c in perfect.configurations]
+    assert trained["overrides"] == track.overrides and trained["scenario"] == track.scenario
+    assert {**trained, "overrides": None} == {**perfect_trained, "overrides": None}
+    assert lidar.protocol == perfect.protocol
 
 
 def test_room_sarl_lidar_tracker_experiment_is_room_sarl_figure4_in_the_figure4_lidar_tracker_setting():
