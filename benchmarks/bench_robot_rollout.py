@@ -1,7 +1,7 @@
-"""Test episodes per second of a shared robot policy's evaluation (one row per robot per episode), in one run.
+"""Test episodes per second of a shared robot policy's or a scripted baseline's evaluation (one row per robot per episode).
 
     python benchmarks/bench_robot_rollout.py [--scenario robots_crossing_hall] [--episodes 32] [--worlds 32] [--repeats 3]
-                                             [--policy RUN] [--old COMMIT] [--clock cpu]
+                                             [--policy RUN | --baseline straight|social_force] [--old COMMIT] [--clock cpu]
 
 The same test episodes played by :class:`crowdnav.evaluation.robot_rollout.RobotEpisodes` three ways:
 
@@ -10,6 +10,9 @@ The same test episodes played by :class:`crowdnav.evaluation.robot_rollout.Robot
 * ``single``: ``--worlds`` episodes at once, one robots-only env per world (``stacked=False``: the per-world engine);
 * ``stacked``: ``--worlds`` episodes at once in the stacked engine (what ``crowdnav evaluate`` and experiments use).
 
+``--baseline``: the scripted baseline an ``agents: robots`` experiment plays, driving every robot, on its env options
+(the scenario, the goal observation): ``single`` is how it played before its batched twin drove the stack.
+
 The script checks that every case gives the same rows (every column, bit for bit) and prints the median test
 episodes/s of each and the ratios. ``--policy``: a shared robot run (``crowdnav train --agents robots``) played on its
 own settings with ``--scenario`` and the default sensors; without it, the smallest run is trained first (a few
@@ -17,6 +20,9 @@ seconds; its robots mostly wander until the time limit, the longest episodes). `
 process's CPU time (a machine shared with other jobs). Measured 2026-12-07 (2 shared cores, ``OMP_NUM_THREADS=1 ...
 --repeats 3 --clock cpu``, the smallest run, every episode to the 150-step limit): old 4.8 test episodes/s, single 6.7
 (1.40x), stacked 24.7 (5.15x); 100 episodes (``--episodes 100 --repeats 1``): 5.3, 7.2, 26.7 (5.03x).
+Scripted baselines (``--baseline``), measured 2026-12-07 on the same 2 shared cores (``OMP_NUM_THREADS=1 ... --baseline
+social_force --repeats 3 --clock cpu``): social force, every robot arriving, old 23.2, single 22.8, stacked 129.7 test
+episodes/s (5.68x single); 100 episodes: 23.9, 23.4, 120.4 (5.15x); straight (collisions, arrivals): 64.9, 60.4, 228.0 (3.77x).
 """
 
 from __future__ import annotations
@@ -50,6 +56,17 @@ def shared_policy(args: argparse.Namespace) -> Any:
     return load_robots_policy(out)
 
 
+def played(args: argparse.Namespace) -> tuple[dict[str, Any], Any, bool]:
+    """(env options, policy, privileged): the ``--baseline`` on an experiment's baseline options, or the shared robot policy."""
+    if args.baseline:
+        from crowdnav.evaluation.baselines import baseline_env_options, scripted_policy
+
+        options = baseline_env_options({"scenario": args.scenario, "agents": "robots"})
+        return options, scripted_policy(args.baseline), True
+    policy = shared_policy(args)
+    return policy.env_options, policy, False
+
+
 def old_rollout(commit: str) -> Any:
     """``evaluation/robot_rollout.py`` as it was at ``commit``, as a module."""
     text = subprocess.run(["git", "show", f"{commit}:evaluation/robot_rollout.py"], check=True, capture_output=True, text=True,
@@ -63,18 +80,20 @@ def old_rollout(commit: str) -> Any:
     return module
 
 
-def timing(args: argparse.Namespace, case: str, policy: Any, seeds: list[int], rows: dict[str, list[dict[str, Any]]]) -> Callable[[], float]:
+def timing(args: argparse.Namespace, case: str, play: tuple[dict[str, Any], Any, bool], seeds: list[int],
+           rows: dict[str, list[dict[str, Any]]]) -> Callable[[], float]:
     """The case's episodes, made once; returns its timing run (test episodes/s), which keeps its rows in ``rows``."""
     from crowdnav.evaluation.robot_rollout import RobotEpisodes
 
+    options, policy, privileged = play
     if case == "old":
-        episodes = old_rollout(args.old).RobotEpisodes(policy.env_options, seeds)
+        episodes = old_rollout(args.old).RobotEpisodes(options, seeds)
     else:
-        episodes = RobotEpisodes(policy.env_options, seeds, worlds=args.worlds, stacked=case == "stacked")
+        episodes = RobotEpisodes(options, seeds, worlds=args.worlds, stacked=case == "stacked")
 
     def run() -> float:
         start = CLOCK()
-        rows[case] = episodes.run(policy)
+        rows[case] = episodes.run(policy, privileged=privileged)
         return len(seeds) / (CLOCK() - start)
     return run
 
@@ -90,16 +109,17 @@ def main() -> None:
     parser.add_argument("--worlds", type=int, default=32)
     parser.add_argument("--repeats", type=int, default=3)
     parser.add_argument("--policy", help="a shared robot run (crowdnav train --agents robots); default: the smallest, trained now")
+    parser.add_argument("--baseline", choices=["straight", "social_force"], help="a scripted baseline driving every robot instead")
     parser.add_argument("--old", default="b391f70", help="the commit whose rollout is the 'old' case")
     parser.add_argument("--cases", nargs="+", default=CASES, choices=CASES)
     parser.add_argument("--clock", choices=["wall", "cpu"], default="wall", help="cpu: the process's CPU time (a loaded machine)")
     args = parser.parse_args()
     global CLOCK
     CLOCK = time.process_time if args.clock == "cpu" else time.perf_counter
-    policy = shared_policy(args)
+    play = played(args)
     seeds = list(range(1_000_000, 1_000_000 + args.episodes))
     rows: dict[str, list[dict[str, Any]]] = {}
-    run = {case: timing(args, case, policy, seeds, rows) for case in args.cases}
+    run = {case: timing(args, case, play, seeds, rows) for case in args.cases}
     results: dict[str, list[float]] = {case: [] for case in args.cases}
     for _ in range(args.repeats):  # interleaved, so every case sees the same machine load
         for case in args.cases:
@@ -112,7 +132,8 @@ def main() -> None:
             raise SystemExit(f"{case} and {args.cases[0]} gave different rows")
     medians = {case: statistics.median(values) for case, values in results.items()}
     outcomes = sorted({str(row["outcome"]) for row in first})
-    print(f"{args.scenario}, {args.episodes} test episodes x {len(first) // max(1, args.episodes)} robots ({', '.join(outcomes)}), "
+    playing = f"baseline {args.baseline}" if args.baseline else "a shared robot policy"
+    print(f"{args.scenario}, {playing}, {args.episodes} test episodes x {len(first) // max(1, args.episodes)} robots ({', '.join(outcomes)}), "
           f"{args.worlds} worlds; the same rows in every case; median of {args.repeats} (test episodes/s, {args.clock} clock)")
     for case, value in medians.items():
         print(f"  {case:8s} {value:10,.1f}")

@@ -23,12 +23,15 @@ with the social-force robot (one row per episode, the first robot's).
 from __future__ import annotations
 
 from collections.abc import Callable, Mapping, Sequence
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from crowdnav.evaluation.metrics import Trajectory, episode_metrics
 
 from crowdnav.envs.engine import RobotsEngine, RobotsFrame, RobotsStep
+
+if TYPE_CHECKING:
+    from crowdnav.envs.robots_engine import ScriptedRobotsEngine
 
 ScriptedPolicy = Callable[[Any], np.ndarray]
 """A privileged robot policy: a robot's view (``simulator.robot_view(k)``) -> action (2,)."""
@@ -54,12 +57,15 @@ class RobotEpisodes:
     ``env_options``: keyword arguments of :class:`crowdnav.envs.CrowdNavEnv` (scenario, modalities,
     sensors, overrides, reward weights); ``seeds``: the held-out episode seeds. A shared robot policy plays through
     :func:`crowdnav.envs.robots_engine.robots_engine` (the worlds stacked where the scenario stacks), its network
-    predicting each world's robots (:func:`_shared` says why not all at once); a scripted policy through
-    :class:`crowdnav.envs.robots_engine.SingleRobots`, whose worlds are simulators it can read (it is called with one
-    robot's view of one simulator: the batched twins of :mod:`crowdnav.batch.robot_policies` drive the other robots
-    only, beside a first robot the caller drives). Each episode is its seed's in the robots-only env bit for bit,
-    whichever world plays it and whatever plays beside it. ``stacked=False``: one env per world for a shared robot
-    policy too (the same rows; what the stack is measured against, ``benchmarks/bench_robot_rollout.py``).
+    predicting each world's robots (:func:`_shared` says why not all at once). So do the scripted baselines an
+    ``agents: robots`` experiment plays, straight and social force: their batched twins act for every robot of the
+    stack, the first one included, as each robot's view of its simulator would have them act
+    (:meth:`crowdnav.envs.vector_stacked_robots.StackedRobots.scripted_actions`). The other scripted policies (ORCA,
+    the planners, a callable; the shielded baselines' worlds do not stack) play on
+    :class:`crowdnav.envs.robots_engine.SingleRobots`, called with one robot's view of one simulator. Each episode is
+    its seed's in the robots-only env bit for bit, whichever world plays it and whatever plays beside it.
+    ``stacked=False``: one env per world for every policy (the same rows; what the stack is measured against,
+    ``benchmarks/bench_robot_rollout.py``).
     """
 
     def __init__(self, env_options: Mapping[str, Any], seeds: Sequence[int], *, worlds: int = WORLDS, stacked: bool = True):
@@ -74,18 +80,18 @@ class RobotEpisodes:
         self._specs = [sim.robot_scenario(k).robot for k in range(len(self.robots))]
         self._dt = float(sim.dt)
         self._stacked = stacked
-        self._engines: dict[bool, RobotsEngine] = {}
-        """The engine of each kind of policy (scripted or not), built on first use and reused run after run."""
+        self._engines: dict[bool, ScriptedRobotsEngine] = {}
+        """The engine of each kind (stacked where the scenario stacks, or one env per world), built on first use and reused."""
 
-    def engine(self, privileged: bool = False) -> RobotsEngine:
-        """The engine that plays a scripted (``privileged``) or a shared robot policy."""
-        if privileged not in self._engines:
-            from crowdnav.envs.robots_engine import SingleRobots, robots_engine
+    def engine(self, policy: Any = None, privileged: bool = False) -> ScriptedRobotsEngine:
+        """The engine that plays ``policy``: a shared robot policy, or with ``privileged`` a scripted one (class docstring)."""
+        from crowdnav.envs.robots_engine import SingleRobots, robots_engine
+        from crowdnav.envs.vector_stacked_robots import scripted_name
 
-            worlds = self.worlds
-            per_world = privileged or not self._stacked
-            self._engines[privileged] = SingleRobots(self.env_options, worlds) if per_world else robots_engine(self.env_options, worlds)
-        return self._engines[privileged]
+        stacked = self._stacked and (not privileged or scripted_name(policy) is not None)
+        if stacked not in self._engines:
+            self._engines[stacked] = robots_engine(self.env_options, self.worlds) if stacked else SingleRobots(self.env_options, self.worlds)
+        return self._engines[stacked]
 
     def run(self, policy: Any, *, privileged: bool = False, on_end: Callable[[], None] | None = None) -> list[dict[str, Any]]:
         """One row per robot per seed (seed order, robots in scenario order).
@@ -94,7 +100,7 @@ class RobotEpisodes:
         ``observe`` and ``commands``), or with ``privileged`` a scripted robot policy called with each running robot's
         view (``simulator.robot_view(k)``). ``on_end`` is called once per episode as it ends (a progress bar).
         """
-        engine = self.engine(privileged)
+        engine = self.engine(policy, privileged)
         act = _scripted(policy, engine) if privileged else _shared(policy)
         w, seeds = engine.num_worlds, self.seeds
         tracks = _Tracks(engine)
@@ -274,15 +280,12 @@ def _shared(policy: Any) -> Callable[[np.ndarray, np.ndarray, np.ndarray, np.nda
     return act
 
 
-def _scripted(policy: ScriptedPolicy, engine: Any) -> Callable[[np.ndarray, np.ndarray, np.ndarray, np.ndarray], np.ndarray]:
-    """A scripted robot policy's actions: each running robot's, called with its view of its world's simulator (the
-    per-world engine's); 0 for a robot that ended."""
+def _scripted(policy: ScriptedPolicy, engine: ScriptedRobotsEngine) -> Callable[[np.ndarray, np.ndarray, np.ndarray, np.ndarray], np.ndarray]:
+    """A scripted robot policy's actions: each running robot's as called with its view of its world
+    (:meth:`crowdnav.envs.robots_engine.ScriptedRobotsEngine.scripted_actions`); 0 for a robot that ended."""
 
     def act(observations: np.ndarray, acting: np.ndarray, running: np.ndarray, playing: np.ndarray) -> np.ndarray:
-        actions = np.zeros((*running.shape, 2), np.float32)
-        for world, k in np.argwhere(running & playing[:, None]).tolist():
-            actions[world, k] = np.asarray(policy(engine.envs[world].simulator.robot_view(k)), np.float32)
-        return actions
+        return engine.scripted_actions(policy, running & playing[:, None])
 
     return act
 

@@ -14,13 +14,15 @@ bit in both:
 * :class:`SingleRobots`: one robots-only env per world, for what the stack does not play (crowds of
   ``Simulator.grid_from`` humans or more, crowd models other than the social force, a shield, a residual plan).
 
-:func:`robots_engine` chooses once. Robot ``k`` is the scenario's ``robots.<k>`` (``robot_names`` order).
+:func:`robots_engine` chooses once. Robot ``k`` is the scenario's ``robots.<k>`` (``robot_names`` order). Both also play
+scripted robots (:class:`ScriptedRobotsEngine`): the stacked engine those with a batched twin (straight, social force),
+the per-world one any, called with each robot's view of its world's simulator.
 """
 
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
-from typing import Any
+from typing import Any, Protocol
 
 import numpy as np
 from gymnasium import spaces
@@ -31,6 +33,15 @@ from crowdnav.envs.vector_stacked_robots import StackedRobots
 from crowdnav.sensors.tracker import make_tracker
 from crowdnav.sim.simulator import Simulator
 from crowdnav.worlds.compiled import CompiledWorld
+
+
+class ScriptedRobotsEngine(RobotsEngine, Protocol):
+    """A :class:`crowdnav.envs.engine.RobotsEngine` whose robots a scripted policy can drive."""
+
+    def scripted_actions(self, policy: Any, robots: np.ndarray) -> np.ndarray:
+        """(W, R, 2) float32: scripted ``policy``'s action (:data:`crowdnav.policies.ScriptedPolicy`) for each of ``robots``
+        ((W, R) bool: robots in their world), as ``policy`` returns it called with that robot's view of its world after the
+        last step (``simulator.robot_view(k)``, the robots that ended there gone); 0 elsewhere. Call it after :meth:`observe`."""
 
 
 def robots_world(options: Mapping[str, Any]) -> CompiledWorld:
@@ -51,7 +62,7 @@ def stacks_robots(world: CompiledWorld, options: Mapping[str, Any]) -> bool:
             and make_tracker(world, 1) is None and plain)
 
 
-def robots_engine(options: Mapping[str, Any], num_worlds: int) -> RobotsEngine:
+def robots_engine(options: Mapping[str, Any], num_worlds: int) -> ScriptedRobotsEngine:
     """The engine of ``num_worlds`` worlds of the robots-only env of ``options`` (:func:`stacks_robots` chooses which)."""
     world = robots_world(options)
     if stacks_robots(world, options):
@@ -104,6 +115,13 @@ class SingleRobots:
     def observe(self) -> np.ndarray:
         observations: np.ndarray = self._observations.copy()
         return observations
+
+    def scripted_actions(self, policy: Any, robots: np.ndarray) -> np.ndarray:
+        """Any scripted policy: called robot by robot with its view of its world's simulator (the ended robots left at the step's end)."""
+        actions = np.zeros((self.num_worlds, len(self.robot_names), 2), np.float32)
+        for world, k in np.argwhere(robots).tolist():
+            actions[world, k] = np.asarray(policy(self.envs[world].simulator.robot_view(k)), np.float32)
+        return actions
 
     def frame(self) -> RobotsFrame:
         w, r = self.num_worlds, len(self.robot_names)

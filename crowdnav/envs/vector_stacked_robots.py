@@ -18,23 +18,29 @@ flat_observations=True``) does around its simulator, so world ``i`` plays that e
   builds them) on its view (:func:`crowdnav.batch.robot_views.robot_view`), the worlds grouped by which robots are in
   them (a view lists only those), flattened in its Dict's key order as ``flat_observations`` flattens;
 * **frames**: every robot's and human's place, the humans' force on each robot (:meth:`StackedRobots.frame`, what
-  evaluation records per step), read from the stack a crowd size at a time.
+  evaluation records per step), read from the stack a crowd size at a time;
+* **scripted robots**: a scripted policy with a batched twin (:func:`scripted_name`: straight, social force) acts for
+  any robot, the first one included, as called with that robot's view of its world
+  (:meth:`StackedRobots.scripted_actions`, :func:`crowdnav.batch.robot_policies.every_robot_actions`).
 """
 
 from __future__ import annotations
 
 import dataclasses
 from collections.abc import Sequence
+from typing import Any
 
 import numpy as np
 from gymnasium import spaces
 
+from crowdnav.batch.robot_policies import SEAT_POLICIES, every_robot_actions
 from crowdnav.batch.robot_views import robot_view
 from crowdnav.batch.simulator import BatchSimulator
 from crowdnav.batch.state import BatchState
 from crowdnav.batch.team import TeamStack
 from crowdnav.envs.engine import RobotsFrame, RobotsStep
 from crowdnav.envs.reward import REWARD_TERMS, reward_terms
+from crowdnav.policies import SCRIPTED_POLICIES
 from crowdnav.sensors import Modality, build_modalities
 from crowdnav.sim.contacts import goal_distance
 from crowdnav.sim.events import outcomes
@@ -171,6 +177,27 @@ class StackedRobots:
             parts.append(np.asarray(modality.observe_batch(views[wanted]), dtype=modality.space().dtype).reshape(len(worlds), -1))
         return np.concatenate(parts, axis=1)
 
+    # ------------------------------------------------------------------ scripted robots
+
+    def scripted_actions(self, policy: Any, robots: np.ndarray) -> np.ndarray:
+        """(W, R, 2) float32: scripted ``policy``'s action for each of ``robots`` ((W, R) bool), as ``policy`` returns it called
+        with that robot's view of its world (``simulator.robot_view(k)``); 0 elsewhere. ``policy`` needs a batched twin
+        (:func:`scripted_name`; ValueError otherwise).
+
+        The robots that ended at the last step of the worlds of ``robots`` leave those worlds first, as the per-world env's
+        had left them at that step's end (this engine defers it past the observation): read :meth:`observe` before."""
+        name = scripted_name(policy)
+        if name is None:
+            raise ValueError(f"{type(policy).__name__} has no batched twin to drive stacked robots; play it on SingleRobots")
+        out = np.zeros((self.num_worlds, len(self.robot_names), 2), dtype=np.float32)
+        acting: np.ndarray = np.any(robots, axis=1)
+        self._leave(acting)
+        worlds = np.flatnonzero(acting)
+        if len(worlds):
+            out[worlds] = every_robot_actions(name, self.batch, worlds)  # (float64 of float32: exact)
+        out[~robots] = 0.0
+        return out
+
     # ------------------------------------------------------------------ frames
 
     def frame(self) -> RobotsFrame:
@@ -196,6 +223,13 @@ class StackedRobots:
 
     def close(self) -> None:
         """Nothing to release (the worlds are arrays)."""
+
+
+def scripted_name(policy: Any) -> str | None:
+    """The :data:`crowdnav.policies.SCRIPTED_POLICIES` name of ``policy`` (an instance of that very class: a subclass may act
+    otherwise) where :class:`StackedRobots` has its batched twin (:data:`crowdnav.batch.robot_policies.SEAT_POLICIES`);
+    None for the others (ORCA, the planners, a callable)."""
+    return next((name for name, kind in SCRIPTED_POLICIES.items() if type(policy) is kind and name in SEAT_POLICIES), None)
 
 
 def _rows(state: BatchState, rows: np.ndarray) -> BatchState:

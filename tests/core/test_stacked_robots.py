@@ -17,19 +17,11 @@ from crowdnav.batch.scalar_math import cdiv_real
 from crowdnav.batch.simulator import BatchSimulator
 from crowdnav.policies import SocialForceRobot, StraightToGoal
 from crowdnav.sim.simulator import Simulator
-from crowdnav.worlds.compiled import load_world
-
-SCENARIO = "robots_crossing_hall"
-WORLDS = 6
+from tests.core.paired_worlds import WORLDS, paired_worlds
 
 
 def _worlds(overrides: dict[str, object] | None = None) -> tuple[BatchSimulator, list[Simulator]]:
-    world = load_world(SCENARIO, overrides)
-    batch, singles = BatchSimulator(world, WORLDS), [Simulator(world) for _ in range(WORLDS)]
-    batch.reset(range(WORLDS), [30 + i for i in range(WORLDS)])
-    for i, sim in enumerate(singles):
-        sim.reset(seed=30 + i)
-    return batch, singles
+    return paired_worlds(overrides, first_seed=30)
 
 
 def _ego(batch: BatchSimulator) -> np.ndarray:

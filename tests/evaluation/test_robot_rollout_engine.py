@@ -2,7 +2,8 @@
 each a world of one engine, give every per-robot row (outcome, collision kind, return, every metric) exactly as one
 robots-only PettingZoo env per test seed gives it, the driver evaluation used before (``_reference_rows`` below, kept
 as it was), for a shared robot network (stacked engine, one ``predict`` for every robot of every world) and for the
-scripted baselines (one env per world, each robot's view)."""
+scripted baselines (stacked engine, their batched twins acting for every robot; one env per world, each robot's view,
+for a policy without a twin or a world that does not stack)."""
 
 from __future__ import annotations
 
@@ -21,6 +22,8 @@ from crowdnav.envs.vector_stacked_robots import StackedRobots
 HALL = "robots_crossing_hall"
 OPEN = {"max_steps": 60, "world.boundary_walls": False, "humans.count": [0, 7]}
 """No walls (a robot may leave the world), crowds of 0 to 7 humans (worlds of several crowd sizes), a short time limit."""
+SCRIPTED = {**OPEN, "max_steps": 80}
+"""The scripted baselines' worlds: time for the social-force robots to arrive one after the other (or not)."""
 
 
 def _reference_rows(env_options: dict[str, Any], seeds: list[int], policy: Any, privileged: bool) -> list[dict[str, Any]]:
@@ -132,17 +135,42 @@ def test_a_shared_robot_policy_on_a_world_that_does_not_stack_gives_the_same_row
     _same_rows(rows, _reference_rows(options, SEEDS[:5], robots_policy, privileged=False))
 
 
-@pytest.mark.parametrize("name", ["straight", "social_force"])
-def test_a_scripted_baseline_gives_the_rows_of_one_env_per_seed_several_worlds_at_once(name):
-    options = {"scenario": HALL, "modalities": ["goal"], "overrides": OPEN}
-    episodes = RobotEpisodes(options, SEEDS, worlds=4)
+@pytest.mark.parametrize(("name", "worlds"), [("straight", 4), ("social_force", 4), ("social_force", 16)])
+def test_a_scripted_baseline_gives_the_rows_of_one_env_per_seed_from_the_stacked_engine(name, worlds):
+    """Every robot, the first one included, driven by the baseline's batched twin; robots leave while others go on."""
+    options = {"scenario": HALL, "modalities": ["goal"], "overrides": SCRIPTED}
+    policy = scripted_policy(name)
+    episodes = RobotEpisodes(options, SEEDS, worlds=worlds)
     try:
-        rows = episodes.run(scripted_policy(name), privileged=True)
+        rows = episodes.run(policy, privileged=True)
+        assert isinstance(episodes.engine(policy, privileged=True), StackedRobots)
     finally:
         episodes.close()
     expected = _reference_rows(options, SEEDS, scripted_policy(name), privileged=True)
     assert len({row["outcome"] for row in expected}) >= 2
+    steps = {(row["test_seed"], row["robot"]): row["steps"] for row in expected}
+    assert any(steps[seed, "east_bound"] < max(steps[seed, robot] for robot in ("west_bound", "north_bound")) for seed in SEEDS)
     _same_rows(rows, expected)
+
+
+def test_a_scripted_policy_without_a_batched_twin_or_on_a_world_that_does_not_stack_plays_one_env_per_world():
+    options = {"scenario": HALL, "modalities": ["goal"], "overrides": OPEN}
+    straight = scripted_policy("straight")
+    episodes = RobotEpisodes(options, SEEDS[:5], worlds=3)
+    try:
+        rows = episodes.run(straight.__call__, privileged=True)  # a callable: no batched twin
+        assert isinstance(episodes.engine(straight.__call__, privileged=True), SingleRobots)
+    finally:
+        episodes.close()
+    _same_rows(rows, _reference_rows(options, SEEDS[:5], straight, privileged=True))
+    orca_crowd = {**options, "overrides": {**OPEN, "humans.model": "orca"}}
+    episodes = RobotEpisodes(orca_crowd, SEEDS[:5], worlds=3)
+    try:
+        rows = episodes.run(straight, privileged=True)
+        assert isinstance(episodes.engine(straight, privileged=True), SingleRobots)
+    finally:
+        episodes.close()
+    _same_rows(rows, _reference_rows(orca_crowd, SEEDS[:5], straight, privileged=True))
 
 
 @pytest.mark.slow  # 8 s; the shared-policy cases at 4 and 16 worlds check several at once in the default suite
