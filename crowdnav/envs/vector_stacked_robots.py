@@ -132,11 +132,17 @@ class StackedRobots:
 
     def _goal_distance(self) -> np.ndarray:
         """(W, R): every robot's goal distance now (:func:`crowdnav.sim.contacts.goal_distance`, the view's ``robot_goal_distance``)."""
-        out = np.zeros((self.num_worlds, len(self.robot_names)))
+        positions, goals = self._positions_and_goals()
+        return goal_distance(goals, positions)  # elementwise: the same bits as each robot's own
+
+    def _positions_and_goals(self) -> tuple[np.ndarray, np.ndarray]:
+        """(W, R) complex each: every robot's centre and goal (the first robot's from its crowd size's stack, the team's)."""
+        positions = np.zeros((self.num_worlds, len(self.robot_names)), dtype=complex)
+        goals = np.zeros_like(positions)
         for bucket in self.batch.buckets.values():
-            out[bucket.world, 0] = goal_distance(bucket.state.robot_goal, bucket.state.positions[:, 0])
-        out[:, 1:] = goal_distance(self.team.goals, self.team.positions)
-        return out
+            positions[bucket.world, 0], goals[bucket.world, 0] = bucket.state.positions[:, 0], bucket.state.robot_goal
+        positions[:, 1:], goals[:, 1:] = self.team.positions, self.team.goals
+        return positions, goals
 
     def _social_force(self) -> np.ndarray:
         """(W, R) complex: the humans' social force on every robot (the first robot's row of the repulsion, the team's)."""
@@ -201,20 +207,18 @@ class StackedRobots:
     # ------------------------------------------------------------------ frames
 
     def frame(self) -> RobotsFrame:
-        w, team = self.num_worlds, self.team
+        w = self.num_worlds
         crowd = np.zeros(w, dtype=np.int64)
         for n, bucket in self.batch.buckets.items():
             crowd[bucket.world] = n
         force = self._social_force()
-        frame = RobotsFrame(np.zeros((w, len(self.robot_names)), complex), np.zeros((w, len(self.robot_names)), complex),
-                            np.hypot(force.real, force.imag), np.full((w, int(crowd.max(initial=0))), complex(np.nan, np.nan)),
-                            crowd, np.zeros(w, dtype=np.int64))
+        positions, goals = self._positions_and_goals()
+        frame = RobotsFrame(positions, goals, np.hypot(force.real, force.imag),
+                            np.full((w, int(crowd.max(initial=0))), complex(np.nan, np.nan)), crowd, np.zeros(w, dtype=np.int64))
         for n, bucket in self.batch.buckets.items():  # each crowd size's worlds at once
             state, worlds = bucket.state, bucket.world
-            frame.robots[worlds, 0], frame.goals[worlds, 0] = state.positions[:, 0], state.robot_goal
             frame.humans[worlds, :n] = state.positions[:, 1:]
             frame.stalls[worlds] = state.human_stalls.sum(axis=1)
-        frame.robots[:, 1:], frame.goals[:, 1:] = team.positions, team.goals
         return frame
 
     def radii(self, world: int) -> tuple[np.ndarray, np.ndarray]:

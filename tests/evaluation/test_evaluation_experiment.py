@@ -266,24 +266,17 @@ def test_pretrained_encoder_is_trained_once_per_experiment_and_given_to_frozen_r
     assert encoder.stat().st_mtime_ns == written
 
 
-def test_room_sarl_room_lidar_tracker_experiment_is_room_sarl_room_in_the_room_lidar_tracker_setting():
-    """room_sarl_room's recipe, only seen through the room_lidar_tracker track's tracker."""
+@pytest.mark.parametrize(("perfect_name", "lidar_name", "track_name"), [
+    ("room_sarl_figure4", "room_sarl_figure4_lidar_tracker", "figure4_lidar_tracker"),
+    ("room_sarl_room", "room_sarl_room_lidar_tracker", "room_lidar_tracker"),
+])
+def test_room_sarl_lidar_tracker_experiments_are_their_perfect_sensing_recipe_in_the_lidar_tracker_tracks_setting(
+        perfect_name, lidar_name, track_name):
+    """The same recipe as the perfect-sensing experiment, only seen through the track's tracker (what training through it buys)."""
     from crowdnav.evaluation.track import load_track
 
-    perfect, lidar = load_experiment("room_sarl_room"), load_experiment("room_sarl_room_lidar_tracker")
-    track = load_track("room_lidar_tracker")
-    (trained,), (perfect_trained,) = [c.train for c in lidar.configurations], [c.train for c in perfect.configurations]
-    assert trained["overrides"] == track.overrides and trained["scenario"] == track.scenario
-    assert {**trained, "overrides": None} == {**perfect_trained, "overrides": None}
-    assert lidar.protocol == perfect.protocol
-
-
-def test_room_sarl_lidar_tracker_experiment_is_room_sarl_figure4_in_the_figure4_lidar_tracker_setting():
-    """The same recipe as room_sarl_figure4, only seen through the track's tracker (what training through it buys)."""
-    from crowdnav.evaluation.track import load_track
-
-    perfect, lidar = load_experiment("room_sarl_figure4"), load_experiment("room_sarl_figure4_lidar_tracker")
-    track = load_track("figure4_lidar_tracker")
+    perfect, lidar = load_experiment(perfect_name), load_experiment(lidar_name)
+    track = load_track(track_name)
     (trained,), (perfect_trained,) = [c.train for c in lidar.configurations], [c.train for c in perfect.configurations]
     assert trained["overrides"] == track.overrides and trained["scenario"] == track.scenario
     assert {**trained, "overrides": None} == {**perfect_trained, "overrides": None}
