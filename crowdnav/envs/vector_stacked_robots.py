@@ -133,7 +133,8 @@ class StackedRobots:
     def _goal_distance(self) -> np.ndarray:
         """(W, R): every robot's goal distance now (:func:`crowdnav.sim.contacts.goal_distance`, the view's ``robot_goal_distance``)."""
         positions, goals = self._positions_and_goals()
-        return goal_distance(goals, positions)  # elementwise: the same bits as each robot's own
+        distance: np.ndarray = goal_distance(goals, positions)  # elementwise: the same bits as each robot's own
+        return distance
 
     def _positions_and_goals(self) -> tuple[np.ndarray, np.ndarray]:
         """(W, R) complex each: every robot's centre and goal (the first robot's from its crowd size's stack, the team's)."""
