@@ -30,7 +30,7 @@ def test_shipped_experiments_cover_figure_4_the_default_and_the_reference_agents
                                           "recurrent_crowded_open_space", "room_sarl_ensemble_figure4",
                                           "room_sarl_figure4_lidar_tracker", "room_sarl_room", "room_sarl_station_hall",
                                           "room_sarl_crowded_open_space", "room_sarl_edge_crowded_open_space",
-                                          "room_sarl_room_lidar_tracker"}
+                                          "room_sarl_room_lidar_tracker", "room_sarl_ensemble_edge_crowded_open_space"}
     labels = {name: [c.name for c in load_experiment(name).configurations] for name in shipped_experiments()}
     assert labels["encoders"] == ["frozen", "finetune", "scratch"]
     assert labels["modalities"] == labels["modalities_paper"] == ["leog", "lidar", "closest_obstacle"]
@@ -303,3 +303,13 @@ def test_room_sarl_edge_experiment_is_the_open_space_recipe_plus_the_world_edge_
     (plain_trained,), (edge_trained,) = [c.train for c in plain.configurations], [c.train for c in edge.configurations]
     assert edge_trained == {**plain_trained, "sensors": {"obstacles": {"world_edge": True}}}
     assert edge.protocol == plain.protocol
+
+
+def test_room_sarl_ensemble_edge_experiment_is_the_edge_recipe_plus_figure4s_ensemble_only():
+    """The one change validated on Figure-4 (a value ensemble of 3) added to the edge recipe; nothing else tuned."""
+    edge, ensemble = load_experiment("room_sarl_edge_crowded_open_space"), load_experiment("room_sarl_ensemble_edge_crowded_open_space")
+    (edge_trained,), (ensemble_trained,) = [c.train for c in edge.configurations], [c.train for c in ensemble.configurations]
+    figure4_kwargs = load_experiment("room_sarl_ensemble_figure4").configurations[0].train["algo_kwargs"]
+    assert ensemble_trained == {**edge_trained, "algo_kwargs": {**edge_trained["algo_kwargs"], "ensemble": 3}}
+    assert ensemble_trained["algo_kwargs"] == figure4_kwargs
+    assert ensemble.protocol == edge.protocol
