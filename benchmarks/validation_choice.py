@@ -14,13 +14,13 @@ from __future__ import annotations
 import argparse
 import sys
 
-from crowdnav.evaluation.validation_choice import VALIDATION_SEED_BASE, choose_on_validation, summary
+from crowdnav.evaluation.validation_choice import VALIDATION_EPISODES, VALIDATION_SEED_BASE, choose_on_validation, summary
 
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("experiment", help="an experiment's results folder (crowdnav benchmark --out DIR: DIR/<experiment>)")
-    parser.add_argument("--episodes", type=int, default=300, help="validation episodes per snapshot (default 300)")
+    parser.add_argument("--episodes", type=int, default=VALIDATION_EPISODES, help="validation episodes per snapshot (default 300)")
     parser.add_argument("--seed-base", type=int, default=VALIDATION_SEED_BASE, help="first validation seed (default 500000)")
     parser.add_argument("--configurations", nargs="*", default=None, help="only these configurations (default: every one)")
     args = parser.parse_args(argv)

@@ -23,6 +23,12 @@ sensing is ranked on a track that differs from its training's in the sensing onl
 (``trained_setting``, the trained values) and which policy played (``played``), and its label says
 it (``...; trained with perfect sensing, played through lidar_tracker``).
 
+With ``chosen`` (``--chosen-on-validation``) each seed is read at the snapshot the declared early-stopping rule keeps
+(:mod:`crowdnav.evaluation.validation_choice`: the most successes on validation episodes 500,000-500,299, ties to the
+later; the stored validation table is read, nothing is played): the protocol's test evaluation at that point, as
+``agent_<experiment>_<configuration>_validated_seed<K>.csv``, an entry of its own beside the final evaluation's, its
+label naming the snapshot and the rule, so the two are reported apart and ranked apart.
+
 Before writing anything it checks, each refused in one line naming the difference: that the
 experiment's setting is the track's (scenario and overrides, time limit, test seeds and count,
 observation keys), that every seed the protocol names is finished, that at least
@@ -124,18 +130,23 @@ def _seed_folders(folder: Path) -> dict[int, Path]:
     return found
 
 
-def _final_rows(track: Track, run: Path, where: str) -> tuple[list[dict[str, Any]], dict[str, str]]:
-    """The final evaluation's rows (typed for :func:`reference_csv`), and its first raw row."""
+def _final_rows(track: Track, run: Path, where: str, point: int | None = None) -> tuple[list[dict[str, Any]], dict[str, str]]:
+    """The final evaluation's rows (typed for :func:`reference_csv`), and its first raw row; ``point``: the evaluation after
+    that many training episodes instead."""
     from crowdnav.evaluation.storage import TEST_FILE
 
     rows = _read_rows(run / TEST_FILE) if (run / TEST_FILE).is_file() else []
     if not rows or "evaluation" not in rows[0]:
         raise TrackError(f"{where}: no per-episode table ({TEST_FILE} with an evaluation column)")
-    last = max(int(row["evaluation"]) for row in rows)
-    final = [row for row in rows if int(row["evaluation"]) == last]
+    if point is None:
+        last = max(int(row["evaluation"]) for row in rows)
+        final = [row for row in rows if int(row["evaluation"]) == last]
+    else:
+        final = [row for row in rows if int(row["training_episodes"]) == point]
     seeds = [int(row["test_seed"]) for row in final]
     if sorted(seeds) != track.seeds:
-        raise TrackError(f"{where}: its final evaluation played {len(seeds)} rows of test seeds {min(seeds)}-{max(seeds)}; track "
+        raise TrackError(f"{where}: its {'final ' if point is None else ''}evaluation played {len(seeds)} rows of test seeds "
+                         f"{min(seeds, default='-')}-{max(seeds, default='-')}; track "
                          f"{track.name} is one row per seed {track.seeds[0]}-{track.seeds[-1]}")
     typed = []
     for row in sorted(final, key=lambda row: int(row["test_seed"])):
@@ -172,14 +183,20 @@ def _straight_check(track: Track, folder: Path) -> str:
     return f"straight-to-goal as the track's on its first {len(seeds)} test episodes"
 
 
-def read_agents(track: Track, folder: str | Path, *, played: bool = False,
+def read_agents(track: Track, folder: str | Path, *, played: bool = False, chosen: bool = False,
                 log: Callable[[str], None] = print) -> list[tuple[dict[str, Any], str]]:
     """Check an experiment configuration folder against ``track``; (entry, CSV text) per training seed.
 
     ``played``: each seed's final policy is played on the track (:mod:`crowdnav.evaluation.track_played`), whose
     setting may differ from its training's in the sensing only, instead of its recorded final evaluation copied.
+    ``chosen``: each seed's test evaluation at the snapshot chosen on validation episodes (module docstring).
     """
     from crowdnav.evaluation.storage import META_FILE, read_json
+    from crowdnav.evaluation.validation_choice import VALIDATION_EPISODES, VALIDATION_SEED_BASE, stored_choice
+
+    if played and chosen:
+        raise TrackError("--played plays each seed's final policy; --chosen-on-validation copies the chosen snapshot's recorded "
+                         "evaluation: one or the other")
 
     folder = Path(folder)
     runs = _seed_folders(folder)
@@ -221,7 +238,15 @@ def read_agents(track: Track, folder: str | Path, *, played: bool = False,
     out = []
     for seed, meta in sorted(metas.items()):
         where = f"{folder.parent.name}/{folder.name}/seed_{seed}"
-        rows, raw = _final_rows(track, runs[seed], where)
+        choice: dict[str, Any] = {}
+        if chosen:
+            try:
+                point, validation = stored_choice(runs[seed])
+            except ValueError as error:
+                raise TrackError(f"{where}: {error}") from None
+            choice = {"seed_base": VALIDATION_SEED_BASE, "episodes": VALIDATION_EPISODES, "kept": point,
+                      "validation_successes": {str(key): value for key, value in validation.items()}}
+        rows, raw = _final_rows(track, runs[seed], where, choice.get("kept"))
         if played:
             log(f"{track.name}: playing {where}'s final policy on {track.test_episodes} episodes")
             rows, policy = play_final(track, runs[seed], meta, raw, where)
@@ -232,10 +257,13 @@ def read_agents(track: Track, folder: str | Path, *, played: bool = False,
         label = str(meta["label"])
         if not all(key.replace("_", " ") in label.lower() for key in modalities):
             label = f"{label}, reads {', '.join(modalities)}"
-        name = re.sub(r"[^A-Za-z0-9_.-]", "_", f"{AGENT_PREFIX}{meta['experiment']}_{meta['configuration']}_seed{seed}")
+        validated = "_validated" if chosen else ""
+        name = re.sub(r"[^A-Za-z0-9_.-]", "_", f"{AGENT_PREFIX}{meta['experiment']}_{meta['configuration']}{validated}_seed{seed}")
         observations = ", ".join(modalities) + ("; shield: the humans its sensors report + the map" if config.get("shield") else "")
         success = sum(row["outcome"] == "success" for row in rows) / len(rows)
-        how = played_label(sensing[seed]) if played else ""
+        how = played_label(sensing[seed]) if played else (
+            f"the snapshot after {choice['kept']:,} episodes, chosen on validation episodes {VALIDATION_SEED_BASE:,}-"
+            f"{VALIDATION_SEED_BASE + VALIDATION_EPISODES - 1:,}" if chosen else "")
         entry = {"name": name, "label": f"{label} ({budget}, seed {seed}{'; ' + how if how else ''})", "kind": "policy",
                  "observations": observations,
                  "file": f"{name}.csv", "episodes": len(rows), "success": round(success, 4), "experiment": meta["experiment"],
@@ -243,16 +271,18 @@ def read_agents(track: Track, folder: str | Path, *, played: bool = False,
                  "training_steps": steps, "training_episodes": int(raw.get("training_episodes") or 0),
                  "experiment_commit": meta["git_commit"], "episodes_checked": checked,
                  **({"experiment_commits": meta["git_commits"]} if len(meta.get("git_commits") or []) > 1 else {}),
-                 **({"played": policy, "trained_setting": {key: value for key, (value, _) in sensing[seed].items()}} if played else {})}
+                 **({"played": policy, "trained_setting": {key: value for key, (value, _) in sensing[seed].items()}} if played else {}),
+                 **({"validation_choice": choice} if chosen else {})}
         out.append((entry, reference_csv(rows)))
     return out
 
 
 def write_agents(track: Track, folders: list[str | Path], out: str | Path, *, allow_dirty: bool = False, force: bool = False,
-                 played: bool = False, log: Callable[[str], None] = print) -> Path:
+                 played: bool = False, chosen: bool = False, log: Callable[[str], None] = print) -> Path:
     """Add every seed of every experiment configuration in ``folders`` to ``out/<track>/``; returns that folder.
 
-    ``played``: their final policies played on the track (:func:`read_agents`), not their recorded evaluations.
+    ``played``: their final policies played on the track (:func:`read_agents`), not their recorded evaluations;
+    ``chosen``: their snapshots chosen on validation episodes, as entries of their own.
     """
     from crowdnav.evaluation.storage import atomic_write_text
 
@@ -268,7 +298,8 @@ def write_agents(track: Track, folders: list[str | Path], out: str | Path, *, al
         recorded = document.get("track") or {}
         raise TrackError(f"{index} holds results of track {recorded.get('name')} v{recorded.get('version')}, not {track.label}: "
                          f"write the baselines of this version first (crowdnav track reference {track.name} --force)")
-    agents = [pair for folder in folders for pair in read_agents(track, folder, played=played, log=log)]  # every check before any write
+    # every check before any write
+    agents = [pair for folder in folders for pair in read_agents(track, folder, played=played, chosen=chosen, log=log)]
     names = [entry["name"] for entry, _ in agents]
     twice = sorted({name for name in names if names.count(name) > 1})
     if twice:

@@ -34,6 +34,8 @@ from crowdnav.files import hold_lock, open_text_for_append, refuse_link
 
 VALIDATION_SEED_BASE = 500_000
 """First validation seed: above any protocol's test seeds in the shipped experiments, below every training seed."""
+VALIDATION_EPISODES = 300
+"""Validation episodes per snapshot of the declared rule (docs/evaluation.md#early-stopping-on-validation-episodes)."""
 OUTCOMES = ("success", "collision", "out_of_bounds", "truncated")
 FIELDS = ("training_episodes", "episodes", *OUTCOMES)
 
@@ -56,7 +58,7 @@ class Choice:
         return self.test_successes / self.test_episodes
 
 
-def choose_on_validation(experiment: str | Path, *, episodes: int = 300, seed_base: int = VALIDATION_SEED_BASE,
+def choose_on_validation(experiment: str | Path, *, episodes: int = VALIDATION_EPISODES, seed_base: int = VALIDATION_SEED_BASE,
                          configurations: Sequence[str] | None = None, log: Callable[[str], None] = print) -> list[Choice]:
     """The snapshot each run of ``experiment`` keeps on validation episodes (module docstring), configuration by seed."""
     folder = Path(experiment)
@@ -88,9 +90,31 @@ def _choose(run: Path, spec: dict[str, Any], episodes: int, seed_base: int, log:
             _append(table, point, episodes, stored[point])
             log(f"{run.parent.name}/{run.name}: snapshot after {point:,} episodes, {stored[point]['success']} of {episodes} validation successes")
     validation = {point: stored[point]["success"] for point in sorted(tests)}
-    chosen = max(validation, key=lambda point: (validation[point], point))  # ties: the later snapshot
+    chosen = kept(validation)
     successes, played = tests[chosen]
     return Choice(spec["configuration"], int(spec["seed"]), validation, chosen, successes, played)
+
+
+def kept(validation: dict[int, int]) -> int:
+    """The rule: the evaluation point whose snapshot won the most validation episodes, ties to the later one."""
+    return max(validation, key=lambda point: (validation[point], point))
+
+
+def stored_choice(run: Path, *, episodes: int = VALIDATION_EPISODES, seed_base: int = VALIDATION_SEED_BASE) -> tuple[int, dict[int, int]]:
+    """The kept evaluation point of a finished run and its validation successes per point, from the stored table only.
+
+    Plays nothing (publishing reads what :func:`choose_on_validation` stored); refused, naming the command that fills
+    the table, where a point of the run's test evaluations has no stored validation row.
+    """
+    tests = _test_successes(run / "test_episodes.csv")
+    table = run / f"validation_{seed_base}_{episodes}.csv"
+    stored = _read(table)
+    missing = sorted(set(tests) - set(stored))
+    if missing:
+        raise ValueError(f"{table} has no validation row for the snapshot after {missing[0]:,} episodes: run `python "
+                         f"benchmarks/validation_choice.py {run.parent.parent} --episodes {episodes} --seed-base {seed_base}` first")
+    validation = {point: stored[point]["success"] for point in sorted(tests)}
+    return kept(validation), validation
 
 
 def _test_successes(path: Path) -> dict[int, tuple[int, int]]:

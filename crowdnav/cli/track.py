@@ -1,4 +1,7 @@
-"""``crowdnav track list | show NAME | check [NAME...] | reference NAME [--agents DIR [--played]]``: the named, versioned test sets to rank on."""
+"""``crowdnav track list | show NAME | check [NAME...] | reference NAME [--agents DIR [--played | --chosen-on-validation]]``.
+
+The named, versioned test sets to rank on.
+"""
 
 from __future__ import annotations
 
@@ -51,6 +54,11 @@ def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) ->
                                 "track's episodes with the track's setting, instead of copying its recorded final evaluation; the "
                                 "track may differ from the training's setting in the sensing only (keys under sensors., e.g. "
                                 "sensors.tracker), which the entry records (trained_setting) and its label says")
+    reference.add_argument("--chosen-on-validation", action="store_true",
+                           help="with --agents: each seed's test evaluation at the snapshot the declared early-stopping rule keeps "
+                                "(most successes on validation episodes 500,000-500,299, ties to the later; the table "
+                                "benchmarks/validation_choice.py stored, nothing played), as entries of their own (..._validated_seed<K>) "
+                                "beside the final evaluation's")
     reference.add_argument("--baseline", action="append", default=None, metavar="NAME", dest="baselines",
                            help="play only this reference baseline (repeatable), e.g. one added since the track's results "
                                 "were published; the other baselines are kept as published")
@@ -110,12 +118,14 @@ def reference_command(args: argparse.Namespace) -> int:
     track = _track(args.name)
     if args.played and not args.agents:
         raise CliError("--played plays the trained policies of --agents RESULTS_DIR/CONFIGURATION: name one")
+    if args.chosen_on_validation and not args.agents:
+        raise CliError("--chosen-on-validation reads the runs of --agents RESULTS_DIR/CONFIGURATION: name one")
     if args.agents and args.baselines:
         raise CliError("--agents adds reference agents and plays nothing; --baseline plays baselines: one or the other")
     try:
         if args.agents:
             folder = write_agents(track, args.agents, args.out, allow_dirty=args.allow_dirty, force=args.force, played=args.played,
-                                  log=lambda line: print(line, flush=True))
+                                  chosen=args.chosen_on_validation, log=lambda line: print(line, flush=True))
         else:
             folder = write_reference(track, args.out, allow_dirty=args.allow_dirty, force=args.force, only=args.baselines,
                                      log=lambda line: print(line, flush=True))

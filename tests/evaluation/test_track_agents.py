@@ -172,3 +172,48 @@ def test_the_command_adds_the_agents_and_the_leaderboard_ranks_them(tmp_path, ca
     assert main(["track", "reference", str(track_file), "--agents", str(tmp_path / "nothing"), "--out", str(out), "--allow-dirty"]) == 1
     err = capsys.readouterr().err
     assert err.startswith("crowdnav: error: ") and "no seed_K folders" in err and err.count("\n") == 1
+
+
+def _validation_table(run: Path, successes: dict[int, int]) -> None:
+    """The table benchmarks/validation_choice.py stores beside a run: validation outcomes per evaluation point."""
+    with open(run / "validation_500000_300.csv", "w", encoding="utf-8", newline="") as file:
+        writer = csv.DictWriter(file, fieldnames=["training_episodes", "episodes", "success", "collision", "out_of_bounds", "truncated"])
+        writer.writeheader()
+        writer.writerows({"training_episodes": point, "episodes": 300, "success": won, "collision": 300 - won, "out_of_bounds": 0,
+                          "truncated": 0} for point, won in successes.items())
+
+
+def test_the_snapshot_chosen_on_validation_is_published_apart_at_its_own_evaluation(tmp_path):
+    track = _track()
+    experiment = _experiment(tmp_path, track)
+    for seed, table in enumerate(({100: 290, 200: 280}, {100: 290, 200: 290}, {100: 250, 200: 299})):  # ties go to the later
+        _validation_table(experiment / f"seed_{seed}", table)
+    write_agents(track, [experiment], tmp_path / "ref", allow_dirty=True, log=lambda line: None)
+    folder = write_agents(track, [experiment], tmp_path / "ref", allow_dirty=True, chosen=True, log=lambda line: None)
+    entries = {entry["name"]: entry for entry in json.loads((folder / "reference.json").read_text())["entries"]}
+    assert sorted(entries) == sorted([*(f"agent_exp_planned_seed{seed}" for seed in range(3)),
+                                      *(f"agent_exp_planned_validated_seed{seed}" for seed in range(3))])
+    assert [entries[f"agent_exp_planned_validated_seed{seed}"]["validation_choice"]["kept"] for seed in range(3)] == [100, 200, 200]
+    assert entries["agent_exp_planned_validated_seed0"]["label"] == (
+        "PPO + shield, closest obstacle + goal (50k env steps, seed 0; the snapshot after 100 episodes, chosen on validation "
+        "episodes 500,000-500,299)")
+    with open(folder / "agent_exp_planned_validated_seed0.csv", encoding="utf-8") as file:
+        chosen = [row["outcome"] for row in csv.DictReader(file)]
+    with open(folder / "agent_exp_planned_seed0.csv", encoding="utf-8") as file:
+        final = [row["outcome"] for row in csv.DictReader(file)]
+    assert chosen == ["success", "collision", "success"] and final == ["collision", "success", "collision"]  # evaluation 0's, 1's
+
+
+def test_choosing_on_validation_without_the_stored_table_or_with_played_is_refused_in_one_line(tmp_path, capsys):
+    track = _track()
+    experiment = _experiment(tmp_path, track)
+    _validation_table(experiment / "seed_0", {100: 290})  # the 200-episode snapshot never validated
+    with pytest.raises(TrackError, match=r"seed_0: .*validation_500000_300.csv has no validation row for the snapshot after 200 "
+                                         r"episodes: run `python benchmarks/validation_choice.py .*exp --episodes 300") as caught:
+        read_agents(track, experiment, chosen=True, log=lambda line: None)
+    assert "\n" not in str(caught.value)
+    with pytest.raises(TrackError, match="one or the other"):
+        read_agents(track, experiment, chosen=True, played=True, log=lambda line: None)
+    assert main(["track", "reference", "figure4", "--chosen-on-validation"]) == 1
+    err = capsys.readouterr().err
+    assert "--chosen-on-validation reads the runs of --agents" in err and err.count("\n") == 1

@@ -21,7 +21,8 @@ def _row(folder: Path) -> str:
     agents: dict[str, list[dict]] = {}
     for entry in document["entries"]:
         if entry["kind"] == "policy":
-            agents.setdefault(f"{entry['experiment']}/{entry['configuration']}", []).append(entry)
+            chosen = ", snapshot chosen on validation" if "validation_choice" in entry else ""  # reported apart from the final
+            agents.setdefault(f"{entry['experiment']}/{entry['configuration']}{chosen}", []).append(entry)
     seeds = "; ".join(f"`{key}`: " + " / ".join(_percent(e["success"]) for e in sorted(group, key=lambda e: e["seed"]))
                       for key, group in agents.items())
     return f"| {document['track']['name']} ({document['test_episodes']}) | " + " | ".join(cells) + f" | {seeds} |"
