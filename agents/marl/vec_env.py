@@ -22,14 +22,17 @@ single-robot vector env's (:class:`crowdnav.agents.sb3.vec_env.CrowdNavSB3VecEnv
 
 These are, row for row and bit for bit, what the run's worlds as :class:`RobotsTrainingEnv` give stepped one by one,
 and what SuperSuit's ``concat_vec_envs_v1`` over ``pettingzoo_env_to_vec_env_v1`` made of them, the chain that
-collected for ``agents: robots`` before (tests/agents/test_marl_vec_env.py steps all three). :meth:`RobotsVecEnv.
-restore_worlds` puts the worlds back mid-episode for an exact resume (:mod:`crowdnav.agents.marl.resume`) from each
-world's counters and the network's actions since its episode's reset (:meth:`RobotsVecEnv.episode_actions`).
+collected for ``agents: robots`` before (tests/agents/test_marl_vec_env.py steps all three). For an exact resume
+(:mod:`crowdnav.agents.marl.resume`) :meth:`RobotsVecEnv.snapshot` gives a world as data (:class:`RobotsWorldState`:
+its engine's state and what this env keeps of it) and :meth:`RobotsVecEnv.load_worlds` puts every world back from
+such states, whichever engine took them; :meth:`RobotsVecEnv.restore_worlds` rebuilds them instead from each world's
+counters and the network's actions since its episode's reset (:meth:`RobotsVecEnv.episode_actions`), replayed.
 """
 
 from __future__ import annotations
 
 from collections.abc import Sequence
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -44,7 +47,23 @@ from stable_baselines3.common.vec_env.base_vec_env import VecEnv, VecEnvObs, Vec
 from crowdnav.envs.engine import RobotsEngine, RobotsStep
 from crowdnav.envs.reward import REWARD_TERMS
 from crowdnav.envs.robots_engine import SingleRobots, robots_engine
+from crowdnav.envs.world_state import WorldState
 from crowdnav.scenario.schema import Scenario
+
+
+@dataclass(frozen=True, eq=False)
+class RobotsWorldState:
+    """One world of a :class:`RobotsVecEnv` (:meth:`RobotsVecEnv.snapshot`); it pickles."""
+
+    world: WorldState
+    """The engine's state of the world (:meth:`crowdnav.envs.engine.RobotsEngine.snapshot`, every robot's observation in it)."""
+    first_episode: int
+    played: int
+    """The world's episode counters (:meth:`RobotsVecEnv.episode_counters`)."""
+    active: np.ndarray
+    """(R,) bool: the robots whose rows the network sees (one that ended at the last step shows it until the next)."""
+    actions: np.ndarray
+    """(steps, R, 2) float32: the network's actions since the episode's reset (:meth:`RobotsVecEnv.episode_actions` goes on from them)."""
 
 
 class RobotsVecEnv(VecEnv):
@@ -203,8 +222,58 @@ class RobotsVecEnv(VecEnv):
                     actions[world, :length] = history[world, len(self._history) - length :]
         return actions, lengths
 
+    def snapshot(self, world: int) -> RobotsWorldState:
+        """World ``world`` now, copied: :meth:`load_worlds` puts it back in a RobotsVecEnv of either engine."""
+        length = int(self._steps - self._began[world])
+        kept = self._history[len(self._history) - length :] if length else []
+        actions = np.array([step[world] for step in kept], dtype=np.float32).reshape(length, len(self.robots), 2)
+        return RobotsWorldState(self.engine.snapshot(world), int(self.first_episode[world]), int(self.played[world]),
+                                self._active[world].copy(), actions)
+
+    def load_worlds(self, states: Sequence[RobotsWorldState]) -> np.ndarray:
+        """A training resume: world ``w`` becomes ``states[w]`` (:meth:`snapshot` s of a run of the same config, either
+        engine's), every world at once; returns the rows' observations, those of the snapshots. A state that does not fit
+        is a ValueError in one line (its world and the worlds loaded before it are then to be reset)."""
+        worlds, robots = self.num_worlds, len(self.robots)
+        if len(states) != worlds:
+            raise ValueError(f"load_worlds: {len(states)} states for {worlds} worlds")
+        for w, state in enumerate(states):
+            if not isinstance(state, RobotsWorldState) or state.played < 1 or state.active.shape != (robots,) \
+                    or state.active.dtype != bool or state.actions.shape[1:] != (robots, 2) or state.actions.dtype != np.float32:
+                raise ValueError(f"world {w}: expected a RobotsWorldState of a world of {robots} robots (RobotsVecEnv.snapshot)")
+        for w, state in enumerate(states):
+            self.engine.load(w, state.world)
+        self.first_episode = np.array([state.first_episode for state in states], dtype=np.int64)
+        self.played = np.array([state.played for state in states], dtype=np.int64)
+        episodes = self.first_episode + (self.played - 1) * worlds + np.arange(worlds)  # the episode each world plays
+        self.episode_seeds = [train_seed(self.run_seed, int(episode)) for episode in episodes]
+        self._active = np.stack([state.active for state in states])
+        lengths = np.array([len(state.actions) for state in states], dtype=np.int64)
+        steps = int(lengths.max(initial=0))
+        history = np.zeros((steps, worlds, robots, 2), np.float32)  # each world's actions the last of the steps kept
+        for w, state in enumerate(states):
+            history[steps - len(state.actions) :, w] = state.actions
+        self._history, self._steps, self._began = list(history), steps, steps - lengths
+        self._raw = self.engine.observe()
+        self._reset_seeds()
+        return self.inputs.rows(self._raw, self._active)
+
+    def restart(self, counters: Sequence[tuple[int, int]]) -> np.ndarray:
+        """Every world reset to the episode its counters ``(first_episode, played)`` number (as saved: ``played`` counts it);
+        returns the rows' observations. A resume's first act: what the stored worlds are checked against."""
+        worlds = self.num_worlds
+        if len(counters) != worlds:
+            raise ValueError(f"restart: one counter pair per world ({worlds})")
+        self.first_episode = np.array([int(first) for first, _ in counters], dtype=np.int64)
+        self.played = np.array([int(played) - 1 for _, played in counters], dtype=np.int64)
+        self._history, self._steps = [], 0
+        self._start(np.arange(worlds))
+        self._raw = self.engine.observe()
+        self._reset_seeds()
+        return self.inputs.rows(self._raw, self._active)
+
     def restore_worlds(self, counters: Sequence[tuple[int, int]], actions: np.ndarray, lengths: np.ndarray) -> np.ndarray:
-        """A training resume: world ``w`` back in its episode after its first ``lengths[w]`` steps of ``actions[w]``
+        """A format-1 resume: world ``w`` back in its episode after its first ``lengths[w]`` steps of ``actions[w]``
         ((worlds, steps, robots, 2), the network's own actions), its counters ``(first_episode, played)`` as saved.
 
         Every world is reset with its episode's seed and replays its actions (a world whose replay is over waits): the
@@ -214,11 +283,7 @@ class RobotsVecEnv(VecEnv):
         worlds = self.num_worlds
         if len(counters) != worlds or len(actions) != worlds or len(lengths) != worlds:
             raise ValueError(f"restore_worlds: one counter pair, action array and length per world ({worlds})")
-        self.first_episode = np.array([int(first) for first, _ in counters], dtype=np.int64)
-        self.played = np.array([int(played) - 1 for _, played in counters], dtype=np.int64)
-        self._history, self._steps = [], 0
-        self._start(np.arange(worlds))
-        self._raw = self.engine.observe()
+        self.restart(counters)
         lengths = np.asarray(lengths, dtype=np.int64)
         steps = int(lengths.max(initial=0))
         wait = steps - lengths  # the shorter replays start later, so that every world's steps are the last ones recorded

@@ -17,7 +17,8 @@ worlds. Which one a vector env uses is :func:`crowdnav.envs.vector.stacks`' choi
 :class:`RobotsEngine` is the same for the robots-only env, every robot of a ``robots:`` scenario driven by the caller
 (:mod:`crowdnav.envs.robots_engine`): :class:`crowdnav.envs.vector_stacked_robots.StackedRobots` stacked,
 :class:`crowdnav.envs.robots_engine.SingleRobots` one env per world; a step's per-robot results are a :class:`RobotsStep`,
-where everyone is a :class:`RobotsFrame`.
+where everyone is a :class:`RobotsFrame`; a world's state is a :class:`crowdnav.envs.world_state.WorldState` too
+(:mod:`crowdnav.envs.robots_state`), loading into either.
 """
 
 from __future__ import annotations
@@ -163,6 +164,14 @@ class RobotsEngine(Protocol):
 
     def radii(self, world: int) -> tuple[np.ndarray, np.ndarray]:
         """``world``'s body radii (m): its robots' (R,) and its humans' (n,), the simulator's order."""
+
+    def snapshot(self, world: int) -> WorldState:
+        """Everything ``world``'s future depends on given the actions, with every robot's last observation, copied
+        (:mod:`crowdnav.envs.robots_state`): it loads into a world of either robots engine."""
+
+    def load(self, world: int, state: WorldState) -> None:
+        """Make ``state`` (a :meth:`snapshot`, either robots engine's) ``world``'s: it plays on bit for bit, :meth:`observe`
+        giving the stored observation until the world steps or resets. A ValueError in one line names what differs."""
 
     def close(self) -> None:
         """Release what the worlds hold."""

@@ -16,7 +16,8 @@ bit in both:
 
 :func:`robots_engine` chooses once. Robot ``k`` is the scenario's ``robots.<k>`` (``robot_names`` order). Both also play
 scripted robots (:class:`ScriptedRobotsEngine`): the stacked engine those with a batched twin (straight, social force),
-the per-world one any, called with each robot's view of its world's simulator.
+the per-world one any, called with each robot's view of its world's simulator. A world's state taken by either loads
+into either (:mod:`crowdnav.envs.robots_state`).
 """
 
 from __future__ import annotations
@@ -29,7 +30,9 @@ from gymnasium import spaces
 
 from crowdnav.envs.core import load_env_world, option_overrides
 from crowdnav.envs.engine import RobotsEngine, RobotsFrame, RobotsStep
+from crowdnav.envs.robots_state import robots_rows, robots_state
 from crowdnav.envs.vector_stacked_robots import StackedRobots
+from crowdnav.envs.world_state import WorldState
 from crowdnav.sensors.tracker import make_tracker
 from crowdnav.sim.simulator import Simulator
 from crowdnav.worlds.compiled import CompiledWorld
@@ -144,6 +147,21 @@ class SingleRobots:
         sim = self.envs[world].simulator
         assert sim.team is not None  # a robots: scenario's
         return sim.team.all_radii.copy(), sim.radii[1:].copy()
+
+    def snapshot(self, world: int) -> WorldState:
+        env = self.envs[world]
+        return robots_state(env.core.snapshot({}), bool(env.agents), self._observations[world], self.robot_names)
+
+    def load(self, world: int, state: WorldState) -> None:
+        env = self.envs[world]
+        state, rows = robots_rows(state, env.core.world_key, self.robot_names, self.observation_size)
+        env.core.load(state)  # the simulator, every robot's reward memory, the tracker, whether the episode runs
+        team = env.simulator.team
+        assert team is not None  # a robots: scenario's
+        # the env's own episode bookkeeping (it has no load of its own): the robots still in the world act, until the episode ends
+        env._active_robots = [name for name, here in zip(self.robot_names, team.state.active.tolist(), strict=True) if here]
+        env.agents = list(env.possible_agents) if state.env is not None and state.env.running else []
+        self._observations[world] = rows
 
     def close(self) -> None:
         for env in self.envs:

@@ -21,13 +21,16 @@ flat_observations=True``) does around its simulator, so world ``i`` plays that e
   evaluation records per step), read from the stack a crowd size at a time;
 * **scripted robots**: a scripted policy with a batched twin (:func:`scripted_name`: straight, social force) acts for
   any robot, the first one included, as called with that robot's view of its world
-  (:meth:`StackedRobots.scripted_actions`, :func:`crowdnav.batch.robot_policies.every_robot_actions`).
+  (:meth:`StackedRobots.scripted_actions`, :func:`crowdnav.batch.robot_policies.every_robot_actions`);
+* **states**: a world's :class:`crowdnav.envs.world_state.WorldState` as the env holds it after its step (the robots
+  leaving already out, the last observation with it: :mod:`crowdnav.envs.robots_state`), which loads into either engine.
 """
 
 from __future__ import annotations
 
 import dataclasses
 from collections.abc import Sequence
+from functools import cached_property
 from typing import Any
 
 import numpy as np
@@ -40,6 +43,8 @@ from crowdnav.batch.state import BatchState
 from crowdnav.batch.team import TeamStack
 from crowdnav.envs.engine import RobotsFrame, RobotsStep
 from crowdnav.envs.reward import REWARD_TERMS, reward_terms
+from crowdnav.envs.robots_state import retired, robots_rows, robots_state
+from crowdnav.envs.world_state import WorldKey, WorldState, make_state, world_key
 from crowdnav.policies import SCRIPTED_POLICIES
 from crowdnav.sensors import Modality, build_modalities
 from crowdnav.sim.contacts import goal_distance
@@ -79,6 +84,13 @@ class StackedRobots:
         """Each robot's goal distance at its last step or reset (its reward's progress memory)."""
         self._leaving = np.zeros((self.num_worlds, r), dtype=bool)
         """Robots that ended at their world's last step, leaving it before anything else happens there."""
+        self._over = np.zeros(self.num_worlds, dtype=bool)
+        """Worlds whose episode ended at their last step (not reset since)."""
+        self._loaded = np.zeros(self.num_worlds, dtype=bool)
+        self._stored = np.zeros((self.num_worlds, r, self.observation_size), np.float32)
+        """Worlds loaded from a state, and (``_stored``) the observation it carried, observed until the world steps or resets."""
+        self._observed: np.ndarray | None = None
+        """:meth:`observe`'s last answer while it is current (a snapshot's observation: the robots leaving still in it)."""
 
     # ------------------------------------------------------------------ reset
 
@@ -86,6 +98,8 @@ class StackedRobots:
         self.batch.reset(worlds, seeds)
         worlds = np.asarray(worlds, dtype=np.int64)
         self._leaving[worlds] = False
+        self._over[worlds] = self._loaded[worlds] = False
+        self._observed = None
         self._previous[worlds] = self._goal_distance()[worlds]
 
     # ------------------------------------------------------------------- step
@@ -93,6 +107,7 @@ class StackedRobots:
     def step(self, actions: np.ndarray, active: np.ndarray | None = None) -> RobotsStep:
         team, w = self.team, self.num_worlds
         stepping = np.ones(w, dtype=bool) if active is None else active
+        self._observed = None
         self._leave(stepping)
         here = team.active & stepping[:, None]  # the robots that act: in a stepping world, not left
         actions = np.where(here[:, :, None], np.asarray(actions, dtype=np.float64), 0.0)  # a robot that left stands (unchecked)
@@ -109,6 +124,8 @@ class StackedRobots:
         truncated = going & result.truncated & stepping
         over = stepping & (~going | truncated)
         self._leaving |= ended & ~over[:, None]  # (the stepping worlds' were cleared as they left)
+        self._over = np.where(stepping, over, self._over)
+        self._loaded &= ~stepping  # a loaded world that stepped observes its new state
         collisions = {(world, 0): contact for world, contact in result.collisions.items() if here[world, 0]}
         collisions.update(((world, j + 1), contact) for (world, j), contact in team.collisions.items() if here[world, j + 1])
         rewards, terms = self._rewards(here, outcome)
@@ -170,6 +187,9 @@ class StackedRobots:
                     part = _rows(state, group)
                     for k in np.flatnonzero(pattern).tolist():  # each robot in those worlds, by its own sensors
                         out[worlds[group], k] = self._flat(part, worlds[group], k, np.flatnonzero(pattern))
+        if self._loaded.any():
+            out[self._loaded] = self._stored[self._loaded]
+        self._observed = out
         return out
 
     def _flat(self, state: BatchState, worlds: np.ndarray, robot: int, present: np.ndarray) -> np.ndarray:
@@ -225,6 +245,33 @@ class StackedRobots:
     def radii(self, world: int) -> tuple[np.ndarray, np.ndarray]:
         bucket, _ = self.batch.locate(world)
         return self.team.team.all_radii.copy(), bucket.radii[1:].copy()
+
+    # ------------------------------------------------------------------ a world's state
+
+    def snapshot(self, world: int) -> WorldState:
+        episode = self.batch.snapshot(world)
+        leaving = self._leaving[world]
+        if leaving.any():  # out of the world in the state, as the env leaves them at its step's end (here: the next step's start)
+            episode = retired(episode, self.team.state_of(world, leaving[1:]), bool(leaving[0]))
+        observed = self._observed if self._observed is not None else self.observe()
+        base = make_state(self.world_key, episode, tuple(self._previous[world].tolist()), None)
+        return robots_state(base, not self._over[world], observed[world], self.robot_names)
+
+    def load(self, world: int, state: WorldState) -> None:
+        state, rows = robots_rows(state, self.world_key, self.robot_names, self.observation_size)
+        if state.tracker is not None:
+            raise ValueError("a world state with a people tracker's tracks cannot load into stacked robots (they play without a tracker)")
+        self.batch.load(world, state.episode)
+        self._previous[world] = state.rewards
+        self._leaving[world] = False
+        self._over[world] = state.env is not None and not state.env.running
+        self._loaded[world], self._stored[world] = True, rows
+        self._observed = None
+
+    @cached_property
+    def world_key(self) -> WorldKey:
+        """What a world state must match to load here (made on first use)."""
+        return world_key(self.batch.scenario)
 
     def close(self) -> None:
         """Nothing to release (the worlds are arrays)."""
