@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 from collections.abc import Mapping
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 from crowdnav.cli.common import CliError, add_override_option, add_reward_options, parse_overrides, reward_options
 from crowdnav.suggest import unknown_name_message
@@ -117,11 +117,16 @@ def _render_foreign(args: argparse.Namespace) -> int:
         options["modalities"] = [key.strip() for key in args.modalities.split(",") if key.strip()]
     try:
         name, _, act, privileged, env_options = resolve_policy(args.policy, options)
+        memory: dict[str, Any] = {"state": None}  # a recurrent policy's state, carried through its episode
 
         def play(env: CrowdNavEnv, observation: Mapping[str, np.ndarray]) -> np.ndarray:  # one episode at a time: a batch of one
             try:
                 if privileged:
                     action: np.ndarray = act(env.simulator)
+                elif getattr(act, "recurrent", False):  # its state kept, forgotten where an episode begins
+                    batch = {key: np.asarray(value)[None] for key, value in observation.items()}
+                    actions, memory["state"] = act.predict(batch, memory["state"], np.array([env.simulator.step_count == 0]))
+                    action = np.asarray(actions)[0]
                 else:
                     action = np.asarray(act({key: np.asarray(value)[None] for key, value in observation.items()}))[0]
             except PolicyError:

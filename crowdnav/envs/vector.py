@@ -26,6 +26,7 @@ from crowdnav.envs.vector_stacked_team import StackedTeamWorlds, first_robot_mod
 from crowdnav.envs.vector_team import TeamWorlds
 from crowdnav.envs.world_state import VectorWorldState, check_state, world_key
 from crowdnav.planning.shield import validate_shield
+from crowdnav.sensors import Modality
 from crowdnav.sim.simulator import Simulator
 from crowdnav.worlds.compiled import CompiledWorld
 
@@ -33,6 +34,8 @@ MAX_WORLDS = 4_096
 """Most worlds in one vector env (the training config's num_envs bound)."""
 MAX_AGENTS = 2_000_000
 """Most agents (robots and humans at the crowd's largest) over all worlds: each costs about 1 kB of state."""
+EngineFactory = Callable[[CompiledWorld, int, dict[str, Modality]], WorldEngine]
+"""``engine(world, num_envs, modalities)``: the worlds of a backend of one's own (:class:`CrowdNavVectorEnv`'s ``engine``)."""
 
 
 class CrowdNavVectorEnv(VectorEnv):
@@ -71,6 +74,8 @@ class CrowdNavVectorEnv(VectorEnv):
     that needs one), or, for one world (``num_envs=1``) and crowds of ``Simulator.grid_from`` humans or more (the
     single simulator's neighbour grid), held as single envs (:class:`crowdnav.envs.vector_team.TeamWorlds`): the
     same episodes, at the single env's speed per world. The env itself keeps Gymnasium's conventions only.
+    ``engine`` (optional, an :data:`EngineFactory`) builds the worlds instead of that choice: a new backend, played
+    through the protocol like the others (docs/architecture.md, "Adding a backend").
 
     **Several robots** (a scenario with ``robots:``): world ``i`` is :class:`crowdnav.envs.CrowdNavEnv`
     with the same ``other_robots`` option (the first robot learns, the others follow their scripted
@@ -116,6 +121,7 @@ class CrowdNavVectorEnv(VectorEnv):
         shield: bool | Mapping[str, Any] | None = None,
         residual: bool = False,
         other_robots: str | Callable[..., Any] = "social-force",
+        engine: EngineFactory | None = None,
     ):
         if render_mode is not None:
             raise ValueError("the vector env does not render; render a single env (gymnasium.make(..., render_mode=...))")
@@ -133,7 +139,12 @@ class CrowdNavVectorEnv(VectorEnv):
         # worlds that are plain single envs (one robot): when all step, TeamWorlds.step_every steps them
         self._single_worlds: TeamWorlds | None = None
         policy = team_policy(other_robots) if world.scenario.robots is not None else None
-        if policy is not None and stacks(world, num_envs, other_robots):  # several robots, stacked
+        if engine is not None:  # a backend of the caller's
+            self.engine = engine(world, num_envs, self.modalities)
+            if self.engine.num_worlds != num_envs:
+                raise ValueError(f"engine: it built {self.engine.num_worlds} worlds; num_envs is {num_envs}")
+            self.modalities = self.engine.modalities
+        elif policy is not None and stacks(world, num_envs, other_robots):  # several robots, stacked
             stacked = StackedTeamWorlds(world, num_envs, first_robot_modalities(world), policy)
             self.engine, self.modalities = stacked, stacked.modalities
         elif stacks(world, num_envs, other_robots):

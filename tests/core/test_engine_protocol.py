@@ -19,7 +19,7 @@ from crowdnav.planning.shield import validate_shield
 from crowdnav.worlds.compiled import load_world
 
 ROOT = Path(__file__).resolve().parents[2]
-ENGINE_TYPES = {"BatchSimulator", "TeamWorlds", "StackedWorlds", "StackedTeamWorlds"}
+ENGINE_TYPES = {"BatchSimulator", "TeamWorlds", "StackedWorlds", "StackedTeamWorlds", "StackedRobots", "SingleRobots"}
 PROTOCOL = [name for name, member in vars(WorldEngine).items() if inspect.isfunction(member) and not name.startswith("_")]
 
 
