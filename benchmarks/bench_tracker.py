@@ -10,14 +10,20 @@ reference (the tracker's share: issue 51 asks for at most 1.20 at 32 worlds and 
 median time of the tracker's own updates per step (``PeopleTracker.update``, the same clock).
 ``--modalities`` picks the observation (default: ``goal humans velocity``, a SARL-style agent's
 tracker reader; ``--modalities goal closest_obstacle plan`` is the main job's, whose planner costs more).
+``--baseline DIR`` adds, next to each tracker profile, the same profile with the people tracker of another checkout
+(DIR: its repository root, e.g. ``git worktree add /tmp/tracker_base HEAD``; its ``crowdnav/sensors/tracker.py``,
+``sightlines.py`` and ``tracker_draws.py``), interleaved in the same process: the tracker before and after a change.
 """
 
 from __future__ import annotations
 
 import argparse
+import importlib.util
 import statistics
+import sys
 import time
 from collections.abc import Callable
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -27,11 +33,38 @@ from crowdnav.envs.vector import CrowdNavVectorEnv
 CLOCK: Callable[[], float] = time.process_time
 
 
+BASELINE = "@baseline"
+"""Suffix of a profile run with the ``--baseline`` checkout's tracker."""
+
+
+def baseline_tracker(root: str) -> Any:
+    """The ``PeopleTracker`` class of the checkout at ``root``, with that checkout's sightlines and draws (loaded under
+    their own names for its imports, then the modules of this checkout put back)."""
+    names = ("sightlines", "tracker_draws", "tracker")
+    saved = {name: sys.modules.get(f"crowdnav.sensors.{name}") for name in names}
+    loaded = {}
+    try:
+        for name in names:
+            spec = importlib.util.spec_from_file_location(f"crowdnav.sensors.{name}", Path(root) / "crowdnav" / "sensors" / f"{name}.py")
+            assert spec is not None and spec.loader is not None
+            loaded[name] = sys.modules[spec.name] = importlib.util.module_from_spec(spec)
+            spec.loader.exec_module(loaded[name])
+    finally:
+        for name, module in saved.items():
+            if module is not None:
+                sys.modules[f"crowdnav.sensors.{name}"] = module
+    return loaded["tracker"].PeopleTracker
+
+
 def stepper(args: argparse.Namespace, profile: str) -> Callable[[], tuple[float, float]]:
-    """A vector env of ``profile``, reset once; its timing run returns the seconds per vector step, and of them the
-    tracker's updates."""
+    """A vector env of ``profile`` (``BASELINE``-suffixed: with the baseline's tracker), reset once; its timing run returns
+    the seconds per vector step, and of them the tracker's updates."""
+    name = profile.removesuffix(BASELINE)
     env = CrowdNavVectorEnv(args.scenario, num_envs=args.batch, modalities=args.modalities,
-                            overrides={"humans.count": args.humans, "sensors.tracker.profile": profile})
+                            overrides={"humans.count": args.humans, "sensors.tracker.profile": name})
+    engine: Any = env.engine
+    if name != profile:
+        engine.tracker = baseline_tracker(args.baseline)(engine.batch.world, engine.tracker.values, engine.num_worlds)
     env.reset(seed=0)
     actions = np.random.default_rng(0).uniform(-1, 1, (args.steps, args.batch, 2)).astype(np.float32)
     for action in actions[:10]:  # warm caches (the planner's maps, numpy's dispatch)
@@ -66,9 +99,13 @@ def main() -> None:
     parser.add_argument("--modalities", nargs="+", default=["goal", "humans", "velocity"])
     parser.add_argument("--profiles", nargs="+", default=["perfect", "lidar_tracker", "camera_front"])
     parser.add_argument("--clock", choices=["wall", "cpu"], default="cpu", help="cpu: the process's CPU time (a shared machine)")
+    parser.add_argument("--baseline", help="another checkout's root: each tracker profile also with its people tracker")
     args = parser.parse_args()
     global CLOCK
     CLOCK = time.perf_counter if args.clock == "wall" else time.process_time
+    if args.baseline:
+        args.profiles = [case for profile in args.profiles
+                         for case in ([profile] if profile == args.profiles[0] else [profile + BASELINE, profile])]
     runs = {profile: stepper(args, profile) for profile in args.profiles}
     seconds: dict[str, list[float]] = {profile: [] for profile in args.profiles}
     tracking: dict[str, list[float]] = {profile: [] for profile in args.profiles}
@@ -82,7 +119,7 @@ def main() -> None:
           f"median of {args.repeats} x {args.steps} steps ({args.clock} clock)")
     for profile, values in seconds.items():
         ratios = [value / base for value, base in zip(values, seconds[reference], strict=True)]
-        print(f"  {profile:14s} {statistics.median(values) * 1e3:7.3f} ms/step   x{statistics.median(ratios):.3f} of {reference}"
+        print(f"  {profile:23s} {statistics.median(values) * 1e3:7.3f} ms/step   x{statistics.median(ratios):.3f} of {reference}"
               f"   tracker updates {statistics.median(tracking[profile]) * 1e3:6.3f} ms/step")
 
 

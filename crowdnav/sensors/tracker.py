@@ -132,15 +132,18 @@ class PeopleTracker:
         The episode's first detections come with the worlds' next :meth:`update` (after the reset, before any step).
         """
         rows = np.asarray(worlds, dtype=np.intp)
+        keys = []
         for world, seed in zip(rows.tolist(), seeds, strict=True):  # per reset, not per step
             if seed is not None or self._entropy[world] is None:
                 self._entropy[world] = int(seed) if seed is not None else fresh_entropy()
-                self._episode[world] = 0
+                episode = 0
             else:
-                self._episode[world] += 1
+                episode = int(self._episode[world]) + 1
+            self._episode[world] = episode
             entropy = self._entropy[world]
             assert entropy is not None
-            self._key[world] = episode_key(entropy, int(self._episode[world]))
+            keys.append(episode_key(entropy, episode))
+        self._key[rows] = keys
         self._step[rows] = 0
         self._fresh[rows] = True
         self._alive[rows] = False
@@ -245,62 +248,74 @@ class PeopleTracker:
         """This step's detections and the tracks' new estimates; ``at`` indexes the state arrays' (rows, people), as views
         (``gathered`` False) or copies written back at the end.
 
-        Every (world, person) entry is updated on its own, as dense arrays: a detection's updates are ufuncs with
-        ``where=detected`` (the entries not detected keep their values, bit for bit), cheaper than gathering the detections.
+        Every (world, person) entry is updated on its own, as dense arrays: a detection's updates are masked (``where=``,
+        or a term that is 0 where nothing changes: the entries not updated keep their values, bit for bit), cheaper
+        than gathering the detections.
         """
         values, now, window = self.values, self._step[rows], self.values.window
         detected, measured, draws = self._detect(rows, now, positions, heading, radius)
         alive, hits, last_seen = self._alive[at], self._hits[at], self._last_seen[at]
         moments, sums = self._moments[:, at[0], at[1]], self._sums[:, at[0], at[1]]
         count, steps, squares, total, weighted = moments[0], moments[1], moments[2], sums[0], sums[1]
+        now_column = now[:, None]
         # the window's detections are a step older (a fresh world's tracks are empty: nothing moves)
         squares += count - 2.0 * steps
         steps -= count
         weighted -= total
         # a track is kept unless falsely dropped or coasted too long; a detection far from its prediction starts a new one
         predicted = self._position[at] + self._velocity[at] * self.dt
-        alive &= (draws[..., 1] >= values.drop_probability) & (detected | (now[:, None] - last_seen <= values.max_missed))
-        new = detected & (~alive | (np.abs(measured - predicted) > GATE))
+        alive &= draws[..., 1] >= values.drop_probability
+        alive &= detected | (last_seen >= (now - values.max_missed)[:, None])
+        continued = np.abs(measured - predicted) <= GATE
+        continued &= alive
+        new = detected > continued
         hits[new] = 0
-        moments[:, new] = 0.0
-        sums[:, new] = 0.0
+        np.copyto(moments, 0.0, where=new)
+        np.copyto(sums, 0.0, where=new)
         # each track's window slot for this detection, as an index into the flat ring (C-contiguous: views or fresh copies)
-        k, n = hits.shape
-        slot = np.arange(0, k * n * window, window).reshape(k, n) + hits % window
+        slot = hits % window
+        slot += _ring_base(hits.shape[0], hits.shape[1], window)
         ring, ring_at = self._measured[at].reshape(-1), self._measured_at[at].reshape(-1)
         held, held_at = ring[slot], ring_at[slot]
-        # a full window drops its oldest detection (the slot the new one takes)
-        full = count >= window
-        old_at = np.where(full, held_at - now[:, None], 0.0)
-        old = np.where(full, held, 0.0)
-        np.subtract(count, full, out=count, where=detected)
-        np.subtract(steps, old_at, out=steps, where=detected)
-        np.subtract(squares, old_at * old_at, out=squares, where=detected)
-        np.subtract(total, old, out=total, where=detected)
-        np.subtract(weighted, old_at * old, out=weighted, where=detected)
+        # a full window drops its oldest detection (the slot the new one takes); the moments are whole numbers (exact), the
+        # sums never -0.0 (so x - 0.0 is x)
+        dropped = count >= window
+        grown = detected > dropped
+        dropped &= detected
+        age = held_at - now_column  # the dropped detection's steps before now
+        moved = age * dropped
+        steps -= moved
+        squares -= moved * moved
+        np.subtract(total, held, out=total, where=dropped)
+        np.subtract(weighted, age * held, out=weighted, where=dropped)
+        count += grown
         # ... and takes the new one, at 0 steps before now
-        ring[slot] = np.where(detected, measured, held)
-        ring_at[slot] = np.where(detected, now[:, None], held_at)
-        np.add(count, 1.0, out=count, where=detected)
+        np.copyto(held, measured, where=detected)
+        np.copyto(held_at, now_column, where=detected)
+        ring[slot], ring_at[slot] = held, held_at
         np.add(total, measured, out=total, where=detected)
         hits += detected
         alive |= detected
-        confirmed = (self._confirmed[at] & ~new) | (hits >= values.confirm_hits) | (alive & fresh[:, None])
-        np.copyto(last_seen, now[:, None], where=detected)
+        confirmed = self._confirmed[at]
+        np.greater(confirmed, new, out=confirmed)  # kept unless a new track
+        confirmed |= hits >= values.confirm_hits
+        if fresh.any():
+            confirmed |= alive & fresh[:, None]
+        np.copyto(last_seen, now_column, where=detected)
         latest = self._latest[at]
         np.copyto(latest, measured, where=detected)
         # least squares through the window: slope = cov(step, position) / var(step); one detection: slope 0
         tracks = np.maximum(count, 1.0)
         mean = steps / tracks
-        spread = squares - steps * mean  # whole numbers, exact
+        spread = squares - steps * mean
         slope = (weighted - mean * total) / np.where(spread > 0.0, spread, np.inf)  # metres per step
         if gathered:
             self._alive[at], self._hits[at], self._last_seen[at], self._latest[at] = alive, hits, last_seen, latest
-            self._measured[at], self._measured_at[at] = ring.reshape(k, n, window), ring_at.reshape(k, n, window)
+            self._measured[at], self._measured_at[at] = ring.reshape(*hits.shape, window), ring_at.reshape(*hits.shape, window)
             self._moments[:, at[0], at[1]], self._sums[:, at[0], at[1]] = moments, sums
-        self._confirmed[at] = confirmed
+            self._confirmed[at] = confirmed
         # the latest detection, moved on at the estimated velocity while the track coasts
-        self._position[at] = np.where(alive, latest + slope * (now[:, None] - last_seen), 0.0)
+        self._position[at] = np.where(alive, latest + slope * (now_column - last_seen), 0.0)
         self._velocity[at] = np.where(alive, slope * (1.0 / self.dt), 0.0)
 
     def _detect(self, rows: np.ndarray | slice, now: np.ndarray, positions: np.ndarray, heading: np.ndarray,
@@ -311,7 +326,9 @@ class PeopleTracker:
         distance = np.abs(toward)
         draws = uniforms(self._key[rows], now, people.shape[1])
         # in range (a robot inside a person's disc sees nobody there), and the detector fires: then is it in view, in sight?
-        detected = (distance <= values.max_range) & (distance > radius) & (draws[..., 0] < values.detection_probability)
+        detected = distance <= values.max_range
+        detected &= distance > radius
+        detected &= draws[..., 0] < values.detection_probability
         if not self.full_circle:
             bearing = np.arctan2(toward.imag, toward.real) - heading[:, None]
             detected &= np.abs(np.mod(bearing + math.pi, 2.0 * math.pi) - math.pi) <= self.half_fov
@@ -324,6 +341,19 @@ class PeopleTracker:
         noise = np.empty(people.shape, dtype=complex)
         noise.real, noise.imag = sigma * across, sigma * along
         return detected, people + noise, draws
+
+
+_RING_BASES: dict[tuple[int, int, int], np.ndarray] = {}
+
+
+def _ring_base(k: int, n: int, window: int) -> np.ndarray:
+    """(k, n) each track's first slot in a flat ring of k x n windows (kept per shape)."""
+    base = _RING_BASES.get((k, n, window))
+    if base is None:
+        if len(_RING_BASES) > 64:  # bounded
+            _RING_BASES.clear()
+        base = _RING_BASES[k, n, window] = np.arange(0, k * n * window, window).reshape(k, n)
+    return base
 
 
 def make_tracker(world: CompiledWorld, num_worlds: int) -> PeopleTracker | None:
