@@ -22,7 +22,7 @@ import numpy as np
 
 from crowdnav.envs.world_state import EnvState, WorldKey, WorldState, check_state
 from crowdnav.sim.episode_state import EpisodeState
-from crowdnav.sim.robots import PARKED, TeamState
+from crowdnav.sim.robots import TeamState, retire_in
 
 
 def robots_state(base: WorldState, running: bool, observations: np.ndarray, names: Sequence[str]) -> WorldState:
@@ -50,8 +50,5 @@ def retired(episode: EpisodeState, team: TeamState, first: bool) -> EpisodeState
     """``episode`` (a copy) with ``team`` (its robots after the first, those leaving already out) and, ``first``, the first
     robot out of the world too, as :func:`crowdnav.sim.robots.retire_robots` leaves it (parked, still, its place kept)."""
     if first:
-        state = episode.state
-        team.active[0] = False
-        team.left_at[0] = state.positions[0]
-        state.positions[0], state.velocities[0] = PARKED, 0.0
+        retire_in(team, episode.state, [0])
     return dataclasses.replace(episode, team=team)

@@ -274,7 +274,11 @@ def retire_robots(team: Team, ego: SimState, index: np.ndarray | list[int]) -> N
 
     Each is moved to :data:`PARKED` and stops; the caller measures the new geometry.
     """
-    state = team.state
+    retire_in(team.state, ego, index)
+
+
+def retire_in(state: TeamState, ego: SimState, index: np.ndarray | list[int]) -> None:
+    """:func:`retire_robots` on a team's state and its world's state as data (a world state's copies, as a snapshot takes them)."""
     index = np.asarray(index, dtype=int).reshape(-1)
     if ((index < 0) | (index >= len(state.active))).any():
         raise ValueError(f"robot indices must be in [0, {len(state.active) - 1}], got {index.tolist()}")
