@@ -118,14 +118,15 @@ def _render_foreign(args: argparse.Namespace) -> int:
     try:
         name, _, act, privileged, env_options = resolve_policy(args.policy, options)
         memory: dict[str, Any] = {"state": None}  # a recurrent policy's state, carried through its episode
+        predict = getattr(act, "predict", None) if getattr(act, "recurrent", False) else None
 
         def play(env: CrowdNavEnv, observation: Mapping[str, np.ndarray]) -> np.ndarray:  # one episode at a time: a batch of one
             try:
                 if privileged:
                     action: np.ndarray = act(env.simulator)
-                elif getattr(act, "recurrent", False):  # its state kept, forgotten where an episode begins
+                elif predict is not None:  # its state kept, forgotten where an episode begins
                     batch = {key: np.asarray(value)[None] for key, value in observation.items()}
-                    actions, memory["state"] = act.predict(batch, memory["state"], np.array([env.simulator.step_count == 0]))
+                    actions, memory["state"] = predict(batch, memory["state"], np.array([env.simulator.step_count == 0]))
                     action = np.asarray(actions)[0]
                 else:
                     action = np.asarray(act({key: np.asarray(value)[None] for key, value in observation.items()}))[0]
