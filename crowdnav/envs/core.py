@@ -13,7 +13,7 @@ import dataclasses
 import math
 from collections.abc import Mapping, Sequence
 from functools import cached_property, partial
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 from gymnasium import spaces
@@ -384,7 +384,7 @@ class EnvCore:
         """The world as the robot's tracker reports the people now (:mod:`crowdnav.sensors.tracked`; ``perfect``: the simulator)."""
         if self.tracker is None:
             return self.simulator
-        return TrackedView(self.simulator, self.tracker.columns(WORLD, self.simulator.n_humans))
+        return cast(RobotWorld, TrackedView(self.simulator, self.tracker.columns(WORLD, self.simulator.n_humans)))
 
     def render(self) -> np.ndarray | None:
         """The current frame (``rgb_array``), a window update (``human``) or None without a render_mode."""

@@ -184,7 +184,7 @@ class StackedRobots:
                 which = which.reshape(-1)
                 for p, pattern in enumerate(patterns):  # worlds holding the same robots: their views list the same discs
                     group = np.flatnonzero(which == p)
-                    part = _rows(state, group)
+                    part = state.rows(group)
                     for k in np.flatnonzero(pattern).tolist():  # each robot in those worlds, by its own sensors
                         out[worlds[group], k] = self._flat(part, worlds[group], k, np.flatnonzero(pattern))
         if self._loaded.any():
@@ -282,12 +282,6 @@ def scripted_name(policy: Any) -> str | None:
     otherwise) where :class:`StackedRobots` has its batched twin (:data:`crowdnav.batch.robot_policies.SEAT_POLICIES`);
     None for the others (ORCA, the planners, a callable)."""
     return next((name for name, kind in SCRIPTED_POLICIES.items() if type(policy) is kind and name in SEAT_POLICIES), None)
-
-
-def _rows(state: BatchState, rows: np.ndarray) -> BatchState:
-    """Rows ``rows`` of a :class:`crowdnav.batch.state.BatchState` (its shared ``radii`` kept)."""
-    return dataclasses.replace(state, **{field.name: getattr(state, field.name)[rows] for field in dataclasses.fields(state)
-                                         if field.name != "radii"})
 
 
 def _check(actions: np.ndarray, here: np.ndarray, names: Sequence[str]) -> None:

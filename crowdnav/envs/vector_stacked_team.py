@@ -23,6 +23,7 @@ import numpy as np
 
 from crowdnav.batch.bucket import Bucket
 from crowdnav.batch.robot_policies import RobotPolicy
+from crowdnav.batch.robot_views import robot_view
 from crowdnav.batch.simulator import StepResult
 from crowdnav.batch.state import BatchState
 from crowdnav.batch.team import TeamStack
@@ -32,7 +33,6 @@ from crowdnav.envs.world_state import EnvState, WorldState, check_state, make_st
 from crowdnav.sensors import Modality, build_modalities
 from crowdnav.sim.robots import TeamState
 from crowdnav.sim.simulator import Simulator
-from crowdnav.sim.state import SELF_DISTANCE
 from crowdnav.worlds.compiled import CompiledWorld
 
 
@@ -139,23 +139,9 @@ class StackedTeamWorlds(StackedWorlds):
         which = which.reshape(-1)
         for p, pattern in enumerate(patterns):  # worlds whose views hold the same discs
             rows = np.flatnonzero(which == p)
-            view = self._view(state, rows, worlds[rows], np.flatnonzero(pattern))
+            view = robot_view(state, team, worlds[rows], 0, np.flatnonzero(pattern) + 1, rows)
             for key in self._sees_robots & out.keys():
                 out[key][worlds[rows]] = self.modalities[key].observe_batch(view)
-
-    def _view(self, state: BatchState, rows: np.ndarray, worlds: np.ndarray, seen: np.ndarray) -> BatchState:
-        """Rows ``rows`` of ``state`` as the first robot sees them: then the other robots ``seen`` (as RobotView builds it)."""
-        team = self.team
-        positions = np.concatenate([state.positions[rows], team.positions[worlds][:, seen]], axis=1)
-        velocities = np.concatenate([state.velocities[rows], team.velocities[worlds][:, seen]], axis=1)
-        offset = positions - positions[:, :1]
-        distance = np.abs(offset)
-        distance[:, 0] = SELF_DISTANCE
-        return dataclasses.replace(state, positions=positions, velocities=velocities, robot_heading=state.robot_heading[rows],
-                                   robot_goal=state.robot_goal[rows], radii=np.concatenate([state.radii, team.team.radii[seen]]),
-                                   robot_offset=offset, robot_distance=distance, polygon_offset=state.polygon_offset[rows],
-                                   polygon_distance=state.polygon_distance[rows], disc_offset=state.disc_offset[rows],
-                                   disc_distance=state.disc_distance[rows])
 
     def _observation(self, world: int) -> dict[str, np.ndarray]:
         """``world``'s observation now (what :meth:`observe` writes for it)."""

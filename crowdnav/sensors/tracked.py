@@ -18,20 +18,18 @@ from __future__ import annotations
 import dataclasses
 import weakref
 from collections.abc import Callable
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, cast
 
 import numpy as np
 
 from crowdnav.scenario.tracker import PERFECT
 from crowdnav.sensors.tracker import TrackedColumns
-from crowdnav.sim.state import SELF_DISTANCE
+from crowdnav.sim.geometry import pair_tables
+from crowdnav.sim.robot_view import reads_the_rest
 
 if TYPE_CHECKING:
     from crowdnav.batch.state import BatchState
-    from crowdnav.scenario.schema import Scenario
     from crowdnav.sim.robot_view import RobotWorld
-    from crowdnav.worlds.compiled import CompiledWorld
-    from crowdnav.worlds.obstacles import StaticObstacles
 
 Reader = Callable[[int], TrackedColumns]
 """``reader(n)``: a world's columns (1-row arrays) for its first n people."""
@@ -52,7 +50,7 @@ def sensed_people(sim: RobotWorld) -> RobotWorld:
     """
     reader = _READERS.get(sim)
     if reader is not None:
-        return TrackedView(sim, reader(sim.n_humans))
+        return cast("RobotWorld", TrackedView(sim, reader(sim.n_humans)))
     profile = sim.scenario.sensors.tracker.profile
     if profile != PERFECT:
         raise ValueError(f"sensors.tracker is {profile!r}: the people tracker's state lives in the env; call this with the "
@@ -66,94 +64,29 @@ def tracked_state(state: BatchState, columns: TrackedColumns) -> BatchState:
                                robot_distance=columns.distance)
 
 
+@reads_the_rest("_sim")  # every other name: the simulator's (the robot's pose, goal and map, the people's radii and speeds)
 class TrackedView:
     """One world (``sim``, a simulator) with the tracker's people (``columns``, 1-row arrays) in place of the true ones.
 
     It has the names a :class:`crowdnav.sim.robot_view.RobotWorld` has: ``positions``, ``velocities``,
     ``robot_offset``, ``robot_distance`` (and ``pair_*``, built from them) hold the tracks; the rest is
-    the simulator's.
+    the simulator's (:func:`crowdnav.sim.robot_view.reads_the_rest`).
     """
+
+    positions: np.ndarray
+    velocities: np.ndarray
+    robot_offset: np.ndarray
+    robot_distance: np.ndarray
 
     def __init__(self, sim: RobotWorld, columns: TrackedColumns):
         self._sim = sim
         self.positions, self.velocities, self.robot_offset, self.robot_distance = (np.array(values[0]) for values in columns)
 
     @property
-    def world(self) -> CompiledWorld:
-        return self._sim.world
-
-    @property
-    def scenario(self) -> Scenario:
-        return self._sim.scenario
-
-    @property
-    def obstacles(self) -> StaticObstacles:
-        return self._sim.obstacles
-
-    @property
-    def dt(self) -> float:
-        return self._sim.dt
-
-    @property
-    def n_humans(self) -> int:
-        return self._sim.n_humans
-
-    @property
-    def robot_position(self) -> complex:
-        return self._sim.robot_position
-
-    @property
-    def robot_goal(self) -> complex:
-        return self._sim.robot_goal
-
-    @property
-    def robot_goal_distance(self) -> float:
-        return self._sim.robot_goal_distance
-
-    @property
-    def robot_heading(self) -> float:
-        return self._sim.robot_heading
-
-    @property
-    def robot_social_force(self) -> complex:
-        return self._sim.robot_social_force
-
-    @property
-    def other_robot_discs(self) -> slice:
-        return self._sim.other_robot_discs
-
-    @property
-    def radii(self) -> np.ndarray:
-        return self._sim.radii
-
-    @property
-    def human_max_speed(self) -> np.ndarray:
-        return self._sim.human_max_speed
-
-    @property
-    def polygon_offset(self) -> np.ndarray:
-        return self._sim.polygon_offset
-
-    @property
-    def polygon_distance(self) -> np.ndarray:
-        return self._sim.polygon_distance
-
-    @property
-    def disc_offset(self) -> np.ndarray:
-        return self._sim.disc_offset
-
-    @property
-    def disc_distance(self) -> np.ndarray:
-        return self._sim.disc_distance
-
-    @property
     def pair_offset(self) -> np.ndarray:
         """(n+1, n+1) complex between the robot and the tracks (NaN for people not reported)."""
-        offset: np.ndarray = self.positions[None, :] - self.positions[:, None]
-        return offset
+        return pair_tables(self.positions)[0]
 
     @property
     def pair_distance(self) -> np.ndarray:
-        distance: np.ndarray = np.abs(self.pair_offset)
-        distance.flat[:: len(self.positions) + 1] = SELF_DISTANCE
-        return distance
+        return pair_tables(self.positions)[1]

@@ -76,9 +76,7 @@ def measure(z: np.ndarray, surface: Any, polygons: int, contact_all: np.ndarray,
     come from the same operations whatever the leading axes, so one world and a batch agree bit for bit.
     """
     m = z.shape[-1]
-    offset = z[..., None, :] - z[..., :, None]  # [..., i, j]: from agent i to agent j
-    distance = np.abs(offset)
-    distance.reshape(-1, m * m)[:, :: m + 1] = SELF_DISTANCE  # every world's diagonal
+    offset, distance = pair_tables(z)
     static_offset, static_distance = measure_obstacles(z, surface)
     if static_offset is None or static_distance is None:
         gap = distance - contact_all
@@ -94,6 +92,16 @@ def measure(z: np.ndarray, surface: Any, polygons: int, contact_all: np.ndarray,
     else:
         touch = np.minimum.reduce(gap[:, 1:].reshape(len(z), -1), axis=1) < 0.0 if m > 1 else np.zeros(len(z), dtype=bool)
     return Measured(offset, distance, gap, touch, repulsion, *obstacle_kinds(z, static_offset, static_distance, polygons))
+
+
+def pair_tables(z: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """From agent i to agent j at positions ``z`` (..., n+1) and their lengths, (..., n+1, n+1) each: an agent's own distance
+    :data:`crowdnav.sim.state.SELF_DISTANCE` (every ``pair_offset`` / ``pair_distance``: a simulator's, a batch's, a view's)."""
+    m = z.shape[-1]
+    offset = z[..., None, :] - z[..., :, None]  # [..., i, j]: from agent i to agent j
+    distance = np.abs(offset)
+    distance.reshape(-1, m * m)[:, :: m + 1] = SELF_DISTANCE  # every world's diagonal
+    return offset, distance
 
 
 def measure_obstacles(z: np.ndarray, surface: Any) -> tuple[np.ndarray | None, np.ndarray | None]:
@@ -206,10 +214,7 @@ class Geometry:
         All pairs: the measured tables; a large crowd: built from positions ``z`` when first read.
         """
         if self._pair_offset is None or self._pair_distance is None:
-            offset = z[None, :] - z[:, None]
-            distance = np.abs(offset)
-            distance.flat[:: len(z) + 1] = SELF_DISTANCE
-            self._pair_offset, self._pair_distance = offset, distance
+            self._pair_offset, self._pair_distance = pair_tables(z)
         return self._pair_offset, self._pair_distance
 
     def push_humans_apart(self, positions: np.ndarray) -> None:

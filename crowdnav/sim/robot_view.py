@@ -3,7 +3,10 @@
 :class:`RobotView` shows the world from robot k: index 0 is that robot, then the humans, then
 the other robots still in the world, with the attribute names the sensors, the reward and the
 scripted policies read from a simulator, so all of them work for any robot unchanged.
-:class:`RobotWorld` is the type of that shared reading (a :class:`typing.Protocol` both match).
+:class:`RobotWorld` is the type of that shared reading (a :class:`typing.Protocol` both match), declared
+once: its names (:data:`ROBOT_WORLD`) are what every view is checked against, :func:`reads_the_rest`
+forwards those a view does not compute, and :func:`robot_offsets` measures a view's offsets from its
+positions (one world's or K worlds', as :mod:`crowdnav.batch.robot_views` builds them).
 :func:`robot_positions`, :func:`robot_goals`, ... read every robot of a simulator at once (one
 robot: the first and only); :class:`crowdnav.Simulator` shows them as its attributes
 (``sim.robot_positions``). Nothing here writes a state.
@@ -12,10 +15,13 @@ robot: the first and only); :class:`crowdnav.Simulator` shows them as its attrib
 from __future__ import annotations
 
 import copy
-from typing import TYPE_CHECKING, Protocol
+from collections.abc import Callable
+from operator import attrgetter
+from typing import TYPE_CHECKING, Protocol, TypeVar
 
 import numpy as np
 
+from crowdnav.sim.geometry import pair_tables
 from crowdnav.sim.state import SELF_DISTANCE
 
 if TYPE_CHECKING:
@@ -96,6 +102,43 @@ class Viewed(RobotWorld, Protocol):
     def robot_scenario(self, index: int) -> Scenario: ...
 
 
+ROBOT_WORLD: tuple[str, ...] = tuple(name for name, member in vars(RobotWorld).items() if isinstance(member, property))
+"""The names :class:`RobotWorld` declares, in its order: what every view of one robot has, each of the declared kind
+(tests/core/test_robot_world.py checks the simulator, :class:`RobotView` and the tracker's view)."""
+
+Kind = TypeVar("Kind", bound=type)
+
+
+def reads_the_rest(source: str) -> Callable[[Kind], Kind]:
+    """Class decorator for a view of one robot: each :data:`ROBOT_WORLD` name the class does not have (a property, a method,
+    a class attribute or an annotated attribute its instances set) becomes a read-only property reading ``self.<source>.<name>``.
+
+    The properties are :func:`operator.attrgetter` (no Python frame per read: the cost of a hand-written forwarding
+    property, not of ``__getattr__``); the class's ``forwarded`` lists their names. A name added to :class:`RobotWorld`
+    is read from the source by every such view that does not compute it. The type checker sees the class's own names
+    only: a builder hands the view out as a :class:`RobotWorld` (``cast``).
+    """
+
+    def forward(cls: Kind) -> Kind:
+        have = {name for owner in cls.__mro__ for name in (*vars(owner), *vars(owner).get("__annotations__", ()))}
+        forwarded = tuple(name for name in ROBOT_WORLD if name not in have)
+        for name in forwarded:
+            setattr(cls, name, property(attrgetter(f"{source}.{name}"), doc=f"``{name}`` of the world it is read from."))
+        cls.forwarded = forwarded  # type: ignore[attr-defined]
+        return cls
+
+    return forward
+
+
+def robot_offsets(positions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """A view's ``robot_offset`` and ``robot_distance`` from its ``positions`` (last axis: the robot first, any leading world
+    axis): from the robot to every disc's centre, and their lengths, the robot's own :data:`crowdnav.sim.state.SELF_DISTANCE`."""
+    offset = positions - (positions[0] if positions.ndim == 1 else positions[..., :1])  # one world: a scalar's faster subtraction
+    distance = np.abs(offset)
+    distance[..., 0] = SELF_DISTANCE
+    return offset, distance
+
+
 class RobotView:
     """The world seen from robot ``index`` (0: the ego robot): the simulator's attributes, that robot first.
 
@@ -109,7 +152,7 @@ class RobotView:
         team = sim.team
         assert team is not None  # a view is of one robot among several
         state = team.state
-        self.world, self.obstacles, self.dt, self.bounds = sim.world, sim.obstacles, sim.dt, sim.bounds
+        self.world, self.obstacles, self.dt, self.bounds, self.step_count = sim.world, sim.obstacles, sim.dt, sim.bounds, sim.step_count
         self.scenario = sim.robot_scenario(index)
         others = np.flatnonzero(state.active[1:]) if with_robots else np.zeros(0, dtype=int)
         if index:
@@ -139,14 +182,10 @@ class RobotView:
         self.velocities = np.concatenate([[velocity], sim.velocities[1:], ego_velocity, state.velocities[others]])
         self.radii = np.concatenate([[radius], sim.radii[1:], ego_radius, team.radii[others]])
         self.human_max_speed = np.concatenate([sim.human_max_speed, ego_speed, team.max_speeds[others]])
-        self.robot_offset = self.positions - me
-        self.robot_distance = np.abs(self.robot_offset)
-        self.robot_distance[0] = SELF_DISTANCE
+        self.robot_offset, self.robot_distance = robot_offsets(self.positions)
         count = sim.obstacles.polygon_count
         self.polygon_offset, self.polygon_distance = polygon_offset[:, :count], polygon_distance[:, :count]
         self.disc_offset, self.disc_distance = polygon_offset[:, count:], polygon_distance[:, count:]
-
-        self.step_count = sim.step_count
         self._pairs: tuple[np.ndarray, np.ndarray] | None = None
 
     @property
@@ -175,10 +214,7 @@ class RobotView:
 
     def _pair_tables(self) -> tuple[np.ndarray, np.ndarray]:
         if self._pairs is None:
-            offset = self.positions[None, :] - self.positions[:, None]
-            distance = np.abs(offset)
-            distance.flat[:: len(self.positions) + 1] = SELF_DISTANCE
-            self._pairs = (offset, distance)
+            self._pairs = pair_tables(self.positions)
         return self._pairs
 
     def without_robots(self) -> RobotView:
