@@ -20,7 +20,7 @@ from importlib.metadata import version
 import numpy as np
 
 from crowdnav import Simulator
-from crowdnav.policies import OrcaRobot, SocialForceRobot
+from crowdnav.planning.scripted import OrcaRobot, SocialForceRobot
 
 
 def step_microseconds(sim: Simulator, steps: int, seed: int) -> float:

@@ -14,7 +14,7 @@ import time
 from pathlib import Path
 
 from crowdnav import CrowdNavEnv
-from crowdnav.policies import RandomPolicy
+from crowdnav.planning.scripted import RandomPolicy
 from crowdnav.rendering import VideoWriter
 
 

@@ -6,9 +6,9 @@ robots-only env per world, in one run.
 Both cases are :class:`crowdnav.agents.marl.vec_env.RobotsVecEnv` (SB3's VecEnv, one row per robot per world) over
 the same worlds, stepped with the same random actions (``robot_actions: velocity``, as the shared robot runs train):
 
-* ``single``: one robots-only PettingZoo env per world (:class:`crowdnav.envs.robots_engine.SingleRobots`, what
+* ``single``: one robots-only PettingZoo env per world (:class:`crowdnav.envs.engines.robots.SingleRobots`, what
   collected before the stacked engine and what a scenario that does not stack still gets);
-* ``stacked``: the worlds in one batched simulator (:class:`crowdnav.envs.vector_stacked_robots.StackedRobots`).
+* ``stacked``: the worlds in one batched simulator (:class:`crowdnav.envs.engines.stacked_robots.StackedRobots`).
 
 Their rows are the same bit for bit (tests/agents/test_marl_vec_env.py). Printed: each case's median world-steps/s
 (robot rows/s is that times the robots) and stacked / single. ``--clock cpu`` times with the process's CPU time: on

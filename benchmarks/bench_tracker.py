@@ -28,7 +28,7 @@ from typing import Any
 
 import numpy as np
 
-from crowdnav.envs.vector import CrowdNavVectorEnv
+from crowdnav.envs.vector.env import CrowdNavVectorEnv
 
 CLOCK: Callable[[], float] = time.process_time
 

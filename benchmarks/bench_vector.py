@@ -20,10 +20,10 @@ Printed: median env-steps/s over the repeats and the ratios native / sync, nativ
 kernels and sb3_native / sb3_single. ``--clock cpu`` times with the process's CPU time instead of the
 wall clock: on a machine shared with other jobs the wall clock also counts the time the process waits
 for a core. One world (``--batch 1``) is a size like any other: the native env then holds it as a
-single env (``crowdnav.envs.vector.stacks``), and ``kernels`` does not apply.
+single env (``crowdnav.envs.vector.env.stacks``), and ``kernels`` does not apply.
 
 A several-robot scenario (``--scenario robots_crossing_hall --batch 32 --modalities goal lidar``) runs
-the same cases: its native worlds are stacked too (:mod:`crowdnav.envs.vector_stacked_team`: the other
+the same cases: its native worlds are stacked too (:mod:`crowdnav.envs.engines.stacked_team`: the other
 robots of every world in the batched simulator, their scripted policy batched), and ``kernels`` is then
 the batched simulator's step (the other robots standing still: their policy is the engine's) and the
 observations. Measured 2026-12-07 (2 shared cores, ``--clock cpu --cases single native --repeats 1``, five

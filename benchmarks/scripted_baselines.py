@@ -22,7 +22,7 @@ import numpy as np
 from crowdnav.cli.common import CliError, add_override_option, parse_overrides
 from crowdnav.envs import CrowdNavEnv
 from crowdnav.envs.reward import REWARD_TERMS
-from crowdnav.policies import SocialForceRobot, StraightToGoal
+from crowdnav.planning.scripted import SocialForceRobot, StraightToGoal
 from crowdnav.scenario.library import library_names
 from crowdnav.sim.simulator import OUTCOMES
 

@@ -1,17 +1,22 @@
-"""The module paths of crowdnav's flat root before :mod:`crowdnav.sim` and :mod:`crowdnav.worlds`, still importable (as the modules they became).
+"""Module paths crowdnav's core had before its packages by concept, still importable (as the modules they became).
 
-Users, notebooks and older docs import ``crowdnav.simulator``, ``crowdnav.world``,
-``crowdnav.social_force`` and the like; a file that pickled one of their classes names it by that
-path. :data:`MOVED` maps each old path to its module now; :func:`install` (run once by ``crowdnav``)
+Users, notebooks and older docs import ``crowdnav.simulator``, ``crowdnav.world``, ``crowdnav.policies``,
+``crowdnav.envs.world_state`` and the like; a file that pickled one of their classes names it by that path.
+:data:`MOVED` maps each old path to its module now (the flat root before :mod:`crowdnav.sim` and
+:mod:`crowdnav.worlds`; the scripted policies before :mod:`crowdnav.planning.scripted`; the flat ``crowdnav/envs/``
+before :mod:`crowdnav.envs.engines` and :mod:`crowdnav.envs.vector`); :func:`install` (run once by ``crowdnav``)
 appends a finder to :data:`sys.meta_path` that answers an old path with the new module itself: one
 module object under both names (``crowdnav.simulator.Simulator is crowdnav.sim.simulator.Simulator``),
-so a class unpickled by its old path is the class. Nothing is imported until an old path is. Code
-imports the new paths (tests/core/test_legacy_paths.py checks the old ones).
+so a class unpickled by its old path is the class. Nothing is imported until an old path is, as a module
+(``import crowdnav.policies``) or as an attribute of its package (``crowdnav.policies`` after ``import crowdnav``:
+:func:`old_attribute`). Code imports the new paths (tests/core/test_legacy_paths.py checks the old ones).
+
+Not in the table: ``crowdnav.envs.vector`` was a module and is now a package; it exports that module's public names
+(:mod:`crowdnav.envs.vector`), so ``crowdnav.envs.vector.CrowdNavVectorEnv`` is still the class.
 
 :class:`LegacyPaths` serves any such table: :mod:`crowdnav.agents.legacy` installs one for the
 flat layout agents/ had.
 """
-
 from __future__ import annotations
 
 import importlib
@@ -42,6 +47,18 @@ MOVED: dict[str, str] = {
     "crowdnav.placement_checks": "crowdnav.worlds.placement_checks",
     "crowdnav.placement_regions": "crowdnav.worlds.placement_regions",
     "crowdnav.placement_team": "crowdnav.worlds.placement_team",
+    "crowdnav.policies": "crowdnav.planning.scripted",
+    "crowdnav.envs.engine": "crowdnav.envs.engines.protocol",
+    "crowdnav.envs.vector_stacked": "crowdnav.envs.engines.stacked",
+    "crowdnav.envs.vector_stacked_team": "crowdnav.envs.engines.stacked_team",
+    "crowdnav.envs.vector_stacked_robots": "crowdnav.envs.engines.stacked_robots",
+    "crowdnav.envs.vector_team": "crowdnav.envs.engines.per_world",
+    "crowdnav.envs.robots_engine": "crowdnav.envs.engines.robots",
+    "crowdnav.envs.robots_state": "crowdnav.envs.engines.robots_state",
+    "crowdnav.envs.world_state": "crowdnav.envs.engines.world_state",
+    "crowdnav.envs.world_state_codec": "crowdnav.envs.engines.world_state_codec",
+    "crowdnav.envs.vector_actions": "crowdnav.envs.vector.actions",
+    "crowdnav.envs.vector_infos": "crowdnav.envs.vector.infos",
 }
 """Old module path -> the module it is now."""
 
@@ -66,3 +83,14 @@ def install(moved: Mapping[str, str] = MOVED) -> None:
     """Put a finder for ``moved`` on :data:`sys.meta_path` once, after the others (it never hides a module that exists)."""
     if not any(isinstance(finder, LegacyPaths) and finder.moved is moved for finder in sys.meta_path):
         sys.meta_path.append(LegacyPaths(moved))
+
+
+def old_attribute(package: str, name: str, moved: Mapping[str, str] = MOVED) -> ModuleType:
+    """``package.name`` where that is an old path of ``moved`` (imported now), for the package's PEP 562 ``__getattr__``.
+
+    Before a move, importing the package often imported such a module too (``crowdnav.envs.single`` imported
+    ``crowdnav.policies``), so ``import crowdnav`` then ``crowdnav.policies.StraightToGoal`` worked; so it still does.
+    """
+    if f"{package}.{name}" not in moved:
+        raise AttributeError(f"module {package!r} has no attribute {name!r}")
+    return importlib.import_module(f"{package}.{name}")

@@ -1,7 +1,7 @@
 """Scripted baselines on an experiment's own test episodes: the bar a learned policy must clear.
 
 Every experiment evaluates the scripted robots of :data:`EXPERIMENT_BASELINES`
-(:mod:`crowdnav.policies`) on the same held-out test episodes as its learned runs, with the same
+(:mod:`crowdnav.planning.scripted`) on the same held-out test episodes as its learned runs, with the same
 scenario, overrides and reward (a configuration with ``agents: robots``: the baseline drives every
 robot of the scenario, :mod:`crowdnav.evaluation.robot_rollout`):
 
@@ -125,7 +125,7 @@ def is_baseline(configuration: str) -> bool:
 def scripted_policy(name: str) -> Any:
     """The scripted robot policy of a baseline name (:data:`BASELINES`; ``orca`` raises
     :class:`crowdnav.sim.orca_solver.OrcaUnavailableError`, one line, without pyrvo)."""
-    from crowdnav.policies import SCRIPTED_POLICIES
+    from crowdnav.planning.scripted import SCRIPTED_POLICIES
 
     return SCRIPTED_POLICIES[SHIELDED_BASELINES.get(name, name).replace("_", "-")]()
 

@@ -7,7 +7,7 @@ flat_observations=True)``) with ``s``, and every robot acts with the policy (a s
 that robot's ``simulator.robot_view(k)``, as the Gymnasium env's ``other_robots`` do). The humans
 follow the scenario's crowd model; a robot that ends leaves the world, the others go on.
 :class:`RobotEpisodes` plays several test episodes at once, each in a world of one robots-only engine
-(:mod:`crowdnav.envs.robots_engine`): the rows are those of one env per seed, bit for bit.
+(:mod:`crowdnav.envs.engines.robots`): the rows are those of one env per seed, bit for bit.
 
 Each robot's row has the columns of a single-robot test episode (:mod:`crowdnav.evaluation.rollout`:
 ``test_episode``, ``test_seed``, ``outcome``, ``collision_kind``, ``return`` and the metrics of
@@ -28,10 +28,10 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 from crowdnav.evaluation.metrics import Trajectory, episode_metrics
 
-from crowdnav.envs.engine import RobotsEngine, RobotsFrame, RobotsStep
+from crowdnav.envs.engines.protocol import RobotsEngine, RobotsFrame, RobotsStep
 
 if TYPE_CHECKING:
-    from crowdnav.envs.robots_engine import ScriptedRobotsEngine
+    from crowdnav.envs.engines.robots import ScriptedRobotsEngine
 
 ScriptedPolicy = Callable[[Any], np.ndarray]
 """A privileged robot policy: a robot's view (``simulator.robot_view(k)``) -> action (2,)."""
@@ -56,20 +56,20 @@ class RobotEpisodes:
 
     ``env_options``: keyword arguments of :class:`crowdnav.envs.CrowdNavEnv` (scenario, modalities,
     sensors, overrides, reward weights); ``seeds``: the held-out episode seeds. A shared robot policy plays through
-    :func:`crowdnav.envs.robots_engine.robots_engine` (the worlds stacked where the scenario stacks), its network
+    :func:`crowdnav.envs.engines.robots.robots_engine` (the worlds stacked where the scenario stacks), its network
     predicting each world's robots (:func:`_shared` says why not all at once). So do the scripted baselines an
     ``agents: robots`` experiment plays, straight and social force: their batched twins act for every robot of the
     stack, the first one included, as each robot's view of its simulator would have them act
-    (:meth:`crowdnav.envs.vector_stacked_robots.StackedRobots.scripted_actions`). The other scripted policies (ORCA,
+    (:meth:`crowdnav.envs.engines.stacked_robots.StackedRobots.scripted_actions`). The other scripted policies (ORCA,
     the planners, a callable; the shielded baselines' worlds do not stack) play on
-    :class:`crowdnav.envs.robots_engine.SingleRobots`, called with one robot's view of one simulator. Each episode is
+    :class:`crowdnav.envs.engines.robots.SingleRobots`, called with one robot's view of one simulator. Each episode is
     its seed's in the robots-only env bit for bit, whichever world plays it and whatever plays beside it.
     ``stacked=False``: one env per world for every policy (the same rows; what the stack is measured against,
     ``benchmarks/bench_robot_rollout.py``).
     """
 
     def __init__(self, env_options: Mapping[str, Any], seeds: Sequence[int], *, worlds: int = WORLDS, stacked: bool = True):
-        from crowdnav.envs.robots_engine import robots_world
+        from crowdnav.envs.engines.robots import robots_world
         from crowdnav.sim.simulator import Simulator
 
         self.env_options = {key: value for key, value in env_options.items() if key != "agents"}
@@ -85,8 +85,8 @@ class RobotEpisodes:
 
     def engine(self, policy: Any = None, privileged: bool = False) -> ScriptedRobotsEngine:
         """The engine that plays ``policy``: a shared robot policy, or with ``privileged`` a scripted one (class docstring)."""
-        from crowdnav.envs.robots_engine import SingleRobots, robots_engine
-        from crowdnav.envs.vector_stacked_robots import scripted_name
+        from crowdnav.envs.engines.robots import SingleRobots, robots_engine
+        from crowdnav.envs.engines.stacked_robots import scripted_name
 
         stacked = self._stacked and (not privileged or scripted_name(policy) is not None)
         if stacked not in self._engines:
@@ -260,7 +260,9 @@ def _shared(policy: Any) -> Callable[[np.ndarray, np.ndarray, np.ndarray, np.nda
     The network acts on one world's robots at a time, as many rows as :meth:`RobotsPolicy.act` gives it: torch's CPU
     matrix product picks its kernel by the number of rows (with MKL, fewer than 16 rows into a 2-wide layer sum in
     another order than 16 or more), so one pass over every world's rows would move the actions in their last bits and
-    the episodes with them. What SB3's ``predict`` does around each pass (evaluation mode, no gradients, the tensor,
+    the episodes with them; each world's rows are copied into a tensor of their own, since a slice's memory alignment
+    can decide the kernel too (AMD EPYC: a slice of the stacked rows moved returns in their 7th digit against a fresh
+    array). What SB3's ``predict`` does around each pass (evaluation mode, no gradients, the tensor,
     the clip to the action space) is done once per step."""
     import torch
 
@@ -274,7 +276,7 @@ def _shared(policy: Any) -> Callable[[np.ndarray, np.ndarray, np.ndarray, np.nda
         network.set_training_mode(False)
         with torch.no_grad():
             for world in np.flatnonzero(playing).tolist():
-                actions[world] = network._predict(inputs[world], deterministic=True).cpu().numpy().reshape(r, 2)
+                actions[world] = network._predict(inputs[world].clone(), deterministic=True).cpu().numpy().reshape(r, 2)
         return np.asarray(policy.commands.batch(np.clip(actions, low, high), observations))
 
     return act
@@ -282,7 +284,7 @@ def _shared(policy: Any) -> Callable[[np.ndarray, np.ndarray, np.ndarray, np.nda
 
 def _scripted(policy: ScriptedPolicy, engine: ScriptedRobotsEngine) -> Callable[[np.ndarray, np.ndarray, np.ndarray, np.ndarray], np.ndarray]:
     """A scripted robot policy's actions: each running robot's as called with its view of its world
-    (:meth:`crowdnav.envs.robots_engine.ScriptedRobotsEngine.scripted_actions`); 0 for a robot that ended."""
+    (:meth:`crowdnav.envs.engines.robots.ScriptedRobotsEngine.scripted_actions`); 0 for a robot that ended."""
 
     def act(observations: np.ndarray, acting: np.ndarray, running: np.ndarray, playing: np.ndarray) -> np.ndarray:
         return engine.scripted_actions(policy, running & playing[:, None])

@@ -3,7 +3,7 @@
 The test episodes of one evaluation run side by side in lock-step, so the policy is called once
 per step on the batch of the still-running episodes (one network forward for all of them). A
 learned policy's episodes are the worlds of one native vector env
-(:class:`crowdnav.envs.vector.CrowdNavVectorEnv`, stepped as one batch); a scripted policy, which
+(:class:`crowdnav.envs.vector.env.CrowdNavVectorEnv`, stepped as one batch); a scripted policy, which
 reads each episode's live simulator, plays one single env per seed. Both give the same episodes
 bit for bit (world i of the batch is the single env seeded with seed i; tested). Nothing here
 learns: the transitions go nowhere but into the trajectories.
@@ -18,14 +18,14 @@ from typing import Any
 import numpy as np
 from crowdnav.evaluation.metrics import Trajectory, episode_metrics
 
-from crowdnav.envs.engine import world_frame
+from crowdnav.envs.engines.protocol import world_frame
 
 BatchPolicy = Callable[[Mapping[str, np.ndarray]], np.ndarray]
 """Observations stacked per key, shape (N, ...) -> actions (N, 2); :class:`crowdnav.agents.AgentPolicy` is one. A policy
 whose ``recurrent`` attribute is True is played through its ``predict(observations, state, episode_start) -> (actions,
 state)`` instead, on every episode's row (:class:`_Acting`)."""
 ScriptedPolicy = Callable[[Any], np.ndarray]
-"""A privileged robot policy: simulator -> action (2,), e.g. :class:`crowdnav.policies.StraightToGoal`."""
+"""A privileged robot policy: simulator -> action (2,), e.g. :class:`crowdnav.planning.scripted.StraightToGoal`."""
 
 
 class HeldOutEpisodes:
@@ -54,7 +54,7 @@ class HeldOutEpisodes:
             batched: bool = True, on_end: Callable[[], None] | None = None) -> list[dict[str, Any]]:
         """Play one episode per seed with ``policy``; one dict per episode (seed order): outcome, return, metrics.
 
-        ``privileged``: ``policy`` is a scripted robot policy (:mod:`crowdnav.policies`) called
+        ``privileged``: ``policy`` is a scripted robot policy (:mod:`crowdnav.planning.scripted`) called
         with each running episode's simulator instead of the stacked observations. ``record``:
         each dict also holds ``frames``, the episode's states step by step (see
         :mod:`crowdnav.evaluation.trajectories`). ``batched=False`` plays a learned policy's
@@ -90,7 +90,7 @@ class HeldOutEpisodes:
     def _run_batched(self, policy: BatchPolicy, record: bool, ended: Callable[[], None]) -> list[dict[str, Any]]:
         """:meth:`run` for a learned policy, the episodes stepped as one batch (ended worlds wait)."""
         if self._vector is None:
-            from crowdnav.envs.vector import CrowdNavVectorEnv
+            from crowdnav.envs.vector.env import CrowdNavVectorEnv
 
             self._vector = CrowdNavVectorEnv(num_envs=len(self.seeds), autoreset_mode="Disabled", **self.env_options)
         env, count = self._vector, len(self.seeds)

@@ -4,7 +4,7 @@ Off by default (``demonstrations.episodes: 0``): the main job and every publishe
 With ``episodes: N`` a new run (never a resumed one: its weights and buffer carry the warm start
 already) does, right after its model is made (:func:`warm_start`):
 
-1. **Collect** (:func:`collect_demonstrations`): :class:`crowdnav.policies.SocialForceRobot`, which
+1. **Collect** (:func:`collect_demonstrations`): :class:`crowdnav.planning.scripted.SocialForceRobot`, which
    reads the true simulator state, drives N episodes of the run's environment (its scenario,
    overrides, modalities, sensors and reward), one single env per running episode, the episodes
    stepped side by side in lock-step. Episode ``i`` uses seed
@@ -123,7 +123,7 @@ def collect_demonstrations(config: TrainConfig | Mapping[str, Any], episodes: in
     depend on ``worlds``: each episode is its own seeded env.
     """
     from crowdnav.envs import CrowdNavEnv
-    from crowdnav.policies import SocialForceRobot
+    from crowdnav.planning.scripted import SocialForceRobot
 
     if not isinstance(config, TrainConfig):
         from crowdnav.agents.training.config import config_from_mapping

@@ -13,7 +13,7 @@ network's two values into each robot's env action:
   unicycle **tracks** it: it drives along its heading at the command's projection on it, never
   backwards (``max(0, x)``), and turns toward the command's direction as fast as one step allows
   (turn rate ``bearing / time_step``, clipped to ``max_angular_speed``), the rule the scripted
-  baselines use to drive a unicycle at a velocity (:func:`crowdnav.policies.velocity_to_action`);
+  baselines use to drive a unicycle at a velocity (:func:`crowdnav.planning.scripted.velocity_to_action`);
 * ``goal_velocity``: the same, with the desired velocity in the robot's **goal frame** (x toward
   its goal, y to the left of that), the frame CrowdNav's robot-centric state is rotated into
   (Chen et al., "Crowd-robot interaction", ICRA 2019): ``(1, 0)`` drives any robot straight at

@@ -4,7 +4,7 @@
 (``crowdnav.parallel_env(..., humans_as_agents=False, fixed_agents=True, flat_observations=True)``):
 every robot is an agent every step (a robot that ended is inactive: zero observation, reward 0),
 the humans follow the scenario's crowd model. :class:`crowdnav.agents.marl.vec_env.RobotsVecEnv`
-plays ``num_envs`` such worlds as one SB3 vector env through one engine (:mod:`crowdnav.envs.robots_engine`),
+plays ``num_envs`` such worlds as one SB3 vector env through one engine (:mod:`crowdnav.envs.engines.robots`),
 with the same additions, row for row and bit for bit (this env per world is its reference in the tests, and
 what SuperSuit's chain takes). What it adds for shared-parameter training:
 

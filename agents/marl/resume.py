@@ -7,7 +7,7 @@ A run is stored when a rollout is complete and before SB3 trains on it:
 * ``robots_state.npz`` (:data:`STATE_FILE`, format :data:`STATES_FORMAT`, kind "states"): the collected rollout, the
   last observation and episode starts, the episode log's running return and length per robot row, and each world
   as its state (:meth:`RobotsVecEnv.snapshot <crowdnav.agents.marl.vec_env.RobotsVecEnv.snapshot>`): the robots
-  engine's world state with every robot's last observation (as arrays and JSON, :mod:`crowdnav.envs.world_state_codec`:
+  engine's world state with every robot's last observation (as arrays and JSON, :mod:`crowdnav.envs.engines.world_state_codec`:
   ``worlds/<i>/`` and ``worlds/states.json``), its episode counters, which robots' rows are active
   (``worlds/active``) and the network's actions since its reset (``worlds/actions``, ``worlds/lengths``: the env's
   record of them goes on; nothing replays them).
@@ -38,8 +38,8 @@ from crowdnav.agents.marl.vec_env import RobotsVecEnv, RobotsWorldState
 from crowdnav.agents.runs.checkpoint import save_checkpoint
 from crowdnav.agents.runs.resume_state import _ROLLOUT, ROLLOUT_FORMAT, ResumeStateError, _fill, _position, _read_npz, _write_npz
 
-from crowdnav.envs.world_state import VectorWorldState
-from crowdnav.envs.world_state_codec import from_arrays, to_arrays
+from crowdnav.envs.engines.world_state import VectorWorldState
+from crowdnav.envs.engines.world_state_codec import from_arrays, to_arrays
 from crowdnav.files import discard_leftovers, staging_beside, swap_folder
 
 STATE_FILE = "robots_state.npz"

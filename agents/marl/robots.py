@@ -2,7 +2,7 @@
 
 No episode loop of crowdnav's own: :class:`crowdnav.agents.marl.vec_env.RobotsVecEnv` plays
 ``num_envs`` worlds of the robots-only env (stacked in one batch where the scenario allows,
-:mod:`crowdnav.envs.robots_engine`) and gives Stable-Baselines3 one vector row per robot per world;
+:mod:`crowdnav.envs.engines.robots`) and gives Stable-Baselines3 one vector row per robot per world;
 SB3's PPO trains one ``MlpPolicy`` on every row, so every robot acts with the same network (told
 apart by the one-hot of ``agent_identity``). :class:`RobotsRun` is that run as a strategy of the one run loop
 (:class:`crowdnav.agents.training.run_loop.RunLoop`, which owns the run folder, the resume decision and the result).

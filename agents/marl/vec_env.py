@@ -1,7 +1,7 @@
 """The robots of ``num_envs`` worlds as one Stable-Baselines3 ``VecEnv``: one row per robot per world (``agents: robots``).
 
 :class:`RobotsVecEnv` plays the run's worlds through a robots-only engine
-(:func:`crowdnav.envs.robots_engine.robots_engine`: the worlds stacked in one batch where the scenario stacks, one
+(:func:`crowdnav.envs.engines.robots.robots_engine`: the worlds stacked in one batch where the scenario stacks, one
 robots-only env per world otherwise) and adds what shared-parameter training needs, as
 :class:`crowdnav.agents.marl.env.RobotsTrainingEnv` adds it to one world: the network's observations
 (:class:`crowdnav.agents.marl.env.RobotObservations`), its actions (:class:`crowdnav.agents.marl.actions.RobotActions`)
@@ -44,10 +44,10 @@ from crowdnav.agents.training.seeding import MAX_TRAIN_EPISODES, train_seed
 from gymnasium import spaces
 from stable_baselines3.common.vec_env.base_vec_env import VecEnv, VecEnvObs, VecEnvStepReturn
 
-from crowdnav.envs.engine import RobotsEngine, RobotsStep
+from crowdnav.envs.engines.protocol import RobotsEngine, RobotsStep
+from crowdnav.envs.engines.robots import SingleRobots, robots_engine
+from crowdnav.envs.engines.world_state import WorldState
 from crowdnav.envs.reward import REWARD_TERMS
-from crowdnav.envs.robots_engine import SingleRobots, robots_engine
-from crowdnav.envs.world_state import WorldState
 from crowdnav.scenario.schema import Scenario
 
 
@@ -56,7 +56,7 @@ class RobotsWorldState:
     """One world of a :class:`RobotsVecEnv` (:meth:`RobotsVecEnv.snapshot`); it pickles."""
 
     world: WorldState
-    """The engine's state of the world (:meth:`crowdnav.envs.engine.RobotsEngine.snapshot`, every robot's observation in it)."""
+    """The engine's state of the world (:meth:`crowdnav.envs.engines.protocol.RobotsEngine.snapshot`, every robot's observation in it)."""
     first_episode: int
     played: int
     """The world's episode counters (:meth:`RobotsVecEnv.episode_counters`)."""

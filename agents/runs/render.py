@@ -15,7 +15,7 @@ from typing import Any
 import numpy as np
 
 from crowdnav.errors import CrowdNavError
-from crowdnav.policies import SCRIPTED_POLICIES
+from crowdnav.planning.scripted import SCRIPTED_POLICIES
 from crowdnav.rendering.episodes import Act, render_episodes, scripted_act, video_suffix
 
 

@@ -11,8 +11,8 @@ tensors, optimizers included, are read as in :mod:`crowdnav.agents.sb3.model_zip
   write position;
 * ``rollout_state.npz`` (on-policy, and batched runs): the collected rollout, the last
   observation, a recurrent policy's LSTM states, and the worlds mid-episode, each as its world
-  state (:mod:`crowdnav.envs.world_state`, stored as arrays and JSON by
-  :mod:`crowdnav.envs.world_state_codec`), loaded back as it was; files of format 1 stored each
+  state (:mod:`crowdnav.envs.engines.world_state`, stored as arrays and JSON by
+  :mod:`crowdnav.envs.engines.world_state_codec`), loaded back as it was; files of format 1 stored each
   world as its episode's index (hence its seed) and the actions it had taken since, replayed on
   resume (:mod:`crowdnav.agents.runs.resume_worlds`). Either way the rebuilt observation must
   equal the stored one, or the resume is refused.

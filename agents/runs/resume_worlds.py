@@ -1,8 +1,8 @@
 """``rollout_state.npz``: an interrupted rollout and the worlds mid-episode, as arrays (see :mod:`crowdnav.agents.runs.resume_state`).
 
 A world is stored as its state (format ``crowdnav-resume/2``, kind "states"): the vector env's
-:meth:`~crowdnav.envs.vector.CrowdNavVectorEnv.snapshot` of it, as arrays and JSON
-(:mod:`crowdnav.envs.world_state_codec`: arrays under ``worlds/<i>/``, their description in
+:meth:`~crowdnav.envs.vector.env.CrowdNavVectorEnv.snapshot` of it, as arrays and JSON
+(:mod:`crowdnav.envs.engines.world_state_codec`: arrays under ``worlds/<i>/``, their description in
 ``worlds/states.json``), with the episode counter that seeds the later episodes and each
 world's return and length so far. A resume resets the worlds to their episodes' seeds (what the
 stored states are checked against: their parts' shapes and dtypes, the scenario, settings and
@@ -40,7 +40,7 @@ from crowdnav.agents.runs.resume_state import (
 from crowdnav.agents.sb3.vec_env import CrowdNavSB3VecEnv
 from crowdnav.agents.training.seeding import train_seed
 
-from crowdnav.envs.world_state_codec import from_arrays, to_arrays
+from crowdnav.envs.engines.world_state_codec import from_arrays, to_arrays
 
 _RECURRENT_ROLLOUT = ("hidden_states_pi", "cell_states_pi", "hidden_states_vf", "cell_states_vf")
 """sb3-contrib's recurrent rollout buffers' LSTM states, one per step (absent from SB3's own buffers)."""

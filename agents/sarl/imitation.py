@@ -25,7 +25,7 @@ def make_teacher(name: str) -> Any:
     """The scripted robot ``name`` as a callable ``teacher(simulator) -> action``."""
     if name not in TEACHERS:
         raise ConfigError(f"algo_kwargs.imitation_teacher: {name!r} is not one of {', '.join(TEACHERS)}")
-    from crowdnav.policies import SCRIPTED_POLICIES
+    from crowdnav.planning.scripted import SCRIPTED_POLICIES
 
     return SCRIPTED_POLICIES[name]()
 
@@ -33,7 +33,7 @@ def make_teacher(name: str) -> Any:
 def world_simulators(env: Any) -> list[Any]:
     """Each world's simulator of a :func:`crowdnav.agents.sb3.factory.make_vec_env` env (or a VecEnvWrapper of it), for the teacher.
 
-    The vector env's engine gives them (:meth:`crowdnav.envs.engine.WorldEngine.simulators`): where it holds single
+    The vector env's engine gives them (:meth:`crowdnav.envs.engines.protocol.WorldEngine.simulators`): where it holds single
     envs (one world, or crowds too large to stack) their live simulators (read, never stepped: the teacher of one
     world reads what it read before the vector stack); stacked worlds a snapshot per call, so a teacher that keeps a
     plan per episode state (the oracle) plans again at every step there.

@@ -148,7 +148,7 @@ def make_vec_env(config: TrainConfig, encoder: LeogEncoder | None = None, first_
     """
     from gymnasium.vector import AutoresetMode
 
-    from crowdnav.envs.vector import CrowdNavVectorEnv
+    from crowdnav.envs.vector.env import CrowdNavVectorEnv
 
     vector = CrowdNavVectorEnv(num_envs=config.num_envs, autoreset_mode=AutoresetMode.SAME_STEP, **env_options(config))
     if not config.normalize_observations:

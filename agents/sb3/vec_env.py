@@ -36,8 +36,8 @@ from gymnasium import spaces
 from gymnasium.vector import AutoresetMode
 from stable_baselines3.common.vec_env.base_vec_env import VecEnv, VecEnvObs, VecEnvStepReturn
 
-from crowdnav.envs.vector import CrowdNavVectorEnv
-from crowdnav.envs.world_state import VectorWorldState
+from crowdnav.envs.engines.world_state import VectorWorldState
+from crowdnav.envs.vector.env import CrowdNavVectorEnv
 from crowdnav.sensors.base import checked_scale, normalized_box
 
 

@@ -16,7 +16,7 @@ on from its episode count, with the episode seeds the uninterrupted run would ha
 all in what it saves continues exactly. A budget in episodes or ``timesteps`` (env steps of all worlds).
 
 The agent collects from the one vector stack every algorithm uses (:func:`crowdnav.agents.sb3.factory.make_vec_env`:
-``num_envs`` worlds of :class:`crowdnav.envs.vector.CrowdNavVectorEnv` behind SB3's ``VecEnv`` API, rewards in
+``num_envs`` worlds of :class:`crowdnav.envs.vector.env.CrowdNavVectorEnv` behind SB3's ``VecEnv`` API, rewards in
 float64 as the env gives them; at ``num_envs: 1`` the one world is the single env, episode for episode). Episodes
 are numbered in the order they end and logged with the seed their world played. With several worlds a checkpoint
 falls while the other worlds are mid-episode: a resume starts new episodes in every world, from the first episode

@@ -1,6 +1,6 @@
 """Many worlds of one scenario as one batch: the stacked state the sensors read and the batched simulator.
 
-The native vector env (:class:`crowdnav.envs.vector.CrowdNavVectorEnv`) is built on it.
+The native vector env (:class:`crowdnav.envs.vector.env.CrowdNavVectorEnv`) is built on it.
 """
 
 from crowdnav.batch.state import BatchState

@@ -1,7 +1,7 @@
 """The scripted robot policies of a ``robots:`` scenario, every world's at once, for any robot of the stack.
 
 The single env drives each other robot with a scripted policy called on that robot's view
-(:class:`crowdnav.policies.SocialForceRobot`, :class:`crowdnav.policies.StraightToGoal`, on
+(:class:`crowdnav.planning.scripted.SocialForceRobot`, :class:`crowdnav.planning.scripted.StraightToGoal`, on
 :meth:`crowdnav.Simulator.robot_view`), in Python's scalar arithmetic; evaluation's scripted baselines drive every robot,
 the first one included, that way. Here the same policy runs over a world axis, written with
 :mod:`crowdnav.batch.scalar_math` so that each world's action has the single policy's bits: a policy acts for one
@@ -13,8 +13,8 @@ in the world (a view lists only those, and the length of a sum decides its round
 :func:`batched_policy` drives the other robots beside a first robot the caller drives (the vector env's
 ``other_robots``); :func:`every_robot_actions` drives every robot, the first one's seat read from the batch's crowd-size
 stacks (the robots-only engine's scripted baselines). A policy without a batched twin (ORCA, the planners, a callable)
-is not stacked: :func:`crowdnav.envs.vector.stacks` keeps such worlds as single envs, and evaluation plays it on
-:class:`crowdnav.envs.robots_engine.SingleRobots`.
+is not stacked: :func:`crowdnav.envs.vector.env.stacks` keeps such worlds as single envs, and evaluation plays it on
+:class:`crowdnav.envs.engines.robots.SingleRobots`.
 """
 
 from __future__ import annotations
@@ -48,7 +48,7 @@ def batched_policy(name: Any) -> RobotPolicy | None:
 
 
 def velocity_actions(robot: Any, dt: float, heading: np.ndarray, vr: np.ndarray, vi: np.ndarray) -> np.ndarray:
-    """:func:`crowdnav.policies.velocity_to_action` of one robot spec in every row: (K, 2) float64 of the float32 action."""
+    """:func:`crowdnav.planning.scripted.velocity_to_action` of one robot spec in every row: (K, 2) float64 of the float32 action."""
     # velocity * cmath.exp(-1j * heading) / max_speed; -1j * h: CPython's product of complex(-0.0, -1.0) and complex(h, 0.0)
     er, ei = -0.0 * heading - -1.0 * 0.0, -0.0 * 0.0 + -1.0 * heading
     lr, li = cmul(vr, vi, np.exp(er) * np.cos(ei), np.exp(er) * np.sin(ei))
@@ -111,7 +111,7 @@ class Fleet:
 
 
 def straight_action(seat: Seat, fleet: Fleet) -> np.ndarray:
-    """(K, 2): :class:`crowdnav.policies.StraightToGoal` of ``seat``'s robot in each world."""
+    """(K, 2): :class:`crowdnav.planning.scripted.StraightToGoal` of ``seat``'s robot in each world."""
     robot, dt = seat.spec, fleet.dt
     to_goal = seat.goal - seat.position
     distance = np.hypot(to_goal.real, to_goal.imag)
@@ -123,7 +123,7 @@ def straight_action(seat: Seat, fleet: Fleet) -> np.ndarray:
 
 
 def social_force_action(seat: Seat, fleet: Fleet) -> np.ndarray:
-    """(K, 2): :class:`crowdnav.policies.SocialForceRobot` of ``seat``'s robot in each world: goal attraction, the humans'
+    """(K, 2): :class:`crowdnav.planning.scripted.SocialForceRobot` of ``seat``'s robot in each world: goal attraction, the humans'
     repulsion (measured), the static obstacles' and the other robots' still in the world, added in the policy's order."""
     robot, params, k = seat.spec, fleet.force, seat.index
     force = sf.goal_force(seat.goal - seat.position, params.goal_weight, params.goal_saturation_distance) + seat.social
@@ -147,7 +147,7 @@ def social_force_action(seat: Seat, fleet: Fleet) -> np.ndarray:
 
 
 SEAT_POLICIES: dict[str, Callable[[Seat, Fleet], np.ndarray]] = {"social-force": social_force_action, "straight": straight_action}
-"""The scripted policies (:data:`crowdnav.policies.SCRIPTED_POLICIES` names) with a batched twin for any robot of a stack."""
+"""The scripted policies (:data:`crowdnav.planning.scripted.SCRIPTED_POLICIES` names) with a batched twin for any robot of a stack."""
 
 
 def _team_seat(team: TeamStack, worlds: np.ndarray, j: int) -> Seat:
@@ -163,12 +163,12 @@ def _team_fleet(team: TeamStack, worlds: np.ndarray, ego: np.ndarray) -> Fleet:
 
 
 def straight_robots(team: TeamStack, worlds: np.ndarray, ego: np.ndarray) -> np.ndarray:
-    """:class:`crowdnav.policies.StraightToGoal` for every other robot of ``worlds``."""
+    """:class:`crowdnav.planning.scripted.StraightToGoal` for every other robot of ``worlds``."""
     return _other_robots(straight_action, team, worlds, ego)
 
 
 def social_force_robots(team: TeamStack, worlds: np.ndarray, ego: np.ndarray) -> np.ndarray:
-    """:class:`crowdnav.policies.SocialForceRobot` for every other robot of ``worlds``."""
+    """:class:`crowdnav.planning.scripted.SocialForceRobot` for every other robot of ``worlds``."""
     return _other_robots(social_force_action, team, worlds, ego)
 
 

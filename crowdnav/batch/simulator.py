@@ -98,7 +98,7 @@ class BatchSimulator:
         self.dt = first.dt
         if first.max_humans >= first.grid_from:
             raise ValueError(f"the batched simulator handles crowds below {first.grid_from} humans (all pairs); this scenario allows "
-                             f"{first.max_humans}: step its worlds with crowdnav.envs.vector.CrowdNavVectorEnv (single envs, the neighbour grid)")
+                             f"{first.max_humans}: step its worlds with crowdnav.envs.vector.env.CrowdNavVectorEnv (single envs, the neighbour grid)")
         obstacles = world.obstacles
         self._surface: EdgeSet | None = first.geometry.surface
         self._polygons = obstacles.polygon_count

@@ -140,8 +140,8 @@ class CrowdModel:
     def episode_state(self) -> dict[str, Any]:
         """What this model's commands depend on besides the view and the world's generator (its episode state so far), as
         new arrays and JSON scalars only (None, bool, int, float, text; nested in dicts with text keys, tuples and lists):
-        a checkpoint stores it without pickle (:mod:`crowdnav.envs.world_state_codec`, which refuses anything else), and
-        :meth:`resume` takes it back (:mod:`crowdnav.envs.world_state`). Default: nothing."""
+        a checkpoint stores it without pickle (:mod:`crowdnav.envs.engines.world_state_codec`, which refuses anything else), and
+        :meth:`resume` takes it back (:mod:`crowdnav.envs.engines.world_state`). Default: nothing."""
         return {}
 
     def resume(self, view: CrowdView, state: Mapping[str, Any]) -> None:

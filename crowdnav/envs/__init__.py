@@ -1,13 +1,21 @@
 """Environments: Gymnasium (robot only) and PettingZoo (robot and humans), sharing one core.
 
-Importing this package registers the Gymnasium ids (see :mod:`crowdnav.envs.registration`).
+The modules here are the env core (``core``: options, one simulator, sensors, reward, checks; ``reward``), the
+Gymnasium env (``single``), the PettingZoo env (``parallel``, with ``multi_agent``, ``human_observation`` and
+``human_policy``) and the Gymnasium ids (``registration``). Two subpackages: :mod:`crowdnav.envs.engines` (the
+engine protocol, its backends and a world's state as data) and :mod:`crowdnav.envs.vector` (the native vector env
+and its action and info pipeline), the vector env above the engines. Importing this package registers the Gymnasium
+ids (see :mod:`crowdnav.envs.registration`). :mod:`crowdnav.legacy_paths` keeps the flat paths of the modules that
+moved into the subpackages importable (``crowdnav.envs.world_state``, ``crowdnav.envs.vector_stacked``, ...).
 """
 
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
+from types import ModuleType
 from typing import Any
 
+from crowdnav import legacy_paths
 from crowdnav.envs.core import EnvCore, ScenarioSource
 from crowdnav.envs.human_policy import SocialForcePolicy
 from crowdnav.envs.multi_agent import HumanExit, HumanReward
@@ -52,6 +60,11 @@ def env(scenario: ScenarioSource, **options: Any) -> Any:
 
 ENV_IDS = register_envs()
 """The Gymnasium ids of the library scenarios."""
+
+
+def __getattr__(name: str) -> ModuleType:
+    """An old module path of this package as an attribute (``crowdnav.envs.world_state``), imported on first use."""
+    return legacy_paths.old_attribute(__name__, name)
 
 __all__ = [
     "ENV_IDS",

@@ -18,8 +18,8 @@ from typing import Any, cast
 import numpy as np
 from gymnasium import spaces
 
+from crowdnav.envs.engines.world_state import EnvState, WorldKey, WorldState, check_state, make_state, world_key
 from crowdnav.envs.reward import Reward
-from crowdnav.envs.world_state import EnvState, WorldKey, WorldState, check_state, make_state, world_key
 from crowdnav.planning.shield import validate_shield
 from crowdnav.rendering.episode_view import RENDER_MODES, EpisodeView, RenderOptions
 from crowdnav.scenario import ScenarioIssue, library
@@ -355,17 +355,17 @@ class EnvCore:
 
     @cached_property
     def world_key(self) -> WorldKey:
-        """What a world state must match to load here (:func:`crowdnav.envs.world_state.world_key`, made on first use)."""
+        """What a world state must match to load here (:func:`crowdnav.envs.engines.world_state.world_key`, made on first use)."""
         return world_key(self.scenario)
 
     def snapshot(self, other_outcomes: dict[str, str | None]) -> WorldState:
-        """The world now (:class:`crowdnav.envs.world_state.WorldState`, copies), the env's ``other_outcomes`` with it."""
+        """The world now (:class:`crowdnav.envs.engines.world_state.WorldState`, copies), the env's ``other_outcomes`` with it."""
         observation = {key: values.copy() for key, values in self._observation.items()}
         return make_state(self.world_key, capture(self.simulator), tuple(reward.previous_distance for reward in self.robot_rewards),
                           None if self.tracker is None else self.tracker.row_state(0), EnvState(self._running, dict(other_outcomes), observation))
 
     def load(self, state: WorldState) -> tuple[dict[str, np.ndarray], EnvState | None]:
-        """Make ``state`` (checked: :func:`crowdnav.envs.world_state.check_state`) the world's, on copies: (the observation, its env
+        """Make ``state`` (checked: :func:`crowdnav.envs.engines.world_state.check_state`) the world's, on copies: (the observation, its env
         part). Without one (the stacked engine's) it runs on, observed again, a tracker waiting for its first detections making them."""
         state = check_state(state, self.world_key)
         sim, env = self.simulator, state.env

@@ -29,12 +29,12 @@ def env_id(name: str) -> str:
 
 
 def vector_env(scenario: Any = None, num_envs: int = 1, *, max_episode_steps: int | None = None, **options: Any) -> Any:
-    """:class:`crowdnav.envs.vector.CrowdNavVectorEnv`; ``max_episode_steps`` (Gymnasium's name) caps the scenario's ``max_steps``.
+    """:class:`crowdnav.envs.vector.env.CrowdNavVectorEnv`; ``max_episode_steps`` (Gymnasium's name) caps the scenario's ``max_steps``.
 
     Like ``TimeLimit``, it only ever shortens episodes: a cap above the scenario's ``max_steps``
     changes nothing. ``options``: the keyword arguments of CrowdNavVectorEnv.
     """
-    from crowdnav.envs.vector import CrowdNavVectorEnv
+    from crowdnav.envs.vector.env import CrowdNavVectorEnv
 
     if max_episode_steps is not None and (isinstance(max_episode_steps, bool) or not isinstance(max_episode_steps, int)
                                           or max_episode_steps < 1):

@@ -9,14 +9,14 @@ import gymnasium as gym
 import numpy as np
 
 from crowdnav.envs.core import EnvCore, ScenarioSource, step_info
-from crowdnav.envs.world_state import WorldState
-from crowdnav.policies import SCRIPTED_POLICIES
+from crowdnav.envs.engines.world_state import WorldState
+from crowdnav.planning.scripted import SCRIPTED_POLICIES
 from crowdnav.rendering.episode_view import RENDER_MODES
 from crowdnav.sim.events import StepEvents
 from crowdnav.sim.robot_view import RobotWorld
 
 OTHER_ROBOT_POLICIES = tuple(name for name in SCRIPTED_POLICIES if name != "random")
-"""Names ``other_robots`` accepts (:data:`crowdnav.policies.SCRIPTED_POLICIES` but ``random``, which has no episode seed)."""
+"""Names ``other_robots`` accepts (:data:`crowdnav.planning.scripted.SCRIPTED_POLICIES` but ``random``, which has no episode seed)."""
 
 
 class CrowdNavEnv(gym.Env):
@@ -182,7 +182,7 @@ class CrowdNavEnv(gym.Env):
         return dict(self._other_outcomes)
 
     def snapshot(self) -> WorldState:
-        """The world now: everything its future depends on given the actions (:class:`crowdnav.envs.world_state.WorldState`, a copy
+        """The world now: everything its future depends on given the actions (:class:`crowdnav.envs.engines.world_state.WorldState`, a copy
         that pickles; the state of a callable ``other_robots`` excepted)."""
         return self.core.snapshot(self._other_outcomes)
 

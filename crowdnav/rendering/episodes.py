@@ -15,7 +15,7 @@ import numpy as np
 
 from crowdnav.envs import CrowdNavEnv
 from crowdnav.paths import inside
-from crowdnav.policies import SCRIPTED_POLICIES
+from crowdnav.planning.scripted import SCRIPTED_POLICIES
 from crowdnav.rendering.video import VIDEO_FORMATS, VideoWriter
 
 if TYPE_CHECKING:
@@ -25,7 +25,7 @@ Act = Callable[[CrowdNavEnv, Mapping[str, np.ndarray]], np.ndarray]
 
 
 def scripted_act(name: str, seed: int = 0) -> Act:
-    """The scripted policy ``name`` (:data:`crowdnav.policies.SCRIPTED_POLICIES`) as ``act(env, observation)``."""
+    """The scripted policy ``name`` (:data:`crowdnav.planning.scripted.SCRIPTED_POLICIES`) as ``act(env, observation)``."""
     if name not in SCRIPTED_POLICIES:
         raise ValueError(f"unknown scripted policy {name!r}; expected one of: {', '.join(SCRIPTED_POLICIES)}")
     scripted = SCRIPTED_POLICIES[name](seed) if name == "random" else SCRIPTED_POLICIES[name]()

@@ -6,7 +6,7 @@ its resets and goal rules), a ``robots:`` scenario's :class:`crowdnav.sim.robots
 model's episode state (:meth:`crowdnav.crowd.base.CrowdModel.episode_state`: a recording's window, who reacts).
 The geometry is not in it: :meth:`crowdnav.Simulator.refresh` measures it again from the positions, bit for bit.
 A simulator that restores it plays on as the captured one would, step for step. The envs' world states
-(:mod:`crowdnav.envs.world_state`) hold one; the batched simulator takes and gives one per world.
+(:mod:`crowdnav.envs.engines.world_state`) hold one; the batched simulator takes and gives one per world.
 """
 
 from __future__ import annotations

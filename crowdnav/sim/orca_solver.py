@@ -1,7 +1,7 @@
 """ORCA (optimal reciprocal collision avoidance) through the optional package pyrvo (RVO2's bindings).
 
 Used by the humans of groups with ``model: orca`` (the crowd model :class:`crowdnav.crowd.orca.OrcaModel`,
-one per :class:`crowdnav.Simulator`) and by the ORCA robot baseline (:class:`crowdnav.policies.OrcaRobot`).
+one per :class:`crowdnav.Simulator`) and by the ORCA robot baseline (:class:`crowdnav.planning.scripted.OrcaRobot`).
 The core install does not need pyrvo: it is imported only when something asks for ORCA, and its
 absence is one line saying ``pip install -e ".[orca]"`` (in crowdnav's clone).
 

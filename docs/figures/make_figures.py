@@ -15,7 +15,7 @@ from pathlib import Path
 import imageio.v3 as iio
 
 from crowdnav import CrowdNavEnv
-from crowdnav.policies import SocialForceRobot
+from crowdnav.planning.scripted import SocialForceRobot
 
 HERE = Path(__file__).parent
 

@@ -19,7 +19,7 @@ from crowdnav.agents.marl.robots import load_robots_policy
 from crowdnav.agents.training.config import config_from_mapping
 from stable_baselines3.common.policies import ActorCriticPolicy
 
-from crowdnav.policies import velocity_to_action
+from crowdnav.planning.scripted import velocity_to_action
 from crowdnav.scenario.loader import load_scenario
 from tests.agents.test_marl import HALL, robots_config
 from tests.agents.test_marl_resume import Stopped, _episodes, _stop_at, _weights

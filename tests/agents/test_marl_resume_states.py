@@ -18,10 +18,10 @@ from crowdnav.agents.marl.vec_env import RobotsVecEnv, RobotsWorldState
 from crowdnav.agents.runs.resume_state import ResumeStateError
 from crowdnav.agents.training.config import config_from_mapping
 
-from crowdnav.envs.robots_engine import SingleRobots
-from crowdnav.envs.vector_stacked_robots import StackedRobots
-from crowdnav.envs.world_state import VectorWorldState
-from crowdnav.envs.world_state_codec import to_arrays
+from crowdnav.envs.engines.robots import SingleRobots
+from crowdnav.envs.engines.stacked_robots import StackedRobots
+from crowdnav.envs.engines.world_state import VectorWorldState
+from crowdnav.envs.engines.world_state_codec import to_arrays
 from tests.agents.test_marl import robots_config
 from tests.agents.test_marl_resume import Stopped, _episodes, _log, _stop_at, _weights
 

@@ -11,8 +11,8 @@ from crowdnav.agents.marl.vec_env import RobotsVecEnv
 from crowdnav.agents.sb3.factory import env_options
 from crowdnav.agents.training.config import TrainConfig, config_from_mapping
 
-from crowdnav.envs.robots_engine import SingleRobots
-from crowdnav.envs.vector_stacked_robots import StackedRobots
+from crowdnav.envs.engines.robots import SingleRobots
+from crowdnav.envs.engines.stacked_robots import StackedRobots
 from tests.agents.test_marl import robots_config
 
 

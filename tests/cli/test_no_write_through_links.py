@@ -26,7 +26,7 @@ from crowdnav.evaluation.validation_choice import choose_on_validation
 
 from crowdnav.cli import main
 from crowdnav.files import LinkedFileError, atomic_write_bytes, open_for_write
-from crowdnav.policies import StraightToGoal
+from crowdnav.planning.scripted import StraightToGoal
 from crowdnav.rendering.video import VideoWriter, write_video
 from tests.agents.agents_tiny import tiny_config
 

@@ -187,7 +187,7 @@ def test_evaluate_takes_the_last_test_seeds_below_the_training_band(tmp_path, ca
 
 @pytest.mark.parametrize("seed", [1.5, -1, [1.5, 2], "ab", [True, 1], np.float64(2.0)], ids=str)
 def test_the_vector_env_refuses_seeds_the_single_env_refuses(seed):
-    from crowdnav.envs.vector import CrowdNavVectorEnv
+    from crowdnav.envs.vector.env import CrowdNavVectorEnv
 
     env = CrowdNavVectorEnv(num_envs=2, scenario="open_space")
     with pytest.raises(ValueError, match=r"seed must be None, an int or a list of one per world, .*non-negative integers") as caught:

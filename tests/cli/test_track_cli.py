@@ -26,7 +26,8 @@ def test_track_list_and_show_say_what_a_track_fixes(capsys):
 def test_evaluate_refuses_what_a_track_fixes_and_the_keys_it_does_not_allow(capsys, tmp_path):
     assert main(["evaluate", "baseline:straight", "--track", "figure4", "--episodes", "5", "--out", str(tmp_path)]) == 1
     assert capsys.readouterr().err == "crowdnav: error: --episodes: a track fixes its test episodes and scenario; leave it out\n"
-    argv = ["evaluate", "crowdnav.policies:StraightToGoal", "--track", "robots_crossing_hall", "--modalities", "goal,humans", "--out", str(tmp_path)]
+    argv = ["evaluate", "crowdnav.planning.scripted:StraightToGoal", "--track", "robots_crossing_hall", "--modalities", "goal,humans",
+            "--out", str(tmp_path)]
     assert main(argv) == 1
     err = capsys.readouterr().err
     assert err.endswith("humans is not allowed\n") and err.count("\n") == 1

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 import crowdnav
-import crowdnav.policies  # noqa: F401  (the several-robots loop reads crowdnav.policies)
+import crowdnav.planning.scripted  # noqa: F401  (the several-robots loop reads crowdnav.planning.scripted)
 from crowdnav.envs.multi_agent import UnknownAgentError, agent_list
 from crowdnav.errors import CrowdNavError
 from crowdnav.scenario.library import library_names

@@ -17,19 +17,19 @@ import pytest
 import tests.core.test_engine_protocol as protocol_tests
 from crowdnav.batch.robot_policies import social_force_robots
 from crowdnav.batch.simulator import StepResult
-from crowdnav.envs.engine import Judged, WorldEngine
-from crowdnav.envs.vector import CrowdNavVectorEnv
-from crowdnav.envs.vector_stacked import StackedWorlds
-from crowdnav.envs.vector_stacked_team import StackedTeamWorlds, first_robot_modalities
-from crowdnav.envs.vector_team import TeamWorlds
-from crowdnav.envs.world_state import WorldState
+from crowdnav.envs.engines.per_world import TeamWorlds
+from crowdnav.envs.engines.protocol import Judged, WorldEngine
+from crowdnav.envs.engines.stacked import StackedWorlds
+from crowdnav.envs.engines.stacked_team import StackedTeamWorlds, first_robot_modalities
+from crowdnav.envs.engines.world_state import WorldState
+from crowdnav.envs.vector.env import CrowdNavVectorEnv
 from tests.core.test_engine_snapshot import _same
 
 WORLDS = 3
 
 
 class ReversedWorlds:
-    """A :class:`crowdnav.envs.engine.WorldEngine`: world ``i`` is world ``K - 1 - i`` of ``inner``."""
+    """A :class:`crowdnav.envs.engines.protocol.WorldEngine`: world ``i`` is world ``K - 1 - i`` of ``inner``."""
 
     def __init__(self, inner: WorldEngine):
         self.inner, self.num_worlds, self.modalities = inner, inner.num_worlds, inner.modalities

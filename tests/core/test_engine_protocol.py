@@ -1,4 +1,4 @@
-"""The vector env's two engines (crowdnav.envs.engine): the same protocol, the same worlds, and no one branching on which."""
+"""The vector env's two engines (crowdnav.envs.engines.protocol): the same protocol, the same worlds, and no one branching on which."""
 
 from __future__ import annotations
 
@@ -11,10 +11,10 @@ import pytest
 
 from crowdnav.batch.robot_policies import social_force_robots
 from crowdnav.envs.core import load_env_world
-from crowdnav.envs.engine import WorldEngine
-from crowdnav.envs.vector_stacked import StackedWorlds
-from crowdnav.envs.vector_stacked_team import StackedTeamWorlds, first_robot_modalities
-from crowdnav.envs.vector_team import TeamWorlds
+from crowdnav.envs.engines.per_world import TeamWorlds
+from crowdnav.envs.engines.protocol import WorldEngine
+from crowdnav.envs.engines.stacked import StackedWorlds
+from crowdnav.envs.engines.stacked_team import StackedTeamWorlds, first_robot_modalities
 from crowdnav.planning.shield import validate_shield
 from crowdnav.worlds.compiled import load_world
 

@@ -1,6 +1,6 @@
-"""World states (crowdnav.envs.world_state): a world's snapshot, loaded into any world of either engine, plays on bit for bit.
+"""World states (crowdnav.envs.engines.world_state): a world's snapshot, loaded into any world of either engine, plays on bit for bit.
 
-For each engine and every library scenario (several robots too: stacked, crowdnav.envs.vector_stacked_team, and as
+For each engine and every library scenario (several robots too: stacked, crowdnav.envs.engines.stacked_team, and as
 single envs; plus the tracker profiles, ORCA and reacting recorded crowds, several robots driven by ORCA, the residual
 plan with the shield), a vector env plays seeded random actions, world K is
 snapshot, and the env plays on, episode ends and autoresets included, recording everything observable of world K
@@ -22,10 +22,10 @@ from typing import Any
 import numpy as np
 import pytest
 
-import crowdnav.envs.vector as vector_module
+import crowdnav.envs.vector.env as vector_module
+from crowdnav.envs.engines.world_state import VectorWorldState, WorldState
 from crowdnav.envs.single import CrowdNavEnv
-from crowdnav.envs.vector import CrowdNavVectorEnv
-from crowdnav.envs.world_state import VectorWorldState, WorldState
+from crowdnav.envs.vector.env import CrowdNavVectorEnv
 from crowdnav.scenario.library import library_names
 from tests.core.test_replay import _replay, _write
 

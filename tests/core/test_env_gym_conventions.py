@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 import crowdnav
-from crowdnav.policies import StraightToGoal
+from crowdnav.planning.scripted import StraightToGoal
 
 
 def test_time_limit_truncation_carries_outcome_and_is_success():

@@ -13,7 +13,7 @@ import pytest
 
 from crowdnav.batch.robot_policies import every_robot_actions
 from crowdnav.batch.simulator import BatchSimulator
-from crowdnav.policies import SocialForceRobot, StraightToGoal
+from crowdnav.planning.scripted import SocialForceRobot, StraightToGoal
 from crowdnav.sim.simulator import Simulator
 from tests.core.paired_worlds import WORLDS, paired_worlds
 from tests.core.robot_placement_shapes import EAST_DOOR, WEST_DOOR

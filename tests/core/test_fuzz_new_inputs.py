@@ -22,7 +22,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from crowdnav.envs import CrowdNavEnv
-from crowdnav.envs.vector import CrowdNavVectorEnv
+from crowdnav.envs.vector.env import CrowdNavVectorEnv
 from crowdnav.errors import CrowdNavError
 from crowdnav.planning.oracle import OraclePlanner, PlannerUnavailable
 from crowdnav.planning.predictive import MAX_WINDOW_CELLS, PlannerSettings, PredictivePlanner
@@ -104,7 +104,7 @@ def test_the_window_limit_leaves_room_for_the_documented_settings():
 def test_env_refuses_a_giant_shield_at_construction_in_one_line_under_a_memory_cap(shield):
     done = run_capped(f"""
         from crowdnav.envs import CrowdNavEnv
-        from crowdnav.envs.vector import CrowdNavVectorEnv
+        from crowdnav.envs.vector.env import CrowdNavVectorEnv
         for make in (lambda: CrowdNavEnv("open_space", shield={shield!r}), lambda: CrowdNavVectorEnv("open_space", 2, shield={shield!r})):
             try:
                 make()

@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 import crowdnav
-from crowdnav.policies import StraightToGoal
+from crowdnav.planning.scripted import StraightToGoal
 from crowdnav.scenario.library import library_names
 from crowdnav.sim.events import OUTCOMES
 

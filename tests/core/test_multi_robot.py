@@ -206,7 +206,7 @@ def test_robots_sharing_one_start_point_are_refused_at_validation_naming_both_re
 
 
 def test_social_force_robots_driving_head_on_feel_each_other_and_do_not_collide():
-    from crowdnav.policies import SocialForceRobot
+    from crowdnav.planning.scripted import SocialForceRobot
 
     sim, policy = Simulator(HEAD_ON), SocialForceRobot()
     sim.reset(seed=0)

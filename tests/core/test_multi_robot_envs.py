@@ -210,7 +210,7 @@ def test_parallel_seed_test_passes_for_robots_only_fixed_agents():
 
 
 def test_robots_only_parallel_env_plays_the_gym_envs_episode_when_the_others_follow_the_same_policy():
-    from crowdnav.policies import StraightToGoal
+    from crowdnav.planning.scripted import StraightToGoal
 
     gym_env, par_env = CrowdNavEnv(HALL, other_robots="straight"), parallel_env(HALL, humans_as_agents=False)
     gym_observation, _ = gym_env.reset(seed=4)

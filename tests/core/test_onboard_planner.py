@@ -10,7 +10,7 @@ from crowdnav.envs import CrowdNavEnv
 from crowdnav.planning import PlannerUnavailable
 from crowdnav.planning.onboard import OnboardPlanner
 from crowdnav.planning.predictive import CrowdEstimate, PredictivePlanner, moves_to_actions
-from crowdnav.policies import SCRIPTED_POLICIES
+from crowdnav.planning.scripted import SCRIPTED_POLICIES
 from tests.core.multi_robot_scenes import HALL, hall
 
 FIGURE4 = {"humans.count": 5, "humans.preferred_speed": [0.5, 1.2]}

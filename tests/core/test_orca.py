@@ -80,7 +80,7 @@ def test_orca_without_pyrvo_fails_at_load_in_one_line_with_the_install_command(n
 
 
 def test_the_orca_robot_without_pyrvo_is_one_line_from_python_evaluate_and_render(no_pyrvo, capsys, tmp_path):
-    from crowdnav.policies import OrcaRobot
+    from crowdnav.planning.scripted import OrcaRobot
 
     with pytest.raises(OrcaUnavailableError, match=r"^the ORCA robot \(baseline:orca\) needs .*pip install -e \"\.\[orca\]\" in crowdnav's clone$"):
         OrcaRobot()
@@ -94,7 +94,7 @@ def test_the_orca_robot_without_pyrvo_is_one_line_from_python_evaluate_and_rende
 
 def test_importing_crowdnav_loads_no_pyrvo_and_works_without_it():
     code = ("import sys\n"
-            "import crowdnav, crowdnav.envs, crowdnav.policies, crowdnav.cli\n"
+            "import crowdnav, crowdnav.envs, crowdnav.planning.scripted, crowdnav.cli\n"
             "assert 'pyrvo' not in sys.modules\n"
             "sys.modules['pyrvo'] = None\n"
             "env = crowdnav.envs.CrowdNavEnv(scenario='open_space')\n"
@@ -215,7 +215,7 @@ def _outcomes(policy, scenario: str, overrides: dict, seeds: range) -> list[str]
 
 def test_the_orca_robot_reaches_its_goal_in_easy_scenarios():
     pytest.importorskip("pyrvo")
-    from crowdnav.policies import OrcaRobot
+    from crowdnav.planning.scripted import OrcaRobot
 
     policy = OrcaRobot()  # one policy for several worlds: its solvers are kept per world
     assert _outcomes(policy, "empty_room", {}, range(5)) == ["success"] * 5

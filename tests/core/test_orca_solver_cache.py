@@ -7,7 +7,7 @@ import gc
 
 import pytest
 
-from crowdnav.policies import WORLDS_KEPT, OrcaRobot
+from crowdnav.planning.scripted import WORLDS_KEPT, OrcaRobot
 from crowdnav.sim.orca_solver import SOLVERS_KEPT, SolverCache
 from crowdnav.sim.simulator import Simulator
 from crowdnav.worlds.compiled import load_world

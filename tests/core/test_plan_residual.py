@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from crowdnav.envs import CrowdNavEnv
-from crowdnav.envs.vector import CrowdNavVectorEnv
+from crowdnav.envs.vector.env import CrowdNavVectorEnv
 from crowdnav.planning.predictive import CrowdEstimate, PredictivePlanner
 
 FIGURE4 = {"humans.count": 5, "humans.preferred_speed": [0.5, 1.2]}

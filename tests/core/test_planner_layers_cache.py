@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from crowdnav.envs.vector import CrowdNavVectorEnv
+from crowdnav.envs.vector.env import CrowdNavVectorEnv
 from crowdnav.planning import predictive
 from crowdnav.planning.predictive import CrowdEstimate, PlannerSettings, PredictivePlanner
 from crowdnav.worlds.compiled import load_world

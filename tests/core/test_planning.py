@@ -10,8 +10,8 @@ from crowdnav.envs import CrowdNavEnv
 from crowdnav.planning import OraclePlanner, PlannerUnavailable
 from crowdnav.planning.lattice import Lattice, disc_cells, search
 from crowdnav.planning.predictive import CrowdEstimate, PredictivePlanner
+from crowdnav.planning.scripted import SocialForceRobot, StraightToGoal
 from crowdnav.planning.static_map import StaticMap
-from crowdnav.policies import SocialForceRobot, StraightToGoal
 from crowdnav.scenario import library
 
 FIGURE4 = {"humans.count": 5, "humans.preferred_speed": [0.5, 1.2]}

@@ -1,4 +1,4 @@
-"""Every robot driven by the caller (crowdnav.envs.robots_engine): the stacked engine plays each world's robots as the
+"""Every robot driven by the caller (crowdnav.envs.engines.robots): the stacked engine plays each world's robots as the
 robots-only PettingZoo env does (one per world: SingleRobots), bit for bit: observations, rewards and terms, outcomes
 with their named contacts, the first robot leaving (parked) while the others go on, the time limit, partial steps, and
 the frames evaluation records (where everyone is, the humans' force on each robot)."""
@@ -8,9 +8,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from crowdnav.envs.engine import RobotsStep
-from crowdnav.envs.robots_engine import SingleRobots, robots_engine, robots_world, stacks_robots
-from crowdnav.envs.vector_stacked_robots import StackedRobots
+from crowdnav.envs.engines.protocol import RobotsStep
+from crowdnav.envs.engines.robots import SingleRobots, robots_engine, robots_world, stacks_robots
+from crowdnav.envs.engines.stacked_robots import StackedRobots
 
 HALL = "robots_crossing_hall"
 WORLDS = 5

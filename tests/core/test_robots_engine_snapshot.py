@@ -1,4 +1,4 @@
-"""World states of the robots-only engines (crowdnav.envs.robots_state): both engines take the same state of the same
+"""World states of the robots-only engines (crowdnav.envs.engines.robots_state): both engines take the same state of the same
 world, bit for bit, and a world's state loaded into a world of either engine (its own world again, another world of a
 fresh engine reset with other seeds) plays on bit for bit: observations, rewards and terms, outcomes and contacts, the
 time limit, partial steps, the next episodes. Snapshots fall where a robot ended at the last step and its world goes
@@ -14,12 +14,12 @@ from typing import Any
 import numpy as np
 import pytest
 
+from crowdnav.envs.engines.robots import SingleRobots, robots_engine
+from crowdnav.envs.engines.stacked_robots import StackedRobots
+from crowdnav.envs.engines.world_state import VectorWorldState, WorldState
+from crowdnav.envs.engines.world_state_codec import to_arrays
 from crowdnav.envs.reward import REWARD_TERMS
-from crowdnav.envs.robots_engine import SingleRobots, robots_engine
 from crowdnav.envs.single import CrowdNavEnv
-from crowdnav.envs.vector_stacked_robots import StackedRobots
-from crowdnav.envs.world_state import VectorWorldState, WorldState
-from crowdnav.envs.world_state_codec import to_arrays
 
 HALL = "robots_crossing_hall"
 OPTIONS = {"scenario": HALL, "overrides": {"max_steps": 60, "world.boundary_walls": False}, "sensors": {"lidar": {"beams": 16}},
@@ -36,7 +36,7 @@ def _engine(kind: str, worlds: int = WORLDS) -> Any:
 
 
 def _arrays(state: WorldState) -> dict[str, bytes]:
-    """A state as its stored arrays and description (:mod:`crowdnav.envs.world_state_codec`), each as bytes: equal states, equal bits."""
+    """A state as its stored arrays and description (:mod:`crowdnav.envs.engines.world_state_codec`), each as bytes: equal states, equal bits."""
     return {key: values.tobytes() for key, values in to_arrays([VectorWorldState(state, False, False, False)]).items()}
 
 

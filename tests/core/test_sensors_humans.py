@@ -14,7 +14,7 @@ import crowdnav  # noqa: F401  (registers the ids)
 from crowdnav import Simulator, load_scenario
 from crowdnav.batch.state import BatchState
 from crowdnav.envs import CrowdNavEnv
-from crowdnav.envs.vector import CrowdNavVectorEnv
+from crowdnav.envs.vector.env import CrowdNavVectorEnv
 from crowdnav.scenario import ScenarioError
 from crowdnav.scenario.schema import HumansSensor, Sensors
 from crowdnav.sensors import MODALITIES, HumansModality, build_modalities

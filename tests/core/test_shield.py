@@ -6,9 +6,9 @@ import numpy as np
 import pytest
 
 from crowdnav.envs import CrowdNavEnv
-from crowdnav.envs.vector import CrowdNavVectorEnv
+from crowdnav.envs.vector.env import CrowdNavVectorEnv
+from crowdnav.planning.scripted import StraightToGoal
 from crowdnav.planning.shield import shield_settings
-from crowdnav.policies import StraightToGoal
 
 FIGURE4 = {"humans.count": 5, "humans.preferred_speed": [0.5, 1.2]}
 

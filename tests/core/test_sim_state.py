@@ -12,7 +12,7 @@ from gymnasium.vector import AutoresetMode
 from crowdnav import Simulator
 from crowdnav.batch.simulator import BatchSimulator
 from crowdnav.batch.stacked_state import StackedState
-from crowdnav.envs.vector import CrowdNavVectorEnv
+from crowdnav.envs.vector.env import CrowdNavVectorEnv
 from crowdnav.sim.state import SimState, StateFields
 from crowdnav.worlds.compiled import load_world
 from tests.paths import REPO

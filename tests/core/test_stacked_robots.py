@@ -15,7 +15,7 @@ import pytest
 from crowdnav.batch.robot_policies import _ATAN2, social_force_robots, straight_robots
 from crowdnav.batch.scalar_math import cdiv_real
 from crowdnav.batch.simulator import BatchSimulator
-from crowdnav.policies import SocialForceRobot, StraightToGoal
+from crowdnav.planning.scripted import SocialForceRobot, StraightToGoal
 from crowdnav.sim.simulator import Simulator
 from tests.core.paired_worlds import WORLDS, paired_worlds
 

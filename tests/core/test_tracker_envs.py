@@ -12,7 +12,7 @@ from gymnasium.vector import AutoresetMode
 
 from crowdnav import Simulator
 from crowdnav.envs import CrowdNavEnv
-from crowdnav.envs.vector import CrowdNavVectorEnv
+from crowdnav.envs.vector.env import CrowdNavVectorEnv
 from crowdnav.planning.onboard import OnboardPlanner
 from crowdnav.sensors.tracked import sensed_people
 from tests.core.test_vector_env import _compare_with_sync

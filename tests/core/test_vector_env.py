@@ -13,7 +13,7 @@ import crowdnav  # noqa: F401  (registers the ids)
 from crowdnav import Simulator
 from crowdnav.batch.scalar_math import TWO_PI, cmul, remainder
 from crowdnav.batch.simulator import BatchSimulator
-from crowdnav.envs.vector import CrowdNavVectorEnv
+from crowdnav.envs.vector.env import CrowdNavVectorEnv
 from crowdnav.worlds.compiled import load_world
 
 ALL = ["goal", "closest_obstacle", "lidar", "leog", "velocity"]

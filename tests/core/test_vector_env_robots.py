@@ -2,7 +2,7 @@
 
 The first robot is the agent, the others follow their scripted policy (``other_robots``), as in
 :class:`crowdnav.envs.CrowdNavEnv`; the worlds are a group of single simulators stepped in one call
-(:class:`crowdnav.envs.vector_team.TeamWorlds`).
+(:class:`crowdnav.envs.engines.per_world.TeamWorlds`).
 """
 
 from __future__ import annotations
@@ -14,7 +14,7 @@ from gymnasium.vector import AutoresetMode
 
 import crowdnav  # noqa: F401  (registers the ids)
 from crowdnav.envs import CrowdNavEnv
-from crowdnav.envs.vector import CrowdNavVectorEnv
+from crowdnav.envs.vector.env import CrowdNavVectorEnv
 from tests.core.test_vector_env import _same
 
 SCENARIO = "robots_crossing_hall"

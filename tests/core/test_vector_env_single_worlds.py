@@ -1,4 +1,4 @@
-"""Worlds the native vector env holds as single envs (:func:`crowdnav.envs.vector.stacks` False): one world, and crowds of
+"""Worlds the native vector env holds as single envs (:func:`crowdnav.envs.vector.env.stacks` False): one world, and crowds of
 ``Simulator.grid_from`` humans or more. They must play the single env's episodes bit for bit, with the vector env's own
 autoreset modes, infos, shield and residual plan, as stacked worlds do (tests/core/test_vector_env.py)."""
 
@@ -12,10 +12,10 @@ import crowdnav  # noqa: F401  (registers the ids)
 from crowdnav import Simulator
 from crowdnav.batch.simulator import BatchSimulator
 from crowdnav.envs import CrowdNavEnv
-from crowdnav.envs.vector import CrowdNavVectorEnv, stacks
-from crowdnav.envs.vector_stacked import StackedWorlds
-from crowdnav.envs.vector_stacked_team import StackedTeamWorlds
-from crowdnav.envs.vector_team import TeamWorlds
+from crowdnav.envs.engines.per_world import TeamWorlds
+from crowdnav.envs.engines.stacked import StackedWorlds
+from crowdnav.envs.engines.stacked_team import StackedTeamWorlds
+from crowdnav.envs.vector.env import CrowdNavVectorEnv, stacks
 from crowdnav.worlds.compiled import load_world
 from tests.core.test_vector_env import ALL, _compare_with_sync
 

@@ -10,7 +10,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from crowdnav.envs.vector import CrowdNavVectorEnv
+from crowdnav.envs.vector.env import CrowdNavVectorEnv
 
 FIGURE4 = {"humans.count": 5, "humans.preferred_speed": [0.5, 1.2]}
 SEEDS = [1000, 1001, 1002]

@@ -1,4 +1,4 @@
-"""World states as arrays and JSON (crowdnav.envs.world_state_codec): written, read back without pickle, equal bit for bit.
+"""World states as arrays and JSON (crowdnav.envs.engines.world_state_codec): written, read back without pickle, equal bit for bit.
 
 Over the cases of tests/core/test_engine_snapshot.py (every library scenario on both engines, the tracker profiles,
 ORCA, reacting recorded crowds, several robots, the residual plan with the shield): every world's state goes through
@@ -17,8 +17,8 @@ from typing import Any
 import numpy as np
 import pytest
 
-from crowdnav.envs.vector import CrowdNavVectorEnv
-from crowdnav.envs.world_state_codec import WorldStateFileError, decode_states, encode_states, from_arrays, to_arrays
+from crowdnav.envs.engines.world_state_codec import WorldStateFileError, decode_states, encode_states, from_arrays, to_arrays
+from crowdnav.envs.vector.env import CrowdNavVectorEnv
 from tests.core.test_engine_snapshot import WARM, WORLDS, _actions, _cases, _env, _options, _play, _same
 
 

@@ -13,7 +13,7 @@ from crowdnav.evaluation.storage import META_FILE, TEST_FILE, load_results, read
 
 from crowdnav.envs import CrowdNavEnv
 from crowdnav.planning.onboard import OnboardPlanner
-from crowdnav.policies import SocialForceRobot, StraightToGoal
+from crowdnav.planning.scripted import SocialForceRobot, StraightToGoal
 from tests.evaluation.evaluation_tiny import tiny_experiment_document, tiny_results
 
 

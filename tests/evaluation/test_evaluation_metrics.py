@@ -169,7 +169,7 @@ def test_test_episodes_count_the_crowd_s_stalls_single_and_batched():
     """human_stalls: the episode's stalls (humans.stall), the same whether the episodes run one env each or as one batch."""
     from crowdnav.evaluation.rollout import HeldOutEpisodes
 
-    from crowdnav.policies import StraightToGoal
+    from crowdnav.planning.scripted import StraightToGoal
 
     options = {"scenario": "open_space", "modalities": ["goal"], "overrides": {"humans.count": 8, "humans.stall.time": 1.0}}
     scripted = HeldOutEpisodes(options, [3, 4]).run(StraightToGoal(), privileged=True)

@@ -10,7 +10,7 @@ from crowdnav.evaluation.rollout import HeldOutEpisodes
 from crowdnav.evaluation.trajectories import TIDY_COLUMNS, TRACK_ID_STRIDE, tidy_table, trajnet_lines, write_trajectories
 
 from crowdnav import CrowdNavEnv
-from crowdnav.policies import StraightToGoal
+from crowdnav.planning.scripted import StraightToGoal
 
 
 def _recorded(seeds=(0, 1)):

@@ -9,7 +9,7 @@ from crowdnav.evaluation.rollout import HeldOutEpisodes
 from crowdnav.evaluation.trajectories import write_trajectories
 
 from crowdnav.crowd.recording import read_recording
-from crowdnav.policies import StraightToGoal
+from crowdnav.planning.scripted import StraightToGoal
 
 
 def test_trajnet_written_by_crowdnav_reads_back_with_the_same_tracks_times_and_positions(tmp_path):

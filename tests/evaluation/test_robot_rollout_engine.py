@@ -16,8 +16,8 @@ from crowdnav.evaluation.baselines import scripted_policy
 from crowdnav.evaluation.metrics import Trajectory, episode_metrics
 from crowdnav.evaluation.robot_rollout import RobotEpisodes
 
-from crowdnav.envs.robots_engine import SingleRobots
-from crowdnav.envs.vector_stacked_robots import StackedRobots
+from crowdnav.envs.engines.robots import SingleRobots
+from crowdnav.envs.engines.stacked_robots import StackedRobots
 
 HALL = "robots_crossing_hall"
 OPEN = {"max_steps": 60, "world.boundary_walls": False, "humans.count": [0, 7]}

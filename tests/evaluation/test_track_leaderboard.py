@@ -167,7 +167,7 @@ def test_an_evaluated_onboard_baseline_declares_what_it_reads_and_ranks_as_onboa
 def test_shielded_baselines_are_played_with_the_shield_and_skipped_in_one_line_where_the_track_allows_no_tracker(tmp_path):
     from crowdnav.evaluation.rollout import HeldOutEpisodes
 
-    from crowdnav.policies import StraightToGoal
+    from crowdnav.planning.scripted import StraightToGoal
 
     track = load_track("figure4")
     short = track.__class__(**{**track.__dict__, "test_episodes": 3})

@@ -19,7 +19,7 @@ from crowdnav.cli import main
 from crowdnav.cli.common import CliError, parse_overrides
 from crowdnav.envs.core import load_env_world
 from crowdnav.envs.single import CrowdNavEnv
-from crowdnav.envs.vector import CrowdNavVectorEnv
+from crowdnav.envs.vector.env import CrowdNavVectorEnv
 from crowdnav.worlds.placement import PlacementError
 from crowdnav.yaml_input import MAX_DEPTH, YamlLimitError, check_value, parse_value, read_text_file
 

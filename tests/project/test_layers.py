@@ -144,3 +144,13 @@ def test_the_circle_finder_finds_a_circle():
 def test_no_modules_import_each_other_in_a_circle_even_through_imports_inside_functions():
     graph = {module: imports(module, in_functions=True) for module in MODULES}
     assert [component for component in strongly_connected(graph) if len(component) > 1] == []
+
+
+def test_inside_the_envs_the_engines_never_import_the_vector_env_above_them():
+    """crowdnav/envs/engines/ (the engine protocol and its backends) sits below crowdnav/envs/vector/, which reads it through
+    the protocol: the engines import nothing of the vector env, even inside functions."""
+    engines = [module for module in MODULES if module.startswith("crowdnav.envs.engines")]
+    assert len(engines) >= 9
+    upward = sorted(f"{module} -> {target}" for module in engines for target in imports(module, in_functions=True)
+                    if target == "crowdnav.envs.vector" or target.startswith("crowdnav.envs.vector."))
+    assert upward == []

@@ -1,13 +1,13 @@
 """Several robots per world, stacked: :class:`StackedTeamWorlds`, the vector env's engine for a ``robots:`` scenario.
 
-The worlds' simulator is the one :class:`crowdnav.envs.vector_stacked.StackedWorlds` steps, whose
+The worlds' simulator is the one :class:`crowdnav.envs.engines.stacked.StackedWorlds` steps, whose
 :class:`crowdnav.batch.simulator.BatchSimulator` holds every world's other robots (:mod:`crowdnav.batch.team`);
 this engine adds what the single env (:class:`crowdnav.envs.single.CrowdNavEnv`) does around its simulator for
 them, each as array work over the worlds: the other robots' actions from their scripted policy
 (:mod:`crowdnav.batch.robot_policies`), their outcomes (``info["other_robots"]``), the robots that ended
 leaving the world, the first robot's observation with the other robots in its range sensors (the worlds grouped
 by which robots are still there: a view lists only those), their reward memories and the single env's part of a
-world's state (:class:`crowdnav.envs.world_state.EnvState`), so a snapshot loads into either engine or a single env.
+world's state (:class:`crowdnav.envs.engines.world_state.EnvState`), so a snapshot loads into either engine or a single env.
 
 A robot that ends leaves the world after the step's observation (the single env's ``finish_step``): here when
 the next step starts (or a snapshot, a frame or a simulator is asked for), so every observation of the world
@@ -27,9 +27,9 @@ from crowdnav.batch.robot_views import robot_view
 from crowdnav.batch.simulator import StepResult
 from crowdnav.batch.state import BatchState
 from crowdnav.batch.team import TeamStack
-from crowdnav.envs.engine import with_team
-from crowdnav.envs.vector_stacked import StackedWorlds
-from crowdnav.envs.world_state import EnvState, WorldState, check_state, make_state
+from crowdnav.envs.engines.protocol import with_team
+from crowdnav.envs.engines.stacked import StackedWorlds
+from crowdnav.envs.engines.world_state import EnvState, WorldState, check_state, make_state
 from crowdnav.sensors import Modality, build_modalities
 from crowdnav.sim.robots import TeamState
 from crowdnav.sim.simulator import Simulator
@@ -46,7 +46,7 @@ def first_robot_modalities(world: CompiledWorld) -> dict[str, Modality]:
 class StackedTeamWorlds(StackedWorlds):
     """``num_worlds`` worlds of a ``robots:`` scenario in one batch, the other robots driven by ``policy`` (see the module docstring).
 
-    ``modalities``: the first robot's (:func:`first_robot_modalities`). Implements :class:`crowdnav.envs.engine.WorldEngine`.
+    ``modalities``: the first robot's (:func:`first_robot_modalities`). Implements :class:`crowdnav.envs.engines.protocol.WorldEngine`.
     """
 
     def __init__(self, world: CompiledWorld, num_worlds: int, modalities: dict[str, Modality], policy: RobotPolicy):

@@ -1,10 +1,10 @@
 """Worlds held as single envs in the native vector env: :class:`TeamWorlds`, a group of per-world simulators stepped in one call.
 
-:class:`crowdnav.envs.vector.CrowdNavVectorEnv` holds its worlds here, not in one stacked
+:class:`crowdnav.envs.vector.env.CrowdNavVectorEnv` holds its worlds here, not in one stacked
 :class:`crowdnav.batch.simulator.BatchSimulator`, where stacking does not pay or does not apply:
 
 * a scenario with ``robots:`` whose other robots follow a policy without a batched twin (ORCA, a callable; the
-  named scripted ones run stacked, :mod:`crowdnav.envs.vector_stacked_team`) or whose crowd has ORCA humans:
+  named scripted ones run stacked, :mod:`crowdnav.envs.engines.stacked_team`) or whose crowd has ORCA humans:
   the robots after the first are in each world's :class:`crowdnav.sim.robots.Team`;
 * one world (``num_envs=1``): a batch of one does the single env's array work with a world axis and
   per-step bookkeeping on top (0.36x its env-steps/s, docs/environments.md#one-world-and-crowds-of-200-humans-or-more), so the world is
@@ -31,10 +31,10 @@ from typing import Any, NamedTuple
 import numpy as np
 
 from crowdnav.batch.simulator import StepResult
-from crowdnav.envs.engine import Judged, world_frame
+from crowdnav.envs.engines.protocol import Judged, world_frame
+from crowdnav.envs.engines.world_state import WorldState
 from crowdnav.envs.reward import REWARD_TERMS
 from crowdnav.envs.single import CrowdNavEnv
-from crowdnav.envs.world_state import WorldState
 from crowdnav.planning.shield import Shield
 from crowdnav.sensors import Modality
 from crowdnav.sensors.lidar import LidarModality
@@ -241,7 +241,7 @@ class TeamWorlds:
         return complex(self.envs[world].simulator.robot_goal)
 
     def frame(self, world: int) -> dict[str, np.ndarray]:
-        """World ``world``'s simulator as :func:`crowdnav.envs.engine.world_frame` gives it (the other robots included)."""
+        """World ``world``'s simulator as :func:`crowdnav.envs.engines.protocol.world_frame` gives it (the other robots included)."""
         return world_frame(self.envs[world].simulator)
 
     def row(self, name: str, world: int) -> np.ndarray:

@@ -1,6 +1,6 @@
 """The native vector env's action pipeline: the actions checked, the plan added (residual), the shield.
 
-:class:`crowdnav.envs.vector.CrowdNavVectorEnv` runs every step's actions through here, and so does
+:class:`crowdnav.envs.vector.env.CrowdNavVectorEnv` runs every step's actions through here, and so does
 its ``restore_worlds`` when it replays the actions since an episode's reset (a training resume): the
 worlds then execute exactly the actions they executed when the episodes were played.
 """
@@ -13,7 +13,7 @@ from typing import Any
 import numpy as np
 
 from crowdnav.envs.core import real_array
-from crowdnav.envs.engine import WorldEngine
+from crowdnav.envs.engines.protocol import WorldEngine
 from crowdnav.planning.shield import Shield
 
 SMALL_BATCH = 8

@@ -1,24 +1,24 @@
-"""The engine protocol: what :class:`crowdnav.envs.vector.CrowdNavVectorEnv` asks of the worlds it holds.
+"""The engine protocol: what :class:`crowdnav.envs.vector.env.CrowdNavVectorEnv` asks of the worlds it holds.
 
 The vector env keeps Gymnasium's conventions (autoreset modes, seeding, reset masks, the infos' layout, the residual
 plan); everything about the worlds themselves, their episodes, rewards and observations, is its engine's. Two
 engines implement :class:`WorldEngine`, and the vector env reads neither's insides:
 
-* :class:`crowdnav.envs.vector_stacked.StackedWorlds`: the worlds stacked in one
+* :class:`crowdnav.envs.engines.stacked.StackedWorlds`: the worlds stacked in one
   :class:`crowdnav.batch.simulator.BatchSimulator` (array work over the world axis, the reward's kernels batched);
-  several robots per world: :class:`crowdnav.envs.vector_stacked_team.StackedTeamWorlds` (the other robots stacked too);
-* :class:`crowdnav.envs.vector_team.TeamWorlds`: one single env per world stepped in one call (one world, crowds too
+  several robots per world: :class:`crowdnav.envs.engines.stacked_team.StackedTeamWorlds` (the other robots stacked too);
+* :class:`crowdnav.envs.engines.per_world.TeamWorlds`: one single env per world stepped in one call (one world, crowds too
   large to stack, other robots driven by ORCA or a callable).
 
 Either plays world ``i`` as the single env plays it after ``reset(seed=s_i)``, bit for bit, and gives a world's
-state as data (:meth:`WorldEngine.snapshot`, :mod:`crowdnav.envs.world_state`) that either loads into any of its
-worlds. Which one a vector env uses is :func:`crowdnav.envs.vector.stacks`' choice, made once.
+state as data (:meth:`WorldEngine.snapshot`, :mod:`crowdnav.envs.engines.world_state`) that either loads into any of its
+worlds. Which one a vector env uses is :func:`crowdnav.envs.vector.env.stacks`' choice, made once.
 
 :class:`RobotsEngine` is the same for the robots-only env, every robot of a ``robots:`` scenario driven by the caller
-(:mod:`crowdnav.envs.robots_engine`): :class:`crowdnav.envs.vector_stacked_robots.StackedRobots` stacked,
-:class:`crowdnav.envs.robots_engine.SingleRobots` one env per world; a step's per-robot results are a :class:`RobotsStep`,
-where everyone is a :class:`RobotsFrame`; a world's state is a :class:`crowdnav.envs.world_state.WorldState` too
-(:mod:`crowdnav.envs.robots_state`), loading into either.
+(:mod:`crowdnav.envs.engines.robots`): :class:`crowdnav.envs.engines.stacked_robots.StackedRobots` stacked,
+:class:`crowdnav.envs.engines.robots.SingleRobots` one env per world; a step's per-robot results are a :class:`RobotsStep`,
+where everyone is a :class:`RobotsFrame`; a world's state is a :class:`crowdnav.envs.engines.world_state.WorldState` too
+(:mod:`crowdnav.envs.engines.robots_state`), loading into either.
 """
 
 from __future__ import annotations
@@ -31,7 +31,7 @@ import numpy as np
 
 if TYPE_CHECKING:
     from crowdnav.batch.simulator import StepResult
-    from crowdnav.envs.world_state import WorldState
+    from crowdnav.envs.engines.world_state import WorldState
     from crowdnav.planning.shield import Shield
     from crowdnav.sensors import Modality
     from crowdnav.sim.events import Collision
@@ -94,7 +94,7 @@ class WorldEngine(Protocol):
         """Each world's simulator to read, never to step: the live one where a world is one, else a snapshot."""
 
     def snapshot(self, world: int) -> WorldState:
-        """Everything ``world``'s future depends on given the actions, copied (:class:`crowdnav.envs.world_state.WorldState`)."""
+        """Everything ``world``'s future depends on given the actions, copied (:class:`crowdnav.envs.engines.world_state.WorldState`)."""
 
     def load(self, world: int, state: WorldState) -> None:
         """Make ``state`` (a :meth:`snapshot` of a world of this scenario and options, either engine's) ``world``'s: it plays on
@@ -141,7 +141,7 @@ class RobotsFrame:
 
 
 class RobotsEngine(Protocol):
-    """``num_worlds`` worlds of a ``robots:`` scenario, every robot driven by the caller (:mod:`crowdnav.envs.robots_engine`)."""
+    """``num_worlds`` worlds of a ``robots:`` scenario, every robot driven by the caller (:mod:`crowdnav.envs.engines.robots`)."""
 
     num_worlds: int
     robot_names: list[str]
@@ -167,7 +167,7 @@ class RobotsEngine(Protocol):
 
     def snapshot(self, world: int) -> WorldState:
         """Everything ``world``'s future depends on given the actions, with every robot's last observation, copied
-        (:mod:`crowdnav.envs.robots_state`): it loads into a world of either robots engine."""
+        (:mod:`crowdnav.envs.engines.robots_state`): it loads into a world of either robots engine."""
 
     def load(self, world: int, state: WorldState) -> None:
         """Make ``state`` (a :meth:`snapshot`, either robots engine's) ``world``'s: it plays on bit for bit, :meth:`observe`

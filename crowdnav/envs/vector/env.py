@@ -18,13 +18,13 @@ from gymnasium.vector.utils import batch_space
 from crowdnav.batch.memory import keep_freed_memory as _keep_freed_memory
 from crowdnav.batch.robot_policies import batched_policy as team_policy
 from crowdnav.envs.core import ScenarioSource, checked_residual, load_env_world, option_overrides
-from crowdnav.envs.engine import WorldEngine
-from crowdnav.envs.vector_actions import checked_actions, checked_replay, executed
-from crowdnav.envs.vector_infos import end_infos, every_infos, reward_term_infos, same_step_infos
-from crowdnav.envs.vector_stacked import StackedWorlds
-from crowdnav.envs.vector_stacked_team import StackedTeamWorlds, first_robot_modalities
-from crowdnav.envs.vector_team import TeamWorlds
-from crowdnav.envs.world_state import VectorWorldState, check_state, world_key
+from crowdnav.envs.engines.per_world import TeamWorlds
+from crowdnav.envs.engines.protocol import WorldEngine
+from crowdnav.envs.engines.stacked import StackedWorlds
+from crowdnav.envs.engines.stacked_team import StackedTeamWorlds, first_robot_modalities
+from crowdnav.envs.engines.world_state import VectorWorldState, check_state, world_key
+from crowdnav.envs.vector.actions import checked_actions, checked_replay, executed
+from crowdnav.envs.vector.infos import end_infos, every_infos, reward_term_infos, same_step_infos
 from crowdnav.planning.shield import validate_shield
 from crowdnav.sensors import Modality
 from crowdnav.sim.simulator import Simulator
@@ -68,11 +68,11 @@ class CrowdNavVectorEnv(VectorEnv):
     * ``DISABLED``: an ended world stays as it ended (its actions are ignored, its flags repeat,
       reward 0) until ``reset(options={"reset_mask": mask})`` resets it (for evaluation).
 
-    **Engine.** The worlds are its ``engine`` (:class:`crowdnav.envs.engine.WorldEngine`), chosen once by
-    :func:`stacks`: stacked in one batch (:class:`crowdnav.envs.vector_stacked.StackedWorlds`: a step loops over
+    **Engine.** The worlds are its ``engine`` (:class:`crowdnav.envs.engines.protocol.WorldEngine`), chosen once by
+    :func:`stacks`: stacked in one batch (:class:`crowdnav.envs.engines.stacked.StackedWorlds`: a step loops over
     the crowd sizes present, never over worlds, humans, beams or cells; resets and goal-rule draws run per world
     that needs one), or, for one world (``num_envs=1``) and crowds of ``Simulator.grid_from`` humans or more (the
-    single simulator's neighbour grid), held as single envs (:class:`crowdnav.envs.vector_team.TeamWorlds`): the
+    single simulator's neighbour grid), held as single envs (:class:`crowdnav.envs.engines.per_world.TeamWorlds`): the
     same episodes, at the single env's speed per world. The env itself keeps Gymnasium's conventions only.
     ``engine`` (optional, an :data:`EngineFactory`) builds the worlds instead of that choice: a new backend, played
     through the protocol like the others (docs/architecture.md, "Adding a backend").
@@ -80,10 +80,10 @@ class CrowdNavVectorEnv(VectorEnv):
     **Several robots** (a scenario with ``robots:``): world ``i`` is :class:`crowdnav.envs.CrowdNavEnv`
     with the same ``other_robots`` option (the first robot learns, the others follow their scripted
     policy); its infos gain ``other_robots`` (a dict of per-robot arrays, as ``SyncVectorEnv`` lays out the
-    single env's dict). The worlds are stacked too (:class:`crowdnav.envs.vector_stacked_team.StackedTeamWorlds`:
+    single env's dict). The worlds are stacked too (:class:`crowdnav.envs.engines.stacked_team.StackedTeamWorlds`:
     the other robots of every world in the batch, their scripted policy batched), where ``other_robots`` names a
     policy with a batched twin (``social-force``, ``straight``) and the crowd walks by the social force; else
-    (ORCA, a callable) a group of single envs (:class:`crowdnav.envs.vector_team.TeamWorlds`): the same episodes
+    (ORCA, a callable) a group of single envs (:class:`crowdnav.envs.engines.per_world.TeamWorlds`): the same episodes
     either way. The shield is refused there, as by the single env.
 
     **Episode seeds.** ``episode_seeds(worlds)`` (optional) gives the seeds of the episodes an
@@ -91,11 +91,11 @@ class CrowdNavVectorEnv(VectorEnv):
     :class:`crowdnav.agents.training.seeding.EpisodeSeedCounter`); without it an autoreset continues each
     world's generator.
 
-    **World states.** ``snapshot(world)`` gives a world as data that pickles (:mod:`crowdnav.envs.world_state`: its
+    **World states.** ``snapshot(world)`` gives a world as data that pickles (:mod:`crowdnav.envs.engines.world_state`: its
     simulator's episode and generator, its reward memory, its tracker, Gymnasium's flags of it); ``load(world, state)``
     makes it any world's of an env of the same scenario and options, which then plays on bit for bit;
     ``load_worlds(states)`` loads every world at once (a training resume; stored without pickle by
-    :mod:`crowdnav.envs.world_state_codec`).
+    :mod:`crowdnav.envs.engines.world_state_codec`).
 
     **Memory.** With ``keep_freed_memory`` (default) the env raises glibc malloc's trim threshold
     to 64 MB for its process (:mod:`crowdnav.batch.memory`): the batch's temporaries are then reused
@@ -149,7 +149,7 @@ class CrowdNavVectorEnv(VectorEnv):
             self.engine, self.modalities = stacked, stacked.modalities
         elif stacks(world, num_envs, other_robots):
             self.engine = StackedWorlds(world, num_envs, self.modalities)
-        else:  # one single env per world, stepped in one call (crowdnav.envs.vector_team)
+        else:  # one single env per world, stepped in one call (crowdnav.envs.engines.per_world)
             team = TeamWorlds(world, num_envs, other_robots)
             self.engine, self.modalities = team, team.modalities  # several robots: the first robot's own (robots.0.modalities)
             self._single_worlds = team if team.plain else None
@@ -286,8 +286,8 @@ class CrowdNavVectorEnv(VectorEnv):
         return self._copy_observations()
 
     def snapshot(self, world: int) -> VectorWorldState:
-        """World ``world`` now, as data that pickles (:class:`crowdnav.envs.world_state.VectorWorldState`, a copy): its engine's
-        :class:`crowdnav.envs.world_state.WorldState` and Gymnasium's flags of it (its episode ended and waits for its autoreset
+        """World ``world`` now, as data that pickles (:class:`crowdnav.envs.engines.world_state.VectorWorldState`, a copy): its engine's
+        :class:`crowdnav.envs.engines.world_state.WorldState` and Gymnasium's flags of it (its episode ended and waits for its autoreset
         or a reset mask, the flags a waiting world repeats). :meth:`load` makes it any world's of an env of the same options."""
         world = self._world(world)
         if not self._started[world]:
@@ -341,7 +341,7 @@ class CrowdNavVectorEnv(VectorEnv):
 
     def _same_step_reset(self, infos: dict[str, Any], ended: np.ndarray) -> dict[str, Any]:
         """Reset the ended worlds now; their last observation and info move to ``final_obs`` / ``final_info``
-        (as ``SyncVectorEnv`` does: :func:`crowdnav.envs.vector_infos.same_step_infos`)."""
+        (as ``SyncVectorEnv`` does: :func:`crowdnav.envs.vector.infos.same_step_infos`)."""
         worlds = np.flatnonzero(ended)
         out = same_step_infos(infos, ended, self._observations)
         self._autoreset(worlds)
@@ -393,7 +393,7 @@ class CrowdNavVectorEnv(VectorEnv):
 
 def stacks(world: CompiledWorld, num_envs: int, other_robots: str | Callable[..., Any] = "social-force") -> bool:
     """Whether the vector env steps ``num_envs`` worlds of ``world`` stacked (:class:`StackedWorlds`; several robots:
-    :class:`crowdnav.envs.vector_stacked_team.StackedTeamWorlds`), else as single envs (:class:`TeamWorlds`): more than one
+    :class:`crowdnav.envs.engines.stacked_team.StackedTeamWorlds`), else as single envs (:class:`TeamWorlds`): more than one
     world, crowds below :attr:`Simulator.grid_from` humans; several robots where the stacked team plays what the single env
     does: the other robots driven by a policy with a batched twin (``other_robots``: :func:`team_policy`) and the crowd's
     social-force model alone (a view of stacked worlds lists one robot to the other models; a ``robots:`` scenario has no

@@ -1,16 +1,16 @@
-"""A world of the robots-only engines as data: what :class:`crowdnav.envs.engine.RobotsEngine` ``snapshot`` gives and ``load`` takes.
+"""A world of the robots-only engines as data: what :class:`crowdnav.envs.engines.protocol.RobotsEngine` ``snapshot`` gives and ``load`` takes.
 
-It is a :class:`crowdnav.envs.world_state.WorldState` as the robots-only PettingZoo env holds its world after a step:
+It is a :class:`crowdnav.envs.engines.world_state.WorldState` as the robots-only PettingZoo env holds its world after a step:
 the simulator's episode with the robots that ended out of the world, every robot's reward memory, the tracker's
-state. Its env part (:class:`crowdnav.envs.world_state.EnvState`) is that env's: whether the episode runs, no other
+state. Its env part (:class:`crowdnav.envs.engines.world_state.EnvState`) is that env's: whether the episode runs, no other
 robots' outcomes (the env reports none), and as ``observation`` every robot's last flat observation by its name (zero
 for a robot that had left). The observation is stored, not made again at load: a robot that ended at the last step
 shows in the others' observations of that step, and it is out of the world in the state.
 
-Either engine's state loads into either (:class:`crowdnav.envs.vector_stacked_robots.StackedRobots`,
-:class:`crowdnav.envs.robots_engine.SingleRobots`; tests/core/test_robots_engine_snapshot.py); a single or vector
+Either engine's state loads into either (:class:`crowdnav.envs.engines.stacked_robots.StackedRobots`,
+:class:`crowdnav.envs.engines.robots.SingleRobots`; tests/core/test_robots_engine_snapshot.py); a single or vector
 env's state (the first robot's observation by modality) is refused, and the world key is checked as everywhere
-(:func:`crowdnav.envs.world_state.check_state`).
+(:func:`crowdnav.envs.engines.world_state.check_state`).
 """
 
 from __future__ import annotations
@@ -20,7 +20,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from crowdnav.envs.world_state import EnvState, WorldKey, WorldState, check_state
+from crowdnav.envs.engines.world_state import EnvState, WorldKey, WorldState, check_state
 from crowdnav.sim.episode_state import EpisodeState
 from crowdnav.sim.robots import TeamState, retire_in
 

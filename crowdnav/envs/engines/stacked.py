@@ -1,7 +1,7 @@
 """Worlds stacked in one batch: :class:`StackedWorlds`, the vector env's engine where stacking pays.
 
 One :class:`crowdnav.batch.simulator.BatchSimulator` steps the worlds (array work over a world axis, one stack per
-crowd size); this engine adds what a world needs beyond its simulator (:class:`crowdnav.envs.engine.WorldEngine`):
+crowd size); this engine adds what a world needs beyond its simulator (:class:`crowdnav.envs.engines.protocol.WorldEngine`):
 the reward (the single env's kernels, :func:`crowdnav.envs.reward.reward_terms`, over the stepping worlds, with each
 world's goal distance at its last step as the progress term's memory), the observations (each modality's
 ``observe_batch``, chunk by chunk as the simulator steps them), the shield's batched call, the worlds' rows and a
@@ -17,9 +17,9 @@ import numpy as np
 
 from crowdnav.batch.simulator import BatchSimulator, StepResult
 from crowdnav.batch.state import BatchState
-from crowdnav.envs.engine import Judged
+from crowdnav.envs.engines.protocol import Judged
+from crowdnav.envs.engines.world_state import WorldKey, WorldState, check_state, make_state, world_key
 from crowdnav.envs.reward import REWARD_TERMS, reward_terms
-from crowdnav.envs.world_state import WorldKey, WorldState, check_state, make_state, world_key
 from crowdnav.planning.shield import Shield
 from crowdnav.sensors import Modality
 from crowdnav.sensors.tracked import attach, tracked_state
@@ -34,7 +34,7 @@ class StackedWorlds:
     """``num_worlds`` worlds of ``world`` (the compiled scenario with every env option applied) in one :class:`BatchSimulator`.
 
     ``modalities``: the observation's modalities by key (the vector env's). Implements
-    :class:`crowdnav.envs.engine.WorldEngine`; ``batch`` is the simulator (read it, step it only through here).
+    :class:`crowdnav.envs.engines.protocol.WorldEngine`; ``batch`` is the simulator (read it, step it only through here).
     """
 
     def __init__(self, world: CompiledWorld, num_worlds: int, modalities: dict[str, Modality]):

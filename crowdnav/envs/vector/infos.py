@@ -2,7 +2,7 @@
 marking the worlds that have it): the reward terms, the outcomes and collisions of a step, and the
 split of a step's infos between the worlds that run on and those a same-step autoreset restarts.
 
-:class:`crowdnav.envs.vector.CrowdNavVectorEnv` documents what each key holds; these are its parts.
+:class:`crowdnav.envs.vector.env.CrowdNavVectorEnv` documents what each key holds; these are its parts.
 """
 
 from __future__ import annotations
@@ -13,9 +13,9 @@ from typing import Any
 import numpy as np
 
 from crowdnav.batch.simulator import StepResult
-from crowdnav.envs.engine import WorldEngine
+from crowdnav.envs.engines.per_world import EveryStep
+from crowdnav.envs.engines.protocol import WorldEngine
 from crowdnav.envs.reward import REWARD_TERMS
-from crowdnav.envs.vector_team import EveryStep
 from crowdnav.sim.events import Collision
 
 MASKED_TERMS = tuple((term, f"_{term}") for term in REWARD_TERMS)

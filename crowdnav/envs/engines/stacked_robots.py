@@ -1,5 +1,5 @@
 """Every robot of every world driven by the caller, the worlds stacked: :class:`StackedRobots` (a
-:class:`crowdnav.envs.engine.RobotsEngine`).
+:class:`crowdnav.envs.engines.protocol.RobotsEngine`).
 
 The worlds are one :class:`crowdnav.batch.simulator.BatchSimulator`, their robots after the first its
 :class:`crowdnav.batch.team.TeamStack`; this engine does, as array work over the worlds, what the robots-only PettingZoo
@@ -22,8 +22,8 @@ flat_observations=True``) does around its simulator, so world ``i`` plays that e
 * **scripted robots**: a scripted policy with a batched twin (:func:`scripted_name`: straight, social force) acts for
   any robot, the first one included, as called with that robot's view of its world
   (:meth:`StackedRobots.scripted_actions`, :func:`crowdnav.batch.robot_policies.every_robot_actions`);
-* **states**: a world's :class:`crowdnav.envs.world_state.WorldState` as the env holds it after its step (the robots
-  leaving already out, the last observation with it: :mod:`crowdnav.envs.robots_state`), which loads into either engine.
+* **states**: a world's :class:`crowdnav.envs.engines.world_state.WorldState` as the env holds it after its step (the robots
+  leaving already out, the last observation with it: :mod:`crowdnav.envs.engines.robots_state`), which loads into either engine.
 """
 
 from __future__ import annotations
@@ -41,11 +41,11 @@ from crowdnav.batch.robot_views import robot_view
 from crowdnav.batch.simulator import BatchSimulator
 from crowdnav.batch.state import BatchState
 from crowdnav.batch.team import TeamStack
-from crowdnav.envs.engine import RobotsFrame, RobotsStep
+from crowdnav.envs.engines.protocol import RobotsFrame, RobotsStep
+from crowdnav.envs.engines.robots_state import retired, robots_rows, robots_state
+from crowdnav.envs.engines.world_state import WorldKey, WorldState, make_state, world_key
 from crowdnav.envs.reward import REWARD_TERMS, reward_terms
-from crowdnav.envs.robots_state import retired, robots_rows, robots_state
-from crowdnav.envs.world_state import WorldKey, WorldState, make_state, world_key
-from crowdnav.policies import SCRIPTED_POLICIES
+from crowdnav.planning.scripted import SCRIPTED_POLICIES
 from crowdnav.sensors import Modality, build_modalities
 from crowdnav.sim.contacts import goal_distance
 from crowdnav.sim.events import outcomes
@@ -278,7 +278,7 @@ class StackedRobots:
 
 
 def scripted_name(policy: Any) -> str | None:
-    """The :data:`crowdnav.policies.SCRIPTED_POLICIES` name of ``policy`` (an instance of that very class: a subclass may act
+    """The :data:`crowdnav.planning.scripted.SCRIPTED_POLICIES` name of ``policy`` (an instance of that very class: a subclass may act
     otherwise) where :class:`StackedRobots` has its batched twin (:data:`crowdnav.batch.robot_policies.SEAT_POLICIES`);
     None for the others (ORCA, the planners, a callable)."""
     return next((name for name, kind in SCRIPTED_POLICIES.items() if type(policy) is kind and name in SEAT_POLICIES), None)

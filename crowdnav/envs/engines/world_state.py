@@ -14,14 +14,14 @@ scenario and options, whichever engine holds it) plays on bit for bit as the cap
   loaded into a single env then observes its state again and runs).
 
 It is plain data (dataclasses of numpy arrays, Python and numpy numbers, texts, dicts, tuples): it pickles, it is
-stored without pickle as arrays and JSON (:mod:`crowdnav.envs.world_state_codec`: a training checkpoint's worlds),
+stored without pickle as arrays and JSON (:mod:`crowdnav.envs.engines.world_state_codec`: a training checkpoint's worlds),
 and it shares nothing with the world it came from (snapshots are copies, and loading copies again). ``version`` is :data:`WORLD_STATE_VERSION`, and
 a state loads only into a world of the same scenario with the same settings (options applied) and robot count
 (:func:`check_state`: a ValueError in one line naming what differs).
 
 **Gymnasium's state of a world** is not the engine's: whether a world's episode ended and waits for its
 autoreset (``NEXT_STEP``) or for a reset mask (``DISABLED``, with the flags it repeats) is the vector env's
-convention, so :meth:`crowdnav.envs.vector.CrowdNavVectorEnv.snapshot` wraps the engine's :class:`WorldState` in a
+convention, so :meth:`crowdnav.envs.vector.env.CrowdNavVectorEnv.snapshot` wraps the engine's :class:`WorldState` in a
 :class:`VectorWorldState` with those flags. The seeds of later episodes (the vector env's ``episode_seeds``,
 e.g. training's episode counter) belong to whoever numbers the episodes, not to a world.
 
@@ -82,7 +82,7 @@ class WorldState:
 
 @dataclass(frozen=True, eq=False)
 class VectorWorldState:
-    """One world of a :class:`crowdnav.envs.vector.CrowdNavVectorEnv`: its engine's :class:`WorldState` and Gymnasium's flags."""
+    """One world of a :class:`crowdnav.envs.vector.env.CrowdNavVectorEnv`: its engine's :class:`WorldState` and Gymnasium's flags."""
 
     world: WorldState
     ended: bool

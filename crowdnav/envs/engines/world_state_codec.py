@@ -1,6 +1,6 @@
 """World states as arrays and JSON: how a checkpoint stores its worlds without pickle.
 
-:func:`to_arrays` turns :class:`crowdnav.envs.world_state.VectorWorldState` s into named arrays (for an ``.npz``
+:func:`to_arrays` turns :class:`crowdnav.envs.engines.world_state.VectorWorldState` s into named arrays (for an ``.npz``
 written with ``allow_pickle=False``) and :func:`from_arrays` builds them back, equal bit for bit
 (tests/core/test_world_state_codec.py: every library scenario, both engines, the tracker profiles, ORCA, reacting
 recorded crowds, several robots). World ``i``'s arrays are named ``<prefix>/<i>/<path>``, ``<path>`` the attribute
@@ -9,7 +9,7 @@ path inside its state (``world/episode/state/positions``, ``world/tracker/measur
 uint8) is the list of the worlds' descriptions (:func:`encode_states` / :func:`decode_states` give and take them
 apart from the arrays), each the state's tree:
 
-* a state's dataclass (:class:`~crowdnav.envs.world_state.VectorWorldState`, ``WorldState``, ``EnvState``,
+* a state's dataclass (:class:`~crowdnav.envs.engines.world_state.VectorWorldState`, ``WorldState``, ``EnvState``,
   :class:`~crowdnav.sim.episode_state.EpisodeState`, :class:`~crowdnav.sim.state.SimState`,
   :class:`~crowdnav.sim.robots.TeamState`): ``{"object": class name, "fields": {name: node}}``;
 * a numpy array: ``{"array": path}``, a numpy scalar: ``{"numpy": path}`` (a 0-d array, read back as the same scalar
@@ -24,7 +24,7 @@ when written, naming it: a crowd model's :meth:`~crowdnav.crowd.base.CrowdModel.
 scalars only. Reading checks what it builds: the classes and their fields, the episode state's arrays (``(n+1,)`` for
 the agents, ``(n,)`` per human), and, given ``like`` (states of the worlds they will load into, e.g. just reset), every
 part against it: the same classes, keys and scalar types, arrays of the same dtype and shape (the episode state's: the
-same dtype, its crowd size its own), then the world key (:func:`crowdnav.envs.world_state.check_state`: scenario,
+same dtype, its crowd size its own), then the world key (:func:`crowdnav.envs.engines.world_state.check_state`: scenario,
 settings, robots, version). A damaged or foreign description is a :class:`WorldStateFileError` in one line, naming
 the world and the part.
 """
@@ -38,7 +38,7 @@ from typing import Any
 
 import numpy as np
 
-from crowdnav.envs.world_state import WORLD_STATE_VERSION, EnvState, VectorWorldState, WorldKey, WorldState, check_state
+from crowdnav.envs.engines.world_state import WORLD_STATE_VERSION, EnvState, VectorWorldState, WorldKey, WorldState, check_state
 from crowdnav.errors import CrowdNavError
 from crowdnav.sim.episode_state import EpisodeState
 from crowdnav.sim.robots import TeamState

@@ -4,12 +4,12 @@ The robots-only PettingZoo env (``crowdnav.parallel_env(..., humans_as_agents=Fa
 flat_observations=True)``, :class:`crowdnav.envs.parallel.CrowdNavParallelEnv`) is one world in which every robot is an
 agent: each acts, is observed in its own frame (a flat float32 vector), is rewarded and ends on its own; a robot that
 ended leaves the world (parked, no longer seen) and its agent stays, inactive, until the episode ends (every robot
-ended, or the time limit while some robot runs). A :class:`crowdnav.envs.engine.RobotsEngine` plays ``num_worlds`` such
-worlds with arrays: actions (W, R, 2), observations (W, R, D), and a :class:`crowdnav.envs.engine.RobotsStep` of per-robot
+ended, or the time limit while some robot runs). A :class:`crowdnav.envs.engines.protocol.RobotsEngine` plays ``num_worlds`` such
+worlds with arrays: actions (W, R, 2), observations (W, R, D), and a :class:`crowdnav.envs.engines.protocol.RobotsStep` of per-robot
 arrays. Two implement it, world ``i`` reset with seed ``s`` playing the env's episode after ``reset(seed=s)`` bit for
 bit in both:
 
-* :class:`crowdnav.envs.vector_stacked_robots.StackedRobots`: the worlds stacked in one
+* :class:`crowdnav.envs.engines.stacked_robots.StackedRobots`: the worlds stacked in one
   :class:`crowdnav.batch.simulator.BatchSimulator` (array work over the worlds; loops over robots and crowd sizes);
 * :class:`SingleRobots`: one robots-only env per world, for what the stack does not play (crowds of
   ``Simulator.grid_from`` humans or more, crowd models other than the social force, a shield, a residual plan).
@@ -17,7 +17,7 @@ bit in both:
 :func:`robots_engine` chooses once. Robot ``k`` is the scenario's ``robots.<k>`` (``robot_names`` order). Both also play
 scripted robots (:class:`ScriptedRobotsEngine`): the stacked engine those with a batched twin (straight, social force),
 the per-world one any, called with each robot's view of its world's simulator. A world's state taken by either loads
-into either (:mod:`crowdnav.envs.robots_state`).
+into either (:mod:`crowdnav.envs.engines.robots_state`).
 """
 
 from __future__ import annotations
@@ -29,20 +29,20 @@ import numpy as np
 from gymnasium import spaces
 
 from crowdnav.envs.core import load_env_world, option_overrides
-from crowdnav.envs.engine import RobotsEngine, RobotsFrame, RobotsStep
-from crowdnav.envs.robots_state import robots_rows, robots_state
-from crowdnav.envs.vector_stacked_robots import StackedRobots
-from crowdnav.envs.world_state import WorldState
+from crowdnav.envs.engines.protocol import RobotsEngine, RobotsFrame, RobotsStep
+from crowdnav.envs.engines.robots_state import robots_rows, robots_state
+from crowdnav.envs.engines.stacked_robots import StackedRobots
+from crowdnav.envs.engines.world_state import WorldState
 from crowdnav.sensors.tracker import make_tracker
 from crowdnav.sim.simulator import Simulator
 from crowdnav.worlds.compiled import CompiledWorld
 
 
 class ScriptedRobotsEngine(RobotsEngine, Protocol):
-    """A :class:`crowdnav.envs.engine.RobotsEngine` whose robots a scripted policy can drive."""
+    """A :class:`crowdnav.envs.engines.protocol.RobotsEngine` whose robots a scripted policy can drive."""
 
     def scripted_actions(self, policy: Any, robots: np.ndarray) -> np.ndarray:
-        """(W, R, 2) float32: scripted ``policy``'s action (:data:`crowdnav.policies.ScriptedPolicy`) for each of ``robots``
+        """(W, R, 2) float32: scripted ``policy``'s action (:data:`crowdnav.planning.scripted.ScriptedPolicy`) for each of ``robots``
         ((W, R) bool: robots in their world), as ``policy`` returns it called with that robot's view of its world after the
         last step (``simulator.robot_view(k)``, the robots that ended there gone); 0 elsewhere. Call it after :meth:`observe`."""
 
