@@ -106,13 +106,15 @@ def stored_choice(run: Path, *, episodes: int = VALIDATION_EPISODES, seed_base: 
     Plays nothing (publishing reads what :func:`choose_on_validation` stored); refused, naming the command that fills
     the table, where a point of the run's test evaluations has no stored validation row.
     """
+    from crowdnav.evaluation.storage import experiment_of
+
     tests = _test_successes(run / "test_episodes.csv")
     table = run / f"validation_{seed_base}_{episodes}.csv"
     stored = _read(table)
     missing = sorted(set(tests) - set(stored))
     if missing:
         raise ValueError(f"{table} has no validation row for the snapshot after {missing[0]:,} episodes: run `python "
-                         f"benchmarks/validation_choice.py {run.parent.parent} --episodes {episodes} --seed-base {seed_base}` first")
+                         f"benchmarks/validation_choice.py {experiment_of(run)} --episodes {episodes} --seed-base {seed_base}` first")
     validation = {point: stored[point]["success"] for point in sorted(tests)}
     return kept(validation), validation
 
