@@ -185,6 +185,15 @@ class CrowdNavParallelEnv(ParallelEnv):  # type: ignore[misc]  # pettingzoo has 
         robot_info: dict[str, Any] = {"active": True} if self.fixed_agents and self._several else {}
         return observations, {**{name: dict(robot_info) for name in self._robot_names}, **infos}
 
+    def loaded_robots(self, running: bool) -> None:
+        """After ``self.core.load`` of a robots-only world (every robot driven, humans not agents): the robots still in the
+        world act, until the episode ends (``running``); what :meth:`reset` and :meth:`step` keep of an episode's agents."""
+        team = self.simulator.team
+        if team is None or self.humans_as_agents:
+            raise ValueError("loaded_robots: a robots: scenario's env whose humans are not agents (the robots engines')")
+        self._active_robots = [name for name, here in zip(self._robot_names, team.state.active.tolist(), strict=True) if here]
+        self.agents = list(self.possible_agents) if running else []
+
     def step(self, actions: Mapping[str, Any]) -> StepReturn:
         """One action per agent in ``agents``; out-of-range values are clipped, NaN/inf raise ValueError."""
         if not isinstance(actions, Mapping):

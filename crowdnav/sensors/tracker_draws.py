@@ -11,15 +11,10 @@ and no Python loop, and the same episode gets the same numbers, bit for bit. Per
 after it starts the next episode of that seed (1, 2, ...), as the simulator continues its own
 generator. Episode ``e`` of seed ``s`` has the key ``SeedSequence(s, spawn_key=(TRACKER_STREAM, e))``
 (one 64-bit word), a stream of its own beside the simulator's ``SeedSequence(s)``. A world never
-seeded takes fresh entropy once (``SeedSequence()``), as the simulator does. :func:`episode_key` computes
-that word with SeedSequence's own hash in Python integers (numpy's ``bit_generator.pyx``, pool of 4
-words), the seed's part mixed once and kept: about 3 us a key instead of a SeedSequence's 9 or more
-(``tests/core/test_tracker_keys.py`` holds it to numpy's, word for word).
+seeded takes fresh entropy once (``SeedSequence()``), as the simulator does.
 """
 
 from __future__ import annotations
-
-import functools
 
 import numpy as np
 
@@ -43,77 +38,10 @@ def fresh_entropy() -> int:
 
 
 def episode_key(entropy: int, episode: int) -> np.uint64:
-    """The 64-bit key of episode ``episode`` (0: the seeded reset itself) after a reset with seed ``entropy``:
-    ``SeedSequence(entropy, spawn_key=(TRACKER_STREAM, episode)).generate_state(1, dtype=np.uint64)[0]``."""
-    pool, hash_const = _seeded_pool(entropy)
-    mixer = list(pool)
-    for word in _words(episode):  # the spawn key's last entry, each word mixed into each pool word
-        for dst in range(_POOL):
-            value, hash_const = _hashmix(word, hash_const)
-            mixer[dst] = _mix(mixer[dst], value)
-    hash_const, words = _INIT_B, []
-    for value in mixer[:2]:  # generate_state(1, uint64): 2 uint32 words, the low one first
-        value ^= hash_const
-        hash_const = hash_const * _MULT_B & _M32
-        value = value * hash_const & _M32
-        words.append(value ^ value >> 16)
-    key: np.uint64 = np.uint64(words[0] | words[1] << 32)
+    """The 64-bit key of episode ``episode`` (0: the seeded reset itself) after a reset with seed ``entropy``."""
+    sequence = np.random.SeedSequence(entropy, spawn_key=(TRACKER_STREAM, episode))
+    key: np.uint64 = sequence.generate_state(1, dtype=np.uint64)[0]
     return key
-
-
-# SeedSequence's hash (numpy/random/bit_generator.pyx: pool of 4 words), on Python integers
-_POOL, _M32 = 4, 0xFFFFFFFF
-_INIT_A, _MULT_A, _INIT_B, _MULT_B = 0x43B0D7E5, 0x931E8875, 0x8B51F9DD, 0x58F38DED
-_MIX_L, _MIX_R = 0xCA01F9DD, 0x4973F715
-
-
-def _words(value: int) -> list[int]:
-    """``value`` as SeedSequence reads an integer: 32-bit words, lowest first (0: one word)."""
-    if value < 0:
-        raise ValueError("expected non-negative integer")
-    words = [value & _M32]
-    value >>= 32
-    while value:
-        words.append(value & _M32)
-        value >>= 32
-    return words
-
-
-def _hashmix(value: int, hash_const: int) -> tuple[int, int]:
-    """The hashed value, and the hash constant advanced."""
-    value ^= hash_const
-    hash_const = hash_const * _MULT_A & _M32
-    value = value * hash_const & _M32
-    return value ^ value >> 16, hash_const
-
-
-def _mix(x: int, y: int) -> int:
-    result = (_MIX_L * x - _MIX_R * y) & _M32
-    return result ^ result >> 16
-
-
-@functools.lru_cache(maxsize=1024)
-def _seeded_pool(entropy: int) -> tuple[tuple[int, ...], int]:
-    """The pool, and the hash constant, once the seed and the tracker's stream are mixed in (the spawn key but its last
-    entry): the same for every episode of the seed."""
-    run = _words(entropy)
-    run += [0] * (_POOL - len(run))  # a spawn key given: the seed's words padded to the pool size
-    words = run + _words(TRACKER_STREAM)
-    hash_const = _INIT_A
-    mixer = []
-    for word in words[:_POOL]:
-        value, hash_const = _hashmix(word, hash_const)
-        mixer.append(value)
-    for src in range(_POOL):  # every pool word into every other
-        for dst in range(_POOL):
-            if src != dst:
-                value, hash_const = _hashmix(mixer[src], hash_const)
-                mixer[dst] = _mix(mixer[dst], value)
-    for word in words[_POOL:]:
-        for dst in range(_POOL):
-            value, hash_const = _hashmix(word, hash_const)
-            mixer[dst] = _mix(mixer[dst], value)
-    return tuple(mixer), hash_const
 
 
 def _tail(persons: int) -> np.ndarray:

@@ -162,3 +162,13 @@ def test_every_attribute_of_the_robots_engines_is_in_a_world_state_or_said_not_t
     for thing in held:
         unknown = sorted(set(vars(thing)) - set(ATTRIBUTES[type(thing).__name__]))
         assert unknown == [], f"{type(thing).__name__}: say whether a world state holds {unknown} (tests/core/test_robots_engine_snapshot.py)"
+
+
+def test_the_parallel_envs_loaded_robots_refuses_an_env_that_is_not_a_robots_engines():
+    from crowdnav.envs.parallel import CrowdNavParallelEnv
+
+    for env in (CrowdNavParallelEnv("open_space"), CrowdNavParallelEnv("robots_crossing_hall")):  # one robot; humans as agents
+        with pytest.raises(ValueError, match="loaded_robots: a robots: scenario's env whose humans are not agents") as caught:
+            env.loaded_robots(True)
+        assert "\n" not in str(caught.value)
+        env.close()

@@ -1,4 +1,4 @@
-"""The people tracker's episode keys are numpy's SeedSequence words, computed without building a SeedSequence."""
+"""The people tracker's episode keys are numpy's SeedSequence words (the stream docs/sensors.md names), for seeds of any width."""
 
 from __future__ import annotations
 

@@ -156,11 +156,7 @@ class SingleRobots:
         env = self.envs[world]
         state, rows = robots_rows(state, env.core.world_key, self.robot_names, self.observation_size)
         env.core.load(state)  # the simulator, every robot's reward memory, the tracker, whether the episode runs
-        team = env.simulator.team
-        assert team is not None  # a robots: scenario's
-        # the env's own episode bookkeeping (it has no load of its own): the robots still in the world act, until the episode ends
-        env._active_robots = [name for name, here in zip(self.robot_names, team.state.active.tolist(), strict=True) if here]
-        env.agents = list(env.possible_agents) if state.env is not None and state.env.running else []
+        env.loaded_robots(state.env is not None and state.env.running)  # the env's own episode bookkeeping
         self._observations[world] = rows
 
     def close(self) -> None:
